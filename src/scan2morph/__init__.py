@@ -1,0 +1,17 @@
+"""scan2morph: 3D face scans to subject-specific morphable face models.
+
+The library is split by concept and data flows one way::
+
+    io -> scan -> template -> align -> motion -> morph / modal -> store / render / report
+
+Nothing here imports snakemake; the workflow under ``workflow/`` is a thin layer on top.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("scan2morph")
+except PackageNotFoundError:  # running from a source tree that was not installed
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]
