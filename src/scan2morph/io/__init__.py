@@ -1,0 +1,26 @@
+"""Readers and writers for the formats users bring and the formats we hand out."""
+
+from scan2morph.io.image import read_color, write_color
+from scan2morph.io.landmarks import read_pts, write_pts
+from scan2morph.io.range_image import (
+    read_abs,
+    read_npz_range,
+    read_range,
+    write_abs,
+    write_npz_range,
+)
+from scan2morph.io.take import RangeTake, read_range_take
+
+__all__ = [
+    "RangeTake",
+    "read_abs",
+    "read_color",
+    "read_npz_range",
+    "read_pts",
+    "read_range",
+    "read_range_take",
+    "write_abs",
+    "write_color",
+    "write_npz_range",
+    "write_pts",
+]

@@ -1,0 +1,49 @@
+"""Color images (PNG, PPM, JPEG) as (H, W, 3) uint8 RGB arrays."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from scan2morph.errors import InputError
+
+COLOR_SUFFIXES = (".png", ".ppm", ".pnm", ".jpg", ".jpeg")
+
+
+def read_color(path: str | Path) -> np.ndarray:
+    """Read a color image.
+
+    Returns
+    -------
+    color : (H, W, 3) uint8
+        RGB. Grey images are expanded to three channels; 16-bit images are scaled to 8 bit;
+        alpha is dropped.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected a PNG/PPM/JPEG color image)")
+    if path.suffix.lower() not in COLOR_SUFFIXES:
+        raise InputError(path, f"color: unknown image format {path.suffix!r} (expected PNG, PPM or JPEG)")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputError(path, "color: cannot decode the image (corrupt or not an image)")
+    if img.dtype == np.uint16:
+        img = (img / 257.0).round().astype(np.uint8)
+    if img.dtype != np.uint8:
+        raise InputError(path, f"color: unsupported pixel type {img.dtype} (expected 8 or 16 bit)")
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    elif img.shape[2] == 4:
+        img = img[:, :, :3]
+    return np.ascontiguousarray(img[:, :, ::-1])
+
+
+def write_color(path: str | Path, color: np.ndarray) -> None:
+    """Write an (H, W, 3) uint8 RGB image; the format follows the suffix."""
+    color = np.asarray(color)
+    if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
+        raise InputError(path, f"color: expected (H, W, 3) uint8, got {color.shape} {color.dtype}")
+    if not cv2.imwrite(str(path), np.ascontiguousarray(color[:, :, ::-1])):
+        raise InputError(path, "color: could not write the image (unknown suffix or bad path)")

@@ -1,0 +1,204 @@
+"""Range images: FRGC ``.abs`` / ``.abs.gz`` and ``.npz``.
+
+A range image is ``xyz`` (H, W, 3) float64 in mm, NaN where the scanner saw nothing, in the
+take's scanner frame. Pixel (row r, column c) of ``xyz`` corresponds to pixel (r, c) of the color
+image taken with it.
+
+FRGC ``.abs`` layout (text)::
+
+    480 rows
+    640 columns
+    pixels (flag X Y Z):
+    <R*C flags 0/1>
+    <R*C X values>
+    <R*C Y values>
+    <R*C Z values>
+
+Values are row-major from the top row; invalid pixels have flag 0 and coordinates -999999.
+"""
+
+from __future__ import annotations
+
+import gzip
+import re
+from pathlib import Path
+
+import numpy as np
+
+from scan2morph.errors import InputError
+
+#: The placeholder FRGC writes for the coordinates of a pixel without data.
+ABS_INVALID = -999999.0
+
+_HEADER_RE = (
+    re.compile(r"^\s*(\d+)\s+rows\s*$", re.IGNORECASE),
+    re.compile(r"^\s*(\d+)\s+columns\s*$", re.IGNORECASE),
+    re.compile(r"^\s*pixels\s*\(flag\s+X\s+Y\s+Z\)\s*:?\s*$", re.IGNORECASE),
+)
+
+
+def _open_text(path: Path, mode: str):
+    if path.name.endswith(".gz"):
+        return gzip.open(path, mode + "t", encoding="ascii", newline="\n")
+    return open(path, mode, encoding="ascii", newline="\n")
+
+
+def read_abs(path: str | Path) -> np.ndarray:
+    """Read an FRGC ``.abs`` or ``.abs.gz`` range image.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; gzip-compressed when the name ends in ``.gz``.
+
+    Returns
+    -------
+    xyz : (H, W, 3) float64
+        Coordinates in mm; NaN where the flag is 0.
+
+    Raises
+    ------
+    InputError
+        Missing file, bad header, truncated data, wrong value counts or non-numeric values.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected an FRGC .abs or .abs.gz range image)")
+    try:
+        with _open_text(path, "r") as fh:
+            lines = fh.read().splitlines()
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read as FRGC .abs text: {exc}") from exc
+    if len(lines) < 3:
+        raise InputError(path, "truncated header: expected 'R rows', 'C columns', 'pixels (flag X Y Z):'")
+    dims = []
+    for i, (line, pattern, what) in enumerate(
+        zip(lines[:3], _HEADER_RE, ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"))
+    ):
+        m = pattern.match(line)
+        if m is None:
+            raise InputError(path, f"header line {i + 1}: expected {what}, got {line[:60]!r}")
+        if m.groups():
+            dims.append(int(m.group(1)))
+    rows, cols = dims
+    if rows <= 0 or cols <= 0:
+        raise InputError(path, f"header: expected positive rows and columns, got {rows} x {cols}")
+    n = rows * cols
+    data_lines = [ln for ln in lines[3:] if ln.strip()]
+    names = ("flag", "X", "Y", "Z")
+    if len(data_lines) < 4:
+        missing = ", ".join(names[len(data_lines) :])
+        raise InputError(path, f"truncated: expected 4 data lines (flag X Y Z), missing {missing}")
+    if len(data_lines) > 4:
+        raise InputError(path, f"expected 4 data lines (flag X Y Z), found {len(data_lines)}")
+    arrays = []
+    for name, line in zip(names, data_lines):
+        tokens = line.split()
+        if len(tokens) != n:
+            raise InputError(
+                path, f"line '{name}': expected {rows}*{cols} = {n} values, got {len(tokens)}"
+            )
+        try:
+            arrays.append(np.array(tokens, dtype=np.float64))
+        except ValueError:
+            bad = next(t for t in tokens if not _is_number(t))
+            raise InputError(path, f"line '{name}': non-numeric value {bad[:20]!r}") from None
+    flag, x, y, z = arrays
+    if not np.all((flag == 0) | (flag == 1)):
+        raise InputError(path, "line 'flag': expected only 0 or 1 values")
+    xyz = np.stack([x, y, z], axis=-1).reshape(rows, cols, 3)
+    valid = (flag == 1).reshape(rows, cols)
+    if not np.all(np.isfinite(xyz[valid])):
+        raise InputError(path, "X/Y/Z: non-finite value at a pixel flagged valid")
+    xyz[~valid] = np.nan
+    return xyz
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def write_abs(path: str | Path, xyz: np.ndarray) -> None:
+    """Write a range image as FRGC ``.abs`` (gzip-compressed when the name ends in ``.gz``).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    xyz : (H, W, 3) float
+        Coordinates in mm; NaN pixels are written with flag 0 and -999999.
+
+    Notes
+    -----
+    Values are written with 6 decimals (1 nm), far below any scanner's noise.
+    """
+    xyz = _check_xyz(xyz, path)
+    rows, cols = xyz.shape[:2]
+    valid = np.all(np.isfinite(xyz), axis=-1).reshape(-1)
+    flat = xyz.reshape(-1, 3).copy()
+    flat[~valid] = ABS_INVALID
+    path = Path(path)
+    with _open_text(path, "w") as fh:
+        fh.write(f"{rows} rows\n{cols} columns\npixels (flag X Y Z):\n")
+        fh.write(" ".join(np.where(valid, "1", "0")) + "\n")
+        for k in range(3):
+            fh.write(" ".join(np.char.mod("%.6f", flat[:, k])) + "\n")
+
+
+def _check_xyz(xyz: np.ndarray, source) -> np.ndarray:
+    xyz = np.asarray(xyz)
+    if xyz.ndim != 3 or xyz.shape[2] != 3 or xyz.shape[0] == 0 or xyz.shape[1] == 0:
+        raise InputError(source, f"xyz: expected an (H, W, 3) array, got shape {xyz.shape}")
+    if not np.issubdtype(xyz.dtype, np.floating):
+        raise InputError(source, f"xyz: expected float values in mm, got dtype {xyz.dtype}")
+    return xyz.astype(np.float64, copy=False)
+
+
+def read_npz_range(path: str | Path) -> np.ndarray:
+    """Read a range image from an ``.npz`` with key ``xyz`` ((H, W, 3) float, mm, NaN = no data).
+
+    Infinite values are treated as an error, not as missing data.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected an .npz with key 'xyz')")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "xyz" not in data.files:
+                raise InputError(path, f"key 'xyz' missing (found {sorted(data.files)})")
+            xyz = data["xyz"]
+    except InputError:
+        raise
+    except Exception as exc:  # zipfile / pickle / value errors from numpy
+        raise InputError(path, f"cannot read as .npz: {exc}") from exc
+    xyz = _check_xyz(xyz, f"{path}: key 'xyz'")
+    if np.isinf(xyz).any():
+        raise InputError(path, "key 'xyz': infinite values (use NaN for no data)")
+    # a pixel is valid only when all three coordinates are
+    xyz = xyz.copy()
+    xyz[~np.all(np.isfinite(xyz), axis=-1)] = np.nan
+    return xyz
+
+
+def write_npz_range(path: str | Path, xyz: np.ndarray) -> None:
+    """Write a range image as ``.npz`` with key ``xyz`` (compressed)."""
+    np.savez_compressed(Path(path), xyz=_check_xyz(xyz, path))
+
+
+def read_range(path: str | Path) -> np.ndarray:
+    """Read a range image by its suffix: ``.abs``, ``.abs.gz`` or ``.npz``.
+
+    Returns
+    -------
+    xyz : (H, W, 3) float64, mm, NaN = no data.
+    """
+    name = Path(path).name.lower()
+    if name.endswith(".abs") or name.endswith(".abs.gz"):
+        return read_abs(path)
+    if name.endswith(".npz"):
+        return read_npz_range(path)
+    raise InputError(path, "xyz: unknown range format (expected .abs, .abs.gz or .npz)")

@@ -1,0 +1,76 @@
+"""Running one pipeline job: logging to the job's log file, clear messages for bad input.
+
+The workflow's adapter scripts call :func:`run_job`; it never imports snakemake.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from scan2morph.errors import InputError
+
+log = logging.getLogger("scan2morph")
+
+
+def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
+    """Run ``func`` with logging to ``log_path``.
+
+    An :class:`~scan2morph.errors.InputError` is written to the log and to stderr as one clear line
+    and the process exits with status 1 (no traceback: the message says what to fix). Any other
+    exception is logged with its traceback and re-raised.
+    """
+    handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
+    if log_path:
+        Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+        handlers.append(logging.FileHandler(log_path, mode="w", encoding="utf-8"))
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", handlers=handlers, force=True
+    )
+    try:
+        func()
+    except InputError as exc:
+        log.error("bad input: %s", exc)
+        logging.shutdown()
+        sys.exit(1)
+    except Exception:
+        log.exception("job failed")
+        logging.shutdown()
+        raise
+
+
+def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(chunk), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def config_sha256(config: dict) -> str:
+    """SHA-256 of a configuration, independent of key order."""
+    return hashlib.sha256(json.dumps(config, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write a JSON file with sorted keys (stable diffs between runs)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps(data, indent=2, sort_keys=True, default=_jsonable) + "\n")
+
+
+def _jsonable(value):
+    try:
+        import numpy as np
+
+        if isinstance(value, np.generic):
+            return value.item()
+        if isinstance(value, np.ndarray):
+            return value.tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    raise TypeError(f"not JSON serialisable: {type(value)}")

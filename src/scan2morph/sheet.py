@@ -1,0 +1,149 @@
+"""The take sheet: one row per take (DESIGN.md, "Inputs").
+
+The sheet is read one way (pandas, tab-separated, all strings, ``#`` comments), its relative paths
+are resolved against the sheet's folder, and the synthetic cohort's rows are added from the config.
+Problems that belong to one subject (a missing file, an unknown modality, a duplicate take, no
+neutral take) do not stop the whole run: :func:`subject_problems` lists them so that only that
+subject's jobs fail, with a message naming the file and the row.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from scan2morph.errors import InputError
+
+COLUMNS = ("subject", "take", "kind", "label", "modality", "xyz", "color", "left", "right",
+           "calibration", "landmarks")
+REQUIRED = ("subject", "take", "kind", "label", "modality", "landmarks")
+KINDS = ("neutral", "viseme", "expression")
+MODALITIES = ("range", "stereo")
+FILES = {"range": ("xyz", "color", "landmarks"), "stereo": ("left", "right", "calibration", "landmarks")}
+_ID = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def read_sheet(path: str | Path) -> pd.DataFrame:
+    """Read a user's take sheet.
+
+    Paths in the sheet that are relative are resolved against the sheet's folder. Empty cells
+    become empty strings. A sheet with only comments gives an empty table.
+
+    Raises
+    ------
+    InputError
+        The file is missing, a required column is missing or an id has forbidden characters
+        (these make the sheet unreadable as a whole, so the run stops before any job).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "sheet not found (config key 'subjects')")
+    try:
+        df = pd.read_csv(path, sep="\t", dtype=str, comment="#", skip_blank_lines=True)
+    except pd.errors.EmptyDataError:
+        df = pd.DataFrame(columns=list(COLUMNS))
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"not a tab-separated sheet: {exc}") from exc
+    df.columns = [c.strip() for c in df.columns]
+    missing = [c for c in REQUIRED if c not in df.columns]
+    if missing:
+        raise InputError(path, f"columns {missing} missing (expected {list(COLUMNS)})")
+    unknown = [c for c in df.columns if c not in COLUMNS]
+    if unknown:
+        raise InputError(path, f"unknown columns {unknown} (expected {list(COLUMNS)})")
+    for c in COLUMNS:
+        if c not in df.columns:
+            df[c] = ""
+    df = df[list(COLUMNS)].fillna("")
+    df = df.apply(lambda col: col.str.strip())
+    for row, rec in enumerate(df.itertuples(index=False), start=2):
+        for col in ("subject", "take"):
+            value = getattr(rec, col)
+            if not _ID.match(value):
+                raise InputError(
+                    path, f"row {row}, column '{col}': {value!r} is not an id (letters, digits, _ and -)"
+                )
+    base = path.resolve().parent
+    for col in ("xyz", "color", "left", "right", "calibration", "landmarks"):
+        df[col] = [str(base / v) if v and not Path(v).is_absolute() else v for v in df[col]]
+    df["sheet_row"] = range(2, len(df) + 2)
+    df["sheet"] = str(path)
+    df["synthetic"] = False
+    return df
+
+
+def synthetic_rows(n_subjects: int, prefix: str, takes: list[dict], root: str) -> pd.DataFrame:
+    """Rows of the synthetic cohort, whose files the ``synth_take`` rule writes under ``root``.
+
+    Parameters
+    ----------
+    n_subjects : int
+        Number of synthetic subjects (ids ``{prefix}01``, ``{prefix}02``, ...).
+    prefix : str
+        Subject id prefix.
+    takes : list of dict
+        Each with ``take``, ``kind``, ``label`` and ``modality``.
+    root : str
+        Folder of the synthetic inputs (``results/synthetic``).
+    """
+    rows = []
+    for i in range(1, n_subjects + 1):
+        subject = f"{prefix}{i:02d}"
+        for t in takes:
+            stem = f"{root}/{subject}/{t['take']}"
+            rows.append(
+                dict(subject=subject, take=t["take"], kind=t["kind"], label=t["label"],
+                     modality=t.get("modality", "range"), xyz=f"{stem}.abs.gz", color=f"{stem}.png",
+                     left="", right="", calibration="", landmarks=f"{stem}.pts",
+                     sheet_row=0, sheet="config: synthetic", synthetic=True)
+            )
+    return pd.DataFrame(rows, columns=[*COLUMNS, "sheet_row", "sheet", "synthetic"])
+
+
+def subject_problems(table: pd.DataFrame, check_files: bool = True) -> dict[str, list[str]]:
+    """Problems per subject that make that subject's run fail (and only that subject's).
+
+    Checks: kind and modality known, the modality's files named (and present when
+    ``check_files``, for user rows), take ids unique per subject, exactly one neutral take.
+    """
+    problems: dict[str, list[str]] = {}
+    table = table.reset_index(drop=True)
+    for subject, rows in table.groupby("subject", sort=False):
+        out = []
+        for rec in rows.itertuples(index=False):
+            where = f"{rec.sheet} row {rec.sheet_row} ({subject}/{rec.take})"
+            if rec.kind not in KINDS:
+                out.append(f"{where}: kind {rec.kind!r} unknown (expected one of {list(KINDS)})")
+            if rec.modality not in MODALITIES:
+                out.append(f"{where}: modality {rec.modality!r} unknown (expected one of {list(MODALITIES)})")
+                continue
+            for col in FILES[rec.modality]:
+                value = getattr(rec, col)
+                if not value:
+                    out.append(f"{where}: column '{col}' is empty (a {rec.modality} take needs it)")
+                elif check_files and not rec.synthetic and not Path(value).is_file():
+                    out.append(f"{where}: column '{col}': file not found: {value}")
+        dup = rows["take"][rows["take"].duplicated()].unique()
+        for take in dup:
+            out.append(f"{rows['sheet'].iloc[0]}: take {take!r} appears more than once for subject {subject!r}")
+        n_neutral = int((rows["kind"] == "neutral").sum())
+        if n_neutral != 1:
+            out.append(f"subject {subject!r}: expected exactly one take of kind 'neutral', found {n_neutral}")
+        problems[subject] = out
+    return problems
+
+
+def take_table(sheet: pd.DataFrame, synthetic: pd.DataFrame) -> pd.DataFrame:
+    """All takes (user and synthetic), indexed by (subject, take), first row of a duplicate kept."""
+    both = pd.concat([sheet, synthetic], ignore_index=True)
+    clash = set(sheet["subject"]) & set(synthetic["subject"])
+    if clash:
+        raise InputError(
+            sheet["sheet"].iloc[0],
+            f"subject ids {sorted(clash)} clash with the synthetic cohort's; rename them or set "
+            "synthetic.prefix",
+        )
+    both = both.set_index(["subject", "take"], drop=False)
+    return both[~both.index.duplicated(keep="first")]

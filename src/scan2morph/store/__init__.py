@@ -1,0 +1,22 @@
+"""The versioned per-subject HDF5 store."""
+
+from scan2morph.store.hdf5 import (
+    FORMAT_VERSION,
+    merge_parts,
+    open_store,
+    read_attrs,
+    read_part,
+    write_part,
+)
+from scan2morph.store.layout import load_layout, validate_store
+
+__all__ = [
+    "FORMAT_VERSION",
+    "load_layout",
+    "merge_parts",
+    "open_store",
+    "read_attrs",
+    "read_part",
+    "validate_store",
+    "write_part",
+]

@@ -1,0 +1,204 @@
+"""The versioned per-subject HDF5 store and the HDF5 "parts" the stages hand to it.
+
+Each stage writes a *part*: a small HDF5 file whose datasets already sit at their final paths in
+the subject's store (for example ``/takes/car/mesh/vertices``). The store rule merges the parts of a
+subject into ``results/{subject}/{subject}.h5`` and adds the root attributes of the contract.
+Writing goes to a temporary file that is renamed into place, so a failed job never leaves a
+half-written store behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from scan2morph import __version__
+from scan2morph.errors import InputError
+
+#: Semantic version of the store layout (``schemas/store.layout.yaml``).
+FORMAT_VERSION = "1.0.0"
+#: Datasets at least this large are chunked and gzip-compressed.
+_COMPRESS_BYTES = 1 << 16
+
+
+def _atomic_h5(path: Path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _write_dataset(h5: h5py.File, name: str, value) -> None:
+    if isinstance(value, str) or (
+        isinstance(value, (list, tuple, np.ndarray)) and len(value) and isinstance(np.asarray(value).flat[0], str)
+    ):
+        h5.create_dataset(name, data=np.asarray(value, dtype=object), dtype=h5py.string_dtype())
+        return
+    arr = np.asarray(value)
+    if arr.dtype.kind in "US":
+        h5.create_dataset(name, data=arr.astype(object), dtype=h5py.string_dtype())
+        return
+    kwargs = {}
+    if arr.nbytes >= _COMPRESS_BYTES and arr.ndim >= 1:
+        kwargs = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+    h5.create_dataset(name, data=arr, **kwargs)
+
+
+def _set_attrs(obj, attrs: Mapping) -> None:
+    for key, value in attrs.items():
+        if isinstance(value, (dict, list)) and not isinstance(value, np.ndarray):
+            value = json.dumps(value, sort_keys=True)
+        obj.attrs[key] = value
+
+
+def write_part(
+    path: str | Path,
+    datasets: Mapping[str, object],
+    attrs: Mapping[str, Mapping] | None = None,
+) -> None:
+    """Write a stage's part file.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output ``.h5`` file (replaced atomically).
+    datasets : mapping of str to array-like
+        Absolute store paths (``/takes/car/mesh/vertices``) to arrays or strings.
+    attrs : mapping of str to mapping, optional
+        Group or dataset path to its attributes; ``"/"`` is the root.
+    """
+    path = Path(path)
+    tmp = _atomic_h5(path)
+    try:
+        with h5py.File(tmp, "w") as h5:
+            for name, value in datasets.items():
+                _write_dataset(h5, name, value)
+            for name, group_attrs in (attrs or {}).items():
+                obj = h5.require_group(name) if name not in h5 else h5[name]
+                _set_attrs(obj, group_attrs)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def read_part(path: str | Path, prefix: str = "/") -> dict[str, np.ndarray]:
+    """Read every dataset below ``prefix`` of a part (or a store) into a dict keyed by path."""
+    out: dict[str, np.ndarray] = {}
+    with h5py.File(path, "r") as h5:
+        root = h5[prefix]
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                value = obj[()]
+                if obj.dtype.kind == "O":
+                    value = obj.asstr()[()]
+                out[f"{root.name.rstrip('/')}/{name}"] = value
+
+        root.visititems(visit)
+    return out
+
+
+def read_attrs(path: str | Path, name: str = "/") -> dict:
+    """Attributes of one group or dataset of a part or store."""
+    with h5py.File(path, "r") as h5:
+        return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5[name].attrs.items()}
+
+
+def merge_parts(
+    path: str | Path,
+    parts: Iterable[str | Path],
+    subject: str,
+    config_sha256: str,
+) -> None:
+    """Merge stage parts into the subject's versioned store.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``results/{subject}/{subject}.h5`` (replaced atomically).
+    parts : iterable of paths
+        Part files; a path present in two parts is an error.
+    subject : str
+        Subject id (root attribute).
+    config_sha256 : str
+        Hash of the configuration the run used (root attribute).
+
+    Notes
+    -----
+    The input checksums that the ingest stage puts on each ``/takes/{take}`` group (attributes
+    ``input_sha256_<role>``) are gathered into the root attribute ``input_sha256``: a JSON object
+    take -> role -> hex digest.
+    """
+    path = Path(path)
+    tmp = _atomic_h5(path)
+    try:
+        with h5py.File(tmp, "w") as out:
+            for part in parts:
+                with h5py.File(part, "r") as src:
+                    _merge_group(src, out, Path(part))
+            out.attrs["format_version"] = FORMAT_VERSION
+            out.attrs["scan2morph_version"] = __version__
+            out.attrs["config_sha256"] = config_sha256
+            out.attrs["subject"] = subject
+            out.attrs["units"] = "mm"
+            checksums = {
+                take: {
+                    key.removeprefix("input_sha256_"): str(value)
+                    for key, value in group.attrs.items()
+                    if key.startswith("input_sha256_")
+                }
+                for take, group in out.get("takes", {}).items()
+            }
+            out.attrs["input_sha256"] = json.dumps(checksums, sort_keys=True)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _merge_group(src: h5py.Group, dst: h5py.Group, part: Path) -> None:
+    for key, value in src.attrs.items():
+        dst.attrs[key] = value
+    for name, obj in src.items():
+        if isinstance(obj, h5py.Dataset):
+            if name in dst:
+                raise InputError(part, f"dataset {obj.name} is already in the store (two parts write it)")
+            src.copy(obj, dst, name=name)
+        else:
+            _merge_group(obj, dst.require_group(name), part)
+
+
+def open_store(path: str | Path) -> h5py.File:
+    """Open a subject store for reading, refusing an unknown major format version.
+
+    Raises
+    ------
+    InputError
+        Not an HDF5 file, no ``format_version``, or a major version this library does not read.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "store not found")
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(path, f"not an HDF5 file: {exc}") from exc
+    version = h5.attrs.get("format_version")
+    if version is None:
+        h5.close()
+        raise InputError(path, "root attribute 'format_version' missing: not a scan2morph store")
+    version = version.decode() if isinstance(version, bytes) else str(version)
+    major = version.split(".")[0]
+    if major != FORMAT_VERSION.split(".")[0]:
+        h5.close()
+        raise InputError(
+            path,
+            f"format_version {version} is not readable by scan2morph {__version__} "
+            f"(reads {FORMAT_VERSION.split('.')[0]}.x); convert it or use a matching release",
+        )
+    return h5

@@ -1,0 +1,185 @@
+"""Readers and writers: round trips and every bad-input message."""
+
+from __future__ import annotations
+
+import gzip
+
+import numpy as np
+import pytest
+
+from scan2morph.errors import InputError
+from scan2morph.io import (
+    read_abs,
+    read_color,
+    read_npz_range,
+    read_pts,
+    read_range,
+    read_range_take,
+    write_abs,
+    write_color,
+    write_npz_range,
+    write_pts,
+)
+
+
+@pytest.fixture
+def xyz():
+    rng = np.random.default_rng(0)
+    h, w = 7, 9
+    xyz = rng.normal(0.0, 100.0, (h, w, 3))
+    xyz[rng.random((h, w)) < 0.2] = np.nan
+    return xyz
+
+
+@pytest.mark.parametrize("name", ["scan.abs", "scan.abs.gz"])
+def test_abs_round_trip(tmp_path, xyz, name):
+    path = tmp_path / name
+    write_abs(path, xyz)
+    back = read_abs(path)
+    assert back.shape == xyz.shape
+    np.testing.assert_array_equal(np.isnan(back), np.isnan(xyz))
+    np.testing.assert_allclose(back[~np.isnan(xyz)], xyz[~np.isnan(xyz)], atol=5e-7)
+    if name.endswith(".gz"):
+        assert gzip.open(path, "rt").readline().strip() == "7 rows"
+
+
+def test_abs_layout_is_frgc(tmp_path):
+    """Flags, then X, Y and Z lines, row-major from the top row, -999999 for no data."""
+    xyz = np.arange(2 * 3 * 3, dtype=float).reshape(2, 3, 3)
+    xyz[0, 1] = np.nan
+    path = tmp_path / "a.abs"
+    write_abs(path, xyz)
+    lines = path.read_text().splitlines()
+    assert lines[:3] == ["2 rows", "3 columns", "pixels (flag X Y Z):"]
+    assert lines[3].split() == ["1", "0", "1", "1", "1", "1"]
+    assert float(lines[4].split()[1]) == -999999.0
+    assert [float(v) for v in lines[4].split()][3] == 9.0  # X of row 1, column 0
+
+
+def _abs_text(rows=2, cols=2, lines=None):
+    body = lines or ["1 1 1 1", "1 2 3 4", "5 6 7 8", "9 10 11 12"]
+    return f"{rows} rows\n{cols} columns\npixels (flag X Y Z):\n" + "\n".join(body) + "\n"
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (_abs_text(lines=["1 1 1 1", "1 2 3 4"]), "truncated.*missing Y, Z"),
+        (_abs_text(lines=["1 1 1 1", "1 2 3", "5 6 7 8", "9 10 11 12"]), "line 'X': expected 2\\*2 = 4 values, got 3"),
+        (_abs_text(lines=["1 1 1 1", "1 2 3 4", "5 6 x 8", "9 10 11 12"]), "line 'Y': non-numeric value 'x'"),
+        (_abs_text(lines=["1 1 2 1", "1 2 3 4", "5 6 7 8", "9 10 11 12"]), "only 0 or 1"),
+        ("2 rows\n", "truncated header"),
+        ("2 rows\nwide\npixels (flag X Y Z):\n", "header line 2: expected '<C> columns'"),
+        ("", "truncated header"),
+    ],
+)
+def test_abs_bad_input(tmp_path, text, match):
+    path = tmp_path / "bad.abs"
+    path.write_text(text)
+    with pytest.raises(InputError, match=match) as info:
+        read_abs(path)
+    assert str(path) in str(info.value)
+
+
+def test_abs_truncated_gzip(tmp_path, xyz):
+    path = tmp_path / "scan.abs.gz"
+    write_abs(path, xyz)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="scan.abs.gz"):
+        read_abs(path)
+
+
+def test_abs_missing_file(tmp_path):
+    with pytest.raises(InputError, match="file not found"):
+        read_abs(tmp_path / "nope.abs")
+
+
+def test_npz_round_trip_and_dispatch(tmp_path, xyz):
+    path = tmp_path / "scan.npz"
+    write_npz_range(path, xyz)
+    np.testing.assert_array_equal(read_npz_range(path), xyz)
+    np.testing.assert_array_equal(read_range(path), xyz)
+    with pytest.raises(InputError, match="unknown range format"):
+        read_range(tmp_path / "scan.ply")
+
+
+def test_npz_bad_input(tmp_path):
+    np.savez(tmp_path / "a.npz", depth=np.zeros((2, 2)))
+    with pytest.raises(InputError, match="key 'xyz' missing"):
+        read_npz_range(tmp_path / "a.npz")
+    np.savez(tmp_path / "b.npz", xyz=np.zeros((2, 2)))
+    with pytest.raises(InputError, match="expected an \\(H, W, 3\\) array"):
+        read_npz_range(tmp_path / "b.npz")
+    np.savez(tmp_path / "c.npz", xyz=np.full((2, 2, 3), np.inf))
+    with pytest.raises(InputError, match="infinite"):
+        read_npz_range(tmp_path / "c.npz")
+    (tmp_path / "d.npz").write_text("not a zip")
+    with pytest.raises(InputError, match="cannot read as .npz"):
+        read_npz_range(tmp_path / "d.npz")
+
+
+def test_pts_round_trip_is_one_based(tmp_path):
+    pts = np.random.default_rng(1).uniform(0, 100, (68, 2))
+    path = tmp_path / "a.pts"
+    write_pts(path, pts)
+    lines = path.read_text().splitlines()
+    assert lines[:3] == ["version: 1", "n_points: 68", "{"] and lines[-1] == "}"
+    np.testing.assert_allclose([float(v) for v in lines[3].split()], pts[0] + 1.0, atol=1e-4)
+    np.testing.assert_allclose(read_pts(path), pts, atol=1e-4)
+
+
+def _pts_text(n, declared=None, extra=""):
+    body = "\n".join(f"{i + 1}.0 {i + 2}.0" for i in range(n))
+    return f"version: 1\nn_points: {declared or n}\n{{\n{body}\n{extra}}}\n"
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (_pts_text(67), "n_points: expected 68 \\(iBUG-68\\), got 67"),
+        (_pts_text(67, declared=68), "n_points says 68 but the list has 67"),
+        (_pts_text(68).replace("5.0 6.0", "5.0 abc"), "point 5: non-numeric"),
+        (_pts_text(68).replace("5.0 6.0", "5.0 nan"), "point 5: non-finite"),
+        (_pts_text(68).replace("}\n", ""), "missing '}'"),
+        ("version: 1\n{\n}\n", "'n_points' missing"),
+    ],
+)
+def test_pts_bad_input(tmp_path, text, match):
+    path = tmp_path / "bad.pts"
+    path.write_text(text)
+    with pytest.raises(InputError, match=match):
+        read_pts(path)
+
+
+def test_color_round_trip_and_errors(tmp_path):
+    rgb = np.random.default_rng(2).integers(0, 256, (5, 6, 3), dtype=np.uint8)
+    for name in ("c.png", "c.ppm"):
+        write_color(tmp_path / name, rgb)
+        np.testing.assert_array_equal(read_color(tmp_path / name), rgb)
+    (tmp_path / "x.png").write_bytes(b"garbage")
+    with pytest.raises(InputError, match="cannot decode"):
+        read_color(tmp_path / "x.png")
+    (tmp_path / "c.tiff").write_bytes(b"x")
+    with pytest.raises(InputError, match="unknown image format"):
+        read_color(tmp_path / "c.tiff")
+
+
+def test_range_take_checks_sizes_and_landmarks(tmp_path):
+    xyz = np.zeros((20, 30, 3))
+    write_abs(tmp_path / "s.abs", xyz)
+    write_color(tmp_path / "ok.png", np.zeros((20, 30, 3), np.uint8))
+    write_color(tmp_path / "big.png", np.zeros((21, 30, 3), np.uint8))
+    pts = np.tile([[10.0, 10.0]], (68, 1))
+    write_pts(tmp_path / "p.pts", pts)
+    take = read_range_take(tmp_path / "s.abs", tmp_path / "ok.png", tmp_path / "p.pts")
+    assert take.xyz.shape == (20, 30, 3) and take.landmarks.shape == (68, 2)
+    with pytest.raises(InputError, match="big.png: color: image is 30x21 .* 30x20"):
+        read_range_take(tmp_path / "s.abs", tmp_path / "big.png", tmp_path / "p.pts")
+    pts[3] = [35.0, 5.0]
+    write_pts(tmp_path / "q.pts", pts)
+    with pytest.raises(InputError, match="q.pts: point 4 lies outside the 30x20 image"):
+        read_range_take(tmp_path / "s.abs", tmp_path / "ok.png", tmp_path / "q.pts")
+    write_abs(tmp_path / "empty.abs", np.full((20, 30, 3), np.nan))
+    with pytest.raises(InputError, match="no valid pixel"):
+        read_range_take(tmp_path / "empty.abs", tmp_path / "ok.png", tmp_path / "p.pts")

@@ -1,0 +1,99 @@
+"""The HDF5 store: parts, merge, version check, layout validation."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from scan2morph import __version__
+from scan2morph.errors import InputError
+from scan2morph.store import (
+    FORMAT_VERSION,
+    load_layout,
+    merge_parts,
+    open_store,
+    read_part,
+    validate_store,
+    write_part,
+)
+
+LAYOUT = Path(__file__).resolve().parents[1] / "schemas" / "store.layout.yaml"
+
+
+def _take_part(path, take, h=4, w=5):
+    rng = np.random.default_rng(len(take))
+    g = f"/takes/{take}"
+    write_part(
+        path,
+        {
+            f"{g}/range/xyz": rng.normal(size=(h, w, 3)).astype(np.float32),
+            f"{g}/range/color": rng.integers(0, 255, (h, w, 3), dtype=np.uint8),
+            f"{g}/range/spikes": np.zeros((h, w), bool),
+            f"{g}/range/filled": np.zeros((h, w), bool),
+            f"{g}/landmarks": rng.uniform(0, 4, (68, 2)),
+        },
+        attrs={g: {"kind": "viseme", "input_sha256_xyz": "ab" * 32, "repair": {"n_holes": 2}}},
+    )
+
+
+def test_merge_and_validate(tmp_path):
+    _take_part(tmp_path / "a.h5", "neutral")
+    _take_part(tmp_path / "b.h5", "car", h=6, w=7)  # takes may differ in image size
+    out = tmp_path / "s" / "s.h5"
+    merge_parts(out, [tmp_path / "a.h5", tmp_path / "b.h5"], "s", "cd" * 32)
+    assert validate_store(out, load_layout(LAYOUT)) == []
+    with open_store(out) as h5:
+        assert h5.attrs["format_version"] == FORMAT_VERSION
+        assert h5.attrs["scan2morph_version"] == __version__
+        assert h5.attrs["subject"] == "s"
+        assert json.loads(h5.attrs["input_sha256"]) == {
+            "car": {"xyz": "ab" * 32},
+            "neutral": {"xyz": "ab" * 32},
+        }
+        assert json.loads(h5["takes/car"].attrs["repair"]) == {"n_holes": 2}
+        assert h5["takes/car/range/xyz"].shape == (6, 7, 3)
+    data = read_part(out, "/takes/car")
+    assert data["/takes/car/landmarks"].shape == (68, 2)
+
+
+def test_layout_validation_finds_problems(tmp_path):
+    _take_part(tmp_path / "a.h5", "neutral")
+    with h5py.File(tmp_path / "a.h5", "a") as h5:
+        del h5["takes/neutral/range/filled"]
+        del h5["takes/neutral/landmarks"]
+        h5["takes/neutral/landmarks"] = np.zeros((67, 2))
+    out = tmp_path / "s.h5"
+    merge_parts(out, [tmp_path / "a.h5"], "s", "0" * 64)
+    problems = validate_store(out, load_layout(LAYOUT))
+    assert "/takes/neutral/range/filled: required dataset missing" in problems
+    assert any("/takes/neutral/landmarks: shape (67, 2)" in p for p in problems)
+
+
+def test_two_parts_writing_one_dataset_is_an_error(tmp_path):
+    _take_part(tmp_path / "a.h5", "neutral")
+    _take_part(tmp_path / "b.h5", "neutral")
+    with pytest.raises(InputError, match="two parts write it"):
+        merge_parts(tmp_path / "s.h5", [tmp_path / "a.h5", tmp_path / "b.h5"], "s", "0")
+    assert not (tmp_path / "s.h5").exists()
+    assert list(tmp_path.glob("*.tmp")) == []
+
+
+def test_open_store_refuses_unknown_major(tmp_path):
+    _take_part(tmp_path / "a.h5", "neutral")
+    out = tmp_path / "s.h5"
+    merge_parts(out, [tmp_path / "a.h5"], "s", "0")
+    with h5py.File(out, "a") as h5:
+        h5.attrs["format_version"] = "2.0.0"
+    with pytest.raises(InputError, match=r"format_version 2.0.0 is not readable .*\(reads 1.x\)"):
+        open_store(out)
+    with h5py.File(out, "a") as h5:
+        del h5.attrs["format_version"]
+    with pytest.raises(InputError, match="'format_version' missing"):
+        open_store(out)
+    (tmp_path / "x.h5").write_text("nope")
+    with pytest.raises(InputError, match="not an HDF5 file"):
+        open_store(tmp_path / "x.h5")

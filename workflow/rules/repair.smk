@@ -1,0 +1,19 @@
+# Repair: spike removal, then small-hole filling (Yano-Harada 3.1).
+
+
+rule repair:
+    input:
+        part="results/{subject}/takes/{take}/ingest.h5",
+    output:
+        part="results/{subject}/takes/{take}/repair.h5",
+        report="results/{subject}/takes/{take}/repair.json",
+    params:
+        repair=config["repair"],
+    log:
+        "logs/repair/{subject}/{take}.log",
+    benchmark:
+        "benchmarks/rules/repair/{subject}/{take}.tsv"
+    resources:
+        mem_mb=1000,
+    script:
+        "../scripts/repair.py"

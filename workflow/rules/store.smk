@@ -1,0 +1,17 @@
+# Store: merge the stages' parts into the versioned per-subject HDF5 file.
+
+
+rule store:
+    input:
+        parts=get_subject_parts,
+        layout=LAYOUT,
+    output:
+        "results/{subject}/{subject}.h5",
+    params:
+        config_sha256=CONFIG_SHA256,
+    log:
+        "logs/store/{subject}.log",
+    benchmark:
+        "benchmarks/rules/store/{subject}.tsv"
+    script:
+        "../scripts/store.py"
