@@ -14,7 +14,9 @@ def main(snakemake):
         take = snakemake.wildcards.take
         g = f"/takes/{take}"
         raw = read_part(snakemake.input.part)
-        xyz, report = repair_range(raw[f"{g}/raw/xyz"], dict(snakemake.params.repair))
+        xyz, report = repair_range(
+            raw[f"{g}/raw/xyz"], dict(snakemake.params.repair), source=f"{snakemake.wildcards.subject}/{take}"
+        )
         filled = report.pop("filled")
         spikes = report.pop("spikes")
         logging.info("%s: %s", take, report)

@@ -1,0 +1,490 @@
+"""Range-image repair: spike removal and small-hole filling (Yano-Harada section 3.1).
+
+A range image is ``xyz`` (H, W, 3) float64 in mm, NaN where the scanner saw nothing, in an
+arbitrary right-handed scanner frame. Nothing here assumes which axis is depth: spikes are
+judged by 3D distances and holes are filled in all three coordinates with one matte.
+
+Hole filling follows the algorithm the paper takes from L. Williams (1990), "3D paint":
+
+0. the surface array holds the range data, with the missing values set to 0;
+1. a matte array is 1 where range data exist and 0 in the gaps;
+2. around the gaps, matte and surface are blurred with a small kernel;
+3. where the blurred matte exceeds a threshold, the gap sample becomes blurred surface divided
+   by blurred matte and its matte becomes 1;
+4. steps 2-3 repeat until no gap is left.
+
+Step 3's ratio is a normalised convolution, i.e. a weighted mean of the valid neighbours. On a
+tilted or curved surface that mean lags one pixel behind the front (the neighbours all lie on
+one side), which costs a pixel pitch times the slope, e.g. 0.5 mm for the in-plane coordinates
+of a 0.5 mm/px scan. With ``trend_degree`` 1 or 2 (default 2) each hole's surface is also fitted
+by a polynomial in pixel coordinates over the valid rim around it, and step 3 subtracts the
+polynomial's Taylor expansion over the same weights (first and second matte-weighted moments of
+the kernel), so that the filled value is exact for surfaces that are linear (degree 1) or
+quadratic (degree 2) in the pixel coordinates. ``trend_degree=0`` is the paper's filter verbatim.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from scan2morph.errors import InputError
+
+#: Default parameters of :func:`repair_range` (the ``repair`` section of the config).
+DEFAULT_REPAIR: dict[str, float | int] = {
+    "spike_threshold_mm": 5.0,
+    "spike_window": 5,
+    "max_hole_px": 400,
+    "fill_kernel_px": 3,
+    "fill_threshold": 0.2,
+    "fill_max_iter": 100,
+}
+
+# Source named by parameter errors: the config section, whatever the take.
+_PARAMS = "repair"
+# Width (px, chessboard distance) of the valid rim around a hole used to fit its trend.
+_RIM_PX = 3
+# Neighbour pixels processed per chunk in remove_spikes (bounds memory to ~20 MB).
+_SPIKE_CHUNK = 32768
+# Condition-number guard for the per-hole trend fits (6 x 6 normal equations, scaled basis).
+_FIT_RCOND = 1e-10
+# A hole whose rim the trend fits worse than this (RMS 3D residual, mm) is filled without the
+# trend terms: its rim spans a depth edge, where a polynomial would extrapolate nonsense.
+_TREND_MAX_RMS_MM = 1.0
+
+
+# --------------------------------------------------------------------------------------------
+# validation
+
+
+def _check_xyz(xyz: Any, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``xyz`` as a float64 copy with whole-pixel NaNs, and its (H, W) valid mask."""
+    arr = np.asarray(xyz)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise InputError(source, f"xyz: expected shape (H, W, 3), got {arr.shape}")
+    if arr.shape[0] < 3 or arr.shape[1] < 3:
+        raise InputError(source, f"xyz: expected H, W >= 3, got {arr.shape[:2]}")
+    if arr.dtype.kind != "f":
+        raise InputError(
+            source, f"xyz: expected a float array (mm, NaN = no data), got {arr.dtype}"
+        )
+    arr = arr.astype(np.float64, copy=True)
+    if np.isinf(arr).any():
+        raise InputError(source, "xyz: expected finite values or NaN, got +-inf")
+    valid = ~np.isnan(arr).any(axis=2)
+    if not valid.any():
+        raise InputError(source, "xyz: no valid pixel (all NaN)")
+    arr[~valid] = np.nan  # a pixel is missing as a whole
+    return arr, valid
+
+
+def _check_int(value: Any, name: str, source: str, *, minimum: int, odd: bool = False) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise InputError(source, f"{name}: expected an integer, got {value!r}")
+    value = int(value)
+    if value < minimum or (odd and value % 2 == 0):
+        kind = "an odd integer" if odd else "an integer"
+        raise InputError(source, f"{name}: expected {kind} >= {minimum}, got {value}")
+    return value
+
+
+def _check_float(value: Any, name: str, source: str, *, upper: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InputError(source, f"{name}: expected a number, got {value!r}")
+    value = float(value)
+    if not np.isfinite(value) or value <= 0 or (upper is not None and value >= upper):
+        bound = f"in (0, {upper})" if upper is not None else "> 0"
+        raise InputError(source, f"{name}: expected a finite number {bound}, got {value}")
+    return value
+
+
+def _neighbour_offsets(
+    width_padded: int, radius: int, *, centre: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Flat-index offsets, (dy, dx) pairs of a (2r+1)^2 window in a padded row-major image."""
+    d = np.arange(-radius, radius + 1)
+    dy, dx = np.meshgrid(d, d, indexing="ij")
+    keep = np.ones(dy.shape, bool) if centre else (dy != 0) | (dx != 0)
+    dy, dx = dy[keep], dx[keep]
+    return dy * width_padded + dx, np.stack([dy, dx], axis=1)
+
+
+# --------------------------------------------------------------------------------------------
+# spikes
+
+
+def remove_spikes(
+    xyz: np.ndarray,
+    threshold_mm: float = DEFAULT_REPAIR["spike_threshold_mm"],
+    window: int = DEFAULT_REPAIR["spike_window"],
+    *,
+    min_support: int = 4,
+    source: str = "repair",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Set isolated outliers ("spikes") of a range image to NaN.
+
+    A valid pixel is a spike when its 3D distance to the median of its ``window`` x ``window``
+    neighbourhood (per-coordinate median over the valid neighbours, the pixel itself excluded)
+    exceeds ``threshold_mm``, and fewer than ``min_support`` of its valid neighbours lie within
+    ``threshold_mm`` of it. The second test keeps the rim of a foreground surface in front of
+    another valid surface: there the neighbourhood median may come from the far surface, but the
+    rim pixel is backed by its own surface's neighbours, which a spike is not. Pixels with fewer
+    than ``max(3, (window**2 - 1) // 4)`` valid neighbours are left alone.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float ndarray, mm
+        Range image, NaN where there is no data. Not modified.
+    threshold_mm : float, mm
+        Distance from the neighbourhood median above which a pixel may be a spike.
+    window : int
+        Odd side length of the square neighbourhood, pixels.
+    min_support : int
+        A pixel with at least this many valid neighbours within ``threshold_mm`` is kept.
+    source : str
+        Names the data in ``xyz`` errors (a file or ``subject/take``); parameter errors name
+        the config section ``repair``.
+
+    Returns
+    -------
+    xyz_clean : (H, W, 3) float64 ndarray, mm
+        Copy of ``xyz`` with the spikes set to NaN.
+    spikes : (H, W) bool ndarray
+        True at the pixels removed.
+
+    Raises
+    ------
+    InputError
+        If ``xyz`` is not an (H, W, 3) float array with some valid pixel, or a parameter is
+        out of range.
+    """
+    arr, valid = _check_xyz(xyz, source)
+    threshold_mm = _check_float(threshold_mm, "threshold_mm", _PARAMS)
+    window = _check_int(window, "window", _PARAMS, minimum=3, odd=True)
+    min_support = _check_int(min_support, "min_support", _PARAMS, minimum=1)
+    r = window // 2
+    h, w = valid.shape
+    # coordinate-major padded copy: gathers give (3, n, K) rows contiguous along K
+    pad = np.pad(arr, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
+    pad = np.ascontiguousarray(pad.reshape(-1, 3).T)
+    offsets, _ = _neighbour_offsets(w + 2 * r, r, centre=False)
+    min_valid = max(3, (window * window - 1) // 4)
+
+    ys, xs = np.nonzero(valid)
+    centres = (ys + r) * (w + 2 * r) + (xs + r)
+    is_spike = np.zeros(centres.size, bool)
+    for start in range(0, centres.size, _SPIKE_CHUNK):  # chunks bound memory, not a pixel loop
+        c = centres[start : start + _SPIKE_CHUNK]
+        nb = pad[:, c[:, None] + offsets[None, :]]  # (3, n, K)
+        n_valid = np.count_nonzero(~np.isnan(nb[0]), axis=1)  # (n,)
+        srt = np.sort(nb, axis=2)  # NaNs sort last
+        lo = np.broadcast_to(np.maximum(n_valid - 1, 0)[None, :, None] // 2, (3, c.size, 1))
+        hi = np.broadcast_to(n_valid[None, :, None] // 2, (3, c.size, 1))
+        med = (
+            0.5
+            * (np.take_along_axis(srt, lo, axis=2) + np.take_along_axis(srt, hi, axis=2))[:, :, 0]
+        )  # (3, n)
+        p = pad[:, c]  # (3, n)
+        dist2 = ((p - med) ** 2).sum(axis=0)
+        cand = np.flatnonzero((dist2 > threshold_mm**2) & (n_valid >= min_valid))
+        # support: valid neighbours within threshold_mm of the candidate itself
+        nd2 = ((nb[:, cand, :] - p[:, cand, None]) ** 2).sum(axis=0)  # (m, K), NaN if invalid
+        support = np.count_nonzero(nd2 <= threshold_mm**2, axis=1)
+        is_spike[start + cand[support < min_support]] = True
+
+    spikes = np.zeros((h, w), bool)
+    spikes[ys[is_spike], xs[is_spike]] = True
+    arr[spikes] = np.nan
+    return arr, spikes
+
+
+# --------------------------------------------------------------------------------------------
+# holes
+
+
+def _binomial_kernel(size: int) -> np.ndarray:
+    """1D binomial kernel of odd ``size``, sum 1 (a small Gaussian)."""
+    k = np.array([1.0])
+    for _ in range(size - 1):
+        k = np.convolve(k, [1.0, 1.0])
+    return k / k.sum()
+
+
+def _hole_trends(
+    pad: np.ndarray,
+    valid_pad: np.ndarray,
+    gap_idx: np.ndarray,
+    gap_lab: np.ndarray,
+    n_lab: int,
+    wp: int,
+    degree: int,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Fit each hole's surface by a polynomial over its valid rim; return its derivatives.
+
+    Returns the gradient (n_gap, 3, 2) and Hessian entries (n_gap, 3, 3) as (uu, uv, vv), in
+    mm per pixel (row = v, column = u), of each coordinate at each gap pixel, and the number
+    of holes whose fit was rejected (their derivatives are 0).
+    """
+    n_gap = gap_idx.size
+    grad = np.zeros((n_gap, 3, 2))
+    hess = np.zeros((n_gap, 3, 3))
+    if degree == 0:
+        return grad, hess, 0
+    offs, _ = _neighbour_offsets(wp, _RIM_PX, centre=False)
+    # (hole, rim pixel) pairs; a pixel between two holes serves both fits.
+    cand = gap_idx[:, None] + offs[None, :]
+    lab = np.broadcast_to(gap_lab[:, None], cand.shape)
+    ok = valid_pad[cand]
+    key = np.unique(lab[ok].astype(np.int64) * pad.shape[0] + cand[ok])
+    pl, pp = np.divmod(key, pad.shape[0])
+    pv, pu = np.divmod(pp, wp)
+    gv, gu = np.divmod(gap_idx, wp)
+    # each hole's centroid and size, to centre and scale the basis
+    cnt = np.bincount(gap_lab, minlength=n_lab)
+    cu = np.bincount(gap_lab, gu, minlength=n_lab) / np.maximum(cnt, 1)
+    cv = np.bincount(gap_lab, gv, minlength=n_lab) / np.maximum(cnt, 1)
+    scale = np.sqrt(np.maximum(cnt, 1)) / 2.0 + _RIM_PX
+    a = (pu - cu[pl]) / scale[pl]
+    b = (pv - cv[pl]) / scale[pl]
+    basis = np.stack([np.ones_like(a), a, b, a * a, a * b, b * b], axis=1)  # (P, 6)
+    n_terms = np.bincount(pl, minlength=n_lab)
+    # fewer rim points than twice the unknowns: lower the degree for that hole
+    deg = np.where(n_terms >= 12, degree, np.where(n_terms >= 6, 1, 0))
+    used = np.array([1, 1, 1, 2, 2, 2])[None, :] <= np.maximum(deg, 0)[:, None]  # (L, 6)
+    used[:, 0] = True
+    basis = basis * used[pl]
+    ata = np.zeros((n_lab, 6, 6))
+    atb = np.zeros((n_lab, 6, 3))
+    np.add.at(ata, pl, basis[:, :, None] * basis[:, None, :])
+    np.add.at(atb, pl, basis[:, :, None] * pad[pp][:, None, :])
+    li, ji = np.nonzero(~used)
+    ata[li, ji, ji] = 1.0  # unused terms solve to 0
+    coef = np.linalg.pinv(ata, rcond=_FIT_RCOND) @ atb  # (L, 6, 3)
+    resid2 = np.sum((pad[pp] - np.einsum("pk,pkc->pc", basis, coef[pl])) ** 2, axis=1)
+    fit_rms = np.sqrt(np.bincount(pl, resid2, minlength=n_lab) / np.maximum(n_terms, 1))
+    rejected = (n_terms == 0) | (fit_rms > _TREND_MAX_RMS_MM)
+    coef[rejected] = 0.0
+    # derivatives at the gap pixels, back to pixel units
+    c = coef[gap_lab]  # (n_gap, 6, 3)
+    s = scale[gap_lab][:, None]
+    a = ((gu - cu[gap_lab]) / scale[gap_lab])[:, None]
+    b = ((gv - cv[gap_lab]) / scale[gap_lab])[:, None]
+    grad[:, :, 0] = (c[:, 1] + 2 * c[:, 3] * a + c[:, 4] * b) / s
+    grad[:, :, 1] = (c[:, 2] + c[:, 4] * a + 2 * c[:, 5] * b) / s
+    hess[:, :, 0] = 2 * c[:, 3] / s**2
+    hess[:, :, 1] = c[:, 4] / s**2
+    hess[:, :, 2] = 2 * c[:, 5] / s**2
+    return grad, hess, int(rejected.sum())
+
+
+def fill_holes(
+    xyz: np.ndarray,
+    max_hole_px: int = DEFAULT_REPAIR["max_hole_px"],
+    kernel_px: int = DEFAULT_REPAIR["fill_kernel_px"],
+    threshold: float = DEFAULT_REPAIR["fill_threshold"],
+    max_iter: int = DEFAULT_REPAIR["fill_max_iter"],
+    *,
+    trend_degree: int = 2,
+    source: str = "repair",
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Fill the small holes of a range image by Williams' matte-blur filter.
+
+    A hole is an 8-connected component of NaN pixels that does not touch the image border
+    (components that do are background). Holes of at most ``max_hole_px`` pixels are filled
+    (see the module docstring for the filter); larger ones stay NaN and are reported, as do
+    holes the filter could not close within ``max_iter`` iterations.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float ndarray, mm
+        Range image, NaN where there is no data. Not modified.
+    max_hole_px : int
+        Largest hole area filled, pixels.
+    kernel_px : int
+        Odd side length of the binomial blur kernel, pixels.
+    threshold : float
+        Blurred-matte level in (0, 1) above which a gap pixel is filled. Progress is guaranteed
+        below the kernel's weight on one adjacent row (0.25 for a 3 px kernel).
+    max_iter : int
+        Largest number of blur passes.
+    trend_degree : {0, 1, 2}
+        Degree of the per-hole polynomial whose Taylor terms correct step 3 (0: the paper's
+        filter as is; 2: exact for surfaces quadratic in the pixel coordinates).
+    source : str
+        Names the data in ``xyz`` errors (a file or ``subject/take``); parameter errors name
+        the config section ``repair``.
+
+    Returns
+    -------
+    xyz_filled : (H, W, 3) float64 ndarray, mm
+        Copy of ``xyz`` with the small holes filled.
+    report : dict
+        ``n_holes`` (int, holes found), ``n_filled`` (int), ``filled_px`` (int),
+        ``unfilled_holes`` (list of int, areas in px of the holes left, largest first),
+        ``largest_unfilled_px`` (int, 0 if none), ``n_iter`` (int, blur passes run),
+        ``n_trend_rejected`` (int, holes filled without trend terms because the polynomial fit
+        its rim worse than 1 mm RMS, e.g. across a depth edge) and ``filled`` ((H, W) bool,
+        pixels that received values).
+
+    Raises
+    ------
+    InputError
+        If ``xyz`` is not an (H, W, 3) float array with some valid pixel, or a parameter is
+        out of range.
+    """
+    arr, valid = _check_xyz(xyz, source)
+    max_hole_px = _check_int(max_hole_px, "max_hole_px", _PARAMS, minimum=1)
+    kernel_px = _check_int(kernel_px, "kernel_px", _PARAMS, minimum=3, odd=True)
+    threshold = _check_float(threshold, "threshold", _PARAMS, upper=1.0)
+    max_iter = _check_int(max_iter, "max_iter", _PARAMS, minimum=1)
+    if trend_degree not in (0, 1, 2) or isinstance(trend_degree, bool):
+        raise InputError(_PARAMS, f"trend_degree: expected 0, 1 or 2, got {trend_degree!r}")
+    h, w = valid.shape
+
+    labels, n_comp = ndimage.label(~valid, structure=np.ones((3, 3), bool))
+    area = np.bincount(labels.ravel(), minlength=n_comp + 1)
+    border = np.zeros(n_comp + 1, bool)
+    for edge in (labels[0], labels[-1], labels[:, 0], labels[:, -1]):
+        border[edge] = True
+    border[0] = True  # label 0 is the valid data
+    hole = ~border
+    target = hole & (area <= max_hole_px)
+
+    report: dict[str, Any] = {"n_holes": int(hole.sum()), "n_iter": 0, "n_trend_rejected": 0}
+    filled = np.zeros((h, w), bool)
+    gap_mask = target[labels]
+    if gap_mask.any():
+        r = kernel_px // 2
+        rp = max(r, _RIM_PX)
+        wp = w + 2 * rp
+        pad = np.pad(arr, ((rp, rp), (rp, rp), (0, 0)), constant_values=np.nan)
+        pad = pad.reshape(-1, 3)
+        valid_pad = ~np.isnan(pad[:, 0])
+        gy, gx = np.nonzero(gap_mask)
+        gap_idx = (gy + rp) * wp + (gx + rp)
+        # consecutive hole ids 0..L-1 for the fits
+        _, gap_lab = np.unique(labels[gy, gx], return_inverse=True)
+        n_lab = int(gap_lab.max()) + 1
+        grad, hess, report["n_trend_rejected"] = _hole_trends(
+            pad, valid_pad, gap_idx, gap_lab, n_lab, wp, trend_degree
+        )
+
+        # Step 0 and 1: surface with gaps at 0, matte 1 on data
+        surf = np.where(valid_pad[:, None], pad, 0.0)
+        matte = valid_pad.astype(np.float64)
+        k1 = _binomial_kernel(kernel_px)
+        kern = np.outer(k1, k1).ravel()  # (K,)
+        offs, dyx = _neighbour_offsets(wp, r, centre=True)
+        d = dyx[:, ::-1].astype(np.float64)  # (K, 2) as (du, dv)
+        d2 = np.stack([d[:, 0] ** 2, 2 * d[:, 0] * d[:, 1], d[:, 1] ** 2], axis=1) / 2
+
+        todo = np.arange(gap_idx.size)
+        for it in range(max_iter):
+            # Step 2: blur matte and surface at the remaining gap pixels only
+            nb = gap_idx[todo, None] + offs[None, :]
+            wgt = matte[nb] * kern[None, :]  # (n, K)
+            m0 = wgt.sum(axis=1)
+            ready = m0 > threshold
+            report["n_iter"] = it + 1
+            if not ready.any():
+                break
+            sel, wgt, nb, m0 = todo[ready], wgt[ready], nb[ready], m0[ready]
+            blur = np.einsum("nk,nkc->nc", wgt, surf[nb])
+            # Taylor terms of the hole's trend over the same weights (zero if degree 0)
+            m1 = wgt @ d  # (n, 2)
+            m2 = wgt @ d2  # (n, 3)
+            corr = np.einsum("ncj,nj->nc", grad[sel], m1) + np.einsum("ncj,nj->nc", hess[sel], m2)
+            # Step 3: replace by blurred surface / blurred matte; matte becomes 1
+            surf[gap_idx[sel]] = (blur - corr) / m0[:, None]
+            matte[gap_idx[sel]] = 1.0
+            todo = todo[~ready]
+            if todo.size == 0:  # Step 4: until no gap is left
+                break
+
+        # a hole the filter could not close stays NaN as a whole
+        failed_lab = np.unique(gap_lab[todo])
+        ok = ~np.isin(gap_lab, failed_lab)
+        arr[gy[ok], gx[ok]] = surf[gap_idx[ok]]
+        filled[gy[ok], gx[ok]] = True
+        target_ids = np.flatnonzero(target)
+        target[target_ids[failed_lab]] = False
+
+    left = np.flatnonzero(hole & ~target)
+    unfilled = sorted((int(a) for a in area[left]), reverse=True)
+    report.update(
+        n_filled=int(target.sum()),
+        filled_px=int(filled.sum()),
+        unfilled_holes=unfilled,
+        largest_unfilled_px=unfilled[0] if unfilled else 0,
+        filled=filled,
+    )
+    return arr, report
+
+
+# --------------------------------------------------------------------------------------------
+# both
+
+
+def repair_range(
+    xyz: np.ndarray, params: dict[str, Any] | None = None, *, source: str = "repair"
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Remove spikes, then fill small holes, of a range image.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float ndarray, mm
+        Range image, NaN where there is no data. Not modified.
+    params : dict, optional
+        Any of the keys of :data:`DEFAULT_REPAIR` (``spike_threshold_mm``, ``spike_window``,
+        ``max_hole_px``, ``fill_kernel_px``, ``fill_threshold``, ``fill_max_iter``); missing
+        keys take the defaults.
+    source : str
+        Names the data in ``xyz`` errors (a file or ``subject/take``); parameter errors name
+        the config section ``repair``.
+
+    Returns
+    -------
+    xyz_repaired : (H, W, 3) float64 ndarray, mm
+        Copy of ``xyz`` without spikes and with small holes filled.
+    report : dict
+        The :func:`fill_holes` report plus ``spikes`` ((H, W) bool) and ``n_spikes`` (int).
+        ``filled`` marks pixels whose values were interpolated (spikes included, when their
+        hole was filled).
+
+    Raises
+    ------
+    InputError
+        Unknown or out-of-range parameters (source ``"repair"``), or a bad ``xyz``.
+    """
+    params = {} if params is None else params
+    if not isinstance(params, dict):
+        raise InputError(_PARAMS, f"params: expected a dict, got {type(params).__name__}")
+    unknown = sorted(set(params) - set(DEFAULT_REPAIR))
+    if unknown:
+        raise InputError(
+            _PARAMS, f"params: unknown key(s) {unknown}, expected some of {sorted(DEFAULT_REPAIR)}"
+        )
+    p = {**DEFAULT_REPAIR, **params}
+    for key in ("spike_window", "fill_kernel_px"):
+        _check_int(p[key], f"params.{key}", _PARAMS, minimum=3, odd=True)
+    for key in ("max_hole_px", "fill_max_iter"):
+        _check_int(p[key], f"params.{key}", _PARAMS, minimum=1)
+    _check_float(p["spike_threshold_mm"], "params.spike_threshold_mm", _PARAMS)
+    _check_float(p["fill_threshold"], "params.fill_threshold", _PARAMS, upper=1.0)
+    clean, spikes = remove_spikes(xyz, p["spike_threshold_mm"], p["spike_window"], source=source)
+    out, report = fill_holes(
+        clean,
+        p["max_hole_px"],
+        p["fill_kernel_px"],
+        p["fill_threshold"],
+        p["fill_max_iter"],
+        source=source,
+    )
+    report.update(spikes=spikes, n_spikes=int(spikes.sum()))
+    return out, report
+
+
+__all__ = ["DEFAULT_REPAIR", "fill_holes", "remove_spikes", "repair_range"]
