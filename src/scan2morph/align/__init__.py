@@ -1,0 +1,15 @@
+"""Rigid alignment of a subject's takes to its neutral frame (Kabsch initial pose + ICP)."""
+
+from scan2morph.align.icp import DEFAULT_ICP, AlignResult, align_take, vertex_normals
+from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
+
+__all__ = [
+    "DEFAULT_ICP",
+    "AlignResult",
+    "align_take",
+    "invert",
+    "kabsch",
+    "rotation_angle_deg",
+    "transform_points",
+    "vertex_normals",
+]

@@ -1,0 +1,167 @@
+"""Laplacian smoothing of per-vertex motion vectors (Yano-Harada, Sec. 4.1).
+
+The paper's explicit diffusion step on the template's 1-ring ("umbrella") operator::
+
+    d_i <- d_i + w * L d_i,    L d_i = mean_{j in N(i)} (d_j - d_i),    0 <= w <= 1
+
+iterated 30 times with w = 0.1. Suppressed (masked) vertices are held at zero every
+iteration (a Dirichlet boundary); missing (invalid) vertices are first filled from their
+neighbours.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from scan2morph.errors import InputError
+from scan2morph.motion.mask import _check_faces, _unique_edges
+
+
+def _field(d: np.ndarray, source: str) -> np.ndarray:
+    d = np.array(d, dtype=np.float64)  # a copy: the caller's array is never modified
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise InputError(source, f"d: expected (V, 3) motion vectors, got {d.shape}")
+    return d
+
+
+def _flags(m: np.ndarray | None, n: int, name: str, source: str) -> np.ndarray:
+    if m is None:
+        return np.zeros(n, dtype=bool)
+    m = np.asarray(m)
+    if m.shape != (n,) or m.dtype != np.bool_:
+        raise InputError(source, f"{name}: expected ({n},) bool, got {m.dtype} {m.shape}")
+    return m
+
+
+def _adjacency(faces: np.ndarray, n: int) -> sp.csr_array:
+    """Symmetric 0/1 vertex adjacency (V, V) of the mesh's edges."""
+    e = _unique_edges(faces)
+    i = np.concatenate([e[:, 0], e[:, 1]])
+    j = np.concatenate([e[:, 1], e[:, 0]])
+    return sp.csr_array((np.ones(len(i)), (i, j)), shape=(n, n))
+
+
+def _fill(d: np.ndarray, adj: sp.csr_array, known: np.ndarray) -> np.ndarray:
+    """Grow known values into unknown vertices, one ring per round (mean of known neighbours).
+
+    Vertices in a component with no known vertex end at zero.
+    """
+    d = d.copy()
+    known = known.copy()
+    d[~known] = 0.0
+    while not known.all():
+        count = adj @ known.astype(np.float64)
+        new = ~known & (count > 0)
+        if not new.any():
+            break
+        total = adj @ (d * known[:, None])
+        d[new] = total[new] / count[new, None]
+        known |= new
+    return d
+
+
+def fill_missing(
+    d: np.ndarray,
+    faces: np.ndarray,
+    missing: np.ndarray | None = None,
+    fixed: np.ndarray | None = None,
+    source: str = "motion",
+) -> np.ndarray:
+    """Fill missing per-vertex vectors from their neighbours.
+
+    Rounds grow inward from the known region: each round, every missing vertex with at least
+    one known neighbour takes the mean of its known neighbours and becomes known.
+
+    Parameters
+    ----------
+    d : (V, 3) float, mm
+        Per-vertex vectors; non-finite rows count as missing too.
+    faces : (F, 3) int
+        Template faces (the 1-ring neighbourhoods).
+    missing : (V,) bool, optional
+        Vertices to fill.
+    fixed : (V,) bool, optional
+        Vertices held at zero; they count as known (with value zero).
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (V, 3) float64, mm
+        Filled copy. Missing vertices in a component with no known vertex are zero.
+    """
+    d = _field(d, source)
+    n = len(d)
+    f = _check_faces(faces, n, source)
+    missing = _flags(missing, n, "missing", source) | ~np.isfinite(d).all(axis=1)
+    fixed = _flags(fixed, n, "fixed", source)
+    d[fixed] = 0.0
+    return _fill(d, _adjacency(f, n), ~missing | fixed)
+
+
+def laplacian_smooth(
+    d: np.ndarray,
+    faces: np.ndarray,
+    w: float = 0.1,
+    iterations: int = 30,
+    fixed: np.ndarray | None = None,
+    missing: np.ndarray | None = None,
+    source: str = "motion",
+) -> np.ndarray:
+    """Smooth per-vertex motion vectors with the 1-ring umbrella Laplacian.
+
+    Parameters
+    ----------
+    d : (V, 3) float, mm
+        Motion vectors; non-finite rows are treated as missing.
+    faces : (F, 3) int
+        Template faces.
+    w : float
+        Step, 0 <= w <= 1 (paper: 0.1).
+    iterations : int
+        Number of steps, >= 0 (paper: 30). 0 only fills missing vertices.
+    fixed : (V,) bool, optional
+        Suppressed vertices: zero before and after every step.
+    missing : (V,) bool, optional
+        Invalid vertices: first filled from their neighbours (:func:`fill_missing`).
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (V, 3) float64, mm
+        Smoothed copy. Vertices without neighbours are left unchanged.
+
+    Raises
+    ------
+    InputError
+        Bad shapes, ``w`` outside [0, 1] or ``iterations`` < 0.
+    """
+    w_f = float(w)
+    if not 0.0 <= w_f <= 1.0:
+        raise InputError(source, f"w: expected 0 <= w <= 1, got {w!r}")
+    if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 0:
+        raise InputError(source, f"iterations: expected an integer >= 0, got {iterations!r}")
+    d = _field(d, source)
+    n = len(d)
+    f = _check_faces(faces, n, source)
+    fixed = _flags(fixed, n, "fixed", source)
+    missing = _flags(missing, n, "missing", source) | ~np.isfinite(d).all(axis=1)
+    adj = _adjacency(f, n)
+    d[fixed] = 0.0
+    d = _fill(d, adj, ~missing | fixed)
+
+    # One step is d <- M d with M = (1 - w) I + w D^-1 A on vertices that have neighbours.
+    deg = adj.sum(axis=1)
+    has = deg > 0
+    inv_deg = np.divide(1.0, deg, out=np.zeros(n), where=has)
+    step = sp.diags_array(1.0 - w_f * has) + sp.diags_array(w_f * inv_deg) @ adj
+    step = sp.csr_array(step)
+    for _ in range(int(iterations)):
+        d = step @ d
+        d[fixed] = 0.0
+    return d
+
+
+__all__ = ["fill_missing", "laplacian_smooth"]

@@ -1,0 +1,393 @@
+"""Tests of scan2morph.align: Kabsch, rigid helpers and take-to-neutral alignment (ICP)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy.spatial.transform import Rotation
+
+from scan2morph.align import (
+    DEFAULT_ICP,
+    align_take,
+    invert,
+    kabsch,
+    rotation_angle_deg,
+    transform_points,
+    vertex_normals,
+)
+from scan2morph.errors import InputError
+
+
+def _rigid(rng: np.random.Generator, deg: float, mm: float) -> np.ndarray:
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    t = np.eye(4)
+    t[:3, :3] = Rotation.from_rotvec(np.radians(deg) * axis).as_matrix()
+    shift = rng.normal(size=3)
+    t[:3, 3] = mm * shift / np.linalg.norm(shift)
+    return t
+
+
+def _grid_faces(nx: int, ny: int) -> np.ndarray:
+    i = np.arange(nx * ny).reshape(ny, nx)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def _face(nx: int = 45, ny: int = 56) -> tuple[np.ndarray, np.ndarray]:
+    """A face-like height field (160 x 200 mm): dome, nose, eye sockets, brow, cheeks, chin."""
+    x, y = np.meshgrid(np.linspace(-80, 80, nx), np.linspace(-100, 100, ny))
+
+    def g(cx, cy, sx, sy=None):
+        sy = sx if sy is None else sy
+        return np.exp(-((x - cx) ** 2 / (2 * sx * sx) + (y - cy) ** 2 / (2 * sy * sy)))
+
+    z = (
+        60 * g(0, 0, 70)
+        + 25 * g(0, 5, 10, 18)
+        - 10 * g(-32, 30, 12)
+        - 10 * g(32, 30, 12)
+        + 10 * g(0, -80, 20)
+        + 7 * g(0, 48, 35, 6)
+        + 9 * g(-45, -5, 12)
+        + 9 * g(45, -5, 12)
+        + 5 * g(-20, 70, 15)
+    )
+    return np.stack([x.ravel(), y.ravel(), z.ravel()], 1), _grid_faces(nx, ny)
+
+
+PAIR_XY = [(-50, 40), (50, 40), (0, 30), (-60, 0), (60, 0), (0, 80)]
+
+
+def _scene(seed: int = 0, pair_noise_mm: float = 1.0):
+    """Neutral mesh in an arbitrary frame and a viseme take in its own scanner frame.
+
+    The take's mouth moves 10 mm; the take is moved by a known 5 deg / 10 mm rigid motion
+    and carries 0.1 mm noise (its six pair vertices carry ``pair_noise_mm`` more, as a
+    template fit would).
+    """
+    rng = np.random.default_rng(seed)
+    v, f = _face()
+    r_mouth = np.hypot(v[:, 0], v[:, 1] + 45)
+    bump = np.where(r_mouth < 30, np.cos(np.pi / 2 * r_mouth / 30) ** 2, 0.0)
+    direction = np.array([0.0, -1.0, 0.3]) / np.hypot(1.0, 0.3)
+    upper = np.flatnonzero((v[:, 1] > -15) & (r_mouth > 40))
+    pairs = np.array([np.argmin(np.linalg.norm(v[:, :2] - p, axis=1)) for p in PAIR_XY])
+    frame = _rigid(rng, 40, 300)  # the neutral frame is arbitrary too
+    neutral = transform_points(frame, v)
+    viseme = transform_points(frame, v + 10.0 * bump[:, None] * direction)
+    truth = _rigid(rng, 5, 10)  # take scanner frame -> neutral frame
+    take = transform_points(invert(truth), viseme) + rng.normal(scale=0.1, size=v.shape)
+    take[pairs] += rng.normal(scale=pair_noise_mm, size=(len(pairs), 3))
+    centre = neutral[upper].mean(axis=0)
+    return dict(
+        take=take,
+        neutral=neutral,
+        faces=f,
+        pairs=pairs,
+        upper=upper,
+        truth=truth,
+        centre=centre,
+        mouth=np.flatnonzero(r_mouth < 30),
+        rng=rng,
+    )
+
+
+def _errors(estimate: np.ndarray, truth: np.ndarray, centre: np.ndarray) -> tuple[float, float]:
+    """Rotation error (deg) and translation error at the upper-face centroid (mm)."""
+    e = estimate @ invert(truth)
+    return rotation_angle_deg(e), float(np.linalg.norm(transform_points(e, centre) - centre))
+
+
+# --------------------------------------------------------------------------------------- rigid
+
+
+def test_kabsch_recovers_random_rigid_transform_exactly():
+    rng = np.random.default_rng(1)
+    src = rng.normal(scale=50, size=(40, 3))
+    truth = _rigid(rng, 73, 250)
+    t = kabsch(src, transform_points(truth, src))
+    assert_allclose(t, truth, atol=1e-10)
+    assert np.linalg.det(t[:3, :3]) == pytest.approx(1.0, abs=1e-12)
+    assert_allclose(t[3], [0, 0, 0, 1])
+
+
+def test_kabsch_matches_scipy_align_vectors_weighted_noisy():
+    rng = np.random.default_rng(2)
+    src = rng.normal(scale=30, size=(25, 3))
+    dst = transform_points(_rigid(rng, 120, 40), src) + rng.normal(scale=2.0, size=src.shape)
+    w = rng.uniform(0.1, 3.0, size=25)
+    t = kabsch(src, dst, w)
+    c_src = w @ src / w.sum()
+    c_dst = w @ dst / w.sum()
+    rot, _ = Rotation.align_vectors(dst - c_dst, src - c_src, weights=w)
+    assert_allclose(t[:3, :3], rot.as_matrix(), atol=1e-10)
+    assert_allclose(t[:3, 3], c_dst - rot.as_matrix() @ c_src, atol=1e-9)
+
+
+def test_kabsch_returns_proper_rotation_for_mirrored_points():
+    rng = np.random.default_rng(3)
+    src = rng.normal(scale=10, size=(12, 3))
+    dst = src * np.array([1.0, 1.0, -1.0]) + rng.normal(scale=0.5, size=src.shape)  # a mirror
+    t = kabsch(src, dst)
+    assert np.linalg.det(t[:3, :3]) == pytest.approx(1.0, abs=1e-12)
+    c_src, c_dst = src.mean(0), dst.mean(0)
+    rot, _ = Rotation.align_vectors(dst - c_dst, src - c_src)
+    assert_allclose(t[:3, :3], rot.as_matrix(), atol=1e-10)
+
+
+def test_kabsch_zero_weights_ignore_points():
+    rng = np.random.default_rng(4)
+    src = rng.normal(scale=20, size=(10, 3))
+    truth = _rigid(rng, 30, 5)
+    dst = transform_points(truth, src)
+    dst[:3] += 100.0  # outliers with weight zero
+    w = np.r_[np.zeros(3), np.ones(7)]
+    assert_allclose(kabsch(src, dst, w), truth, atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    ("src", "dst", "weights", "match"),
+    [
+        (np.zeros((2, 3)), np.zeros((2, 3)), None, "at least 3 point pairs"),
+        (np.eye(3), np.eye(3)[:, :2], None, r"dst: expected \(n, 3\)"),
+        (np.eye(3), np.eye(4)[:3, :3] * 2, np.ones(2), r"weights: expected shape \(3,\)"),
+        (np.eye(3), np.eye(3), -np.ones(3), "non-negative"),
+        (np.eye(3), np.eye(3), np.array([1.0, 1.0, 0.0]), "at least 3 positive"),
+        (np.r_[np.eye(3)[:2], [[np.nan, 0, 0]]], np.eye(3), None, "finite"),
+        (np.outer(np.arange(5.0), [1, 2, 3]), np.eye(5, 3), None, "src: .*collinear"),
+        (np.eye(5, 3), np.ones((5, 3)), None, "dst: .*collinear"),
+    ],
+)
+def test_kabsch_bad_input(src, dst, weights, match):
+    with pytest.raises(InputError, match=match):
+        kabsch(src, dst, weights, source="s01/car")
+
+
+@pytest.mark.parametrize("deg", [0.0, 1e-6, 0.05, 5.0, 90.0, 179.9, 180.0])
+def test_rotation_angle_deg_matches_rotvec(deg):
+    axis = np.array([0.3, -0.5, 0.81])
+    r = Rotation.from_rotvec(np.radians(deg) * axis / np.linalg.norm(axis)).as_matrix()
+    assert rotation_angle_deg(r) == pytest.approx(deg, abs=1e-9)
+    t = np.eye(4)
+    t[:3, :3] = r
+    assert rotation_angle_deg(t) == pytest.approx(deg, abs=1e-9)
+
+
+def test_invert_and_transform_points():
+    rng = np.random.default_rng(5)
+    t = _rigid(rng, 33, 120)
+    assert_allclose(invert(t) @ t, np.eye(4), atol=1e-12)
+    assert_allclose(invert(t), np.linalg.inv(t), atol=1e-12)
+    p = rng.normal(size=(7, 3))
+    p[2] = np.nan
+    homog = (t @ np.c_[p, np.ones(7)].T).T[:, :3]
+    assert_allclose(transform_points(t, p), homog, atol=1e-12)
+    assert np.isnan(transform_points(t, p)[2]).all()
+    with pytest.raises(InputError, match=r"transform: expected shape \(4, 4\)"):
+        invert(np.eye(3))
+    with pytest.raises(InputError, match=r"points: expected shape \(\.\.\., 3\)"):
+        transform_points(t, np.zeros((4, 2)))
+
+
+def test_vertex_normals_of_a_tilted_plane_and_a_nan_vertex():
+    rng = np.random.default_rng(6)
+    x, y = np.meshgrid(np.arange(6.0), np.arange(5.0))
+    flat = np.stack([x.ravel(), y.ravel(), np.zeros(30)], 1)
+    t = _rigid(rng, 50, 10)
+    v = transform_points(t, flat)
+    v[12] = np.nan
+    n = vertex_normals(v, _grid_faces(6, 5))
+    ok = np.arange(30) != 12
+    assert_allclose(n[ok], np.tile(t[:3, 2], (29, 1)), atol=1e-12)  # counter-clockwise: +z
+    assert np.isnan(n[12]).all()
+
+
+# --------------------------------------------------------------------------------- align_take
+
+
+@pytest.mark.parametrize("method", ["icp", "correspondence"])
+def test_align_take_recovers_known_rigid_motion(method):
+    s = _scene(seed=0)
+    valid = np.ones(len(s["take"]), dtype=bool)
+    res = align_take(
+        s["take"],
+        valid,
+        s["neutral"],
+        valid,
+        s["faces"],
+        s["pairs"],
+        s["upper"],
+        {"method": method},
+        source="s01/car",
+    )
+    rot_err, t_err = _errors(res.transform, s["truth"], s["centre"])
+    rot0, t0 = _errors(res.initial, s["truth"], s["centre"])
+    assert rot_err < 0.1 and t_err < 0.2, (rot_err, t_err)
+    assert rot0 > 0.1  # the six noisy pairs alone are not enough
+    assert res.converged and res.method == method
+    assert res.fitness == pytest.approx(1.0)
+    # Oracle: RMS distance of the upper face at the true pose (noise + the noisier pairs).
+    true_res = transform_points(s["truth"], s["take"][s["upper"]]) - s["neutral"][s["upper"]]
+    assert res.inlier_rmse == pytest.approx(np.sqrt(np.mean(np.sum(true_res**2, 1))), rel=0.1)
+    assert res.n_points == len(s["upper"])
+    # The mouth moved 10 mm, the rest of the face does not: motion is recovered.
+    aligned = transform_points(res.transform, s["take"])
+    moved = np.linalg.norm(aligned - s["neutral"], axis=1)
+    assert moved[s["mouth"]].max() == pytest.approx(10.0, abs=0.5)
+    assert np.median(moved[s["upper"]]) < 0.3
+
+
+def test_align_take_icp_and_correspondence_accuracy_compared():
+    """Both refinements over three scenes; the closed form uses the known correspondence."""
+    errs = {"icp": [], "correspondence": []}
+    for seed in range(3):
+        s = _scene(seed=seed)
+        valid = np.ones(len(s["take"]), dtype=bool)
+        for method, out in errs.items():
+            res = align_take(
+                s["take"],
+                valid,
+                s["neutral"],
+                valid,
+                s["faces"],
+                s["pairs"],
+                s["upper"],
+                {"method": method},
+                source="s01/car",
+            )
+            out.append(_errors(res.transform, s["truth"], s["centre"]))
+    icp, corr = np.array(errs["icp"]), np.array(errs["correspondence"])
+    print(f"\nICP max error: {icp[:, 0].max():.4f} deg, {icp[:, 1].max():.4f} mm")
+    print(f"correspondence max error: {corr[:, 0].max():.4f} deg, {corr[:, 1].max():.4f} mm")
+    assert icp[:, 0].max() < 0.1 and icp[:, 1].max() < 0.2
+    assert corr[:, 0].max() < 0.03 and corr[:, 1].max() < 0.03
+
+
+def test_align_take_with_invalid_vertices_and_holes():
+    s = _scene(seed=1)
+    n = len(s["take"])
+    rng = s["rng"]
+    src_valid = rng.random(n) > 0.1
+    dst_valid = rng.random(n) > 0.1
+    src_valid[s["pairs"]] = dst_valid[s["pairs"]] = True
+    take, neutral = s["take"].copy(), s["neutral"].copy()
+    take[~src_valid] = np.nan
+    neutral[~dst_valid] = np.nan
+    for method in ("icp", "correspondence"):
+        res = align_take(
+            take,
+            src_valid,
+            neutral,
+            dst_valid,
+            s["faces"],
+            s["pairs"],
+            s["upper"],
+            {"method": method},
+            source="s01/car",
+        )
+        rot_err, t_err = _errors(res.transform, s["truth"], s["centre"])
+        assert rot_err < 0.1 and t_err < 0.2, (method, rot_err, t_err)
+
+
+def test_align_take_garbage_target_does_not_converge():
+    s = _scene(seed=2)
+    rng = s["rng"]
+    garbage = rng.uniform(-500, 500, size=s["neutral"].shape)
+    valid = np.ones(len(garbage), dtype=bool)
+    with pytest.raises(InputError, match=r"^s01/man: alignment did not converge: fitness"):
+        align_take(
+            s["take"],
+            valid,
+            garbage,
+            valid,
+            s["faces"],
+            s["pairs"],
+            s["upper"],
+            source="s01/man",
+        )
+
+
+@pytest.mark.parametrize("method", ["icp", "correspondence"])
+def test_align_take_unreachable_min_fitness_raises(method):
+    s = _scene(seed=3)
+    valid = np.ones(len(s["take"]), dtype=bool)
+    # 0.01 mm correspondences cannot hold 0.1 mm noise: almost no inliers.
+    params = {"method": method, "max_correspondence_mm": 0.01, "min_fitness": 0.5}
+    with pytest.raises(InputError, match=r"s01/eel: alignment did not converge"):
+        align_take(
+            s["take"],
+            valid,
+            s["neutral"],
+            valid,
+            s["faces"],
+            s["pairs"],
+            s["upper"],
+            params,
+            source="s01/eel",
+        )
+
+
+def test_align_take_pair_on_invalid_vertex_raises():
+    s = _scene(seed=0)
+    n = len(s["take"])
+    valid = np.ones(n, dtype=bool)
+    bad = valid.copy()
+    bad[s["pairs"][3]] = False
+    take = s["take"].copy()
+    take[s["pairs"][3]] = np.nan
+    args = (s["faces"], s["pairs"], s["upper"])
+    with pytest.raises(InputError, match=rf"s01/she: .*pair vertex {s['pairs'][3]} .*src_valid"):
+        align_take(take, bad, s["neutral"], valid, *args, source="s01/she")
+    with pytest.raises(InputError, match=rf"s01/she: .*pair vertex {s['pairs'][3]} .*dst_valid"):
+        align_take(s["take"], valid, s["neutral"], bad, *args, source="s01/she")
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"params": {"max_iter": 3}}, "unknown key"),
+        ({"params": {"robust_kernel": "cauchy"}}, "robust_kernel must be one of"),
+        ({"params": {"method": "magic"}}, "method must be one of"),
+        ({"params": {"max_correspondence_mm": -1}}, "max_correspondence_mm must be a positive"),
+        ({"params": {"min_fitness": 1.5}}, r"min_fitness must be in \[0, 1\]"),
+        ({"params": {"max_iterations": 0}}, "max_iterations must be an integer >= 1"),
+        ({"pair_indices": np.array([0, 1])}, "at least 3 point pairs"),
+        ({"pair_indices": np.array([0, 1, 10**6])}, "pair_indices: vertex index 1000000 out of"),
+        ({"icp_indices": np.array([-1])}, "icp_indices: vertex index -1 out of range"),
+        ({"icp_indices": np.array([0, 1])}, "only 2 upper-face vertices are valid"),
+        ({"faces": np.array([[0, 1, 10**6]])}, "faces: vertex index out of range"),
+        ({"dst_vertices": np.zeros((5, 3))}, "dst_vertices: expected 2520 vertices"),
+        ({"src_valid": np.ones(3, dtype=bool)}, r"src_valid: expected \(2520,\) bool"),
+    ],
+)
+def test_align_take_bad_input(change, match):
+    s = _scene(seed=0)
+    valid = np.ones(len(s["take"]), dtype=bool)
+    kw = dict(
+        src_vertices=s["take"],
+        src_valid=valid,
+        dst_vertices=s["neutral"],
+        dst_valid=valid,
+        faces=s["faces"],
+        pair_indices=s["pairs"],
+        icp_indices=s["upper"],
+        params=None,
+    )
+    kw.update(change)
+    with pytest.raises(InputError, match=f"^s01/too: .*{match}"):
+        align_take(**kw, source="s01/too")
+
+
+def test_default_icp_keys():
+    assert set(DEFAULT_ICP) == {
+        "method",
+        "max_correspondence_mm",
+        "max_iterations",
+        "robust_kernel",
+        "kernel_k_mm",
+        "min_fitness",
+        "relative_fitness",
+        "relative_rmse",
+    }
