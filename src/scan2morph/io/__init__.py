@@ -1,5 +1,6 @@
 """Readers and writers for the formats users bring and the formats we hand out."""
 
+from scan2morph.io.gltf import read_glb_targets, write_glb
 from scan2morph.io.image import read_color, write_color
 from scan2morph.io.landmarks import read_pts, write_pts
 from scan2morph.io.range_image import (
@@ -16,11 +17,13 @@ __all__ = [
     "read_abs",
     "read_color",
     "read_npz_range",
+    "read_glb_targets",
     "read_pts",
     "read_range",
     "read_range_take",
     "write_abs",
     "write_color",
+    "write_glb",
     "write_npz_range",
     "write_pts",
 ]
