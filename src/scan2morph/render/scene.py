@@ -1,0 +1,149 @@
+"""Headless rendering of face meshes with pyrender (OSMesa or EGL, on the CPU).
+
+The view is derived from the mesh, never from an axis convention: the camera looks against the
+area-weighted mean normal (the face's front), with ``up`` given by the caller (for a face, from
+chin to brows) or, failing that, the mesh's longest extent across the view.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+
+import numpy as np  # noqa: E402
+import pyrender  # noqa: E402
+import trimesh  # noqa: E402
+
+from scan2morph.errors import InputError  # noqa: E402
+
+
+def front_direction(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit vector out of the face: the normalised area-weighted sum of face normals.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm (NaN rows are ignored with the faces that use them).
+    faces : (F, 3) int, counter-clockwise seen from the front.
+    """
+    tri = vertices[faces]
+    ok = np.all(np.isfinite(tri), axis=(1, 2))
+    n = np.cross(tri[ok, 1] - tri[ok, 0], tri[ok, 2] - tri[ok, 0]).sum(axis=0)
+    norm = np.linalg.norm(n)
+    if norm == 0:
+        raise InputError("render", "mesh has no finite, non-degenerate faces")
+    return n / norm
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """OpenGL camera pose (4, 4): camera at ``eye`` looking at ``target``, y towards ``up``."""
+    z = eye - target
+    z = z / np.linalg.norm(z)
+    x = np.cross(up, z)
+    if np.linalg.norm(x) < 1e-9:  # up parallel to the view: pick any perpendicular
+        x = np.cross(np.eye(3)[np.argmin(np.abs(z))], z)
+    x = x / np.linalg.norm(x)
+    y = np.cross(z, x)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, eye
+    return pose
+
+
+def render_mesh(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    *,
+    up: np.ndarray | None = None,
+    front: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
+    texture: np.ndarray | None = None,
+    uv: np.ndarray | None = None,
+    wireframe: bool = False,
+    size: tuple[int, int] = (480, 480),
+    yaw_deg: float = 0.0,
+    center: np.ndarray | None = None,
+    radius: float | None = None,
+) -> np.ndarray:
+    """Render a mesh to an RGB image.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm. Faces touching a non-finite vertex are not drawn.
+    faces : (F, 3) int.
+    up : (3,) float, optional
+        Direction that should point up in the image.
+    front : (3,) float, optional
+        Direction from the mesh towards the camera; default :func:`front_direction`.
+    colors : (V, 3) float in [0, 1], optional
+        Per-vertex colors (e.g. a colormap of distances).
+    texture, uv : (H, W, 3) uint8 and (V, 2), optional
+        Texture image and texture coordinates (image convention: v down).
+    wireframe : bool
+        Draw the triangle edges only.
+    size : (width, height)
+    yaw_deg : float
+        Turn the camera about ``up`` (degrees), e.g. 30 for a three-quarter view.
+    center, radius : optional
+        Framing; default the bounding sphere of the finite vertices (pass the same values to
+        render several meshes at one scale).
+
+    Returns
+    -------
+    image : (height, width, 3) uint8
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    keep = np.all(np.isfinite(vertices[faces]), axis=(1, 2))
+    if not keep.any():
+        raise InputError("render", "nothing to draw: no face has three finite vertices")
+    faces = faces[keep]
+    safe = np.where(np.isfinite(vertices), vertices, 0.0)
+    used = np.unique(faces)
+    if center is None:
+        center = safe[used].mean(axis=0)
+    if radius is None:
+        radius = float(np.linalg.norm(safe[used] - center, axis=1).max())
+    if front is None:
+        front = front_direction(vertices, faces)
+    if up is None:
+        pts = safe[used] - center
+        pts = pts - np.outer(pts @ front, front)
+        up = np.linalg.svd(pts, full_matrices=False)[2][0]
+    up = np.asarray(up, float) - np.dot(up, front) * front
+    up /= np.linalg.norm(up)
+    if yaw_deg:
+        a = np.radians(yaw_deg)
+        side = np.cross(up, front)
+        front = np.cos(a) * front + np.sin(a) * side
+
+    mesh = trimesh.Trimesh(safe, faces, process=False)
+    if texture is not None and uv is not None:
+        uv_gl = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
+        from PIL import Image
+
+        mesh.visual = trimesh.visual.TextureVisuals(uv=uv_gl, image=Image.fromarray(texture))
+    elif colors is not None:
+        rgba = np.column_stack([np.clip(colors, 0, 1), np.ones(len(colors))])
+        mesh.visual = trimesh.visual.ColorVisuals(mesh, vertex_colors=(rgba * 255).astype(np.uint8))
+    scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0], ambient_light=[0.35, 0.35, 0.35])
+    material = None
+    if colors is None and texture is None:
+        material = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=[0.78, 0.74, 0.70, 1.0], metallicFactor=0.0, roughnessFactor=0.8,
+            doubleSided=True,
+        )
+    scene.add(pyrender.Mesh.from_trimesh(mesh, material=material, wireframe=wireframe, smooth=not wireframe))
+    fov = np.radians(30.0)
+    dist = radius / np.sin(fov / 2) * 1.05
+    pose = look_at(center + front * dist, center, up)
+    w, h = size
+    scene.add(pyrender.PerspectiveCamera(yfov=fov, aspectRatio=w / h, znear=dist * 0.2, zfar=dist * 3), pose=pose)
+    key = look_at(center + dist * (front + 0.4 * up + 0.3 * np.cross(up, front)), center, up)
+    scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=key)
+    renderer = pyrender.OffscreenRenderer(w, h)
+    try:
+        flags = pyrender.RenderFlags.SKIP_CULL_FACES
+        image, _ = renderer.render(scene, flags=flags)
+    finally:
+        renderer.delete()
+    return np.ascontiguousarray(image[:, :, :3])
