@@ -67,7 +67,9 @@ def read_abs(path: str | Path) -> np.ndarray:
     try:
         with _open_text(path, "r") as fh:
             lines = fh.read().splitlines()
-    except (OSError, EOFError, UnicodeDecodeError) as exc:
+    except EOFError as exc:
+        raise InputError(path, f"truncated gzip stream: {exc}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as FRGC .abs text: {exc}") from exc
     if len(lines) < 3:
         raise InputError(path, "truncated header: expected 'R rows', 'C columns', 'pixels (flag X Y Z):'")
@@ -95,8 +97,9 @@ def read_abs(path: str | Path) -> np.ndarray:
     for name, line in zip(names, data_lines):
         tokens = line.split()
         if len(tokens) != n:
+            hint = " (truncated file?)" if name == "Z" and len(tokens) < n else ""
             raise InputError(
-                path, f"line '{name}': expected {rows}*{cols} = {n} values, got {len(tokens)}"
+                path, f"line '{name}': expected {rows}*{cols} = {n} values, got {len(tokens)}{hint}"
             )
         try:
             arrays.append(np.array(tokens, dtype=np.float64))
