@@ -1,5 +1,10 @@
 """Readers and writers for the formats users bring and the formats we hand out."""
 
+from scan2morph.io.calibration import (
+    StereoCalibration,
+    read_stereo_calibration,
+    write_stereo_calibration,
+)
 from scan2morph.io.gltf import read_glb_targets, write_glb
 from scan2morph.io.image import read_color, write_color
 from scan2morph.io.landmarks import read_pts, write_pts
@@ -14,6 +19,7 @@ from scan2morph.io.take import RangeTake, read_range_take
 
 __all__ = [
     "RangeTake",
+    "StereoCalibration",
     "read_abs",
     "read_color",
     "read_npz_range",
@@ -21,9 +27,11 @@ __all__ = [
     "read_pts",
     "read_range",
     "read_range_take",
+    "read_stereo_calibration",
     "write_abs",
     "write_color",
     "write_glb",
     "write_npz_range",
     "write_pts",
+    "write_stereo_calibration",
 ]
