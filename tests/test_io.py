@@ -41,6 +41,9 @@ def test_abs_round_trip(tmp_path, xyz, name):
     np.testing.assert_allclose(back[~np.isnan(xyz)], xyz[~np.isnan(xyz)], atol=5e-7)
     if name.endswith(".gz"):
         assert gzip.open(path, "rt").readline().strip() == "7 rows"
+    first = path.read_bytes()
+    write_abs(path, xyz)
+    assert path.read_bytes() == first  # byte-reproducible (no gzip timestamp)
 
 
 def test_abs_layout_is_frgc(tmp_path):

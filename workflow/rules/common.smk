@@ -13,6 +13,7 @@ from scan2morph.sheet import read_sheet, subject_problems, synthetic_rows, take_
 validate(config, "../../schemas/config.schema.yaml")
 
 SYNTH_ROOT = "results/synthetic"
+SYNTH_TAKES = [t["take"] for t in config["synthetic"]["takes"]]
 LAYOUT = str(Path(workflow.basedir) / "schemas" / "store.layout.yaml")
 SHEET = read_sheet(config["subjects"])
 for _i, _row in enumerate(SHEET.to_dict("records")):

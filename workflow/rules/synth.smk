@@ -1,25 +1,22 @@
 # Synthetic subjects with exact ground truth, written in the formats users bring.
+# One job per subject: the procedural head is built once and rendered for every take.
 
 
-def get_synth_take(wildcards):
-    return TAKES.loc[(wildcards.subject, wildcards.take), ["kind", "label"]].to_dict()
-
-
-rule synth_take:
+rule synth_subject:
     output:
-        xyz=f"{SYNTH_ROOT}/{{subject}}/{{take}}.abs.gz",
-        color=f"{SYNTH_ROOT}/{{subject}}/{{take}}.png",
-        landmarks=f"{SYNTH_ROOT}/{{subject}}/{{take}}.pts",
-        truth=f"{SYNTH_ROOT}/{{subject}}/truth/{{take}}.npz",
+        xyz=expand(f"{SYNTH_ROOT}/{{{{subject}}}}/{{take}}.abs.gz", take=SYNTH_TAKES),
+        color=expand(f"{SYNTH_ROOT}/{{{{subject}}}}/{{take}}.png", take=SYNTH_TAKES),
+        landmarks=expand(f"{SYNTH_ROOT}/{{{{subject}}}}/{{take}}.pts", take=SYNTH_TAKES),
+        truth=expand(f"{SYNTH_ROOT}/{{{{subject}}}}/truth/{{take}}.npz", take=SYNTH_TAKES),
     params:
-        take=get_synth_take,
+        takes=config["synthetic"]["takes"],
         seed=config["synthetic"]["seed"],
         scanner=config["synthetic"]["scanner"],
     log:
-        "logs/synth_take/{subject}/{take}.log",
+        "logs/synth_subject/{subject}.log",
     benchmark:
-        "benchmarks/rules/synth_take/{subject}/{take}.tsv"
+        "benchmarks/rules/synth_subject/{subject}.tsv"
     resources:
-        mem_mb=1000,
+        mem_mb=2000,
     script:
-        "../scripts/synth_take.py"
+        "../scripts/synth_subject.py"

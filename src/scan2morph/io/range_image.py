@@ -20,6 +20,7 @@ Values are row-major from the top row; invalid pixels have flag 0 and coordinate
 from __future__ import annotations
 
 import gzip
+import io
 import re
 from pathlib import Path
 
@@ -39,6 +40,9 @@ _HEADER_RE = (
 
 def _open_text(path: Path, mode: str):
     if path.name.endswith(".gz"):
+        if mode == "w":  # mtime=0: the same data gives the same bytes (reproducible outputs)
+            raw = gzip.GzipFile(path, "wb", mtime=0)
+            return io.TextIOWrapper(raw, encoding="ascii", newline="\n")
         return gzip.open(path, mode + "t", encoding="ascii", newline="\n")
     return open(path, mode, encoding="ascii", newline="\n")
 

@@ -1,0 +1,283 @@
+"""Synthetic takes with exact ground truth, written in the formats users bring.
+
+A subject's identity comes from ``(seed, subject)``; a take's articulation intensity, head pose
+and scanner defects from ``(seed, subject, take)``. The same inputs give byte-identical
+outputs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import re
+import zipfile
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.synth.head import (
+    LABEL_KIND,
+    Identity,
+    articulate,
+    build_head,
+    label_coefficients,
+    sample_identity,
+)
+from scan2morph.synth.scanner import camera_matrix, head_pose, project, scan
+
+#: Scanner and camera parameters of a synthetic take, with their defaults.
+DEFAULT_PARAMS: dict[str, float | int] = {
+    "width": 640,  # image width, pixels
+    "height": 480,  # image height, pixels
+    "focal_px": 1450.0,  # focal length, pixels
+    "distance_mm": 1000.0,  # camera to the front of the face along the optical axis
+    "pose_sigma_deg": 2.0,  # random head rotation, per axis
+    "pose_sigma_mm": 10.0,  # random head translation, per axis
+    "noise_mm": 0.1,  # depth noise along the ray
+    "spike_fraction": 0.001,  # fraction of measured pixels turned into spikes
+    "spike_mm": 30.0,  # typical spike displacement
+    "hole_blobs": 4,  # random round holes on the skin
+    "click_noise_px": 0.5,  # landmark clicking noise
+    "grazing_deg": 75.0,  # dropout beyond this angle between normal and view ray
+}
+
+_INT_PARAMS = ("width", "height", "hole_blobs")
+_ID_RE = re.compile(r"^[A-Za-z0-9_-]+$")
+#: Head-frame point put on the optical axis: mid-face height (between the hairline and the
+#: chin), at the front of the face.
+_AIM = np.array([0.0, -14.0, 95.0])
+
+
+def default_takes() -> list[tuple[str, str, str]]:
+    """The default takes of a synthetic subject.
+
+    Returns
+    -------
+    list of (take, kind, label)
+        The neutral, the five visemes (take id = label), two smiles and two sad faces.
+    """
+    takes = [("neutral", "neutral", "neutral")]
+    takes += [(v, "viseme", v) for v in ("car", "man", "she", "eel", "too")]
+    takes += [("smile1", "expression", "smile"), ("smile2", "expression", "smile")]
+    takes += [("sad1", "expression", "sad"), ("sad2", "expression", "sad")]
+    return takes
+
+
+def _key(text: str) -> int:
+    return int.from_bytes(hashlib.sha256(text.encode("utf-8")).digest()[:8], "little")
+
+
+def subject_identity(subject: str, seed: int) -> Identity:
+    """The identity of a synthetic subject, fixed by ``(seed, subject)``.
+
+    Parameters
+    ----------
+    subject : str
+    seed : int
+        Non-negative cohort seed.
+
+    Returns
+    -------
+    Identity
+    """
+    return sample_identity(np.random.default_rng([int(seed), _key(subject)]))
+
+
+def _check_params(params: dict | None, source: str) -> dict:
+    out = dict(DEFAULT_PARAMS)
+    if params is None:
+        return out
+    if not isinstance(params, dict):
+        raise InputError(source, f"params: expected a dict, got {type(params).__name__}")
+    unknown = sorted(set(params) - set(DEFAULT_PARAMS))
+    if unknown:
+        raise InputError(
+            source, f"params: unknown key(s) {unknown}; expected some of {sorted(DEFAULT_PARAMS)}"
+        )
+    for k, v in params.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise InputError(source, f"params.{k}: expected a number, got {v!r}")
+        if not np.isfinite(v):
+            raise InputError(source, f"params.{k}: expected a finite number, got {v!r}")
+        if k in _INT_PARAMS and float(v) != int(v):
+            raise InputError(source, f"params.{k}: expected an integer, got {v!r}")
+        out[k] = int(v) if k in _INT_PARAMS else float(v)
+    for k in ("width", "height"):
+        if not 16 <= out[k] <= 4096:
+            raise InputError(source, f"params.{k}: expected 16..4096 pixels, got {out[k]}")
+    for k in ("focal_px", "distance_mm"):
+        if out[k] <= 0:
+            raise InputError(source, f"params.{k}: expected > 0, got {out[k]}")
+    if out["distance_mm"] < 300.0:
+        raise InputError(
+            source, f"params.distance_mm: expected >= 300 mm, got {out['distance_mm']}"
+        )
+    for k in (
+        "pose_sigma_deg",
+        "pose_sigma_mm",
+        "noise_mm",
+        "spike_mm",
+        "hole_blobs",
+        "click_noise_px",
+    ):
+        if out[k] < 0:
+            raise InputError(source, f"params.{k}: expected >= 0, got {out[k]}")
+    if not 0.0 <= out["spike_fraction"] <= 0.5:
+        raise InputError(
+            source, f"params.spike_fraction: expected 0..0.5, got {out['spike_fraction']}"
+        )
+    if not 0.0 < out["grazing_deg"] <= 90.0:
+        raise InputError(
+            source, f"params.grazing_deg: expected in (0, 90], got {out['grazing_deg']}"
+        )
+    return out
+
+
+def make_take(
+    subject: str,
+    label: str,
+    kind: str,
+    take: str,
+    seed: int,
+    params: dict | None = None,
+) -> dict:
+    """Simulate one scan of a synthetic subject.
+
+    Parameters
+    ----------
+    subject : str
+        Subject id (letters, digits, ``_``, ``-``); with ``seed`` it fixes the identity.
+    label : str
+        ``neutral``, a viseme (``car``, ``man``, ``she``, ``eel``, ``too``) or an expression
+        (``smile``, ``sad``).
+    kind : str
+        ``neutral``, ``viseme`` or ``expression``; must match the label.
+    take : str
+        Take id; with ``seed`` and ``subject`` it fixes the intensity, pose and defects.
+    seed : int
+        Non-negative cohort seed.
+    params : dict, optional
+        Overrides of :data:`DEFAULT_PARAMS`.
+
+    Returns
+    -------
+    dict
+        ``xyz`` (H, W, 3) float64 mm in the scanner frame, NaN = no data; ``color`` (H, W, 3)
+        uint8; ``landmarks`` (68, 2) float64 pixel coordinates with click noise; ``truth``
+        (dict of arrays, see :func:`write_take`); ``subject``, ``take``, ``kind``, ``label``.
+
+    Raises
+    ------
+    InputError
+        On an unknown label, a kind that does not match it, a bad id or seed, or bad params.
+    """
+    source = f"{subject}/{take}"
+    for name, value in (("subject", subject), ("take", take)):
+        if not isinstance(value, str) or not _ID_RE.match(value):
+            raise InputError(source, f"{name}: expected letters, digits, '_' or '-', got {value!r}")
+    if label not in LABEL_KIND:
+        raise InputError(source, f"label: expected one of {sorted(LABEL_KIND)}, got {label!r}")
+    if kind != LABEL_KIND[label]:
+        raise InputError(
+            source, f"kind: label {label!r} is a {LABEL_KIND[label]!r} take, got {kind!r}"
+        )
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(source, f"seed: expected a non-negative integer, got {seed!r}")
+    p = _check_params(params, source)
+
+    head = build_head(subject_identity(subject, seed))
+    rng = np.random.default_rng([int(seed), _key(subject), _key(take)])
+    coeffs = label_coefficients(label, rng if label != "neutral" else None)
+    vertices = articulate(head, coeffs)
+    K = camera_matrix(p["width"], p["height"], p["focal_px"])
+    pose = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], _AIM)
+    out = scan(
+        head,
+        vertices,
+        pose,
+        K,
+        p["width"],
+        p["height"],
+        rng,
+        noise_mm=p["noise_mm"],
+        spike_fraction=p["spike_fraction"],
+        spike_mm=p["spike_mm"],
+        hole_blobs=p["hole_blobs"],
+        grazing_deg=p["grazing_deg"],
+    )
+    lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
+    lm2 = project(K, lm3)
+    clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)
+    truth = {
+        "vertices": vertices,
+        "faces": np.array(head.faces, dtype=np.int64),
+        "skin_faces": head.skin_faces,
+        "pose": pose,
+        "K": K,
+        "landmarks3d": lm3,
+        "landmarks2d": lm2,
+        "displacement": vertices - head.vertices,
+    }
+    return {
+        "xyz": out["xyz"],
+        "color": out["color"],
+        "landmarks": clicked,
+        "truth": truth,
+        "subject": subject,
+        "take": take,
+        "kind": kind,
+        "label": label,
+    }
+
+
+def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """A compressed ``.npz`` with fixed zip timestamps, so equal arrays give equal bytes."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in arrays:
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            data = io.BytesIO()
+            np.lib.format.write_array(data, np.asarray(arrays[name]), allow_pickle=False)
+            zf.writestr(info, data.getvalue())
+    path.write_bytes(buf.getvalue())
+
+
+def write_take(
+    result: dict,
+    xyz_path: str | PathLike[str],
+    color_path: str | PathLike[str],
+    pts_path: str | PathLike[str],
+    truth_path: str | PathLike[str],
+) -> None:
+    """Write a take from :func:`make_take` as a user would bring it, plus its truth.
+
+    Parameters
+    ----------
+    result : dict
+        Output of :func:`make_take`.
+    xyz_path : str or path-like
+        FRGC ``.abs`` / ``.abs.gz`` range image (NaN -> flag 0).
+    color_path : str or path-like
+        Colour image (PNG).
+    pts_path : str or path-like
+        iBUG 68-point ``.pts`` (1-based).
+    truth_path : str or path-like
+        ``.npz`` with ``vertices`` (N, 3) head frame mm, ``faces`` (F, 3), ``skin_faces``
+        (F,) bool, ``pose`` (4, 4) head -> scanner, ``K`` (3, 3), ``landmarks3d`` (68, 3)
+        scanner frame, ``landmarks2d`` (68, 2) exact projections, ``displacement`` (N, 3)
+        this take minus the neutral, head frame.
+    """
+    from scan2morph.io import write_abs, write_color, write_pts
+
+    for key in ("xyz", "color", "landmarks", "truth"):
+        if key not in result:
+            raise InputError(
+                str(truth_path), f"result: missing key {key!r} (expected make_take output)"
+            )
+    write_abs(xyz_path, result["xyz"])
+    write_color(color_path, result["color"])
+    write_pts(pts_path, result["landmarks"])
+    _write_npz(Path(truth_path), result["truth"])

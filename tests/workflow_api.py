@@ -1,0 +1,36 @@
+"""Running the Snakemake workflow through snakemake's Python API (for the end-to-end tests)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from snakemake.api import SnakemakeApi
+from snakemake.settings.types import (
+    ConfigSettings,
+    DAGSettings,
+    ExecutionSettings,
+    OutputSettings,
+    ResourceSettings,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_workflow(workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False):
+    """Run the repo's Snakefile in ``workdir`` with ``configfile``; returns True on success."""
+    with SnakemakeApi(OutputSettings(quiet=None, dryrun=dryrun, show_failed_logs=True)) as api:
+        workflow = api.workflow(
+            resource_settings=ResourceSettings(cores=cores),
+            config_settings=ConfigSettings(configfiles=[REPO / "config" / "config.yaml", configfile]),
+            snakefile=REPO / "Snakefile",
+            workdir=workdir,
+        )
+        dag = workflow.dag(dag_settings=DAGSettings(targets=set(targets)))
+        try:
+            dag.execute_workflow(
+                executor="dryrun" if dryrun else "local",
+                execution_settings=ExecutionSettings(keep_going=keep_going, latency_wait=1),
+            )
+        except Exception:  # snakemake raises when a job failed
+            return False
+    return True
