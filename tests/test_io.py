@@ -68,9 +68,18 @@ def _abs_text(rows=2, cols=2, lines=None):
     "text, match",
     [
         (_abs_text(lines=["1 1 1 1", "1 2 3 4"]), "truncated.*missing Y, Z"),
-        (_abs_text(lines=["1 1 1 1", "1 2 3 4", "5 6 7 8", "9 10"]), "line .Z.: .* got 2 \\(truncated file\\?\\)"),
-        (_abs_text(lines=["1 1 1 1", "1 2 3", "5 6 7 8", "9 10 11 12"]), "line 'X': expected 2\\*2 = 4 values, got 3"),
-        (_abs_text(lines=["1 1 1 1", "1 2 3 4", "5 6 x 8", "9 10 11 12"]), "line 'Y': non-numeric value 'x'"),
+        (
+            _abs_text(lines=["1 1 1 1", "1 2 3 4", "5 6 7 8", "9 10"]),
+            "line .Z.: .* got 2 \\(truncated file\\?\\)",
+        ),
+        (
+            _abs_text(lines=["1 1 1 1", "1 2 3", "5 6 7 8", "9 10 11 12"]),
+            "line 'X': expected 2\\*2 = 4 values, got 3",
+        ),
+        (
+            _abs_text(lines=["1 1 1 1", "1 2 3 4", "5 6 x 8", "9 10 11 12"]),
+            "line 'Y': non-numeric value 'x'",
+        ),
         (_abs_text(lines=["1 1 2 1", "1 2 3 4", "5 6 7 8", "9 10 11 12"]), "only 0 or 1"),
         ("2 rows\n", "truncated header"),
         ("2 rows\nwide\npixels (flag X Y Z):\n", "header line 2: expected '<C> columns'"),

@@ -39,8 +39,13 @@ def test_paths_resolve_against_the_sheet_and_problems_are_per_subject(tmp_path):
     assert "row 4 (bad/neutral): column 'color': file not found" in text and "gone.png" in text
     assert "row 5 (bad/car): modality 'laser' unknown" in text
     assert "take 'car' appears more than once for subject 'bad'" in text
-    assert problems["lonely"] == ["subject 'lonely': expected exactly one take of kind 'neutral', found 0"]
-    table = take_table(sheet, synthetic_rows(1, "synth", [dict(take="neutral", kind="neutral", label="neutral")], "r"))
+    assert problems["lonely"] == [
+        "subject 'lonely': expected exactly one take of kind 'neutral', found 0"
+    ]
+    table = take_table(
+        sheet,
+        synthetic_rows(1, "synth", [dict(take="neutral", kind="neutral", label="neutral")], "r"),
+    )
     assert list(table.loc["synth01", "xyz"]) == ["r/synth01/neutral.abs.gz"]
     assert len(table.loc["bad"]) == 2  # the duplicate is dropped from the DAG, reported above
 
@@ -56,8 +61,12 @@ def test_bad_sheets_stop_the_run(tmp_path):
     with pytest.raises(InputError, match="row 2, column 'subject': 'a b' is not an id"):
         read_sheet(path)
     with pytest.raises(InputError, match="clash with the synthetic cohort"):
-        sheet = read_sheet(_sheet(tmp_path, [["synth01", "n", "neutral", "n", "range", "", "", "", "", "", "p"]]))
-        take_table(sheet, synthetic_rows(1, "synth", [dict(take="n", kind="neutral", label="n")], "r"))
+        sheet = read_sheet(
+            _sheet(tmp_path, [["synth01", "n", "neutral", "n", "range", "", "", "", "", "", "p"]])
+        )
+        take_table(
+            sheet, synthetic_rows(1, "synth", [dict(take="n", kind="neutral", label="n")], "r")
+        )
 
 
 def test_comment_only_sheet_is_empty(tmp_path):

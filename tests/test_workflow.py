@@ -31,9 +31,24 @@ def _write_user_takes(root, subject, takes):
         res = make_take(subject, label, kind, take, seed=7, params=dict(TINY))
         d = root / subject
         d.mkdir(parents=True, exist_ok=True)
-        write_take(res, d / f"{take}.abs.gz", d / f"{take}.png", d / f"{take}.pts", d / f"{take}.truth.npz")
-        rows.append([subject, take, kind, label, "range", f"{subject}/{take}.abs.gz", f"{subject}/{take}.png",
-                     "", "", "", f"{subject}/{take}.pts"])
+        write_take(
+            res, d / f"{take}.abs.gz", d / f"{take}.png", d / f"{take}.pts", d / f"{take}.truth.npz"
+        )
+        rows.append(
+            [
+                subject,
+                take,
+                kind,
+                label,
+                "range",
+                f"{subject}/{take}.abs.gz",
+                f"{subject}/{take}.png",
+                "",
+                "",
+                "",
+                f"{subject}/{take}.pts",
+            ]
+        )
     return rows
 
 
@@ -47,14 +62,26 @@ def cohort(tmp_path_factory):
     # one broken subject per kind of bad input; each copies alice's files and breaks one
     for name in ("truncabs", "pts67", "colorsize", "missing", "modality", "duplicate"):
         shutil.copytree(scans / "alice", scans / name)
-        bad[name] = [[name, *r[1:5], r[5].replace("alice", name), r[6].replace("alice", name), "", "", "",
-                      r[10].replace("alice", name)] for r in rows]
+        bad[name] = [
+            [
+                name,
+                *r[1:5],
+                r[5].replace("alice", name),
+                r[6].replace("alice", name),
+                "",
+                "",
+                "",
+                r[10].replace("alice", name),
+            ]
+            for r in rows
+        ]
     data = gzip.open(scans / "truncabs" / "car.abs.gz", "rt").read()
     with gzip.open(scans / "truncabs" / "car.abs.gz", "wt") as fh:
         fh.write(data[: len(data) * 2 // 3])
     pts = (scans / "pts67" / "car.pts").read_text().splitlines()
-    (scans / "pts67" / "car.pts").write_text("\n".join(pts[:2]).replace("68", "67") + "\n{\n" +
-                                             "\n".join(pts[3:-2]) + "\n}\n")
+    (scans / "pts67" / "car.pts").write_text(
+        "\n".join(pts[:2]).replace("68", "67") + "\n{\n" + "\n".join(pts[3:-2]) + "\n}\n"
+    )
     import cv2
 
     img = cv2.imread(str(scans / "colorsize" / "car.png"))
@@ -65,7 +92,9 @@ def cohort(tmp_path_factory):
     sheet = scans / "subjects.tsv"
     sheet.write_text(HEADER + "".join("\t".join(r) + "\n" for r in rows + sum(bad.values(), [])))
     synth_takes = [dict(take=t, kind=k, label=lab, modality="range") for t, k, lab in takes]
-    cfg = dict(subjects=str(sheet), synthetic=dict(subjects=1, takes=synth_takes, scanner=dict(TINY)))
+    cfg = dict(
+        subjects=str(sheet), synthetic=dict(subjects=1, takes=synth_takes, scanner=dict(TINY))
+    )
     configfile = work / "tiny.yaml"
     configfile.write_text(yaml.safe_dump(cfg))
     ok = run_workflow(work, configfile)
@@ -102,7 +131,10 @@ def test_synthetic_inputs_are_written_in_user_formats(cohort):
     [
         ("truncabs", r"car.abs.gz: .*truncated"),
         ("pts67", "car.pts: n_points: expected 68 (iBUG-68), got 67"),
-        ("colorsize", "car.png: color: image is 160x110 (WxH) but the range image car.abs.gz is 160x120"),
+        (
+            "colorsize",
+            "car.png: color: image is 160x110 (WxH) but the range image car.abs.gz is 160x120",
+        ),
         ("missing", "column 'color': file not found"),
         ("modality", "modality 'lidar' unknown"),
         ("duplicate", "take 'car' appears more than once for subject 'duplicate'"),

@@ -16,12 +16,16 @@ from snakemake.settings.types import (
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run_workflow(workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False):
+def run_workflow(
+    workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False
+):
     """Run the repo's Snakefile in ``workdir`` with ``configfile``; returns True on success."""
     with SnakemakeApi(OutputSettings(quiet=None, dryrun=dryrun, show_failed_logs=True)) as api:
         workflow = api.workflow(
             resource_settings=ResourceSettings(cores=cores),
-            config_settings=ConfigSettings(configfiles=[REPO / "config" / "config.yaml", configfile]),
+            config_settings=ConfigSettings(
+                configfiles=[REPO / "config" / "config.yaml", configfile]
+            ),
             snakefile=REPO / "Snakefile",
             workdir=workdir,
         )

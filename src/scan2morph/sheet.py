@@ -16,12 +16,26 @@ import pandas as pd
 
 from scan2morph.errors import InputError
 
-COLUMNS = ("subject", "take", "kind", "label", "modality", "xyz", "color", "left", "right",
-           "calibration", "landmarks")
+COLUMNS = (
+    "subject",
+    "take",
+    "kind",
+    "label",
+    "modality",
+    "xyz",
+    "color",
+    "left",
+    "right",
+    "calibration",
+    "landmarks",
+)
 REQUIRED = ("subject", "take", "kind", "label", "modality", "landmarks")
 KINDS = ("neutral", "viseme", "expression")
 MODALITIES = ("range", "stereo")
-FILES = {"range": ("xyz", "color", "landmarks"), "stereo": ("left", "right", "calibration", "landmarks")}
+FILES = {
+    "range": ("xyz", "color", "landmarks"),
+    "stereo": ("left", "right", "calibration", "landmarks"),
+}
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
@@ -63,7 +77,8 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
             value = getattr(rec, col)
             if not _ID.match(value):
                 raise InputError(
-                    path, f"row {row}, column '{col}': {value!r} is not an id (letters, digits, _ and -)"
+                    path,
+                    f"row {row}, column '{col}': {value!r} is not an id (letters, digits, _ and -)",
                 )
     base = path.resolve().parent
     for col in ("xyz", "color", "left", "right", "calibration", "landmarks"):
@@ -94,10 +109,22 @@ def synthetic_rows(n_subjects: int, prefix: str, takes: list[dict], root: str) -
         for t in takes:
             stem = f"{root}/{subject}/{t['take']}"
             rows.append(
-                dict(subject=subject, take=t["take"], kind=t["kind"], label=t["label"],
-                     modality=t.get("modality", "range"), xyz=f"{stem}.abs.gz", color=f"{stem}.png",
-                     left="", right="", calibration="", landmarks=f"{stem}.pts",
-                     sheet_row=0, sheet="config: synthetic", synthetic=True)
+                dict(
+                    subject=subject,
+                    take=t["take"],
+                    kind=t["kind"],
+                    label=t["label"],
+                    modality=t.get("modality", "range"),
+                    xyz=f"{stem}.abs.gz",
+                    color=f"{stem}.png",
+                    left="",
+                    right="",
+                    calibration="",
+                    landmarks=f"{stem}.pts",
+                    sheet_row=0,
+                    sheet="config: synthetic",
+                    synthetic=True,
+                )
             )
     return pd.DataFrame(rows, columns=[*COLUMNS, "sheet_row", "sheet", "synthetic"])
 
@@ -117,7 +144,9 @@ def subject_problems(table: pd.DataFrame, check_files: bool = True) -> dict[str,
             if rec.kind not in KINDS:
                 out.append(f"{where}: kind {rec.kind!r} unknown (expected one of {list(KINDS)})")
             if rec.modality not in MODALITIES:
-                out.append(f"{where}: modality {rec.modality!r} unknown (expected one of {list(MODALITIES)})")
+                out.append(
+                    f"{where}: modality {rec.modality!r} unknown (expected one of {list(MODALITIES)})"
+                )
                 continue
             for col in FILES[rec.modality]:
                 value = getattr(rec, col)
@@ -127,10 +156,14 @@ def subject_problems(table: pd.DataFrame, check_files: bool = True) -> dict[str,
                     out.append(f"{where}: column '{col}': file not found: {value}")
         dup = rows["take"][rows["take"].duplicated()].unique()
         for take in dup:
-            out.append(f"{rows['sheet'].iloc[0]}: take {take!r} appears more than once for subject {subject!r}")
+            out.append(
+                f"{rows['sheet'].iloc[0]}: take {take!r} appears more than once for subject {subject!r}"
+            )
         n_neutral = int((rows["kind"] == "neutral").sum())
         if n_neutral != 1:
-            out.append(f"subject {subject!r}: expected exactly one take of kind 'neutral', found {n_neutral}")
+            out.append(
+                f"subject {subject!r}: expected exactly one take of kind 'neutral', found {n_neutral}"
+            )
         problems[subject] = out
     return problems
 

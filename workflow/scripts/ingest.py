@@ -11,15 +11,23 @@ def main(snakemake):
         row = snakemake.params.row
         take = row["take"]
         if row["modality"] != "range":
-            raise InputError(f"{row['subject']}/{take}", f"modality {row['modality']!r} not supported")
-        scan = read_range_take(snakemake.input.xyz, snakemake.input.color, snakemake.input.landmarks)
+            raise InputError(
+                f"{row['subject']}/{take}", f"modality {row['modality']!r} not supported"
+            )
+        scan = read_range_take(
+            snakemake.input.xyz, snakemake.input.color, snakemake.input.landmarks
+        )
         roles = ("xyz", "color", "landmarks")
         attrs = {k: row[k] for k in ("kind", "label", "modality")}
         attrs |= {f"input_sha256_{r}": sha256_file(snakemake.input[r]) for r in roles}
         g = f"/takes/{take}"
         write_part(
             snakemake.output.part,
-            {f"{g}/raw/xyz": scan.xyz, f"{g}/raw/color": scan.color, f"{g}/landmarks": scan.landmarks},
+            {
+                f"{g}/raw/xyz": scan.xyz,
+                f"{g}/raw/color": scan.color,
+                f"{g}/landmarks": scan.landmarks,
+            },
             attrs={g: attrs},
         )
 

@@ -15,7 +15,9 @@ def main(snakemake):
         g = f"/takes/{take}"
         raw = read_part(snakemake.input.part)
         xyz, report = repair_range(
-            raw[f"{g}/raw/xyz"], dict(snakemake.params.repair), source=f"{snakemake.wildcards.subject}/{take}"
+            raw[f"{g}/raw/xyz"],
+            dict(snakemake.params.repair),
+            source=f"{snakemake.wildcards.subject}/{take}",
         )
         filled = report.pop("filled")
         spikes = report.pop("spikes")

@@ -10,7 +10,9 @@ def main(snakemake):
     def job():
         subject, p, out = snakemake.wildcards.subject, snakemake.params, snakemake.output
         for i, t in enumerate(p.takes):
-            result = make_take(subject, t["label"], t["kind"], t["take"], seed=p.seed, params=dict(p.scanner))
+            result = make_take(
+                subject, t["label"], t["kind"], t["take"], seed=p.seed, params=dict(p.scanner)
+            )
             write_take(result, out.xyz[i], out.color[i], out.landmarks[i], out.truth[i])
             logging.info("%s/%s: %s %s written", subject, t["take"], t["kind"], t["label"])
 

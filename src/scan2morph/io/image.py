@@ -25,7 +25,9 @@ def read_color(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(path, "file not found (expected a PNG/PPM/JPEG color image)")
     if path.suffix.lower() not in COLOR_SUFFIXES:
-        raise InputError(path, f"color: unknown image format {path.suffix!r} (expected PNG, PPM or JPEG)")
+        raise InputError(
+            path, f"color: unknown image format {path.suffix!r} (expected PNG, PPM or JPEG)"
+        )
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(path, "color: cannot decode the image (corrupt or not an image)")

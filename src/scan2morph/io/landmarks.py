@@ -61,7 +61,9 @@ def read_pts(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
     except KeyError:
         raise InputError(path, "header 'n_points' missing") from None
     except ValueError:
-        raise InputError(path, f"header 'n_points': not an integer ({header['n_points']!r})") from None
+        raise InputError(
+            path, f"header 'n_points': not an integer ({header['n_points']!r})"
+        ) from None
     if "}" not in lines[i + 1 :]:
         raise InputError(path, "missing '}' that closes the point list (truncated file?)")
     end = lines.index("}", i + 1)
@@ -78,7 +80,9 @@ def read_pts(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
         try:
             rows.append((float(parts[0]), float(parts[1])))
         except ValueError:
-            raise InputError(path, f"point {k + 1}: non-numeric coordinate in {line[:40]!r}") from None
+            raise InputError(
+                path, f"point {k + 1}: non-numeric coordinate in {line[:40]!r}"
+            ) from None
     points = np.asarray(rows, dtype=np.float64)
     if not np.all(np.isfinite(points)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(points), axis=1))[0]) + 1

@@ -76,10 +76,12 @@ def read_abs(path: str | Path) -> np.ndarray:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as FRGC .abs text: {exc}") from exc
     if len(lines) < 3:
-        raise InputError(path, "truncated header: expected 'R rows', 'C columns', 'pixels (flag X Y Z):'")
+        raise InputError(
+            path, "truncated header: expected 'R rows', 'C columns', 'pixels (flag X Y Z):'"
+        )
     dims = []
     for i, (line, pattern, what) in enumerate(
-        zip(lines[:3], _HEADER_RE, ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"))
+        zip(lines[:3], _HEADER_RE, ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"), strict=True)
     ):
         m = pattern.match(line)
         if m is None:
@@ -98,7 +100,7 @@ def read_abs(path: str | Path) -> np.ndarray:
     if len(data_lines) > 4:
         raise InputError(path, f"expected 4 data lines (flag X Y Z), found {len(data_lines)}")
     arrays = []
-    for name, line in zip(names, data_lines):
+    for name, line in zip(names, data_lines, strict=True):
         tokens = line.split()
         if len(tokens) != n:
             hint = " (truncated file?)" if name == "Z" and len(tokens) < n else ""

@@ -32,7 +32,9 @@ class RangeTake:
     landmarks: np.ndarray
 
 
-def read_range_take(xyz_path: str | Path, color_path: str | Path, landmarks_path: str | Path) -> RangeTake:
+def read_range_take(
+    xyz_path: str | Path, color_path: str | Path, landmarks_path: str | Path
+) -> RangeTake:
     """Read a range take and check that its files agree.
 
     Raises
@@ -53,8 +55,11 @@ def read_range_take(xyz_path: str | Path, color_path: str | Path, landmarks_path
         raise InputError(xyz_path, "xyz: no valid pixel in the range image")
     landmarks = read_pts(landmarks_path)
     h, w = xyz.shape[:2]
-    outside = (landmarks[:, 0] < -0.5) | (landmarks[:, 0] > w - 0.5) | (landmarks[:, 1] < -0.5) | (
-        landmarks[:, 1] > h - 0.5
+    outside = (
+        (landmarks[:, 0] < -0.5)
+        | (landmarks[:, 0] > w - 0.5)
+        | (landmarks[:, 1] < -0.5)
+        | (landmarks[:, 1] > h - 0.5)
     )
     if outside.any():
         k = int(np.flatnonzero(outside)[0])

@@ -129,15 +129,24 @@ def render_mesh(
     material = None
     if colors is None and texture is None:
         material = pyrender.MetallicRoughnessMaterial(
-            baseColorFactor=[0.78, 0.74, 0.70, 1.0], metallicFactor=0.0, roughnessFactor=0.8,
+            baseColorFactor=[0.78, 0.74, 0.70, 1.0],
+            metallicFactor=0.0,
+            roughnessFactor=0.8,
             doubleSided=True,
         )
-    scene.add(pyrender.Mesh.from_trimesh(mesh, material=material, wireframe=wireframe, smooth=not wireframe))
+    scene.add(
+        pyrender.Mesh.from_trimesh(
+            mesh, material=material, wireframe=wireframe, smooth=not wireframe
+        )
+    )
     fov = np.radians(30.0)
     dist = radius / np.sin(fov / 2) * 1.05
     pose = look_at(center + front * dist, center, up)
     w, h = size
-    scene.add(pyrender.PerspectiveCamera(yfov=fov, aspectRatio=w / h, znear=dist * 0.2, zfar=dist * 3), pose=pose)
+    scene.add(
+        pyrender.PerspectiveCamera(yfov=fov, aspectRatio=w / h, znear=dist * 0.2, zfar=dist * 3),
+        pose=pose,
+    )
     key = look_at(center + dist * (front + 0.4 * up + 0.3 * np.cross(up, front)), center, up)
     scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=key)
     renderer = pyrender.OffscreenRenderer(w, h)

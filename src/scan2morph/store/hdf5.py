@@ -36,7 +36,9 @@ def _atomic_h5(path: Path):
 
 def _write_dataset(h5: h5py.File, name: str, value) -> None:
     if isinstance(value, str) or (
-        isinstance(value, (list, tuple, np.ndarray)) and len(value) and isinstance(np.asarray(value).flat[0], str)
+        isinstance(value, (list, tuple, np.ndarray))
+        and len(value)
+        and isinstance(np.asarray(value).flat[0], str)
     ):
         h5.create_dataset(name, data=np.asarray(value, dtype=object), dtype=h5py.string_dtype())
         return
@@ -167,7 +169,9 @@ def _merge_group(src: h5py.Group, dst: h5py.Group, part: Path) -> None:
     for name, obj in src.items():
         if isinstance(obj, h5py.Dataset):
             if name in dst:
-                raise InputError(part, f"dataset {obj.name} is already in the store (two parts write it)")
+                raise InputError(
+                    part, f"dataset {obj.name} is already in the store (two parts write it)"
+                )
             src.copy(obj, dst, name=name)
         else:
             _merge_group(obj, dst.require_group(name), part)

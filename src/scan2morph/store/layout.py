@@ -78,7 +78,9 @@ def validate_store(path: str | Path, layout: dict) -> list[str]:
             for ds_path, binding in sorted(matches.items()):
                 ds = h5[ds_path]
                 kinds = _KINDS[entry["dtype"]]
-                if ds.dtype.kind not in kinds or (entry["dtype"] == "uint8" and ds.dtype.itemsize != 1):
+                if ds.dtype.kind not in kinds or (
+                    entry["dtype"] == "uint8" and ds.dtype.itemsize != 1
+                ):
                     problems.append(f"{ds_path}: dtype {ds.dtype}, expected {entry['dtype']}")
                 shape = entry.get("shape")
                 if shape is None:
@@ -87,7 +89,7 @@ def validate_store(path: str | Path, layout: dict) -> list[str]:
                     problems.append(f"{ds_path}: shape {ds.shape}, expected {shape}")
                     continue
                 scope = dict(bound)
-                for want, got in zip(shape, ds.shape):
+                for want, got in zip(shape, ds.shape, strict=True):
                     if isinstance(want, int):
                         if want != got:
                             problems.append(f"{ds_path}: shape {ds.shape}, expected {shape}")
