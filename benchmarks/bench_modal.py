@@ -1,0 +1,167 @@
+"""Time and memory of the modal basis: shell assembly and eigensolve against DOF count and k.
+
+The mesh is a face-sized half-ellipsoid cap (150 x 190 x 60 mm, open rim, clamped), meshed
+with (n+1)^2 vertices so that 6 (n+1)^2 is the requested DOF count. Each case runs in a fresh
+subprocess so that its peak RSS (``resource.getrusage``: after import, after assembly, after
+the eigensolve) is its own; with ``--trace``, ``tracemalloc`` also gives the peak of
+Python/NumPy allocations per stage (SuperLU's factor lives outside it, in the RSS).
+
+BLAS threads are set per case with ``--blas-threads`` (default 1): on two cores the
+triangular solves run on two threads of their own, and measured with OpenBLAS on two threads
+as well the solve threads and BLAS's spinning threads fight over the cores (the eigensolve
+took 13 s instead of 8 s for 60k DOF / 100 modes).
+
+The issue's goal: 60,000 DOF and 100 modes in under 10 s on 2 cores (the paper: about 5 min
+for 15,000 DOF with block Lanczos in its FE software).
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_modal.py                      # the full table
+    .venv/bin/python benchmarks/bench_modal.py --dofs 60000 --ks 100 --methods block arpack
+    .venv/bin/python benchmarks/bench_modal.py --blas-threads 2    # BLAS threads per case
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+
+def cap_mesh(n: int, radii=(75.0, 95.0, 60.0)):
+    """Half-ellipsoid cap with (n+1)^2 vertices and 2 n^2 triangles."""
+    import numpy as np
+
+    u = np.linspace(-1.0, 1.0, n + 1)
+    uu, ww = np.meshgrid(u, u, indexing="xy")
+    x = uu * np.sqrt(1 - ww**2 / 2)
+    y = ww * np.sqrt(1 - uu**2 / 2)
+    z = np.sqrt(1 - 0.9 * (x**2 + y**2))
+    vertices = np.c_[radii[0] * x.ravel(), radii[1] * y.ravel(), radii[2] * z.ravel()]
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
+    p = (j * (n + 1) + i).ravel()
+    faces = np.r_[np.c_[p, p + 1, p + n + 2], np.c_[p, p + n + 2, p + n + 1]]
+    return vertices, faces
+
+
+def run_case(dofs: int, k: int, method: str, solve_threads: int, trace: bool) -> dict:
+    """One measurement, in this process; with ``trace`` the stages are rerun under
+    tracemalloc for the peak of Python/NumPy allocations (tracing slows them down, so the
+    times come from the untraced run)."""
+    import resource
+    import time
+    import tracemalloc
+
+    import numpy as np
+
+    from scan2morph.modal import assemble, boundary_vertices, fixed_dofs, solve_modes
+
+    n = max(2, round(np.sqrt(dofs / 6)) - 1)
+    vertices, faces = cap_mesh(n)
+    fixed = fixed_dofs(boundary_vertices(faces), "all")
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    t0 = time.perf_counter()
+    k_mat, m_mat = assemble(vertices, faces, 1.0)
+    t_asm = time.perf_counter() - t0
+    rss_asm = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    t0 = time.perf_counter()
+    freqs, modes = solve_modes(k_mat, m_mat, fixed, k, method=method, threads=solve_threads)
+    t_eig = time.perf_counter() - t0
+    rss_eig = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    free = np.setdiff1d(np.arange(k_mat.shape[0]), fixed)
+    kq = (k_mat @ modes)[free]
+    lam = (2 * np.pi * freqs) ** 2
+    res = np.linalg.norm(kq - (m_mat @ modes)[free] * lam, axis=0) / np.linalg.norm(kq, axis=0)
+    orth = np.abs(modes.T @ (m_mat @ modes) - np.eye(k)).max()
+    py_asm = py_eig = float("nan")
+    if trace:
+        del modes
+        tracemalloc.start()
+        k_mat, m_mat = assemble(vertices, faces, 1.0)
+        py_asm = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.reset_peak()
+        solve_modes(k_mat, m_mat, fixed, k, method=method, threads=solve_threads)
+        py_eig = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.stop()
+    return {
+        "dofs": int(k_mat.shape[0]),
+        "free": int(free.size),
+        "k": k,
+        "method": method,
+        "assemble_s": t_asm,
+        "eigen_s": t_eig,
+        "py_peak_assemble_mb": py_asm,
+        "py_peak_eigen_mb": py_eig,
+        "rss_base_mb": rss0,
+        "rss_after_assemble_mb": rss_asm,
+        "rss_peak_mb": rss_eig,
+        "f1_hz": float(freqs[0]),
+        "fk_hz": float(freqs[-1]),
+        "max_rel_residual": float(res.max()),
+        "max_orth_error": float(orth),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--dofs", type=int, nargs="+", default=[5000, 15000, 30000, 60000])
+    ap.add_argument("--ks", type=int, nargs="+", default=[20, 50, 100])
+    ap.add_argument("--methods", nargs="+", default=["block", "arpack"])
+    ap.add_argument("--blas-threads", type=int, default=1)
+    ap.add_argument("--solve-threads", type=int, default=2)
+    ap.add_argument(
+        "--trace", action="store_true", help="also measure Python peaks with tracemalloc"
+    )
+    ap.add_argument("--case", nargs=3, metavar=("DOFS", "K", "METHOD"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.case:
+        dofs, k, method = int(args.case[0]), int(args.case[1]), args.case[2]
+        out = run_case(dofs, k, method, args.solve_threads, args.trace)
+        print(json.dumps(out))
+        return
+    env = dict(os.environ, OPENBLAS_NUM_THREADS=str(args.blas_threads))
+    env["OMP_NUM_THREADS"] = str(args.blas_threads)
+    print(
+        f"BLAS threads {args.blas_threads}, solve threads {args.solve_threads}; "
+        "times in s, memory in MiB"
+    )
+    head = (
+        f"{'DOF':>7} {'free':>7} {'k':>4} {'method':>7} {'assemble':>9} {'eigen':>7} "
+        f"{'total':>7} {'py_asm':>7} {'py_eig':>7} {'rss0':>6} {'rss_asm':>7} {'rss':>7} "
+        f"{'f1_hz':>9} {'fk_hz':>9} "
+        f"{'resid':>8} {'orth':>8}"
+    )
+    print(head)
+    print("-" * len(head))
+    results = {}
+    for dofs in args.dofs:
+        for k in args.ks:
+            for method in args.methods:
+                cmd = [sys.executable, __file__, "--case", str(dofs), str(k), method]
+                cmd += ["--solve-threads", str(args.solve_threads)] + ["--trace"] * args.trace
+                proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+                if proc.returncode:
+                    print(f"{dofs:>7} {k:>4} {method:>7} failed: {proc.stderr.strip()[-300:]}")
+                    continue
+                r = json.loads(proc.stdout.strip().splitlines()[-1])
+                results[(dofs, k, method)] = r
+                print(
+                    f"{r['dofs']:>7} {r['free']:>7} {k:>4} {method:>7} {r['assemble_s']:>9.2f} "
+                    f"{r['eigen_s']:>7.2f} {r['assemble_s'] + r['eigen_s']:>7.2f} "
+                    f"{r['py_peak_assemble_mb']:>7.0f} {r['py_peak_eigen_mb']:>7.0f} "
+                    f"{r['rss_base_mb']:>6.0f} {r['rss_after_assemble_mb']:>7.0f} "
+                    f"{r['rss_peak_mb']:>7.0f} {r['f1_hz']:>9.2f} {r['fk_hz']:>9.2f} "
+                    f"{r['max_rel_residual']:>8.1e} {r['max_orth_error']:>8.1e}",
+                    flush=True,
+                )
+    for (dofs, k, method), r in results.items():
+        ref = results.get((dofs, k, "arpack"))
+        if method != "arpack" and ref is not None:
+            diff = abs(r["fk_hz"] / ref["fk_hz"] - 1)
+            print(f"{dofs} DOF, k={k}: {method} vs arpack, relative difference of f_k {diff:.1e}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,43 @@
+"""Modal basis of the neutral face and expression coordinates (the modal analysis paper).
+
+The neutral mesh becomes a thin-shell finite element model (:mod:`.fem`, pyfe3d triangles,
+boundary fixed, upper face thickened); its lowest natural modes (:mod:`.eigen`) form a
+mass-orthonormal basis in which expression displacement fields get their coordinates
+(:mod:`.project`), optionally after inserting identified expressions as "semantic" vectors.
+Units: mm, N, tonne, s (frequencies in Hz).
+"""
+
+from scan2morph.modal.eigen import ModalBasis, ModalParams, modal_basis, solve_modes
+from scan2morph.modal.fem import (
+    ShellMaterial,
+    assemble,
+    boundary_vertices,
+    fixed_dofs,
+    thickness_map,
+)
+from scan2morph.modal.project import (
+    CoordinateStats,
+    coordinate_statistics,
+    project,
+    reconstruct,
+    reconstruction_error_curve,
+    semantic_basis,
+)
+
+__all__ = [
+    "CoordinateStats",
+    "ModalBasis",
+    "ModalParams",
+    "ShellMaterial",
+    "assemble",
+    "boundary_vertices",
+    "coordinate_statistics",
+    "fixed_dofs",
+    "modal_basis",
+    "project",
+    "reconstruct",
+    "reconstruction_error_curve",
+    "semantic_basis",
+    "solve_modes",
+    "thickness_map",
+]
