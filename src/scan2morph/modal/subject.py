@@ -1,0 +1,94 @@
+"""One subject's modal analysis: basis of the neutral face, expression coordinates, statistics."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.modal.eigen import ModalBasis, ModalParams, modal_basis
+from scan2morph.modal.project import (
+    coordinate_statistics,
+    project,
+    reconstruct,
+    reconstruction_error_curve,
+    semantic_basis,
+)
+
+
+def subject_modal(
+    neutral: np.ndarray,
+    faces: np.ndarray,
+    upper_face: np.ndarray,
+    params: ModalParams,
+    displacements: Mapping[str, np.ndarray],
+    labels: Mapping[str, str],
+    semantic_takes: Sequence[str],
+    ks: Sequence[int],
+    source: str,
+) -> tuple[ModalBasis, dict[str, np.ndarray]]:
+    """Modal basis of the neutral face and everything the store keeps about it.
+
+    Parameters
+    ----------
+    neutral : (V, 3) float, mm, complete
+    faces : (F, 3) int
+    upper_face : (V,) bool
+        Vertices whose elements are thickened.
+    params : ModalParams
+    displacements : mapping take -> (V, 3) mm
+        Expression displacement fields in the neutral frame.
+    labels : mapping take -> label
+    semantic_takes : sequence of str
+        Expression takes inserted into the basis as semantic modes (may be empty).
+    ks : sequence of int
+        Numbers of modes at which the reconstruction error is reported.
+    source : str
+
+    Returns
+    -------
+    basis : ModalBasis
+    datasets : dict of store path -> array
+    """
+    basis = modal_basis(neutral, faces, params, upper_face, source=source)
+    ks = sorted({int(k) for k in ks if 1 <= int(k) <= basis.n_modes} | {basis.n_modes})
+    data = {
+        "/modal/frequencies_hz": basis.frequencies_hz,
+        "/modal/modes": basis.modes,
+        "/modal/dof_modes": basis.dof_modes,
+        "/modal/thickness_mm": basis.thickness_mm,
+        "/modal/fixed_vertices": basis.fixed_vertices,
+        "/modal/reconstruction_k": np.asarray(ks),
+    }
+    coords = {}
+    for take, field in displacements.items():
+        q = project(basis, field, source=f"{source}/{take}")
+        coords[take] = q
+        data[f"/expressions/{take}/coordinates"] = q
+        data[f"/expressions/{take}/reconstruction_rms_mm"] = reconstruction_error_curve(
+            basis, field, ks, weighting="vertex"
+        )
+        data[f"/expressions/{take}/synthesized"] = reconstruct(basis, q)
+    unknown = [t for t in semantic_takes if t not in displacements]
+    if unknown:
+        raise InputError(
+            source,
+            f"modal.semantic_takes: {unknown} are not expression takes ({sorted(displacements)})",
+        )
+    if semantic_takes:
+        sem = semantic_basis(
+            basis, [displacements[t] for t in semantic_takes], list(semantic_takes), source=source
+        )
+        data["/modal/semantic/names"] = np.asarray(sem.names, dtype=object)
+        data["/modal/semantic/modes"] = sem.modes
+        for take, field in displacements.items():
+            data[f"/expressions/{take}/semantic_coordinates"] = project(
+                sem, field, source=f"{source}/{take}"
+            )
+    if coords:
+        for label, stats in coordinate_statistics(coords, {t: labels[t] for t in coords}).items():
+            g = f"/modal/statistics/{label}"
+            data[f"{g}/mean"], data[f"{g}/std"] = stats.mean, stats.std
+            data[f"{g}/takes"] = np.asarray(stats.takes, dtype=object)
+    return basis, data

@@ -1,0 +1,103 @@
+"""One subject's morphable model: PCA over neutral + viseme models, named blends, exports.
+
+Blend-shape weights name viseme *labels* (``car``, ``too``, ...); where a subject has several
+takes of one label, the label's model is the mean of those takes' models.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.morph.blend import blend
+from scan2morph.morph.pca import PCAModel, pca, synthesize
+
+
+def label_models(
+    models: Mapping[str, np.ndarray], labels: Mapping[str, str]
+) -> dict[str, np.ndarray]:
+    """Mean model per viseme label (takes of one label averaged)."""
+    out: dict[str, list[np.ndarray]] = {}
+    for take, model in models.items():
+        out.setdefault(labels[take], []).append(model)
+    return {label: np.mean(shapes, axis=0) for label, shapes in out.items()}
+
+
+def subject_morph(
+    neutral: np.ndarray,
+    models: Mapping[str, np.ndarray],
+    labels: Mapping[str, str],
+    blends: Mapping[str, Mapping[str, float]],
+    pca_blends: Mapping[str, Sequence[float]],
+    alpha_limit: float,
+    source: str,
+) -> tuple[PCAModel, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """PCA and named blends of one subject.
+
+    Parameters
+    ----------
+    neutral : (V, 3) float, mm, complete (no NaN)
+        The base model S_0.
+    models : mapping take -> (V, 3)
+        Viseme models S_i (neutral + processed motion), in the neutral frame.
+    labels : mapping take -> label
+    blends : mapping name -> (label -> weight)
+        Blend shapes (Eq. 1) to build.
+    pca_blends : mapping name -> alphas
+        PCA blends (Eq. 2) to build; a blend with more alphas than components is an error.
+    alpha_limit : float
+    source : str
+        Subject label for messages.
+
+    Returns
+    -------
+    model : PCAModel
+        Over ``["neutral", *models]`` in that order.
+    blend_shapes : dict name -> (V, 3)
+    pca_shapes : dict name -> (V, 3)
+    """
+    if not models:
+        raise InputError(source, "no viseme takes: the morphable model needs at least one viseme")
+    model = pca([neutral, *models.values()], names=["neutral", *models], source=f"{source}/pca")
+    per_label = label_models(models, labels)
+    blend_shapes = {
+        name: blend(neutral, per_label, dict(weights), source=f"{source}/morph.blends.{name}")
+        for name, weights in blends.items()
+    }
+    pca_shapes = {}
+    for name, alpha in pca_blends.items():
+        a = np.asarray(alpha, dtype=float)
+        if a.size > model.n_components:  # fewer visemes than the blend needs: keep what exists
+            if np.any(a[model.n_components :] != 0):
+                raise InputError(
+                    source,
+                    f"morph.pca_blends.{name}: {a.size} alphas but the model has {model.n_components} components",
+                )
+            a = a[: model.n_components]
+        pca_shapes[name] = synthesize(
+            model, a, alpha_limit=alpha_limit, source=f"{source}/morph.pca_blends.{name}"
+        )
+    return model, blend_shapes, pca_shapes
+
+
+def pca_datasets(model: PCAModel) -> dict[str, np.ndarray]:
+    """The ``/pca`` group of the store (DESIGN.md)."""
+    return {
+        "/pca/mean": model.mean,
+        "/pca/components": model.components,
+        "/pca/eigenvalues": model.eigenvalues,
+        "/pca/cr": model.cr,
+        "/pca/ccr": model.ccr,
+        "/pca/coefficients": model.coefficients,
+        "/pca/takes": np.asarray(model.names, dtype=object),
+    }
+
+
+def pca_component_targets(model: PCAModel) -> dict[str, np.ndarray]:
+    """One shape per component at +1 standard deviation (alpha_i = 1), for morph-target export."""
+    return {
+        f"pca_{i + 1}": model.mean + np.sqrt(model.eigenvalues[i]) * model.components[i]
+        for i in range(model.n_components)
+    }

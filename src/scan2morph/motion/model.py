@@ -1,0 +1,113 @@
+"""Viseme models and expression displacement fields of one subject (Yano-Harada 4.1, 5).
+
+Given the template faces, the neutral mesh and every other take's mesh aligned into the neutral
+frame, this computes what the store keeps: the stencil mask, raw and processed motion per viseme,
+the viseme models (neutral + processed motion) and the expression displacement fields (aligned
+take minus neutral, neither masked nor smoothed, invalid vertices filled from neighbours).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scan2morph.motion.mask import stencil_mask
+from scan2morph.motion.smooth import fill_missing, laplacian_smooth
+from scan2morph.motion.vectors import motion_vectors
+
+
+@dataclass(frozen=True)
+class AlignedMesh:
+    """A take's mesh in the neutral frame: ``vertices`` (V, 3) mm (NaN = invalid), ``valid`` (V,)."""
+
+    vertices: np.ndarray
+    valid: np.ndarray
+
+
+def complete_neutral(
+    neutral: AlignedMesh, faces: np.ndarray, source: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """The neutral mesh with invalid vertices filled from their neighbours.
+
+    Returns
+    -------
+    vertices : (V, 3) float64, mm, all finite
+    filled : (V,) bool, the vertices that were filled
+    """
+    filled = ~neutral.valid | ~np.isfinite(neutral.vertices).all(axis=1)
+    return fill_missing(neutral.vertices, faces, missing=filled, source=source), filled
+
+
+def viseme_motion(
+    neutral: AlignedMesh,
+    visemes: dict[str, AlignedMesh],
+    faces: np.ndarray,
+    mask_paths: np.ndarray,
+    radius_mm: float,
+    w: float,
+    iterations: int,
+    source: str,
+) -> dict[str, np.ndarray]:
+    """Mask, motion vectors and viseme models.
+
+    Parameters
+    ----------
+    neutral : AlignedMesh
+    visemes : dict take -> AlignedMesh (aligned into the neutral frame)
+    faces : (F, 3) int
+    mask_paths : (P, 2) int
+        Start and goal vertices of the Dijkstra paths that seed the stencil mask.
+    radius_mm, w, iterations
+        Sphere radius (mm) and Laplacian smoothing weight and iteration count.
+    source : str
+        ``subject`` label for messages.
+
+    Returns
+    -------
+    dict of store path -> array
+        ``/mask/suppressed`` (V,), ``/mask/seeds`` (S,), ``/neutral/vertices`` (V, 3),
+        ``/neutral/filled`` (V,), and per viseme ``/visemes/{take}/motion_raw``,
+        ``/visemes/{take}/motion``, ``/visemes/{take}/model``.
+    """
+    base, filled = complete_neutral(neutral, faces, source)
+    suppressed, seeds = stencil_mask(base, faces, mask_paths, radius_mm=radius_mm, source=source)
+    out = {
+        "/mask/suppressed": suppressed,
+        "/mask/seeds": seeds,
+        "/neutral/vertices": base,
+        "/neutral/filled": filled,
+    }
+    for take, mesh in visemes.items():
+        raw = motion_vectors(
+            mesh.vertices, neutral.vertices, mesh.valid, neutral.valid, source=f"{source}/{take}"
+        )
+        missing = ~np.isfinite(raw).all(axis=1)
+        smooth = laplacian_smooth(
+            raw,
+            faces,
+            w=w,
+            iterations=iterations,
+            fixed=suppressed,
+            missing=missing,
+            source=f"{source}/{take}",
+        )
+        out[f"/visemes/{take}/motion_raw"] = raw
+        out[f"/visemes/{take}/motion"] = smooth
+        out[f"/visemes/{take}/model"] = base + smooth
+    return out
+
+
+def expression_displacements(
+    neutral: AlignedMesh, expressions: dict[str, AlignedMesh], faces: np.ndarray, source: str
+) -> dict[str, np.ndarray]:
+    """``/expressions/{take}/displacement`` (V, 3): aligned take minus neutral, invalid filled."""
+    out = {}
+    for take, mesh in expressions.items():
+        raw = motion_vectors(
+            mesh.vertices, neutral.vertices, mesh.valid, neutral.valid, source=f"{source}/{take}"
+        )
+        out[f"/expressions/{take}/displacement"] = fill_missing(
+            raw, faces, source=f"{source}/{take}"
+        )
+    return out
