@@ -89,8 +89,14 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     return df
 
 
-def synthetic_rows(n_subjects: int, prefix: str, takes: list[dict], root: str) -> pd.DataFrame:
-    """Rows of the synthetic cohort, whose files the ``synth_take`` rule writes under ``root``.
+def synthetic_rows(
+    n_subjects: int,
+    prefix: str,
+    takes: list[dict],
+    root: str,
+    stereo: dict | None = None,
+) -> pd.DataFrame:
+    """Rows of the synthetic cohort, whose files the synthetic rules write under ``root``.
 
     Parameters
     ----------
@@ -99,27 +105,64 @@ def synthetic_rows(n_subjects: int, prefix: str, takes: list[dict], root: str) -
     prefix : str
         Subject id prefix.
     takes : list of dict
-        Each with ``take``, ``kind``, ``label`` and ``modality``.
+        Each with ``take``, ``kind``, ``label`` and optionally ``modality`` (``range``, the
+        default, or ``stereo``: that take is a stereo pair for every subject).
     root : str
         Folder of the synthetic inputs (``results/synthetic``).
+    stereo : dict, optional
+        ``subjects`` (1-based subject numbers) and ``takes`` (take ids of ``takes``): those
+        takes of those subjects are stereo pairs too. Numbers above ``n_subjects`` are
+        ignored (so that a smaller cohort keeps the same config); other keys are ignored.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per take with the sheet's columns: a range take has ``xyz``
+        (``{take}.abs.gz``) and ``color`` (``{take}.png``), a stereo take ``left``
+        (``{take}_left.png``), ``right`` (``{take}_right.png``) and ``calibration``
+        (``{take}_calib.yaml``); both have ``landmarks`` (``{take}.pts``).
+
+    Raises
+    ------
+    InputError
+        ``stereo.takes`` names a take that is not in ``takes``, or ``stereo.subjects`` holds
+        something other than positive integers.
     """
+    stereo = stereo or {}
+    source = "config: synthetic.stereo"
+    take_ids = [t["take"] for t in takes]
+    unknown = [t for t in stereo.get("takes", []) if t not in take_ids]
+    if unknown:
+        raise InputError(
+            source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
+        )
+    numbers = list(stereo.get("subjects", []))
+    if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
+        raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
     rows = []
     for i in range(1, n_subjects + 1):
         subject = f"{prefix}{i:02d}"
         for t in takes:
             stem = f"{root}/{subject}/{t['take']}"
+            listed = i in numbers and t["take"] in stereo.get("takes", [])
+            modality = "stereo" if listed else t.get("modality", "range")
+            files = dict(xyz="", color="", left="", right="", calibration="")
+            if modality == "stereo":
+                files |= dict(
+                    left=f"{stem}_left.png",
+                    right=f"{stem}_right.png",
+                    calibration=f"{stem}_calib.yaml",
+                )
+            else:
+                files |= dict(xyz=f"{stem}.abs.gz", color=f"{stem}.png")
             rows.append(
                 dict(
                     subject=subject,
                     take=t["take"],
                     kind=t["kind"],
                     label=t["label"],
-                    modality=t.get("modality", "range"),
-                    xyz=f"{stem}.abs.gz",
-                    color=f"{stem}.png",
-                    left="",
-                    right="",
-                    calibration="",
+                    modality=modality,
+                    **files,
                     landmarks=f"{stem}.pts",
                     sheet_row=0,
                     sheet="config: synthetic",

@@ -1,13 +1,14 @@
 # Ingest: one take's input files -> arrays on the shared pixel grid, with input checksums.
+# A stereo take is reconstructed here into the range image of its left camera.
 
 
 rule check_subject:
     output:
         "results/{subject}/check.json",
-    params:
-        problems=get_subject_problems,
     log:
         "logs/check_subject/{subject}.log",
+    params:
+        problems=get_subject_problems,
     script:
         "../scripts/check_subject.py"
 
@@ -18,13 +19,14 @@ rule ingest:
         check="results/{subject}/check.json",
     output:
         part="results/{subject}/takes/{take}/ingest.h5",
-    params:
-        row=take_row,
     log:
         "logs/ingest/{subject}/{take}.log",
     benchmark:
         "benchmarks/rules/ingest/{subject}/{take}.tsv"
     resources:
         mem_mb=1000,
+    params:
+        row=take_row,
+        stereo=get_stereo_params,
     script:
         "../scripts/ingest.py"

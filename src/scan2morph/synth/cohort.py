@@ -19,6 +19,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.synth.head import (
     LABEL_KIND,
+    HeadModel,
     Identity,
     articulate,
     build_head,
@@ -47,7 +48,7 @@ _INT_PARAMS = ("width", "height", "hole_blobs")
 _ID_RE = re.compile(r"^[A-Za-z0-9_-]+$")
 #: Head-frame point put on the optical axis: mid-face height (between the hairline and the
 #: chin), at the front of the face.
-_AIM = np.array([0.0, -14.0, 95.0])
+AIM = np.array([0.0, -14.0, 95.0])
 
 
 def default_takes() -> list[tuple[str, str, str]]:
@@ -85,28 +86,62 @@ def subject_identity(subject: str, seed: int) -> Identity:
     return sample_identity(np.random.default_rng([int(seed), _key(subject)]))
 
 
-def _check_params(params: dict | None, source: str) -> dict:
-    out = dict(DEFAULT_PARAMS)
+def numeric_params(
+    params: dict | None,
+    defaults: dict[str, float | int],
+    int_keys: tuple[str, ...],
+    source: str,
+) -> dict:
+    """``defaults`` updated with ``params``: known keys, finite numbers, integers where needed.
+
+    Parameters
+    ----------
+    params : dict or None
+        Overrides.
+    defaults : dict
+        Every accepted key with its default.
+    int_keys : tuple of str
+        Keys whose values must be integers.
+    source : str
+        Named in the errors (``subject/take``).
+
+    Returns
+    -------
+    dict
+        Every key of ``defaults``; ``int`` for ``int_keys``, ``float`` otherwise.
+
+    Raises
+    ------
+    InputError
+        ``params`` not a dict, an unknown key, a value that is not a finite number, a
+        non-integer value for an integer key.
+    """
+    out = dict(defaults)
     if params is None:
         return out
     if not isinstance(params, dict):
         raise InputError(source, f"params: expected a dict, got {type(params).__name__}")
-    unknown = sorted(set(params) - set(DEFAULT_PARAMS))
+    unknown = sorted(set(params) - set(defaults))
     if unknown:
         raise InputError(
-            source, f"params: unknown key(s) {unknown}; expected some of {sorted(DEFAULT_PARAMS)}"
+            source, f"params: unknown key(s) {unknown}; expected some of {sorted(defaults)}"
         )
     for k, v in params.items():
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
             raise InputError(source, f"params.{k}: expected a number, got {v!r}")
         if not np.isfinite(v):
             raise InputError(source, f"params.{k}: expected a finite number, got {v!r}")
-        if k in _INT_PARAMS and float(v) != int(v):
+        if k in int_keys and float(v) != int(v):
             raise InputError(source, f"params.{k}: expected an integer, got {v!r}")
-        out[k] = int(v) if k in _INT_PARAMS else float(v)
+        out[k] = int(v) if k in int_keys else float(v)
     for k in ("width", "height"):
-        if not 16 <= out[k] <= 4096:
+        if k in out and not 16 <= out[k] <= 4096:
             raise InputError(source, f"params.{k}: expected 16..4096 pixels, got {out[k]}")
+    return out
+
+
+def _check_params(params: dict | None, source: str) -> dict:
+    out = numeric_params(params, DEFAULT_PARAMS, _INT_PARAMS, source)
     for k in ("focal_px", "distance_mm"):
         if out[k] <= 0:
             raise InputError(source, f"params.{k}: expected > 0, got {out[k]}")
@@ -133,6 +168,66 @@ def _check_params(params: dict | None, source: str) -> dict:
             source, f"params.grazing_deg: expected in (0, 90], got {out['grazing_deg']}"
         )
     return out
+
+
+def check_take(subject: str, label: str, kind: str, take: str, seed: int) -> str:
+    """Check the ids, label, kind and seed of a simulated take.
+
+    Returns
+    -------
+    str
+        ``subject/take``, the source named in errors.
+
+    Raises
+    ------
+    InputError
+        On an unknown label, a kind that does not match it, a bad id or seed.
+    """
+    source = f"{subject}/{take}"
+    for name, value in (("subject", subject), ("take", take)):
+        if not isinstance(value, str) or not _ID_RE.match(value):
+            raise InputError(source, f"{name}: expected letters, digits, '_' or '-', got {value!r}")
+    if label not in LABEL_KIND:
+        raise InputError(source, f"label: expected one of {sorted(LABEL_KIND)}, got {label!r}")
+    if kind != LABEL_KIND[label]:
+        raise InputError(
+            source, f"kind: label {label!r} is a {LABEL_KIND[label]!r} take, got {kind!r}"
+        )
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(source, f"seed: expected a non-negative integer, got {seed!r}")
+    return source
+
+
+def articulated_head(
+    subject: str, label: str, kind: str, take: str, seed: int
+) -> tuple[HeadModel, np.ndarray, np.random.Generator]:
+    """The checked set-up shared by every simulated take: head, deformed vertices, take rng.
+
+    Parameters
+    ----------
+    subject, label, kind, take, seed
+        As in :func:`make_take`.
+
+    Returns
+    -------
+    head : HeadModel
+        The subject's head (cached per identity).
+    vertices : (N, 3) float64
+        The head articulated for ``label`` at this take's intensity, head frame, mm.
+    rng : numpy.random.Generator
+        The take's generator, fixed by ``(seed, subject, take)``, after drawing the intensity;
+        the caller draws the pose and the defects from it.
+
+    Raises
+    ------
+    InputError
+        On an unknown label, a kind that does not match it, a bad id or seed.
+    """
+    check_take(subject, label, kind, take, seed)
+    head = build_head(subject_identity(subject, seed))
+    rng = np.random.default_rng([int(seed), _key(subject), _key(take)])
+    coeffs = label_coefficients(label, rng if label != "neutral" else None)
+    return head, articulate(head, coeffs), rng
 
 
 def make_take(
@@ -173,26 +268,10 @@ def make_take(
     InputError
         On an unknown label, a kind that does not match it, a bad id or seed, or bad params.
     """
-    source = f"{subject}/{take}"
-    for name, value in (("subject", subject), ("take", take)):
-        if not isinstance(value, str) or not _ID_RE.match(value):
-            raise InputError(source, f"{name}: expected letters, digits, '_' or '-', got {value!r}")
-    if label not in LABEL_KIND:
-        raise InputError(source, f"label: expected one of {sorted(LABEL_KIND)}, got {label!r}")
-    if kind != LABEL_KIND[label]:
-        raise InputError(
-            source, f"kind: label {label!r} is a {LABEL_KIND[label]!r} take, got {kind!r}"
-        )
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(source, f"seed: expected a non-negative integer, got {seed!r}")
-    p = _check_params(params, source)
-
-    head = build_head(subject_identity(subject, seed))
-    rng = np.random.default_rng([int(seed), _key(subject), _key(take)])
-    coeffs = label_coefficients(label, rng if label != "neutral" else None)
-    vertices = articulate(head, coeffs)
+    p = _check_params(params, check_take(subject, label, kind, take, seed))
+    head, vertices, rng = articulated_head(subject, label, kind, take, seed)
     K = camera_matrix(p["width"], p["height"], p["focal_px"])
-    pose = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], _AIM)
+    pose = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], AIM)
     out = scan(
         head,
         vertices,
@@ -232,8 +311,15 @@ def make_take(
     }
 
 
-def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """A compressed ``.npz`` with fixed zip timestamps, so equal arrays give equal bytes."""
+def write_npz(path: str | PathLike[str], arrays: dict[str, np.ndarray]) -> None:
+    """Write a compressed ``.npz`` with fixed zip timestamps, so equal arrays give equal bytes.
+
+    Parameters
+    ----------
+    path : str or path-like
+    arrays : dict of str to array
+        Written as ``{name}.npy`` members, in the dict's order (no pickles).
+    """
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name in arrays:
@@ -242,7 +328,7 @@ def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
             data = io.BytesIO()
             np.lib.format.write_array(data, np.asarray(arrays[name]), allow_pickle=False)
             zf.writestr(info, data.getvalue())
-    path.write_bytes(buf.getvalue())
+    Path(path).write_bytes(buf.getvalue())
 
 
 def write_take(
@@ -280,4 +366,4 @@ def write_take(
     write_abs(xyz_path, result["xyz"])
     write_color(color_path, result["color"])
     write_pts(pts_path, result["landmarks"])
-    _write_npz(Path(truth_path), result["truth"])
+    write_npz(truth_path, result["truth"])
