@@ -7,6 +7,7 @@ from scan2morph.io.calibration import (
 )
 from scan2morph.io.gltf import read_glb_targets, write_glb
 from scan2morph.io.image import read_color, write_color
+from scan2morph.io.obj import write_obj
 from scan2morph.io.landmarks import read_pts, write_pts
 from scan2morph.io.range_image import (
     read_abs,
@@ -15,11 +16,19 @@ from scan2morph.io.range_image import (
     write_abs,
     write_npz_range,
 )
-from scan2morph.io.take import RangeTake, read_range_take
+from scan2morph.io.take import (
+    RangeTake,
+    StereoTake,
+    check_landmarks_inside,
+    read_range_take,
+    read_stereo_take,
+)
 
 __all__ = [
     "RangeTake",
     "StereoCalibration",
+    "StereoTake",
+    "check_landmarks_inside",
     "read_abs",
     "read_color",
     "read_npz_range",
@@ -28,10 +37,12 @@ __all__ = [
     "read_range",
     "read_range_take",
     "read_stereo_calibration",
+    "read_stereo_take",
     "write_abs",
     "write_color",
     "write_glb",
     "write_npz_range",
+    "write_obj",
     "write_pts",
     "write_stereo_calibration",
 ]

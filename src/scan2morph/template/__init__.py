@@ -1,0 +1,33 @@
+"""Correspondent face meshes: 2D template, thin-plate-spline fit, subdivision, sampling."""
+
+from scan2morph.template.mesh import (
+    DEFAULT_FIDUCIAL_SET_BY_KIND,
+    FIDUCIAL_SETS,
+    ICP_POINTS,
+    MASK_PATHS,
+    Template,
+    build_template,
+)
+from scan2morph.template.sample import check_no_folds, fit_take, sample_range, texture_uv
+from scan2morph.template.serialize import load_template, save_template
+from scan2morph.template.subdivide import subdivide, subdivide_template
+from scan2morph.template.tps import TPS, tps_warp
+
+__all__ = [
+    "DEFAULT_FIDUCIAL_SET_BY_KIND",
+    "FIDUCIAL_SETS",
+    "ICP_POINTS",
+    "MASK_PATHS",
+    "TPS",
+    "Template",
+    "build_template",
+    "check_no_folds",
+    "fit_take",
+    "load_template",
+    "sample_range",
+    "save_template",
+    "subdivide",
+    "subdivide_template",
+    "texture_uv",
+    "tps_warp",
+]

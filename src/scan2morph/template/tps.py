@@ -1,0 +1,123 @@
+"""Thin-plate-spline warp of the template plane onto the image (Yano-Harada 3.1).
+
+F(u) = A(u) + sum_i lambda_i phi(|u - u_i|) with phi(r) = r^2 log r and A affine, solved as the
+paper's linear system ::
+
+    [ Phi  P ] [lambda]   [v]
+    [ P^T  0 ] [  a   ] = [0]
+
+where Phi_ij = phi(|u_i - u_j|) and P = [1, u_x, u_y]. The warp interpolates the fiducials
+exactly; the number of unknowns depends only on the number of fiducials.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.tol import RCOND
+
+
+def _phi(r: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = r * r * np.log(r)
+    return np.where(r > 0, out, 0.0)
+
+
+def _pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=-1))
+
+
+@dataclass(frozen=True)
+class TPS:
+    """A fitted 2D thin-plate spline.
+
+    Attributes
+    ----------
+    centres : (m, 2) float64
+        Source points u_i (template coordinates).
+    weights : (m, 2) float64
+        lambda_i for x and y.
+    affine : (3, 2) float64
+        Coefficients of A(u) = a0 + a1 u_x + a2 u_y for x and y.
+    """
+
+    centres: np.ndarray
+    weights: np.ndarray
+    affine: np.ndarray
+
+    @classmethod
+    def fit(cls, src, dst, source: str = "tps", image_size: tuple[int, int] | None = None) -> TPS:
+        """Solve for the spline mapping ``src`` (m, 2) onto ``dst`` (m, 2).
+
+        Parameters
+        ----------
+        src, dst : (m, 2) float
+            Fiducials in the template frame and their image positions (pixels).
+        source : str
+            Label for error messages (``subject/take``).
+        image_size : (width, height), optional
+            When given, ``dst`` points must lie inside the image.
+
+        Raises
+        ------
+        InputError
+            Fewer than 3 points, non-finite points, duplicate points, all points collinear
+            (singular system) or destination points outside the image.
+        """
+        src = np.asarray(src, dtype=np.float64)
+        dst = np.asarray(dst, dtype=np.float64)
+        if src.ndim != 2 or src.shape[1] != 2 or dst.shape != src.shape:
+            raise InputError(source, f"fiducials: expected two (m, 2) arrays, got {src.shape} and {dst.shape}")
+        m = len(src)
+        if m < 3:
+            raise InputError(source, f"fiducials: a thin-plate spline needs at least 3 points, got {m}")
+        for name, pts in (("template", src), ("image", dst)):
+            bad = ~np.isfinite(pts).all(axis=1)
+            if bad.any():
+                raise InputError(source, f"fiducials: {name} point {int(np.argmax(bad))} is not finite")
+        d = _pairwise(src, src)
+        scale = max(float(np.ptp(src, axis=0).max()), 1e-300)
+        i, j = np.nonzero(np.triu(d <= 1e-9 * scale, k=1))
+        if len(i):
+            raise InputError(source, f"fiducials: points {int(i[0])} and {int(j[0])} coincide (duplicate points)")
+        centred = src - src.mean(axis=0)
+        sv = np.linalg.svd(centred, compute_uv=False)
+        if sv[1] <= RCOND * 1e2 * max(sv[0], 1e-300):
+            raise InputError(source, "fiducials: all points are collinear (the spline's system is singular)")
+        if image_size is not None:
+            w, h = image_size
+            out = (dst[:, 0] < -0.5) | (dst[:, 0] > w - 0.5) | (dst[:, 1] < -0.5) | (dst[:, 1] > h - 0.5)
+            if out.any():
+                k = int(np.argmax(out))
+                raise InputError(source, f"fiducials: image point {k} at {dst[k].round(1).tolist()} is outside the {w}x{h} image")
+        p = np.column_stack([np.ones(m), src])
+        a = np.zeros((m + 3, m + 3))
+        a[:m, :m] = _phi(d)
+        a[:m, m:] = p
+        a[m:, :m] = p.T
+        b = np.zeros((m + 3, 2))
+        b[:m] = dst
+        try:
+            x = np.linalg.solve(a, b)
+        except np.linalg.LinAlgError:
+            raise InputError(source, "fiducials: singular thin-plate spline system") from None
+        return cls(centres=src, weights=x[:m], affine=x[m:])
+
+    def __call__(self, points) -> np.ndarray:
+        """Warp points (n, 2) -> (n, 2); vectorised in blocks to bound memory."""
+        pts = np.asarray(points, dtype=np.float64)
+        out = np.empty_like(pts)
+        for s in range(0, len(pts), 65536):
+            blk = pts[s : s + 65536]
+            out[s : s + 65536] = (
+                self.affine[0] + blk @ self.affine[1:] + _phi(_pairwise(blk, self.centres)) @ self.weights
+            )
+        return out
+
+
+def tps_warp(src, dst, points, source: str = "tps", image_size=None) -> np.ndarray:
+    """Fit the spline taking ``src`` to ``dst`` and apply it to ``points`` (n, 2)."""
+    return TPS.fit(src, dst, source=source, image_size=image_size)(points)

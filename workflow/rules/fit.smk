@@ -1,0 +1,47 @@
+# Template fitting (Yano-Harada 3.1): TPS warp to fiducials, subdivision, bilinear sampling.
+
+
+rule template:
+    output:
+        "resources/template.npz",
+    log:
+        "logs/template/template.log",
+    script:
+        "../scripts/template.py"
+
+
+rule template_part:
+    input:
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/template.h5",
+    log:
+        "logs/template_part/{subject}.log",
+    params:
+        levels=config["template"]["subdivision_levels"],
+    script:
+        "../scripts/template_part.py"
+
+
+rule fit:
+    input:
+        part="results/{subject}/takes/{take}/repair.h5",
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/takes/{take}/fit.h5",
+        obj="results/{subject}/meshes/{take}.obj",
+        mtl="results/{subject}/meshes/{take}.mtl",
+        texture="results/{subject}/meshes/{take}.png",
+    log:
+        "logs/fit/{subject}/{take}.log",
+    benchmark:
+        "benchmarks/rules/fit/{subject}/{take}.tsv"
+    resources:
+        mem_mb=1000,
+    params:
+        levels=config["template"]["subdivision_levels"],
+        fiducials=get_fiducial_set,
+        min_valid_fraction=config["template"]["min_valid_fraction"],
+        max_fold_fraction=config["template"]["max_fold_fraction"],
+    script:
+        "../scripts/fit.py"
