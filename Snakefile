@@ -1,5 +1,5 @@
 # scan2morph: 3D face scans -> subject-specific morphable face models.
-# Stages (one file each under workflow/rules/): synth, ingest, repair, store.
+# Stages (one file each under workflow/rules/): synth, ingest, repair, fit, align, motion, morph, modal, store, accuracy.
 
 
 from snakemake.utils import min_version
@@ -10,11 +10,27 @@ min_version("9.0")
 configfile: "config/config.yaml"
 
 
+report: "workflow/report/workflow.rst"
+
+
 include: "workflow/rules/common.smk"
+
+
+wildcard_constraints:
+    subject="|".join(SUBJECTS) if SUBJECTS else "^$",
+    take="[A-Za-z0-9_-]+",
+
+
 include: "workflow/rules/synth.smk"
 include: "workflow/rules/ingest.smk"
 include: "workflow/rules/repair.smk"
+include: "workflow/rules/fit.smk"
+include: "workflow/rules/align.smk"
+include: "workflow/rules/motion.smk"
+include: "workflow/rules/morph.smk"
+include: "workflow/rules/modal.smk"
 include: "workflow/rules/store.smk"
+include: "workflow/rules/accuracy.smk"
 
 
 rule all:

@@ -8,6 +8,7 @@ keep-going, each broken subject fails with a clear message and the others still 
 from __future__ import annotations
 
 import gzip
+import json
 import re
 import shutil
 
@@ -15,14 +16,22 @@ import numpy as np
 import pytest
 import yaml
 
+from scan2morph.io import write_color
 from scan2morph.store import load_layout, open_store, validate_store
-from scan2morph.synth import make_take, write_take
+from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from tests.workflow_api import REPO, run_workflow
 
 pytestmark = pytest.mark.slow
 
 TINY = dict(width=160, height=120, focal_px=362.5, distance_mm=1000.0)
+TINY_RIG = dict(width=160, height=120, focal_px=325.0)
 HEADER = "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tleft\tright\tcalibration\tlandmarks\n"
+STEREO_FILES = {
+    "left": "_left.png",
+    "right": "_right.png",
+    "calibration": "_calib.yaml",
+    "landmarks": ".pts",
+}
 
 
 def _write_user_takes(root, subject, takes):
@@ -89,12 +98,29 @@ def cohort(tmp_path_factory):
     bad["missing"][1][6] = "missing/nothere.png"
     bad["modality"][1][4] = "lidar"
     bad["duplicate"].append(list(bad["duplicate"][1]))
+    # a stereo take whose right image is smaller than the left one
+    stereo = make_stereo_take("stereosize", "car", "viseme", "car", seed=7, params=TINY_RIG)
+    d = scans / "stereosize"
+    shutil.copytree(scans / "alice", d)
+    stems = {r: d / f"car{s}" for r, s in STEREO_FILES.items()}
+    write_stereo_take(stereo, *stems.values(), d / "car.truth.npz")
+    write_color(stems["right"], stereo["right"][:110])
+    rel = {r: f"stereosize/{p.name}" for r, p in stems.items()}
+    bad["stereosize"] = [
+        [c.replace("alice", "stereosize") for c in rows[0]],
+        ["stereosize", "car", "viseme", "car", "stereo", "", "", *rel.values()],
+    ]
     sheet = scans / "subjects.tsv"
     sheet.write_text(HEADER + "".join("\t".join(r) + "\n" for r in rows + sum(bad.values(), [])))
-    synth_takes = [dict(take=t, kind=k, label=lab, modality="range") for t, k, lab in takes]
-    cfg = dict(
-        subjects=str(sheet), synthetic=dict(subjects=1, takes=synth_takes, scanner=dict(TINY))
+    synth_takes = [dict(take=t, kind=k, label=lab) for t, k, lab in takes]
+    # synth01's car is a stereo pair: ingest reconstructs it, repair and store treat it as a scan
+    synthetic = dict(
+        subjects=1,
+        takes=synth_takes,
+        scanner=dict(TINY),
+        stereo=dict(subjects=[1], takes=["car"], rig=dict(TINY_RIG)),
     )
+    cfg = dict(subjects=str(sheet), synthetic=synthetic)
     configfile = work / "tiny.yaml"
     configfile.write_text(yaml.safe_dump(cfg))
     ok = run_workflow(work, configfile)
@@ -120,10 +146,29 @@ def test_good_subjects_finish_and_stores_match_the_layout(cohort):
 def test_synthetic_inputs_are_written_in_user_formats(cohort):
     work, _, _ = cohort
     d = work / "results" / "synthetic" / "synth01"
+    for suffix in (".abs.gz", ".png", ".pts"):
+        assert (d / f"neutral{suffix}").is_file()
+    for suffix in STEREO_FILES.values():
+        assert (d / f"car{suffix}").is_file()
+    assert not (d / "car.abs.gz").exists()
+    assert (d / "car_calib.yaml").read_text().startswith("%YAML:1.0")
     for take in ("neutral", "car"):
-        for suffix in (".abs.gz", ".png", ".pts"):
-            assert (d / f"{take}{suffix}").is_file()
         assert (d / "truth" / f"{take}.npz").is_file()
+
+
+def test_stereo_take_is_stored_like_a_range_take(cohort):
+    work, _, _ = cohort
+    with open_store(work / "results" / "synth01" / "synth01.h5") as h5:
+        car, neutral = h5["takes/car"], h5["takes/neutral"]
+        assert car.attrs["modality"] == "stereo" and neutral.attrs["modality"] == "range"
+        stereo = json.loads(car.attrs["stereo"])
+        assert stereo["baseline_mm"] == pytest.approx(120.0, abs=0.1)
+        assert car["range/color"].shape == (120, 160, 3)
+        assert car["range/xyz"].shape == (120, 160, 3)
+        assert car["landmarks"].shape == (68, 2)
+        checksums = json.loads(h5.attrs["input_sha256"])
+    assert set(checksums["car"]) == {"left", "right", "calibration", "landmarks"}
+    assert set(checksums["neutral"]) == {"xyz", "color", "landmarks"}
 
 
 @pytest.mark.parametrize(
@@ -138,6 +183,10 @@ def test_synthetic_inputs_are_written_in_user_formats(cohort):
         ("missing", "column 'color': file not found"),
         ("modality", "modality 'lidar' unknown"),
         ("duplicate", "take 'car' appears more than once for subject 'duplicate'"),
+        (
+            "stereosize",
+            "car_right.png: right: image is 160x110 (WxH) but the left image car_left.png is 160x120",
+        ),
     ],
 )
 def test_bad_subjects_fail_with_a_clear_message(cohort, subject, message):

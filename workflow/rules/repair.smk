@@ -7,13 +7,13 @@ rule repair:
     output:
         part="results/{subject}/takes/{take}/repair.h5",
         report="results/{subject}/takes/{take}/repair.json",
-    params:
-        repair=config["repair"],
     log:
         "logs/repair/{subject}/{take}.log",
     benchmark:
         "benchmarks/rules/repair/{subject}/{take}.tsv"
     resources:
         mem_mb=1000,
+    params:
+        repair=config["repair"],
     script:
         "../scripts/repair.py"

@@ -7,11 +7,11 @@ rule store:
         layout=LAYOUT,
     output:
         "results/{subject}/{subject}.h5",
-    params:
-        config_sha256=CONFIG_SHA256,
     log:
         "logs/store/{subject}.log",
     benchmark:
         "benchmarks/rules/store/{subject}.tsv"
+    params:
+        config_sha256=CONFIG_SHA256,
     script:
         "../scripts/store.py"

@@ -13,6 +13,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.morph.blend import blend
 from scan2morph.morph.pca import PCAModel, pca, synthesize
+from scan2morph.tol import VISEMES
 
 
 def label_models(
@@ -46,7 +47,8 @@ def subject_morph(
     blends : mapping name -> (label -> weight)
         Blend shapes (Eq. 1) to build.
     pca_blends : mapping name -> alphas
-        PCA blends (Eq. 2) to build; a blend with more alphas than components is an error.
+        PCA blends (Eq. 2) to build; a blend with non-zero alphas beyond the model's components
+        (a subject with few takes) is left out.
     alpha_limit : float
     source : str
         Subject label for messages.
@@ -56,28 +58,27 @@ def subject_morph(
     model : PCAModel
         Over ``["neutral", *models]`` in that order.
     blend_shapes : dict name -> (V, 3)
+        Blends naming a paper viseme (``tol.VISEMES``) the subject has no take of are left out;
+        any other unknown label is an error.
     pca_shapes : dict name -> (V, 3)
     """
     if not models:
         raise InputError(source, "no viseme takes: the morphable model needs at least one viseme")
     model = pca([neutral, *models.values()], names=["neutral", *models], source=f"{source}/pca")
     per_label = label_models(models, labels)
-    blend_shapes = {
-        name: blend(neutral, per_label, dict(weights), source=f"{source}/morph.blends.{name}")
-        for name, weights in blends.items()
-    }
+    blend_shapes = {}
+    for name, weights in blends.items():
+        missing = [lab for lab in weights if lab not in per_label]
+        if missing and all(lab in VISEMES for lab in missing):
+            continue  # a paper viseme this subject was not scanned with: the blend does not apply
+        blend_shapes[name] = blend(neutral, per_label, dict(weights), source=f"{source}/morph.blends.{name}")
     pca_shapes = {}
     for name, alpha in pca_blends.items():
         a = np.asarray(alpha, dtype=float)
-        if a.size > model.n_components:  # fewer visemes than the blend needs: keep what exists
-            if np.any(a[model.n_components :] != 0):
-                raise InputError(
-                    source,
-                    f"morph.pca_blends.{name}: {a.size} alphas but the model has {model.n_components} components",
-                )
-            a = a[: model.n_components]
+        if np.any(a[model.n_components :] != 0):
+            continue  # needs more components than this subject's few takes give: does not apply
         pca_shapes[name] = synthesize(
-            model, a, alpha_limit=alpha_limit, source=f"{source}/morph.pca_blends.{name}"
+            model, a[: model.n_components], alpha_limit=alpha_limit, source=f"{source}/morph.pca_blends.{name}"
         )
     return model, blend_shapes, pca_shapes
 

@@ -11,6 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.sparse import csgraph
+
+from scan2morph.errors import InputError
+import scipy.sparse as sp
+import scipy.sparse.csgraph  # noqa: F401  (sp.csgraph)
+import scipy.sparse.linalg as spla
+
+from scan2morph.errors import InputError
 
 from scan2morph.motion.mask import stencil_mask
 from scan2morph.motion.smooth import fill_missing, laplacian_smooth
@@ -25,10 +35,49 @@ class AlignedMesh:
     valid: np.ndarray
 
 
+def harmonic_fill(values: np.ndarray, faces: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Fill unknown vertices with the harmonic interpolant of the known ones.
+
+    Solves the uniform graph Laplace equation on the unknown vertices with the known values as
+    boundary conditions, so filled vertices take distinct, smoothly varying positions (a mean of
+    neighbours taken round by round collapses whole patches onto one point, giving zero-area
+    triangles). Unknown vertices in a component with no known vertex stay NaN.
+
+    Parameters
+    ----------
+    values : (V, d) float
+    faces : (F, 3) int
+    known : (V,) bool
+
+    Returns
+    -------
+    (V, d) float64
+    """
+    n = len(values)
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    rows, cols = np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]]
+    adj = sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    adj.data[:] = 1.0  # duplicate edges summed: back to a 0/1 adjacency
+    lap = sp.csr_array(sp.diags_array(adj.sum(axis=1)) - adj)
+    out = np.array(values, dtype=np.float64, copy=True)
+    unknown = ~np.asarray(known, dtype=bool)
+    if not unknown.any():
+        return out
+    _, comp = csgraph.connected_components(adj, directed=False)
+    anchored = np.isin(comp, np.unique(comp[~unknown]))
+    solve = unknown & anchored
+    if solve.any():
+        l_uu = sp.csc_array(lap[solve][:, solve])
+        rhs = -(lap[solve][:, ~unknown] @ out[~unknown])
+        out[solve] = spla.spsolve(l_uu, rhs).reshape(int(solve.sum()), -1)
+    out[unknown & ~anchored] = np.nan
+    return out
+
+
 def complete_neutral(
     neutral: AlignedMesh, faces: np.ndarray, source: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The neutral mesh with invalid vertices filled from their neighbours.
+    """The neutral mesh with invalid vertices filled by harmonic interpolation.
 
     Returns
     -------
@@ -36,7 +85,10 @@ def complete_neutral(
     filled : (V,) bool, the vertices that were filled
     """
     filled = ~neutral.valid | ~np.isfinite(neutral.vertices).all(axis=1)
-    return fill_missing(neutral.vertices, faces, missing=filled, source=source), filled
+    vertices = harmonic_fill(neutral.vertices, faces, ~filled)
+    if not np.isfinite(vertices).all():
+        raise InputError(source, "neutral mesh: a part of the template has no valid vertex to fill it from")
+    return vertices, filled
 
 
 def viseme_motion(

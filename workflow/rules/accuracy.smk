@@ -1,0 +1,21 @@
+# Accuracy against ground truth (synthetic subjects only: they are the ones with truth files).
+
+
+rule accuracy:
+    input:
+        store="results/{subject}/{subject}.h5",
+        truths=get_truth_files,
+    output:
+        report(
+            "results/{subject}/accuracy.json",
+            caption="../report/accuracy.rst",
+            category="Accuracy",
+        ),
+    log:
+        "logs/accuracy/{subject}.log",
+    params:
+        takes=get_takes,
+        neutral=get_neutral_take,
+        visemes=get_viseme_takes,
+    script:
+        "../scripts/accuracy.py"

@@ -1,0 +1,19 @@
+# Rigid alignment of each take to the neutral: point pairs (Kabsch), then ICP on the upper face.
+
+
+rule align:
+    input:
+        take="results/{subject}/takes/{take}/fit.h5",
+        neutral=get_neutral_fit,
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/takes/{take}/align.h5",
+    log:
+        "logs/align/{subject}/{take}.log",
+    benchmark:
+        "benchmarks/rules/align/{subject}/{take}.tsv"
+    params:
+        align=config["align"],
+        levels=config["template"]["subdivision_levels"],
+    script:
+        "../scripts/align.py"

@@ -1,0 +1,23 @@
+# Modal basis of the neutral face (shell FEM) and expression coordinates (modal analysis paper).
+
+
+rule modal:
+    input:
+        motion="results/{subject}/motion.h5",
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/modal.h5",
+    log:
+        "logs/modal/{subject}.log",
+    benchmark:
+        "benchmarks/rules/modal/{subject}.tsv"
+    threads: 2
+    resources:
+        mem_mb=4000,
+    params:
+        expressions=get_expression_takes,
+        labels=get_take_labels,
+        modal=config["modal"],
+        levels=config["template"]["subdivision_levels"],
+    script:
+        "../scripts/modal.py"

@@ -1,0 +1,34 @@
+# Morphable models (Yano-Harada 5): PCA over neutral + viseme models, blends, exports.
+
+
+rule morph:
+    input:
+        motion="results/{subject}/motion.h5",
+        neutral_fit=get_neutral_fit,
+        neutral_repair=get_neutral_repair,
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/morph.h5",
+        eigen=report(
+            "results/{subject}/tables/pca_eigenvalues.tsv",
+            caption="../report/pca_eigenvalues.rst",
+            category="Morphable model",
+        ),
+        coefficients=report(
+            "results/{subject}/tables/pca_coefficients.tsv",
+            caption="../report/pca_coefficients.rst",
+            category="Morphable model",
+        ),
+        glb="results/{subject}/{subject}.glb",
+        models=directory("results/{subject}/meshes/models"),
+    log:
+        "logs/morph/{subject}.log",
+    benchmark:
+        "benchmarks/rules/morph/{subject}.tsv"
+    params:
+        visemes=get_viseme_takes,
+        labels=get_take_labels,
+        morph=config["morph"],
+        levels=config["template"]["subdivision_levels"],
+    script:
+        "../scripts/morph.py"

@@ -1,0 +1,27 @@
+# Viseme motion vectors: aligned viseme minus neutral, stencil mask, Laplacian smoothing;
+# expression displacement fields (for the modal stage).
+
+
+rule motion:
+    input:
+        neutral_fit=get_neutral_fit,
+        neutral_align=get_neutral_align,
+        fits=get_other_fits,
+        aligns=get_other_aligns,
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/motion.h5",
+    log:
+        "logs/motion/{subject}.log",
+    benchmark:
+        "benchmarks/rules/motion/{subject}.tsv"
+    params:
+        neutral=get_neutral_take,
+        others=get_other_takes,
+        visemes=get_viseme_takes,
+        expressions=get_expression_takes,
+        mask=config["mask"],
+        smoothing=config["smoothing"],
+        levels=config["template"]["subdivision_levels"],
+    script:
+        "../scripts/motion.py"
