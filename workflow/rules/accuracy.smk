@@ -5,6 +5,7 @@ rule accuracy:
     input:
         store="results/{subject}/{subject}.h5",
         truths=get_truth_files,
+        template="resources/template.npz",
     output:
         report(
             "results/{subject}/accuracy.json",
@@ -17,5 +18,8 @@ rule accuracy:
         takes=get_takes,
         neutral=get_neutral_take,
         visemes=get_viseme_takes,
+        fiducial_sets=get_fiducial_sets,
+        levels=config["template"]["subdivision_levels"],
+        smoothing=config["smoothing"],
     script:
         "../scripts/accuracy.py"

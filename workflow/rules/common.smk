@@ -179,6 +179,13 @@ def get_take_labels(wildcards):
     return dict(zip(rows["take"], rows["label"]))
 
 
+def get_fiducial_sets(wildcards):
+    """Fiducial set of every take of a subject (take -> set name)."""
+    rows = TAKES.loc[wildcards.subject]
+    sets = config["template"]["fiducials"]
+    return {t: sets.get(k, "closed") for t, k in zip(rows["take"], rows["kind"])}
+
+
 def get_fiducial_set(wildcards):
     kind = TAKES.loc[(wildcards.subject, wildcards.take), "kind"]
     return config["template"]["fiducials"].get(kind, "closed")

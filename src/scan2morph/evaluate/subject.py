@@ -7,8 +7,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from scan2morph.evaluate.mesh import alignment_accuracy, mesh_accuracy
-from scan2morph.evaluate.motion import motion_accuracy, true_motion
+from scan2morph.evaluate.motion import ideal_motion, motion_accuracy, true_motion
 from scan2morph.evaluate.truth import Truth
+from scan2morph.motion.smooth import laplacian_smooth
 
 
 def subject_accuracy(
@@ -16,6 +17,10 @@ def subject_accuracy(
     truths: Mapping[str, Truth],
     neutral: str,
     visemes: list[str],
+    template=None,
+    fiducial_sets: Mapping[str, str] | None = None,
+    levels: int = 1,
+    smoothing: Mapping[str, float] | None = None,
 ) -> dict:
     """Errors of one subject's pipeline outputs against its ground truth.
 
@@ -29,6 +34,12 @@ def subject_accuracy(
         The neutral take id.
     visemes : list of str
         Viseme take ids.
+    template : Template, optional
+        The base template; with ``fiducial_sets`` (take -> set) and ``levels`` it gives the ideal
+        motion (see ``evaluate.motion``). Without it, motion is compared to material motion only.
+    smoothing : mapping, optional
+        ``w`` and ``iterations`` of the pipeline's smoothing, applied with its mask to the ideal
+        motion for the ``relative_error`` reference.
 
     Returns
     -------
@@ -45,12 +56,28 @@ def subject_accuracy(
                 store[f"/takes/{take}/align/transform"], v, valid, truth, truths[neutral]
             )
         if take in visemes:
-            m_true = true_motion(n_vertices, truths[neutral], truth)
+            material = true_motion(n_vertices, truths[neutral], truth)
+            ideal = material
+            if template is not None:
+                sets = (fiducial_sets[neutral], fiducial_sets[take])
+                ideal = ideal_motion(template, truths[neutral], truth, sets, levels)
+            processed = None
+            if smoothing is not None:
+                processed = laplacian_smooth(
+                    ideal,
+                    store["/template/faces"],
+                    w=smoothing["w"],
+                    iterations=smoothing["iterations"],
+                    fixed=store["/mask/suppressed"],
+                    missing=~np.isfinite(ideal).all(axis=1),
+                )
             entry["motion"] = motion_accuracy(
                 store[f"/visemes/{take}/motion"],
                 store[f"/visemes/{take}/motion_raw"],
-                m_true,
+                ideal,
+                material,
                 store["/mask/suppressed"],
+                processed,
             )
         takes[take] = entry
 
@@ -66,6 +93,7 @@ def subject_accuracy(
             "align_rotation_deg_max": worst("align", "rotation_deg"),
             "align_translation_mm_max": worst("align", "translation_mm"),
             "motion_relative_error_max": worst("motion", "relative_error"),
+            "motion_material_relative_error_max": worst("motion", "material_relative_error"),
             "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
         },
     }
