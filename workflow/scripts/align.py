@@ -8,7 +8,7 @@ from scan2morph.align import align_take, transform_points
 from scan2morph.jobs import run_job
 from scan2morph.store import read_part, write_part
 from scan2morph.template import load_template, subdivide_template
-from scan2morph.template.regions import named_indices, upper_face
+from scan2morph.template.regions import icp_region, named_indices
 
 
 def main(snakemake):
@@ -24,7 +24,7 @@ def main(snakemake):
             transform = np.eye(4)
         else:
             template = subdivide_template(load_template(snakemake.input.template), p.levels)
-            settings = {k: v for k, v in p.align.items() if k not in ("point_pairs", "icp_above")}
+            settings = {k: v for k, v in p.align.items() if k not in ("point_pairs", "icp_region")}
             result = align_take(
                 src,
                 src_valid,
@@ -32,7 +32,7 @@ def main(snakemake):
                 neutral[f"/takes/{key_n}/mesh/valid"],
                 template.faces,
                 named_indices(template, p.align["point_pairs"], "align.point_pairs"),
-                np.flatnonzero(upper_face(template, p.align["icp_above"])),
+                np.flatnonzero(icp_region(template, p.align["icp_region"])),
                 settings,
                 source=f"{w.subject}/{w.take}",
             )
