@@ -200,3 +200,19 @@ def test_obj_round_trip_with_trimesh(tmp_path):
     write_obj(tmp_path / "n.obj", v, f, valid=valid)
     lines = (tmp_path / "n.obj").read_text().splitlines()
     assert sum(ln.startswith("v ") for ln in lines) == 4 and sum(ln.startswith("f ") for ln in lines) == 1
+
+
+def test_stable_region_covers_forehead_ridge_and_temples_only(template):
+    from scan2morph.template.regions import icp_region, stable_face, upper_face
+
+    fine = subdivide_template(template, 1)
+    stable = stable_face(fine)
+    named = fine.named
+    assert stable[named["forehead_centre"]] and stable[named["nose_mid"]]
+    for moving in ("mouth_r", "mouth_l", "chin", "brow_r_inner", "brow_l_inner", "cheekbone_r"):
+        assert not stable[named[moving]], moving
+    assert 0.1 < stable.mean() < 0.4
+    assert not (stable & ~upper_face(fine)).any()  # all of it lies above the nose tip
+    np.testing.assert_array_equal(icp_region(fine, "upper_face"), upper_face(fine))
+    with pytest.raises(InputError, match="align.icp_region: 'lips' unknown"):
+        icp_region(fine, "lips")

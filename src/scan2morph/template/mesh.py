@@ -395,11 +395,15 @@ def _enforce_edges(points: np.ndarray, tri: np.ndarray, constraints) -> np.ndarr
     return np.asarray(tri, dtype=np.int64)
 
 
-def _triangulate(points: np.ndarray, mouth: np.ndarray) -> np.ndarray:
-    """Delaunay triangles with the mouth lens's edges enforced, minus those inside the lens."""
+def _triangulate(points: np.ndarray, mouth: np.ndarray, enforce: bool = True) -> np.ndarray:
+    """Delaunay triangles with the mouth lens's edges enforced, minus those inside the lens.
+
+    ``enforce=False`` skips the (slower) edge recovery: enough for the relaxation's springs.
+    """
     tri = Delaunay(points).simplices
     loop = np.asarray(mouth)
-    tri = _enforce_edges(points, tri, list(zip(loop, np.roll(loop, -1), strict=True)))
+    if enforce:
+        tri = _enforce_edges(points, tri, list(zip(loop, np.roll(loop, -1), strict=True)))
     centroids = points[tri].mean(axis=1)
     return tri[~_inside_polygon(centroids, points[loop])]
 
@@ -412,7 +416,7 @@ def _relax(
     area = 0.5 * abs(signed_area2(outline, np.array([[0, i, i + 1] for i in range(1, len(outline) - 1)])).sum())
     h = np.sqrt(2.0 * area / (np.sqrt(3.0) * len(p)))
     for _ in range(150):
-        tri = _triangulate(p, mouth)
+        tri = _triangulate(p, mouth, enforce=False)
         bars = _edges(tri)
         vec = p[bars[:, 0]] - p[bars[:, 1]]
         length = np.hypot(vec[:, 0], vec[:, 1])
