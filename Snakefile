@@ -1,5 +1,5 @@
 # scan2morph: 3D face scans -> subject-specific morphable face models.
-# Stages (one file each under workflow/rules/): synth, ingest, repair, fit, align, motion, morph, modal, store, accuracy.
+# Stages (one file each under workflow/rules/): synth, ingest, repair, fit, align, motion, morph, modal, store, accuracy, figures.
 
 
 from snakemake.utils import min_version
@@ -31,6 +31,7 @@ include: "workflow/rules/morph.smk"
 include: "workflow/rules/modal.smk"
 include: "workflow/rules/store.smk"
 include: "workflow/rules/accuracy.smk"
+include: "workflow/rules/figures.smk"
 
 
 rule all:

@@ -7,6 +7,7 @@ import pandas as pd
 from snakemake.utils import validate
 
 from scan2morph.jobs import config_sha256
+from scan2morph.render.figures import STAGE_FIGURES, figure_names
 from scan2morph.sheet import read_sheet, subject_problems, synthetic_rows, take_table
 
 validate(config, "../../schemas/config.schema.yaml")
@@ -219,7 +220,28 @@ def get_truth_files(wildcards):
     )
 
 
+def figure_outputs(stage):
+    """The fixed PNG outputs of one stage's figures rule, each a report item with its caption."""
+    return {
+        stem: report(
+            f"results/{{subject}}/figures/{stem}.png",
+            caption=f"../report/figures/{stem}.rst",
+            category="Figures",
+            subcategory=stage,
+        )
+        for stem in figure_names(stage)
+    }
+
+
+def get_figure_outputs():
+    """Every figure of every subject (for rule all)."""
+    stems = [stem for stage in STAGE_FIGURES for stem in figure_names(stage)]
+    return expand("results/{subject}/figures/{stem}.png", subject=SUBJECTS, stem=stems)
+
+
 def get_final_outputs():
-    return expand("results/{subject}/{subject}.h5", subject=SUBJECTS) + expand(
-        "results/{subject}/accuracy.json", subject=synthetic_subjects()
+    return (
+        expand("results/{subject}/{subject}.h5", subject=SUBJECTS)
+        + expand("results/{subject}/accuracy.json", subject=synthetic_subjects())
+        + get_figure_outputs()
     )

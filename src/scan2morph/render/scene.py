@@ -121,7 +121,12 @@ def render_mesh(
         uv_gl = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
         from PIL import Image
 
-        mesh.visual = trimesh.visual.TextureVisuals(uv=uv_gl, image=Image.fromarray(texture))
+        # An explicit PBR material: trimesh's default one scales the texture by 0.4 and makes
+        # it metallic, which renders the face at about half its brightness.
+        material = trimesh.visual.material.PBRMaterial(
+            baseColorTexture=Image.fromarray(texture), metallicFactor=0.0, roughnessFactor=0.8, doubleSided=True
+        )
+        mesh.visual = trimesh.visual.TextureVisuals(uv=uv_gl, material=material)
     elif colors is not None:
         rgba = np.column_stack([np.clip(colors, 0, 1), np.ones(len(colors))])
         mesh.visual = trimesh.visual.ColorVisuals(mesh, vertex_colors=(rgba * 255).astype(np.uint8))

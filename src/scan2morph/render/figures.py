@@ -1,0 +1,87 @@
+"""The figures of every stage, drawn from a subject's store, and the files they are saved to.
+
+Each stage has a fixed list of figures (:data:`STAGE_FIGURES`), so the workflow can name its
+outputs before the store exists: ``{out_dir}/{stage}_{name}.png``. Per-take panels are composed
+into one figure per kind, whatever takes a subject has; a figure whose data a subject lacks (no
+expression takes, no blends) says so instead of being left out.
+
+Figure functions take a ``Mapping[str, ndarray]`` keyed by store path (see
+:mod:`scan2morph.render.source`) and return a matplotlib :class:`~matplotlib.figure.Figure`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from scan2morph.errors import InputError
+from scan2morph.render import fit_figures, modal_figures, morph_figures, motion_figures
+from scan2morph.render.source import StoreMapping
+from scan2morph.render.views import DPI
+
+#: Stage -> figure name -> function(store) -> Figure.
+STAGE_FIGURES: dict[str, dict[str, Callable[[Mapping[str, np.ndarray]], Figure]]] = {
+    "fit": fit_figures.FIGURES,
+    "motion": motion_figures.FIGURES,
+    "morph": morph_figures.FIGURES,
+    "modal": modal_figures.FIGURES,
+}
+
+
+def figure_names(stage: str) -> list[str]:
+    """File stems of a stage's figures, ``{stage}_{name}``, in report order.
+
+    Raises
+    ------
+    InputError
+        Unknown stage.
+    """
+    if stage not in STAGE_FIGURES:
+        raise InputError(
+            "figures", f"stage: expected one of {sorted(STAGE_FIGURES)}, got {stage!r}"
+        )
+    return [f"{stage}_{name}" for name in STAGE_FIGURES[stage]]
+
+
+def stage_figures(store: Mapping[str, np.ndarray], stage: str) -> dict[str, Figure]:
+    """Draw a stage's figures: ``{stage}_{name}`` -> Figure."""
+    names = figure_names(stage)
+    return {
+        stem: func(store) for stem, func in zip(names, STAGE_FIGURES[stage].values(), strict=True)
+    }
+
+
+def write_stage_figures(store_path: str | Path, out_dir: str | Path, stage: str) -> list[Path]:
+    """Render a stage's figures from a subject store to ``{out_dir}/{stage}_{name}.png``.
+
+    Parameters
+    ----------
+    store_path : str or Path
+        ``results/{subject}/{subject}.h5``.
+    out_dir : str or Path
+        Folder of the PNG files (created).
+    stage : {"fit", "motion", "morph", "modal"}
+
+    Returns
+    -------
+    list of Path
+        The files written, in :func:`figure_names` order.
+
+    Raises
+    ------
+    InputError
+        Unknown stage, unreadable store, or a dataset a figure needs is missing or misshapen.
+    """
+    figure_names(stage)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    with StoreMapping(store_path) as store:
+        for stem, func in zip(figure_names(stage), STAGE_FIGURES[stage].values(), strict=True):
+            path = out_dir / f"{stem}.png"
+            func(store).savefig(path, dpi=DPI, facecolor="white")
+            written.append(path)
+    return written

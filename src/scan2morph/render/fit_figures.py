@@ -1,0 +1,225 @@
+"""Figures of template fitting (Yano and Harada, Fig. 1-4): template, fitted meshes, 3D model."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.tri import Triangulation
+
+from scan2morph.errors import InputError
+from scan2morph.render.source import (
+    example_take,
+    fiducials,
+    mesh,
+    need,
+    neutral_take,
+    source_of,
+    template_faces,
+)
+from scan2morph.render.views import Panel, face_view, panel_figure, render_view, subplots
+from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIPS
+
+#: Colour of the wireframe's edges (sRGB).
+WIRE_RGB = np.array([0.15, 0.15, 0.2])
+#: Margin around the face when an image is cropped to it, as a share of the face's extent.
+CROP_MARGIN = 0.08
+
+
+def _valid_faces(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    return faces[np.all(np.isfinite(points[faces]), axis=(1, 2))]
+
+
+def fig_template(store: Mapping[str, np.ndarray]) -> Figure:
+    """The 2D template mesh with its fiducials (Fig. 1a).
+
+    The paper's 20 closed-mouth feature points are red, the inner-lip points added for an open
+    mouth orange, the named points that later stages use (ICP pairs, mask path ends) green, the
+    other iBUG vertices small grey dots.
+    """
+    xy = need(store, "/template/vertices2d", "the template figure").astype(float)
+    faces = template_faces(store, "the template figure")
+    fid = fiducials(store)
+    ibug = {int(n[4:]): i for n, i in fid.items() if n.startswith("ibug") and n[4:].isdigit()}
+    named = {n: i for n, i in fid.items() if not (n.startswith("ibug") and n[4:].isdigit())}
+    coarse = base_faces(faces)
+    shown = faces if coarse is None else coarse
+    fig, ax = subplots(figsize=(5.4, 6.2))
+    ax.triplot(Triangulation(xy[:, 0], xy[:, 1], shown), color="0.6", lw=0.35)
+    named_idx = list(named.values())
+    dots = [
+        (
+            [i for n, i in ibug.items() if n not in CLOSED_MOUTH + INNER_LIPS],
+            "0.35",
+            6,
+            "other iBUG points",
+        ),
+        (
+            [ibug[n] for n in CLOSED_MOUTH if n in ibug],
+            "tab:red",
+            28,
+            f"closed-mouth fiducials ({len(CLOSED_MOUTH)})",
+        ),
+        (
+            [ibug[n] for n in INNER_LIPS if n in ibug],
+            "tab:orange",
+            22,
+            f"inner lips, open mouth (+{len(INNER_LIPS)})",
+        ),
+    ]
+    for idx, color, size, label in dots:
+        if idx:
+            ax.scatter(
+                xy[idx, 0], xy[idx, 1], s=size, c=color, zorder=3, label=label, edgecolors="none"
+            )
+    if named_idx:  # rings, so that a named point that is also an iBUG fiducial shows both
+        ax.scatter(
+            xy[named_idx, 0],
+            xy[named_idx, 1],
+            s=60,
+            facecolors="none",
+            edgecolors="tab:green",
+            linewidths=1.2,
+            zorder=4,
+            label="named points (ICP pairs, mask paths)",
+        )
+    ax.set_aspect("equal")
+    ax.invert_yaxis()
+    ax.set_xlabel("x (half outer-eye distance)")
+    ax.set_ylabel("y (down)")
+    n_v = int(shown.max()) + 1
+    level = (
+        f"\n(base level; {len(xy)} vertices, {len(faces)} faces after subdivision)"
+        if coarse is not None
+        else ""
+    )
+    ax.set_title(
+        f"2D template with fiducials: {n_v} vertices, {len(shown)} faces{level}", fontsize=9
+    )
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=7, frameon=False)
+    return fig
+
+
+def _crop_box(points: np.ndarray, shape: tuple[int, ...]) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1) pixel box around finite points with a margin, inside the image."""
+    p = points[np.all(np.isfinite(points), axis=1)]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    pad = CROP_MARGIN * (hi - lo).max()
+    h, w = shape[:2]
+    return (
+        max(lo[0] - pad, -0.5),
+        min(hi[0] + pad, w - 0.5),
+        max(lo[1] - pad, -0.5),
+        min(hi[1] + pad, h - 0.5),
+    )
+
+
+def base_faces(faces: np.ndarray) -> np.ndarray | None:
+    """The base (low-resolution) faces of a template subdivided 1-to-4, or None if not one.
+
+    ``scan2morph.template.subdivide`` turns faces ``(a, b, c)`` into four blocks of F faces,
+    ``(a, ab, ca)``, ``(ab, b, bc)``, ``(ca, bc, c)``, ``(ab, bc, ca)``; the structure is checked
+    in full before the base is read off, and undone as often as it holds.
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+
+    Returns
+    -------
+    (F / 4**levels, 3) int64, or None when ``faces`` is not a subdivided mesh.
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    coarse = None
+    while len(faces) % 4 == 0 and len(faces):
+        n = len(faces) // 4
+        q1, q2, q3, q4 = faces[:n], faces[n : 2 * n], faces[2 * n : 3 * n], faces[3 * n :]
+        ab, ca, bc = q1[:, 1], q1[:, 2], q2[:, 2]
+        if not (
+            np.array_equal(q2[:, 0], ab)
+            and np.array_equal(q3[:, :2], np.column_stack([ca, bc]))
+            and np.array_equal(q4, np.column_stack([ab, bc, ca]))
+        ):
+            break
+        faces = coarse = np.column_stack([q1[:, 0], q2[:, 1], q3[:, 2]])
+    return coarse
+
+
+def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
+    """Color images with landmarks and with the fitted (warped) template (Fig. 1b, 2, 4).
+
+    One row per take: the neutral and the viseme with the largest motion (else an expression).
+    Columns: the 68 landmarks; the warped template at the base (low) resolution when the store's
+    mesh is a subdivision of it; the warped template as stored (high resolution), invalid vertices
+    (no range data under them) marked with red crosses.
+    """
+    faces = template_faces(store, "the landmark figure")
+    coarse = base_faces(faces)
+    meshes = ([("low resolution", coarse)] if coarse is not None else []) + [
+        ("high resolution" if coarse is not None else "fitted template", faces)
+    ]
+    neutral = neutral_take(store)
+    takes = [neutral] + [t for t in [example_take(store)] if t is not None]
+    ncols = 1 + len(meshes)
+    fig, axes = subplots(
+        len(takes),
+        ncols,
+        figsize=(2.6 * ncols, 3.3 * len(takes)),
+        squeeze=False,
+    )
+    for row, take in enumerate(takes):
+        what = f"the landmark figure of take {take}"
+        color = need(store, f"/takes/{take}/range/color", what)
+        marks = need(store, f"/takes/{take}/landmarks", what).astype(float)
+        pts = need(store, f"/takes/{take}/mesh/points2d", what).astype(float)
+        valid = need(store, f"/takes/{take}/mesh/valid", what).astype(bool)
+        if pts.shape != (len(valid), 2) or marks.shape != (68, 2):
+            raise InputError(
+                source_of(store),
+                f"/takes/{take}: points2d, valid or landmarks have the wrong shape",
+            )
+        x0, x1, y0, y1 = _crop_box(np.vstack([pts, marks]), color.shape)
+        for ax in axes[row]:
+            ax.imshow(color, interpolation="bilinear")
+            ax.set_xlim(x0, x1)
+            ax.set_ylim(y1, y0)
+            ax.set_xticks([])
+            ax.set_yticks([])
+        axes[row, 0].scatter(marks[:, 0], marks[:, 1], s=7, c="red", edgecolors="none")
+        axes[row, 0].set_title(f"{take}: 68 landmarks", fontsize=8)
+        for ax, (label, tri) in zip(axes[row, 1:], meshes, strict=True):
+            tri = _valid_faces(pts, tri)
+            lw = 0.35 if len(tri) < 1500 else 0.2
+            ax.triplot(Triangulation(pts[:, 0], pts[:, 1], tri), color="cyan", lw=lw, alpha=0.9)
+            ax.set_title(f"{take}: {label} ({len(tri)} faces)", fontsize=8)
+        bad = ~valid & np.all(np.isfinite(pts), axis=1)
+        axes[row, -1].scatter(pts[bad, 0], pts[bad, 1], s=6, marker="x", c="red", linewidths=0.6)
+        axes[row, -1].set_xlabel(f"{valid.sum()} of {len(valid)} vertices valid", fontsize=7)
+    fig.suptitle("Template fitted to the color image", fontsize=10)
+    return fig
+
+
+def fig_model(store: Mapping[str, np.ndarray]) -> Figure:
+    """The neutral 3D model shaded, textured and as wireframe (Fig. 3)."""
+    faces = template_faces(store, "the model figure")
+    take = neutral_take(store)
+    what = f"the model figure of take {take}"
+    vertices = mesh(store, f"/takes/{take}/mesh/vertices", what)
+    uv = need(store, f"/takes/{take}/mesh/uv", what)
+    color = need(store, f"/takes/{take}/range/color", what)
+    view = face_view(
+        vertices, faces, need(store, "/template/vertices2d", what), source=source_of(store)
+    )
+    panels = [
+        Panel(render_view(vertices, faces, view), "(a) shaded"),
+        Panel(render_view(vertices, faces, view, texture=color, uv=uv), "(b) textured"),
+        Panel(render_view(vertices, faces, view, rgb=WIRE_RGB, wireframe=True), "(c) wireframe"),
+    ]
+    return panel_figure(
+        panels, ncols=3, title=f"3D face model of the neutral take ({take}), scanner frame"
+    )
+
+
+#: Figure name -> function, in the order the report shows them.
+FIGURES = {"template": fig_template, "landmarks": fig_landmarks, "model": fig_model}

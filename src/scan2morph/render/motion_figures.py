@@ -1,0 +1,222 @@
+"""Figures of alignment and viseme motion (Yano and Harada, Fig. 5-10 and 17)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.figure import Figure
+
+from scan2morph.render.source import (
+    example_take,
+    fiducials,
+    mesh,
+    need,
+    neutral_take,
+    neutral_view,
+    source_of,
+    template_faces,
+    viseme_takes,
+)
+from scan2morph.render.views import (
+    ColorScale,
+    Panel,
+    face_view,
+    frame_view,
+    message_figure,
+    panel_figure,
+    render_view,
+)
+from scan2morph.template.mesh import ICP_POINTS
+
+#: Radius of the coloured spot that marks a point on a mesh, mm.
+SPOT_MM = 5.0
+#: Plain surface colour (sRGB) behind marks and masks.
+SKIN_RGB = (0.80, 0.76, 0.72)
+#: The two meshes of an overlay: neutral (blue) and the other take (orange).
+PAIR_RGB = ((0.25, 0.50, 0.90), (0.95, 0.55, 0.15))
+#: Suppressed vertices of the stencil mask (orange, as the paper) and the rest (dark grey).
+MASK_RGB, UNMASKED_RGB = (1.0, 0.55, 0.0), (0.22, 0.22, 0.22)
+#: Seed vertices of the mask.
+SEED_RGB = (0.85, 0.05, 0.05)
+#: Yaw of the profile views, degrees.
+PROFILE_DEG = 90.0
+
+
+def _spots(vertices: np.ndarray, centers: np.ndarray, colors: np.ndarray) -> np.ndarray:
+    """(V, 3) sRGB: skin, and each centre's colour within SPOT_MM of it."""
+    rgb = np.tile(SKIN_RGB, (len(vertices), 1))
+    d = np.linalg.norm(vertices[:, None, :] - centers[None, :, :], axis=2)
+    d = np.where(np.isfinite(d), d, np.inf)
+    near = d.argmin(axis=1)
+    hit = d[np.arange(len(vertices)), near] <= SPOT_MM
+    rgb[hit] = colors[near[hit]]
+    return rgb
+
+
+def fig_point_pairs(store: Mapping[str, np.ndarray]) -> Figure:
+    """The six point pairs of the initial alignment on the neutral and one other take (Fig. 5).
+
+    Each pair has one colour on both meshes; each mesh is shown in its own scanner frame.
+    """
+    what = "the point-pair figure"
+    faces = template_faces(store, what)
+    fid = fiducials(store)
+    names = [n for n in ICP_POINTS if n in fid]
+    if not names:
+        return message_figure(
+            "Point pairs for the initial alignment", "no ICP point is a fiducial of this template"
+        )
+    colors = colormaps["tab10"](np.arange(len(names)))[:, :3]
+    xy = need(store, "/template/vertices2d", what)
+    takes = [neutral_take(store)] + [t for t in [example_take(store)] if t is not None]
+    panels = []
+    for take in takes:
+        vertices = mesh(store, f"/takes/{take}/mesh/vertices", what)
+        idx = np.array([fid[n] for n in names])
+        rgb = _spots(vertices, vertices[idx], colors)
+        view = face_view(vertices, faces, xy, source=source_of(store))
+        panels.append(Panel(render_view(vertices, faces, view, rgb=rgb), f"{take} (scanner frame)"))
+    legend = [(tuple(c), n.replace("_", " ")) for c, n in zip(colors, names, strict=True)]
+    return panel_figure(
+        panels,
+        ncols=len(panels),
+        title="Point pairs for the initial rigid alignment",
+        legend=legend,
+        legend_ncol=3,
+    )
+
+
+def _pair(
+    a: np.ndarray, b: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two meshes as one: vertices, faces and the pair colours."""
+    vertices = np.vstack([a, b])
+    both = np.vstack([faces, faces + len(a)])
+    rgb = np.vstack([np.tile(PAIR_RGB[0], (len(a), 1)), np.tile(PAIR_RGB[1], (len(b), 1))])
+    return vertices, both, rgb
+
+
+def fig_alignment(store: Mapping[str, np.ndarray]) -> Figure:
+    """The neutral and one other take before (scanner frames) and after rigid alignment (Fig. 6).
+
+    Rows: before, after; columns: frontal and profile view of the neutral frame.
+    """
+    what = "the alignment figure"
+    take = example_take(store)
+    if take is None:
+        return message_figure(
+            "Rigid alignment", "the store has no viseme or expression take to align"
+        )
+    faces = template_faces(store, what)
+    neutral = neutral_take(store)
+    base = mesh(store, f"/takes/{neutral}/align/vertices", what)
+    rows = {
+        "before (scanner frames)": mesh(store, f"/takes/{take}/mesh/vertices", what),
+        "after alignment": mesh(store, f"/takes/{take}/align/vertices", what),
+    }
+    direction = neutral_view(store, what)
+    panels = []
+    for other in rows.values():
+        vertices, both, rgb = _pair(base, other, faces)
+        view = frame_view(direction, [base, other], faces)
+        for yaw, side in ((0.0, "front"), (PROFILE_DEG, "profile")):
+            panels.append(Panel(render_view(vertices, both, view, rgb=rgb, yaw_deg=yaw), side))
+    legend = [(PAIR_RGB[0], f"{neutral} (neutral)"), (PAIR_RGB[1], take)]
+    return panel_figure(
+        panels,
+        ncols=2,
+        title=f"Rigid alignment of {take} to {neutral}",
+        legend=legend,
+        row_labels=list(rows),
+    )
+
+
+def fig_mask(store: Mapping[str, np.ndarray]) -> Figure:
+    """Seed vertices (on the Dijkstra paths) and the stencil mask on the neutral (Fig. 7)."""
+    what = "the mask figure"
+    faces = template_faces(store, what)
+    base = mesh(store, "/neutral/vertices", what)
+    suppressed = need(store, "/mask/suppressed", what).astype(bool)
+    seeds = need(store, "/mask/seeds", what).astype(np.int64)
+    view = neutral_view(store, what)
+    seed_rgb = np.tile(SKIN_RGB, (len(base), 1))
+    seed_rgb[seeds] = SEED_RGB
+    mask_rgb = np.where(suppressed[:, None], MASK_RGB, UNMASKED_RGB)
+    panels = [
+        Panel(
+            render_view(base, faces, view, rgb=seed_rgb),
+            f"(a) seeds: {len(seeds)} vertices on the paths",
+        ),
+        Panel(
+            render_view(base, faces, view, rgb=mask_rgb),
+            f"(b) mask: {suppressed.sum()} of {len(base)} vertices",
+        ),
+    ]
+    legend = [(SEED_RGB, "seed"), (MASK_RGB, "suppressed (motion zeroed)"), (UNMASKED_RGB, "free")]
+    return panel_figure(panels, ncols=2, title="Stencil mask on the neutral model", legend=legend)
+
+
+def fig_distance(store: Mapping[str, np.ndarray]) -> Figure:
+    """Each viseme model coloured by its distance to the aligned measured take (Fig. 9, 10)."""
+    what = "the viseme distance figure"
+    takes = viseme_takes(store)
+    if not takes:
+        return message_figure(
+            "Viseme models against their targets", "the store has no viseme takes"
+        )
+    faces = template_faces(store, what)
+    view = neutral_view(store, what)
+    models, dists = {}, {}
+    for take in takes:
+        models[take] = mesh(store, f"/visemes/{take}/model", what)
+        target = mesh(store, f"/takes/{take}/align/vertices", what)
+        dists[take] = np.linalg.norm(models[take] - target, axis=1)
+    finite = np.concatenate([d[np.isfinite(d)] for d in dists.values()])
+    vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
+    scale = ColorScale(0.0, max(vmax, 1e-3), "distance to the aligned take (mm)")
+    view = frame_view(view, list(models.values()), faces)
+    panels = []
+    for take in takes:
+        d = dists[take]
+        rms = float(np.sqrt(np.nanmean(d**2))) if np.isfinite(d).any() else float("nan")
+        image = render_view(models[take], faces, view, rgb=scale.rgb(d))
+        panels.append(Panel(image, f"{take}: RMS {rms:.2f} mm"))
+    return panel_figure(
+        panels,
+        ncols=min(len(panels), 5),
+        title="Viseme models (neutral + processed motion) against the measured takes",
+        scale=scale,
+    )
+
+
+def fig_visemes(store: Mapping[str, np.ndarray]) -> Figure:
+    """The neutral base model and every viseme model, shaded and textured (Fig. 10, 17)."""
+    what = "the viseme models figure"
+    faces = template_faces(store, what)
+    neutral = neutral_take(store)
+    shapes = {f"{neutral} (base)": mesh(store, "/neutral/vertices", what)}
+    shapes |= {take: mesh(store, f"/visemes/{take}/model", what) for take in viseme_takes(store)}
+    uv = need(store, f"/takes/{neutral}/mesh/uv", what)
+    color = need(store, f"/takes/{neutral}/range/color", what)
+    view = frame_view(neutral_view(store, what), list(shapes.values()), faces)
+    shaded = [Panel(render_view(v, faces, view), name) for name, v in shapes.items()]
+    textured = [
+        Panel(render_view(v, faces, view, texture=color, uv=uv), "") for v in shapes.values()
+    ]
+    return panel_figure(
+        shaded + textured,
+        ncols=len(shapes),
+        title="Face models with viseme control: base model and viseme models (neutral texture)",
+    )
+
+
+#: Figure name -> function, in the order the report shows them.
+FIGURES = {
+    "point_pairs": fig_point_pairs,
+    "alignment": fig_alignment,
+    "mask": fig_mask,
+    "distance": fig_distance,
+    "visemes": fig_visemes,
+}

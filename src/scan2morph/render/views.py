@@ -1,0 +1,366 @@
+"""The drawing kit of the figures: a face's own camera view, colour maps on meshes, panel grids.
+
+No axis direction is assumed. A face mesh carries its template coordinates (x right, y down in
+the canonical 2D frame), so the affine map from template to 3D gives the face's own "up" (towards
+the brows) and "right"; the front is the area-weighted normal (faces are counter-clockwise seen
+from the scanner). Meshes in one frame share one :class:`View`, so they render at one scale.
+
+Figures are built on matplotlib's Agg canvas without pyplot (see :func:`new_figure`).
+
+pyrender writes vertex colours through a display gamma (a grey of 0.5 comes out as 0.73), so
+colours are linearised here before rendering: a frontal surface then shows the colour map's own
+colours, darkened only by the shading.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Colormap, ListedColormap, Normalize
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+
+from scan2morph.errors import InputError
+from scan2morph.render.scene import front_direction, render_mesh
+
+#: Width and height of one rendered panel, pixels.
+PANEL_PX = 360
+#: Resolution of the saved figures (a panel is then PANEL_PX / DPI inches wide).
+DPI = 150
+#: Colour map of every scalar field drawn on a mesh: blue = low, red = high, as the papers. The
+#: middle of "turbo", without its near-black ends, which would hide the shading of the surface.
+FIELD_CMAP = ListedColormap(colormaps["turbo"](np.linspace(0.12, 0.88, 256)), name="turbo_mid")
+#: Colour of vertices without a value (NaN), sRGB.
+NAN_RGB = (0.55, 0.55, 0.55)
+#: Display gamma that pyrender applies to vertex colours (measured: 0.5 -> 0.73, 0.1 -> 0.35).
+_RENDER_GAMMA = 2.2
+
+
+@dataclass(frozen=True)
+class View:
+    """Camera framing of a face: where up and front point, and what to fit in the image.
+
+    Attributes
+    ----------
+    up : (3,) float
+        Unit vector that points up in the image (chin to brows).
+    front : (3,) float
+        Unit vector from the face towards the camera.
+    center : (3,) float, mm
+        Point at the image centre.
+    radius : float, mm
+        Radius of the sphere about ``center`` that the image shows.
+    """
+
+    up: np.ndarray
+    front: np.ndarray
+    center: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True)
+class ColorScale:
+    """A colour map with its limits and the colour bar's label (with units)."""
+
+    vmin: float
+    vmax: float
+    label: str
+    cmap: str | Colormap = field(default_factory=lambda: FIELD_CMAP)
+
+    @property
+    def colormap(self) -> Colormap:
+        return colormaps[self.cmap] if isinstance(self.cmap, str) else self.cmap
+
+    def rgb(self, values: np.ndarray) -> np.ndarray:
+        """(V,) values to (V, 3) sRGB in [0, 1]; NaN gets :data:`NAN_RGB`."""
+        values = np.asarray(values, dtype=np.float64)
+        span = self.vmax - self.vmin if self.vmax > self.vmin else 1.0
+        t = np.clip((values - self.vmin) / span, 0.0, 1.0)
+        rgb = self.colormap(np.nan_to_num(t))[:, :3]
+        rgb[~np.isfinite(values)] = NAN_RGB
+        return rgb
+
+    def mappable(self) -> ScalarMappable:
+        return ScalarMappable(norm=Normalize(self.vmin, self.vmax), cmap=self.colormap)
+
+
+def _finite_rows(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Vertices used by a face whose three corners are finite, as a (V,) mask."""
+    keep = np.all(np.isfinite(vertices[faces]), axis=(1, 2))
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces[keep].ravel()] = True
+    return used
+
+
+def _check_mesh(vertices, faces, source: str) -> tuple[np.ndarray, np.ndarray]:
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise InputError(source, f"vertices: expected shape (V, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.size == 0:
+        raise InputError(source, f"faces: expected shape (F, 3) with F > 0, got {faces.shape}")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InputError(source, f"faces: indices must lie in 0..{len(vertices) - 1}")
+    return vertices, faces
+
+
+def frame_view(view: View, meshes: Sequence[np.ndarray], faces: np.ndarray) -> View:
+    """The same directions, re-centred and re-sized to show every mesh of ``meshes`` whole.
+
+    The centre is the middle of the meshes' bounding box in the view's own axes (right, up,
+    front), so the face sits in the middle of the image whatever its proportions.
+    """
+    pts = np.concatenate([m[_finite_rows(m, faces)] for m in meshes])
+    if len(pts) == 0:
+        raise InputError("render", "nothing to frame: no face has three finite vertices")
+    right = np.cross(view.up, view.front)
+    basis = np.stack([right, view.up, view.front])
+    local = pts @ basis.T
+    mid = 0.5 * (local.min(axis=0) + local.max(axis=0))
+    center = mid @ basis
+    radius = float(np.linalg.norm(pts - center, axis=1).max())
+    return replace(view, center=center, radius=radius)
+
+
+def face_view(
+    vertices: np.ndarray, faces: np.ndarray, vertices2d: np.ndarray, source: str = "render"
+) -> View:
+    """A face's own frontal, upright view.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm, NaN where invalid
+        The face mesh, in any right-handed frame.
+    faces : (F, 3) int
+        Counter-clockwise seen from the front.
+    vertices2d : (V, 2) float
+        The template's canonical coordinates of the same vertices (x right, y down).
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    View
+        ``up`` is the 3D direction of the template's -y (least-squares affine map over the valid
+        vertices), made perpendicular to ``front`` (the area-weighted normal).
+    """
+    vertices, faces = _check_mesh(vertices, faces, source)
+    vertices2d = np.asarray(vertices2d, dtype=np.float64)
+    if vertices2d.shape != (len(vertices), 2):
+        raise InputError(
+            source, f"vertices2d: expected shape ({len(vertices)}, 2), got {vertices2d.shape}"
+        )
+    ok = _finite_rows(vertices, faces) & np.all(np.isfinite(vertices2d), axis=1)
+    if ok.sum() < 3:
+        raise InputError(source, "vertices: fewer than 3 valid vertices, no view can be derived")
+    design = np.column_stack([vertices2d[ok], np.ones(ok.sum())])
+    coef = np.linalg.lstsq(design, vertices[ok], rcond=None)[0]
+    front = front_direction(vertices, faces)
+    up = -coef[1] - np.dot(-coef[1], front) * front
+    norm = np.linalg.norm(up)
+    if norm < 1e-12:
+        raise InputError(
+            source, "vertices: degenerate mesh (template y has no extent across the view)"
+        )
+    return frame_view(View(up / norm, front, np.zeros(3), 1.0), [vertices], faces)
+
+
+def linear_rgb(rgb: np.ndarray) -> np.ndarray:
+    """sRGB colours in [0, 1] as the linear values that render to them (see module notes)."""
+    return np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0) ** _RENDER_GAMMA
+
+
+def render_view(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    view: View,
+    *,
+    rgb: np.ndarray | None = None,
+    texture: np.ndarray | None = None,
+    uv: np.ndarray | None = None,
+    wireframe: bool = False,
+    yaw_deg: float = 0.0,
+    size: int = PANEL_PX,
+) -> np.ndarray:
+    """Render a mesh in a view.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm; faces touching a NaN vertex are not drawn.
+    faces : (F, 3) int
+    view : View
+    rgb : (V, 3) or (3,) float in [0, 1], optional
+        Per-vertex (or one) sRGB colour (as a colour map gives them).
+    texture, uv : (H, W, 3) uint8 and (V, 2), optional
+        Texture image and coordinates (v down); NaN texture coordinates are drawn at (0, 0).
+    wireframe : bool
+    yaw_deg : float
+        Turn about ``up`` (90 = profile).
+    size : int
+        Width and height, pixels.
+
+    Returns
+    -------
+    (size, size, 3) uint8
+    """
+    vertices, faces = _check_mesh(vertices, faces, "render")
+    colors = None if rgb is None else linear_rgb(np.broadcast_to(rgb, vertices.shape))
+    if uv is not None:
+        uv = np.nan_to_num(np.asarray(uv, dtype=np.float64))
+    return render_mesh(
+        vertices,
+        faces,
+        up=view.up,
+        front=view.front,
+        colors=colors,
+        texture=texture,
+        uv=uv,
+        wireframe=wireframe,
+        size=(size, size),
+        yaw_deg=yaw_deg,
+        center=view.center,
+        radius=view.radius,
+    )
+
+
+def new_figure(**kwargs) -> Figure:
+    """A matplotlib Figure on an Agg canvas at :data:`DPI`, outside pyplot (no global state, no
+    backend switch: the caller's backend is left alone, and nothing needs closing)."""
+    fig = Figure(dpi=DPI, **kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **kwargs):
+    """``pyplot.subplots`` on a :func:`new_figure` (constrained layout): (Figure, axes)."""
+    fig = new_figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
+@dataclass(frozen=True)
+class Panel:
+    """One image of a panel grid with its title (``image`` None leaves the cell empty)."""
+
+    image: np.ndarray | None
+    title: str = ""
+
+
+def panel_figure(
+    panels: Sequence[Panel],
+    *,
+    ncols: int,
+    title: str,
+    scale: ColorScale | None = None,
+    legend: Sequence[tuple[tuple[float, float, float], str]] = (),
+    row_labels: Sequence[str] = (),
+    legend_ncol: int | None = None,
+) -> Figure:
+    """A grid of images with titles, an optional colour bar and legend.
+
+    Parameters
+    ----------
+    panels : sequence of Panel
+        Row by row.
+    ncols : int
+    title : str
+        Figure title (what is shown).
+    scale : ColorScale, optional
+        Adds a colour bar with its label (give units).
+    legend : sequence of (sRGB, label)
+        Colour swatches below the grid.
+    row_labels : sequence of str
+        Text left of each row.
+    legend_ncol : int, optional
+        Swatches per legend row (default: all in one row).
+    """
+    panels = crop_panels(panels)
+    nrows = max(1, -(-len(panels) // ncols))
+    shapes = [p.image.shape for p in panels if p.image is not None] or [(PANEL_PX, PANEL_PX)]
+    panel_w, panel_h = shapes[0][1] / DPI, shapes[0][0] / DPI
+    # room for the longest panel title, the figure title and one row of the legend (inches at
+    # the font sizes below: about 0.06 per character of 8 pt, 0.075 of 10 pt)
+    longest = max((len(line) for p in panels for line in p.title.split("\n")), default=0)
+    panel_w = max(panel_w, 0.062 * longest + 0.1)
+    ncol = legend_ncol or max(1, len(legend))
+    legend_w = max(
+        (
+            sum(0.065 * len(lab) + 0.5 for _, lab in legend[i : i + ncol])
+            for i in range(0, len(legend), ncol)
+        ),
+        default=0.0,
+    )
+    width = max(
+        ncols * panel_w + (1.0 if scale else 0.0) + (0.4 if row_labels else 0.0),
+        0.075 * len(title) + 0.4,
+        legend_w + 0.2,
+    )
+    height = nrows * (panel_h + 0.25) + 0.45 + 0.3 * -(-len(legend) // ncol)
+    fig = new_figure(figsize=(width, height), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).reshape(nrows, ncols)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for ax, panel in zip(axes.ravel(), panels, strict=False):
+        if panel.image is not None:
+            ax.imshow(panel.image, interpolation="lanczos")
+        ax.set_title(panel.title, fontsize=8)
+    for row, label in enumerate(row_labels[:nrows]):
+        ax = axes[row, 0]
+        ax.set_axis_on()
+        ax.set_xticks([])
+        ax.set_yticks([])
+        for spine in ax.spines.values():
+            spine.set_visible(False)
+        ax.set_ylabel(label, fontsize=9)
+    fig.suptitle(title, fontsize=10)
+    if scale is not None:
+        fig.colorbar(scale.mappable(), ax=axes.ravel().tolist(), shrink=0.8, label=scale.label)
+    if legend:
+        handles = [Patch(facecolor=c, edgecolor="0.3", label=lab) for c, lab in legend]
+        fig.legend(
+            handles=handles, loc="outside lower center", ncol=ncol, fontsize=8, frameon=False
+        )
+    return fig
+
+
+def crop_panels(panels: Sequence[Panel], margin_px: int = 6) -> list[Panel]:
+    """Crop every image to the union of the drawn (non-white) parts of all, so the panels keep
+    one scale; all images must have one shape."""
+    images = [p.image for p in panels if p.image is not None]
+    if not images or len({im.shape for im in images}) != 1:
+        return list(panels)
+    drawn = np.any(np.stack(images) < 250, axis=(0, 3))
+    if not drawn.any():
+        return list(panels)
+    rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
+    r0, r1 = max(rows[0] - margin_px, 0), rows[-1] + margin_px + 1
+    c0, c1 = max(cols[0] - margin_px, 0), cols[-1] + margin_px + 1
+    return [Panel(None if p.image is None else p.image[r0:r1, c0:c1], p.title) for p in panels]
+
+
+def message_figure(title: str, message: str) -> Figure:
+    """A figure that says why there is nothing to show (e.g. a subject without expressions)."""
+    fig = new_figure(figsize=(4.8, 1.6))
+    fig.suptitle(title, fontsize=10)
+    fig.text(0.5, 0.4, message, ha="center", va="center", fontsize=9, wrap=True)
+    return fig
+
+
+def figure_to_array(fig: Figure) -> np.ndarray:
+    """Rasterise a figure at its own size and dpi: (H, W, 3) uint8."""
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[:, :, :3].copy()
+
+
+def axes_pixels(fig: Figure, ax) -> tuple[slice, slice]:
+    """Row and column slices of an axes' image area in :func:`figure_to_array`'s output."""
+    fig.canvas.draw()
+    box = ax.get_window_extent()
+    height = fig.canvas.get_width_height()[1]
+    rows = slice(int(np.ceil(height - box.y1)), int(np.floor(height - box.y0)))
+    cols = slice(int(np.ceil(box.x0)), int(np.floor(box.x1)))
+    return rows, cols

@@ -1,0 +1,526 @@
+"""Figures of every stage, drawn from a synthetic subject store with known fields."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib import colormaps
+from PIL import Image
+from scipy.spatial.transform import Rotation
+
+from scan2morph.errors import InputError
+from scan2morph.render.figures import (
+    STAGE_FIGURES,
+    figure_names,
+    stage_figures,
+    write_stage_figures,
+)
+from scan2morph.render.fit_figures import fig_model
+from scan2morph.render.modal_figures import fig_expressions
+from scan2morph.render.morph_figures import blend_title, fig_gradual, pca_alphas
+from scan2morph.render.motion_figures import fig_distance, fig_mask
+from scan2morph.render.source import (
+    StoreMapping,
+    example_take,
+    expression_takes,
+    neutral_take,
+    viseme_takes,
+)
+from scan2morph.render.views import (
+    DPI,
+    PANEL_PX,
+    ColorScale,
+    axes_pixels,
+    face_view,
+    figure_to_array,
+    render_view,
+)
+from scan2morph.store import merge_parts, write_part
+
+SCALE_MM = 45.0  # template unit (half the outer-eye distance) in mm
+DEPTH_MM = 1000.0
+FOCAL_PX, WIDTH, HEIGHT = 1450.0, 640, 480
+ICP_NAMES = (
+    "eye_r_outer",
+    "eye_r_inner",
+    "eye_l_inner",
+    "eye_l_outer",
+    "nose_bridge",
+    "forehead_centre",
+)
+
+
+# --------------------------------------------------------------------------------------------
+# A synthetic store: a grid "face" with every dataset of schemas/store.layout.yaml
+# --------------------------------------------------------------------------------------------
+def grid_template(nx: int = 9, ny: int = 11):
+    """A grid in template coordinates (x right, y down), faces counter-clockwise as seen."""
+    x, y = np.meshgrid(np.linspace(-1.5, 1.5, nx), np.linspace(-1.3, 2.3, ny))
+    xy = np.column_stack([x.ravel(), y.ravel()])
+    i = np.arange(nx * ny).reshape(ny, nx)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    faces = np.vstack([np.column_stack([a, c, b]), np.column_stack([b, c, d])])
+    named = {
+        "forehead_centre": (0.0, -1.1),
+        "chin": (0.0, 2.3),
+        "eye_r_outer": (-1.0, 0.0),
+        "eye_r_inner": (-0.4, 0.0),
+        "eye_l_inner": (0.4, 0.0),
+        "eye_l_outer": (1.0, 0.0),
+        "nose_bridge": (0.0, 0.1),
+        "nose_tip": (0.0, 1.0),
+    }
+    ibug = {37: (-1.0, 0.0), 46: (1.0, 0.0), 49: (-0.5, 1.5), 55: (0.5, 1.5), 62: (0.0, 1.4)}
+    nearest = lambda p: int(np.argmin(np.linalg.norm(xy - np.asarray(p), axis=1)))  # noqa: E731
+    names = [f"ibug{n:02d}" for n in ibug] + list(named)
+    indices = [nearest(p) for p in ibug.values()] + [nearest(p) for p in named.values()]
+    return xy, faces, names, np.asarray(indices), None
+
+
+def _height(xy):
+    x, y = xy[:, 0], xy[:, 1]
+    dome = 70.0 * np.sqrt(np.clip(1 - (x / 1.8) ** 2 - ((y - 0.5) / 2.5) ** 2, 0, None))
+    nose = 22.0 * np.exp(-((x / 0.28) ** 2) - ((y - 0.55) / 0.55) ** 2)
+    return dome + nose
+
+
+def _deformation(xy, kind):
+    """Displacement (V, 3) in the camera frame (x right, y down, z away), mm."""
+    x, y = xy[:, 0], xy[:, 1]
+    d = np.zeros((len(xy), 3))
+    if kind == "car":  # jaw drop
+        d[:, 1] = 14.0 * np.clip((y - 1.2) / 1.1, 0, 1)
+    elif kind == "too":  # pucker
+        g = np.exp(-((x / 0.45) ** 2) - ((y - 1.5) / 0.35) ** 2)
+        d[:, 2] = -7.0 * g
+        d[:, 0] = -3.0 * x * g
+    elif kind.startswith("smile"):
+        g = np.exp(-(((np.abs(x) - 0.55) / 0.3) ** 2) - ((y - 1.45) / 0.3) ** 2)
+        d[:, 0], d[:, 1] = 4.0 * np.sign(x) * g, -3.0 * g * (1.1 if kind.endswith("2") else 1.0)
+    elif kind == "sad1":
+        g = np.exp(-(((np.abs(x) - 0.55) / 0.3) ** 2) - ((y - 1.5) / 0.3) ** 2)
+        d[:, 1] = 4.0 * g
+    return d
+
+
+def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
+    """Every dataset of the layout for a subject: neutral, visemes car and too, expressions smile1,
+    smile2 (label smile) and sad1 (label sad), all in an arbitrarily rotated frame."""
+    rng = np.random.default_rng(seed)
+    xy, faces, names, indices, ibug_xy = template if template is not None else grid_template()
+    v = len(xy)
+    frame = Rotation.random(random_state=rng).as_matrix()  # the neutral frame, arbitrary
+    camera = np.column_stack([SCALE_MM * xy, DEPTH_MM - _height(xy)])
+    store: dict[str, np.ndarray] = {
+        "/template/faces": faces.astype(np.int64),
+        "/template/vertices2d": xy.astype(float),
+        "/template/fiducials/names": np.asarray(names, dtype=object),
+        "/template/fiducials/indices": np.asarray(indices, dtype=np.int64),
+    }
+    yy, xx = np.mgrid[0:HEIGHT, 0:WIDTH]
+    takes = ["neutral", "car", "too", "smile1", "smile2", "sad1"]
+    aligned = {}
+    for n, take in enumerate(takes):
+        deformed = camera + _deformation(xy, take)
+        pose = np.eye(4)
+        if n:
+            pose[:3, :3] = Rotation.from_rotvec(rng.normal(0, np.radians(3), 3)).as_matrix()
+            pose[:3, 3] = rng.normal(0, 15, 3)
+        scan_cam = deformed @ pose[:3, :3].T + pose[:3, 3]  # the take's camera frame
+        u = FOCAL_PX * scan_cam[:, 0] / scan_cam[:, 2] + WIDTH / 2
+        w = FOCAL_PX * scan_cam[:, 1] / scan_cam[:, 2] + HEIGHT / 2
+        points2d = np.column_stack([u, w])
+        valid = np.ones(v, dtype=bool)
+        if n:
+            valid[rng.choice(v, 3, replace=False)] = False
+        scan = scan_cam @ frame.T  # the take's scanner frame: the same arbitrary rotation
+        scan[~valid] = np.nan
+        # scanner -> neutral frame: undo the take's pose in camera coordinates
+        to_neutral = np.eye(4)
+        to_neutral[:3, :3] = frame @ pose[:3, :3].T @ frame.T
+        to_neutral[:3, 3] = -to_neutral[:3, :3] @ (frame @ pose[:3, 3])
+        aligned[take] = scan @ to_neutral[:3, :3].T + to_neutral[:3, 3]
+        color = np.stack(
+            [
+                180 + 40 * np.sin(xx / 23.0),
+                140 + 30 * np.cos(yy / 17.0),
+                120 + 20 * np.sin((xx + yy) / 31.0),
+            ],
+            axis=-1,
+        ).astype(np.uint8)
+        if ibug_xy is None:
+            marks = rng.uniform([u.min(), w.min()], [u.max(), w.max()], (68, 2))
+        else:
+            marks = np.asarray(ibug_xy) * SCALE_MM * FOCAL_PX / DEPTH_MM + [WIDTH / 2, HEIGHT / 2]
+        g = f"/takes/{take}"
+        store |= {
+            f"{g}/range/color": color,
+            f"{g}/landmarks": marks,
+            f"{g}/mesh/vertices": scan,
+            f"{g}/mesh/uv": np.column_stack([(u + 0.5) / WIDTH, (w + 0.5) / HEIGHT]),
+            f"{g}/mesh/valid": valid,
+            f"{g}/mesh/points2d": points2d,
+            f"{g}/align/transform": to_neutral,
+            f"{g}/align/vertices": aligned[take],
+        }
+    neutral = aligned["neutral"]
+    suppressed = xy[:, 1] < 0.3
+    store |= {
+        "/neutral/vertices": neutral,
+        "/neutral/filled": np.zeros(v, dtype=bool),
+        "/mask/suppressed": suppressed,
+        "/mask/seeds": np.flatnonzero(np.abs(xy[:, 1] + 0.4) < 0.2),
+    }
+    models = {}
+    for take in ("car", "too"):
+        raw = aligned[take] - neutral
+        motion = np.where(suppressed[:, None], 0.0, np.nan_to_num(raw))
+        models[take] = neutral + motion
+        store |= {
+            f"/visemes/{take}/motion_raw": raw,
+            f"/visemes/{take}/motion": motion,
+            f"/visemes/{take}/model": models[take],
+        }
+    # PCA over neutral + viseme models (the paper's convention: eigenvalue = sum of coef^2)
+    shapes = np.stack([neutral, *models.values()])
+    mean = shapes.mean(axis=0)
+    centred = (shapes - mean).reshape(len(shapes), -1)
+    _, s, vt = np.linalg.svd(centred, full_matrices=False)
+    k = len(shapes) - 1
+    comps, eig = vt[:k], s[:k] ** 2
+    store |= {
+        "/pca/mean": mean,
+        "/pca/components": comps.reshape(k, v, 3),
+        "/pca/eigenvalues": eig,
+        "/pca/cr": eig / eig.sum(),
+        "/pca/ccr": np.cumsum(eig) / eig.sum(),
+        "/pca/coefficients": centred @ comps.T,
+        "/pca/takes": np.asarray(["neutral", "car", "too"], dtype=object),
+    }
+    for label in ("car", "too"):
+        for pct in (30, 60, 90):
+            store[f"/blends/{label}_{pct}/vertices"] = neutral + pct / 100 * (
+                models[label] - neutral
+            )
+    store["/blends/too50_car20/vertices"] = (
+        neutral + 0.5 * (models["too"] - neutral) + 0.2 * (models["car"] - neutral)
+    )
+    store["/pca_blends/pca_blend1/vertices"] = mean + (
+        0.5 * np.sqrt(eig[0]) * comps[0] + 1.0 * np.sqrt(eig[1]) * comps[1]
+    ).reshape(v, 3)
+    # modal basis: smooth normal-direction patterns on the face, frequencies ascending
+    normal = frame @ np.array([0.0, 0.0, -1.0])
+    n_modes = 8
+    modes = np.stack(
+        [
+            np.outer(
+                np.sin((j % 3 + 1) * np.pi * (xy[:, 0] + 1.5) / 3.0)
+                * np.sin((j // 3 + 1) * np.pi * (xy[:, 1] + 1.3) / 3.6),
+                normal,
+            )
+            for j in range(n_modes)
+        ]
+    )
+    ks = np.array([1, 2, 5, 8])
+    store |= {
+        "/modal/frequencies_hz": 40.0 * np.arange(1, n_modes + 1),
+        "/modal/modes": modes,
+        "/modal/dof_modes": np.concatenate([modes, np.zeros_like(modes)], axis=2),
+        "/modal/thickness_mm": np.ones(len(faces)),
+        "/modal/fixed_vertices": np.zeros(v, dtype=bool),
+        "/modal/reconstruction_k": ks,
+    }
+    flat = modes.reshape(n_modes, -1)
+    coords = {}
+    for take in ("smile1", "smile2", "sad1"):
+        disp = np.nan_to_num(aligned[take] - neutral)
+        q = np.linalg.lstsq(flat.T, disp.ravel(), rcond=None)[0]
+        coords[take] = q
+        rms = [
+            np.sqrt(np.mean(np.sum((disp - (q[:kk] @ flat[:kk]).reshape(v, 3)) ** 2, axis=1)))
+            for kk in ks
+        ]
+        store |= {
+            f"/expressions/{take}/displacement": disp,
+            f"/expressions/{take}/coordinates": q,
+            f"/expressions/{take}/reconstruction_rms_mm": np.asarray(rms),
+            f"/expressions/{take}/synthesized": (q @ flat).reshape(v, 3),
+        }
+    smile = np.stack([coords["smile1"], coords["smile2"]])
+    store |= {
+        "/modal/statistics/smile/mean": smile.mean(axis=0),
+        "/modal/statistics/smile/std": smile.std(axis=0, ddof=1),
+        "/modal/statistics/smile/takes": np.asarray(["smile1", "smile2"], dtype=object),
+        "/modal/statistics/sad/mean": coords["sad1"],
+        "/modal/statistics/sad/std": np.full(n_modes, np.nan),
+        "/modal/statistics/sad/takes": np.asarray(["sad1"], dtype=object),
+    }
+    return store
+
+
+@pytest.fixture(scope="module")
+def store():
+    return synthetic_store()
+
+
+def _decode(pixels: np.ndarray, scale: ColorScale, n: int = 256) -> np.ndarray:
+    """Values whose colour (up to the shading factor) best explains each pixel (N, 3) uint8."""
+    t = np.linspace(0, 1, n)
+    ramp = scale.colormap(t)[:, :3]
+    p = pixels[:: max(1, len(pixels) // 1500)].astype(float) / 255.0  # a sample is enough
+    k = (p @ ramp.T) / np.sum(ramp**2, axis=1)  # best shading factor per (pixel, ramp entry)
+    resid = np.linalg.norm(p[:, None, :] - k[:, :, None] * ramp[None], axis=2)
+    resid[(k < 0.4) | (k > 1.2)] = np.inf
+    return scale.vmin + t[resid.argmin(axis=1)] * (scale.vmax - scale.vmin)
+
+
+def _surface(image: np.ndarray) -> np.ndarray:
+    """Pixels that are not the white background."""
+    return np.any(image < 245, axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Views
+# --------------------------------------------------------------------------------------------
+def test_face_view_recovers_up_and_front_of_a_rotated_flat_face():
+    rng = np.random.default_rng(4)
+    xy, faces, *_ = grid_template()
+    rot = Rotation.random(random_state=rng).as_matrix()
+    flat = np.column_stack([SCALE_MM * xy, np.full(len(xy), DEPTH_MM)]) @ rot.T
+    view = face_view(flat, faces, xy)
+    # template -y is up; the camera of the scanner (at -z in camera coordinates) is the front
+    np.testing.assert_allclose(view.up, rot @ [0, -1, 0], atol=1e-9)
+    np.testing.assert_allclose(view.front, rot @ [0, 0, -1], atol=1e-9)
+    np.testing.assert_allclose(view.center, rot @ [0, 0.5 * SCALE_MM, DEPTH_MM], atol=1e-6)
+
+
+def test_render_is_upright_and_not_mirrored_in_any_frame():
+    rng = np.random.default_rng(5)
+    xy, faces, *_ = grid_template()
+    camera = np.column_stack([SCALE_MM * xy, DEPTH_MM - _height(xy)])
+    for _ in range(3):
+        rot = Rotation.random(random_state=rng).as_matrix()
+        vertices = camera @ rot.T + rng.normal(0, 300, 3)
+        # top half red, bottom half blue; image-right half (template +x) gets green added
+        rgb = np.where(xy[:, 1:2] < 0.5, [0.9, 0.1, 0.1], [0.1, 0.1, 0.9])
+        image = render_view(vertices, faces, face_view(vertices, faces, xy), rgb=rgb)
+        rows, cols = np.nonzero(_surface(image))
+        red = image[rows, cols, 0] > image[rows, cols, 2]
+        assert rows[red].mean() < rows[~red].mean() - 40  # red (forehead) above blue (chin)
+        rgb[xy[:, 0] > 0.5] = [0.1, 0.9, 0.1]
+        image = render_view(vertices, faces, face_view(vertices, faces, xy), rgb=rgb)
+        rows, cols = np.nonzero(_surface(image))
+        green = image[rows, cols, 1] > np.maximum(image[rows, cols, 0], image[rows, cols, 2])
+        assert cols[green].mean() > cols[~green].mean() + 40  # template +x on the image's right
+
+
+def test_rendered_colours_decode_to_the_field_values():
+    xy, faces, *_ = grid_template(21, 25)
+    vertices = np.column_stack([SCALE_MM * xy, np.full(len(xy), DEPTH_MM)])
+    scale = ColorScale(0.0, 10.0, "mm")
+    values = np.where(xy[:, 0] < 0, 2.0, 8.0)
+    image = render_view(vertices, faces, face_view(vertices, faces, xy), rgb=scale.rgb(values))
+    rows, cols = np.nonzero(_surface(image))
+    mid = cols.mean()
+    left = image[rows[cols < mid - 20], cols[cols < mid - 20]]
+    right = image[rows[cols > mid + 20], cols[cols > mid + 20]]
+    np.testing.assert_allclose(np.median(_decode(left, scale)), 2.0, atol=0.15)
+    np.testing.assert_allclose(np.median(_decode(right, scale)), 8.0, atol=0.15)
+
+
+def test_colour_scale_clips_and_marks_nan():
+    scale = ColorScale(0.0, 4.0, "mm", cmap="viridis")
+    rgb = scale.rgb(np.array([-1.0, 0.0, 2.0, 4.0, 9.0, np.nan]))
+    cmap = colormaps["viridis"]
+    np.testing.assert_allclose(rgb[:5], cmap(np.array([0, 0, 0.5, 1, 1]))[:, :3])
+    np.testing.assert_allclose(rgb[5], (0.55, 0.55, 0.55))
+
+
+# --------------------------------------------------------------------------------------------
+# Store access
+# --------------------------------------------------------------------------------------------
+def test_takes_by_kind(store):
+    assert neutral_take(store) == "neutral"
+    assert viseme_takes(store) == ["car", "too"]
+    assert expression_takes(store) == ["sad1", "smile1", "smile2"]
+    assert example_take(store) == "car"  # the jaw drop moves more than the pucker
+
+
+def test_pca_alphas_recover_the_blend_parameters(store):
+    alpha = pca_alphas(store, store["/pca_blends/pca_blend1/vertices"])
+    np.testing.assert_allclose(alpha, [0.5, 1.0], atol=1e-9)
+
+
+def test_blend_titles():
+    assert blend_title("man60_eel30") == "0.6 man + 0.3 eel + 0.1 base"
+    assert blend_title("too80_eel10_car10") == "0.8 too + 0.1 eel + 0.1 car"
+    assert blend_title("car_30") == "0.3 car + 0.7 base"
+    assert blend_title("my blend") == "my blend"
+
+
+# --------------------------------------------------------------------------------------------
+# Figures
+# --------------------------------------------------------------------------------------------
+def test_every_figure_is_drawn_and_not_blank(store):
+    for stage in STAGE_FIGURES:
+        figs = stage_figures(store, stage)
+        assert list(figs) == figure_names(stage)
+        for stem, fig in figs.items():
+            image = figure_to_array(fig)
+            w, h = fig.get_size_inches() * DPI
+            assert abs(image.shape[0] - h) <= 1 and abs(image.shape[1] - w) <= 1, stem
+            assert image.shape[2] == 3
+            assert image.std() > 20, stem  # drawn, not an empty canvas
+
+
+def test_model_figure_has_three_panels_of_the_face(store):
+    fig = fig_model(store)
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels] == ["(a) shaded", "(b) textured", "(c) wireframe"]
+    shapes = {np.asarray(ax.images[0].get_array()).shape for ax in panels}
+    assert len(shapes) == 1  # cropped alike: one scale
+    (shape,) = shapes
+    assert 0.5 * PANEL_PX < max(shape[:2]) <= PANEL_PX
+    for ax, fill in zip(panels, (0.5, 0.5, 0.05), strict=True):
+        image = np.asarray(ax.images[0].get_array())
+        assert _surface(image).mean() > fill  # the face fills the panel (the wireframe: its edges)
+
+
+def test_expression_figure_maps_a_known_field_to_its_colours(store):
+    known = dict(store)
+    xy = store["/template/vertices2d"]
+    for take in expression_takes(store):  # 2 mm on the image's left half, 8 mm on its right half
+        magnitude = np.where(xy[:, 0] < 0, 2.0, 8.0)
+        known[f"/expressions/{take}/displacement"] = magnitude[:, None] * np.array([0.6, 0.0, 0.8])
+    scale_max = 8.0
+    fig = fig_expressions(known)
+    image = figure_to_array(fig)
+    ax = next(ax for ax in fig.axes if ax.images)
+    rows, cols = axes_pixels(fig, ax)
+    panel = image[rows, cols]
+    r, c = np.nonzero(_surface(panel) & (panel.std(axis=-1) > 12))  # coloured face pixels
+    mid = (c.min() + c.max()) / 2
+    scale = ColorScale(0.0, scale_max, "")
+    left = _decode(panel[r[c < mid - 15], c[c < mid - 15]], scale)
+    right = _decode(panel[r[c > mid + 15], c[c > mid + 15]], scale)
+    np.testing.assert_allclose(np.median(left) / scale_max, 0.25, atol=0.03)
+    np.testing.assert_allclose(np.median(right) / scale_max, 1.0, atol=0.03)
+
+
+def test_distance_figure_colours_a_vertex_by_its_distance(store):
+    known = dict(store)
+    xy = store["/template/vertices2d"]
+    target = store["/takes/car/align/vertices"].copy()
+    model = np.where(np.isfinite(target), target, store["/neutral/vertices"])
+    far = xy[:, 1] > 1.0  # the lower face is 6 mm off, the rest exact
+    model[far] += [6.0, 0.0, 0.0]
+    known["/visemes/car/model"] = model
+    known["/visemes/too/model"] = np.where(
+        np.isfinite(store["/takes/too/align/vertices"]),
+        store["/takes/too/align/vertices"],
+        store["/neutral/vertices"],
+    )
+    fig = fig_distance(known)
+    image = figure_to_array(fig)
+    ax = next(ax for ax in fig.axes if ax.images and ax.get_title().startswith("car"))
+    assert "RMS" in ax.get_title()
+    panel = image[axes_pixels(fig, ax)]
+    r, c = np.nonzero(_surface(panel) & (panel.std(axis=-1) > 12))
+    top, bottom = r < np.percentile(r, 30), r > np.percentile(r, 85)
+    scale = ColorScale(0.0, 6.0, "")
+    assert np.median(_decode(panel[r[top], c[top]], scale)) < 0.6
+    assert np.median(_decode(panel[r[bottom], c[bottom]], scale)) > 5.4
+
+
+def test_mask_figure_shows_the_mask_in_orange(store):
+    fig = fig_mask(store)
+    image = figure_to_array(fig)
+    ax = [ax for ax in fig.axes if ax.images][1]
+    panel = image[axes_pixels(fig, ax)]
+    r, c = np.nonzero(_surface(panel))
+    orange = (panel[r, c, 0] > 150) & (panel[r, c, 2] < 60)
+    # the suppressed part is the upper face (template y < 0.3): orange pixels lie above the rest
+    assert orange.mean() > 0.2
+    assert r[orange].mean() < r[~orange].mean()
+
+
+def test_missing_data_gives_a_figure_that_says_so(store):
+    bare = {
+        k: v
+        for k, v in store.items()
+        if not k.startswith(("/blends", "/expressions", "/modal/statistics"))
+    }
+    fig = fig_gradual(bare)
+    assert any("no blend" in t.get_text() for t in fig.texts)
+    figs = stage_figures(bare, "modal")
+    assert any("no expression" in t.get_text() for t in figs["modal_synthesis"].texts)
+
+
+# --------------------------------------------------------------------------------------------
+# Files
+# --------------------------------------------------------------------------------------------
+def _write_store(path, data):
+    part = path.parent / "part.h5"
+    write_part(part, data)
+    merge_parts(path, [part], "s01", "0" * 64)
+
+
+def test_write_stage_figures_from_an_hdf5_store(tmp_path, store):
+    path = tmp_path / "s01.h5"
+    _write_store(path, store)
+    with StoreMapping(path) as mapping:
+        assert set(mapping) == set(store)
+        assert list(mapping["/pca/takes"]) == ["neutral", "car", "too"]
+    written = write_stage_figures(path, tmp_path / "figures", "fit")
+    assert [p.name for p in written] == [f"{s}.png" for s in figure_names("fit")]
+    for p in written:
+        image = np.asarray(Image.open(p).convert("RGB"))
+        assert image.shape[0] > 300 and image.shape[1] > 300
+        assert image.std() > 20
+
+
+def test_bad_input(tmp_path, store):
+    with pytest.raises(InputError, match="stage: expected one of"):
+        figure_names("render")
+    with pytest.raises(InputError, match="store not found"):
+        write_stage_figures(tmp_path / "none.h5", tmp_path, "fit")
+    missing = {k: v for k, v in store.items() if k != "/neutral/vertices"}
+    with pytest.raises(
+        InputError, match=r"dataset /neutral/vertices is missing \(needed for the mask figure\)"
+    ):
+        fig_mask(missing)
+    short = dict(store) | {"/visemes/car/model": store["/visemes/car/model"][:-1]}
+    with pytest.raises(InputError, match=r"/visemes/car/model: expected shape"):
+        fig_distance(short)
+    two = dict(store) | {"/takes/extra/mesh/vertices": store["/takes/neutral/mesh/vertices"]}
+    with pytest.raises(InputError, match="exactly one neutral take"):
+        fig_model(two)
+    rows = dict(store) | {"/pca/coefficients": store["/pca/coefficients"][:-1]}
+    with pytest.raises(InputError, match=r"/pca/coefficients: expected 3 rows"):
+        stage_figures(rows, "morph")
+    ks = dict(store) | {"/modal/reconstruction_k": np.array([1, 2])}
+    with pytest.raises(InputError, match=r"reconstruction_rms_mm: expected shape \(2,\)"):
+        stage_figures(ks, "modal")
+    names = dict(store) | {"/template/fiducials/names": store["/template/fiducials/names"][:-1]}
+    with pytest.raises(InputError, match="names and indices differ in length"):
+        stage_figures(names, "motion")
+    xy, faces, *_ = grid_template()
+    with pytest.raises(InputError, match="vertices2d: expected shape"):
+        face_view(np.zeros((len(xy), 3)), faces, xy[:-1])
+    with pytest.raises(InputError, match="fewer than 3 valid vertices"):
+        face_view(np.full((len(xy), 3), np.nan), faces, xy)
+    with pytest.raises(InputError, match="faces: indices must lie"):
+        face_view(np.zeros((4, 3)), faces, xy[:4])
+
+
+def test_base_faces_undo_the_template_subdivision():
+    from scan2morph.render.fit_figures import base_faces
+    from scan2morph.template import subdivide
+
+    xy, faces, *_ = grid_template(5, 6)
+    once = subdivide(xy, faces)
+    twice = subdivide(once[0], once[1])
+    np.testing.assert_array_equal(base_faces(once[1]), faces)
+    np.testing.assert_array_equal(base_faces(twice[1]), faces)
+    assert base_faces(faces) is None  # not a subdivision
+    assert base_faces(np.roll(once[1], 1, axis=0)) is None
