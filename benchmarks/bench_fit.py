@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import time
 
->>>
-
 from scan2morph.synth import make_take
 from scan2morph.template import TPS, build_template, fit_take, sample_range, subdivide_template
 
@@ -27,16 +25,24 @@ def main():
     xyz, lm = scan["xyz"], scan["landmarks"]
     template = build_template()
     numbers, idx = template.fiducial_set("open")
-    print(f"{'level':>5} {'V':>6} {'F':>6} {'subdivide ms':>13} {'warp ms':>8} {'sample ms':>10} {'fit_take ms':>12}")
+    print(
+        f"{'level':>5} {'V':>6} {'F':>6} {'subdivide ms':>13} {'warp ms':>8} {'sample ms':>10} {'fit_take ms':>12}"
+    )
     for level in (0, 1, 2):
         fine = subdivide_template(template, level)
         spline = TPS.fit(template.vertices[idx], lm[numbers - 1])
         pts = spline(fine.vertices)
         t_sub = best_of(lambda level=level: subdivide_template(template, level))
-        t_warp = best_of(lambda fine=fine: TPS.fit(template.vertices[idx], lm[numbers - 1])(fine.vertices))
+        t_warp = best_of(
+            lambda fine=fine: TPS.fit(template.vertices[idx], lm[numbers - 1])(fine.vertices)
+        )
         t_sample = best_of(lambda pts=pts: sample_range(xyz, pts))
-        t_fit = best_of(lambda level=level: fit_take(template, lm, xyz, (640, 480), "open", level, "bench"))
-        print(f"{level:>5} {fine.n_vertices:>6} {len(fine.faces):>6} {t_sub:>13.2f} {t_warp:>8.2f} {t_sample:>10.2f} {t_fit:>12.2f}")
+        t_fit = best_of(
+            lambda level=level: fit_take(template, lm, xyz, (640, 480), "open", level, "bench")
+        )
+        print(
+            f"{level:>5} {fine.n_vertices:>6} {len(fine.faces):>6} {t_sub:>13.2f} {t_warp:>8.2f} {t_sample:>10.2f} {t_fit:>12.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ from scipy.interpolate import RBFInterpolator
 from scipy.sparse import csgraph, csr_array
 
 from scan2morph.errors import InputError
-from scan2morph.io import read_pts, write_obj
+from scan2morph.io import write_obj
 from scan2morph.template import (
     TPS,
     build_template,
@@ -46,8 +46,8 @@ def test_template_mesh_is_the_papers_size_and_well_formed(template):
     adj = csr_array((np.ones(3 * len(f)), (f.ravel(), np.roll(f, 1, axis=1).ravel())), shape=(n, n))
     assert csgraph.connected_components(adj, directed=False)[0] == 1
     angles = _angles_deg(v, f)
-    assert angles.min() > 3.0  # slivers only where the inner and outer mouth corners meet
-    assert np.mean(angles > 20.0) > 0.99
+    assert angles.min() > 20.0  # measured 20.7 degrees (at the mouth corners)
+    assert np.percentile(angles.min(axis=1), 1) > 30.0  # measured 32.9
     # every fiducial of both sets is a vertex at its canonical iBUG position
     for name in ("closed", "open"):
         numbers, idx = template.fiducials[name]
@@ -58,7 +58,9 @@ def test_template_mesh_is_the_papers_size_and_well_formed(template):
     uniq, count = np.unique(e, axis=0, return_counts=True)
     border = {tuple(x) for x in uniq[count == 1]}
     for loop in (template.boundary, template.mouth_boundary):
-        loop_edges = {tuple(sorted((int(a), int(b)))) for a, b in zip(loop, np.roll(loop, -1), strict=True)}
+        loop_edges = {
+            tuple(sorted((int(a), int(b)))) for a, b in zip(loop, np.roll(loop, -1), strict=True)
+        }
         assert loop_edges <= border
     assert len(border) == len(template.boundary) + len(template.mouth_boundary)
 
@@ -93,10 +95,25 @@ def test_tps_matches_scipy_and_interpolates(template):
     "src, dst, size, match",
     [
         ([[0, 0], [1, 0]], [[0, 0], [1, 0]], None, "at least 3 points"),
-        ([[0, 0], [1, 0], [0, 0], [0, 1]], [[0, 0], [1, 0], [2, 2], [0, 1]], None, "points 0 and 2 coincide"),
+        (
+            [[0, 0], [1, 0], [0, 0], [0, 1]],
+            [[0, 0], [1, 0], [2, 2], [0, 1]],
+            None,
+            "points 0 and 2 coincide",
+        ),
         ([[0, 0], [1, 1], [2, 2], [3, 3]], [[0, 0], [1, 1], [2, 2], [3, 3]], None, "collinear"),
-        ([[0, 0], [1, 0], [0, np.nan]], [[0, 0], [1, 0], [0, 1]], None, "template point 2 is not finite"),
-        ([[0, 0], [1, 0], [0, 1]], [[0, 0], [1, 0], [0, 500]], (100, 100), "image point 2 .* outside the 100x100 image"),
+        (
+            [[0, 0], [1, 0], [0, np.nan]],
+            [[0, 0], [1, 0], [0, 1]],
+            None,
+            "template point 2 is not finite",
+        ),
+        (
+            [[0, 0], [1, 0], [0, 1]],
+            [[0, 0], [1, 0], [0, 500]],
+            (100, 100),
+            "image point 2 .* outside the 100x100 image",
+        ),
     ],
 )
 def test_tps_bad_input(src, dst, size, match):
@@ -107,10 +124,16 @@ def test_tps_bad_input(src, dst, size, match):
 def test_subdivision_keeps_base_and_splits_edges(template):
     fine = subdivide_template(template, 1)
     f = template.faces
-    n_edges = len(np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0))
+    n_edges = len(
+        np.unique(
+            np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0
+        )
+    )
     assert fine.n_vertices == template.n_vertices + n_edges and len(fine.faces) == 4 * len(f)
     np.testing.assert_array_equal(fine.vertices[: template.n_vertices], template.vertices)
-    np.testing.assert_allclose(signed_area2(fine.vertices, fine.faces).sum(), signed_area2(template.vertices, f).sum())
+    np.testing.assert_allclose(
+        signed_area2(fine.vertices, fine.faces).sum(), signed_area2(template.vertices, f).sum()
+    )
     assert (signed_area2(fine.vertices, fine.faces) < 0).all()
     assert len(fine.boundary) == 2 * len(template.boundary)
     # midpoints inserted between consecutive loop vertices
@@ -132,11 +155,16 @@ def test_bilinear_sampling_is_exact_on_a_plane_and_marks_missing_data():
     near_hole = (np.abs(pts[:, 0] - 10) < 1) & (np.abs(pts[:, 1] - 10) < 1)
     np.testing.assert_array_equal(valid, ~near_hole)
     px, py = pts[valid, 0], pts[valid, 1]
-    np.testing.assert_allclose(v[valid], np.column_stack([0.5 * px + 10, -0.5 * py, 800 + 0.1 * px - 0.2 * py]), atol=1e-9)
+    np.testing.assert_allclose(
+        v[valid], np.column_stack([0.5 * px + 10, -0.5 * py, 800 + 0.1 * px - 0.2 * py]), atol=1e-9
+    )
     assert np.isnan(v[~valid]).all()
     out, ok = sample_range(xyz, np.array([[-0.5, 3.0], [39.5, 3.0], [5.0, 29.0]]))
     assert ok.tolist() == [False, False, True]
-    np.testing.assert_allclose(texture_uv(np.array([[0.0, 0.0], [39.0, 29.0]]), w, h), [[0.5 / 40, 0.5 / 30], [39.5 / 40, 29.5 / 30]])
+    np.testing.assert_allclose(
+        texture_uv(np.array([[0.0, 0.0], [39.0, 29.0]]), w, h),
+        [[0.5 / 40, 0.5 / 30], [39.5 / 40, 29.5 / 30]],
+    )
 
 
 @pytest.fixture(scope="module")
@@ -152,11 +180,27 @@ def test_fit_take_samples_the_true_surface(template, neutral_scan):
     from scan2morph.evaluate.truth import Truth
 
     s = neutral_scan
-    mesh = fit_take(template, s["truth"]["landmarks2d"], s["xyz"], (320, 240), "closed", 1, "t1/neutral")
+    mesh = fit_take(
+        template, s["truth"]["landmarks2d"], s["xyz"], (320, 240), "closed", 1, "t1/neutral"
+    )
     assert mesh["vertices"].shape == (subdivide_template(template, 1).n_vertices, 3)
     assert mesh["valid"].mean() > 0.8
-    truth = Truth(**{k: s["truth"][k] for k in ("vertices", "faces", "skin_faces", "pose", "K", "landmarks3d",
-                                                 "landmarks2d", "displacement")}, extra={})
+    truth = Truth(
+        **{
+            k: s["truth"][k]
+            for k in (
+                "vertices",
+                "faces",
+                "skin_faces",
+                "pose",
+                "K",
+                "landmarks3d",
+                "landmarks2d",
+                "displacement",
+            )
+        },
+        extra={},
+    )
     acc = mesh_accuracy(mesh["vertices"], mesh["valid"], truth)
     print(acc)
     assert acc["rms_mm"] < 0.3
@@ -173,9 +217,13 @@ def test_fit_take_bad_input(template, neutral_scan):
         fit_take(template, bad, s["xyz"], (320, 240), source="a/b")
     far = lm.copy()
     far[36] = [1000.0, 10.0]
-    with pytest.raises(InputError, match="a/b: fiducials: image point .* outside the 320x240 image"):
+    with pytest.raises(
+        InputError, match="a/b: fiducials: image point .* outside the 320x240 image"
+    ):
         fit_take(template, far, s["xyz"], (320, 240), source="a/b")
-    with pytest.raises(InputError, match="a/b: only 0.0% of the template's vertices fall on range data"):
+    with pytest.raises(
+        InputError, match="a/b: only 0.0% of the template's vertices fall on range data"
+    ):
         fit_take(template, lm, np.full_like(s["xyz"], np.nan), (320, 240), source="a/b")
     mirrored = lm.copy()
     mirrored[:, 0] = 319 - mirrored[:, 0]  # landmarks mirrored left-right: the template folds
@@ -199,7 +247,10 @@ def test_obj_round_trip_with_trimesh(tmp_path):
     valid = np.array([True, True, True, False])
     write_obj(tmp_path / "n.obj", v, f, valid=valid)
     lines = (tmp_path / "n.obj").read_text().splitlines()
-    assert sum(ln.startswith("v ") for ln in lines) == 4 and sum(ln.startswith("f ") for ln in lines) == 1
+    assert (
+        sum(ln.startswith("v ") for ln in lines) == 4
+        and sum(ln.startswith("f ") for ln in lines) == 1
+    )
 
 
 def test_stable_region_covers_forehead_ridge_and_temples_only(template):

@@ -1,9 +1,15 @@
 """Wavefront OBJ + MTL + PNG texture (opens in MeshLab and Blender with the texture upright).
 
-Vertex order is identical across takes (one template): every vertex is written, invalid ones as
-``v nan nan nan`` would break viewers, so invalid vertices are written at the position given
-(callers pass filled positions when they have them, NaN rows become 0 0 0) and the faces that
-touch an invalid vertex are left out, so nothing invalid is ever drawn.
+Vertex order is identical across takes (one template): every vertex is written, so vertex i is
+the same template vertex in every take's OBJ. ``v nan nan nan`` would break viewers, so invalid
+vertices are written at the position given (callers pass filled positions when they have them;
+non-finite rows are written at the centroid of the finite ones, which keeps viewers' zoom-to-fit
+on the face) and the faces that touch an invalid vertex are left out, so nothing invalid is drawn.
+A comment line ``# invalid: i j ...`` lists the invalid vertices (1-based, as OBJ indices).
+
+Texture coordinates are given in the image convention (origin at the image's top-left corner, as
+glTF) and written as ``vt u 1-v`` (OBJ's origin is the bottom-left corner), so the texture is
+upright in MeshLab and Blender.
 """
 
 from __future__ import annotations
@@ -36,11 +42,22 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
     faces = np.asarray(faces, dtype=np.int64)
     if vertices.ndim != 2 or vertices.shape[1] != 3:
         raise InputError(path, f"vertices: expected (V, 3), got {vertices.shape}")
-    ok = np.isfinite(vertices).all(axis=1)
+    if faces.ndim != 2 or faces.shape[1] != 3 or (faces.size and not (0 <= faces).all()):
+        raise InputError(path, f"faces: expected (F, 3) non-negative indices, got {faces.shape}")
+    if faces.size and faces.max() >= len(vertices):
+        raise InputError(path, f"faces: index {int(faces.max())} >= {len(vertices)} vertices")
+    if uv is not None and np.shape(uv) != (len(vertices), 2):
+        raise InputError(path, f"uv: expected ({len(vertices)}, 2), got {np.shape(uv)}")
+    finite = np.isfinite(vertices).all(axis=1)
+    ok = finite.copy()
     if valid is not None:
+        if np.shape(valid) != (len(vertices),):
+            raise InputError(path, f"valid: expected ({len(vertices)},), got {np.shape(valid)}")
         ok &= np.asarray(valid, dtype=bool)
     keep = ok[faces].all(axis=1)
     lines = [f"# scan2morph mesh: {len(vertices)} vertices (mm), {int(keep.sum())} faces"]
+    if not ok.all():
+        lines.append("# invalid: " + " ".join(str(i) for i in np.flatnonzero(~ok) + 1))
     if texture is not None:
         if uv is None:
             raise InputError(path, "texture given without uv")
@@ -49,7 +66,8 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
             f"newmtl face\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {path.with_suffix('.png').name}\n"
         )
         lines += [f"mtllib {path.with_suffix('.mtl').name}", "usemtl face"]
-    v = np.where(np.isfinite(vertices), vertices, 0.0)
+    centre = vertices[finite].mean(axis=0) if finite.any() else np.zeros(3)
+    v = np.where(finite[:, None], vertices, centre)
     lines += [f"v {a:.6f} {b:.6f} {c:.6f}" for a, b, c in v]
     f1 = faces[keep] + 1
     if uv is not None:
@@ -59,3 +77,57 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
     else:
         lines += [f"f {a} {b} {c}" for a, b, c in f1]
     path.write_text("\n".join(lines) + "\n")
+
+
+def read_obj(path) -> dict[str, np.ndarray]:
+    """Read an OBJ written by :func:`write_obj` (a minimal reader: ``v``, ``vt``, triangles).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict
+        ``vertices`` (V, 3) float64; ``faces`` (F, 3) int64, 0-based; ``uv`` (V, 2) in the image
+        convention (v flipped back) or None; ``valid`` (V,) bool from the ``# invalid:`` line.
+
+    Raises
+    ------
+    InputError
+        Missing file, a malformed line, or a face that is not a triangle.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected a Wavefront OBJ)")
+    verts, tex, faces, invalid = [], [], [], []
+    for n, line in enumerate(path.read_text().splitlines(), start=1):
+        parts = line.split()
+        try:
+            if line.startswith("# invalid:"):
+                invalid += [int(i) - 1 for i in parts[2:]]
+            elif parts and parts[0] == "v":
+                verts.append([float(t) for t in parts[1:4]])
+            elif parts and parts[0] == "vt":
+                tex.append([float(t) for t in parts[1:3]])
+            elif parts and parts[0] == "f":
+                if len(parts) != 4:
+                    raise InputError(
+                        path, f"line {n}: expected a triangle, got {len(parts) - 1} corners"
+                    )
+                faces.append([int(t.split("/")[0]) - 1 for t in parts[1:]])
+        except ValueError as exc:
+            raise InputError(path, f"line {n}: cannot parse {line[:40]!r} ({exc})") from None
+    vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
+    valid = np.ones(len(vertices), dtype=bool)
+    valid[invalid] = False
+    uv = None
+    if tex:
+        uv = np.asarray(tex, dtype=np.float64)
+        uv[:, 1] = 1.0 - uv[:, 1]
+    return {
+        "vertices": vertices,
+        "faces": np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+        "uv": uv,
+        "valid": valid,
+    }

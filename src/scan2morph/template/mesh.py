@@ -36,9 +36,8 @@ removed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial import Delaunay, cKDTree
@@ -133,7 +132,9 @@ def _canonical_ibug() -> np.ndarray:
     p = np.zeros((N_IBUG, 2))
     theta = np.pi * np.arange(17) / 16.0
     p[0:17] = np.column_stack([-_JAW_A * np.cos(theta), _JAW_Y0 + _JAW_B * np.sin(theta)])
-    brow_r = np.array([[-1.16, -0.40], [-0.97, -0.58], [-0.74, -0.66], [-0.48, -0.64], [-0.24, -0.56]])
+    brow_r = np.array(
+        [[-1.16, -0.40], [-0.97, -0.58], [-0.74, -0.66], [-0.48, -0.64], [-0.24, -0.56]]
+    )
     p[17:22] = brow_r
     p[22:27] = _mirror(brow_r[::-1])
     p[27:31] = np.column_stack([np.zeros(4), [-0.02, 0.33, 0.68, 1.02]])
@@ -204,7 +205,6 @@ class Template:
     boundary: np.ndarray
     mouth_boundary: np.ndarray
     level: int = 0
-    _frozen: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("vertices", "faces", "ibug_xy", "ibug_vertex", "boundary", "mouth_boundary"):
@@ -258,11 +258,15 @@ class Template:
             return self.fiducials[which]
         numbers = np.asarray(which)
         if numbers.ndim != 1 or numbers.size == 0 or not np.issubdtype(numbers.dtype, np.integer):
-            raise InputError(source, "fiducial_set: expected a set name or a 1-D list of iBUG numbers")
+            raise InputError(
+                source, "fiducial_set: expected a set name or a 1-D list of iBUG numbers"
+            )
         numbers = numbers.astype(np.int64)
         bad = numbers[(numbers < 1) | (numbers > N_IBUG)]
         if bad.size:
-            raise InputError(source, f"fiducial_set: iBUG numbers {bad.tolist()} not in 1..{N_IBUG}")
+            raise InputError(
+                source, f"fiducial_set: iBUG numbers {bad.tolist()} not in 1..{N_IBUG}"
+            )
         if np.unique(numbers).size != numbers.size:
             raise InputError(source, "fiducial_set: repeated iBUG numbers")
         idx = self.ibug_vertex[numbers - 1]
@@ -308,10 +312,10 @@ def _outline(n: int, ibug: np.ndarray) -> np.ndarray:
     brow_mean = ibug[17:27, 1].mean()
     top = brow_top - FOREHEAD_RATIO * (ibug[30, 1] - brow_mean)
     a = _JAW_A - JAW_INSET
-    # Dense parametrisation: t in [0, 2 pi), t = 0 at the chin, going to the image's right.
+    # Dense parametrisation: t in [0, 2 pi), t = 0 at the chin, going to the image's right;
+    # x = a sin t, and the jaw is the part below the ears (cos t >= 0).
     t = np.linspace(0.0, 2.0 * np.pi, 20001)
-    phi = t - np.pi / 2  # angle from the +x axis, y down: chin at phi = pi/2 ... use t directly
-    c, s = np.sin(t), np.cos(t)  # x = a sin t, jaw below y0 where cos t > 0
+    c, s = np.sin(t), np.cos(t)
     x = a * c
     y = np.where(
         s >= 0,
@@ -319,7 +323,6 @@ def _outline(n: int, ibug: np.ndarray) -> np.ndarray:
         _JAW_Y0 - (_JAW_Y0 - top) * np.abs(s) ** (2.0 / _FOREHEAD_N),
     )
     x = np.where(s >= 0, x, a * np.sign(c) * np.abs(c) ** (2.0 / _FOREHEAD_N))
-    del phi
     seg = np.hypot(np.diff(x), np.diff(y))
     arc = np.concatenate([[0.0], np.cumsum(seg)])
     targets = np.arange(n) * arc[-1] / n
@@ -413,8 +416,7 @@ def _relax(
 ) -> np.ndarray:
     """Spring relaxation of the free points (rows >= n_fixed) with Delaunay re-triangulation."""
     p = points.copy()
-    area = 0.5 * abs(signed_area2(outline, np.array([[0, i, i + 1] for i in range(1, len(outline) - 1)])).sum())
-    h = np.sqrt(2.0 * area / (np.sqrt(3.0) * len(p)))
+    h = _spacing(outline, len(p))
     for _ in range(150):
         tri = _triangulate(p, mouth, enforce=False)
         bars = _edges(tri)
@@ -437,6 +439,13 @@ def _relax(
         if np.abs(step[free[ok]]).max(initial=0.0) < 1e-4 * h:
             break
     return p
+
+
+def _spacing(outline: np.ndarray, n: int) -> float:
+    """Edge length of an equilateral lattice of ``n`` points filling the outline (shoelace area)."""
+    x, y = outline[:, 0], outline[:, 1]
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    return float(np.sqrt(2.0 * area / (np.sqrt(3.0) * n)))
 
 
 def _farthest_points(candidates: np.ndarray, chosen: np.ndarray, n: int) -> np.ndarray:
@@ -474,6 +483,12 @@ def build_template() -> Template:
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], g), np.arange(lo[1], hi[1], g))
     cand = np.column_stack([gx.ravel(), gy.ravel()])
     cand = cand[_inside_polygon(cand, outline) & ~_inside_polygon(cand, mouth_poly)]
+    # Free points start clear of the outline and the mouth (the relaxation keeps them clear): a
+    # free point close to a boundary edge would make a sliver triangle with it.
+    h = _spacing(outline, N_VERTICES)
+    clear = _segment_distance(cand, outline) > 0.5 * h
+    clear &= _segment_distance(cand, mouth_poly) > 0.5 * h
+    cand = cand[clear]
     free = _farthest_points(cand, fixed, N_VERTICES - n_fixed)
     mouth_idx = np.arange(N_OUTLINE, N_OUTLINE + len(mouth_numbers))
     points = _relax(np.vstack([fixed, free]), n_fixed, outline, mouth_poly, mouth_idx)

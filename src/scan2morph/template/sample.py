@@ -16,27 +16,45 @@ from scan2morph.template.tps import TPS
 from scan2morph.tol import N_IBUG
 
 
-def sample_range(xyz: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def sample_range(
+    xyz: np.ndarray, points: np.ndarray, source: str = "range image"
+) -> tuple[np.ndarray, np.ndarray]:
     """Bilinear samples of a range image.
 
     Parameters
     ----------
     xyz : (H, W, 3) float, mm, NaN = no data
     points : (V, 2) float, pixel coordinates ((0, 0) = centre of the top-left pixel)
+    source : str
+        Label for error messages.
 
     Returns
     -------
     vertices : (V, 3) float64, mm; NaN where invalid
-    valid : (V,) bool, all four neighbour pixels have data
+    valid : (V,) bool
+        True where the point lies in ``[0, W-1] x [0, H-1]`` and all four neighbour pixels have
+        data (x, y, z all finite). Non-finite points are invalid.
+
+    Raises
+    ------
+    InputError
+        ``xyz`` not (H, W, 3) with H, W >= 2, or ``points`` not (V, 2).
     """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    if xyz.ndim != 3 or xyz.shape[2] != 3 or min(xyz.shape[:2]) < 2:
+        raise InputError(source, f"xyz: expected (H, W, 3) with H, W >= 2, got {xyz.shape}")
+    if points.ndim != 2 or points.shape[1] != 2:
+        raise InputError(source, f"points: expected (V, 2) pixel coordinates, got {points.shape}")
     h, w = xyz.shape[:2]
     x, y = points[:, 0], points[:, 1]
     inside = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= w - 1) & (y <= h - 1)
-    x0 = np.clip(np.floor(np.where(inside, x, 0)).astype(np.int64), 0, max(w - 2, 0))
-    y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, max(h - 2, 0))
+    # The last row / column samples the cell to its left / above with weight 1 on its own pixel.
+    x0 = np.clip(np.floor(np.where(inside, x, 0)).astype(np.int64), 0, w - 2)
+    y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, h - 2)
     fx = np.where(inside, x, 0) - x0
     fy = np.where(inside, y, 0) - y0
-    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    x1, y1 = x0 + 1, y0 + 1
     p00, p10, p01, p11 = xyz[y0, x0], xyz[y0, x1], xyz[y1, x0], xyz[y1, x1]
     out = (
         p00 * ((1 - fx) * (1 - fy))[:, None]
@@ -50,7 +68,22 @@ def sample_range(xyz: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def texture_uv(points: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(V, 2) texture coordinates u = (x + 0.5) / W, v = (y + 0.5) / H (top-left origin, as glTF)."""
+    """Texture coordinates of pixel positions.
+
+    Parameters
+    ----------
+    points : (V, 2) float
+        Pixel coordinates ((0, 0) = centre of the top-left pixel).
+    width, height : int
+        Image size W, H in pixels.
+
+    Returns
+    -------
+    uv : (V, 2) float64
+        ``u = (x + 0.5) / W``, ``v = (y + 0.5) / H``: image convention, origin at the top-left
+        corner of the image (as glTF); the OBJ writer flips v.
+    """
+    points = np.asarray(points, dtype=np.float64)
     return np.column_stack([(points[:, 0] + 0.5) / width, (points[:, 1] + 0.5) / height])
 
 
@@ -62,7 +95,9 @@ def folded_faces(points2d: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return signed_area2(points2d, faces) >= 0
 
 
-def check_no_folds(points2d: np.ndarray, faces: np.ndarray, source: str, max_fraction: float = 0.0) -> np.ndarray:
+def check_no_folds(
+    points2d: np.ndarray, faces: np.ndarray, source: str, max_fraction: float = 0.0
+) -> np.ndarray:
     """Check the warp for folds; returns the folded faces when there are few enough.
 
     A thin-plate spline is not guaranteed one-to-one: with an open mouth a few small triangles
@@ -118,6 +153,14 @@ def fit_take(
     dict
         ``vertices`` (V, 3) mm (NaN invalid), ``uv`` (V, 2), ``valid`` (V,), ``points2d`` (V, 2),
         ``faces`` (F, 3), ``n_folded`` (number of folded triangles, whose vertices are invalid).
+
+    Raises
+    ------
+    InputError
+        Naming ``source``: landmarks not (68, 2) or not finite; ``xyz`` not (H, W, 3) or not
+        ``image_size``; an unknown fiducial set; fiducials outside the image, coincident or
+        collinear; more than ``max_fold_fraction`` folded triangles; fewer than
+        ``min_valid_fraction`` valid vertices.
     """
     landmarks = np.asarray(landmarks, dtype=np.float64)
     if landmarks.shape != (N_IBUG, 2):
@@ -125,12 +168,33 @@ def fit_take(
     if not np.isfinite(landmarks).all():
         k = int(np.argmax(~np.isfinite(landmarks).all(axis=1)))
         raise InputError(source, f"landmarks: point {k + 1} (iBUG numbering) is not finite")
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 3 or xyz.shape[2] != 3:
+        raise InputError(source, f"xyz: expected (H, W, 3), got {xyz.shape}")
+    width, height = (int(n) for n in image_size)
+    if (height, width) != xyz.shape[:2]:
+        raise InputError(
+            source,
+            f"image_size: {width}x{height} (WxH) but the range image is "
+            f"{xyz.shape[1]}x{xyz.shape[0]}; landmarks, color and range must be pixel to pixel",
+        )
     numbers, base_idx = template.fiducial_set(fiducial_set, source=source)
+    dst = landmarks[numbers - 1]
+    out = (dst < -0.5).any(axis=1) | (dst[:, 0] > width - 0.5) | (dst[:, 1] > height - 0.5)
+    if out.any():
+        k = int(np.argmax(out))
+        raise InputError(
+            source,
+            f"fiducials: image point {k} (iBUG {int(numbers[k])}) at {dst[k].round(1).tolist()} "
+            f"is outside the {width}x{height} image ({int(out.sum())} fiducials outside)",
+        )
     fine = subdivide_template(template, levels)
-    spline = TPS.fit(template.vertices[base_idx], landmarks[numbers - 1], source=source, image_size=image_size)
+    spline = TPS.fit(
+        template.vertices[base_idx], landmarks[numbers - 1], source=source, image_size=image_size
+    )
     points = spline(fine.vertices)
     folded = check_no_folds(points, fine.faces, source, max_fold_fraction)
-    vertices, valid = sample_range(xyz, points)
+    vertices, valid = sample_range(xyz, points, source=source)
     valid[np.unique(fine.faces[folded])] = False
     vertices[~valid] = np.nan
     share = float(valid.mean())
@@ -141,7 +205,6 @@ def fit_take(
             f"least {100 * min_valid_fraction:.0f}%): the face region has no range data or the "
             "landmarks do not belong to this scan",
         )
-    width, height = image_size
     return {
         "vertices": vertices,
         "uv": texture_uv(points, width, height),

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 
+from scan2morph.errors import InputError
+
 
 def subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One 1-to-4 midpoint subdivision.
@@ -54,11 +56,30 @@ def subdivide_template(template, levels: int = 1):
     Base vertex indices (fiducials, named points) are kept; the outer and mouth boundary loops
     get their midpoints inserted, in order. The canonical 2D coordinates are subdivided, so the
     warp is applied afterwards to every vertex (midpoints follow the spline, not the chords).
+
+    Parameters
+    ----------
+    template : Template
+        Base (or already subdivided) template.
+    levels : int
+        Number of 1-to-4 subdivisions (default 1, the paper's high resolution). Each level adds
+        one vertex per edge (V + E vertices) and multiplies the faces by 4.
+
+    Returns
+    -------
+    Template
+        With ``level`` increased by ``levels``; ``fiducials``, ``named`` and ``ibug_vertex`` are
+        unchanged (base indices are kept, new vertices are appended).
+
+    Raises
+    ------
+    InputError
+        ``levels`` is not an integer >= 0.
     """
     if isinstance(levels, bool) or int(levels) != levels or levels < 0:
-        from scan2morph.errors import InputError
-
-        raise InputError("config", f"template.subdivision_levels: expected an integer >= 0, got {levels!r}")
+        raise InputError(
+            "config", f"template.subdivision_levels: expected an integer >= 0, got {levels!r}"
+        )
     for _ in range(int(levels)):
         vertices, faces, edges = subdivide(template.vertices, template.faces)
         index = {(int(a), int(b)): len(template.vertices) + k for k, (a, b) in enumerate(edges)}

@@ -70,29 +70,47 @@ class TPS:
         src = np.asarray(src, dtype=np.float64)
         dst = np.asarray(dst, dtype=np.float64)
         if src.ndim != 2 or src.shape[1] != 2 or dst.shape != src.shape:
-            raise InputError(source, f"fiducials: expected two (m, 2) arrays, got {src.shape} and {dst.shape}")
+            raise InputError(
+                source, f"fiducials: expected two (m, 2) arrays, got {src.shape} and {dst.shape}"
+            )
         m = len(src)
         if m < 3:
-            raise InputError(source, f"fiducials: a thin-plate spline needs at least 3 points, got {m}")
+            raise InputError(
+                source, f"fiducials: a thin-plate spline needs at least 3 points, got {m}"
+            )
         for name, pts in (("template", src), ("image", dst)):
             bad = ~np.isfinite(pts).all(axis=1)
             if bad.any():
-                raise InputError(source, f"fiducials: {name} point {int(np.argmax(bad))} is not finite")
+                raise InputError(
+                    source, f"fiducials: {name} point {int(np.argmax(bad))} is not finite"
+                )
         d = _pairwise(src, src)
         scale = max(float(np.ptp(src, axis=0).max()), 1e-300)
         i, j = np.nonzero(np.triu(d <= 1e-9 * scale, k=1))
         if len(i):
-            raise InputError(source, f"fiducials: points {int(i[0])} and {int(j[0])} coincide (duplicate points)")
+            raise InputError(
+                source, f"fiducials: points {int(i[0])} and {int(j[0])} coincide (duplicate points)"
+            )
         centred = src - src.mean(axis=0)
         sv = np.linalg.svd(centred, compute_uv=False)
         if sv[1] <= RCOND * 1e2 * max(sv[0], 1e-300):
-            raise InputError(source, "fiducials: all points are collinear (the spline's system is singular)")
+            raise InputError(
+                source, "fiducials: all points are collinear (the spline's system is singular)"
+            )
         if image_size is not None:
             w, h = image_size
-            out = (dst[:, 0] < -0.5) | (dst[:, 0] > w - 0.5) | (dst[:, 1] < -0.5) | (dst[:, 1] > h - 0.5)
+            out = (
+                (dst[:, 0] < -0.5)
+                | (dst[:, 0] > w - 0.5)
+                | (dst[:, 1] < -0.5)
+                | (dst[:, 1] > h - 0.5)
+            )
             if out.any():
                 k = int(np.argmax(out))
-                raise InputError(source, f"fiducials: image point {k} at {dst[k].round(1).tolist()} is outside the {w}x{h} image")
+                raise InputError(
+                    source,
+                    f"fiducials: image point {k} at {dst[k].round(1).tolist()} is outside the {w}x{h} image",
+                )
         p = np.column_stack([np.ones(m), src])
         a = np.zeros((m + 3, m + 3))
         a[:m, :m] = _phi(d)
@@ -113,7 +131,9 @@ class TPS:
         for s in range(0, len(pts), 65536):
             blk = pts[s : s + 65536]
             out[s : s + 65536] = (
-                self.affine[0] + blk @ self.affine[1:] + _phi(_pairwise(blk, self.centres)) @ self.weights
+                self.affine[0]
+                + blk @ self.affine[1:]
+                + _phi(_pairwise(blk, self.centres)) @ self.weights
             )
         return out
 
