@@ -7,6 +7,17 @@ rule modal:
         template="resources/template.npz",
     output:
         part="results/{subject}/modal.h5",
+        coordinates=report(
+            "results/{subject}/tables/modal_coordinates.tsv",
+            caption="../report/modal_coordinates.rst",
+            category="Modal analysis",
+        ),
+        reconstruction=report(
+            "results/{subject}/tables/modal_reconstruction.tsv",
+            caption="../report/modal_reconstruction.rst",
+            category="Modal analysis",
+        ),
+        meshes=directory("results/{subject}/meshes/expressions"),
     log:
         "logs/modal/{subject}.log",
     benchmark:

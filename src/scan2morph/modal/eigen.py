@@ -445,6 +445,7 @@ def modal_basis(
     params: ModalParams | None = None,
     upper_face: ArrayLike | None = None,
     *,
+    fixed: ArrayLike | None = None,
     source: str = "neutral",
 ) -> ModalBasis:
     """Natural modal basis of a neutral face mesh (paper Sec. III.B).
@@ -456,6 +457,10 @@ def modal_basis(
     params : ModalParams, optional
     upper_face : (V,) bool, optional
         Vertices of the upper face, thickened by ``params.upper_thickness_factor``.
+    fixed : (V,) bool, optional
+        Vertices held fixed; default every boundary vertex. A face template has two boundary
+        loops, the outline and the mouth: the paper fixes the outline, and the lips must stay
+        free (fixing the mouth loop clamps the lips, and no mode can then move them).
     source : str
         Label for error messages, e.g. ``"subject/take"``.
 
@@ -476,6 +481,11 @@ def modal_basis(
         raise InputError(source, f"boundary: expected 'clamped' or 'pinned', got {p.boundary!r}")
     n_v = v.shape[0]
     boundary = fem.boundary_vertices(f, n_v)
+    if fixed is not None:
+        fixed_mask = np.asarray(fixed, dtype=bool)
+        if fixed_mask.shape != (n_v,):
+            raise InputError(source, f"fixed: expected a ({n_v},) bool mask, got shape {fixed_mask.shape}")
+        boundary = fixed_mask
     if not boundary.any():
         raise InputError(
             source, "faces: the mesh has no boundary edge (closed surface); nothing to fix"

@@ -27,6 +27,7 @@ def subject_modal(
     semantic_takes: Sequence[str],
     ks: Sequence[int],
     source: str,
+    fixed: np.ndarray | None = None,
 ) -> tuple[ModalBasis, dict[str, np.ndarray]]:
     """Modal basis of the neutral face and everything the store keeps about it.
 
@@ -45,13 +46,15 @@ def subject_modal(
     ks : sequence of int
         Numbers of modes at which the reconstruction error is reported.
     source : str
+    fixed : (V,) bool, optional
+        Vertices held fixed (the outer outline); default every boundary vertex.
 
     Returns
     -------
     basis : ModalBasis
     datasets : dict of store path -> array
     """
-    basis = modal_basis(neutral, faces, params, upper_face, source=source)
+    basis = modal_basis(neutral, faces, params, upper_face, fixed=fixed, source=source)
     ks = sorted({int(k) for k in ks if 1 <= int(k) <= basis.n_modes} | {basis.n_modes})
     data = {
         "/modal/frequencies_hz": basis.frequencies_hz,
