@@ -28,7 +28,9 @@ def _range_layout():
     """The layout's entries for the repaired range data (what these tests' parts write)."""
     layout = load_layout(LAYOUT)
     layout["datasets"] = [
-        d for d in layout["datasets"] if d["path"].startswith("/takes/{take}/range/") or d["path"].endswith("landmarks")
+        d
+        for d in layout["datasets"]
+        if d["path"].startswith("/takes/{take}/range/") or d["path"].endswith("landmarks")
     ]
     assert len(layout["datasets"]) == 5
     return layout

@@ -30,7 +30,10 @@ def main(snakemake):
         write_part(
             out.part,
             {f"{g}/mesh/{k}": mesh[k] for k in ("vertices", "uv", "valid", "points2d")},
-            attrs={g: read_attrs(snakemake.input.part, g) | {"fiducial_set": p.fiducials, "n_folded": mesh["n_folded"]}},
+            attrs={
+                g: read_attrs(snakemake.input.part, g)
+                | {"fiducial_set": p.fiducials, "n_folded": mesh["n_folded"]}
+            },
         )
         write_obj(
             out.obj,

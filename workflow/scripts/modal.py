@@ -12,7 +12,6 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from scan2morph.io import write_obj  # noqa: E402
-
 from scan2morph.jobs import run_job  # noqa: E402
 from scan2morph.modal import ModalParams, ShellMaterial  # noqa: E402
 from scan2morph.modal.subject import subject_modal  # noqa: E402
@@ -70,16 +69,20 @@ def main(snakemake):
         )
         ks = data["/modal/reconstruction_k"]
         errors = {t: data[f"/expressions/{t}/reconstruction_rms_mm"] for t in p.expressions}
-        pd.DataFrame.from_dict(errors, orient="index", columns=[f"K={k}" for k in ks]).rename_axis("take").to_csv(
-            out.reconstruction, sep="\t", float_format="%.4f"
-        )
+        pd.DataFrame.from_dict(errors, orient="index", columns=[f"K={k}" for k in ks]).rename_axis(
+            "take"
+        ).to_csv(out.reconstruction, sep="\t", float_format="%.4f")
         # Each expression as measured and as synthesised back from its k coordinates (Fig. 8).
         folder = Path(out.meshes)
         folder.mkdir(parents=True, exist_ok=True)
         base = motion["/neutral/vertices"]
         for t in p.expressions:
             write_obj(folder / f"{t}_measured.obj", base + fields[t], template.faces)
-            write_obj(folder / f"{t}_synthesized.obj", base + data[f"/expressions/{t}/synthesized"], template.faces)
+            write_obj(
+                folder / f"{t}_synthesized.obj",
+                base + data[f"/expressions/{t}/synthesized"],
+                template.faces,
+            )
 
     run_job(snakemake.log[0], job)
 

@@ -7,8 +7,8 @@ from scan2morph.io.calibration import (
 )
 from scan2morph.io.gltf import read_glb_targets, write_glb
 from scan2morph.io.image import read_color, write_color
-from scan2morph.io.obj import write_obj
 from scan2morph.io.landmarks import read_pts, write_pts
+from scan2morph.io.obj import write_obj
 from scan2morph.io.range_image import (
     read_abs,
     read_npz_range,

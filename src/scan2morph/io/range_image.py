@@ -81,7 +81,12 @@ def read_abs(path: str | Path) -> np.ndarray:
         )
     dims = []
     for i, (line, pattern, what) in enumerate(
-        zip(lines[:3], _HEADER_RE, ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"), strict=True)
+        zip(
+            lines[:3],
+            _HEADER_RE,
+            ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"),
+            strict=True,
+        )
     ):
         m = pattern.match(line)
         if m is None:

@@ -71,14 +71,19 @@ def subject_morph(
         missing = [lab for lab in weights if lab not in per_label]
         if missing and all(lab in VISEMES for lab in missing):
             continue  # a paper viseme this subject was not scanned with: the blend does not apply
-        blend_shapes[name] = blend(neutral, per_label, dict(weights), source=f"{source}/morph.blends.{name}")
+        blend_shapes[name] = blend(
+            neutral, per_label, dict(weights), source=f"{source}/morph.blends.{name}"
+        )
     pca_shapes = {}
     for name, alpha in pca_blends.items():
         a = np.asarray(alpha, dtype=float)
         if np.any(a[model.n_components :] != 0):
             continue  # needs more components than this subject's few takes give: does not apply
         pca_shapes[name] = synthesize(
-            model, a[: model.n_components], alpha_limit=alpha_limit, source=f"{source}/morph.pca_blends.{name}"
+            model,
+            a[: model.n_components],
+            alpha_limit=alpha_limit,
+            source=f"{source}/morph.pca_blends.{name}",
         )
     return model, blend_shapes, pca_shapes
 

@@ -16,12 +16,6 @@ import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
 from scan2morph.errors import InputError
-import scipy.sparse as sp
-import scipy.sparse.csgraph  # noqa: F401  (sp.csgraph)
-import scipy.sparse.linalg as spla
-
-from scan2morph.errors import InputError
-
 from scan2morph.motion.mask import stencil_mask
 from scan2morph.motion.smooth import fill_missing, laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
@@ -87,7 +81,9 @@ def complete_neutral(
     filled = ~neutral.valid | ~np.isfinite(neutral.vertices).all(axis=1)
     vertices = harmonic_fill(neutral.vertices, faces, ~filled)
     if not np.isfinite(vertices).all():
-        raise InputError(source, "neutral mesh: a part of the template has no valid vertex to fill it from")
+        raise InputError(
+            source, "neutral mesh: a part of the template has no valid vertex to fill it from"
+        )
     return vertices, filled
 
 

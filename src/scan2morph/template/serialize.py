@@ -37,8 +37,13 @@ def load_template(path: str | Path) -> Template:
     try:
         with np.load(path, allow_pickle=False) as d:
             if int(d["format"]) != TEMPLATE_FORMAT:
-                raise InputError(path, f"template format {int(d['format'])}, expected {TEMPLATE_FORMAT}")
-            fid = {k: (np.array(a), np.array(b)) for k, (a, b) in json.loads(str(d["fiducials"])).items()}
+                raise InputError(
+                    path, f"template format {int(d['format'])}, expected {TEMPLATE_FORMAT}"
+                )
+            fid = {
+                k: (np.array(a), np.array(b))
+                for k, (a, b) in json.loads(str(d["fiducials"])).items()
+            }
             return Template(
                 vertices=d["vertices"],
                 faces=d["faces"],
