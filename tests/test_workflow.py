@@ -196,3 +196,23 @@ def test_bad_subjects_fail_with_a_clear_message(cohort, subject, message):
     logs = "".join(p.read_text() for p in (work / "logs").rglob("*.log") if f"/{subject}" in str(p))
     assert re.search(message, logs) or message in logs
     assert "Traceback" not in logs
+
+
+def test_exports_and_accuracy_of_a_finished_subject(cohort):
+    """The glTF holds the viseme models as morph targets; the synthetic subject has its accuracy."""
+    import json
+
+    from scan2morph.io import read_glb_targets
+    from scan2morph.store import read_part
+
+    work, _, _ = cohort
+    store = read_part(work / "results" / "alice" / "alice.h5")
+    base, targets = read_glb_targets(work / "results" / "alice" / "alice.glb")
+    np.testing.assert_allclose(base, store["/neutral/vertices"], atol=1e-4)
+    np.testing.assert_allclose(targets["car"], store["/visemes/car/model"], atol=1e-4)
+    assert "pca_1" in targets
+    acc = json.loads((work / "results" / "synth01" / "accuracy.json").read_text())
+    assert acc["takes"]["car"]["align"]["rotation_deg"] < 1.0
+    assert acc["takes"]["neutral"]["mesh"]["rms_mm"] < 1.0
+    assert (work / "results" / "alice" / "meshes" / "neutral.obj").is_file()
+    assert (work / "results" / "alice" / "tables" / "pca_eigenvalues.tsv").is_file()
