@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 # Debian packages: libusb for open3d, EGL/OSMesa for headless rendering, chromium for the report test.
-DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1
+DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium
 STAMP := $(VENV)/.setup-stamp
 DEB_STAMP := $(VENV)/.deb-stamp
 export PYOPENGL_PLATFORM ?= osmesa

@@ -1,5 +1,6 @@
 # scan2morph: 3D face scans -> subject-specific morphable face models.
-# Stages (one file each under workflow/rules/): synth, ingest, repair, fit, align, motion, morph, modal, store, accuracy, figures.
+# Stages (one file each under workflow/rules/): synth, ingest, repair, fit, align, motion, morph, modal, store, accuracy, figures,
+# report, cohort; sweeps (on demand: `snakemake sweep_all`).
 
 
 from snakemake.utils import min_version
@@ -32,6 +33,9 @@ include: "workflow/rules/modal.smk"
 include: "workflow/rules/store.smk"
 include: "workflow/rules/accuracy.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/report.smk"
+include: "workflow/rules/cohort.smk"
+include: "workflow/rules/sweeps.smk"
 
 
 rule all:

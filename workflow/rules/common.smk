@@ -68,7 +68,7 @@ def get_take_inputs(wildcards):
 
 
 def synth_groups():
-    """Synthetic subjects grouped by which of their takes are stereo pairs, one rule each:
+    """Synthetic subjects grouped by which of their takes are stereo pairs, one generator job per group:
     dicts with the rule ``name``, the ``subjects`` and their ``takes`` (take, kind, label,
     modality), the group with the fewest stereo takes first."""
     groups = {}
@@ -244,4 +244,134 @@ def get_final_outputs():
         expand("results/{subject}/{subject}.h5", subject=SUBJECTS)
         + expand("results/{subject}/accuracy.json", subject=synthetic_subjects())
         + get_figure_outputs()
+        + expand("results/{subject}/report.html", subject=SUBJECTS)
+        + (
+            ["results/cohort/summary.tsv", "results/cohort/summary.png"]
+            if SUBJECTS
+            else []
+        )
     )
+
+
+# --- helpers of report.smk ---
+from glob import glob
+
+from scan2morph.render.figures import STAGE_FIGURES, figure_names
+
+
+# Input helpers (used by this file only).
+def get_subject_figures(wildcards):
+    """Every figure of the subject that the figures rules draw (a stage whose rule is not in the
+    workflow contributes the PNGs already in the figures folder)."""
+    files = []
+    for stage in STAGE_FIGURES:
+        if rules.has(f"figures_{stage}"):
+            files += expand(
+                "results/{subject}/figures/{stem}.png",
+                subject=wildcards.subject,
+                stem=figure_names(stage),
+            )
+        else:
+            files += sorted(glob(f"results/{wildcards.subject}/figures/{stage}_*.png"))
+    return files
+
+
+def get_figure_captions(wildcards):
+    """The caption file of each figure that has one (workflow/report/figures/{stem}.rst)."""
+    folder = Path(workflow.basedir) / "workflow" / "report" / "figures"
+    stems = [Path(f).stem for f in get_subject_figures(wildcards)]
+    return [str(folder / f"{s}.rst") for s in stems if (folder / f"{s}.rst").is_file()]
+
+
+def get_subject_accuracy(wildcards):
+    """The subject's accuracy.json (synthetic subjects), else nothing."""
+    if wildcards.subject in synthetic_subjects():
+        return [f"results/{wildcards.subject}/accuracy.json"]
+    return []
+
+
+def get_rule_order(wildcards):
+    """Rule names in the order the workflow defines them (the stage order of the timings)."""
+    return [r.name for r in workflow.rules]
+
+
+# --- helpers of sweeps.smk ---
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from snakemake.utils import Paramspace
+
+from scan2morph.errors import InputError
+from scan2morph.report.sweep import read_sweep_table, sweep_settings
+
+SWEEP_TABLE = (
+    read_sweep_table(
+        config["sweeps"], Path(workflow.basedir) / "schemas" / "config.schema.yaml"
+    )
+    if Path(config["sweeps"]).is_file()
+    else None
+)
+# one folder per combination, results/sweeps/{column}~{value}/.../ (Paramspace instance patterns)
+SWEEP_SPACE = Paramspace(
+    SWEEP_TABLE.frame() if SWEEP_TABLE else pd.DataFrame(), single_wildcard="params"
+)
+# folder of a combination -> its values by dotted config path
+SWEEP_ROWS = dict(
+    zip(SWEEP_SPACE.instance_patterns, SWEEP_TABLE.rows if SWEEP_TABLE else ())
+)
+
+
+# Input helpers (used by this file only).
+def get_sweep_raw(wildcards):
+    """The subject's ingest parts (raw range images) when a sweep re-runs the repair stage."""
+    if SWEEP_TABLE is None or SWEEP_TABLE.first_stage != "repair":
+        return []
+    return expand(
+        "results/{subject}/takes/{take}/ingest.h5",
+        subject=wildcards.subject,
+        take=takes_of(wildcards.subject),
+    )
+
+
+def get_sweep_settings(wildcards):
+    """The config sections the re-run stages read, with the combination's values set."""
+    return sweep_settings(config, SWEEP_ROWS[wildcards.params])
+
+
+def get_sweep_row(wildcards):
+    return dict(SWEEP_ROWS[wildcards.params])
+
+
+def get_take_kinds(wildcards):
+    rows = TAKES.loc[wildcards.subject]
+    return dict(zip(rows["take"], rows["kind"]))
+
+
+def get_sweep_results(wildcards):
+    """Every combination's accuracy of every synthetic subject (a clear error if none)."""
+    if not SWEEP_ROWS:
+        raise InputError(
+            f"{config['sweeps']} (config key 'sweeps')",
+            "no parameter sweep: the sweep table is missing or has no rows",
+        )
+    if not synthetic_subjects():
+        raise InputError(
+            "config key 'synthetic.subjects'",
+            "a parameter sweep runs on the synthetic cohort: set it above 0",
+        )
+    return expand(
+        "results/sweeps/{params}/{subject}/accuracy.json",
+        params=SWEEP_SPACE.instance_patterns,
+        subject=synthetic_subjects(),
+    )
+
+
+def get_sweep_result_rows(wildcards):
+    """(combination, subject) of each input of sweep_summary, in input order."""
+    return [
+        [dict(row), subject]
+        for row in SWEEP_ROWS.values()
+        for subject in synthetic_subjects()
+    ]

@@ -23,9 +23,14 @@ def main(snakemake):
             levels=p.levels,
             source=f"{w.subject}/{w.take}",
             min_valid_fraction=p.min_valid_fraction,
+            max_fold_fraction=p.max_fold_fraction,
         )
         logging.info(
-            "%s: %d vertices, %.1f%% valid", w.take, len(mesh["valid"]), 100 * mesh["valid"].mean()
+            "%s: %d vertices, %.1f%% valid, %d folded triangles",
+            w.take,
+            len(mesh["valid"]),
+            100 * mesh["valid"].mean(),
+            mesh["n_folded"],
         )
         write_part(
             out.part,

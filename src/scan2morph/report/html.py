@@ -1,0 +1,493 @@
+"""The per-subject report: one self-contained HTML page (``results/{subject}/report.html``).
+
+The page embeds everything it shows (images as base64 ``data:`` URIs, inline CSS, no script) so it
+opens from disk with no server, and declares a Content-Security-Policy that forbids loading
+anything else. Sections: the subject's inputs (a thumbnail of each take's color image), every
+figure with a one-line caption, the PCA tables (Yano and Harada, Tables 1 and 2), the modal
+coordinates of the expressions and their reconstruction error against the number of modes, the
+accuracy against ground truth (synthetic subjects), and provenance (store attributes, input
+checksums, software versions, run time per stage). Every text is HTML-escaped.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.report.provenance import software_versions, store_provenance
+from scan2morph.store import open_store
+
+#: Image types a report embeds: file suffix -> (MIME type, leading magic bytes).
+IMAGE_TYPES = {
+    ".png": ("image/png", b"\x89PNG\r\n\x1a\n"),
+    ".jpg": ("image/jpeg", b"\xff\xd8\xff"),
+    ".jpeg": ("image/jpeg", b"\xff\xd8\xff"),
+}
+#: Order of the take kinds in the inputs section.
+KIND_ORDER = ("neutral", "viseme", "expression")
+#: Section titles of the figure stages (file stems are ``{stage}_{name}``).
+STAGE_TITLES = {"fit": "Fit", "motion": "Motion", "morph": "Morphable model", "modal": "Modal"}
+#: Only embedded data and inline styles may load (a stray external reference is blocked and
+#: reported by the browser instead of being fetched).
+CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0 auto;
+max-width:1200px;padding:0 1.5rem 3rem;color:#222;line-height:1.45}
+h1{margin-top:1.5rem}h2{border-bottom:2px solid #ddd;padding-bottom:.2rem;margin-top:2.5rem}
+nav a{margin-right:1rem}
+table{border-collapse:collapse;margin:.6rem 0 1.2rem;font-size:.9rem}
+caption{text-align:left;font-weight:600;padding:.3rem 0;white-space:nowrap}
+th,td{border:1px solid #ccc;padding:.2rem .5rem}th{background:#f3f3f3}
+td.num{text-align:right;font-variant-numeric:tabular-nums}
+code{font-size:.8rem;word-break:break-all}
+.thumbs{display:flex;flex-wrap:wrap;gap:.8rem}
+.thumbs figure{margin:0;width:min-content}
+figure.fig{margin:1rem 0 2rem}figure.fig img{max-width:100%;height:auto;border:1px solid #eee}
+figcaption{font-size:.85rem;color:#444}
+.note{color:#666;font-size:.9rem}.scroll{overflow-x:auto}
+"""
+
+
+@dataclass(frozen=True)
+class ReportFigure:
+    """A figure file and its one-line caption."""
+
+    path: Path
+    caption: str
+
+
+def read_caption(path: str | Path) -> str:
+    """A reStructuredText caption file as one line of plain text.
+
+    Whitespace runs become single spaces and inline markup (````literal````, ``*emphasis*``,
+    ``**strong**``, ```interpreted```) is reduced to its text.
+
+    Raises
+    ------
+    InputError
+        The file does not exist.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "caption file not found")
+    text = " ".join(path.read_text(encoding="utf-8").split())
+    text = re.sub(r"``(.+?)``", r"\1", text)
+    text = re.sub(r"\*\*(.+?)\*\*", r"\1", text)
+    text = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"\1", text)
+    return re.sub(r"`(.+?)`(_{1,2})?", r"\1", text)
+
+
+def data_uri(data: bytes, mime: str) -> str:
+    """``data:{mime};base64,...`` of raw bytes."""
+    return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
+
+
+def image_uri(path: str | Path) -> str:
+    """The ``data:`` URI of a PNG or JPEG file.
+
+    Raises
+    ------
+    InputError
+        Unsupported suffix, missing file, or content that is not of the suffix's type.
+    """
+    path = Path(path)
+    kind = IMAGE_TYPES.get(path.suffix.lower())
+    if kind is None:
+        raise InputError(
+            path, f"figure: expected one of {sorted(IMAGE_TYPES)}, got {path.suffix!r}"
+        )
+    if not path.is_file():
+        raise InputError(path, "figure file not found")
+    data = path.read_bytes()
+    if not data.startswith(kind[1]):
+        raise InputError(path, f"figure: not a {kind[0]} file (bad signature)")
+    return data_uri(data, kind[0])
+
+
+def thumbnail_jpeg(color: np.ndarray, width_px: int, quality: int = 85) -> bytes:
+    """A color image shrunk to ``width_px`` columns (aspect kept, area averaging), as JPEG.
+
+    Parameters
+    ----------
+    color : (H, W, 3) uint8, RGB
+    width_px : int
+        Width of the thumbnail in pixels (an image narrower than this keeps its size).
+
+    Returns
+    -------
+    bytes
+        The JPEG file.
+    """
+    color = np.asarray(color)
+    if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
+        raise InputError(
+            "thumbnail", f"color: expected (H, W, 3) uint8, got {color.shape} {color.dtype}"
+        )
+    h, w = color.shape[:2]
+    if w > width_px:
+        size = (int(width_px), max(1, round(h * width_px / w)))
+        color = cv2.resize(color, size, interpolation=cv2.INTER_AREA)
+    ok, buf = cv2.imencode(".jpg", color[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
+        raise InputError("thumbnail", "JPEG encoding failed")
+    return buf.tobytes()
+
+
+def _esc(value: object) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def _fmt(value: object, spec: str = ".4g") -> str:
+    if value is None:
+        return "n/a"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return "n/a" if not math.isfinite(value) else format(float(value), spec)
+    return str(value)
+
+
+def _table(columns: Sequence[str], rows: Sequence[Sequence[object]], caption: str = "") -> str:
+    """An HTML table; numbers right-aligned, every text escaped."""
+    head = "".join(f"<th>{_esc(c)}</th>" for c in columns)
+    body = []
+    for row in rows:
+        cells = []
+        for i, cell in enumerate(row):
+            tag = "th" if i == 0 else "td"
+            numeric = isinstance(cell, (int, float, np.number)) and not isinstance(cell, bool)
+            cls = ' class="num"' if numeric and tag == "td" else ""
+            cells.append(f"<{tag}{cls}>{_esc(_fmt(cell))}</{tag}>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    cap = f"<caption>{_esc(caption)}</caption>" if caption else ""
+    table = f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    return f'<div class="scroll">{table}</div>'
+
+
+def _note(text: str) -> str:
+    return f'<p class="note">{_esc(text)}</p>'
+
+
+def _attr(obj: h5py.HLObject, key: str, default: str = "") -> str:
+    value = obj.attrs.get(key, default)
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _take_order(h5: h5py.File, takes: Sequence[str] | None) -> list[str]:
+    present = list(h5["takes"]) if "takes" in h5 else []
+    if takes is not None:
+        return [t for t in takes if t in present] + [t for t in present if t not in takes]
+    rank = {k: i for i, k in enumerate(KIND_ORDER)}
+    return sorted(present, key=lambda t: (rank.get(_attr(h5["takes"][t], "kind"), 99), t))
+
+
+def _inputs_section(h5: h5py.File, takes: list[str], thumbnail_px: int) -> str:
+    if not takes:
+        return _note("The store holds no takes.")
+    items = []
+    for take in takes:
+        group = h5["takes"][take]
+        kind, label = _attr(group, "kind", "?"), _attr(group, "label", "?")
+        modality = _attr(group, "modality", "?")
+        if "range/color" not in group:
+            items.append(f"<figure><figcaption>{_esc(take)}: no color image</figcaption></figure>")
+            continue
+        color = group["range/color"][()]
+        h, w = color.shape[:2]
+        uri = data_uri(thumbnail_jpeg(color, thumbnail_px), "image/jpeg")
+        text = f"{take}: {kind} {label}, {modality}, {w}x{h} px"
+        items.append(
+            f'<figure><img src="{uri}" alt="{_esc(take)}" width="{min(w, thumbnail_px)}">'
+            f"<figcaption>{_esc(text)}</figcaption></figure>"
+        )
+    return '<div class="thumbs">' + "".join(items) + "</div>"
+
+
+def _figures_section(figures: Sequence[ReportFigure]) -> str:
+    if not figures:
+        return _note("No figures were drawn for this subject.")
+    groups: dict[str, list[ReportFigure]] = {}
+    for fig in figures:
+        stem = Path(fig.path).stem
+        stage = stem.split("_", 1)[0] if "_" in stem else "other"
+        groups.setdefault(stage, []).append(fig)
+    out = []
+    for stage, figs in groups.items():
+        out.append(f"<h3>{_esc(STAGE_TITLES.get(stage, stage.capitalize()))}</h3>")
+        for fig in figs:
+            stem = Path(fig.path).stem
+            out.append(
+                f'<figure class="fig" id="fig-{_esc(stem)}"><img src="{image_uri(fig.path)}" '
+                f'alt="{_esc(stem)}"><figcaption><b>{_esc(stem)}</b>: {_esc(fig.caption)}'
+                "</figcaption></figure>"
+            )
+    return "".join(out)
+
+
+def _pca_section(h5: h5py.File) -> str:
+    if "pca/eigenvalues" not in h5:
+        return _note("The store holds no PCA.")
+    pca = h5["pca"]
+    eig, cr, ccr = pca["eigenvalues"][()], pca["cr"][()], pca["ccr"][()]
+    rows1 = [
+        [i + 1, float(e), float(100 * c), float(100 * cc)]
+        for i, (e, c, cc) in enumerate(zip(eig, cr, ccr, strict=True))
+    ]
+    table1 = _table(
+        ["component", "eigenvalue (mm^2)", "CR (%)", "CCR (%)"],
+        rows1,
+        "Table 1: eigenvalues, contribution rate (CR) and cumulative contribution rate (CCR)",
+    )
+    coeff = pca["coefficients"][()]
+    names = pca["takes"].asstr()[()]
+    rows2 = [[str(t), *map(float, row)] for t, row in zip(names, coeff, strict=True)]
+    table2 = _table(
+        ["model", *[f"w{i + 1}" for i in range(coeff.shape[1])]],
+        rows2,
+        "Table 2: PCA coefficients of each model (mm)",
+    )
+    return table1 + table2
+
+
+def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
+    if "modal/frequencies_hz" not in h5:
+        return _note("The store holds no modal basis.")
+    freqs = h5["modal/frequencies_hz"][()]
+    n = min(int(n_coordinates), len(freqs))
+    out = [
+        _table(
+            ["", *[f"mode {i + 1}" for i in range(n)]],
+            [["frequency (Hz)", *map(float, freqs[:n])]],
+            f"Natural frequencies of the first {n} of {len(freqs)} modes",
+        )
+    ]
+    exprs = list(h5["expressions"]) if "expressions" in h5 else []
+    if not exprs:
+        return "".join(out) + _note("The subject has no expression takes.")
+    label = {
+        t: _attr(h5["takes"][t], "label", "") if t in h5.get("takes", {}) else "" for t in exprs
+    }
+    rows = [
+        [
+            f"{t} ({label[t]})" if label[t] else t,
+            *map(float, h5["expressions"][t]["coordinates"][:n]),
+        ]
+        for t in exprs
+        if "coordinates" in h5["expressions"][t]
+    ]
+    out.append(
+        _table(
+            ["expression", *[f"q{i + 1}" for i in range(n)]],
+            rows,
+            f"Modal coordinates q = Q^T M v of each expression, first {n} modes",
+        )
+    )
+    if "modal/reconstruction_k" in h5:
+        ks = h5["modal/reconstruction_k"][()]
+        rows = [
+            [t, *map(float, h5["expressions"][t]["reconstruction_rms_mm"][()])]
+            for t in exprs
+            if "reconstruction_rms_mm" in h5["expressions"][t]
+        ]
+        out.append(
+            _table(
+                ["expression", *[f"K = {int(k)}" for k in ks]],
+                rows,
+                "RMS error (mm) of each expression rebuilt from its first K modes",
+            )
+        )
+    return "".join(out)
+
+
+def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
+    out: dict[str, object] = {}
+    for key, value in entry.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out |= _flatten(value, f"{name} ")
+        elif isinstance(value, (list, tuple)):
+            out[name] = json.dumps(value)
+        else:
+            out[name] = value
+    return out
+
+
+def _accuracy_section(accuracy: Mapping | None) -> str:
+    if accuracy is None:
+        return _note("No ground truth: accuracy is measured on synthetic subjects only.")
+    out = []
+    units = accuracy.get("units")
+    if isinstance(units, Mapping):
+        out.append(_note("Units: " + ", ".join(f"{k} in {v}" for k, v in units.items()) + "."))
+    summary = accuracy.get("summary", {})
+    if isinstance(summary, Mapping) and summary:
+        out.append(
+            _table(
+                ["metric", "value"],
+                [[k, v] for k, v in _flatten(summary).items()],
+                "Summary (worst take)",
+            )
+        )
+    takes = accuracy.get("takes", {})
+    if isinstance(takes, Mapping) and takes:
+        flat = {
+            t: _flatten(v) if isinstance(v, Mapping) else {"value": v} for t, v in takes.items()
+        }
+        columns = list(dict.fromkeys(k for row in flat.values() for k in row))
+        rows = [[t, *[row.get(c) for c in columns]] for t, row in flat.items()]
+        out.append(_table(["take", *columns], rows, "Per take"))
+    return "".join(out) or _note("The accuracy file holds no numbers.")
+
+
+def _provenance_section(
+    attrs: Mapping[str, str],
+    checksums: Mapping[str, Mapping[str, str]],
+    versions: Mapping[str, str],
+    timings: Sequence[Mapping[str, object]],
+) -> str:
+    out = [_table(["attribute", "value"], [[k, v] for k, v in attrs.items()], "Store")]
+    rows = [[t, r, h] for t, roles in checksums.items() for r, h in roles.items()]
+    out.append(
+        _table(["take", "file", "SHA-256"], rows, "Input checksums")
+        if rows
+        else _note("The store lists no input checksums.")
+    )
+    out.append(
+        _table(
+            ["software", "version"],
+            [[k, v] for k, v in versions.items()],
+            "Software (at report time)",
+        )
+    )
+    if timings:
+        rows = [
+            [t["stage"], int(t["jobs"]), float(t["seconds"]), float(t["max_rss_mb"])]
+            for t in timings
+        ]
+        rows.append(
+            [
+                "total",
+                sum(int(t["jobs"]) for t in timings),
+                sum(float(t["seconds"]) for t in timings),
+                float("nan"),
+            ]
+        )
+        out.append(
+            _table(
+                ["stage", "jobs", "wall time (s)", "max RSS (MB)"],
+                rows,
+                "Run time per stage (Snakemake benchmarks)",
+            )
+        )
+    else:
+        out.append(_note("No benchmark files were found for this subject."))
+    return "".join(out)
+
+
+def subject_report_html(
+    store_path: str | Path,
+    figures: Sequence[ReportFigure] = (),
+    accuracy: Mapping | None = None,
+    timings: Sequence[Mapping[str, object]] = (),
+    versions: Mapping[str, str] | None = None,
+    takes: Sequence[str] | None = None,
+    n_coordinates: int = 10,
+    thumbnail_px: int = 160,
+) -> str:
+    """The report page of one subject.
+
+    Parameters
+    ----------
+    store_path : str or Path
+        ``results/{subject}/{subject}.h5`` (its major format version is checked).
+    figures : sequence of ReportFigure
+        PNG/JPEG files (stems ``{stage}_{name}``) with one-line captions, in report order.
+    accuracy : mapping, optional
+        The content of ``accuracy.json`` (``units``, ``summary``, ``takes``); None when the
+        subject has no ground truth.
+    timings : sequence of mapping
+        Rows of :func:`~scan2morph.report.provenance.stage_timings`.
+    versions : mapping, optional
+        Software name -> version; default :func:`~scan2morph.report.provenance.software_versions`.
+    takes : sequence of str, optional
+        Take order of the inputs section (default: neutral, visemes, expressions, by id).
+    n_coordinates : int
+        Number of modal coordinates (and frequencies) shown per expression.
+    thumbnail_px : int
+        Width of the input thumbnails, pixels.
+
+    Returns
+    -------
+    str
+        The HTML document.
+
+    Raises
+    ------
+    InputError
+        Unreadable store or figure, a figure of an unsupported type, bad checksum attribute.
+    """
+    if n_coordinates < 1 or thumbnail_px < 1:
+        raise InputError("report", "n_coordinates and thumbnail_px: expected positive integers")
+    versions = software_versions() if versions is None else versions
+    with open_store(store_path) as h5:
+        attrs, checksums = store_provenance(h5)
+        subject = attrs.get("subject", Path(store_path).stem)
+        order = _take_order(h5, takes)
+        sections = [
+            ("inputs", "Inputs", _inputs_section(h5, order, thumbnail_px)),
+            ("figures", "Figures", _figures_section(figures)),
+            ("pca", "PCA (Yano and Harada, Tables 1 and 2)", _pca_section(h5)),
+            ("modal", "Modal coordinates", _modal_section(h5, n_coordinates)),
+            ("accuracy", "Accuracy against ground truth", _accuracy_section(accuracy)),
+            ("provenance", "Provenance", _provenance_section(attrs, checksums, versions, timings)),
+        ]
+    nav = "".join(
+        f'<a href="#{sid}">{_esc(title.split(" (")[0])}</a>' for sid, title, _ in sections
+    )
+    body = "".join(
+        f'<section id="{sid}"><h2>{_esc(title)}</h2>{content}</section>'
+        for sid, title, content in sections
+    )
+    lead = (
+        f"{len(order)} takes; store format {attrs.get('format_version', '?')}, "
+        f"scan2morph {attrs.get('scan2morph_version', '?')}; units: mm, angles in degrees."
+    )
+    return (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f'<meta http-equiv="Content-Security-Policy" content="{CSP}">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>scan2morph report: {_esc(subject)}</title><style>{_CSS}</style></head>"
+        f"<body><header><h1>scan2morph report: {_esc(subject)}</h1><p>{_esc(lead)}</p>"
+        f"<nav>{nav}</nav></header>{body}</body></html>\n"
+    )
+
+
+def write_subject_report(path: str | Path, store_path: str | Path, **kwargs) -> None:
+    """Write :func:`subject_report_html` to ``path`` (replaced atomically).
+
+    Keyword arguments are those of :func:`subject_report_html`.
+    """
+    text = subject_report_html(store_path, **kwargs)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

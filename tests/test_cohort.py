@@ -1,0 +1,169 @@
+"""The cohort summary (scan2morph.report.cohort): analytic stores, then the tiny run's rule."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+
+from scan2morph.errors import InputError
+from scan2morph.report import cohort_table, motion_rms, subject_summary, write_cohort_summary
+from scan2morph.store import merge_parts, write_part
+from tests.tiny_run import SUBJECT, tiny_run
+
+V = 50
+
+
+def _store(tmp_path, subject, takes, motions, ccr, freqs):
+    """A store with the datasets the summary reads: takes (kind, label), viseme motion, PCA CCR,
+    modal frequencies."""
+    part = tmp_path / f"{subject}_part.h5"
+    data = {f"/visemes/{t}/motion": m for t, m in motions.items()}
+    data |= {"/pca/ccr": np.asarray(ccr, float), "/modal/frequencies_hz": np.asarray(freqs, float)}
+    data |= {f"/takes/{t}/landmarks": np.zeros((68, 2)) for t in takes}
+    attrs = {f"/takes/{t}": {"kind": k, "label": lab} for t, (k, lab) in takes.items()}
+    write_part(part, data, attrs)
+    path = tmp_path / f"{subject}.h5"
+    merge_parts(path, [part], subject, "0" * 64)
+    return path
+
+
+@pytest.fixture
+def stores(tmp_path):
+    rng = np.random.default_rng(3)
+    alice_motion = {
+        "car": np.tile([3.0, 4.0, 0.0], (V, 1)),  # |m| = 5 everywhere
+        "too1": np.tile([0.0, 0.0, 1.0], (V, 1)),
+        "too2": np.tile([0.0, 0.0, 3.0], (V, 1)),
+    }
+    alice_motion["too2"][:5] = np.nan  # rows without data are left out
+    alice = _store(
+        tmp_path,
+        "alice",
+        {
+            "neutral": ("neutral", "neutral"),
+            "car": ("viseme", "car"),
+            "too1": ("viseme", "too"),
+            "too2": ("viseme", "too"),
+            "smile1": ("expression", "smile"),
+        },
+        alice_motion,
+        [0.5, 0.8, 0.95, 1.0],
+        [12.5, 20.0],
+    )
+    bob_car = rng.normal(size=(V, 3))
+    bob = _store(
+        tmp_path,
+        "bob",
+        {"neutral": ("neutral", "neutral"), "car": ("viseme", "car")},
+        {"car": bob_car},
+        [0.9, 1.0],
+        [30.0],
+    )
+    return alice, bob, bob_car
+
+
+def test_subject_summary_matches_analytic_values(stores):
+    alice, bob, bob_car = stores
+    acc = {"summary": {"mesh_rms_mm_max": 0.5, "align_rotation_deg_max": 0.25, "none": None}}
+    s = subject_summary(alice, acc)
+    assert s.row == {
+        "subject": "alice",
+        "n_takes": 5,
+        "n_visemes": 3,
+        "n_expressions": 1,
+        "motion_rms_mm_car": 5.0,
+        "motion_rms_mm_too": 2.0,  # mean of 1 and 3 over the two takes of the label
+        "ccr_1": 0.5,
+        "ccr_2": 0.8,
+        "ccr_3": 0.95,
+        "modal_f1_hz": 12.5,
+        "mesh_rms_mm_max": 0.5,
+        "align_rotation_deg_max": 0.25,
+        "none": pytest.approx(np.nan, nan_ok=True),
+    }
+    np.testing.assert_array_equal(s.ccr, [0.5, 0.8, 0.95, 1.0])
+    b = subject_summary(bob).row
+    assert b["motion_rms_mm_car"] == pytest.approx(np.sqrt((bob_car**2).sum() / V), rel=1e-12)
+    assert np.isnan(b["ccr_3"]) and b["ccr_2"] == 1.0 and b["modal_f1_hz"] == 30.0
+
+
+def test_cohort_table_fills_missing_columns_with_nan(stores):
+    alice, bob, _ = stores
+    table = cohort_table(
+        [subject_summary(bob), subject_summary(alice, {"summary": {"mesh_rms_mm_max": 0.5}})]
+    )
+    assert list(table.columns) == [
+        "subject",
+        "n_takes",
+        "n_visemes",
+        "n_expressions",
+        "motion_rms_mm_car",
+        "motion_rms_mm_too",  # paper order of the visemes
+        "ccr_1",
+        "ccr_2",
+        "ccr_3",
+        "modal_f1_hz",
+        "mesh_rms_mm_max",
+    ]
+    assert list(table["subject"]) == ["bob", "alice"]
+    assert np.isnan(table.loc[0, "motion_rms_mm_too"]) and np.isnan(table.loc[0, "mesh_rms_mm_max"])
+    assert table.loc[1, "mesh_rms_mm_max"] == 0.5
+
+
+def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
+    alice, bob, _ = stores
+    out_tsv, out_png = tmp_path / "cohort" / "summary.tsv", tmp_path / "cohort" / "summary.png"
+    table = write_cohort_summary(
+        {"alice": alice, "bob": bob},
+        {"alice": {"summary": {"mesh_rms_mm_max": 0.5}}},
+        out_tsv,
+        out_png,
+    )
+    back = pd.read_csv(out_tsv, sep="\t")
+    pd.testing.assert_frame_equal(back, table, check_dtype=False, rtol=1e-5)
+    assert back["mesh_rms_mm_max"].isna().tolist() == [False, True]
+    img = cv2.imread(str(out_png))
+    assert img is not None and img.shape[0] > 100 and img.shape[1] > 300
+
+
+def test_bad_inputs_are_named(stores, tmp_path):
+    alice, _, _ = stores
+    with h5py.File(alice, "a") as h5:
+        del h5["pca/ccr"]
+    with pytest.raises(
+        InputError, match=r"alice.h5: /pca/ccr: missing \(the subject did not finish\)"
+    ):
+        subject_summary(alice)
+    with pytest.raises(InputError, match="store not found"):
+        subject_summary(tmp_path / "nobody.h5")
+    with pytest.raises(InputError, match="no subjects to summarise"):
+        write_cohort_summary({}, {}, tmp_path / "a.tsv", tmp_path / "a.png")
+    assert np.isnan(motion_rms(np.full((4, 3), np.nan)))
+
+
+@pytest.mark.slow
+def test_cohort_rule_summarises_the_tiny_run(tmp_path_factory):
+    run = tiny_run(tmp_path_factory, ["results/cohort/summary.tsv"])
+    table = pd.read_csv(run.path("results", "cohort", "summary.tsv"), sep="\t")
+    assert run.path("results", "cohort", "summary.png").stat().st_size > 0
+    assert list(table["subject"]) == [SUBJECT]
+    row = table.iloc[0]
+    assert (row["n_takes"], row["n_visemes"], row["n_expressions"]) == (4, 2, 1)
+    with h5py.File(run.path("results", SUBJECT, f"{SUBJECT}.h5")) as h5:
+        for take in ("car", "too"):
+            m = h5[f"visemes/{take}/motion"][()]
+            want = np.sqrt(np.sum(m**2) / len(m))
+            assert row[f"motion_rms_mm_{take}"] == pytest.approx(want, rel=1e-5)
+        ccr, f1 = h5["pca/ccr"][()], h5["modal/frequencies_hz"][0]
+    want = np.full(3, np.nan)
+    want[: min(3, len(ccr))] = ccr[:3]  # neutral + two visemes: two components, ccr_3 is NA
+    np.testing.assert_allclose([row["ccr_1"], row["ccr_2"], row["ccr_3"]], want, rtol=1e-5)
+    assert row["modal_f1_hz"] == pytest.approx(f1, rel=1e-5)
+    summary = json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())["summary"]
+    for key, value in summary.items():
+        assert row[key] == pytest.approx(value, rel=1e-5)

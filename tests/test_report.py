@@ -1,0 +1,577 @@
+"""The per-subject report page (scan2morph.report.html, .provenance) and the Snakemake report.
+
+The page is built from a tiny finished run's store (tests/tiny_run.py) with the fit stage's
+figures, opened in headless Chromium through the DevTools protocol (no console error, every image
+decoded), and its tables are read back and compared with the store, the accuracy file and the
+benchmark files they come from.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import json
+import os
+import shutil
+import socket
+import struct
+import subprocess
+import sys
+import time
+import urllib.request
+from html.parser import HTMLParser
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+import pytest
+
+from scan2morph.errors import InputError
+from scan2morph.report import (
+    ReportFigure,
+    image_uri,
+    read_caption,
+    software_versions,
+    stage_timings,
+    subject_report_html,
+    thumbnail_jpeg,
+    write_subject_report,
+)
+from tests.tiny_run import SUBJECT, TAKES, tiny_run
+from tests.workflow_api import REPO
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None,
+    reason="headless Chromium not installed (Debian package 'chromium', installed by make setup)",
+)
+CAPTIONS = REPO / "workflow" / "report" / "figures"
+THUMB_PX = 80
+
+
+# --- a minimal DevTools protocol client (stdlib only: no websocket package is installed) ---
+class _WebSocket:
+    """Text-frame websocket client (RFC 6455), enough for the DevTools protocol."""
+
+    def __init__(self, url: str, timeout: float = 30.0):
+        hostport, _, path = url.removeprefix("ws://").partition("/")
+        host, _, port = hostport.partition(":")
+        self.sock = socket.create_connection((host, int(port)), timeout=timeout)
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.sock.sendall(
+            (
+                f"GET /{path} HTTP/1.1\r\nHost: {hostport}\r\nUpgrade: websocket\r\n"
+                f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                "Sec-WebSocket-Version: 13\r\n\r\n"
+            ).encode()
+        )
+        head = b""
+        while not head.endswith(b"\r\n\r\n"):
+            head += self._read(1)
+        if b" 101 " not in head.split(b"\r\n", 1)[0]:
+            raise ConnectionError(head.decode(errors="replace"))
+
+    def _read(self, n: int) -> bytes:
+        buf = b""
+        while len(buf) < n:
+            chunk = self.sock.recv(n - len(buf))
+            if not chunk:
+                raise ConnectionError("websocket closed")
+            buf += chunk
+        return buf
+
+    def send(self, text: str) -> None:
+        data, mask = text.encode(), os.urandom(4)
+        n = len(data)
+        if n < 126:
+            head = struct.pack("!BB", 0x81, 0x80 | n)
+        elif n < 1 << 16:
+            head = struct.pack("!BBH", 0x81, 0x80 | 126, n)
+        else:
+            head = struct.pack("!BBQ", 0x81, 0x80 | 127, n)
+        body = (
+            np.frombuffer(data, np.uint8) ^ np.resize(np.frombuffer(mask, np.uint8), n)
+        ).tobytes()
+        self.sock.sendall(head + mask + body)
+
+    def recv(self) -> str:
+        parts = []
+        while True:
+            b0, b1 = self._read(2)
+            n = b1 & 0x7F
+            if n == 126:
+                (n,) = struct.unpack("!H", self._read(2))
+            elif n == 127:
+                (n,) = struct.unpack("!Q", self._read(8))
+            payload = self._read(n)
+            opcode = b0 & 0x0F
+            if opcode == 0x8:
+                raise ConnectionError("websocket closed by the browser")
+            if opcode in (0x9, 0xA):  # ping / pong
+                continue
+            parts.append(payload)
+            if b0 & 0x80:
+                return b"".join(parts).decode()
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class Browser:
+    """Headless Chromium with a DevTools endpoint; :meth:`inspect` loads a page and reports."""
+
+    def __init__(self, profile: Path):
+        self.proc = subprocess.Popen(
+            [
+                CHROMIUM,
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                f"--user-data-dir={profile}",
+                "--remote-debugging-port=0",
+                "about:blank",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        port_file = profile / "DevToolsActivePort"
+        deadline = time.monotonic() + 30
+        while not (port_file.is_file() and port_file.read_text().strip()):
+            if time.monotonic() > deadline or self.proc.poll() is not None:
+                self.close()
+                raise RuntimeError("chromium did not open its DevTools port")
+            time.sleep(0.05)
+        self.port = int(port_file.read_text().split()[0])
+
+    def inspect(self, url: str) -> dict:
+        """Load ``url`` in a new tab; its errors, images, fetched resources and scripts."""
+        req = urllib.request.Request(
+            f"http://127.0.0.1:{self.port}/json/new?about:blank", method="PUT"
+        )
+        with urllib.request.urlopen(req, timeout=30) as resp:
+            target = json.load(resp)
+        ws = _WebSocket(target["webSocketDebuggerUrl"])
+        events: list[dict] = []
+        ids = iter(range(1, 1 << 30))
+
+        def call(method, **params):
+            i = next(ids)
+            ws.send(json.dumps({"id": i, "method": method, "params": params}))
+            while True:
+                msg = json.loads(ws.recv())
+                if msg.get("id") == i:
+                    if "error" in msg:
+                        raise RuntimeError(f"{method}: {msg['error']}")
+                    return msg["result"]
+                events.append(msg)
+
+        def evaluate(expression):
+            return call("Runtime.evaluate", expression=expression, returnByValue=True)["result"][
+                "value"
+            ]
+
+        try:
+            for domain in ("Runtime", "Log", "Page"):
+                call(f"{domain}.enable")
+            call("Page.navigate", url=url)
+            while not any(e.get("method") == "Page.loadEventFired" for e in events):
+                events.append(json.loads(ws.recv()))
+            images = json.loads(
+                evaluate(
+                    "JSON.stringify(Array.from(document.images, i => ({alt: i.alt, complete: "
+                    "i.complete, width: i.naturalWidth, height: i.naturalHeight, "
+                    "data: i.src.startsWith('data:')})))"
+                )
+            )
+            resources = evaluate("performance.getEntriesByType('resource').map(e => e.name)")
+            active = evaluate("document.querySelectorAll('script, link, iframe, object').length")
+        finally:
+            ws.close()
+        errors = []
+        for e in events:
+            method, params = e.get("method"), e.get("params", {})
+            if method == "Runtime.exceptionThrown":
+                errors.append(params["exceptionDetails"].get("text", "exception"))
+            elif method == "Runtime.consoleAPICalled" and params.get("type") in ("error", "assert"):
+                errors.append(" ".join(str(a.get("value")) for a in params.get("args", [])))
+            elif method == "Log.entryAdded" and params["entry"]["level"] == "error":
+                errors.append(params["entry"]["text"])
+        return dict(errors=errors, images=images, resources=resources, active=active)
+
+    def close(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+# --- reading the page back ---
+class _Tables(HTMLParser):
+    """Every table's caption and cell texts, and every image's alt and src."""
+
+    def __init__(self):
+        super().__init__()
+        self.tables: dict[str, list[list[str]]] = {}
+        self.images: list[dict] = []
+        self.captions: list[str] = []
+        self._table = self._row = self._cell = self._cap = self._fig = None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "table":
+            self._table, self._name = [], ""
+        elif tag == "caption":
+            self._cap = ""
+        elif tag == "tr":
+            self._row = []
+        elif tag in ("td", "th"):
+            self._cell = ""
+        elif tag == "img":
+            self.images.append(a)
+        elif tag == "figcaption":
+            self._fig = ""
+
+    def handle_data(self, data):
+        for name in ("_cell", "_cap", "_fig"):
+            if getattr(self, name) is not None:
+                setattr(self, name, getattr(self, name) + data)
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th"):
+            self._row.append(self._cell)
+            self._cell = None
+        elif tag == "tr":
+            self._table.append(self._row)
+        elif tag == "caption":
+            self._name, self._cap = self._cap, None
+        elif tag == "table":
+            self.tables[self._name] = self._table
+        elif tag == "figcaption":
+            self.captions.append(self._fig)
+            self._fig = None
+
+
+def _parse(text: str) -> _Tables:
+    parser = _Tables()
+    parser.feed(text)
+    return parser
+
+
+def _table(page: _Tables, prefix: str) -> list[list[str]]:
+    (name,) = [n for n in page.tables if n.startswith(prefix)]
+    return page.tables[name]
+
+
+def _floats(cells) -> np.ndarray:
+    return np.array([np.nan if c == "n/a" else float(c) for c in cells])
+
+
+# --- fixtures ---
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return tiny_run(
+        tmp_path_factory, [f"results/{SUBJECT}/accuracy.json", "results/cohort/summary.tsv"]
+    )
+
+
+@pytest.fixture(scope="module")
+def report(run, tmp_path_factory):
+    """The report of the tiny subject with the fit stage's figures, as the rule's script builds it."""
+    from scan2morph.render.figures import write_stage_figures
+
+    out = tmp_path_factory.mktemp("report")
+    store = run.path("results", SUBJECT, f"{SUBJECT}.h5")
+    pngs = write_stage_figures(store, out / "figures", "fit")
+    figures = [ReportFigure(p, read_caption(CAPTIONS / f"{p.stem}.rst")) for p in pngs]
+    accuracy = json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())
+    timings = stage_timings(run.path("benchmarks", "rules"), SUBJECT, ["synth_subject", "ingest"])
+    path = out / "report.html"
+    write_subject_report(
+        path,
+        store,
+        figures=figures,
+        accuracy=accuracy,
+        timings=timings,
+        takes=[t["take"] for t in TAKES],
+        n_coordinates=4,
+        thumbnail_px=THUMB_PX,
+    )
+    return path, store, figures, accuracy
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    if CHROMIUM is None:
+        pytest.skip("headless Chromium not installed (Debian package 'chromium')")
+    b = Browser(tmp_path_factory.mktemp("chromium-profile"))
+    yield b
+    b.close()
+
+
+# --- the page in a browser ---
+@pytest.mark.slow
+@needs_chromium
+def test_report_loads_in_chromium_without_errors_and_every_image_renders(report, browser):
+    path, _, figures, _ = report
+    state = browser.inspect(path.resolve().as_uri())
+    assert state["errors"] == []
+    assert len(state["images"]) == len(TAKES) + len(figures)
+    for img in state["images"]:
+        assert img["complete"] and img["width"] > 0 and img["height"] > 0, img
+        assert img["data"], img
+    assert state["resources"] == []  # nothing fetched: everything is embedded
+    assert state["active"] == 0  # no script, stylesheet link or frame
+
+
+@pytest.mark.slow
+@needs_chromium
+def test_the_browser_check_catches_broken_images_and_external_resources(report, browser, tmp_path):
+    path, *_ = report
+    broken = '<img src="data:image/png;base64,AAAA" alt="broken">'
+    external = '<img src="http://127.0.0.1:9/x.png" alt="external">'
+    bad = tmp_path / "bad.html"
+    bad.write_text(path.read_text().replace("</body>", broken + external + "</body>"))
+    state = browser.inspect(bad.as_uri())
+    assert any("Content Security Policy" in e for e in state["errors"])  # external load blocked
+    widths = {i["alt"]: i["width"] for i in state["images"]}
+    assert widths["broken"] == 0 and widths["external"] == 0
+    assert widths["neutral"] > 0
+
+
+# --- the page's content against its sources ---
+@pytest.mark.slow
+def test_pca_tables_match_the_store(report):
+    path, store, *_ = report
+    page = _parse(path.read_text())
+    t1, t2 = _table(page, "Table 1"), _table(page, "Table 2")
+    with h5py.File(store) as h5:
+        eig, cr, ccr = (h5[f"pca/{k}"][()] for k in ("eigenvalues", "cr", "ccr"))
+        coeff, names = h5["pca/coefficients"][()], h5["pca/takes"].asstr()[()]
+    body = np.array([_floats(r) for r in t1[1:]])
+    np.testing.assert_array_equal(body[:, 0], np.arange(1, len(eig) + 1))
+    np.testing.assert_allclose(body[:, 1], eig, rtol=1e-3)
+    np.testing.assert_allclose(body[:, 2:], 100 * np.c_[cr, ccr], rtol=1e-3)
+    assert t2[0] == ["model", *[f"w{i + 1}" for i in range(coeff.shape[1])]]
+    assert [r[0] for r in t2[1:]] == list(names)
+    np.testing.assert_allclose(np.array([_floats(r[1:]) for r in t2[1:]]), coeff, rtol=1e-3)
+
+
+@pytest.mark.slow
+def test_modal_tables_match_the_store(report):
+    path, store, *_ = report
+    page = _parse(path.read_text())
+    coords, recon = _table(page, "Modal coordinates"), _table(page, "RMS error")
+    freqs = _table(page, "Natural frequencies")
+    with h5py.File(store) as h5:
+        q = h5["expressions/smile1/coordinates"][()]
+        rms, ks = (
+            h5["expressions/smile1/reconstruction_rms_mm"][()],
+            h5["modal/reconstruction_k"][()],
+        )
+        f = h5["modal/frequencies_hz"][()]
+    assert coords[0] == ["expression", "q1", "q2", "q3", "q4"]
+    assert coords[1][0] == "smile1 (smile)"
+    np.testing.assert_allclose(_floats(coords[1][1:]), q[:4], rtol=1e-3)
+    np.testing.assert_allclose(_floats(freqs[1][1:]), f[:4], rtol=1e-3)
+    assert recon[0][1:] == [f"K = {k}" for k in ks]
+    np.testing.assert_allclose(_floats(recon[1][1:]), rms, rtol=1e-3)
+
+
+@pytest.mark.slow
+def test_accuracy_and_provenance_match_their_sources(report, run):
+    path, store, _, accuracy = report
+    page = _parse(path.read_text())
+    summary = {r[0]: float(r[1]) for r in _table(page, "Summary")[1:]}
+    assert summary.keys() == accuracy["summary"].keys()
+    for key, value in accuracy["summary"].items():
+        assert summary[key] == pytest.approx(value, rel=1e-3)
+    per_take = _table(page, "Per take")
+    assert [r[0] for r in per_take[1:]] == list(accuracy["takes"])
+    column = per_take[0].index("mesh rms_mm")
+    for row in per_take[1:]:
+        assert float(row[column]) == pytest.approx(
+            accuracy["takes"][row[0]]["mesh"]["rms_mm"], rel=1e-3
+        )
+    attrs = dict(_table(page, "Store")[1:])
+    with h5py.File(store) as h5:
+        assert attrs["config_sha256"] == h5.attrs["config_sha256"]
+        assert attrs["format_version"] == h5.attrs["format_version"]
+        checksums = json.loads(h5.attrs["input_sha256"])
+    rows = _table(page, "Input checksums")[1:]
+    assert {(t, r): h for t, r, h in rows} == {
+        (t, r): h for t, roles in checksums.items() for r, h in roles.items()
+    }
+    versions = dict(_table(page, "Software")[1:])
+    assert versions["numpy"] == np.__version__
+    assert versions["h5py"] == h5py.__version__
+    assert versions["python"] == sys.version.split()[0]
+    # run time: the sum of the benchmark files' `s`, read here with the csv module
+    files = sorted(run.path("benchmarks", "rules").glob(f"*/{SUBJECT}.tsv")) + sorted(
+        run.path("benchmarks", "rules").glob(f"*/{SUBJECT}/*.tsv")
+    )
+    total = 0.0
+    for f in files:
+        with f.open() as fh:
+            total += float(next(csv.DictReader(fh, delimiter="\t"))["s"])
+    timing = _table(page, "Run time")
+    assert timing[-1][0] == "total"
+    assert float(timing[-1][2]) == pytest.approx(total, rel=1e-3)
+    assert [r[0] for r in timing[1:3]] == ["synth_subject", "ingest"]  # the order given
+    assert int(timing[-1][1]) == len(files)
+
+
+@pytest.mark.slow
+def test_inputs_are_thumbnails_of_the_color_images(report):
+    path, store, figures, _ = report
+    page = _parse(path.read_text())
+    thumbs = [i for i in page.images if i["src"].startswith("data:image/jpeg;base64,")]
+    assert [i["alt"] for i in thumbs] == [t["take"] for t in TAKES]
+    with h5py.File(store) as h5:
+        color = h5["takes/car/range/color"][()]
+    car = next(i for i in thumbs if i["alt"] == "car")
+    data = np.frombuffer(base64.b64decode(car["src"].split(",", 1)[1]), np.uint8)
+    got = cv2.imdecode(data, cv2.IMREAD_COLOR)[..., ::-1]
+    h, w = color.shape[:2]
+    want = cv2.resize(color, (THUMB_PX, round(h * THUMB_PX / w)), interpolation=cv2.INTER_AREA)
+    assert got.shape == want.shape == (60, 80, 3)
+    assert np.abs(got.astype(float) - want).mean() < 3.0  # JPEG quality 85
+
+
+@pytest.mark.slow
+def test_figures_are_embedded_byte_for_byte_with_their_captions(report):
+    path, _, figures, _ = report
+    page = _parse(path.read_text())
+    embedded = {i["alt"]: i["src"] for i in page.images if i["src"].startswith("data:image/png")}
+    assert list(embedded) == [f.path.stem for f in figures]
+    for fig in figures:
+        assert base64.b64decode(embedded[fig.path.stem].split(",", 1)[1]) == fig.path.read_bytes()
+        assert f"{fig.path.stem}: {fig.caption}" in page.captions
+        assert fig.caption == " ".join((CAPTIONS / f"{fig.path.stem}.rst").read_text().split())
+
+
+@pytest.mark.slow
+def test_text_is_escaped(report, tmp_path):
+    _, store, figures, _ = report
+    nasty = '<script>alert("x")</script> & <b>'
+    text = subject_report_html(store, figures=[ReportFigure(figures[0].path, nasty)], versions={})
+    assert "<script" not in text
+    assert "&lt;script&gt;alert(&quot;x&quot;)&lt;/script&gt; &amp; &lt;b&gt;" in text
+    flat = subject_report_html(store, accuracy={"summary": {"<i>": 1.0}}, versions={"a<b": "c&d"})
+    assert "&lt;i&gt;" in flat and "a&lt;b" in flat and "c&amp;d" in flat and "<i>" not in flat
+
+
+@pytest.mark.slow
+def test_report_without_figures_or_ground_truth_says_so(report):
+    _, store, *_ = report
+    text = subject_report_html(store, versions={})
+    assert "No figures were drawn for this subject." in text
+    assert "No ground truth" in text
+    assert "No benchmark files were found" in text
+
+
+# --- unit tests ---
+def test_read_caption_strips_inline_markup(tmp_path):
+    f = tmp_path / "c.rst"
+    f.write_text("The ``q`` field,\n  *emphasised* and **strong**, see `Eq. 7`_.\n")
+    assert read_caption(f) == "The q field, emphasised and strong, see Eq. 7."
+    with pytest.raises(InputError, match="caption file not found"):
+        read_caption(tmp_path / "none.rst")
+
+
+def test_image_uri_rejects_bad_figures(tmp_path):
+    png = tmp_path / "a.png"
+    ok, buf = cv2.imencode(".png", np.zeros((4, 5, 3), np.uint8))
+    png.write_bytes(buf.tobytes())
+    assert image_uri(png) == "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode()
+    (tmp_path / "b.gif").write_bytes(b"GIF89a")
+    with pytest.raises(InputError, match=r"figure: expected one of \['.jpeg', '.jpg', '.png'\]"):
+        image_uri(tmp_path / "b.gif")
+    (tmp_path / "c.png").write_bytes(b"\xff\xd8\xff\xe0 jpeg bytes")
+    with pytest.raises(InputError, match="not a image/png file"):
+        image_uri(tmp_path / "c.png")
+    with pytest.raises(InputError, match="figure file not found"):
+        image_uri(tmp_path / "missing.png")
+
+
+def test_thumbnail_keeps_aspect_and_small_images():
+    rng = np.random.default_rng(8)
+    img = rng.integers(0, 256, (90, 200, 3), dtype=np.uint8)
+    small = cv2.imdecode(np.frombuffer(thumbnail_jpeg(img, 100), np.uint8), cv2.IMREAD_COLOR)
+    assert small.shape == (45, 100, 3)
+    same = cv2.imdecode(np.frombuffer(thumbnail_jpeg(img, 400), np.uint8), cv2.IMREAD_COLOR)
+    assert same.shape == img.shape
+    with pytest.raises(InputError, match=r"color: expected \(H, W, 3\) uint8"):
+        thumbnail_jpeg(img.astype(np.float32), 100)
+
+
+def test_stage_timings_sum_the_benchmark_files(tmp_path):
+    head = "s\th:m:s\tmax_rss\n"
+    (tmp_path / "fit" / "alice").mkdir(parents=True)
+    (tmp_path / "fit" / "alice" / "car.tsv").write_text(head + "2.5\t0:00:02\t100\n")
+    (tmp_path / "fit" / "alice" / "neutral.tsv").write_text(head + "1.25\t0:00:01\t300\n")
+    (tmp_path / "fit" / "bob.tsv").write_text(head + "9\t0:00:09\t1\n")  # another subject
+    (tmp_path / "store").mkdir()
+    (tmp_path / "store" / "alice.tsv").write_text(head + "0.5\t0:00:00\t50\n")
+    rows = stage_timings(tmp_path, "alice", order=["store", "fit"])
+    assert rows == [
+        {"stage": "store", "jobs": 1, "seconds": 0.5, "max_rss_mb": 50.0},
+        {"stage": "fit", "jobs": 2, "seconds": 3.75, "max_rss_mb": 300.0},
+    ]
+    assert stage_timings(tmp_path / "none", "alice") == []
+    (tmp_path / "store" / "alice.tsv").write_text("x\n1\n")
+    with pytest.raises(InputError, match="expected a TSV with a column 's'"):
+        stage_timings(tmp_path, "alice")
+
+
+def test_software_versions_name_missing_packages():
+    v = software_versions({"numpy": ("numpy",), "ghost": ("no-such-distribution-xyz",)})
+    assert v["numpy"] == np.__version__
+    assert v["ghost"] == "not installed"
+    assert list(v)[:3] == ["python", "platform", "scan2morph"]
+
+
+# --- the workflow ---
+def _snakemake(run, *args) -> subprocess.CompletedProcess:
+    cmd = [
+        str(Path(sys.executable).with_name("snakemake")),
+        *args,
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(run.work),
+        "--configfile",
+        *map(str, run.configfiles),
+    ]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.slow
+def test_report_rule_takes_every_figure_and_the_accuracy(run):
+    res = _snakemake(run, f"results/{SUBJECT}/report.html", "-n", "-F", "--quiet", "rules")
+    assert res.returncode == 0, res.stderr
+    rules = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
+    wanted = {"report_subject", "accuracy", "store"} | {
+        f"figures_{stage}" for stage in ("fit", "motion", "morph", "modal")
+    }
+    assert wanted <= rules
+    assert "cohort" not in rules
+
+
+@pytest.mark.slow
+def test_snakemake_report_builds(run, tmp_path):
+    out = tmp_path / "workflow_report.html"
+    res = _snakemake(run, "results/cohort/summary.tsv", "--report", str(out))
+    assert res.returncode == 0, res.stderr
+    text = out.read_text()
+    for category in ("Cohort", "Accuracy", "Morphable model"):
+        assert category in text
+    caption = " ".join((REPO / "workflow" / "report" / "cohort_table.rst").read_text().split())
+    assert caption[:60] in text

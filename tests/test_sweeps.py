@@ -1,0 +1,292 @@
+"""Parameter sweeps (scan2morph.report.sweep, workflow/rules/sweeps.smk).
+
+The sweep table is checked against the config schema (unit tests, and a bad table stops a real
+run before any job); a sweep combination equal to the config reproduces the pipeline's own
+accuracy (the oracle), a changed one changes only what it should.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from scan2morph.errors import InputError
+from scan2morph.evaluate.truth import read_truth
+from scan2morph.report import read_sweep_table, rerun_accuracy, sweep_settings
+from scan2morph.report.sweep import first_stage
+from scan2morph.store import read_part
+from scan2morph.template import load_template
+from tests.tiny_run import SUBJECT, TAKES, tiny_config, tiny_run
+from tests.workflow_api import REPO
+
+SCHEMA = REPO / "schemas" / "config.schema.yaml"
+CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+
+
+def _table(tmp_path, text):
+    path = tmp_path / "sweeps.tsv"
+    path.write_text(text)
+    return path
+
+
+def _flat(d, prefix=""):
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield from _flat(v, f"{prefix}{k}.")
+        else:
+            yield f"{prefix}{k}", v
+
+
+def _assert_same_accuracy(got: dict, want: dict):
+    got = dict(_flat({k: v for k, v in got.items() if k != "sweep"}))
+    want = dict(_flat(want))
+    assert got.keys() == want.keys()
+    for key, value in want.items():
+        if isinstance(value, float):
+            assert got[key] == pytest.approx(value, rel=1e-9, abs=1e-12, nan_ok=True), key
+        else:
+            assert got[key] == value, key
+
+
+# --- the table ---
+def test_a_good_table_is_read_with_typed_values(tmp_path):
+    path = _table(
+        tmp_path,
+        "# a comment\n"
+        "smoothing.iterations\tmask.radius_mm\ttemplate.fiducials.viseme\n"
+        "30\t20.0\topen\n"
+        "\n"
+        "0\t15\tclosed\n",
+    )
+    table = read_sweep_table(path, SCHEMA)
+    assert table.columns == ("smoothing.iterations", "mask.radius_mm", "template.fiducials.viseme")
+    assert table.rows == (
+        {"smoothing.iterations": 30, "mask.radius_mm": 20.0, "template.fiducials.viseme": "open"},
+        {"smoothing.iterations": 0, "mask.radius_mm": 15, "template.fiducials.viseme": "closed"},
+    )
+    assert type(table.rows[0]["smoothing.iterations"]) is int
+    assert type(table.rows[0]["mask.radius_mm"]) is float
+    assert list(table.frame().columns) == [
+        "smoothing_iterations",
+        "mask_radius_mm",
+        "template_fiducials_viseme",
+    ]
+    assert table.first_stage == "fit"
+    assert first_stage(["smoothing.w", "align.kernel_k_mm"]) == "align"
+    assert first_stage(["repair.max_hole_px", "mask.radius_mm"]) == "repair"
+    assert read_sweep_table(_table(tmp_path, "# nothing\n"), SCHEMA).rows == ()
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (
+            "smoothing.iteration\n30\n",
+            r"column 'smoothing.iteration': names no config key \(no 'iteration' under smoothing; keys there: iterations, w\)",
+        ),
+        (
+            "smooth.w\n0.1\n",
+            r"column 'smooth.w': names no config key \(no 'smooth' under the top level",
+        ),
+        (
+            "smoothing.iterations\n3.5\n",
+            r"line 2, column 'smoothing.iterations': 3.5 is not of type 'integer'",
+        ),
+        ("smoothing.iterations\nmany\n", r"'many' is not of type 'integer'"),
+        ("smoothing.iterations\n30.0\n", r"30.0 is not of type 'integer'"),
+        ("smoothing.w\n1.5\n", r"1.5 is greater than the maximum of 1"),
+        ("align.robust_kernel\ncauchy\n", r"'cauchy' is not one of \['tukey', 'huber', 'none'\]"),
+        ("mask.radius_mm\n-2\n", r"-2 is less than or equal to the minimum of 0"),
+        (
+            "modal.modes\n20\n",
+            r"column 'modal.modes': a sweep re-runs the stages from repair to accuracy",
+        ),
+        ("mask.paths\nx\n", r"column 'mask.paths': a swept key must hold a scalar"),
+        ("smoothing.iterations\tsmoothing.w\n30\n", r"line 2: 1 fields, expected 2"),
+        ("smoothing.iterations\n30\n30\n", r"line 3: repeats the combination of line 2"),
+        ("smoothing.iterations\tsmoothing.w\n30\t\n", r"line 2, column 'smoothing.w': empty value"),
+        ("smoothing.w\tsmoothing.w\n0.1\t0.2\n", r"header: repeated column"),
+        ("smoothing.w\nnan\n", r"'nan' is not a finite number"),
+    ],
+)
+def test_a_bad_table_is_refused_naming_line_column_and_rule(tmp_path, text, message):
+    with pytest.raises(InputError, match=message):
+        read_sweep_table(_table(tmp_path, text), SCHEMA)
+
+
+def test_a_string_value_must_fit_in_a_folder_name(tmp_path):
+    schema = {"properties": {"align": {"properties": {"name": {"type": "string"}}}}}
+    assert read_sweep_table(_table(tmp_path, "align.name\nab_1.5-x\n"), schema).rows[0] == {
+        "align.name": "ab_1.5-x"
+    }
+    with pytest.raises(InputError, match=r"'a/b': expected letters, digits and \. _ \+ - only"):
+        read_sweep_table(_table(tmp_path, "align.name\na/b\n"), schema)
+
+
+def test_missing_table_is_named(tmp_path):
+    with pytest.raises(InputError, match="sweeps.tsv: sweep table not found"):
+        read_sweep_table(tmp_path / "sweeps.tsv", SCHEMA)
+
+
+def test_sweep_settings_override_a_copy():
+    row = {"smoothing.iterations": np.int64(5), "template.fiducials.viseme": "closed"}
+    settings = sweep_settings(CONFIG, row)
+    assert settings["smoothing"] == {"w": CONFIG["smoothing"]["w"], "iterations": 5}
+    assert type(settings["smoothing"]["iterations"]) is int  # numpy scalars become Python's
+    assert settings["template"]["fiducials"]["viseme"] == "closed"
+    assert CONFIG["template"]["fiducials"]["viseme"] == "open"  # the config is untouched
+    assert set(settings) == {"repair", "template", "align", "mask", "smoothing"}
+
+
+# --- load-time validation through Snakemake ---
+def _snakemake(work: Path, configfile: Path, *args) -> subprocess.CompletedProcess:
+    cmd = [
+        str(Path(sys.executable).with_name("snakemake")),
+        *args,
+        "--cores",
+        "1",
+        "-s",
+        str(REPO / "Snakefile"),
+        "-d",
+        str(work),
+        "--configfile",
+        str(REPO / "config" / "config.yaml"),
+        str(configfile),
+    ]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("smoothing.iteration\n30\n", "column 'smoothing.iteration': names no config key"),
+        ("mask.radius_mm\ntwenty\n", "column 'mask.radius_mm': 'twenty' is not of type 'number'"),
+    ],
+)
+def test_a_bad_table_stops_the_run_before_any_job(tmp_path, text, message):
+    configfile = tiny_config(tmp_path)
+    (tmp_path / "sweeps.tsv").write_text(text)
+    res = _snakemake(tmp_path, configfile)
+    assert res.returncode != 0
+    assert message in res.stderr + res.stdout
+    assert not (tmp_path / "results").exists() and not (tmp_path / "logs").exists()
+
+
+# --- a tiny sweep end to end ---
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return tiny_run(tmp_path_factory, [f"results/{SUBJECT}/accuracy.json"])
+
+
+@pytest.fixture(scope="module")
+def sweep(run, tmp_path_factory):
+    run.sweeps.write_text("smoothing.iterations\tmask.radius_mm\n30\t20.0\n0\t20.0\n30\t10\n")
+    return tiny_run(tmp_path_factory, ["sweep_all"])
+
+
+def _result(run, iterations, radius):
+    folder = run.path(
+        "results", "sweeps", f"smoothing_iterations~{iterations}", f"mask_radius_mm~{radius}"
+    )
+    return json.loads((folder / SUBJECT / "accuracy.json").read_text())
+
+
+@pytest.mark.slow
+def test_the_config_combination_reproduces_the_pipeline_accuracy(sweep):
+    pipeline = json.loads(sweep.path("results", SUBJECT, "accuracy.json").read_text())
+    result = _result(sweep, 30, "20.0")
+    assert result["sweep"] == {"smoothing.iterations": 30, "mask.radius_mm": 20.0}
+    _assert_same_accuracy(result, pipeline)
+
+
+@pytest.mark.slow
+def test_changed_values_change_only_the_stages_they_feed(sweep):
+    base, raw = _result(sweep, 30, "20.0"), _result(sweep, 0, "20.0")
+    small_mask = _result(sweep, 30, "10")
+    for take in base["takes"]:
+        assert raw["takes"][take]["mesh"] == base["takes"][take]["mesh"]  # fit is upstream
+    car, car_raw = base["takes"]["car"]["motion"], raw["takes"]["car"]["motion"]
+    assert car_raw["rms_error_mm"] != car["rms_error_mm"]
+    # without smoothing the processed motion is the raw motion outside the mask
+    assert car_raw["relative_error"] != car["relative_error"]
+    assert (
+        small_mask["takes"]["car"]["motion"]["masked_true_motion_share"]
+        <= car["masked_true_motion_share"]
+    )
+
+
+@pytest.mark.slow
+def test_summary_collects_every_combination(sweep):
+    table = pd.read_csv(sweep.path("results", "sweeps", "summary.tsv"), sep="\t")
+    assert list(table.columns[:3]) == ["smoothing.iterations", "mask.radius_mm", "subject"]
+    assert table[["smoothing.iterations", "mask.radius_mm"]].values.tolist() == [
+        [30, 20.0],
+        [0, 20.0],
+        [30, 10.0],
+    ]
+    for _, row in table.iterrows():
+        radius = "20.0" if row["mask.radius_mm"] == 20 else "10"
+        summary = _result(sweep, int(row["smoothing.iterations"]), radius)["summary"]
+        for key, value in summary.items():
+            assert row[key] == pytest.approx(value, rel=1e-5)
+    img = cv2.imread(str(sweep.path("results", "sweeps", "summary.png")))
+    assert img is not None and img.shape[0] > 200
+
+
+@pytest.mark.slow
+def test_sweeps_are_not_part_of_the_default_target(sweep):
+    res = _snakemake(sweep.work, sweep.configfile, "-n", "--quiet", "rules")
+    assert res.returncode == 0, res.stderr
+    rules = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
+    assert not {"sweep", "sweep_summary", "sweep_all"} & rules
+
+
+@pytest.mark.slow
+def test_rerun_from_repair_reproduces_the_pipeline(run):
+    """Every stage re-run in memory from the raw range images, with the config's values."""
+    takes = [t["take"] for t in TAKES]
+    raw = {}
+    for take in takes:
+        raw |= read_part(run.path("results", SUBJECT, "takes", take, "ingest.h5"))
+    truths = {
+        t: read_truth(run.path("results", "synthetic", SUBJECT, "truth", f"{t}.npz")) for t in takes
+    }
+    settings = sweep_settings(CONFIG, {})  # the tiny config keeps these sections as they are
+    result = rerun_accuracy(
+        read_part(run.path("results", SUBJECT, f"{SUBJECT}.h5")),
+        settings,
+        load_template(run.path("resources", "template.npz")),
+        {t["take"]: t["kind"] for t in TAKES},
+        truths,
+        "repair",
+        SUBJECT,
+        raw=raw,
+    )
+    _assert_same_accuracy(
+        result, json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())
+    )
+
+
+@pytest.mark.slow
+def test_rerun_refuses_bad_input(run):
+    store = {"/takes/neutral/landmarks": np.zeros((68, 2))}
+    kinds = {t["take"]: t["kind"] for t in TAKES}
+    tpl = load_template(run.path("resources", "template.npz"))
+    settings = sweep_settings(CONFIG, {})
+    with pytest.raises(
+        InputError, match=r"start stage: expected one of \('repair', 'fit', 'align', 'motion'\)"
+    ):
+        rerun_accuracy(store, settings, tpl, kinds, {}, "morph", SUBJECT)
+    with pytest.raises(InputError, match="/takes/neutral/raw/xyz: missing"):
+        rerun_accuracy(store, settings, tpl, kinds, {}, "repair", SUBJECT)
+    with pytest.raises(InputError, match=r"takes: expected exactly one neutral take, got \[\]"):
+        rerun_accuracy(store, settings, tpl, {"car": "viseme"}, {}, "motion", SUBJECT)

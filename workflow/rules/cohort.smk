@@ -1,0 +1,25 @@
+# The cohort summary: one row per subject and a plot comparing them (scan2morph.report.cohort).
+
+
+rule cohort:
+    input:
+        stores=expand("results/{subject}/{subject}.h5", subject=SUBJECTS),
+        accuracy=expand("results/{subject}/accuracy.json", subject=synthetic_subjects()),
+    output:
+        table=report(
+            "results/cohort/summary.tsv",
+            caption="../report/cohort_table.rst",
+            category="Cohort",
+        ),
+        plot=report(
+            "results/cohort/summary.png",
+            caption="../report/cohort_plot.rst",
+            category="Cohort",
+        ),
+    log:
+        "logs/cohort/cohort.log",
+    params:
+        subjects=SUBJECTS,
+        accuracy_subjects=synthetic_subjects(),
+    script:
+        "../scripts/cohort.py"

@@ -1,0 +1,26 @@
+# The per-subject report page (scan2morph.report.html): inputs, figures, PCA and modal tables,
+# accuracy and provenance in one self-contained HTML file.
+
+
+rule report_subject:
+    input:
+        store="results/{subject}/{subject}.h5",
+        figures=get_subject_figures,
+        captions=get_figure_captions,
+        accuracy=get_subject_accuracy,
+    output:
+        report(
+            "results/{subject}/report.html",
+            caption="../report/subject_report.rst",
+            category="Subject reports",
+            labels={"subject": "{subject}"},
+        ),
+    log:
+        "logs/report_subject/{subject}.log",
+    params:
+        benchmarks="benchmarks/rules",
+        stage_order=get_rule_order,
+        takes=get_takes,
+        report=config["report"],
+    script:
+        "../scripts/report_subject.py"

@@ -1,0 +1,60 @@
+# Parameter sweeps, run on demand (`snakemake sweep_all`), not by `rule all`: for each row of the
+# sweep table (config key `sweeps`, one column per swept config path) and each synthetic subject,
+# the stages from the first one that reads a swept key are re-run on the subject's stored parts
+# and measured against the ground truth (scan2morph.report.sweep). The table is checked against
+# the config schema when the workflow loads: a bad column or value stops the run before any job.
+
+
+rule sweep:
+    input:
+        store="results/{subject}/{subject}.h5",
+        raw=get_sweep_raw,
+        truths=get_truth_files,
+        template="resources/template.npz",
+    output:
+        f"results/sweeps/{SWEEP_SPACE.wildcard_pattern}/{{subject}}/accuracy.json",
+    log:
+        "logs/sweep/{params}/{subject}.log",
+    benchmark:
+        "benchmarks/rules/sweep/{params}/{subject}.tsv"
+    wildcard_constraints:
+        params="|".join(map(re.escape, SWEEP_ROWS)) if SWEEP_ROWS else "^$",
+        subject="|".join(synthetic_subjects()) if synthetic_subjects() else "^$",
+    resources:
+        mem_mb=2000,
+    params:
+        row=get_sweep_row,
+        settings=get_sweep_settings,
+        start=SWEEP_TABLE.first_stage if SWEEP_TABLE else "",
+        takes=get_takes,
+        kinds=get_take_kinds,
+    script:
+        "../scripts/sweep.py"
+
+
+rule sweep_summary:
+    input:
+        get_sweep_results,
+    output:
+        table=report(
+            "results/sweeps/summary.tsv",
+            caption="../report/sweep_table.rst",
+            category="Parameter sweep",
+        ),
+        plot=report(
+            "results/sweeps/summary.png",
+            caption="../report/sweep_plot.rst",
+            category="Parameter sweep",
+        ),
+    log:
+        "logs/sweep_summary/sweep_summary.log",
+    params:
+        results=get_sweep_result_rows,
+        columns=list(SWEEP_TABLE.columns) if SWEEP_TABLE else [],
+    script:
+        "../scripts/sweep_summary.py"
+
+
+rule sweep_all:
+    input:
+        rules.sweep_summary.output,
