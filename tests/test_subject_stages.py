@@ -91,7 +91,9 @@ def test_subject_morph_pca_blends_and_labels(face):
     )
     t = pca_component_targets(model)
     np.testing.assert_allclose(np.linalg.norm(t["pca_1"] - model.mean), np.sqrt(lam[0]))
-    _, b2, p2 = subject_morph(v, models, labels, {"eel": {"eel": 0.5}}, {"needs5": [0, 0, 0, 0, 1.0]}, 3.0, "s")
+    _, b2, p2 = subject_morph(
+        v, models, labels, {"eel": {"eel": 0.5}}, {"needs5": [0, 0, 0, 0, 1.0]}, 3.0, "s"
+    )
     assert b2 == {} and p2 == {}  # a missing paper viseme / missing components: not applicable
     with pytest.raises(InputError, match="unknown viseme 'caar'"):
         subject_morph(v, models, labels, {"typo": {"caar": 0.5}}, {}, 3.0, "s")

@@ -484,7 +484,9 @@ def modal_basis(
     if fixed is not None:
         fixed_mask = np.asarray(fixed, dtype=bool)
         if fixed_mask.shape != (n_v,):
-            raise InputError(source, f"fixed: expected a ({n_v},) bool mask, got shape {fixed_mask.shape}")
+            raise InputError(
+                source, f"fixed: expected a ({n_v},) bool mask, got shape {fixed_mask.shape}"
+            )
         boundary = fixed_mask
     if not boundary.any():
         raise InputError(

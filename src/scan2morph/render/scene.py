@@ -124,7 +124,10 @@ def render_mesh(
         # An explicit PBR material: trimesh's default one scales the texture by 0.4 and makes
         # it metallic, which renders the face at about half its brightness.
         material = trimesh.visual.material.PBRMaterial(
-            baseColorTexture=Image.fromarray(texture), metallicFactor=0.0, roughnessFactor=0.8, doubleSided=True
+            baseColorTexture=Image.fromarray(texture),
+            metallicFactor=0.0,
+            roughnessFactor=0.8,
+            doubleSided=True,
         )
         mesh.visual = trimesh.visual.TextureVisuals(uv=uv_gl, material=material)
     elif colors is not None:
