@@ -25,6 +25,7 @@ import numpy as np
 
 from scan2morph.align.rigid import kabsch, transform_points
 from scan2morph.errors import InputError
+from scan2morph.geometry import vertex_normals
 
 #: Default ICP parameters (mm where a unit applies). ``relative_fitness`` / ``relative_rmse``
 #: stop the iteration when both the fitness and the inlier RMSE change by less than that
@@ -155,38 +156,6 @@ def _mesh(vertices, valid, name: str, source: str, n_vertices: int | None = None
             "but has non-finite coordinates",
         )
     return v, m
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals of a triangle mesh.
-
-    Parameters
-    ----------
-    vertices : (V, 3) float, mm
-        NaN rows allowed; faces touching them are skipped.
-    faces : (F, 3) int
-        Counter-clockwise triangles (normals follow the right-hand rule).
-
-    Returns
-    -------
-    normals : (V, 3) float64
-        Unit normals; NaN for vertices with no finite, non-degenerate incident face.
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    tri = v[f]
-    ok = np.isfinite(tri).all(axis=(1, 2))
-    tri, f = tri[ok], f[ok]
-    # Cross product length is twice the face area, so summing it area-weights the normals.
-    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n = np.zeros_like(v)
-    for c in range(3):
-        n[:, c] = np.bincount(f.ravel(), weights=np.repeat(fn[:, c], 3), minlength=len(v))
-    length = np.linalg.norm(n, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        n = n / length[:, None]
-    n[length <= 0] = np.nan
-    return n
 
 
 def _kernel_weights(r: np.ndarray, kernel: str, k: float) -> np.ndarray:

@@ -35,6 +35,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import face_normals, vertex_normals
 
 _GLB_MAGIC = 0x46546C67  # b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -92,24 +93,13 @@ class _BufferBuilder:
 def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3); isolated or degenerate vertices get the mean
     normal of the whole mesh so that every NORMAL is unit length, as glTF requires."""
-    tri = vertices[faces]
-    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
-    n = np.stack(
-        [
-            np.bincount(faces.ravel(), np.repeat(face_n[:, c], 3), minlength=len(vertices))
-            for c in range(3)
-        ],
-        axis=1,
-    )
-    length = np.linalg.norm(n, axis=1)
-    scale = np.linalg.norm(face_n, axis=1).max(initial=0.0)
-    bad = length <= 1e-12 * max(scale, np.finfo(float).tiny)
+    n = vertex_normals(vertices, faces)
+    bad = np.isnan(n[:, 0])
     if bad.any():
-        overall = face_n.sum(axis=0)
+        overall = face_normals(vertices, faces).sum(axis=0)
         norm = np.linalg.norm(overall)
         n[bad] = overall / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
-        length[bad] = 1.0
-    return n / length[:, None]
+    return n
 
 
 def _check_vertices(name: str, value, source: str, n_vertices: int | None) -> np.ndarray:

@@ -18,6 +18,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import unique_edges
 
 
 def _check_vertices(vertices: np.ndarray, source: str) -> np.ndarray:
@@ -36,21 +37,9 @@ def _check_faces(faces: np.ndarray, n_vertices: int, source: str) -> np.ndarray:
     return f.astype(np.int64)
 
 
-def _unique_edges(faces: np.ndarray) -> np.ndarray:
-    """Undirected edges (E, 2) of a triangle mesh, each once, with ``i < j``."""
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    e = e[e[:, 0] != e[:, 1]]
-    if e.size == 0:
-        return e
-    # One int64 key per edge: a 1-D unique is far faster than np.unique(axis=0).
-    base = np.int64(e.max()) + 1
-    key = np.unique(e[:, 0] * base + e[:, 1])
-    return np.stack(np.divmod(key, base), axis=1)
-
-
 def _edge_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_array:
     """Sparse (V, V) graph of edge lengths (upper triangle; use with ``directed=False``)."""
-    e = _unique_edges(faces)
+    e = unique_edges(faces)
     length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
     ok = np.isfinite(length)
     e, length = e[ok], length[ok]

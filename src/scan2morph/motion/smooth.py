@@ -15,7 +15,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from scan2morph.errors import InputError
-from scan2morph.motion.mask import _check_faces, _unique_edges
+from scan2morph.geometry import unique_edges
+from scan2morph.motion.mask import _check_faces
 
 
 def _field(d: np.ndarray, source: str) -> np.ndarray:
@@ -36,7 +37,7 @@ def _flags(m: np.ndarray | None, n: int, name: str, source: str) -> np.ndarray:
 
 def _adjacency(faces: np.ndarray, n: int) -> sp.csr_array:
     """Symmetric 0/1 vertex adjacency (V, V) of the mesh's edges."""
-    e = _unique_edges(faces)
+    e = unique_edges(faces)
     i = np.concatenate([e[:, 0], e[:, 1]])
     j = np.concatenate([e[:, 1], e[:, 0]])
     return sp.csr_array((np.ones(len(i)), (i, j)), shape=(n, n))

@@ -289,19 +289,57 @@ def make_take(
     lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
     lm2 = project(K, lm3)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)
-    truth = {
+    truth = _take_truth(head, vertices, pose, {"K": K}, lm3, lm2)
+    images = {"xyz": out["xyz"], "color": out["color"]}
+    return _take_result(images, clicked, truth, subject, take, kind, label)
+
+
+def _take_truth(
+    head: HeadModel,
+    vertices: np.ndarray,
+    pose: np.ndarray,
+    camera: dict[str, np.ndarray],
+    lm3: np.ndarray,
+    lm2: np.ndarray,
+    **extra: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """The truth arrays of a take, in the order they are written (see :func:`write_take`).
+
+    Parameters
+    ----------
+    head : HeadModel
+    vertices : (N, 3) float64
+        The articulated head, head frame, mm.
+    pose : (4, 4) float64
+        Head -> camera.
+    camera : dict of str to array
+        The camera's intrinsics (``K``, and ``D`` for a distorted camera), stored after ``pose``.
+    lm3 : (68, 3) float64
+        Landmarks in the camera frame, mm.
+    lm2 : (68, 2) float64
+        Their exact projections, px.
+    **extra : array
+        Further arrays, stored last, in the given order.
+    """
+    return {
         "vertices": vertices,
         "faces": np.array(head.faces, dtype=np.int64),
         "skin_faces": head.skin_faces,
         "pose": pose,
-        "K": K,
+        **camera,
         "landmarks3d": lm3,
         "landmarks2d": lm2,
         "displacement": vertices - head.vertices,
+        **extra,
     }
+
+
+def _take_result(
+    images: dict, clicked: np.ndarray, truth: dict, subject: str, take: str, kind: str, label: str
+) -> dict:
+    """A simulated take as returned to the caller: the images, then landmarks, truth and ids."""
     return {
-        "xyz": out["xyz"],
-        "color": out["color"],
+        **images,
         "landmarks": clicked,
         "truth": truth,
         "subject": subject,
@@ -309,6 +347,13 @@ def make_take(
         "kind": kind,
         "label": label,
     }
+
+
+def _check_result(result: dict, keys: tuple[str, ...], source: str, producer: str) -> None:
+    """Raise :class:`InputError` naming ``source`` unless ``result`` has every key of ``keys``."""
+    for key in keys:
+        if key not in result:
+            raise InputError(source, f"result: missing key {key!r} (expected {producer} output)")
 
 
 def write_npz(path: str | PathLike[str], arrays: dict[str, np.ndarray]) -> None:
@@ -358,11 +403,7 @@ def write_take(
     """
     from scan2morph.io import write_abs, write_color, write_pts
 
-    for key in ("xyz", "color", "landmarks", "truth"):
-        if key not in result:
-            raise InputError(
-                str(truth_path), f"result: missing key {key!r} (expected make_take output)"
-            )
+    _check_result(result, ("xyz", "color", "landmarks", "truth"), str(truth_path), "make_take")
     write_abs(xyz_path, result["xyz"])
     write_color(color_path, result["color"])
     write_pts(pts_path, result["landmarks"])

@@ -417,29 +417,6 @@ def _uv_sphere(centre: np.ndarray, radius: float, polar_deg: np.ndarray, n_seg: 
     return verts, np.concatenate(faces), polar
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals.
-
-    Parameters
-    ----------
-    vertices : (N, 3) float
-    faces : (F, 3) int
-        Counter-clockwise seen from the side the normals point to.
-
-    Returns
-    -------
-    (N, 3) float64
-        Unit normals (zero for vertices used by no face).
-    """
-    fn = np.cross(
-        vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]
-    )
-    vn = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], fn)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
-
-
 # grid resolution: azimuth columns (even, symmetric about 0) and polar rows
 _N_AZ_HALF = 120
 _N_POLAR = 180

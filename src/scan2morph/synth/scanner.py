@@ -24,13 +24,13 @@ import pyrender  # noqa: E402
 from scipy import ndimage  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
+from scan2morph.geometry import vertex_normals  # noqa: E402
 from scan2morph.synth.head import (  # noqa: E402
     SEG_BROW,
     SEG_EYE,
     SEG_HAIR,
     SEG_SKIN,
     HeadModel,
-    vertex_normals,
 )
 
 #: Segments a scanner returns data for (before dropout): skin, brows, hair, sclera/iris.
@@ -201,8 +201,42 @@ def render(
         ``SEG_*`` code of the surface each pixel's centre ray meets; -1 on the background.
     """
     v_cam = vertices_head @ pose[:3, :3].T + pose[:3, 3]
-    n_cam = vertex_normals(v_cam, head.faces)
-    colors = shade(head.albedo, v_cam, n_cam)
+    colors = shade(head.albedo, v_cam, vertex_normals(v_cam, head.faces, fill=0.0))
+    color, depth, seg = render_colors(head, v_cam, colors, K, (width, height))
+    return np.ascontiguousarray(color), depth, seg
+
+
+def render_colors(
+    head: HeadModel,
+    v_cam: np.ndarray,
+    colors: np.ndarray,
+    K: np.ndarray,
+    size: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pinhole render (pyrender, OSMesa) of a head with per-vertex colours.
+
+    Parameters
+    ----------
+    head : HeadModel
+        Topology and segments.
+    v_cam : (N, 3) float
+        Vertices in the camera frame (OpenCV's: x right, y down, z forward), mm.
+    colors : (N, 3) float
+        Per-vertex RGB in [0, 1] (flat: no lighting is added by the renderer).
+    K : (3, 3) float
+        Intrinsics (project convention).
+    size : (int, int)
+        Image ``(width, height)``, px.
+
+    Returns
+    -------
+    color : (H, W, 3) uint8
+        Interpolated vertex colours, :data:`BACKGROUND_RGB` behind the head.
+    depth : (H, W) float64
+        Camera Z at each pixel centre, mm; NaN on the background.
+    segment : (H, W) int8
+        ``SEG_*`` code of the surface each pixel's centre ray meets; -1 on the background.
+    """
     scene = pyrender.Scene(
         bg_color=np.array([*BACKGROUND_RGB, 255]) / 255.0, ambient_light=np.ones(3)
     )
@@ -229,14 +263,14 @@ def render(
         zfar=z_mid + 600.0,
     )
     scene.add(cam, pose=np.diag([1.0, -1.0, -1.0, 1.0]))  # OpenCV camera -> OpenGL camera
-    r = _renderer(width, height)
+    r = _renderer(*size)
     flags = pyrender.RenderFlags.SKIP_CULL_FACES
     color, _ = r.render(scene, flags=flags | pyrender.RenderFlags.FLAT)
     seg_rgb, depth = r.render(scene, flags=flags | pyrender.RenderFlags.SEG, seg_node_map=seg_map)
     seg = np.rint(seg_rgb[..., 0] / _SEG_STEP).astype(np.int8) - 1
     depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
     seg[~np.isfinite(depth)] = -1
-    return np.ascontiguousarray(color), depth, seg
+    return color, depth, seg
 
 
 def surface_normals(xyz: np.ndarray) -> np.ndarray:

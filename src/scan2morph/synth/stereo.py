@@ -33,24 +33,26 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
-import pyrender  # noqa: E402
 
 from scan2morph.errors import InputError  # noqa: E402
+from scan2morph.geometry import vertex_normals  # noqa: E402
 from scan2morph.io.calibration import StereoCalibration  # noqa: E402
 from scan2morph.synth.cohort import (  # noqa: E402
     AIM,
+    _check_result,
     _key,
+    _take_result,
+    _take_truth,
     articulated_head,
     check_take,
     numeric_params,
     write_npz,
 )
-from scan2morph.synth.head import SEG_SKIN, HeadModel, vertex_normals  # noqa: E402
+from scan2morph.synth.head import SEG_SKIN, HeadModel  # noqa: E402
 from scan2morph.synth.scanner import (  # noqa: E402
-    _SEG_STEP,
     BACKGROUND_RGB,
-    _renderer,
     head_pose,
+    render_colors,
     shade,
 )
 
@@ -271,51 +273,6 @@ def _remap_tables(K: np.ndarray, D: np.ndarray, width: int, height: int, s: int)
     return _TABLES[key]
 
 
-def _render_pinhole(
-    head: HeadModel,
-    v_cam: np.ndarray,
-    colors: np.ndarray,
-    K: np.ndarray,
-    size: tuple[int, int],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pinhole render (pyrender) of per-vertex colours: colour, depth (camera Z, mm, NaN on the
-    background) and segment (``SEG_*``, -1 on the background), each (h, w)."""
-    scene = pyrender.Scene(
-        bg_color=np.array([*BACKGROUND_RGB, 255]) / 255.0, ambient_light=np.ones(3)
-    )
-    seg_map = {}
-    for code in np.unique(head.segment):
-        faces = head.faces[head.segment == code]
-        used, inv = np.unique(faces, return_inverse=True)
-        rgba = np.concatenate([colors[used], np.ones((len(used), 1))], axis=1)
-        prim = pyrender.Primitive(
-            positions=v_cam[used].astype(np.float32),
-            indices=inv.reshape(-1, 3).astype(np.uint32),
-            color_0=rgba.astype(np.float32),
-            mode=pyrender.constants.GLTF.TRIANGLES,
-        )
-        node = scene.add(pyrender.Mesh([prim]))
-        seg_map[node] = (_SEG_STEP * (int(code) + 1), 0, 0)
-    z_mid = float(np.median(v_cam[:, 2]))
-    cam = pyrender.IntrinsicsCamera(
-        fx=K[0, 0],
-        fy=K[1, 1],
-        cx=K[0, 2] + 0.5,  # OpenGL samples pixel centres at (i + 0.5)
-        cy=K[1, 2] + 0.5,
-        znear=max(z_mid - 600.0, 1.0),
-        zfar=z_mid + 600.0,
-    )
-    scene.add(cam, pose=np.diag([1.0, -1.0, -1.0, 1.0]))  # OpenCV camera -> OpenGL camera
-    r = _renderer(*size)
-    flags = pyrender.RenderFlags.SKIP_CULL_FACES
-    color, _ = r.render(scene, flags=flags | pyrender.RenderFlags.FLAT)
-    seg_rgb, depth = r.render(scene, flags=flags | pyrender.RenderFlags.SEG, seg_node_map=seg_map)
-    seg = np.rint(seg_rgb[..., 0] / _SEG_STEP).astype(np.int8) - 1
-    depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
-    seg[~np.isfinite(depth)] = -1
-    return color, depth, seg
-
-
 def _view(
     head: HeadModel,
     v_rig: np.ndarray,
@@ -330,7 +287,7 @@ def _view(
     s = int(p["supersample"])
     K_u, size, map_x, map_y = _remap_tables(cam["K"], cam["D"], p["width"], p["height"], s)
     v_cam = (v_rig - cam["C"]) @ cam["R"]
-    color, depth, seg = _render_pinhole(head, v_cam, colors, K_u, size)
+    color, depth, seg = render_colors(head, v_cam, colors, K_u, size)
     image = color.astype(np.float32)
     skin = seg == SEG_SKIN
     if p["speckle_contrast"] > 0 and skin.any():
@@ -426,7 +383,7 @@ def make_stereo_take(
     cams, calib = rig_cameras(p)
     v_rig = vertices @ rig_from_head[:3, :3].T + rig_from_head[:3, 3]
     # lights fixed in the rig: both cameras see the same shading
-    colors = shade(head.albedo, v_rig, vertex_normals(v_rig, head.faces))
+    colors = shade(head.albedo, v_rig, vertex_normals(v_rig, head.faces, fill=0.0))
     speckle_seed = (_key(subject) ^ int(seed)) & 0xFFFFFFFFFFFFFFFF
     left, right = (
         _view(head, v_rig, colors, cam, head_from_rig, p, speckle_seed, rng) for cam in cams
@@ -442,30 +399,10 @@ def make_stereo_take(
     lm3 = v_left[head.landmarks]
     lm2 = cv2.projectPoints(lm3, np.zeros(3), np.zeros(3), cam1["K"], cam1["D"])[0].reshape(-1, 2)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)
-    truth = {
-        "vertices": vertices,
-        "faces": np.array(head.faces, dtype=np.int64),
-        "skin_faces": head.skin_faces,
-        "pose": pose,
-        "K": cam1["K"],
-        "D": cam1["D"],
-        "landmarks3d": lm3,
-        "landmarks2d": lm2,
-        "displacement": vertices - head.vertices,
-        "xyz_true": xyz_true,
-        "segment": segment,
-    }
-    return {
-        "left": left,
-        "right": right,
-        "calib": calib,
-        "landmarks": clicked,
-        "truth": truth,
-        "subject": subject,
-        "take": take,
-        "kind": kind,
-        "label": label,
-    }
+    camera = {"K": cam1["K"], "D": cam1["D"]}
+    truth = _take_truth(head, vertices, pose, camera, lm3, lm2, xyz_true=xyz_true, segment=segment)
+    images = {"left": left, "right": right, "calib": calib}
+    return _take_result(images, clicked, truth, subject, take, kind, label)
 
 
 def write_stereo_take(
@@ -500,11 +437,8 @@ def write_stereo_take(
     """
     from scan2morph.io import write_color, write_pts, write_stereo_calibration
 
-    for key in ("left", "right", "calib", "landmarks", "truth"):
-        if key not in result:
-            raise InputError(
-                str(truth_path), f"result: missing key {key!r} (expected make_stereo_take output)"
-            )
+    keys = ("left", "right", "calib", "landmarks", "truth")
+    _check_result(result, keys, str(truth_path), "make_stereo_take")
     write_color(left_path, result["left"])
     write_color(right_path, result["right"])
     write_stereo_calibration(calibration_path, result["calib"])

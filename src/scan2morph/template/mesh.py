@@ -43,6 +43,7 @@ import numpy as np
 from scipy.spatial import Delaunay, cKDTree
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import unique_edges
 from scan2morph.tol import N_IBUG
 
 #: The closed-mouth fiducial set (20 iBUG numbers, 1-based), as the paper's 20 feature points:
@@ -349,11 +350,6 @@ def _segment_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return np.sqrt((d * d).sum(-1)).min(axis=1)
 
 
-def _edges(faces: np.ndarray) -> np.ndarray:
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    return np.unique(e, axis=0)
-
-
 def _segments_cross(p: np.ndarray, a: int, b: int, c: int, d: int) -> bool:
     """Whether segments ab and cd cross at a point interior to both."""
 
@@ -419,7 +415,7 @@ def _relax(
     h = _spacing(outline, len(p))
     for _ in range(150):
         tri = _triangulate(p, mouth, enforce=False)
-        bars = _edges(tri)
+        bars = unique_edges(tri)
         vec = p[bars[:, 0]] - p[bars[:, 1]]
         length = np.hypot(vec[:, 0], vec[:, 1])
         target = 1.2 * np.sqrt((length**2).sum() / len(length))

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import unique_edges
 
 
 def subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -28,11 +29,9 @@ def subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
         The unique edges, sorted, in the order of their midpoints.
     """
     faces = np.asarray(faces, dtype=np.int64)
-    half = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(half, axis=1)
-    edges, inverse = np.unique(key, axis=0, return_inverse=True)
-    n_v, n_f = len(vertices), len(faces)
-    mid = n_v + inverse.reshape(3, n_f)
+    edges, inverse = unique_edges(faces, return_inverse=True)
+    n_v = len(vertices)
+    mid = n_v + inverse.T
     ab, bc, ca = mid
     a, b, c = faces.T
     new_faces = np.concatenate(
