@@ -8,8 +8,13 @@ import numpy as np
 
 from scan2morph.evaluate.mesh import alignment_accuracy, mesh_accuracy
 from scan2morph.evaluate.motion import ideal_motion, motion_accuracy, true_motion
+from scan2morph.evaluate.scan import face_region, stereo_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.motion.smooth import laplacian_smooth
+
+#: Segment label of skin in a stereo truth's ``segment`` image (``scan2morph.synth.head.SEG_SKIN``;
+#: not imported, so that evaluating does not load the renderer).
+SEG_SKIN = 0
 
 
 def subject_accuracy(
@@ -51,6 +56,15 @@ def subject_accuracy(
     for take, truth in truths.items():
         v, valid = store[f"/takes/{take}/mesh/vertices"], store[f"/takes/{take}/mesh/valid"]
         entry = {"mesh": mesh_accuracy(v, valid, truth)}
+        if "xyz_true" in truth.extra and f"/takes/{take}/range/xyz" in store:
+            # a stereo take: depth error and coverage of the reconstruction over the face
+            face = face_region(truth.extra["segment"] == SEG_SKIN, truth.landmarks2d)
+            entry["stereo"] = stereo_accuracy(
+                np.asarray(store[f"/takes/{take}/range/xyz"], dtype=np.float64),
+                truth.extra["xyz_true"],
+                face,
+                source=take,
+            )
         if take != neutral:
             entry["align"] = alignment_accuracy(
                 store[f"/takes/{take}/align/transform"], v, valid, truth, truths[neutral]
@@ -85,15 +99,24 @@ def subject_accuracy(
         values = [t[stage][key] for t in takes.values() if stage in t]
         return float(np.max(values)) if values else None
 
+    summary = {
+        "mesh_rms_mm_max": worst("mesh", "rms_mm"),
+        "align_rotation_deg_max": worst("align", "rotation_deg"),
+        "align_translation_mm_max": worst("align", "translation_mm"),
+        "motion_relative_error_max": worst("motion", "relative_error"),
+        "motion_material_relative_error_max": worst("motion", "material_relative_error"),
+        "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
+    }
+    stereo = [
+        t["stereo"]
+        for t in takes.values()
+        if "stereo" in t and t["stereo"]["depth_rms_mm"] is not None
+    ]
+    if stereo:  # only subjects with stereo takes get the stereo summary
+        summary["stereo_depth_rms_mm_max"] = max(s["depth_rms_mm"] for s in stereo)
+        summary["stereo_coverage_min"] = min(s["coverage"] for s in stereo)
     return {
         "units": {"distances": "mm", "angles": "degrees", "relative": "fraction"},
         "takes": takes,
-        "summary": {
-            "mesh_rms_mm_max": worst("mesh", "rms_mm"),
-            "align_rotation_deg_max": worst("align", "rotation_deg"),
-            "align_translation_mm_max": worst("align", "translation_mm"),
-            "motion_relative_error_max": worst("motion", "relative_error"),
-            "motion_material_relative_error_max": worst("motion", "material_relative_error"),
-            "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
-        },
+        "summary": summary,
     }
