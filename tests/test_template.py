@@ -185,22 +185,7 @@ def test_fit_take_samples_the_true_surface(template, neutral_scan):
     )
     assert mesh["vertices"].shape == (subdivide_template(template, 1).n_vertices, 3)
     assert mesh["valid"].mean() > 0.8
-    truth = Truth(
-        **{
-            k: s["truth"][k]
-            for k in (
-                "vertices",
-                "faces",
-                "skin_faces",
-                "pose",
-                "K",
-                "landmarks3d",
-                "landmarks2d",
-                "displacement",
-            )
-        },
-        extra={},
-    )
+    truth = Truth.from_arrays(s["truth"])
     acc = mesh_accuracy(mesh["vertices"], mesh["valid"], truth)
     print(acc)
     assert acc["rms_mm"] < 0.3

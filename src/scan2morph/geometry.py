@@ -112,4 +112,49 @@ def unique_edges(
     return edges, full.reshape(-1, 3)
 
 
-__all__ = ["face_normals", "unique_edges", "vertex_normals"]
+def check_vertex_array(
+    value,
+    field: str,
+    source: str,
+    n_vertices: int | None = None,
+    ref: str = "the base mesh",
+    hint: str = "",
+) -> np.ndarray:
+    """Validate a (V, 3) array of finite vertex positions; return it as float64.
+
+    Parameters
+    ----------
+    value : array-like
+    field : str
+        Its name in messages (``"vertices"``, ``"shapes['car']"``).
+    source : str
+        The file or label the error names.
+    n_vertices : int, optional
+        Required vertex count, checked against ``ref`` (named in the message).
+    hint : str
+        Appended to the non-finite message (what the caller should do).
+
+    Raises
+    ------
+    InputError
+        Wrong shape, wrong vertex count, or NaN/inf coordinates (counted, first index named).
+    """
+    from scan2morph.errors import InputError
+
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InputError(source, f"{field}: expected a (V, 3) array, got shape {arr.shape}")
+    if n_vertices is not None and arr.shape[0] != n_vertices:
+        raise InputError(
+            source, f"{field}: expected {n_vertices} vertices (as {ref}), got {arr.shape[0]}"
+        )
+    bad = ~np.isfinite(arr).all(axis=1)
+    if bad.any():
+        raise InputError(
+            source,
+            f"{field}: {int(bad.sum())} vertices are NaN/inf (first at index {int(np.argmax(bad))}){hint}",
+        )
+    return arr
+
+
+__all__ = ["check_vertex_array", "face_normals", "unique_edges", "vertex_normals"]

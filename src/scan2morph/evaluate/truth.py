@@ -40,6 +40,17 @@ class Truth:
     displacement: np.ndarray
     extra: dict
 
+    @classmethod
+    def from_arrays(cls, arrays, source: str | Path = "truth") -> Truth:
+        """A Truth from a mapping of the truth keys (an open ``.npz`` or a generator's dict)."""
+        missing = [k for k in _KEYS if k not in arrays]
+        if missing:
+            raise InputError(source, f"truth keys {missing} missing")
+        return cls(
+            **{k: np.asarray(arrays[k]) for k in _KEYS},
+            extra={k: np.asarray(arrays[k]) for k in arrays if k not in _KEYS},
+        )
+
     def posed_vertices(self) -> np.ndarray:
         """(N, 3) truth vertices in the take's scanner frame, mm."""
         return self.vertices @ self.pose[:3, :3].T + self.pose[:3, 3]
@@ -51,12 +62,7 @@ def read_truth(path: str | Path) -> Truth:
     if not path.is_file():
         raise InputError(path, "truth file not found")
     with np.load(path, allow_pickle=False) as data:
-        missing = [k for k in _KEYS if k not in data.files]
-        if missing:
-            raise InputError(path, f"truth keys {missing} missing")
-        fields = {k: data[k] for k in _KEYS}
-        extra = {k: data[k] for k in data.files if k not in _KEYS}
-    return Truth(**fields, extra=extra)
+        return Truth.from_arrays({k: data[k] for k in data.files}, source=path)
 
 
 def surface_scene(vertices: np.ndarray, faces: np.ndarray):

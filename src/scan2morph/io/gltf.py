@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import face_normals, vertex_normals
+from scan2morph.geometry import check_vertex_array, face_normals, vertex_normals
 
 _GLB_MAGIC = 0x46546C67  # b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -103,21 +103,9 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def _check_vertices(name: str, value, source: str, n_vertices: int | None) -> np.ndarray:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise InputError(source, f"{name}: expected a (V, 3) array, got shape {arr.shape}")
-    if n_vertices is not None and arr.shape[0] != n_vertices:
-        raise InputError(
-            source, f"{name}: expected {n_vertices} vertices (as the base mesh), got {arr.shape[0]}"
-        )
-    bad = ~np.isfinite(arr).all(axis=1)
-    if bad.any():
-        raise InputError(
-            source,
-            f"{name}: {int(bad.sum())} vertices are NaN/inf (first at index "
-            f"{int(np.argmax(bad))}); glTF allows no NaN, pass filled vertices",
-        )
-    return arr
+    return check_vertex_array(
+        value, name, source, n_vertices, hint="; glTF allows no NaN, pass filled vertices"
+    )
 
 
 def write_glb(

@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import check_vertex_array
 
 #: Slack allowed on ``sum(weights) <= 1`` (the paper's Fig. 12 right blend sums to exactly 1).
 WEIGHT_SUM_SLACK = 1e-9
@@ -35,21 +36,9 @@ DEFAULT_BLENDS: dict[str, dict[str, float]] = {
 
 def _as_shape(value, source: str, field: str, n_vertices: int | None = None) -> np.ndarray:
     """Validate one (V, 3) finite shape and return it as float64."""
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise InputError(source, f"{field}: expected a (V, 3) array, got shape {arr.shape}")
-    if n_vertices is not None and arr.shape[0] != n_vertices:
-        raise InputError(
-            source, f"{field}: expected {n_vertices} vertices (as the base), got {arr.shape[0]}"
-        )
-    bad = ~np.isfinite(arr).all(axis=1)
-    if bad.any():
-        raise InputError(
-            source,
-            f"{field}: {int(bad.sum())} vertices have non-finite coordinates "
-            f"(first at index {int(np.argmax(bad))}); fill them before blending",
-        )
-    return arr
+    return check_vertex_array(
+        value, field, source, n_vertices, ref="the base", hint="; fill them before blending"
+    )
 
 
 def blend(

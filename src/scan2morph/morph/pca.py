@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import check_vertex_array
 
 #: Eigenvalues below this fraction of the largest are numerical zeros (dropped).
 EIGEN_RTOL = 1e-12
@@ -149,24 +150,15 @@ def _stack_shapes(shapes, names, source: str) -> tuple[np.ndarray, tuple[str, ..
         raise InputError(source, f"shapes: PCA needs at least two shapes, got {m}")
     arrays = []
     for j, (name, item) in enumerate(zip(names, items, strict=True)):
-        arr = np.asarray(item, dtype=np.float64)
         label = f"shapes[{j}] ({name!r})"
-        if arr.ndim != 2 or arr.shape[1] != 3:
-            raise InputError(source, f"{label}: expected a (V, 3) array, got shape {arr.shape}")
-        if arrays and arr.shape[0] != arrays[0].shape[0]:
+        arr = np.asarray(item, dtype=np.float64)
+        if arrays and arr.ndim == 2 and arr.shape[0] != arrays[0].shape[0]:
             raise InputError(
                 source,
                 f"{label}: has {arr.shape[0]} vertices, expected {arrays[0].shape[0]} "
                 f"(as shapes[0] ({names[0]!r}))",
             )
-        bad = ~np.isfinite(arr).all(axis=1)
-        if bad.any():
-            raise InputError(
-                source,
-                f"{label}: {int(bad.sum())} vertices have non-finite coordinates "
-                f"(first at index {int(np.argmax(bad))}); fill them before PCA",
-            )
-        arrays.append(arr)
+        arrays.append(check_vertex_array(arr, label, source, hint="; fill them before PCA"))
     if arrays[0].shape[0] == 0:
         raise InputError(source, "shapes: have no vertices")
     return np.stack(arrays), names
