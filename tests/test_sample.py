@@ -68,6 +68,116 @@ def test_a_missing_neighbour_invalidates_the_sample(xyz, corner):
     assert np.isnan(v[0]).all() and np.isfinite(v[1]).all()  # NaN, never zeros
 
 
+@pytest.mark.parametrize("missing", [(0,), (1,), (2,), (3,)])
+def test_three_neighbours_with_data_are_exact_on_a_plane(xyz, missing):
+    # one corner of the cell (30, 20)-(31, 21) without data: the plane through the other three
+    # is the plane itself, wherever the point lies in the cell
+    img = xyz.copy()
+    dx, dy = [(0, 0), (1, 0), (0, 1), (1, 1)][missing[0]]
+    img[20 + dy, 30 + dx] = np.nan
+    rng = np.random.default_rng(3)
+    pts = np.array([30.0, 20.0]) + rng.uniform(0, 1, (500, 2))
+    v, valid = sample_range(img, pts, min_weight=1e-9)
+    assert valid.all()
+    np.testing.assert_allclose(v, _on_plane(pts), rtol=0, atol=1e-9)
+    # the paper's rule (min_weight 1) rejects them all
+    assert not sample_range(img, pts)[1].any()
+
+
+@pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])
+def test_min_weight_is_the_share_of_bilinear_weight_on_pixels_with_data(xyz, side):
+    # one side of the cell (30, 20)-(31, 21) has no data: the share on data is 1 - f, with f
+    # the offset from the side that has data
+    img = xyz.copy()
+    f = np.array([0.1, 0.3, 0.49, 0.51, 0.9])
+    along = np.full(5, 0.35)
+    if side == "left":  # the right column has data
+        img[20:22, 30] = np.nan
+        pts, kept = (
+            np.column_stack([31 - f, 20 + along]),
+            np.column_stack([np.full(5, 31.0), 20 + along]),
+        )
+    elif side == "right":
+        img[20:22, 31] = np.nan
+        pts, kept = (
+            np.column_stack([30 + f, 20 + along]),
+            np.column_stack([np.full(5, 30.0), 20 + along]),
+        )
+    elif side == "top":  # the bottom row has data
+        img[20, 30:32] = np.nan
+        pts, kept = (
+            np.column_stack([30 + along, 21 - f]),
+            np.column_stack([30 + along, np.full(5, 21.0)]),
+        )
+    else:
+        img[21, 30:32] = np.nan
+        pts, kept = (
+            np.column_stack([30 + along, 20 + f]),
+            np.column_stack([30 + along, np.full(5, 20.0)]),
+        )
+    v, valid = sample_range(img, pts, min_weight=0.5)
+    assert valid.tolist() == [True, True, True, False, False]
+    # two pixels with data: exact along their edge, constant across it (the nearest edge point)
+    np.testing.assert_allclose(v[:3], _on_plane(kept[:3]), rtol=0, atol=1e-9)
+    assert np.isnan(v[3:]).all()
+
+
+def test_two_diagonal_pixels_give_the_value_along_their_diagonal(xyz):
+    img = xyz.copy()
+    img[20, 31] = img[21, 30] = np.nan  # (30, 20) and (31, 21) have data
+    pts = np.array([[30.5, 20.5], [30.3, 20.3], [30.6, 20.4]])
+    v, valid = sample_range(img, pts, min_weight=0.3)
+    assert valid.all()
+    # the projection onto the diagonal: t = (fx + fy) / 2
+    t = pts.sum(axis=1) / 2 - 25.0
+    np.testing.assert_allclose(v, _on_plane(np.column_stack([30 + t, 20 + t])), atol=1e-9)
+    # one pixel with data: its value
+    img2 = xyz.copy()
+    img2[20, 31] = img2[21, 30:32] = np.nan
+    v2, ok2 = sample_range(img2, np.array([[30.2, 20.3]]), min_weight=0.5)
+    assert ok2[0] and np.array_equal(v2[0], xyz[20, 30])
+
+
+def test_a_depth_step_between_neighbours_invalidates_the_sample(xyz):
+    # a step of 8 mm between rows 20 and 21 (a lip over the chin; pixels 0.7 mm apart): points
+    # between the two rows straddle it; the plane itself (slope ~3 deg) never does
+    img = xyz.copy()
+    img[21:, :, 2] += 8.0
+    pts = np.array([[30.5, 20.5], [30.5, 19.5], [30.5, 21.5]])
+    _, ok = sample_range(img, pts, max_slope_deg=80.0)
+    assert ok.tolist() == [False, True, True]
+    # the segment across the step rises atan(~8 / 0.7) ~ 85 deg: an 86 deg bound lets it pass
+    dz = img[21, 30, 2] - img[20, 30, 2]
+    assert 84.5 < np.degrees(np.arctan2(abs(dz), 0.7)) < 85.5
+    assert sample_range(img, pts, max_slope_deg=86.0)[1].all()
+    assert sample_range(img, pts)[1].all()  # no check: the paper's bilinear rule
+
+
+def test_the_step_rule_does_not_depend_on_resolution():
+    # a 70 deg ramp sampled at 0.5 mm and at 3 mm pixels is a surface, never a step
+    for pitch in (0.5, 3.0):
+        y, x = np.mgrid[0:20, 0:20] * pitch
+        img = np.stack([x, y, 1000.0 + np.tan(np.radians(70.0)) * x], axis=-1)
+        pts = np.random.default_rng(5).uniform(0, 19, (300, 2))
+        v, ok = sample_range(img, pts, max_slope_deg=80.0)
+        assert ok.all()
+        assert not sample_range(img, pts, max_slope_deg=60.0)[1].any()
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"min_weight": 0.0}, "min_weight: expected a share in \\(0, 1\\]"),
+        ({"min_weight": 1.5}, "min_weight"),
+        ({"max_slope_deg": 0.0}, "max_slope_deg: expected an angle in \\(0, 90\\) degrees"),
+        ({"max_slope_deg": 90.0}, "max_slope_deg"),
+    ],
+)
+def test_sampling_rules_bad_input(xyz, kw, match):
+    with pytest.raises(InputError, match=match):
+        sample_range(xyz, np.array([[3.0, 3.0]]), source="s01/car", **kw)
+
+
 def test_points_outside_or_not_finite_are_invalid(xyz):
     pts = np.array([[-0.01, 5], [W - 0.99, 5], [5, -1e-9], [5, H - 0.5], [np.nan, 3], [3, np.inf]])
     v, valid = sample_range(xyz, pts)

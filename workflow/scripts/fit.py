@@ -24,6 +24,8 @@ def main(snakemake):
             source=f"{w.subject}/{w.take}",
             min_valid_fraction=p.min_valid_fraction,
             max_fold_fraction=p.max_fold_fraction,
+            min_weight=p.min_weight,
+            max_slope_deg=p.max_slope_deg,
         )
         logging.info(
             "%s: %d vertices, %.1f%% valid, %d folded triangles",

@@ -104,6 +104,7 @@ def motion_accuracy(
     material: np.ndarray,
     suppressed: np.ndarray,
     ideal_processed: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
 ) -> dict:
     """Errors of the motion over unmasked vertices, relative to the reference motion's RMS.
 
@@ -115,6 +116,10 @@ def motion_accuracy(
     suppressed : (V,) bool, the stencil mask
     ideal_processed : (V, 3), optional
         The ideal motion put through the same mask and smoothing as the pipeline's.
+    normals : (V, 3), optional
+        Unit surface normals of the neutral mesh (NaN where undefined). With them the error
+        against the reference splits into its component along the normal (a wrong surface) and
+        the rest, tangent to the surface (a vertex that slid along a right surface).
 
     Returns
     -------
@@ -126,15 +131,19 @@ def motion_accuracy(
         smoothing change); against material motion ``material_relative_error`` and
         ``material_rms_mm``; ``masked_true_motion_share``: share of the material motion's energy
         (sum of squared lengths) on vertices the mask suppresses (it should cover still skin only).
+        With ``normals``: ``normal_rms_error_mm``, ``tangential_rms_error_mm`` (the two parts of
+        ``rms_error_mm``, over unmasked vertices with a normal) and ``normal_relative_error``
+        (the normal part relative to ``ideal_rms_mm``).
     """
     free = ~suppressed
-    err, ref, rel = _rel(motion, ideal if ideal_processed is None else ideal_processed, free)
+    reference = ideal if ideal_processed is None else ideal_processed
+    err, ref, rel = _rel(motion, reference, free)
     _, _, raw_rel = _rel(motion_raw, ideal, free)
     _, _, unproc_rel = _rel(motion, ideal, free)
     _, mat_ref, mat_rel = _rel(motion, material, free)
     ok = np.isfinite(material).all(axis=1)
     energy = np.sum(material[ok] ** 2, axis=1)
-    return {
+    out = {
         "relative_error": rel,
         "rms_error_mm": err,
         "ideal_rms_mm": ref,
@@ -146,3 +155,18 @@ def motion_accuracy(
         if energy.sum() > 0
         else 0.0,
     }
+    if normals is not None:
+        n = np.asarray(normals, dtype=np.float64)
+        delta = np.asarray(motion, dtype=np.float64) - reference
+        ok = free & np.isfinite(delta).all(axis=1) & np.isfinite(n).all(axis=1)
+        along = np.einsum("vd,vd->v", delta[ok], n[ok])
+        tangent = delta[ok] - along[:, None] * n[ok]
+        normal_rms = float(np.sqrt(np.mean(along**2))) if ok.any() else float("nan")
+        out |= {
+            "normal_rms_error_mm": normal_rms,
+            "tangential_rms_error_mm": float(np.sqrt(np.mean(np.sum(tangent**2, axis=1))))
+            if ok.any()
+            else float("nan"),
+            "normal_relative_error": normal_rms / ref if ref > 0 else float("nan"),
+        }
+    return out

@@ -10,6 +10,7 @@ from scan2morph.evaluate.mesh import alignment_accuracy, mesh_accuracy
 from scan2morph.evaluate.motion import ideal_motion, motion_accuracy, true_motion
 from scan2morph.evaluate.scan import face_region, stereo_accuracy
 from scan2morph.evaluate.truth import Truth
+from scan2morph.geometry import vertex_normals
 from scan2morph.motion.smooth import laplacian_smooth
 
 #: Segment label of skin in a stereo truth's ``segment`` image (``scan2morph.synth.head.SEG_SKIN``;
@@ -92,6 +93,7 @@ def subject_accuracy(
                 material,
                 store["/mask/suppressed"],
                 processed,
+                normals=vertex_normals(n_vertices, store["/template/faces"]),
             )
         takes[take] = entry
 
@@ -104,6 +106,7 @@ def subject_accuracy(
         "align_rotation_deg_max": worst("align", "rotation_deg"),
         "align_translation_mm_max": worst("align", "translation_mm"),
         "motion_relative_error_max": worst("motion", "relative_error"),
+        "motion_normal_relative_error_max": worst("motion", "normal_relative_error"),
         "motion_material_relative_error_max": worst("motion", "material_relative_error"),
         "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
     }

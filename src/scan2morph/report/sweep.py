@@ -379,6 +379,8 @@ def rerun_accuracy(
                 source=f"{source}/{take}",
                 min_valid_fraction=tpl["min_valid_fraction"],
                 max_fold_fraction=tpl["max_fold_fraction"],
+                min_weight=tpl["sample_min_weight"],
+                max_slope_deg=tpl["max_slope_deg"],
             )
             data |= {f"{g}/mesh/{k}": mesh[k] for k in ("vertices", "uv", "valid", "points2d")}
     if step <= STAGES.index("align"):

@@ -1,8 +1,16 @@
 """Sampling the range image at the warped template vertices (Yano-Harada 3.1).
 
-XYZ at a vertex is the bilinear interpolation of the four neighbouring pixels; a vertex with a
-neighbour pixel without data (or outside the image) is invalid and gets NaN, never a placeholder.
-Texture coordinates come from the pixel position (color and range are pixel to pixel).
+XYZ at a vertex is the bilinear interpolation of the four neighbouring pixels. The paper's rule
+makes a vertex with any neighbour pixel without data invalid (NaN, never a placeholder); with
+``min_weight`` < 1 a vertex at the edge of the data (the lips along the mouth opening, the rim of
+a hole) keeps a value when the neighbours with data carry at least that share of the bilinear
+weight: the affine function through them (exact on a plane with three, along the edge with two)
+is evaluated at the vertex. Independently, ``max_slope_deg`` rejects a vertex whose neighbours
+straddle a depth step (a lip over the chin, the nose over the cheek): interpolating across it
+would put the vertex in mid-air. A step is told from a steep surface by the slope between two
+neighbour pixels (depth difference against lateral distance), so the rule does not depend on
+the scanner's resolution. Texture coordinates come from the pixel position (color and
+range are pixel to pixel).
 """
 
 from __future__ import annotations
@@ -15,9 +23,49 @@ from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
 from scan2morph.tol import N_IBUG
 
+#: Corner offsets (dx, dy) of the four neighbour pixels, in the order of the bit masks below.
+_CORNERS = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=np.float64)
+
+
+def _partial_weights(fx: np.ndarray, fy: np.ndarray, have: np.ndarray) -> np.ndarray:
+    """(4, V) weights of the four corners for vertices with some corners missing.
+
+    The least-squares affine function ``mean + g . (d - d_mean)`` through the corners with data
+    (``d`` = corner offsets; the gradient ``g`` of least norm when fewer than three, i.e. flat
+    across a pair of corners, so the result does not depend on where the cell's origin is),
+    evaluated at ``(fx, fy)``; missing corners weigh 0.
+    """
+    out = np.zeros((4, len(fx)))
+    pattern = have.T @ (1 << np.arange(4))
+    for code in np.unique(pattern):
+        rows = np.flatnonzero(pattern == code)
+        used = np.flatnonzero((int(code) >> np.arange(4)) & 1)
+        if not len(used):
+            continue
+        centre = _CORNERS[used].mean(axis=0)
+        design = np.column_stack([np.ones(len(used)), _CORNERS[used] - centre])
+        at = np.column_stack([np.ones(len(rows)), fx[rows] - centre[0], fy[rows] - centre[1]])
+        out[np.ix_(used, rows)] = (at @ np.linalg.pinv(design)).T
+    return out
+
+
+def _straddles_step(corners: np.ndarray, have: np.ndarray, max_ratio: float) -> np.ndarray:
+    """(V,) bool: two corners with data joined by a segment with ``|dz| > max_ratio |dxy|``."""
+    out = np.zeros(corners.shape[1], dtype=bool)
+    for a in range(4):
+        for b in range(a + 1, 4):
+            both = have[a] & have[b]
+            d = np.where(both[:, None], corners[b] - corners[a], 0.0)
+            out |= both & (np.abs(d[:, 2]) > max_ratio * np.hypot(d[:, 0], d[:, 1]))
+    return out
+
 
 def sample_range(
-    xyz: np.ndarray, points: np.ndarray, source: str = "range image"
+    xyz: np.ndarray,
+    points: np.ndarray,
+    source: str = "range image",
+    min_weight: float = 1.0,
+    max_slope_deg: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Bilinear samples of a range image.
 
@@ -27,18 +75,28 @@ def sample_range(
     points : (V, 2) float, pixel coordinates ((0, 0) = centre of the top-left pixel)
     source : str
         Label for error messages.
+    min_weight : float in (0, 1]
+        A point whose neighbour pixels with data carry less than this share of its bilinear
+        weight is invalid. 1 (the paper's rule): all four neighbours must have data. Below 1, a
+        point with some neighbours missing takes the value of the affine function through the
+        neighbours with data.
+    max_slope_deg : float in (0, 90), optional
+        A point is invalid when two of its neighbours with data are joined by a segment steeper
+        than this to the image plane (depth difference ``|dz|`` > ``tan(max_slope_deg)`` times
+        the lateral distance ``|(dx, dy)|``, mm): it straddles a depth step. None: no check.
 
     Returns
     -------
     vertices : (V, 3) float64, mm; NaN where invalid
     valid : (V,) bool
-        True where the point lies in ``[0, W-1] x [0, H-1]`` and all four neighbour pixels have
-        data (x, y, z all finite). Non-finite points are invalid.
+        True where the point lies in ``[0, W-1] x [0, H-1]`` and passes the two rules above
+        (x, y, z of a pixel all finite = the pixel has data). Non-finite points are invalid.
 
     Raises
     ------
     InputError
-        ``xyz`` not (H, W, 3) with H, W >= 2, or ``points`` not (V, 2).
+        ``xyz`` not (H, W, 3) with H, W >= 2, ``points`` not (V, 2), ``min_weight`` outside
+        (0, 1] or ``max_slope_deg`` outside (0, 90).
     """
     xyz = np.asarray(xyz, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
@@ -46,6 +104,12 @@ def sample_range(
         raise InputError(source, f"xyz: expected (H, W, 3) with H, W >= 2, got {xyz.shape}")
     if points.ndim != 2 or points.shape[1] != 2:
         raise InputError(source, f"points: expected (V, 2) pixel coordinates, got {points.shape}")
+    if not 0 < min_weight <= 1:
+        raise InputError(source, f"min_weight: expected a share in (0, 1], got {min_weight}")
+    if max_slope_deg is not None and not 0 < max_slope_deg < 90:
+        raise InputError(
+            source, f"max_slope_deg: expected an angle in (0, 90) degrees, got {max_slope_deg}"
+        )
     h, w = xyz.shape[:2]
     x, y = points[:, 0], points[:, 1]
     inside = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= w - 1) & (y <= h - 1)
@@ -54,15 +118,20 @@ def sample_range(
     y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, h - 2)
     fx = np.where(inside, x, 0) - x0
     fy = np.where(inside, y, 0) - y0
-    x1, y1 = x0 + 1, y0 + 1
-    p00, p10, p01, p11 = xyz[y0, x0], xyz[y0, x1], xyz[y1, x0], xyz[y1, x1]
-    out = (
-        p00 * ((1 - fx) * (1 - fy))[:, None]
-        + p10 * (fx * (1 - fy))[:, None]
-        + p01 * ((1 - fx) * fy)[:, None]
-        + p11 * (fx * fy)[:, None]
-    )
-    valid = inside & np.all(np.isfinite(np.stack([p00, p10, p01, p11])), axis=(0, 2))
+    corners = np.stack([xyz[y0 + dy, x0 + dx] for dx, dy in _CORNERS.astype(np.int64)])
+    have = np.isfinite(corners).all(axis=2)  # (4, V)
+    weights = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
+    full = have.all(axis=0)
+    valid = inside & full
+    if min_weight < 1:
+        share = (weights * have).sum(axis=0)
+        partial = inside & ~full & (share >= min_weight - 1e-12)
+        weights[:, partial] = _partial_weights(fx[partial], fy[partial], have[:, partial])
+        valid |= partial
+    weights[~have] = 0.0
+    out = np.einsum("kv,kvd->vd", weights, np.where(have[..., None], corners, 0.0))
+    if max_slope_deg is not None:
+        valid &= ~_straddles_step(corners, have, np.tan(np.radians(max_slope_deg)))
     out[~valid] = np.nan
     return out, valid
 
@@ -126,6 +195,8 @@ def fit_take(
     source: str = "take",
     min_valid_fraction: float = 0.1,
     max_fold_fraction: float = 0.01,
+    min_weight: float = 1.0,
+    max_slope_deg: float | None = None,
 ) -> dict[str, np.ndarray]:
     """Fit the template to one take and sample its range image.
 
@@ -147,6 +218,8 @@ def fit_take(
         Fewer valid vertices than this share is an error (no range data over the face).
     max_fold_fraction : float
         Share of warped triangles allowed to fold; their vertices are marked invalid.
+    min_weight, max_slope_deg : float
+        Sampling at the edge of the data and across depth steps (see :func:`sample_range`).
 
     Returns
     -------
@@ -194,7 +267,9 @@ def fit_take(
     )
     points = spline(fine.vertices)
     folded = check_no_folds(points, fine.faces, source, max_fold_fraction)
-    vertices, valid = sample_range(xyz, points, source=source)
+    vertices, valid = sample_range(
+        xyz, points, source=source, min_weight=min_weight, max_slope_deg=max_slope_deg
+    )
     valid[np.unique(fine.faces[folded])] = False
     vertices[~valid] = np.nan
     share = float(valid.mean())
