@@ -8,6 +8,7 @@ import trimesh
 
 from scan2morph.errors import InputError
 from scan2morph.template import (
+    behind_steps,
     build_template,
     check_no_folds,
     fit_take,
@@ -176,6 +177,40 @@ def test_the_step_rule_does_not_depend_on_resolution():
 def test_sampling_rules_bad_input(xyz, kw, match):
     with pytest.raises(InputError, match=match):
         sample_range(xyz, np.array([[3.0, 3.0]]), source="s01/car", **kw)
+
+
+def _grid_mesh(z):
+    """A (ny, nx) grid 4 mm apart at depth z (mm, scanner at the origin) and its triangles."""
+    ny, nx = z.shape
+    y, x = (np.mgrid[0:ny, 0:nx] - [[[ny / 2]], [[nx / 2]]]) * 4.0
+    i = np.arange(ny * nx).reshape(ny, nx)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return np.stack([x.ravel(), y.ravel(), z.ravel()], 1), faces
+
+
+def test_behind_steps_flags_the_far_side_of_a_depth_step_only():
+    # rows 0-5 a chin at 1000 mm, rows 6-9 the neck 40 mm behind: the first neck row is joined to
+    # the chin by steep edges and is flagged; the chin and the rest of the neck are not
+    z = np.full((10, 12), 1000.0)
+    z[6:] = 1040.0
+    v, faces = _grid_mesh(z)
+    flagged = behind_steps(v, faces, 80.0).reshape(10, 12)
+    assert flagged[6].all() and not flagged[:6].any() and not flagged[7:].any()
+    # the same step in a scanner frame looking down -z (FRGC): "far" is still the neck
+    v_neg = v * [1, 1, -1]
+    np.testing.assert_array_equal(behind_steps(v_neg, faces, 80.0), flagged.ravel())
+    # invalid (NaN) vertices are skipped, never flagged
+    v[6 * 12 : 6 * 12 + 12] = np.nan
+    assert not behind_steps(v, faces, 80.0)[6 * 12 : 7 * 12].any()
+
+
+def test_behind_steps_keeps_a_steep_continuous_surface():
+    # a 70 deg ramp (steep cheek beside the nose), 4 mm vertex spacing: no step
+    z = 1000.0 + np.tan(np.radians(70.0)) * 4.0 * np.arange(12)[None, :].repeat(10, 0)
+    v, faces = _grid_mesh(z)
+    assert not behind_steps(v, faces, 80.0).any()
+    assert behind_steps(v, faces, 60.0).any()
 
 
 def test_points_outside_or_not_finite_are_invalid(xyz):

@@ -7,7 +7,7 @@ import pytest
 from scipy.interpolate import RBFInterpolator
 
 from scan2morph.errors import InputError
-from scan2morph.template import TPS, tps_warp
+from scan2morph.template import TPS, build_template, noise_gain, subdivide_template, tps_warp
 from scan2morph.template.mesh import FIDUCIAL_SETS, IBUG_CANONICAL
 
 
@@ -102,3 +102,35 @@ def test_points_on_the_image_border_are_accepted():
     src = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     dst = np.array([[-0.5, -0.5], [639.5, 0.0], [0.0, 479.5]])
     assert np.abs(TPS.fit(src, dst, image_size=(640, 480))(src) - dst).max() < 1e-9
+
+
+def test_noise_gain_matches_a_monte_carlo_of_noisy_fiducials():
+    rng = np.random.default_rng(11)
+    src = IBUG_CANONICAL[np.array(FIDUCIAL_SETS["open_corners"]) - 1]
+    dst = 300 + 70 * src
+    pts = np.vstack([src[:3], rng.uniform(-1.2, 1.2, (5, 2)) + [0, 1.0], [[1.6, 2.4], [0, 3.0]]])
+    gain = noise_gain(src, pts)
+    np.testing.assert_allclose(gain[:3], 1.0, atol=1e-9)  # interpolation: a fiducial's own noise
+    sigma, n = 0.5, 4000
+    warped = np.stack([TPS.fit(src, dst + rng.normal(0, sigma, dst.shape))(pts) for _ in range(n)])
+    spread = warped.std(axis=0)  # (points, 2): both coordinates see the same gain
+    # the sample std of n normal draws is within 3.5 / sqrt(2 n) of the truth (relative)
+    expect = np.broadcast_to(sigma * gain[3:, None], spread[3:].shape)
+    np.testing.assert_allclose(spread[3:], expect, rtol=3.5 / np.sqrt(2 * n))
+
+
+def test_inner_lip_corners_raise_the_noise_gain_at_the_outline():
+    template = build_template()
+    fine = subdivide_template(template, 1)
+    outline = fine.vertices[fine.boundary]
+    mean_gain = {
+        name: noise_gain(template.vertices[template.fiducial_set(name)[1]], outline).mean()
+        for name in ("closed", "open", "open_corners")
+    }
+    # measured: closed 1.23, open 1.36, open_corners 1.86
+    assert mean_gain["closed"] < mean_gain["open"] < 1.45 < 1.75 < mean_gain["open_corners"]
+
+
+def test_noise_gain_bad_input():
+    with pytest.raises(InputError, match="coincide"):
+        noise_gain(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.zeros((1, 2)))

@@ -21,5 +21,6 @@ rule accuracy:
         fiducial_sets=get_fiducial_sets,
         levels=config["template"]["subdivision_levels"],
         smoothing=config["smoothing"],
+        max_slope_deg=config["template"]["max_slope_deg"],
     script:
         "../scripts/accuracy.py"

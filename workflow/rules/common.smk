@@ -9,6 +9,7 @@ from snakemake.utils import validate
 from scan2morph.jobs import config_sha256
 from scan2morph.render.figures import STAGE_FIGURES, figure_names
 from scan2morph.sheet import read_sheet, subject_problems, synthetic_rows, take_table
+from scan2morph.template.mesh import FIDUCIAL_SETS
 
 validate(config, "../../schemas/config.schema.yaml")
 

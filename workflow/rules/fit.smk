@@ -6,6 +6,9 @@ rule template:
         "resources/template.npz",
     log:
         "logs/template/template.log",
+    params:
+        # the library's fiducial sets, saved with the template: a change rebuilds it
+        fiducial_sets=FIDUCIAL_SETS,
     script:
         "../scripts/template.py"
 

@@ -20,6 +20,7 @@ def main(snakemake):
             fiducial_sets=p.fiducial_sets,
             levels=p.levels,
             smoothing=p.smoothing,
+            max_slope_deg=p.max_slope_deg,
         )
         write_json(snakemake.output[0], report)
 

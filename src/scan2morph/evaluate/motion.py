@@ -19,16 +19,21 @@ import cv2
 import numpy as np
 
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
+from scan2morph.template.sample import behind_steps
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
 
 
-def ideal_points(template, truth: Truth, fiducial_set: str, levels: int) -> np.ndarray:
+def ideal_points(
+    template, truth: Truth, fiducial_set: str, levels: int, max_slope_deg: float | None = None
+) -> np.ndarray:
     """(V, 3) template vertices sampled from the exact surface at the spline of exact landmarks.
 
     The scanner frame is the camera frame of ``truth.K`` (and the distortion ``D`` of a stereo
     take's left camera, when present); NaN where a vertex's ray misses the surface or hits a
-    non-skin face (the mouth cavity, an eyeball), where the method has no data to sample.
+    non-skin face (the mouth cavity, an eyeball), where the method has no data to sample, and,
+    with ``max_slope_deg``, where the method's depth-step rule drops the vertex
+    (:func:`scan2morph.template.sample.behind_steps`: a chin contour vertex on the neck).
     """
     numbers, idx = template.fiducial_set(fiducial_set)
     fine = subdivide_template(template, levels)
@@ -56,6 +61,8 @@ def ideal_points(template, truth: Truth, fiducial_set: str, levels: int) -> np.n
     seen = np.isfinite(t).all(axis=0)
     seen[seen] = truth.skin_faces[face[0, seen]] & (np.ptp(t[:, seen], axis=0) < SILHOUETTE_MM)
     out[~seen] = np.nan
+    if max_slope_deg is not None:
+        out[behind_steps(out, fine.faces, max_slope_deg)] = np.nan
     return out
 
 
@@ -64,14 +71,20 @@ SILHOUETTE_MM = 5.0
 
 
 def ideal_motion(
-    template, neutral: Truth, take: Truth, sets: tuple[str, str], levels: int
+    template,
+    neutral: Truth,
+    take: Truth,
+    sets: tuple[str, str],
+    levels: int,
+    max_slope_deg: float | None = None,
 ) -> np.ndarray:
     """(V, 3) motion the method gives from perfect data, neutral frame, mm (NaN where undefined).
 
-    ``sets`` are the fiducial sets of the neutral and of the take.
+    ``sets`` are the fiducial sets of the neutral and of the take; ``max_slope_deg`` is the
+    method's depth-step rule (see :func:`ideal_points`).
     """
-    p_n = ideal_points(template, neutral, sets[0], levels)
-    p_t = ideal_points(template, take, sets[1], levels)
+    p_n = ideal_points(template, neutral, sets[0], levels, max_slope_deg)
+    p_t = ideal_points(template, take, sets[1], levels, max_slope_deg)
     true = neutral.pose @ np.linalg.inv(take.pose)
     return p_t @ true[:3, :3].T + true[:3, 3] - p_n
 

@@ -27,6 +27,7 @@ def subject_accuracy(
     fiducial_sets: Mapping[str, str] | None = None,
     levels: int = 1,
     smoothing: Mapping[str, float] | None = None,
+    max_slope_deg: float | None = None,
 ) -> dict:
     """Errors of one subject's pipeline outputs against its ground truth.
 
@@ -46,6 +47,8 @@ def subject_accuracy(
     smoothing : mapping, optional
         ``w`` and ``iterations`` of the pipeline's smoothing, applied with its mask to the ideal
         motion for the ``relative_error`` reference.
+    max_slope_deg : float, optional
+        The fit's depth-step rule (``template.max_slope_deg``), applied to the ideal motion too.
 
     Returns
     -------
@@ -75,7 +78,7 @@ def subject_accuracy(
             ideal = material
             if template is not None:
                 sets = (fiducial_sets[neutral], fiducial_sets[take])
-                ideal = ideal_motion(template, truths[neutral], truth, sets, levels)
+                ideal = ideal_motion(template, truths[neutral], truth, sets, levels, max_slope_deg)
             processed = None
             if smoothing is not None:
                 processed = laplacian_smooth(

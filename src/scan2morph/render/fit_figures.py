@@ -19,7 +19,7 @@ from scan2morph.render.source import (
     template_faces,
 )
 from scan2morph.render.views import Panel, face_view, panel_figure, render_view, subplots
-from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIPS
+from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIP_CORNERS, INNER_LIPS
 
 #: Colour of the wireframe's edges (sRGB).
 WIRE_RGB = np.array([0.15, 0.15, 0.2])
@@ -62,10 +62,16 @@ def fig_template(store: Mapping[str, np.ndarray]) -> Figure:
             f"closed-mouth fiducials ({len(CLOSED_MOUTH)})",
         ),
         (
-            [ibug[n] for n in INNER_LIPS if n in ibug],
+            [ibug[n] for n in INNER_LIPS if n in ibug and n not in INNER_LIP_CORNERS],
             "tab:orange",
             22,
-            f"inner lips, open mouth (+{len(INNER_LIPS)})",
+            f"inner lips, open mouth (+{len(INNER_LIPS) - len(INNER_LIP_CORNERS)})",
+        ),
+        (
+            [ibug[n] for n in INNER_LIP_CORNERS if n in ibug],
+            "tab:purple",
+            22,
+            f"inner-lip corners, open_corners set only (+{len(INNER_LIP_CORNERS)})",
         ),
     ]
     for idx, color, size, label in dots:

@@ -433,6 +433,7 @@ def rerun_accuracy(
         fiducial_sets=fiducials,
         levels=levels,
         smoothing=settings["smoothing"],
+        max_slope_deg=tpl["max_slope_deg"],
     )
 
 

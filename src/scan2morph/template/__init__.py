@@ -8,12 +8,19 @@ from scan2morph.template.mesh import (
     Template,
     build_template,
 )
-from scan2morph.template.sample import check_no_folds, fit_take, sample_range, texture_uv
+from scan2morph.template.sample import (
+    behind_steps,
+    check_no_folds,
+    fit_take,
+    sample_range,
+    texture_uv,
+)
 from scan2morph.template.serialize import load_template, save_template
 from scan2morph.template.subdivide import subdivide, subdivide_template
-from scan2morph.template.tps import TPS, tps_warp
+from scan2morph.template.tps import TPS, noise_gain, tps_warp
 
 __all__ = [
+    "behind_steps",
     "DEFAULT_FIDUCIAL_SET_BY_KIND",
     "FIDUCIAL_SETS",
     "ICP_POINTS",
@@ -29,5 +36,6 @@ __all__ = [
     "subdivide",
     "subdivide_template",
     "texture_uv",
+    "noise_gain",
     "tps_warp",
 ]

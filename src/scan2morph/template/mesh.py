@@ -50,12 +50,20 @@ from scan2morph.tol import N_IBUG
 #: chin, brows (outer, middle, inner), nose bridge, nose tip, nostril wings and subnasale,
 #: eye corners, mouth corners and outer-lip midpoints.
 CLOSED_MOUTH = (9, 18, 20, 22, 23, 25, 27, 28, 31, 32, 34, 36, 37, 40, 43, 46, 49, 52, 55, 58)
-#: The inner-lip contour added for open mouths (iBUG 61-68, the mouth hole's boundary).
+#: The inner-lip contour (iBUG 61-68, the mouth hole's boundary).
 INNER_LIPS = (61, 62, 63, 64, 65, 66, 67, 68)
-#: Fiducial sets by name (1-based iBUG numbers).
+#: The inner-lip corners: in the template 0.06 units from the mouth corners 49 / 55 and in a
+#: photo on them within a pixel or two, so they add no information to the spline but, with
+#: independent click noise on two almost coincident points, make it ill-conditioned (the noise
+#: gain at the template outline rises from 1.36 to 1.86, see ``noise_gain``).
+INNER_LIP_CORNERS = (61, 65)
+#: Fiducial sets by name (1-based iBUG numbers). ``open`` (the paper's open-mouth set, whose
+#: points the paper does not list) adds the inner-lip contour without its corners: the lens
+#: corners follow the mouth corners; ``open_corners`` adds all eight.
 FIDUCIAL_SETS: dict[str, tuple[int, ...]] = {
     "closed": CLOSED_MOUTH,
-    "open": CLOSED_MOUTH + INNER_LIPS,
+    "open": CLOSED_MOUTH + tuple(n for n in INNER_LIPS if n not in INNER_LIP_CORNERS),
+    "open_corners": CLOSED_MOUTH + INNER_LIPS,
 }
 #: The paper's choice of set per take kind: neutral and expressions closed, visemes open.
 DEFAULT_FIDUCIAL_SET_BY_KIND = {"neutral": "closed", "expression": "closed", "viseme": "open"}

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import unique_edges
 from scan2morph.template.mesh import signed_area2
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
@@ -57,6 +58,38 @@ def _straddles_step(corners: np.ndarray, have: np.ndarray, max_ratio: float) -> 
             both = have[a] & have[b]
             d = np.where(both[:, None], corners[b] - corners[a], 0.0)
             out |= both & (np.abs(d[:, 2]) > max_ratio * np.hypot(d[:, 0], d[:, 1]))
+    return out
+
+
+def behind_steps(vertices: np.ndarray, faces: np.ndarray, max_slope_deg: float) -> np.ndarray:
+    """(V,) bool: vertices on the far side of a depth step in the fitted mesh.
+
+    A mesh edge steeper than ``max_slope_deg`` to the image plane (its extent along the viewing
+    ray through its midpoint against its extent across it) joins two surfaces at different
+    depths, e.g. a vertex at the chin contour that fell on the neck behind it. Its endpoint
+    farther from the scanner is flagged; the face is the surface in front. The frame must be
+    scanner-centred (the scanner at the origin), as range images and stereo results are.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm, NaN = invalid (their edges are skipped)
+    faces : (F, 3) int
+    max_slope_deg : float in (0, 90)
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    e = unique_edges(faces)
+    a, b = v[e[:, 0]], v[e[:, 1]]
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    e, a, b = e[ok], a[ok], b[ok]
+    ray = a + b
+    ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
+    d = b - a
+    along = np.einsum("ed,ed->e", d, ray)
+    across = np.linalg.norm(d - along[:, None] * ray, axis=1)
+    steep = np.abs(along) > np.tan(np.radians(max_slope_deg)) * across
+    far = np.where(np.linalg.norm(b, axis=1) > np.linalg.norm(a, axis=1), e[:, 1], e[:, 0])
+    out = np.zeros(len(v), dtype=bool)
+    out[far[steep]] = True
     return out
 
 
@@ -209,7 +242,7 @@ def fit_take(
     xyz : (H, W, 3) float, mm, NaN = no data
     image_size : (width, height)
     fiducial_set : str
-        ``"closed"`` or ``"open"`` (see ``template.mesh.FIDUCIAL_SETS``).
+        ``"closed"``, ``"open"`` or ``"open_corners"`` (see ``template.mesh.FIDUCIAL_SETS``).
     levels : int
         1-to-4 subdivisions.
     source : str
@@ -219,7 +252,9 @@ def fit_take(
     max_fold_fraction : float
         Share of warped triangles allowed to fold; their vertices are marked invalid.
     min_weight, max_slope_deg : float
-        Sampling at the edge of the data and across depth steps (see :func:`sample_range`).
+        Sampling at the edge of the data and across depth steps (see :func:`sample_range`);
+        ``max_slope_deg`` also invalidates vertices behind a depth step of the fitted mesh
+        (:func:`behind_steps`).
 
     Returns
     -------
@@ -271,6 +306,10 @@ def fit_take(
         xyz, points, source=source, min_weight=min_weight, max_slope_deg=max_slope_deg
     )
     valid[np.unique(fine.faces[folded])] = False
+    if max_slope_deg is not None:
+        valid &= ~behind_steps(
+            np.where(valid[:, None], vertices, np.nan), fine.faces, max_slope_deg
+        )
     vertices[~valid] = np.nan
     share = float(valid.mean())
     if share < min_valid_fraction:

@@ -30,6 +30,17 @@ def _pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=-1))
 
 
+def _system(src: np.ndarray) -> np.ndarray:
+    """The (m + 3, m + 3) matrix ``[[Phi, P], [P^T, 0]]`` of the spline through ``src``."""
+    m = len(src)
+    p = np.column_stack([np.ones(m), src])
+    a = np.zeros((m + 3, m + 3))
+    a[:m, :m] = _phi(_pairwise(src, src))
+    a[:m, m:] = p
+    a[m:, :m] = p.T
+    return a
+
+
 @dataclass(frozen=True)
 class TPS:
     """A fitted 2D thin-plate spline.
@@ -111,15 +122,10 @@ class TPS:
                     source,
                     f"fiducials: image point {k} at {dst[k].round(1).tolist()} is outside the {w}x{h} image",
                 )
-        p = np.column_stack([np.ones(m), src])
-        a = np.zeros((m + 3, m + 3))
-        a[:m, :m] = _phi(d)
-        a[:m, m:] = p
-        a[m:, :m] = p.T
         b = np.zeros((m + 3, 2))
         b[:m] = dst
         try:
-            x = np.linalg.solve(a, b)
+            x = np.linalg.solve(_system(src), b)
         except np.linalg.LinAlgError:
             raise InputError(source, "fiducials: singular thin-plate spline system") from None
         return cls(centres=src, weights=x[:m], affine=x[m:])
@@ -141,3 +147,35 @@ class TPS:
 def tps_warp(src, dst, points, source: str = "tps", image_size=None) -> np.ndarray:
     """Fit the spline taking ``src`` to ``dst`` and apply it to ``points`` (n, 2)."""
     return TPS.fit(src, dst, source=source, image_size=image_size)(points)
+
+
+def noise_gain(src, points) -> np.ndarray:
+    """How much of the fiducials' position noise a spline passes on to warped points.
+
+    The warp is linear in the destination points: ``F(p) = sum_i L_i(p) v_i`` with weights
+    ``L_i(p)`` that sum to one. Independent noise of standard deviation ``s`` on every
+    destination coordinate moves ``F(p)`` by ``s * sqrt(sum_i L_i(p)^2)`` per coordinate; this
+    returns that factor. It is 1 at a fiducial, below 1 between well-spread fiducials and above
+    1 where the spline extrapolates or where two fiducials nearly coincide.
+
+    Parameters
+    ----------
+    src : (m, 2) float
+        Fiducials in the template frame (validated as by :meth:`TPS.fit`).
+    points : (n, 2) float
+        Template points to warp.
+
+    Returns
+    -------
+    (n,) float64
+        The noise gain at each point.
+    """
+    src = np.asarray(src, dtype=np.float64)
+    m = len(src)
+    TPS.fit(src, src, source="noise_gain")  # the same checks as a fit
+    rhs = np.zeros((m + 3, m))
+    rhs[:m] = np.eye(m)
+    x = np.linalg.solve(_system(src), rhs)  # column k: the spline taking e_k to 1, others to 0
+    pts = np.asarray(points, dtype=np.float64)
+    weights = np.column_stack([np.ones(len(pts)), pts]) @ x[m:] + _phi(_pairwise(pts, src)) @ x[:m]
+    return np.sqrt(np.sum(weights**2, axis=1))
