@@ -35,11 +35,16 @@ from scan2morph.scan.stereo import reconstruct_stereo  # noqa: E402
 VARIANTS = {
     "default": {},
     "wls": {"wls": True},
-    "no-refine": {"refine_iterations": 0},
-    "no-refine+wls": {"refine_iterations": 0, "wls": True},
+    "no-refine": {"refine_iterations": 0, "patch_iterations": 0, "grow_iterations": 0},
+    "no-refine+wls": {
+        "refine_iterations": 0,
+        "patch_iterations": 0,
+        "grow_iterations": 0,
+        "wls": True,
+    },
     "hh (8 paths)": {"mode": "hh"},
 }
-STAGES = ("rectify", "sgbm", "lr_check", "wls", "refine", "resample", "total")
+STAGES = ("rectify", "sgbm", "lr_check", "wls", "refine", "grow", "validate", "resample", "total")
 
 
 def _regions(scene, width, height):

@@ -1,11 +1,13 @@
-"""A synthetic stereo scene with exact ground truth, for the stereo tests and benchmark.
+"""Synthetic stereo scenes with exact ground truth, for the stereo tests and benchmark.
 
 Two pinhole cameras with mild radial distortion, 120 mm apart and each turned 3 degrees
-inwards, look at a sphere (radius 150 mm, ~670-820 mm away) in front of a plane (1150 mm).
-Both surfaces carry a random speckle texture defined on their surface coordinates (sphere:
-arc lengths along longitude/latitude; plane: x, y), looked up with bilinear interpolation.
-Each view is ray cast with 2x2 supersampling; the ground truth is the ray hit of every left
-pixel centre, so it is exact up to floating point.
+inwards, look at a sphere (radius 150 mm, ~670-820 mm away) in front of a plane (1150 mm)
+(:func:`render_scene`), or at a flat plate 800 mm away in front of that plane, a clean depth
+step with an occlusion band beside its left edge, with two untextured discs on the plate
+(:func:`render_step_scene`). All surfaces carry a random speckle texture defined on their
+surface coordinates (sphere: arc lengths along longitude/latitude; planes: x, y), looked up
+with bilinear interpolation. Each view is ray cast with 2x2 supersampling; the ground truth is
+the ray hit of every left pixel centre, so it is exact up to floating point.
 
 Everything is vectorised; a 640x480 pair takes about a second.
 """
@@ -23,6 +25,12 @@ SPHERE_RADIUS_MM = 150.0
 SPHERE_CENTRE_MM = np.array([10.0, -5.0, 820.0])  # rig frame
 PLANE_Z_MM = 1150.0  # rig frame, plane z = const
 SPECKLE_MM = 1.4  # spacing of the random texture grid, mm (~1.6 px at 800 mm)
+# the step scene: a plate (rig frame, z = const, axis-aligned rectangle) in front of the plane
+PLATE_Z_MM = 800.0
+PLATE_CENTRE_MM = np.array([10.0, -5.0])  # (x, y)
+PLATE_HALF_MM = np.array([110.0, 80.0])  # half width, half height
+# untextured discs on the plate, (x, y, radius) mm: a small one (~30 px) and a large one
+FLAT_SPOTS_MM = ((-50.0, 25.0, 3.0), (45.0, -25.0, 22.0))
 
 
 @dataclass
@@ -38,9 +46,12 @@ class StereoScene:
     xyz : (H, W, 3) float64
         Ground-truth point of every left pixel centre, left camera frame, mm.
     surface : (H, W) int8
-        What the left pixel centre sees: 0 sphere, 1 plane, -1 nothing.
+        What the left pixel centre sees: 0 sphere (step scene: plate), 1 plane, -1 nothing.
     rays : (H, W, 3) float64
         Unit ray of every left pixel centre (undistorted), left camera frame.
+    flat : (H, W) int8 or None
+        Step scene: the untextured disc of ``FLAT_SPOTS_MM`` the left pixel centre sees
+        (1-based), 0 none.
     """
 
     left: np.ndarray
@@ -49,6 +60,7 @@ class StereoScene:
     xyz: np.ndarray
     surface: np.ndarray
     rays: np.ndarray
+    flat: np.ndarray | None = None
 
 
 def rot_y(angle: float) -> np.ndarray:
@@ -155,6 +167,14 @@ def _speckle(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
     return np.clip(128.0 + 55.0 * tex, 5.0, 250.0)
 
 
+def _plane_texture(tex: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Speckle ``tex`` (centred on x = y = 0) at the plane coordinates (x, y) mm, flattened."""
+    half = np.array(tex.shape) * SPECKLE_MM / 2
+    rows = ((y + half[0]) / SPECKLE_MM).ravel()
+    cols = ((x + half[1]) / SPECKLE_MM).ravel()
+    return ndimage.map_coordinates(tex, [rows, cols], order=1)
+
+
 def _cast(origin: np.ndarray, dirs: np.ndarray, tex_sphere: np.ndarray, tex_plane: np.ndarray):
     """Hit distance, surface id and intensity of rig-frame rays ``origin + t dirs``."""
     oc = origin - SPHERE_CENTRE_MM
@@ -177,15 +197,7 @@ def _cast(origin: np.ndarray, dirs: np.ndarray, tex_sphere: np.ndarray, tex_plan
     rows_s = (SPHERE_RADIUS_MM * lat + 0.5 * np.pi * SPHERE_RADIUS_MM) / SPECKLE_MM
     cols_s = (SPHERE_RADIUS_MM * lon + np.pi * SPHERE_RADIUS_MM) / SPECKLE_MM
     i_sphere = ndimage.map_coordinates(tex_sphere, [rows_s.ravel(), cols_s.ravel()], order=1)
-    half = np.array(tex_plane.shape) * SPECKLE_MM / 2
-    i_plane = ndimage.map_coordinates(
-        tex_plane,
-        [
-            ((p[..., 1] + half[0]) / SPECKLE_MM).ravel(),
-            ((p[..., 0] + half[1]) / SPECKLE_MM).ravel(),
-        ],
-        order=1,
-    )
+    i_plane = _plane_texture(tex_plane, p[..., 0], p[..., 1])
     # diffuse ("blur") lighting from the rig: view independent, so both views agree
     normal = np.where((surface == 0)[..., None], q, np.array([0.0, 0.0, -1.0]))
     shade = 0.65 + 0.35 * np.clip(-np.sum(normal * dirs, axis=-1), 0.0, 1.0)
@@ -218,13 +230,25 @@ def render_scene(
     )
     tex_plane = _speckle(rng, (int(1400 / SPECKLE_MM), int(1800 / SPECKLE_MM)))
     cams, calib = rig_cameras(width, height)
+    images, xyz, surface, rays_cam = _render(
+        cams, lambda o, d: _cast(o, d, tex_sphere, tex_plane), rng, width, height, noise
+    )
+    return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam)
 
+
+def _render(cams, cast, rng, width, height, noise):
+    """Both views (2x2 supersampled, sensor noise) and the left pixel centres' truth.
+
+    ``cast(origin, dirs)`` returns the hit distance, surface id and intensity of rig-frame
+    rays. Returns the two RGB images, the truth points (H, W, 3) in the left camera frame,
+    the surface ids (H, W) and the unit rays (H, W, 3) of the left pixel centres.
+    """
     images = []
     for cam in cams:
         sub = np.array([-0.25, 0.25])
         ys, xs, dy, dx = np.meshgrid(np.arange(height), np.arange(width), sub, sub, indexing="ij")
         rays = _rotate(pixel_rays(xs + dx, ys + dy, cam["K"], cam["D"]), cam["R"])
-        _, _, intensity = _cast(cam["C"], rays, tex_sphere, tex_plane)
+        _, _, intensity = cast(cam["C"], rays)
         img = intensity.mean(axis=(2, 3)) + noise * rng.standard_normal((height, width))
         grey = np.clip(np.rint(img), 0, 255).astype(np.uint8)
         images.append(np.repeat(grey[..., None], 3, axis=2))
@@ -232,6 +256,68 @@ def render_scene(
     c1 = cams[0]
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
     rays_cam = pixel_rays(xs, ys, c1["K"], c1["D"])
-    t, surface, _ = _cast(c1["C"], _rotate(rays_cam, c1["R"]), tex_sphere, tex_plane)
+    t, surface, _ = cast(c1["C"], _rotate(rays_cam, c1["R"]))
     xyz = np.where((surface >= 0)[..., None], t[..., None] * rays_cam, np.nan)
-    return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam)
+    return images, xyz, surface, rays_cam
+
+
+def _cast_step(origin: np.ndarray, dirs: np.ndarray, tex_plate: np.ndarray, tex_plane: np.ndarray):
+    """Hit distance, surface id (0 plate, 1 plane), intensity and flat-disc id of rig rays."""
+    with np.errstate(divide="ignore"):
+        t_plate = (PLATE_Z_MM - origin[2]) / dirs[..., 2]
+        t_plane = (PLANE_Z_MM - origin[2]) / dirs[..., 2]
+    p = origin + t_plate[..., None] * dirs
+    on_plate = (t_plate > 0) & np.all(
+        np.abs(p[..., :2] - PLATE_CENTRE_MM) <= PLATE_HALF_MM, axis=-1
+    )
+    t_plane = np.where(t_plane > 0, t_plane, np.inf)
+    surface = np.where(on_plate, 0, np.where(np.isfinite(t_plane), 1, -1)).astype(np.int8)
+    t = np.where(on_plate, t_plate, t_plane)
+    p = origin + np.where(np.isfinite(t), t, 0.0)[..., None] * dirs
+    u, v = p[..., 0] - PLATE_CENTRE_MM[0], p[..., 1] - PLATE_CENTRE_MM[1]
+    intensity = np.where(
+        on_plate,
+        _plane_texture(tex_plate, u, v).reshape(t.shape),
+        _plane_texture(tex_plane, p[..., 0], p[..., 1]).reshape(t.shape),
+    )
+    flat = np.zeros(t.shape, np.int8)
+    for k, (x, y, r) in enumerate(FLAT_SPOTS_MM, start=1):
+        flat[on_plate & (np.hypot(p[..., 0] - x, p[..., 1] - y) <= r)] = k
+    intensity = np.where(flat > 0, 128.0, intensity)
+    # both surfaces face the rig; diffuse lighting as in _cast
+    shade = 0.65 + 0.35 * np.clip(dirs[..., 2] / np.linalg.norm(dirs, axis=-1), 0.0, 1.0)
+    intensity = np.where(surface >= 0, intensity * shade, 0.0)
+    return t, surface, intensity, flat
+
+
+def render_step_scene(
+    seed: int = 11, width: int = 640, height: int = 480, noise: float = 1.0
+) -> StereoScene:
+    """Render the depth-step pair: a textured plate (800 mm) in front of the plane (1150 mm).
+
+    The plate's vertical edges are depth steps of ~45 px of disparity; beside its left edge a
+    band of the plane is hidden from the right camera. Two discs on the plate are untextured
+    (``FLAT_SPOTS_MM``; ``StereoScene.flat`` marks the left pixels that see them).
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the textures and the sensor noise.
+    width, height : int
+        Image size, px (intrinsics scale with it).
+    noise : float
+        Standard deviation of additive Gaussian sensor noise, grey levels.
+    """
+    rng = np.random.default_rng(seed)
+    cells = (2 * PLATE_HALF_MM / SPECKLE_MM + 4).astype(int)
+    tex_plate = _speckle(rng, (cells[1], cells[0]))  # rows along y, columns along x
+    tex_plane = _speckle(rng, (int(1400 / SPECKLE_MM), int(1800 / SPECKLE_MM)))
+    cams, calib = rig_cameras(width, height)
+
+    def cast(origin, dirs):
+        return _cast_step(origin, dirs, tex_plate, tex_plane)[:3]
+
+    images, xyz, surface, rays_cam = _render(cams, cast, rng, width, height, noise)
+    c1 = cams[0]
+    flat = _cast_step(c1["C"], _rotate(rays_cam, c1["R"]), tex_plate, tex_plane)[3]
+    return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam, flat)

@@ -227,7 +227,7 @@ def test_hole_the_filter_cannot_close_is_reported_unfilled():
     assert np.isnan(out[10:20, 10:20]).all() and rep["filled"].sum() == 1
 
 
-def test_hole_across_a_depth_step_falls_back_to_the_paper_filter():
+def test_hole_across_a_depth_step_stays_or_falls_back_to_the_paper_filter():
     v, u = np.mgrid[0:40, 0:60].astype(np.float64)
     rot = Rotation.from_rotvec(FRAME_ROTVEC).as_matrix()
     depth = np.where(u >= 30, 530.0, 500.0)  # a 30 mm step between two fronto-parallel planes
@@ -235,9 +235,17 @@ def test_hole_across_a_depth_step_falls_back_to_the_paper_filter():
     hole = np.zeros((40, 60), bool)
     hole[18:22, 28:32] = True
     xyz[hole] = np.nan
-    out, rep = fill_holes(xyz)
+    # a hole larger than max_edge_hole_px whose rim spans the step stays a hole, with its area
+    kept, rep_kept = fill_holes(xyz, max_edge_hole_px=15)
+    assert rep_kept["n_trend_rejected"] == 1 and rep_kept["n_filled"] == 0
+    assert rep_kept["unfilled_holes"] == [16] and not rep_kept["filled"].any()
+    assert_allclose(kept, xyz, rtol=0, atol=0, equal_nan=True)
+    # a smaller one (the default bound is 50 px) is filled by the paper's filter (no trend
+    # terms), within the rim's range
+    out, rep = fill_holes(xyz, max_edge_hole_px=16)
     paper, rep0 = fill_holes(xyz, trend_degree=0)
     assert rep["n_trend_rejected"] == 1 and rep0["n_trend_rejected"] == 0
+    assert rep["n_filled"] == 1 and rep["unfilled_holes"] == []
     assert_allclose(out, paper, rtol=0, atol=1e-12, equal_nan=True)
     rim = ndimage.binary_dilation(hole, np.ones((3, 3))) & ~hole
     assert (out[hole] >= xyz[rim].min(0) - 1e-9).all() and (
@@ -395,6 +403,7 @@ def test_default_params_are_the_documented_ones():
         "fill_kernel_px": 3,
         "fill_threshold": 0.2,
         "fill_max_iter": 100,
+        "max_edge_hole_px": 50,
     }
 
 
@@ -439,6 +448,7 @@ def test_bad_xyz_raises(func, xyz, match):
         ({"fill_kernel_px": -3}, r"params.fill_kernel_px: expected an odd integer >= 3"),
         ({"fill_threshold": 0}, r"params.fill_threshold: expected a finite number in \(0, 1.0\)"),
         ({"fill_threshold": 1.0}, r"params.fill_threshold: expected a finite number in \(0, 1.0\)"),
+        ({"max_edge_hole_px": -1}, r"params.max_edge_hole_px: expected an integer >= 0"),
         ({"fill_max_iter": -2}, r"params.fill_max_iter: expected an integer >= 1, got -2"),
     ],
 )

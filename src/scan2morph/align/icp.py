@@ -8,7 +8,10 @@ Two refinements are offered (``params["method"]``):
 
 ``"icp"`` (the paper's, default)
     open3d point-to-plane ICP with a robust kernel: closest points, target normals are the
-    neutral mesh's vertex normals.
+    neutral mesh's vertex normals. The kernel's scale starts at ``max_correspondence_mm`` and
+    halves each iteration down to ``kernel_k_mm``: a redescending kernel (Tukey) as narrow as
+    1 mm from the start would give zero weight to most points while the initial pose is still
+    a few mm off, and the few left can pull a one-step solve anywhere.
 ``"correspondence"``
     Both meshes come from one template, so vertex i of one *is* vertex i of the other. The
     closed-form alternative is an iteratively reweighted Kabsch fit over the upper-face
@@ -211,9 +214,9 @@ def _refine_icp(p, q, q_normals, initial, prm):
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(q))
     tgt.normals = o3d.utility.Vector3dVector(q_normals)
-    k = prm["kernel_k_mm"]
+    k_final = prm["kernel_k_mm"]
+    k = max(prm["max_correspondence_mm"], k_final)
     loss = {"tukey": reg.TukeyLoss, "huber": reg.HuberLoss}.get(prm["robust_kernel"])
-    est = reg.TransformationEstimationPointToPlane(loss(k) if loss else reg.L2Loss())
     one_step = reg.ICPConvergenceCriteria(relative_fitness=0.0, relative_rmse=0.0, max_iteration=1)
     max_d = prm["max_correspondence_mm"]
     t = np.array(initial)
@@ -224,12 +227,15 @@ def _refine_icp(p, q, q_normals, initial, prm):
     for it in range(1, prm["max_iterations"] + 1):  # noqa: B007 (it is reported)
         if fitness == 0.0:
             break
+        est = reg.TransformationEstimationPointToPlane(loss(k) if loss else reg.L2Loss())
         res = reg.registration_icp(src, tgt, max_d, t, est, one_step)
         t = np.asarray(res.transformation)
         done = (
-            abs(res.fitness - fitness) < prm["relative_fitness"]
+            k == k_final
+            and abs(res.fitness - fitness) < prm["relative_fitness"]
             and abs(res.inlier_rmse - rmse) < prm["relative_rmse"]
         )
+        k = max(k / 2.0, k_final)
         fitness, rmse = res.fitness, res.inlier_rmse
         if done:
             converged = True

@@ -41,6 +41,7 @@ DEFAULT_REPAIR: dict[str, float | int] = {
     "fill_kernel_px": 3,
     "fill_threshold": 0.2,
     "fill_max_iter": 100,
+    "max_edge_hole_px": 50,
 }
 
 # Source named by parameter errors: the config section, whatever the take.
@@ -221,18 +222,19 @@ def _hole_trends(
     n_lab: int,
     wp: int,
     degree: int,
-) -> tuple[np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fit each hole's surface by a polynomial over its valid rim; return its derivatives.
 
     Returns the gradient (n_gap, 3, 2) and Hessian entries (n_gap, 3, 3) as (uu, uv, vv), in
-    mm per pixel (row = v, column = u), of each coordinate at each gap pixel, and the number
-    of holes whose fit was rejected (their derivatives are 0).
+    mm per pixel (row = v, column = u), of each coordinate at each gap pixel, and which holes'
+    fits were rejected ((n_lab,) bool; their derivatives are 0). Degree 0 fits nothing and
+    rejects nothing.
     """
     n_gap = gap_idx.size
     grad = np.zeros((n_gap, 3, 2))
     hess = np.zeros((n_gap, 3, 3))
     if degree == 0:
-        return grad, hess, 0
+        return grad, hess, np.zeros(n_lab, dtype=bool)
     offs, _ = _neighbour_offsets(wp, _RIM_PX, centre=False)
     # (hole, rim pixel) pairs; a pixel between two holes serves both fits.
     cand = gap_idx[:, None] + offs[None, :]
@@ -277,7 +279,7 @@ def _hole_trends(
     hess[:, :, 0] = 2 * c[:, 3] / s**2
     hess[:, :, 1] = c[:, 4] / s**2
     hess[:, :, 2] = 2 * c[:, 5] / s**2
-    return grad, hess, int(rejected.sum())
+    return grad, hess, rejected
 
 
 def fill_holes(
@@ -288,6 +290,7 @@ def fill_holes(
     max_iter: int = DEFAULT_REPAIR["fill_max_iter"],
     *,
     trend_degree: int = 2,
+    max_edge_hole_px: int = DEFAULT_REPAIR["max_edge_hole_px"],
     source: str = "repair",
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Fill the small holes of a range image by Williams' matte-blur filter.
@@ -313,6 +316,13 @@ def fill_holes(
     trend_degree : {0, 1, 2}
         Degree of the per-hole polynomial whose Taylor terms correct step 3 (0: the paper's
         filter as is; 2: exact for surfaces quadratic in the pixel coordinates).
+    max_edge_hole_px : int
+        Largest hole filled whose rim the trend fits worse than 1 mm RMS, pixels. Such a rim
+        spans a depth edge or a strongly curved side of the face (the chin over the neck, the
+        side of the face a second stereo camera does not see), where the filter, left without
+        its trend terms, would bridge the hole with a made-up surface: small ones (a pupil, a
+        nostril pixel) are filled, larger ones stay holes. With ``trend_degree`` 0 no rim is
+        fitted and every hole up to ``max_hole_px`` is filled.
     source : str
         Names the data in ``xyz`` errors (a file or ``subject/take``); parameter errors name
         the config section ``repair``.
@@ -325,9 +335,10 @@ def fill_holes(
         ``n_holes`` (int, holes found), ``n_filled`` (int), ``filled_px`` (int),
         ``unfilled_holes`` (list of int, areas in px of the holes left, largest first),
         ``largest_unfilled_px`` (int, 0 if none), ``n_iter`` (int, blur passes run),
-        ``n_trend_rejected`` (int, holes filled without trend terms because the polynomial fit
-        its rim worse than 1 mm RMS, e.g. across a depth edge) and ``filled`` ((H, W) bool,
-        pixels that received values).
+        ``n_trend_rejected`` (int, holes whose rim the polynomial fits worse than 1 mm RMS, e.g.
+        across a depth edge: filled without trend terms up to ``max_edge_hole_px``, else left
+        and listed in ``unfilled_holes``) and ``filled`` ((H, W) bool, pixels that received
+        values).
 
     Raises
     ------
@@ -337,6 +348,7 @@ def fill_holes(
     """
     arr, valid = _check_xyz(xyz, source)
     max_hole_px = _check_int(max_hole_px, "max_hole_px", _PARAMS, minimum=1)
+    max_edge_hole_px = _check_int(max_edge_hole_px, "max_edge_hole_px", _PARAMS, minimum=0)
     kernel_px = _check_int(kernel_px, "kernel_px", _PARAMS, minimum=3, odd=True)
     threshold = _check_float(threshold, "threshold", _PARAMS, upper=1.0)
     max_iter = _check_int(max_iter, "max_iter", _PARAMS, minimum=1)
@@ -366,11 +378,18 @@ def fill_holes(
         gy, gx = np.nonzero(gap_mask)
         gap_idx = (gy + rp) * wp + (gx + rp)
         # consecutive hole ids 0..L-1 for the fits
-        _, gap_lab = np.unique(labels[gy, gx], return_inverse=True)
-        n_lab = int(gap_lab.max()) + 1
-        grad, hess, report["n_trend_rejected"] = _hole_trends(
+        hole_ids, gap_lab = np.unique(labels[gy, gx], return_inverse=True)
+        n_lab = len(hole_ids)
+        grad, hess, rejected = _hole_trends(
             pad, valid_pad, gap_idx, gap_lab, n_lab, wp, trend_degree
         )
+        report["n_trend_rejected"] = int(rejected.sum())
+        left = rejected & (np.bincount(gap_lab, minlength=n_lab) > max_edge_hole_px)
+        if left.any():
+            target[hole_ids[left]] = False
+            keep = ~left[gap_lab]
+            gy, gx, gap_idx, gap_lab = gy[keep], gx[keep], gap_idx[keep], gap_lab[keep]
+            grad, hess = grad[keep], hess[keep]
 
         # Step 0 and 1: surface with gaps at 0, matte 1 on data
         surf = np.where(valid_pad[:, None], pad, 0.0)
@@ -409,8 +428,7 @@ def fill_holes(
         ok = ~np.isin(gap_lab, failed_lab)
         arr[gy[ok], gx[ok]] = surf[gap_idx[ok]]
         filled[gy[ok], gx[ok]] = True
-        target_ids = np.flatnonzero(target)
-        target[target_ids[failed_lab]] = False
+        target[hole_ids[failed_lab]] = False
 
     left = np.flatnonzero(hole & ~target)
     unfilled = sorted((int(a) for a in area[left]), reverse=True)
@@ -439,8 +457,8 @@ def repair_range(
         Range image, NaN where there is no data. Not modified.
     params : dict, optional
         Any of the keys of :data:`DEFAULT_REPAIR` (``spike_threshold_mm``, ``spike_window``,
-        ``max_hole_px``, ``fill_kernel_px``, ``fill_threshold``, ``fill_max_iter``); missing
-        keys take the defaults.
+        ``max_hole_px``, ``fill_kernel_px``, ``fill_threshold``, ``fill_max_iter``,
+        ``max_edge_hole_px``); missing keys take the defaults.
     source : str
         Names the data in ``xyz`` errors (a file or ``subject/take``); parameter errors name
         the config section ``repair``.
@@ -472,6 +490,7 @@ def repair_range(
         _check_int(p[key], f"params.{key}", _PARAMS, minimum=3, odd=True)
     for key in ("max_hole_px", "fill_max_iter"):
         _check_int(p[key], f"params.{key}", _PARAMS, minimum=1)
+    _check_int(p["max_edge_hole_px"], "params.max_edge_hole_px", _PARAMS, minimum=0)
     _check_float(p["spike_threshold_mm"], "params.spike_threshold_mm", _PARAMS)
     _check_float(p["fill_threshold"], "params.fill_threshold", _PARAMS, upper=1.0)
     clean, spikes = remove_spikes(xyz, p["spike_threshold_mm"], p["spike_window"], source=source)
@@ -481,6 +500,7 @@ def repair_range(
         p["fill_kernel_px"],
         p["fill_threshold"],
         p["fill_max_iter"],
+        max_edge_hole_px=p["max_edge_hole_px"],
         source=source,
     )
     report.update(spikes=spikes, n_spikes=int(spikes.sum()))
