@@ -32,8 +32,10 @@ from scan2morph.io.calibration import (
     validate_stereo_calibration,
     write_stereo_calibration,
 )
-from scan2morph.scan import stereo as stereo_module
 from scan2morph.scan.stereo import DEFAULT_STEREO, reconstruct_stereo, stereo_params
+from scan2morph.scan.stereo.cleanup import _fill_small_holes, _trim_discontinuities
+from scan2morph.scan.stereo.rectify import _rectify
+from scan2morph.scan.stereo.resample import _resample_left
 
 # The scene's depths: sphere 670-820 mm, plane 1150-1250 mm.
 DEPTHS = {"min_depth_mm": 600.0, "max_depth_mm": 1300.0}
@@ -319,7 +321,7 @@ def _plane_disparity(calib):
     """Rectification and the disparity (h, w) of the plane Z = 900 + 0.2 X - 0.1 Y (rectified
     left frame, mm), whose 1/Z and disparity are affine in the rectified pixel; and a function
     of points (n, 3) in the left camera frame giving their distance from the plane along Z."""
-    rect = stereo_module._rectify(calib, (640, 480), stereo_params(DEPTHS), "test")
+    rect = _rectify(calib, (640, 480), stereo_params(DEPTHS), "test")
     w, h = rect["size"]
     f, cx, cy = rect["P1"][0, 0], rect["P1"][0, 2], rect["P1"][1, 2]
     tx = rect["P2"][0, 3] / rect["P2"][0, 0]
@@ -341,7 +343,7 @@ def test_disparity_of_a_plane_resamples_exactly_onto_it(scene):
     grid = cv2.reprojectImageTo3D(disparity, rect["Q"], handleMissingValues=False)
     plane = grid[..., 2] - 900.0 - 0.2 * grid[..., 0] + 0.1 * grid[..., 1]
     assert np.abs(plane).max() < 1e-3  # mm; float32 disparity and output
-    xyz = stereo_module._resample_left(disparity, rect, scene.calib, (640, 480), 1.0)
+    xyz = _resample_left(disparity, rect, scene.calib, (640, 480), 1.0)
     valid = np.isfinite(xyz[..., 2])
     assert valid.mean() > 0.99
     assert np.abs(off_plane(xyz[valid])).max() < 1e-3  # mm (measured 5e-5: float32 disparity)
@@ -359,7 +361,7 @@ def test_resampling_keeps_the_border_of_the_valid_region(scene):
     disparity[:, w // 2 :] = np.nan  # a straight border
     disparity[h // 2 : h // 2 + 3, w // 4 : w // 4 + 3] = np.nan  # a small hole
     disparity[h // 4, w // 4] = np.nan  # a single pixel
-    xyz = stereo_module._resample_left(disparity, rect, scene.calib, (640, 480), 1.0)
+    xyz = _resample_left(disparity, rect, scene.calib, (640, 480), 1.0)
     # where every left pixel lands in the rectified image (independent of the pipeline)
     ys, xs = np.mgrid[0:480, 0:640].astype(np.float64)
     pix = np.stack([xs.ravel(), ys.ravel()], axis=-1).reshape(-1, 1, 2)
@@ -456,7 +458,7 @@ def test_trim_drops_the_low_side_of_steps_only():
     d[:, 20:40] = 130.0  # foreground
     d[:, 12:20] = np.nan  # the occluded band left of the foreground (8 px)
     d[20:, :] = 90.0  # a farther surface below (a step along the columns)
-    out = stereo_module._trim_discontinuities(d, 2, 2.0, 16)
+    out = _trim_discontinuities(d, 2, 2.0, 16)
     top = out[:18]  # rows clear of the lower step
     # foreground kept entirely; background: 2 px beside the gap and beside the step dropped
     assert np.isfinite(top[:, 20:40]).all()
@@ -468,7 +470,7 @@ def test_trim_drops_the_low_side_of_steps_only():
     assert np.isfinite(out[22:, 2:10]).all() and np.isfinite(out[20:, 14:18]).all()
     assert np.isfinite(out[18:20, :10]).all()
     # a wider gap than edge_gap_px is no step: nothing beside it is trimmed
-    far = stereo_module._trim_discontinuities(d[:18], 2, 2.0, 4)
+    far = _trim_discontinuities(d[:18], 2, 2.0, 4)
     assert np.isfinite(far[:, :12]).all()
 
 
@@ -495,14 +497,14 @@ def test_hole_filling_needs_a_small_hole_on_one_plane():
     d[:, 60:] += 8.0
     d[0:2, 70:72] = np.nan  # small, but touching the border
     allowed = np.ones(d.shape, bool)
-    out = stereo_module._fill_small_holes(d, 50, 0.5, allowed)
+    out = _fill_small_holes(d, 50, 0.5, allowed)
     np.testing.assert_allclose(out[10:13, 10:13], plane[10:13, 10:13], atol=1e-3)
     assert np.isnan(out[5:17, 30:42]).all()
     assert np.isnan(out[25:28, 58:61]).all() and np.isnan(out[0:2, 70:72]).all()
     np.testing.assert_array_equal(out[np.isfinite(d)], d[np.isfinite(d)])
     # a hole outside the allowed pixels (e.g. beyond the left image) stays
     allowed[11, 11] = False
-    assert np.isnan(stereo_module._fill_small_holes(d, 50, 0.5, allowed)[10:13, 10:13]).all()
+    assert np.isnan(_fill_small_holes(d, 50, 0.5, allowed)[10:13, 10:13]).all()
 
 
 # --- bad input ------------------------------------------------------------------------------
