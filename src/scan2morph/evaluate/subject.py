@@ -57,6 +57,7 @@ def subject_accuracy(
     """
     takes: dict[str, dict] = {}
     n_vertices = store[f"/takes/{neutral}/mesh/vertices"]
+    n_normals = vertex_normals(n_vertices, store["/template/faces"])
     for take, truth in truths.items():
         v, valid = store[f"/takes/{take}/mesh/vertices"], store[f"/takes/{take}/mesh/valid"]
         entry = {"mesh": mesh_accuracy(v, valid, truth)}
@@ -96,7 +97,7 @@ def subject_accuracy(
                 material,
                 store["/mask/suppressed"],
                 processed,
-                normals=vertex_normals(n_vertices, store["/template/faces"]),
+                normals=n_normals,
             )
         takes[take] = entry
 

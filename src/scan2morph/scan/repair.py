@@ -384,10 +384,10 @@ def fill_holes(
             pad, valid_pad, gap_idx, gap_lab, n_lab, wp, trend_degree
         )
         report["n_trend_rejected"] = int(rejected.sum())
-        left = rejected & (np.bincount(gap_lab, minlength=n_lab) > max_edge_hole_px)
-        if left.any():
-            target[hole_ids[left]] = False
-            keep = ~left[gap_lab]
+        unfit = rejected & (area[hole_ids] > max_edge_hole_px)
+        if unfit.any():
+            target[hole_ids[unfit]] = False
+            keep = ~unfit[gap_lab]
             gy, gx, gap_idx, gap_lab = gy[keep], gx[keep], gap_idx[keep], gap_lab[keep]
             grad, hess = grad[keep], hess[keep]
 

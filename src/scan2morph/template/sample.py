@@ -50,14 +50,23 @@ def _partial_weights(fx: np.ndarray, fy: np.ndarray, have: np.ndarray) -> np.nda
     return out
 
 
+def _steep(d: np.ndarray, view: np.ndarray, max_ratio: float) -> np.ndarray:
+    """(n,) bool: segments ``d`` (n, 3) whose extent along the unit viewing direction ``view``
+    ((3,) or (n, 3)) exceeds ``max_ratio`` times their extent across it: a depth step."""
+    along = d @ view if view.ndim == 1 else np.einsum("nd,nd->n", d, view)
+    across = np.linalg.norm(d - along[:, None] * view, axis=1)
+    return np.abs(along) > max_ratio * across
+
+
 def _straddles_step(corners: np.ndarray, have: np.ndarray, max_ratio: float) -> np.ndarray:
-    """(V,) bool: two corners with data joined by a segment with ``|dz| > max_ratio |dxy|``."""
+    """(V,) bool: two corners with data joined by a step along the depth axis z."""
+    z = np.array([0.0, 0.0, 1.0])
     out = np.zeros(corners.shape[1], dtype=bool)
     for a in range(4):
         for b in range(a + 1, 4):
             both = have[a] & have[b]
             d = np.where(both[:, None], corners[b] - corners[a], 0.0)
-            out |= both & (np.abs(d[:, 2]) > max_ratio * np.hypot(d[:, 0], d[:, 1]))
+            out |= both & _steep(d, z, max_ratio)
     return out
 
 
@@ -83,10 +92,7 @@ def behind_steps(vertices: np.ndarray, faces: np.ndarray, max_slope_deg: float) 
     e, a, b = e[ok], a[ok], b[ok]
     ray = a + b
     ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
-    d = b - a
-    along = np.einsum("ed,ed->e", d, ray)
-    across = np.linalg.norm(d - along[:, None] * ray, axis=1)
-    steep = np.abs(along) > np.tan(np.radians(max_slope_deg)) * across
+    steep = _steep(b - a, ray, np.tan(np.radians(max_slope_deg)))
     far = np.where(np.linalg.norm(b, axis=1) > np.linalg.norm(a, axis=1), e[:, 1], e[:, 0])
     out = np.zeros(len(v), dtype=bool)
     out[far[steep]] = True
