@@ -18,11 +18,14 @@ from tests.tiny_run import SUBJECT, tiny_run
 V = 50
 
 
-def _store(tmp_path, subject, takes, motions, ccr, freqs):
+def _store(tmp_path, subject, takes, motions, ccr, freqs, noise=None):
     """A store with the datasets the summary reads: takes (kind, label), viseme motion, PCA CCR,
-    modal frequencies."""
+    modal frequencies, and optionally the click-noise error bar (take -> relative)."""
     part = tmp_path / f"{subject}_part.h5"
     data = {f"/visemes/{t}/motion": m for t, m in motions.items()}
+    if noise:
+        data["/motion_noise/takes"] = np.array(list(noise), dtype=object)
+        data["/motion_noise/relative"] = np.array(list(noise.values()))
     data |= {"/pca/ccr": np.asarray(ccr, float), "/modal/frequencies_hz": np.asarray(freqs, float)}
     data |= {f"/takes/{t}/landmarks": np.zeros((68, 2)) for t in takes}
     attrs = {f"/takes/{t}": {"kind": k, "label": lab} for t, (k, lab) in takes.items()}
@@ -54,6 +57,7 @@ def stores(tmp_path):
         alice_motion,
         [0.5, 0.8, 0.95, 1.0],
         [12.5, 20.0],
+        noise={"too2": 0.3, "car": 0.1, "too1": 0.2},
     )
     bob_car = rng.normal(size=(V, 3))
     bob = _store(
@@ -78,6 +82,8 @@ def test_subject_summary_matches_analytic_values(stores):
         "n_expressions": 1,
         "motion_rms_mm_car": 5.0,
         "motion_rms_mm_too": 2.0,  # mean of 1 and 3 over the two takes of the label
+        "motion_noise_relative_car": 0.1,
+        "motion_noise_relative_too": pytest.approx(0.25),
         "ccr_1": 0.5,
         "ccr_2": 0.8,
         "ccr_3": 0.95,
@@ -104,6 +110,8 @@ def test_cohort_table_fills_missing_columns_with_nan(stores):
         "n_expressions",
         "motion_rms_mm_car",
         "motion_rms_mm_too",  # paper order of the visemes
+        "motion_noise_relative_car",
+        "motion_noise_relative_too",
         "ccr_1",
         "ccr_2",
         "ccr_3",

@@ -365,6 +365,19 @@ def test_pca_tables_match_the_store(report):
 
 
 @pytest.mark.slow
+def test_click_noise_table_matches_the_store(report):
+    path, store, *_ = report
+    table = _table(_parse(path.read_text()), "Error that landmark clicks")
+    with h5py.File(store) as h5:
+        names = h5["motion_noise/takes"].asstr()[()]
+        err, rel = h5["motion_noise/rms_error_mm"][()], h5["motion_noise/relative"][()]
+    assert table[0] == ["viseme", "click-noise error (mm)", "of the motion (%)"]
+    assert [r[0] for r in table[1:]] == list(names)
+    body = np.array([_floats(r[1:]) for r in table[1:]])
+    np.testing.assert_allclose(body, np.c_[err, 100 * rel], rtol=1e-3)
+
+
+@pytest.mark.slow
 def test_modal_tables_match_the_store(report):
     path, store, *_ = report
     page = _parse(path.read_text())

@@ -143,7 +143,7 @@ def test_sweep_settings_override_a_copy():
     assert type(settings["smoothing"]["iterations"]) is int  # numpy scalars become Python's
     assert settings["template"]["fiducials"]["viseme"] == "closed"
     assert CONFIG["template"]["fiducials"]["viseme"] == "open"  # the config is untouched
-    assert set(settings) == {"repair", "template", "align", "mask", "smoothing"}
+    assert set(settings) == {"repair", "template", "align", "mask", "smoothing", "motion_noise"}
 
 
 # --- load-time validation through Snakemake ---

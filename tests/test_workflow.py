@@ -214,5 +214,18 @@ def test_exports_and_accuracy_of_a_finished_subject(cohort):
     acc = json.loads((work / "results" / "synth01" / "accuracy.json").read_text())
     assert acc["takes"]["car"]["align"]["rotation_deg"] < 1.0
     assert acc["takes"]["neutral"]["mesh"]["rms_mm"] < 1.0
+    # the click-noise error bar: in the store, its table and beside the measured motion error
+    noise = read_part(work / "results" / "synth01" / "synth01.h5", "/motion_noise")
+    assert list(noise["/motion_noise/takes"]) == ["car"]
+    table = (work / "results" / "synth01" / "tables" / "motion_noise.tsv").read_text()
+    assert table.splitlines()[0].split("\t")[:4] == [
+        "take",
+        "motion_rms_mm",
+        "noise_rms_mm",
+        "noise_relative",
+    ]
+    car = acc["takes"]["car"]["motion"]
+    assert car["click_noise_relative"] == pytest.approx(noise["/motion_noise/relative"][0])
+    assert 0 < car["click_noise_relative"] < 1
     assert (work / "results" / "alice" / "meshes" / "neutral.obj").is_file()
     assert (work / "results" / "alice" / "tables" / "pca_eigenvalues.tsv").is_file()

@@ -171,6 +171,22 @@ def get_other_aligns(wildcards):
     )
 
 
+def get_viseme_repairs(wildcards):
+    return _take_files(
+        "results/{subject}/takes/{take}/repair.h5",
+        wildcards.subject,
+        get_viseme_takes(wildcards),
+    )
+
+
+def get_viseme_aligns(wildcards):
+    return _take_files(
+        "results/{subject}/takes/{take}/align.h5",
+        wildcards.subject,
+        get_viseme_takes(wildcards),
+    )
+
+
 def get_neutral_repair(wildcards):
     take = get_neutral_take(wildcards)
     return f"results/{wildcards.subject}/takes/{take}/repair.h5" if take else []
@@ -204,7 +220,7 @@ def get_subject_parts(wildcards):
     ]
     per_subject = [
         f"results/{wildcards.subject}/{stage}.h5"
-        for stage in ("template", "motion", "morph", "modal")
+        for stage in ("template", "motion", "motion_noise", "morph", "modal")
     ]
     return sum(per_take, []) + per_subject
 

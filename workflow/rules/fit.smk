@@ -42,11 +42,7 @@ rule fit:
     resources:
         mem_mb=1000,
     params:
-        levels=config["template"]["subdivision_levels"],
         fiducials=get_fiducial_set,
-        min_valid_fraction=config["template"]["min_valid_fraction"],
-        max_fold_fraction=config["template"]["max_fold_fraction"],
-        min_weight=config["template"]["sample_min_weight"],
-        max_slope_deg=config["template"]["max_slope_deg"],
+        template=config["template"],
     script:
         "../scripts/fit.py"

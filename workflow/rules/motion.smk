@@ -25,3 +25,28 @@ rule motion:
         levels=config["template"]["subdivision_levels"],
     script:
         "../scripts/motion.py"
+
+
+rule motion_noise:
+    input:
+        neutral=get_neutral_repair,
+        visemes=get_viseme_repairs,
+        aligns=get_viseme_aligns,
+        motion="results/{subject}/motion.h5",
+        template="resources/template.npz",
+    output:
+        part="results/{subject}/motion_noise.h5",
+        table="results/{subject}/tables/motion_noise.tsv",
+    log:
+        "logs/motion_noise/{subject}.log",
+    benchmark:
+        "benchmarks/rules/motion_noise/{subject}.tsv"
+    params:
+        neutral=get_neutral_take,
+        visemes=get_viseme_takes,
+        fiducials=get_fiducial_sets,
+        noise=config["motion_noise"],
+        smoothing=config["smoothing"],
+        template=config["template"],
+    script:
+        "../scripts/motion_noise.py"

@@ -5,7 +5,7 @@ import logging
 from scan2morph.io import write_obj
 from scan2morph.jobs import run_job
 from scan2morph.store import read_attrs, read_part, write_part
-from scan2morph.template import fit_take, load_template
+from scan2morph.template import fit_options, fit_take, load_template
 
 
 def main(snakemake):
@@ -20,12 +20,8 @@ def main(snakemake):
             xyz,
             image_size=(xyz.shape[1], xyz.shape[0]),
             fiducial_set=p.fiducials,
-            levels=p.levels,
             source=f"{w.subject}/{w.take}",
-            min_valid_fraction=p.min_valid_fraction,
-            max_fold_fraction=p.max_fold_fraction,
-            min_weight=p.min_weight,
-            max_slope_deg=p.max_slope_deg,
+            **fit_options(p.template),
         )
         logging.info(
             "%s: %d vertices, %.1f%% valid, %d folded triangles",

@@ -99,10 +99,16 @@ def subject_accuracy(
                 processed,
                 normals=n_normals,
             )
+            if "/motion_noise/takes" in store:
+                # the pipeline's own error bar (no truth), beside the error the truth shows
+                names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
+                if take in names:
+                    rel = store["/motion_noise/relative"][names.index(take)]
+                    entry["motion"]["click_noise_relative"] = float(rel)
         takes[take] = entry
 
     def worst(stage, key):
-        values = [t[stage][key] for t in takes.values() if stage in t]
+        values = [t[stage][key] for t in takes.values() if key in t.get(stage, {})]
         return float(np.max(values)) if values else None
 
     summary = {
@@ -113,6 +119,7 @@ def subject_accuracy(
         "motion_normal_relative_error_max": worst("motion", "normal_relative_error"),
         "motion_material_relative_error_max": worst("motion", "material_relative_error"),
         "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
+        "motion_click_noise_relative_max": worst("motion", "click_noise_relative"),
     }
     stereo = [
         t["stereo"]

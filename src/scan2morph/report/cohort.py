@@ -65,7 +65,8 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     -------
     SubjectSummary
         ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``,
-        ``motion_rms_mm_{label}`` per viseme label, ``ccr_1`` .. ``ccr_3``, ``modal_f1_hz``, and
+        ``motion_rms_mm_{label}`` per viseme label, ``motion_noise_relative_{label}`` (the
+        click-noise error bar, when the store has ``/motion_noise``), ``ccr_1`` .. ``ccr_3``, ``modal_f1_hz``, and
         the accuracy summary keys; ``ccr``: the whole CCR curve.
 
     Raises
@@ -91,9 +92,17 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
             by_label.setdefault(label or take, []).append(
                 motion_rms(h5["visemes"][take]["motion"][()])
             )
+        noise_by_label: dict[str, list[float]] = {}
+        if "motion_noise/relative" in h5:
+            names = h5["motion_noise/takes"].asstr()[()]
+            for take, rel in zip(names, h5["motion_noise/relative"][()], strict=True):
+                label = _attr(takes[take], "label") if take in takes else take
+                noise_by_label.setdefault(label or take, []).append(float(rel))
         order = {v: i for i, v in enumerate(VISEMES)}
         for label in sorted(by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
             row[f"motion_rms_mm_{label}"] = float(np.mean(by_label[label]))
+        for label in sorted(noise_by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
+            row[f"motion_noise_relative_{label}"] = float(np.mean(noise_by_label[label]))
         ccr = np.asarray(h5["pca/ccr"][()], dtype=np.float64)
         for i in range(N_CCR):
             row[f"ccr_{i + 1}"] = float(ccr[i]) if i < len(ccr) else float("nan")
@@ -110,14 +119,16 @@ def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     """Rows of several subjects in one table; a column a subject lacks is NaN there.
 
     Column order: the identification and count columns, motion per label (paper order, then
-    others), CCR, frequency, then accuracy columns in first-seen order.
+    others), click-noise error per label (the same order), CCR, frequency, then accuracy columns in first-seen order.
     """
     columns: list[str] = []
     for s in summaries:
         columns += [c for c in s.row if c not in columns]
-    motion = [c for c in columns if c.startswith("motion_rms_mm_")]
-    order = {f"motion_rms_mm_{v}": i for i, v in enumerate(VISEMES)}
-    motion.sort(key=lambda c: (order.get(c, len(order)), c))
+    motion = []
+    for prefix in ("motion_rms_mm_", "motion_noise_relative_"):
+        order = {f"{prefix}{v}": i for i, v in enumerate(VISEMES)}
+        group = [c for c in columns if c.startswith(prefix)]
+        motion += sorted(group, key=lambda c: (order.get(c, len(order)), c))
     head = ["subject", "n_takes", "n_visemes", "n_expressions"]
     fixed = [f"ccr_{i + 1}" for i in range(N_CCR)] + ["modal_f1_hz"]
     rest = [c for c in columns if c not in head + motion + fixed]

@@ -264,6 +264,22 @@ def _pca_section(h5: h5py.File) -> str:
     return table1 + table2
 
 
+def _motion_noise_section(h5: h5py.File) -> str:
+    if "motion_noise/relative" not in h5:
+        return _note("The store holds no click-noise estimate.")
+    group = h5["motion_noise"]
+    names = group["takes"].asstr()[()]
+    rel, err = group["relative"][()], group["rms_error_mm"][()]
+    rows = [[str(t), float(e), float(100 * r)] for t, e, r in zip(names, err, rel, strict=True)]
+    px, draws = _attr(group, "click_noise_px", "?"), _attr(group, "draws", "?")
+    caption = (
+        f"Error that landmark clicks of {px} px (per coordinate) add to each viseme's motion, "
+        f"over the unmasked vertices ({draws} perturbed refits; config motion_noise): a viseme "
+        "whose motion is small against it is dominated by the clicking"
+    )
+    return _table(["viseme", "click-noise error (mm)", "of the motion (%)"], rows, caption)
+
+
 def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
     if "modal/frequencies_hz" not in h5:
         return _note("The store holds no modal basis.")
@@ -451,6 +467,7 @@ def subject_report_html(
         sections = [
             ("inputs", "Inputs", _inputs_section(h5, order, thumbnail_px)),
             ("figures", "Figures", _figures_section(figures)),
+            ("motion-noise", "Viseme motion: click-noise error", _motion_noise_section(h5)),
             ("pca", "PCA (Yano and Harada, Tables 1 and 2)", _pca_section(h5)),
             ("modal", "Modal coordinates", _modal_section(h5, n_coordinates)),
             ("accuracy", "Accuracy against ground truth", _accuracy_section(accuracy)),

@@ -30,8 +30,9 @@ from scan2morph.errors import InputError
 from scan2morph.evaluate.subject import subject_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
+from scan2morph.motion.uncertainty import click_noise_motion, clicked_take, noise_datasets
 from scan2morph.scan import repair_range
-from scan2morph.template import Template, fit_take, subdivide_template
+from scan2morph.template import Template, fit_options, fit_take, subdivide_template
 from scan2morph.template.datasets import template_datasets
 from scan2morph.template.regions import icp_region, named_indices
 
@@ -44,6 +45,7 @@ SECTION_STAGE = {
     "align": "align",
     "mask": "motion",
     "smoothing": "motion",
+    "motion_noise": "motion",
 }
 #: Store datasets each stage writes (regular expressions over store paths), for the stages a
 #: sweep re-runs; a sweep drops those of its first stage and after, and recomputes them.
@@ -51,7 +53,7 @@ STAGE_DATASETS = {
     "repair": r"^/takes/[^/]+/range/(xyz|spikes|filled)$",
     "fit": r"^/takes/[^/]+/mesh/|^/template/",
     "align": r"^/takes/[^/]+/align/",
-    "motion": r"^/(mask|neutral|visemes)/|^/expressions/[^/]+/displacement$",
+    "motion": r"^/(mask|neutral|visemes|motion_noise)/|^/expressions/[^/]+/displacement$",
 }
 #: Store datasets of the stages after motion (morph, modal), which a sweep does not re-run (the
 #: accuracy does not read them): always dropped, so nothing stale is measured.
@@ -307,7 +309,8 @@ def rerun_accuracy(
         The subject's store (``read_part(results/{subject}/{subject}.h5)``).
     settings : mapping
         :func:`sweep_settings`: the sections ``repair``, ``template``, ``align``, ``mask``,
-        ``smoothing``.
+        ``smoothing`` and, optionally, ``motion_noise`` (the click-noise error bar is then
+        recomputed too).
     template : Template
         The base template (``resources/template.npz``).
     kinds : mapping take -> kind
@@ -375,12 +378,8 @@ def rerun_accuracy(
                 xyz,
                 image_size=(xyz.shape[1], xyz.shape[0]),
                 fiducial_set=fiducials[take],
-                levels=levels,
                 source=f"{source}/{take}",
-                min_valid_fraction=tpl["min_valid_fraction"],
-                max_fold_fraction=tpl["max_fold_fraction"],
-                min_weight=tpl["sample_min_weight"],
-                max_slope_deg=tpl["max_slope_deg"],
+                **fit_options(tpl),
             )
             data |= {f"{g}/mesh/{k}": mesh[k] for k in ("vertices", "uv", "valid", "points2d")}
     if step <= STAGES.index("align"):
@@ -424,6 +423,22 @@ def rerun_accuracy(
     data |= expression_displacements(
         aligned(neutral), {t: aligned(t) for t in expressions}, fine.faces, source=source
     )
+    if "motion_noise" in settings:
+        noise = settings["motion_noise"]
+        data |= noise_datasets(
+            click_noise_motion(
+                template,
+                clicked_take(data, neutral, fiducials[neutral]),
+                {t: clicked_take(data, t, fiducials[t]) for t in visemes},
+                data["/mask/suppressed"],
+                settings["smoothing"],
+                fit_options(tpl),
+                noise["click_noise_px"],
+                noise["draws"],
+                noise["seed"],
+                source=source,
+            )
+        )
     return subject_accuracy(
         data,
         truths,

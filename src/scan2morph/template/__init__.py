@@ -11,6 +11,7 @@ from scan2morph.template.mesh import (
 from scan2morph.template.sample import (
     behind_steps,
     check_no_folds,
+    fit_options,
     fit_take,
     sample_range,
     texture_uv,
@@ -29,6 +30,7 @@ __all__ = [
     "Template",
     "build_template",
     "check_no_folds",
+    "fit_options",
     "fit_take",
     "load_template",
     "sample_range",

@@ -15,6 +15,8 @@ range are pixel to pixel).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from scan2morph.errors import InputError
@@ -222,6 +224,22 @@ def check_no_folds(
             "left-right as seen in the image)",
         )
     return folded
+
+
+def fit_options(section: Mapping[str, object]) -> dict[str, object]:
+    """The :func:`fit_take` keyword arguments set by a config ``template`` section.
+
+    ``levels`` (``subdivision_levels``), ``min_valid_fraction``, ``max_fold_fraction``,
+    ``min_weight`` (``sample_min_weight``) and ``max_slope_deg``: what every fit of a subject
+    shares besides the take's own data and fiducial set.
+    """
+    return {
+        "levels": int(section["subdivision_levels"]),
+        "min_valid_fraction": section["min_valid_fraction"],
+        "max_fold_fraction": section["max_fold_fraction"],
+        "min_weight": section["sample_min_weight"],
+        "max_slope_deg": section["max_slope_deg"],
+    }
 
 
 def fit_take(

@@ -1,0 +1,118 @@
+"""Tests of scan2morph.motion.uncertainty: the click-noise error bar of the viseme motion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from scan2morph.errors import InputError
+from scan2morph.motion.uncertainty import ClickedTake, click_noise_motion
+from scan2morph.template import build_template, noise_gain
+
+W, H = 640, 480
+#: d(xyz)/dx, d(xyz)/dy (mm per px) and the offset of a tilted plane seen by the scanner.
+PLANE = np.array([[0.7, 0.0, 0.05], [0.0, 0.7, -0.03], [-224.0, -168.0, 1000.0]])
+SHIFT_MM = np.array([0.0, 0.0, 5.0])
+FIT = {
+    "levels": 0,
+    "min_valid_fraction": 0.1,
+    "max_fold_fraction": 0.01,
+    "min_weight": 1.0,
+    "max_slope_deg": None,
+}
+NO_SMOOTHING = {"w": 0.1, "iterations": 0}
+
+
+@pytest.fixture(scope="module")
+def template():
+    return build_template()
+
+
+@pytest.fixture(scope="module")
+def takes(template):
+    """A neutral on the plane and a viseme that is the same scan moved 5 mm along z."""
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    xyz = np.stack([x, y, np.ones_like(x)], axis=-1) @ PLANE
+    landmarks = np.array([320.0, 230.0]) + 70.0 * template.ibug_xy
+    moved = np.eye(4)
+    moved[:3, 3] = SHIFT_MM
+    neutral = ClickedTake(xyz, landmarks, "closed", np.eye(4))
+    return neutral, {"she": ClickedTake(xyz, landmarks, "closed", moved)}
+
+
+def _run(template, takes, **kw):
+    neutral, visemes = takes
+    args = {
+        "suppressed": np.zeros(len(template.vertices), bool),
+        "smoothing": NO_SMOOTHING,
+        "fit_options": FIT,
+        "click_noise_px": 0.5,
+        "draws": 8,
+        "seed": 1,
+    }
+    args.update(kw)
+    return click_noise_motion(template, neutral, visemes, source="subj", **args)
+
+
+def test_error_bar_matches_the_spline_noise_gain_on_a_plane(template, takes):
+    """On a plane linear in the pixel coordinates a vertex moves by the 2D warp error times the
+    plane's Jacobian A: both takes' independent clicks give sigma * gain * sqrt(2) * |A|_F."""
+    sigma = 0.5
+    res = _run(template, takes, click_noise_px=sigma, draws=600)["she"]
+    _, idx = template.fiducial_set("closed")
+    gain = noise_gain(template.vertices[idx], template.vertices)
+    expected = sigma * gain * np.sqrt(2.0) * np.linalg.norm(PLANE[:2])
+    ratio = res["rms_mm"] / expected
+    assert abs(np.median(ratio) - 1.0) < 0.03
+    assert np.all(np.abs(ratio - 1.0) < 0.15)
+    assert res["motion_rms_mm"] == pytest.approx(5.0, rel=1e-9)
+    rms = np.sqrt(np.mean(expected**2))
+    assert res["relative"] == pytest.approx(rms / 5.0, rel=0.03)
+    assert res["failed_draws"] == 0
+
+
+def test_error_bar_scales_with_the_click_noise(template, takes):
+    small = _run(template, takes, click_noise_px=0.25, draws=200)["she"]["rms_error_mm"]
+    large = _run(template, takes, click_noise_px=1.0, draws=200)["she"]["rms_error_mm"]
+    assert large / small == pytest.approx(4.0, rel=0.1)
+
+
+def test_masked_vertices_carry_no_error_and_smoothing_is_the_pipelines(template, takes):
+    mask = template.vertices[:, 1] > np.median(template.vertices[:, 1])
+    res = _run(template, takes, suppressed=mask, smoothing={"w": 0.1, "iterations": 30})
+    assert_array_equal(res["she"]["rms_mm"][mask], 0.0)
+    assert (res["she"]["rms_mm"][~mask] > 0).all()
+    # smoothing averages neighbouring errors: the spread drops below the unsmoothed one
+    raw = _run(template, takes, suppressed=mask)
+    assert res["she"]["rms_error_mm"] < raw["she"]["rms_error_mm"]
+
+
+def test_same_seed_same_numbers_other_seed_other_numbers(template, takes):
+    a, b = _run(template, takes, seed=3), _run(template, takes, seed=3)
+    c = _run(template, takes, seed=4)
+    assert_array_equal(a["she"]["rms_mm"], b["she"]["rms_mm"])
+    assert not np.array_equal(a["she"]["rms_mm"], c["she"]["rms_mm"])
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"click_noise_px": 0.0}, "click_noise_px: expected > 0"),
+        ({"click_noise_px": float("nan")}, "click_noise_px: expected > 0"),
+        ({"draws": 1}, "draws: expected an integer >= 2"),
+        ({"draws": 2.5}, "draws: expected an integer >= 2"),
+        ({"suppressed": np.zeros(3, bool)}, r"suppressed: expected \(441,\)"),
+        ({"click_noise_px": 60.0}, "subj/she: click_noise_px 60.0: only .* perturbed fits"),
+    ],
+)
+def test_bad_input_is_named(template, takes, kw, match):
+    with pytest.raises(InputError, match=match):
+        _run(template, takes, **kw)
+
+
+def test_a_bad_take_is_named(template, takes):
+    neutral, visemes = takes
+    bad = ClickedTake(visemes["she"].xyz, visemes["she"].landmarks[:67], "closed", np.eye(4))
+    with pytest.raises(InputError, match=r"subj/she.*landmarks: expected \(68, 2\)"):
+        _run(template, (neutral, {"she": bad}))
