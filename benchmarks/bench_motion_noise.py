@@ -6,7 +6,14 @@ landmarks (stored landmarks minus the exact projected ones) to a range of standa
 re-runs fitting, alignment and motion from the subject's store with the run's config
 (``scan2morph.report.rerun_accuracy``, as a parameter sweep does) and prints, per viseme, the
 motion error relative to the ideal motion (``relative_error``) and its part along the surface
-normal (``normal_relative_error``). Nothing is asserted; the printed table is the measurement.
+normal (``normal_relative_error``).
+
+Then it checks the pipeline's click-noise error bar (``scan2morph.motion.uncertainty``, which
+sees no truth): for ``REALISATIONS`` fresh draws of the nominal click noise around the exact
+landmarks it prints the error bar each draw's pipeline reports (``click_noise_relative``, mean
+over draws) against the click-noise part of the error the truth shows, ``sqrt(mean(rel^2) -
+rel0^2)`` with ``rel0`` the error at exact landmarks. Nothing is asserted; the printed tables are
+the measurement.
 """
 
 from __future__ import annotations
@@ -27,6 +34,9 @@ from scan2morph.template import load_template
 ROOT = Path(__file__).resolve().parents[1]
 #: Click noise standard deviations (px per coordinate) to measure.
 NOISE_PX = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.75, 1.0)
+#: Fresh click-noise draws for the error-bar check, and their seed.
+REALISATIONS = 8
+SEED = 7
 
 
 def main(subjects: list[str]) -> int:
@@ -64,7 +74,37 @@ def main(subjects: list[str]) -> int:
             ]
             print(f"{sigma:9.2f} " + " ".join(f"{c:>13}" for c in cells), end="")
             print(f"   {time.perf_counter() - t0:.1f}")
+            if sigma == 0.0:
+                floor = {v: acc["takes"][v]["motion"]["relative_error"] for v in visemes}
+        check_error_bar(subject, store, settings, template, takes, truths, nominal, floor)
     return 0
+
+
+def check_error_bar(subject, store, settings, template, takes, truths, sigma, floor):
+    """Print the reported click-noise error bar against the click-noise error the truth shows."""
+    rng = np.random.default_rng(SEED)
+    visemes = list(floor)
+    measured = {v: [] for v in visemes}
+    predicted = {v: [] for v in visemes}
+    t0 = time.perf_counter()
+    for _ in range(REALISATIONS):
+        data = dict(store)
+        for t in takes:
+            exact = truths[t].landmarks2d
+            data[f"/takes/{t}/landmarks"] = exact + sigma * rng.standard_normal(exact.shape)
+        acc = rerun_accuracy(data, settings, template, takes, truths, "fit", subject)
+        for v in visemes:
+            measured[v].append(acc["takes"][v]["motion"]["relative_error"])
+            predicted[v].append(acc["takes"][v]["motion"]["click_noise_relative"])
+    print(
+        f"\n{subject}: click-noise error at {sigma} px, {REALISATIONS} draws "
+        f"({time.perf_counter() - t0:.0f} s)"
+    )
+    print(f"{'viseme':>8} {'error bar':>10} {'truth':>8} {'ratio':>6}")
+    for v in visemes:
+        truth = np.sqrt(max(np.mean(np.square(measured[v])) - floor[v] ** 2, 0.0))
+        bar = float(np.mean(predicted[v]))
+        print(f"{v:>8} {bar:10.3f} {truth:8.3f} {truth / bar:6.2f}")
 
 
 if __name__ == "__main__":
