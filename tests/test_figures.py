@@ -18,7 +18,7 @@ from scan2morph.render.figures import (
 from scan2morph.render.fit_figures import fig_model
 from scan2morph.render.modal_figures import fig_expressions
 from scan2morph.render.morph_figures import blend_title, fig_gradual, pca_alphas
-from scan2morph.render.motion_figures import fig_distance, fig_mask
+from scan2morph.render.motion_figures import fig_click_noise, fig_distance, fig_mask
 from scan2morph.render.source import (
     StoreMapping,
     example_take,
@@ -181,6 +181,14 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
             f"/visemes/{take}/motion": motion,
             f"/visemes/{take}/model": models[take],
         }
+    # click-noise error bar: 1 mm on car, 0.5 mm on too, nothing under the mask
+    noise = {t: np.where(suppressed, 0.0, a) for t, a in (("car", 1.0), ("too", 0.5))}
+    store |= {f"/visemes/{t}/noise_rms_mm": n for t, n in noise.items()}
+    store |= {
+        "/motion_noise/takes": np.asarray(["car", "too"], dtype=object),
+        "/motion_noise/relative": np.array([0.1, 0.2]),
+        "/motion_noise/rms_error_mm": np.array([1.0, 0.5]),
+    }
     # PCA over neutral + viseme models (the paper's convention: eigenvalue = sum of coef^2)
     shapes = np.stack([neutral, *models.values()])
     mean = shapes.mean(axis=0)
@@ -407,6 +415,19 @@ def test_expression_figure_maps_a_known_field_to_its_colours(store):
     np.testing.assert_allclose(np.median(right) / scale_max, 1.0, atol=0.03)
 
 
+def _car_panel(fig, scale_max):
+    """Title of the figure's "car" panel and the median decoded value over the top 30% and the
+    bottom 15% of its coloured face pixels."""
+    image = figure_to_array(fig)
+    ax = next(ax for ax in fig.axes if ax.images and ax.get_title().startswith("car"))
+    panel = image[axes_pixels(fig, ax)]
+    r, c = np.nonzero(_surface(panel) & (panel.std(axis=-1) > 12))
+    top, bottom = r < np.percentile(r, 30), r > np.percentile(r, 85)
+    scale = ColorScale(0.0, scale_max, "")
+    values = [float(np.median(_decode(panel[r[m], c[m]], scale))) for m in (top, bottom)]
+    return ax.get_title(), *values
+
+
 def test_distance_figure_colours_a_vertex_by_its_distance(store):
     known = dict(store)
     xy = store["/template/vertices2d"]
@@ -420,16 +441,20 @@ def test_distance_figure_colours_a_vertex_by_its_distance(store):
         store["/takes/too/align/vertices"],
         store["/neutral/vertices"],
     )
-    fig = fig_distance(known)
-    image = figure_to_array(fig)
-    ax = next(ax for ax in fig.axes if ax.images and ax.get_title().startswith("car"))
-    assert "RMS" in ax.get_title()
-    panel = image[axes_pixels(fig, ax)]
-    r, c = np.nonzero(_surface(panel) & (panel.std(axis=-1) > 12))
-    top, bottom = r < np.percentile(r, 30), r > np.percentile(r, 85)
-    scale = ColorScale(0.0, 6.0, "")
-    assert np.median(_decode(panel[r[top], c[top]], scale)) < 0.6
-    assert np.median(_decode(panel[r[bottom], c[bottom]], scale)) > 5.4
+    title, top, bottom = _car_panel(fig_distance(known), 6.0)
+    assert "RMS" in title
+    assert top < 0.6 and bottom > 5.4
+
+
+def test_click_noise_figure_colours_each_viseme_by_its_error_bar(store):
+    known = dict(store)
+    xy = store["/template/vertices2d"]
+    known["/visemes/car/noise_rms_mm"] = np.where(xy[:, 1] > 1.0, 2.0, 0.0)  # the lower face
+    title, top, bottom = _car_panel(fig_click_noise(known), 2.0)
+    assert title == "car: 1.00 mm, 10% of the motion"
+    assert top < 0.2 and bottom > 1.8
+    bare = {k: v for k, v in store.items() if not k.startswith("/motion_noise")}
+    assert any("no click-noise" in t.get_text() for t in fig_click_noise(bare).texts)
 
 
 def test_mask_figure_shows_the_mask_in_orange(store):

@@ -158,37 +158,70 @@ def fig_mask(store: Mapping[str, np.ndarray]) -> Figure:
     return panel_figure(panels, ncols=2, title="Stencil mask on the neutral model", legend=legend)
 
 
+def _viseme_fields(
+    store: Mapping[str, np.ndarray],
+    what: str,
+    field,
+    label: str,
+    title: str,
+) -> Figure:
+    """Each viseme model coloured by a per-vertex field (mm), one shared scale to its 99th
+    percentile; ``field(take, model)`` gives the (V,) values and the panel title."""
+    takes = viseme_takes(store)
+    if not takes:
+        return message_figure(title, "the store has no viseme takes")
+    faces = template_faces(store, what)
+    models = {take: mesh(store, f"/visemes/{take}/model", what) for take in takes}
+    values, titles = {}, {}
+    for take in takes:
+        values[take], titles[take] = field(take, models[take])
+    finite = np.concatenate([d[np.isfinite(d)] for d in values.values()])
+    vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
+    scale = ColorScale(0.0, max(vmax, 1e-3), label)
+    view = frame_view(neutral_view(store, what), list(models.values()), faces)
+    panels = [
+        Panel(render_view(models[t], faces, view, rgb=scale.rgb(values[t])), titles[t])
+        for t in takes
+    ]
+    return panel_figure(panels, ncols=min(len(panels), 5), title=title, scale=scale)
+
+
 def fig_distance(store: Mapping[str, np.ndarray]) -> Figure:
     """Each viseme model coloured by its distance to the aligned measured take (Fig. 9, 10)."""
     what = "the viseme distance figure"
-    takes = viseme_takes(store)
-    if not takes:
-        return message_figure(
-            "Viseme models against their targets", "the store has no viseme takes"
-        )
-    faces = template_faces(store, what)
-    view = neutral_view(store, what)
-    models, dists = {}, {}
-    for take in takes:
-        models[take] = mesh(store, f"/visemes/{take}/model", what)
-        target = mesh(store, f"/takes/{take}/align/vertices", what)
-        dists[take] = np.linalg.norm(models[take] - target, axis=1)
-    finite = np.concatenate([d[np.isfinite(d)] for d in dists.values()])
-    vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
-    scale = ColorScale(0.0, max(vmax, 1e-3), "distance to the aligned take (mm)")
-    view = frame_view(view, list(models.values()), faces)
-    panels = []
-    for take in takes:
-        d = dists[take]
+
+    def distance(take, model):
+        d = np.linalg.norm(model - mesh(store, f"/takes/{take}/align/vertices", what), axis=1)
         rms = float(np.sqrt(np.nanmean(d**2))) if np.isfinite(d).any() else float("nan")
-        image = render_view(models[take], faces, view, rgb=scale.rgb(d))
-        panels.append(Panel(image, f"{take}: RMS {rms:.2f} mm"))
-    return panel_figure(
-        panels,
-        ncols=min(len(panels), 5),
-        title="Viseme models (neutral + processed motion) against the measured takes",
-        scale=scale,
+        return d, f"{take}: RMS {rms:.2f} mm"
+
+    return _viseme_fields(
+        store,
+        what,
+        distance,
+        "distance to the aligned take (mm)",
+        "Viseme models (neutral + processed motion) against the measured takes",
     )
+
+
+def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:
+    """Each viseme model coloured by the click-noise error of its motion (``motion_noise``)."""
+    what = "the click-noise figure"
+    title = "Error that the landmark clicks add to each viseme's motion"
+    if "/motion_noise/takes" not in store:
+        return message_figure(title, "the store has no click-noise estimate")
+    names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
+    rel = np.asarray(store["/motion_noise/relative"], dtype=np.float64)
+    err = np.asarray(store["/motion_noise/rms_error_mm"], dtype=np.float64)
+
+    def noise(take, model):
+        values = need(store, f"/visemes/{take}/noise_rms_mm", what)
+        if take not in names:
+            return values, take
+        k = names.index(take)
+        return values, f"{take}: {err[k]:.2f} mm, {100 * rel[k]:.0f}% of the motion"
+
+    return _viseme_fields(store, what, noise, "click-noise error (mm)", title)
 
 
 def fig_visemes(store: Mapping[str, np.ndarray]) -> Figure:
@@ -218,5 +251,6 @@ FIGURES = {
     "alignment": fig_alignment,
     "mask": fig_mask,
     "distance": fig_distance,
+    "click_noise": fig_click_noise,
     "visemes": fig_visemes,
 }
