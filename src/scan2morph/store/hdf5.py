@@ -22,7 +22,7 @@ from scan2morph import __version__
 from scan2morph.errors import InputError
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
-FORMAT_VERSION = "1.0.0"
+FORMAT_VERSION = "1.1.0"
 #: Datasets at least this large are chunked and gzip-compressed.
 _COMPRESS_BYTES = 1 << 16
 
