@@ -81,6 +81,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
     ]
     assert table.first_stage == "fit"
     assert first_stage(["smoothing.w", "align.kernel_k_mm"]) == "align"
+    assert first_stage(["motion_noise.click_noise_px"]) == "motion"
     assert first_stage(["repair.max_hole_px", "mask.radius_mm"]) == "repair"
     assert read_sweep_table(_table(tmp_path, "# nothing\n"), SCHEMA).rows == ()
 
@@ -115,6 +116,8 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         ("smoothing.iterations\tsmoothing.w\n30\t\n", r"line 2, column 'smoothing.w': empty value"),
         ("smoothing.w\tsmoothing.w\n0.1\t0.2\n", r"header: repeated column"),
         ("smoothing.w\nnan\n", r"'nan' is not a finite number"),
+        ("motion_noise.draws\n1\n", r"1 is less than the minimum of 2"),
+        ("motion_noise.click_noise_px\n0\n", r"0 is less than or equal to the minimum of 0"),
     ],
 )
 def test_a_bad_table_is_refused_naming_line_column_and_rule(tmp_path, text, message):
