@@ -7,7 +7,8 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from scan2morph.errors import InputError
-from scan2morph.motion.uncertainty import ClickedTake, click_noise_motion
+from scan2morph.motion.uncertainty import ClickedTake, click_noise_motion, noise_datasets
+from scan2morph.store import read_part, write_part
 from scan2morph.template import build_template, noise_gain
 
 W, H = 640, 480
@@ -116,3 +117,30 @@ def test_a_bad_take_is_named(template, takes):
     bad = ClickedTake(visemes["she"].xyz, visemes["she"].landmarks[:67], "closed", np.eye(4))
     with pytest.raises(InputError, match=r"subj/she.*landmarks: expected \(68, 2\)"):
         _run(template, (neutral, {"she": bad}))
+
+
+def test_a_subject_without_visemes_gets_empty_datasets(template, takes, tmp_path):
+    """No viseme takes: nothing to perturb, and the empty result still round-trips the store."""
+    neutral, _ = takes
+    args = {"smoothing": NO_SMOOTHING, "fit_options": FIT, "draws": 4, "seed": 1}
+    suppressed = np.zeros(len(template.vertices), bool)
+    result = click_noise_motion(template, neutral, {}, suppressed, click_noise_px=0.5, **args)
+    assert result == {}
+    write_part(tmp_path / "part.h5", noise_datasets(result))
+    back = read_part(tmp_path / "part.h5")
+    assert back["/motion_noise/takes"].shape == (0,)
+    assert back["/motion_noise/relative"].shape == (0,)
+
+
+def test_store_datasets_follow_the_result_order(template, takes, tmp_path):
+    neutral, visemes = takes
+    both = {"too": visemes["she"], "she": visemes["she"]}
+    result = _run(template, (neutral, both), draws=3)
+    data = noise_datasets(result)
+    write_part(tmp_path / "part.h5", data)
+    back = read_part(tmp_path / "part.h5")
+    assert list(back["/motion_noise/takes"]) == ["too", "she"]
+    assert back["/motion_noise/relative"].tolist() == [
+        result[t]["relative"] for t in ("too", "she")
+    ]
+    assert_array_equal(back["/visemes/she/noise_rms_mm"], result["she"]["rms_mm"])

@@ -43,7 +43,8 @@ def _write_dataset(h5: h5py.File, name: str, value) -> None:
         h5.create_dataset(name, data=np.asarray(value, dtype=object), dtype=h5py.string_dtype())
         return
     arr = np.asarray(value)
-    if arr.dtype.kind in "US":
+    if arr.dtype.kind in "US" or (arr.dtype.kind == "O" and arr.size == 0):
+        # text, or an empty list of names (no element says so, an object array means text)
         h5.create_dataset(name, data=arr.astype(object), dtype=h5py.string_dtype())
         return
     kwargs = {}
