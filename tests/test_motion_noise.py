@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 
+from scan2morph.align.rigid import transform_points
 from scan2morph.errors import InputError
+from scan2morph.motion.model import AlignedMesh, viseme_motion
 from scan2morph.motion.uncertainty import ClickedTake, click_noise_motion, noise_datasets
 from scan2morph.store import read_part, write_part
-from scan2morph.template import build_template, noise_gain
+from scan2morph.template import build_template, fit_take, noise_gain
+from scan2morph.template.regions import named_indices
 
 W, H = 640, 480
 #: d(xyz)/dx, d(xyz)/dy (mm per px) and the offset of a tilted plane seen by the scanner.
@@ -104,7 +107,11 @@ def test_same_seed_same_numbers_other_seed_other_numbers(template, takes):
         ({"draws": 1}, "draws: expected an integer >= 2"),
         ({"draws": 2.5}, "draws: expected an integer >= 2"),
         ({"suppressed": np.zeros(3, bool)}, r"suppressed: expected \(441,\)"),
-        ({"click_noise_px": 60.0}, "subj/she: click_noise_px 60.0: only .* perturbed fits"),
+        (
+            {"click_noise_px": 60.0},
+            r"subj/neutral: click_noise_px 60.0: only \d of 8 perturbed fits succeeded .*"
+            r"first refusal, draw \d+: subj/neutral: ",
+        ),
     ],
 )
 def test_bad_input_is_named(template, takes, kw, match):
@@ -140,7 +147,31 @@ def test_store_datasets_follow_the_result_order(template, takes, tmp_path):
     write_part(tmp_path / "part.h5", data)
     back = read_part(tmp_path / "part.h5")
     assert list(back["/motion_noise/takes"]) == ["too", "she"]
+    assert back["/motion_noise/failed_draws"].tolist() == [0, 0]
     assert back["/motion_noise/relative"].tolist() == [
         result[t]["relative"] for t in ("too", "she")
     ]
     assert_array_equal(back["/visemes/she/noise_rms_mm"], result["she"]["rms_mm"])
+
+
+def test_reference_motion_is_the_pipelines_and_takes_do_not_share_noise(template, takes):
+    """The unperturbed motion equals viseme_motion's (same mask, same smoothing); a take's
+    numbers do not depend on the other takes (each has its own noise stream)."""
+    neutral, visemes = takes
+    meshes = {}
+    for name, take in (("neutral", neutral), ("she", visemes["she"])):
+        mesh = fit_take(template, take.landmarks, take.xyz, (W, H), "closed", **FIT)
+        aligned = transform_points(take.transform, mesh["vertices"])
+        meshes[name] = AlignedMesh(aligned, mesh["valid"])
+    paths = named_indices(template, [["temple_r", "temple_l"]], "mask.paths")
+    stored = viseme_motion(
+        meshes["neutral"], {"she": meshes["she"]}, template.faces, paths, 20.0, 0.1, 30, "subj"
+    )
+    mask, smoothing = stored["/mask/suppressed"], {"w": 0.1, "iterations": 30}
+    assert 0 < mask.sum() < len(mask)
+    alone = _run(template, takes, suppressed=mask, smoothing=smoothing)["she"]
+    assert_allclose(alone["motion"], stored["/visemes/she/motion"], atol=1e-12)
+    two = {"car": visemes["she"], "she": visemes["she"]}
+    both = _run(template, (neutral, two), suppressed=mask, smoothing=smoothing)
+    assert_array_equal(both["she"]["rms_mm"], alone["rms_mm"])
+    assert not np.array_equal(both["car"]["rms_mm"], alone["rms_mm"])

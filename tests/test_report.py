@@ -371,10 +371,11 @@ def test_click_noise_table_matches_the_store(report):
     with h5py.File(store) as h5:
         names = h5["motion_noise/takes"].asstr()[()]
         err, rel = h5["motion_noise/rms_error_mm"][()], h5["motion_noise/relative"][()]
-    assert table[0] == ["viseme", "click-noise error (mm)", "of the motion (%)"]
+        failed = h5["motion_noise/failed_draws"][()]
+    assert table[0] == ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
     assert [r[0] for r in table[1:]] == list(names)
     body = np.array([_floats(r[1:]) for r in table[1:]])
-    np.testing.assert_allclose(body, np.c_[err, 100 * rel], rtol=1e-3)
+    np.testing.assert_allclose(body, np.c_[err, 100 * rel, failed], rtol=1e-3)
 
 
 @pytest.mark.slow

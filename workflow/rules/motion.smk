@@ -41,6 +41,8 @@ rule motion_noise:
         "logs/motion_noise/{subject}.log",
     benchmark:
         "benchmarks/rules/motion_noise/{subject}.tsv"
+    resources:
+        mem_mb=1000,
     params:
         neutral=get_neutral_take,
         visemes=get_viseme_takes,

@@ -103,12 +103,13 @@ def subject_accuracy(
                 # the pipeline's own error bar (no truth), beside the error the truth shows
                 names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
                 if take in names:
-                    rel = store["/motion_noise/relative"][names.index(take)]
-                    entry["motion"]["click_noise_relative"] = float(rel)
+                    rel = float(store["/motion_noise/relative"][names.index(take)])
+                    entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
         takes[take] = entry
 
     def worst(stage, key):
-        values = [t[stage][key] for t in takes.values() if key in t.get(stage, {})]
+        values = [t[stage].get(key) for t in takes.values() if stage in t]
+        values = [v for v in values if v is not None]
         return float(np.max(values)) if values else None
 
     summary = {

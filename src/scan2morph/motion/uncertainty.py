@@ -14,6 +14,7 @@ On the synthetic cohort the estimate is checked against the error that the groun
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -68,8 +69,10 @@ def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
     """Store datasets of :func:`click_noise_motion`'s result (see ``schemas/store.layout.yaml``)."""
     data = {f"/visemes/{t}/noise_rms_mm": r["rms_mm"] for t, r in result.items()}
     data["/motion_noise/takes"] = np.array(list(result), dtype=object)
-    for key, name in (("relative", "relative"), ("rms_error_mm", "rms_error_mm")):
-        data[f"/motion_noise/{name}"] = np.array([r[key] for r in result.values()])
+    for key in ("relative", "rms_error_mm"):
+        data[f"/motion_noise/{key}"] = np.array([r[key] for r in result.values()], dtype=float)
+    failed = [r["failed_draws"] for r in result.values()]
+    data["/motion_noise/failed_draws"] = np.array(failed, dtype=np.int64)
     return data
 
 
@@ -136,22 +139,28 @@ def click_noise_motion(
     -------
     dict take -> dict
         ``rms_mm`` (V,) float64: RMS over the draws of the change of the final motion at each
-        vertex (0 under the mask); ``relative``: its RMS over the unmasked vertices divided by
-        the RMS of the motion there; ``rms_error_mm``: the former; ``motion_rms_mm``: the
-        latter; ``failed_draws``: draws whose perturbed fit was refused (too many folded
-        triangles), left out.
+        vertex (0 under the mask; NaN where no draw had a value); ``motion`` (V, 3): the final
+        motion from the unperturbed landmarks (the pipeline's ``/visemes/{take}/motion``);
+        ``relative``: the RMS of ``rms_mm`` over the unmasked vertices divided by the RMS of the
+        motion there (NaN when that motion is zero); ``rms_error_mm``: the former;
+        ``motion_rms_mm``: the latter; ``failed_draws``: draws whose perturbed fit of the take
+        or of the neutral was refused (folded template, a fiducial outside the image), left out.
+        Every take has its own noise stream (seeded by ``seed`` and the take id), so adding or
+        removing a take leaves the others' numbers unchanged.
 
     Raises
     ------
     InputError
         ``click_noise_px`` <= 0, ``draws`` < 2, a mask of the wrong length, or a take's own
-        fit error (naming it). More than half of a take's draws refused is an error too: the
-        click noise is then too large for the template.
+        fit error with its clicks (naming it). Fewer than half of the draws of the neutral or of
+        a take fitted is an error too, naming that take and quoting the first refusal: the click
+        noise is then too large for the template.
     """
     if not (np.isfinite(click_noise_px) and click_noise_px > 0):
         raise InputError(source, f"click_noise_px: expected > 0 px, got {click_noise_px}")
     if int(draws) != draws or draws < 2:
         raise InputError(source, f"draws: expected an integer >= 2, got {draws}")
+    draws = int(draws)
     suppressed = np.asarray(suppressed, dtype=bool)
     w, iterations = float(smoothing["w"]), int(smoothing["iterations"])
 
@@ -173,51 +182,62 @@ def click_noise_motion(
         raise InputError(
             source, f"suppressed: expected ({len(n_base)},) mask flags, got {suppressed.shape}"
         )
+    if not visemes:
+        return {}
     reference = {}
     for take, data in visemes.items():
         v, mesh = _fit(template, data, data.landmarks, fit_options, f"{source}/{take}")
         reference[take] = final(v, mesh["valid"], n_base, n_mesh["valid"], faces, take)
-    rng = np.random.default_rng(seed)
-    sq = {t: np.zeros(len(n_base)) for t in visemes}
-    ok = dict.fromkeys(visemes, 0)
-    shape = np.shape(neutral.landmarks)
-    for k in range(int(draws)):
-        noisy = neutral.landmarks + click_noise_px * rng.standard_normal(shape)
-        try:
-            n_v, n_m = _fit(template, neutral, noisy, fit_options, f"{source}/neutral draw {k}")
-        except InputError:
-            n_v = None
-        for take, data in visemes.items():
+
+    def perturbed(name, data, stream):
+        """The take's ``draws`` fits with perturbed clicks (None where refused)."""
+        rng = np.random.default_rng([int(seed), *stream])
+        fits, first = [], None
+        for k in range(draws):
             noisy = data.landmarks + click_noise_px * rng.standard_normal(np.shape(data.landmarks))
-            if n_v is None:
-                continue
-            where = f"{source}/{take} (click-noise draw {k})"
             try:
-                v, mesh = _fit(template, data, noisy, fit_options, where)
-            except InputError:
-                continue
-            d = final(v, mesh["valid"], n_v, n_m["valid"], faces, where) - reference[take]
-            sq[take] += np.nansum(d**2, axis=1)
-            ok[take] += 1
-    out = {}
-    free = ~suppressed
-    for take in visemes:
-        if ok[take] < max(2, int(draws) / 2):
+                fits.append(_fit(template, data, noisy, fit_options, f"{source}/{name}"))
+            except InputError as err:
+                fits.append(None)
+                first = first or f"draw {k}: {err}"
+        done = sum(f is not None for f in fits)
+        if done < max(2, draws / 2):
             raise InputError(
-                f"{source}/{take}",
-                f"click_noise_px {click_noise_px}: only {ok[take]} of {draws} perturbed fits "
-                "succeeded (folded template); the click noise is too large for the template",
+                f"{source}/{name}",
+                f"click_noise_px {click_noise_px}: only {done} of {draws} perturbed fits "
+                f"succeeded (the noise is too large for the template; first refusal, {first})",
             )
-        rms = np.sqrt(sq[take] / ok[take])
+        return fits
+
+    n_fits = perturbed("neutral", neutral, [0])
+    free = ~suppressed
+    out = {}
+    for take, data in visemes.items():
+        sq, count = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64)
+        used = 0
+        t_fits = perturbed(take, data, [1, zlib.crc32(take.encode())])
+        for n_fit, t_fit in zip(n_fits, t_fits, strict=True):
+            if n_fit is None or t_fit is None:
+                continue
+            where = f"{source}/{take} (click-noise draw)"
+            moved = final(t_fit[0], t_fit[1]["valid"], n_fit[0], n_fit[1]["valid"], faces, where)
+            d2 = np.sum((moved - reference[take]) ** 2, axis=1)
+            have = np.isfinite(d2)  # a vertex the smoothing could not reach has no value
+            sq[have] += d2[have]
+            count += have
+            used += 1
+        rms = np.full(len(n_base), np.nan)
+        rms[count > 0] = np.sqrt(sq[count > 0] / count[count > 0])
         motion = reference[take]
-        where = free & np.isfinite(motion).all(axis=1)
+        where = free & np.isfinite(rms) & np.isfinite(motion).all(axis=1)
         err = float(np.sqrt(np.mean(rms[where] ** 2))) if where.any() else float("nan")
         ref = float(np.sqrt(np.mean(np.sum(motion[where] ** 2, axis=1)))) if where.any() else 0.0
         out[take] = {
             "rms_mm": rms,
+            "motion": motion,
             "relative": err / ref if ref > 0 else float("nan"),
             "rms_error_mm": err,
             "motion_rms_mm": ref,
-            "failed_draws": int(draws) - ok[take],
+            "failed_draws": draws - used,
         }
     return out

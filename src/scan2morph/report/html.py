@@ -270,14 +270,19 @@ def _motion_noise_section(h5: h5py.File) -> str:
     group = h5["motion_noise"]
     names = group["takes"].asstr()[()]
     rel, err = group["relative"][()], group["rms_error_mm"][()]
-    rows = [[str(t), float(e), float(100 * r)] for t, e, r in zip(names, err, rel, strict=True)]
+    failed = group["failed_draws"][()] if "failed_draws" in group else [None] * len(names)
+    rows = [
+        [str(t), float(e), float(100 * r), f]
+        for t, e, r, f in zip(names, err, rel, failed, strict=True)
+    ]
     px, draws = _attr(group, "click_noise_px", "?"), _attr(group, "draws", "?")
     caption = (
         f"Error that landmark clicks of {px} px (per coordinate) add to each viseme's motion, "
         f"over the unmasked vertices ({draws} perturbed refits; config motion_noise): a viseme "
         "whose motion is small against it is dominated by the clicking"
     )
-    return _table(["viseme", "click-noise error (mm)", "of the motion (%)"], rows, caption)
+    columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
+    return _table(columns, rows, caption)
 
 
 def _modal_section(h5: h5py.File, n_coordinates: int) -> str:

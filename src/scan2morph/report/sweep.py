@@ -309,8 +309,8 @@ def rerun_accuracy(
         The subject's store (``read_part(results/{subject}/{subject}.h5)``).
     settings : mapping
         :func:`sweep_settings`: the sections ``repair``, ``template``, ``align``, ``mask``,
-        ``smoothing`` and, optionally, ``motion_noise`` (the click-noise error bar is then
-        recomputed too).
+        ``smoothing`` and ``motion_noise`` (the click-noise error bar is recomputed as the
+        pipeline does; without the section it is left out).
     template : Template
         The base template (``resources/template.npz``).
     kinds : mapping take -> kind
