@@ -117,7 +117,8 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         ("smoothing.w\tsmoothing.w\n0.1\t0.2\n", r"header: repeated column"),
         ("smoothing.w\nnan\n", r"'nan' is not a finite number"),
         ("motion_noise.draws\n1\n", r"1 is less than the minimum of 2"),
-        ("motion_noise.click_noise_px\n0\n", r"0 is less than or equal to the minimum of 0"),
+        ("motion_noise.click_noise_px\n0\n", r"0 is not valid under any of the given schemas"),
+        ("motion_noise.click_noise_px\nmeasured\n", r"'measured' is not valid under any"),
     ],
 )
 def test_a_bad_table_is_refused_naming_line_column_and_rule(tmp_path, text, message):

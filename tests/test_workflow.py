@@ -227,5 +227,11 @@ def test_exports_and_accuracy_of_a_finished_subject(cohort):
     car = acc["takes"]["car"]["motion"]
     assert car["click_noise_relative"] == pytest.approx(noise["/motion_noise/relative"][0])
     assert 0 < car["click_noise_relative"] < 1
+    # the click precision: measured on the stable points (or assumed), beside the truth
+    summary = acc["summary"]
+    assert summary["click_noise_px_true"] > 0
+    assert summary["click_noise_px_used"] == pytest.approx(noise["/motion_noise/click_noise_px"])
+    measured = summary["click_noise_px_measured"]
+    assert measured is None or 0.25 < measured / summary["click_noise_px_true"] < 4
     assert (work / "results" / "alice" / "meshes" / "neutral.obj").is_file()
     assert (work / "results" / "alice" / "tables" / "pca_eigenvalues.tsv").is_file()

@@ -122,6 +122,7 @@ def subject_accuracy(
         "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
         "motion_click_noise_relative_max": worst("motion", "click_noise_relative"),
     }
+    summary |= _click_noise(store, truths, neutral, visemes)
     stereo = [
         t["stereo"]
         for t in takes.values()
@@ -134,4 +135,26 @@ def subject_accuracy(
         "units": {"distances": "mm", "angles": "degrees", "relative": "fraction"},
         "takes": takes,
         "summary": summary,
+    }
+
+
+def _click_noise(store, truths, neutral, visemes) -> dict:
+    """The click precision the pipeline measured and used, beside the true click scatter.
+
+    True: RMS over the stable points, the neutral and the visemes, and both image coordinates of
+    the clicked minus the exact landmarks (px); empty without ``/motion_noise/stable_points``.
+    """
+    if "/motion_noise/stable_points" not in store:
+        return {}
+    idx = np.asarray(store["/motion_noise/stable_points"], dtype=np.int64) - 1
+    diffs = [
+        np.asarray(store[f"/takes/{t}/landmarks"], dtype=np.float64)[idx]
+        - truths[t].landmarks2d[idx]
+        for t in [neutral, *visemes]
+    ]
+    measured = float(store["/motion_noise/click_noise_measured_px"])
+    return {
+        "click_noise_px_true": float(np.sqrt(np.mean(np.square(diffs)))),
+        "click_noise_px_measured": measured if np.isfinite(measured) else None,
+        "click_noise_px_used": float(store["/motion_noise/click_noise_px"]),
     }

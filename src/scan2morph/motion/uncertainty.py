@@ -15,54 +15,17 @@ On the synthetic cohort the estimate is checked against the error that the groun
 from __future__ import annotations
 
 import zlib
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from scan2morph.align.rigid import transform_points
 from scan2morph.errors import InputError
+from scan2morph.motion.clicks import ClickedTake, clicked_take
+from scan2morph.motion.precision import resolve_click_noise
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.template.sample import fit_take
-
-
-@dataclass(frozen=True)
-class ClickedTake:
-    """One take as the fit sees it.
-
-    Attributes
-    ----------
-    xyz : (H, W, 3) float, mm, NaN = no data
-        The repaired range image.
-    landmarks : (68, 2) float, px
-        The clicked iBUG-68 landmarks.
-    fiducial_set : str
-        The take's fiducial set (``template.fiducials`` of its kind).
-    transform : (4, 4) float
-        The take's alignment to the neutral (identity for the neutral).
-    """
-
-    xyz: np.ndarray
-    landmarks: np.ndarray
-    fiducial_set: str
-    transform: np.ndarray
-
-
-def clicked_take(store: Mapping[str, np.ndarray], take: str, fiducial_set: str) -> ClickedTake:
-    """A take's repaired range image, clicks and alignment from (a merge of) its store parts.
-
-    Reads ``/takes/{take}/range/xyz``, ``/takes/{take}/landmarks`` and, when present,
-    ``/takes/{take}/align/transform`` (identity otherwise: the neutral).
-    """
-    g = f"/takes/{take}"
-    transform = store.get(f"{g}/align/transform")
-    return ClickedTake(
-        store[f"{g}/range/xyz"],
-        store[f"{g}/landmarks"],
-        fiducial_set,
-        np.eye(4) if transform is None else transform,
-    )
 
 
 def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
@@ -241,3 +204,74 @@ def click_noise_motion(
             "failed_draws": draws - used,
         }
     return out
+
+
+def subject_motion_noise(
+    template,
+    store: Mapping[str, np.ndarray],
+    neutral: str,
+    visemes: Sequence[str],
+    fiducial_sets: Mapping[str, str],
+    smoothing: Mapping[str, float],
+    fit_options: Mapping[str, object],
+    settings: Mapping[str, object],
+    source: str = "subject",
+) -> tuple[dict[str, np.ndarray], dict[str, dict], dict]:
+    """The motion_noise stage of one subject: click precision, then the error bar.
+
+    Parameters
+    ----------
+    template : Template
+        The base template.
+    store : mapping store path -> array
+        The subject's repaired range images, landmarks, alignment and ``/mask/suppressed``
+        (:func:`scan2morph.motion.clicks.clicked_take`).
+    neutral : str
+    visemes : sequence of str
+    fiducial_sets : mapping take -> fiducial set
+    smoothing, fit_options
+        As :func:`click_noise_motion`.
+    settings : mapping
+        The config section ``motion_noise``: ``click_noise_px`` (px or ``"auto"``),
+        ``fallback_px``, ``stable_points``, ``draws``, ``seed``.
+    source : str
+        The subject, for messages.
+
+    Returns
+    -------
+    datasets : dict
+        :func:`noise_datasets` plus ``/motion_noise/click_noise_px`` (the value used),
+        ``/motion_noise/click_noise_measured_px`` (NaN when not measurable) and
+        ``/motion_noise/stable_points``.
+    result : dict
+        :func:`click_noise_motion`'s.
+    noise : dict
+        :func:`scan2morph.motion.precision.resolve_click_noise`'s.
+    """
+    takes = {t: clicked_take(store, t, fiducial_sets[t]) for t in [neutral, *visemes]}
+    points = [int(p) for p in settings["stable_points"]]
+    noise = resolve_click_noise(
+        settings["click_noise_px"],
+        takes,
+        points,
+        settings["fallback_px"],
+        fit_options.get("max_slope_deg"),
+        source,
+    )
+    result = click_noise_motion(
+        template,
+        takes[neutral],
+        {t: takes[t] for t in visemes},
+        store["/mask/suppressed"],
+        smoothing,
+        fit_options,
+        noise["click_noise_px"],
+        settings["draws"],
+        settings["seed"],
+        source=source,
+    )
+    data = noise_datasets(result)
+    data["/motion_noise/click_noise_px"] = np.float64(noise["click_noise_px"])
+    data["/motion_noise/click_noise_measured_px"] = np.float64(noise["measured_px"])
+    data["/motion_noise/stable_points"] = np.array(points, dtype=np.int64)
+    return data, result, noise

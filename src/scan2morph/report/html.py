@@ -275,11 +275,13 @@ def _motion_noise_section(h5: h5py.File) -> str:
         [str(t), float(e), float(100 * r), f]
         for t, e, r, f in zip(names, err, rel, failed, strict=True)
     ]
-    px, draws = _attr(group, "click_noise_px", "?"), _attr(group, "draws", "?")
+    px = _fmt(float(group["click_noise_px"][()]), ".2f") if "click_noise_px" in group else "?"
+    draws, note = _attr(group, "draws", "?"), _attr(group, "click_noise_note", "")
     caption = (
-        f"Error that landmark clicks of {px} px (per coordinate) add to each viseme's motion, "
-        f"over the unmasked vertices ({draws} perturbed refits; config motion_noise): a viseme "
-        "whose motion is small against it is dominated by the clicking"
+        f"Error that landmark clicks of {px} px (per coordinate; {note or 'configured'}) add "
+        f"to each viseme's motion, over the unmasked vertices ({draws} perturbed refits; "
+        "config motion_noise): a viseme whose motion is small against it is dominated by the "
+        "clicking"
     )
     columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
     return _table(columns, rows, caption)

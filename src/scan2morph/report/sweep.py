@@ -30,7 +30,7 @@ from scan2morph.errors import InputError
 from scan2morph.evaluate.subject import subject_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
-from scan2morph.motion.uncertainty import click_noise_motion, clicked_take, noise_datasets
+from scan2morph.motion.uncertainty import subject_motion_noise
 from scan2morph.scan import repair_range
 from scan2morph.template import Template, fit_options, fit_take, subdivide_template
 from scan2morph.template.datasets import template_datasets
@@ -424,21 +424,17 @@ def rerun_accuracy(
         aligned(neutral), {t: aligned(t) for t in expressions}, fine.faces, source=source
     )
     if "motion_noise" in settings:
-        noise = settings["motion_noise"]
-        data |= noise_datasets(
-            click_noise_motion(
-                template,
-                clicked_take(data, neutral, fiducials[neutral]),
-                {t: clicked_take(data, t, fiducials[t]) for t in visemes},
-                data["/mask/suppressed"],
-                settings["smoothing"],
-                fit_options(tpl),
-                noise["click_noise_px"],
-                noise["draws"],
-                noise["seed"],
-                source=source,
-            )
-        )
+        data |= subject_motion_noise(
+            template,
+            data,
+            neutral,
+            visemes,
+            fiducials,
+            settings["smoothing"],
+            fit_options(tpl),
+            settings["motion_noise"],
+            source=source,
+        )[0]
     return subject_accuracy(
         data,
         truths,
