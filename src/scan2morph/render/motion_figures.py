@@ -210,6 +210,8 @@ def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:
     title = "Error that the landmark clicks add to each viseme's motion"
     if "/motion_noise/takes" not in store:
         return message_figure(title, "the store has no click-noise estimate")
+    if "/motion_noise/click_noise_px" in store:
+        title += f" (clicks of {float(store['/motion_noise/click_noise_px']):.2f} px)"
     names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
     rel = np.asarray(store["/motion_noise/relative"], dtype=np.float64)
     err = np.asarray(store["/motion_noise/rms_error_mm"], dtype=np.float64)

@@ -278,10 +278,10 @@ def _motion_noise_section(h5: h5py.File) -> str:
     px = _fmt(float(group["click_noise_px"][()]), ".2f") if "click_noise_px" in group else "?"
     draws, note = _attr(group, "draws", "?"), _attr(group, "click_noise_note", "")
     caption = (
-        f"Error that landmark clicks of {px} px (per coordinate; {note or 'configured'}) add "
-        f"to each viseme's motion, over the unmasked vertices ({draws} perturbed refits; "
-        "config motion_noise): a viseme whose motion is small against it is dominated by the "
-        "clicking"
+        f"Error that landmark clicks add to each viseme's motion, over the unmasked vertices: "
+        f"{draws} refits with the landmarks perturbed by the click noise, "
+        f"{note or f'{px} px per coordinate'} (config motion_noise). A viseme whose motion is "
+        "small against it is dominated by the clicking"
     )
     columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
     return _table(columns, rows, caption)
