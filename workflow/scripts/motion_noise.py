@@ -21,7 +21,7 @@ def main(snakemake):
     def job():
         p, inp, out = snakemake.params, snakemake.input, snakemake.output
         subject = snakemake.wildcards.subject
-        store = read_part(inp.neutral) | read_part(inp.motion)
+        store = read_part(inp.neutral) | read_part(inp.motion, "/mask")
         for path in [*inp.visemes, *inp.aligns]:
             store |= read_part(path)
         data, result, noise = subject_motion_noise(

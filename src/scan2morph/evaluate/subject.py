@@ -12,6 +12,7 @@ from scan2morph.evaluate.scan import face_region, stereo_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.geometry import vertex_normals
 from scan2morph.motion.smooth import laplacian_smooth
+from scan2morph.motion.uncertainty import noise_by_take
 
 #: Segment label of skin in a stereo truth's ``segment`` image (``scan2morph.synth.head.SEG_SKIN``;
 #: not imported, so that evaluating does not load the renderer).
@@ -58,6 +59,8 @@ def subject_accuracy(
     takes: dict[str, dict] = {}
     n_vertices = store[f"/takes/{neutral}/mesh/vertices"]
     n_normals = vertex_normals(n_vertices, store["/template/faces"])
+    # the pipeline's own error bar (no truth), shown beside the error the truth shows
+    bars = noise_by_take(store)
     for take, truth in truths.items():
         v, valid = store[f"/takes/{take}/mesh/vertices"], store[f"/takes/{take}/mesh/valid"]
         entry = {"mesh": mesh_accuracy(v, valid, truth)}
@@ -99,12 +102,9 @@ def subject_accuracy(
                 processed,
                 normals=n_normals,
             )
-            if "/motion_noise/takes" in store:
-                # the pipeline's own error bar (no truth), beside the error the truth shows
-                names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
-                if take in names:
-                    rel = float(store["/motion_noise/relative"][names.index(take)])
-                    entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
+            if take in bars:
+                rel = bars[take]["relative"]
+                entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
         takes[take] = entry
 
     def worst(stage, key):

@@ -10,8 +10,9 @@ deviation per image coordinate with the correction for that mean's own noise:
 
     sigma^2 = sum_i |r_i|^2 n_i / (n_i + 1) / (2 m)
 
-over the m residuals ``r_i`` (px) of clicks compared with the mean of ``n_i`` others. Clicks farther than
-:data:`OUTLIER_SIGMAS` times a first, median-based estimate are mis-clicks: reported and left out.
+over the m residuals ``r_i`` (px) of clicks compared with the mean of ``n_i`` others. Clicks
+farther than :data:`OUTLIER_SIGMAS` times a first, median-based estimate are mis-clicks: removed
+worst first, reported and left out.
 The result feeds :func:`scan2morph.motion.uncertainty.click_noise_motion` when the config asks
 for ``click_noise_px: auto``.
 """
@@ -117,9 +118,7 @@ def click_precision(
             for k in np.flatnonzero(np.isfinite(frame[t]).all(axis=1) & (count >= 2)):
                 n = count[k] - use[t, k]  # the other clicks
                 others = (mean[k] * count[k] - use[t, k] * frame[t, k]) / n
-                offset = transform_points(inverse[t], others) - transform_points(
-                    inverse[t], frame[t, k]
-                )
+                offset = inverse[t][:3, :3] @ (others - frame[t, k])  # in the take's frame
                 du = np.linalg.lstsq(jacs[t, k], offset, rcond=None)[0]
                 # |click - mean of the others| has variance (1 + 1/n) sigma^2 per coordinate
                 radius[t, k], weight[t, k] = np.linalg.norm(du), n / (n + 1)

@@ -39,6 +39,20 @@ def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
     return data
 
 
+def noise_by_take(store: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """Per viseme, ``relative`` and ``rms_error_mm`` from a store's ``/motion_noise`` datasets
+    (the inverse of :func:`noise_datasets`); empty when the store has none."""
+    if "/motion_noise/takes" not in store:
+        return {}
+    names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
+    rel = np.asarray(store["/motion_noise/relative"], dtype=np.float64)
+    err = np.asarray(store["/motion_noise/rms_error_mm"], dtype=np.float64)
+    return {
+        t: {"relative": float(r), "rms_error_mm": float(e)}
+        for t, r, e in zip(names, rel, err, strict=True)
+    }
+
+
 def _fit(template, take: ClickedTake, landmarks, fit_options, source):
     xyz = take.xyz
     mesh = fit_take(

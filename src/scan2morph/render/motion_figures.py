@@ -8,6 +8,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from scan2morph.motion.uncertainty import noise_by_take
 from scan2morph.render.source import (
     example_take,
     fiducials,
@@ -208,20 +209,21 @@ def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:
     """Each viseme model coloured by the click-noise error of its motion (``motion_noise``)."""
     what = "the click-noise figure"
     title = "Error that the landmark clicks add to each viseme's motion"
-    if "/motion_noise/takes" not in store:
+    bars = noise_by_take(store)
+    if not bars:
         return message_figure(title, "the store has no click-noise estimate")
     if "/motion_noise/click_noise_px" in store:
         title += f" (clicks of {float(store['/motion_noise/click_noise_px']):.2f} px)"
-    names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
-    rel = np.asarray(store["/motion_noise/relative"], dtype=np.float64)
-    err = np.asarray(store["/motion_noise/rms_error_mm"], dtype=np.float64)
 
     def noise(take, model):
         values = need(store, f"/visemes/{take}/noise_rms_mm", what)
-        if take not in names:
+        if take not in bars:
             return values, take
-        k = names.index(take)
-        return values, f"{take}: {err[k]:.2f} mm, {100 * rel[k]:.0f}% of the motion"
+        bar = bars[take]
+        return (
+            values,
+            f"{take}: {bar['rms_error_mm']:.2f} mm, {100 * bar['relative']:.0f}% of the motion",
+        )
 
     return _viseme_fields(store, what, noise, "click-noise error (mm)", title)
 

@@ -66,8 +66,8 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     SubjectSummary
         ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``,
         ``motion_rms_mm_{label}`` per viseme label, ``motion_noise_relative_{label}`` (the
-        click-noise error bar, when the store has ``/motion_noise``), ``ccr_1`` .. ``ccr_3``, ``modal_f1_hz``, and
-        the accuracy summary keys; ``ccr``: the whole CCR curve.
+        click-noise error bar, when the store has ``/motion_noise``), ``ccr_1`` .. ``ccr_3``,
+        ``modal_f1_hz``, and the accuracy summary keys; ``ccr``: the whole CCR curve.
 
     Raises
     ------
@@ -119,7 +119,8 @@ def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     """Rows of several subjects in one table; a column a subject lacks is NaN there.
 
     Column order: the identification and count columns, motion per label (paper order, then
-    others), click-noise error per label (the same order), CCR, frequency, then accuracy columns in first-seen order.
+    others), click-noise error per label (the same order), CCR, frequency, then accuracy columns
+    in first-seen order.
     """
     columns: list[str] = []
     for s in summaries:

@@ -270,18 +270,16 @@ def _motion_noise_section(h5: h5py.File) -> str:
     group = h5["motion_noise"]
     names = group["takes"].asstr()[()]
     rel, err = group["relative"][()], group["rms_error_mm"][()]
-    failed = group["failed_draws"][()] if "failed_draws" in group else [None] * len(names)
     rows = [
         [str(t), float(e), float(100 * r), f]
-        for t, e, r, f in zip(names, err, rel, failed, strict=True)
+        for t, e, r, f in zip(names, err, rel, group["failed_draws"][()], strict=True)
     ]
-    px = _fmt(float(group["click_noise_px"][()]), ".2f") if "click_noise_px" in group else "?"
     draws, note = _attr(group, "draws", "?"), _attr(group, "click_noise_note", "")
     caption = (
         f"Error that landmark clicks add to each viseme's motion, over the unmasked vertices: "
-        f"{draws} refits with the landmarks perturbed by the click noise, "
-        f"{note or f'{px} px per coordinate'} (config motion_noise). A viseme whose motion is "
-        "small against it is dominated by the clicking"
+        f"{draws} refits with the landmarks perturbed by the click noise, {note} "
+        "(config motion_noise). A viseme whose motion is small against it is dominated by the "
+        "clicking"
     )
     columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
     return _table(columns, rows, caption)
