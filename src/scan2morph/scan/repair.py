@@ -26,7 +26,7 @@ quadratic (degree 2) in the pixel coordinates. ``trend_degree=0`` is the paper's
 from __future__ import annotations
 
 import numbers
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -225,10 +225,36 @@ def _hole_trends(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fit each hole's surface by a polynomial over its valid rim; return its derivatives.
 
-    Returns the gradient (n_gap, 3, 2) and Hessian entries (n_gap, 3, 3) as (uu, uv, vv), in
-    mm per pixel (row = v, column = u), of each coordinate at each gap pixel, and which holes'
-    fits were rejected ((n_lab,) bool; their derivatives are 0). Degree 0 fits nothing and
-    rejects nothing.
+    Degree 0 fits nothing and rejects nothing.
+
+    Parameters
+    ----------
+    pad : (Hp * Wp, 3) float64
+        The padded range image, row-major, mm; NaN where there is no data.
+    valid_pad : (Hp * Wp,) bool
+        Pixels of ``pad`` with data.
+    gap_idx : (n_gap,) int
+        Flat index of every gap pixel in ``pad``.
+    gap_lab : (n_gap,) int
+        Hole of every gap pixel, 0..n_lab-1.
+    n_lab : int
+        Number of holes.
+    wp : int
+        Padded width ``Wp``, px.
+    degree : {0, 1, 2}
+        Degree of the polynomial in the pixel coordinates; lowered per hole whose rim has
+        fewer than twice as many pixels as unknowns.
+
+    Returns
+    -------
+    grad : (n_gap, 3, 2) float64
+        Gradient (d/du, d/dv) of each coordinate at each gap pixel, mm/px (row = v, column
+        = u).
+    hess : (n_gap, 3, 3) float64
+        Hessian entries (uu, uv, vv) of each coordinate at each gap pixel, mm/px^2.
+    rejected : (n_lab,) bool
+        Holes whose rim the fit misses by more than 1 mm RMS (or that have no rim); their
+        derivatives are 0.
     """
     n_gap = gap_idx.size
     grad = np.zeros((n_gap, 3, 2))
@@ -354,92 +380,258 @@ def fill_holes(
     max_iter = _check_int(max_iter, "max_iter", _PARAMS, minimum=1)
     if trend_degree not in (0, 1, 2) or isinstance(trend_degree, bool):
         raise InputError(_PARAMS, f"trend_degree: expected 0, 1 or 2, got {trend_degree!r}")
-    h, w = valid.shape
+    labels, area, hole = _label_holes(valid)
+    target = hole & (area <= max_hole_px)  # the small holes: to fill
+    report: dict[str, Any] = {"n_holes": int(hole.sum()), "n_iter": 0, "n_trend_rejected": 0}
+    filled = np.zeros(valid.shape, bool)
+    if target[labels].any():
+        gaps = _gap_pixels(arr, labels, target, kernel_px)
+        grad, hess, rejected = _hole_trends(
+            gaps.pad, gaps.valid_pad, gaps.idx, gaps.lab, gaps.hole_ids.size, gaps.wp, trend_degree
+        )
+        report["n_trend_rejected"] = int(rejected.sum())
+        # a hole across a depth edge (its rim fits no trend) is filled only when small
+        unfit = rejected & (area[gaps.hole_ids] > max_edge_hole_px)
+        if unfit.any():
+            target[gaps.hole_ids[unfit]] = False
+            keep = ~unfit[gaps.lab]
+            gaps, grad, hess = gaps.subset(keep), grad[keep], hess[keep]
+        surf, todo, report["n_iter"] = _williams_fill(
+            gaps, grad, hess, kernel_px, threshold, max_iter
+        )
+        failed = _store_closed_holes(arr, filled, gaps, surf, todo)
+        target[failed] = False
+    report.update(_fill_report(hole, target, area, filled))
+    return arr, report
 
+
+def _label_holes(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Label the 8-connected gaps of a range image and tell holes from background.
+
+    Parameters
+    ----------
+    valid : (H, W) bool
+        Pixels with range data.
+
+    Returns
+    -------
+    labels : (H, W) int
+        Gap component of every pixel, 1..n; 0 on the data.
+    area : (n + 1,) int
+        Area of every component, px (entry 0: the data).
+    hole : (n + 1,) bool
+        Components that do not touch the image border (the others are background); False
+        for entry 0.
+    """
     labels, n_comp = ndimage.label(~valid, structure=np.ones((3, 3), bool))
     area = np.bincount(labels.ravel(), minlength=n_comp + 1)
     border = np.zeros(n_comp + 1, bool)
     for edge in (labels[0], labels[-1], labels[:, 0], labels[:, -1]):
         border[edge] = True
     border[0] = True  # label 0 is the valid data
-    hole = ~border
-    target = hole & (area <= max_hole_px)
+    return labels, area, ~border
 
-    report: dict[str, Any] = {"n_holes": int(hole.sum()), "n_iter": 0, "n_trend_rejected": 0}
-    filled = np.zeros((h, w), bool)
-    gap_mask = target[labels]
-    if gap_mask.any():
-        r = kernel_px // 2
-        rp = max(r, _RIM_PX)
-        wp = w + 2 * rp
-        pad = np.pad(arr, ((rp, rp), (rp, rp), (0, 0)), constant_values=np.nan)
-        pad = pad.reshape(-1, 3)
-        valid_pad = ~np.isnan(pad[:, 0])
-        gy, gx = np.nonzero(gap_mask)
-        gap_idx = (gy + rp) * wp + (gx + rp)
-        # consecutive hole ids 0..L-1 for the fits
-        hole_ids, gap_lab = np.unique(labels[gy, gx], return_inverse=True)
-        n_lab = len(hole_ids)
-        grad, hess, rejected = _hole_trends(
-            pad, valid_pad, gap_idx, gap_lab, n_lab, wp, trend_degree
-        )
-        report["n_trend_rejected"] = int(rejected.sum())
-        unfit = rejected & (area[hole_ids] > max_edge_hole_px)
-        if unfit.any():
-            target[hole_ids[unfit]] = False
-            keep = ~unfit[gap_lab]
-            gy, gx, gap_idx, gap_lab = gy[keep], gx[keep], gap_idx[keep], gap_lab[keep]
-            grad, hess = grad[keep], hess[keep]
 
-        # Step 0 and 1: surface with gaps at 0, matte 1 on data
-        surf = np.where(valid_pad[:, None], pad, 0.0)
-        matte = valid_pad.astype(np.float64)
-        k1 = _binomial_kernel(kernel_px)
-        kern = np.outer(k1, k1).ravel()  # (K,)
-        offs, dyx = _neighbour_offsets(wp, r, centre=True)
-        d = dyx[:, ::-1].astype(np.float64)  # (K, 2) as (du, dv)
-        d2 = np.stack([d[:, 0] ** 2, 2 * d[:, 0] * d[:, 1], d[:, 1] ** 2], axis=1) / 2
+class _Gaps(NamedTuple):
+    """The pixels of the holes to fill, on a NaN-padded flat copy of the range image.
 
-        todo = np.arange(gap_idx.size)
-        for it in range(max_iter):
-            # Step 2: blur matte and surface at the remaining gap pixels only
-            nb = gap_idx[todo, None] + offs[None, :]
-            wgt = matte[nb] * kern[None, :]  # (n, K)
-            m0 = wgt.sum(axis=1)
-            ready = m0 > threshold
-            report["n_iter"] = it + 1
-            if not ready.any():
-                break
-            sel, wgt, nb, m0 = todo[ready], wgt[ready], nb[ready], m0[ready]
-            blur = np.einsum("nk,nkc->nc", wgt, surf[nb])
-            # Taylor terms of the hole's trend over the same weights (zero if degree 0)
-            m1 = wgt @ d  # (n, 2)
-            m2 = wgt @ d2  # (n, 3)
-            corr = np.einsum("ncj,nj->nc", grad[sel], m1) + np.einsum("ncj,nj->nc", hess[sel], m2)
-            # Step 3: replace by blurred surface / blurred matte; matte becomes 1
-            surf[gap_idx[sel]] = (blur - corr) / m0[:, None]
-            matte[gap_idx[sel]] = 1.0
-            todo = todo[~ready]
-            if todo.size == 0:  # Step 4: until no gap is left
-                break
+    Attributes
+    ----------
+    pad : (Hp * Wp, 3) float64
+        The range image padded by ``rp`` px on each side, row-major, mm; NaN where there is
+        no data.
+    valid_pad : (Hp * Wp,) bool
+        Pixels of ``pad`` with data.
+    wp : int
+        Padded width ``Wp``, px.
+    y, x : (n,) int
+        Image row and column of every gap pixel, px.
+    idx : (n,) int
+        Flat index of every gap pixel in ``pad``.
+    lab : (n,) int
+        Hole of every gap pixel, 0..L-1.
+    hole_ids : (L,) int
+        Component label (of :func:`_label_holes`) of every hole.
+    """
 
-        # a hole the filter could not close stays NaN as a whole
-        failed_lab = np.unique(gap_lab[todo])
-        ok = ~np.isin(gap_lab, failed_lab)
-        arr[gy[ok], gx[ok]] = surf[gap_idx[ok]]
-        filled[gy[ok], gx[ok]] = True
-        target[hole_ids[failed_lab]] = False
+    pad: np.ndarray
+    valid_pad: np.ndarray
+    wp: int
+    y: np.ndarray
+    x: np.ndarray
+    idx: np.ndarray
+    lab: np.ndarray
+    hole_ids: np.ndarray
 
+    def subset(self, keep: np.ndarray) -> _Gaps:
+        """The gap pixels where ``keep`` ((n,) bool) is True (``hole_ids`` unchanged)."""
+        return self._replace(y=self.y[keep], x=self.x[keep], idx=self.idx[keep], lab=self.lab[keep])
+
+
+def _gap_pixels(arr: np.ndarray, labels: np.ndarray, target: np.ndarray, kernel_px: int) -> _Gaps:
+    """Collect the pixels of the target holes on a padded copy of the range image.
+
+    Parameters
+    ----------
+    arr : (H, W, 3) float64
+        Range image, mm; NaN where there is no data.
+    labels : (H, W) int
+        Gap components of :func:`_label_holes`.
+    target : (n + 1,) bool
+        Components to fill.
+    kernel_px : int
+        Odd side of the blur kernel, px; the padding covers it and the trend's rim.
+
+    Returns
+    -------
+    _Gaps
+        The padded image and the target holes' pixels, numbered hole by hole.
+    """
+    r = kernel_px // 2
+    rp = max(r, _RIM_PX)
+    wp = arr.shape[1] + 2 * rp
+    pad = np.pad(arr, ((rp, rp), (rp, rp), (0, 0)), constant_values=np.nan)
+    pad = pad.reshape(-1, 3)
+    valid_pad = ~np.isnan(pad[:, 0])
+    gy, gx = np.nonzero(target[labels])
+    gap_idx = (gy + rp) * wp + (gx + rp)
+    # consecutive hole ids 0..L-1 for the fits
+    hole_ids, gap_lab = np.unique(labels[gy, gx], return_inverse=True)
+    return _Gaps(pad, valid_pad, wp, gy, gx, gap_idx, gap_lab, hole_ids)
+
+
+def _williams_fill(
+    gaps: _Gaps,
+    grad: np.ndarray,
+    hess: np.ndarray,
+    kernel_px: int,
+    threshold: float,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Williams' steps 0-4, with the Taylor terms of each hole's trend, at the gap pixels.
+
+    Parameters
+    ----------
+    gaps : _Gaps
+        The padded image and the n gap pixels to fill.
+    grad : (n, 3, 2) float64
+        Trend gradient of each coordinate at each gap pixel, (d/du, d/dv), mm/px.
+    hess : (n, 3, 3) float64
+        Trend Hessian entries (uu, uv, vv) at each gap pixel, mm/px^2.
+    kernel_px : int
+        Odd side of the binomial blur kernel, px.
+    threshold : float
+        Blurred-matte level above which a gap pixel is filled, in (0, 1).
+    max_iter : int
+        Largest number of blur passes.
+
+    Returns
+    -------
+    surf : (Hp * Wp, 3) float64
+        The padded surface array, mm: data, filled gap pixels, 0 at the gaps left.
+    todo : (m,) int
+        Indices into the gap pixels the filter could not fill.
+    n_iter : int
+        Blur passes run.
+    """
+    # Step 0 and 1: surface with gaps at 0, matte 1 on data
+    surf = np.where(gaps.valid_pad[:, None], gaps.pad, 0.0)
+    matte = gaps.valid_pad.astype(np.float64)
+    k1 = _binomial_kernel(kernel_px)
+    kern = np.outer(k1, k1).ravel()  # (K,)
+    offs, dyx = _neighbour_offsets(gaps.wp, kernel_px // 2, centre=True)
+    d = dyx[:, ::-1].astype(np.float64)  # (K, 2) as (du, dv)
+    d2 = np.stack([d[:, 0] ** 2, 2 * d[:, 0] * d[:, 1], d[:, 1] ** 2], axis=1) / 2
+
+    gap_idx = gaps.idx
+    todo = np.arange(gap_idx.size)
+    n_iter = 0
+    for it in range(max_iter):
+        # Step 2: blur matte and surface at the remaining gap pixels only
+        nb = gap_idx[todo, None] + offs[None, :]
+        wgt = matte[nb] * kern[None, :]  # (n, K)
+        m0 = wgt.sum(axis=1)
+        ready = m0 > threshold
+        n_iter = it + 1
+        if not ready.any():
+            break
+        sel, wgt, nb, m0 = todo[ready], wgt[ready], nb[ready], m0[ready]
+        blur = np.einsum("nk,nkc->nc", wgt, surf[nb])
+        # Taylor terms of the hole's trend over the same weights (zero if degree 0)
+        m1 = wgt @ d  # (n, 2)
+        m2 = wgt @ d2  # (n, 3)
+        corr = np.einsum("ncj,nj->nc", grad[sel], m1) + np.einsum("ncj,nj->nc", hess[sel], m2)
+        # Step 3: replace by blurred surface / blurred matte; matte becomes 1
+        surf[gap_idx[sel]] = (blur - corr) / m0[:, None]
+        matte[gap_idx[sel]] = 1.0
+        todo = todo[~ready]
+        if todo.size == 0:  # Step 4: until no gap is left
+            break
+    return surf, todo, n_iter
+
+
+def _store_closed_holes(
+    arr: np.ndarray, filled: np.ndarray, gaps: _Gaps, surf: np.ndarray, todo: np.ndarray
+) -> np.ndarray:
+    """Copy the holes the filter closed into ``arr`` and mark them in ``filled`` (in place).
+
+    Parameters
+    ----------
+    arr : (H, W, 3) float64
+        Range image, mm; receives the filled values.
+    filled : (H, W) bool
+        Set True at the pixels filled.
+    gaps : _Gaps
+        The gap pixels.
+    surf : (Hp * Wp, 3) float64
+        The padded surface array of :func:`_williams_fill`, mm.
+    todo : (m,) int
+        Indices into the gap pixels the filter could not fill.
+
+    Returns
+    -------
+    failed : (k,) int
+        Component labels of the holes left: a hole the filter could not close stays NaN as a
+        whole.
+    """
+    failed_lab = np.unique(gaps.lab[todo])
+    ok = ~np.isin(gaps.lab, failed_lab)
+    arr[gaps.y[ok], gaps.x[ok]] = surf[gaps.idx[ok]]
+    filled[gaps.y[ok], gaps.x[ok]] = True
+    return gaps.hole_ids[failed_lab]
+
+
+def _fill_report(
+    hole: np.ndarray, target: np.ndarray, area: np.ndarray, filled: np.ndarray
+) -> dict[str, Any]:
+    """The counts of :func:`fill_holes`' report (see there for the keys).
+
+    Parameters
+    ----------
+    hole : (n + 1,) bool
+        Gap components that are holes.
+    target : (n + 1,) bool
+        Holes filled.
+    area : (n + 1,) int
+        Area of every component, px.
+    filled : (H, W) bool
+        Pixels filled.
+
+    Returns
+    -------
+    dict
+        ``n_filled``, ``filled_px``, ``unfilled_holes`` (areas in px, largest first),
+        ``largest_unfilled_px`` and ``filled``.
+    """
     left = np.flatnonzero(hole & ~target)
     unfilled = sorted((int(a) for a in area[left]), reverse=True)
-    report.update(
-        n_filled=int(target.sum()),
-        filled_px=int(filled.sum()),
-        unfilled_holes=unfilled,
-        largest_unfilled_px=unfilled[0] if unfilled else 0,
-        filled=filled,
-    )
-    return arr, report
+    return {
+        "n_filled": int(target.sum()),
+        "filled_px": int(filled.sum()),
+        "unfilled_holes": unfilled,
+        "largest_unfilled_px": unfilled[0] if unfilled else 0,
+        "filled": filled,
+    }
 
 
 # --------------------------------------------------------------------------------------------

@@ -7,7 +7,9 @@ the algorithm) and reports coverage and timings.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
 from os import PathLike
 from typing import Any
 
@@ -76,6 +78,72 @@ def reconstruct_stereo(
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     p = stereo_params(params, source=str(source))
+    grey_l, grey_r = _grey_pair(left, right, calib, source)
+    size = (grey_l.shape[1], grey_l.shape[0])
+
+    with _timed(timings, "rectify"):
+        pair = _rectify_pair(grey_l, grey_r, calib, size, p, source)
+    matcher = _sgbm_matcher(p, pair.min_disp, pair.num_disp)
+    with _timed(timings, "sgbm"):
+        disp_l16, disp_r16, min_disp_r = _match(matcher, pair)
+    with _timed(timings, "lr_check"):
+        matched_r, consistent, lr_rejected = _check_left_right(
+            pair, disp_l16, disp_r16, min_disp_r, p
+        )
+    with _timed(timings, "wls"):
+        disp16 = _smooth_wls(matcher, pair, disp_l16, disp_r16, p)
+    with _timed(timings, "refine"):
+        disparity, textured, patches = _refine(pair, disp16, consistent, p)
+    with _timed(timings, "grow"):
+        disparity, n_grown = _grow_into_neighbours(disparity, patches, textured & pair.valid_l, p)
+    with _timed(timings, "validate"):
+        disparity, n_filled = _clean(disparity, patches, pair, disp_r16, matched_r, p)
+    with _timed(timings, "resample"):
+        xyz = _resample_left(disparity, pair.rect, calib, size, p["max_step_px"])
+
+    coverage = _coverage(xyz, p, source)
+    timings["total"] = time.perf_counter() - t_start
+    report = _report(coverage, lr_rejected, n_grown, n_filled, pair, calib, p, timings)
+    return xyz, report
+
+
+# --------------------------------------------------------------------------------------------
+# the steps, in the order of the driver
+
+
+@contextmanager
+def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Store the wall time (s) of the ``with`` block as ``timings[stage]``."""
+    t0 = time.perf_counter()
+    yield
+    timings[stage] = time.perf_counter() - t0
+
+
+def _grey_pair(
+    left: np.ndarray, right: np.ndarray, calib: StereoCalibration, source: str | PathLike[str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Check the pair against each other and the calibration; return both as grey.
+
+    Parameters
+    ----------
+    left, right : (H, W, 3) uint8 or (H, W) uint8
+        The raw images of the left and right camera.
+    calib : StereoCalibration
+        The rig; its ``image_size`` (px), if given, must be ``(W, H)``.
+    source : str or path-like
+        Label named in errors.
+
+    Returns
+    -------
+    grey_l, grey_r : (H, W) uint8
+        Grey versions of ``left`` and ``right``.
+
+    Raises
+    ------
+    InputError
+        Images not uint8 (H, W[, 3]), of different sizes or of a size other than the
+        calibration's; a bad calibration.
+    """
     grey_l = _grey(left, "left", source)
     grey_r = _grey(right, "right", source)
     if grey_l.shape != grey_r.shape:
@@ -92,9 +160,69 @@ def reconstruct_stereo(
             f"calibration image_width/image_height {calib.image_size[0]}x{calib.image_size[1]} "
             f"differ from the images {width}x{height}",
         )
+    return grey_l, grey_r
 
-    t0 = time.perf_counter()
-    rect = _rectify(calib, (width, height), p, source)
+
+@dataclass(frozen=True)
+class _RectifiedPair:
+    """The rectified pair on SGBM's padded canvas (Hr rows, Wr + pad_l + pad_r columns).
+
+    Attributes
+    ----------
+    rect : dict
+        The rectification of :func:`~scan2morph.scan.stereo.rectify._rectify` (``P1``, ``R1``,
+        ``size`` ``(Wr, Hr)`` px, remap tables, ...).
+    left, right : (Hr, Wp) uint8
+        Rectified grey views, 0 outside the images.
+    valid_l, valid_r : (Hr, Wp) bool
+        Pixels of the padded canvas holding image content (at least ``(blockSize - 1) / 2``
+        px inside the source image).
+    min_disp, num_disp : int
+        SGBM's ``minDisparity`` and ``numDisparities``, px.
+    pad_l, pad_r : int
+        Columns added on the left and right of the rectified canvas, px.
+    """
+
+    rect: dict[str, Any]
+    left: np.ndarray
+    right: np.ndarray
+    valid_l: np.ndarray
+    valid_r: np.ndarray
+    min_disp: int
+    num_disp: int
+    pad_l: int
+    pad_r: int
+
+
+def _rectify_pair(
+    grey_l: np.ndarray,
+    grey_r: np.ndarray,
+    calib: StereoCalibration,
+    size: tuple[int, int],
+    p: Mapping[str, Any],
+    source: str | PathLike[str],
+) -> _RectifiedPair:
+    """Rectify both views and pad the canvas so that SGBM's unmatched bands hold no content.
+
+    Parameters
+    ----------
+    grey_l, grey_r : (H, W) uint8
+        Raw (distorted) grey views.
+    calib : StereoCalibration
+        The rig, mm.
+    size : (int, int)
+        ``(W, H)`` of the source images, px.
+    p : mapping
+        Checked stereo parameters (``blockSize`` px, the disparity range, rectification).
+    source : str or path-like
+        Label named in errors.
+
+    Returns
+    -------
+    _RectifiedPair
+        Both views on the padded rectified canvas, their content masks and the search range.
+    """
+    rect = _rectify(calib, size, p, source)
     margin = 0.5 * (int(p["blockSize"]) - 1)
     left_r, valid_l = _remap(grey_l, rect["maps1"], margin)
     right_r, valid_r = _remap(grey_r, rect["maps2"], margin)
@@ -108,74 +236,233 @@ def reconstruct_stereo(
         for a in (left_r, right_r, valid_l.view(np.uint8), valid_r.view(np.uint8))
     )
     valid_l, valid_r = valid_l.astype(bool), valid_r.astype(bool)
-    timings["rectify"] = time.perf_counter() - t0
+    return _RectifiedPair(rect, left_r, right_r, valid_l, valid_r, min_disp, num_disp, pad_l, pad_r)
 
-    matcher = _sgbm_matcher(p, min_disp, num_disp)
-    t0 = time.perf_counter()
-    disp_l16 = matcher.compute(left_r, right_r)
+
+def _match(matcher: cv2.StereoSGBM, pair: _RectifiedPair) -> tuple[np.ndarray, np.ndarray, int]:
+    """Semi-global matching of the left view and of the right view.
+
+    Parameters
+    ----------
+    matcher : cv2.StereoSGBM
+        The left view's matcher.
+    pair : _RectifiedPair
+        The padded rectified views, (Hr, Wp) uint8.
+
+    Returns
+    -------
+    disp_l16, disp_r16 : (Hr, Wp) int16
+        Disparities of the left and right view, 1/16 px (below the matcher's
+        ``minDisparity``: no match).
+    min_disp_r : int
+        ``minDisparity`` of the right view's matcher, px.
+    """
+    disp_l16 = matcher.compute(pair.left, pair.right)
     right_matcher = cv2.ximgproc.createRightMatcher(matcher)
-    disp_r16 = right_matcher.compute(right_r, left_r)
-    timings["sgbm"] = time.perf_counter() - t0
+    disp_r16 = right_matcher.compute(pair.right, pair.left)
+    return disp_l16, disp_r16, right_matcher.getMinDisparity()
 
-    t0 = time.perf_counter()
-    matched_l = (disp_l16 >= 16 * min_disp) & valid_l
-    matched_r = (disp_r16 >= 16 * right_matcher.getMinDisparity()) & valid_r
+
+def _check_left_right(
+    pair: _RectifiedPair,
+    disp_l16: np.ndarray,
+    disp_r16: np.ndarray,
+    min_disp_r: int,
+    p: Mapping[str, Any],
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Left-right consistency check of the two SGBM disparities.
+
+    Parameters
+    ----------
+    pair : _RectifiedPair
+        The padded rectified views and their content masks, (Hr, Wp).
+    disp_l16, disp_r16 : (Hr, Wp) int16
+        SGBM disparities of the left and right view, 1/16 px.
+    min_disp_r : int
+        ``minDisparity`` of the right view's matcher, px.
+    p : mapping
+        Checked stereo parameters (``lr_max_diff_px``, px).
+
+    Returns
+    -------
+    matched_r : (Hr, Wp) bool
+        Right pixels with content and an SGBM match.
+    consistent : (Hr, Wp) bool
+        Left pixels whose match the right view confirms within ``lr_max_diff_px``.
+    lr_rejected : float
+        Fraction of the left view's matches the check rejected.
+    """
+    matched_l = (disp_l16 >= 16 * pair.min_disp) & pair.valid_l
+    matched_r = (disp_r16 >= 16 * min_disp_r) & pair.valid_r
     consistent = _lr_consistent(disp_l16, disp_r16, matched_l, matched_r, p["lr_max_diff_px"])
-    timings["lr_check"] = time.perf_counter() - t0
+    lr_rejected = 1.0 - int(np.count_nonzero(consistent)) / max(int(np.count_nonzero(matched_l)), 1)
+    return matched_r, consistent, lr_rejected
 
-    t0 = time.perf_counter()
-    if p["wls"]:
-        wls = cv2.ximgproc.createDisparityWLSFilter(matcher)
-        wls.setLambda(float(p["wls_lambda"]))
-        wls.setSigmaColor(float(p["wls_sigma_color"]))
-        disp16 = wls.filter(disp_l16, left_r, disparity_map_right=disp_r16)
-    else:
-        disp16 = disp_l16
-    timings["wls"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    # WLS fills holes with guesses: keep only what the left-right check confirmed. SGM also
-    # propagates disparities into untextured areas: keep only textured pixels.
+def _smooth_wls(
+    matcher: cv2.StereoSGBM,
+    pair: _RectifiedPair,
+    disp_l16: np.ndarray,
+    disp_r16: np.ndarray,
+    p: Mapping[str, Any],
+) -> np.ndarray:
+    """The left disparity, smoothed by opencv-contrib's WLS filter when ``p["wls"]``.
+
+    Parameters
+    ----------
+    matcher : cv2.StereoSGBM
+        The left view's matcher.
+    pair : _RectifiedPair
+        The padded rectified views (the left one guides the filter), (Hr, Wp) uint8.
+    disp_l16, disp_r16 : (Hr, Wp) int16
+        SGBM disparities of the left and right view, 1/16 px.
+    p : mapping
+        Checked stereo parameters (``wls``, ``wls_lambda``, ``wls_sigma_color``).
+
+    Returns
+    -------
+    disp16 : (Hr, Wp) int16
+        Left disparity, 1/16 px (``disp_l16`` itself without WLS).
+    """
+    if not p["wls"]:
+        return disp_l16
+    wls = cv2.ximgproc.createDisparityWLSFilter(matcher)
+    wls.setLambda(float(p["wls_lambda"]))
+    wls.setSigmaColor(float(p["wls_sigma_color"]))
+    return wls.filter(disp_l16, pair.left, disparity_map_right=disp_r16)
+
+
+def _refine(
+    pair: _RectifiedPair, disp16: np.ndarray, consistent: np.ndarray, p: Mapping[str, Any]
+) -> tuple[np.ndarray, np.ndarray, _PatchMatcher]:
+    """Keep the confirmed textured matches; refine them to sub-pixel disparities.
+
+    WLS fills holes with guesses and SGM propagates disparities into untextured areas: only
+    the pixels the left-right check confirmed and that have local texture are kept. They are
+    refined by windowed Gauss-Newton, then per pixel with the slanted window; small segments
+    are dropped.
+
+    Parameters
+    ----------
+    pair : _RectifiedPair
+        The padded rectified views and their content masks, (Hr, Wp).
+    disp16 : (Hr, Wp) int16
+        Left disparity (after WLS, if on), 1/16 px.
+    consistent : (Hr, Wp) bool
+        Left pixels that passed the left-right check.
+    p : mapping
+        Checked stereo parameters (``refine_*``, ``min_texture``, ``patch_*``,
+        ``min_segment_px``, ``segment_step_px``).
+
+    Returns
+    -------
+    disparity : (Hr, Wp) float32
+        Refined left disparity, px; NaN where there is none.
+    textured : (Hr, Wp) bool
+        Left pixels with local grey-level std of at least ``min_texture`` (window
+        ``refine_sigma_px``).
+    patches : _PatchMatcher
+        The slanted-window matcher of the pair (used again by the growth and validation).
+    """
     sigma = float(p["refine_sigma_px"])
-    textured = _local_std(left_r, sigma, valid_l) >= float(p["min_texture"])
+    textured = _local_std(pair.left, sigma, pair.valid_l) >= float(p["min_texture"])
     disparity = np.where(consistent & textured, disp16.astype(np.float32) / 16.0, np.nan)
     if p["refine_iterations"] > 0:
         disparity = _refine_subpixel(
-            left_r,
-            right_r,
+            pair.left,
+            pair.right,
             disparity,
             int(p["refine_iterations"]),
             float(p["refine_sigma_px"]),
             float(p["min_zncc"]),
         )
-    patches = _PatchMatcher(left_r, right_r, int(p["patch_radius_px"]), float(p["patch_sigma_px"]))
+    patches = _PatchMatcher(
+        pair.left, pair.right, int(p["patch_radius_px"]), float(p["patch_sigma_px"])
+    )
     if p["patch_iterations"] > 0:
         disparity = _refine_patches(disparity, patches, int(p["patch_iterations"]), sigma)
     min_segment, segment_step = int(p["min_segment_px"]), float(p["segment_step_px"])
     if min_segment > 0:
         disparity = _remove_small_segments(disparity, min_segment, segment_step)
-    timings["refine"] = time.perf_counter() - t0
+    return disparity, textured, patches
 
-    t0 = time.perf_counter()
+
+def _grow_into_neighbours(
+    disparity: np.ndarray, patches: _PatchMatcher, allowed: np.ndarray, p: Mapping[str, Any]
+) -> tuple[np.ndarray, int]:
+    """Grow the matched region into unmatched neighbours whose slanted window matches.
+
+    Parameters
+    ----------
+    disparity : (Hr, Wp) float32
+        Refined left disparity, px; NaN where there is none.
+    patches : _PatchMatcher
+        The slanted-window matcher of the pair.
+    allowed : (Hr, Wp) bool
+        Pixels the growth may add (textured, with content).
+    p : mapping
+        Checked stereo parameters (``grow_*``, ``patch_iterations``, ``refine_sigma_px``).
+
+    Returns
+    -------
+    disparity : (Hr, Wp) float32
+        Disparity with the grown pixels, px.
+    n_grown : int
+        Pixels added, px.
+    """
     n_matched = int(np.count_nonzero(np.isfinite(disparity)))
     if p["grow_iterations"] > 0:
         disparity = _grow(
             disparity,
             patches,
-            textured & valid_l,
+            allowed,
             int(p["grow_iterations"]),
             float(p["grow_min_zncc"]),
             float(p["grow_max_change_px"]),
             int(p["patch_iterations"]),
-            sigma,
+            float(p["refine_sigma_px"]),
         )
-    n_grown = int(np.count_nonzero(np.isfinite(disparity))) - n_matched
-    timings["grow"] = time.perf_counter() - t0
+    return disparity, int(np.count_nonzero(np.isfinite(disparity))) - n_matched
 
-    t0 = time.perf_counter()
+
+def _clean(
+    disparity: np.ndarray,
+    patches: _PatchMatcher,
+    pair: _RectifiedPair,
+    disp_r16: np.ndarray,
+    matched_r: np.ndarray,
+    p: Mapping[str, Any],
+) -> tuple[np.ndarray, int]:
+    """Validate every pixel, trim depth edges, drop segments, fill small holes, unpad.
+
+    Parameters
+    ----------
+    disparity : (Hr, Wp) float32
+        Left disparity after growth, px; NaN where there is none.
+    patches : _PatchMatcher
+        The slanted-window matcher of the pair.
+    pair : _RectifiedPair
+        The padded rectified views, their content masks and the padding.
+    disp_r16 : (Hr, Wp) int16
+        SGBM disparity of the right view, 1/16 px.
+    matched_r : (Hr, Wp) bool
+        Right pixels with content and an SGBM match.
+    p : mapping
+        Checked stereo parameters (``min_patch_zncc``, ``lr_max_diff_px``,
+        ``pixel_texture_sigma_px``, ``edge_*``, ``erode_px``, ``min_segment_px``,
+        ``segment_step_px``, ``fill_*``).
+
+    Returns
+    -------
+    disparity : (Hr, Wr) float32
+        Validated left disparity on the unpadded rectified canvas, px; NaN where there is none.
+    n_filled : int
+        Pixels of the small holes filled, px.
+    """
+    sigma = float(p["refine_sigma_px"])
     disp_r = np.where(matched_r, disp_r16.astype(np.float32) / 16.0, np.nan)
     pixel_textured = (
-        _local_std(left_r, float(p["pixel_texture_sigma_px"]), valid_l) >= p["min_texture"]
+        _local_std(pair.left, float(p["pixel_texture_sigma_px"]), pair.valid_l) >= p["min_texture"]
     )
     disparity = _validate(
         disparity,
@@ -192,24 +479,43 @@ def reconstruct_stereo(
         )
     if p["erode_px"] > 0:
         disparity = _erode_valid(disparity, int(p["erode_px"]))
+    min_segment, segment_step = int(p["min_segment_px"]), float(p["segment_step_px"])
     if min_segment > 0:
         disparity = _remove_small_segments(disparity, min_segment, segment_step)
     n_filled = 0
     if p["fill_max_px"] > 0:
         before = int(np.count_nonzero(np.isfinite(disparity)))
         disparity = _fill_small_holes(
-            disparity, int(p["fill_max_px"]), float(p["fill_max_residual_px"]), valid_l
+            disparity, int(p["fill_max_px"]), float(p["fill_max_residual_px"]), pair.valid_l
         )
         n_filled = int(np.count_nonzero(np.isfinite(disparity))) - before
-    disparity = disparity[:, pad_l : disparity.shape[1] - pad_r]
-    timings["validate"] = time.perf_counter() - t0
+    return disparity[:, pair.pad_l : disparity.shape[1] - pair.pad_r], n_filled
 
-    t0 = time.perf_counter()
-    xyz = _resample_left(disparity, rect, calib, (width, height), p["max_step_px"])
-    timings["resample"] = time.perf_counter() - t0
 
+def _coverage(xyz: np.ndarray, p: Mapping[str, Any], source: str | PathLike[str]) -> float:
+    """Fraction of the left pixels with a point; an error below ``p["min_coverage"]``.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float64
+        Points of the left pixels, mm; NaN where there is no data.
+    p : mapping
+        Checked stereo parameters (``min_coverage``, the depth range in mm for the message).
+    source : str or path-like
+        Label named in errors.
+
+    Returns
+    -------
+    coverage : float
+        Fraction of the H x W left pixels with a point.
+
+    Raises
+    ------
+    InputError
+        No point, or fewer than ``min_coverage``: the images do not overlap as a stereo pair.
+    """
     n_valid = int(np.count_nonzero(np.isfinite(xyz[..., 2])))
-    coverage = n_valid / float(width * height)
+    coverage = n_valid / float(xyz.shape[1] * xyz.shape[0])
     if n_valid == 0 or coverage < p["min_coverage"]:
         raise InputError(
             source,
@@ -218,22 +524,58 @@ def reconstruct_stereo(
             "and right belong to this calibration, are textured and see the same surface within "
             f"{p['min_depth_mm']:g}-{p['max_depth_mm']:g} mm",
         )
-    timings["total"] = time.perf_counter() - t_start
-    report = {
+    return coverage
+
+
+def _report(
+    coverage: float,
+    lr_rejected: float,
+    n_grown: int,
+    n_filled: int,
+    pair: _RectifiedPair,
+    calib: StereoCalibration,
+    p: Mapping[str, Any],
+    timings: dict[str, float],
+) -> dict[str, Any]:
+    """The report of :func:`reconstruct_stereo` (see there for its keys).
+
+    Parameters
+    ----------
+    coverage : float
+        Fraction of the left pixels with a point.
+    lr_rejected : float
+        Fraction of the left view's SGBM matches the left-right check rejected.
+    n_grown, n_filled : int
+        Rectified pixels added by the growth and by the hole filling, px.
+    pair : _RectifiedPair
+        The rectification (``size`` ``(Wr, Hr)`` px, focal length in px) and search range.
+    calib : StereoCalibration
+        The rig (baseline, mm).
+    p : mapping
+        Checked stereo parameters (``wls``).
+    timings : dict
+        Wall time per stage, s.
+
+    Returns
+    -------
+    report : dict
+        ``coverage``, ``lr_rejected``, ``rectified_size``, ``focal_rect_px``, ``baseline_mm``,
+        ``minDisparity``, ``numDisparities``, ``wls``, ``grown_px``, ``filled_px`` and
+        ``timings_s``.
+    """
+    return {
         "coverage": coverage,
-        "lr_rejected": 1.0
-        - int(np.count_nonzero(consistent)) / max(int(np.count_nonzero(matched_l)), 1),
-        "rectified_size": rect["size"],
-        "focal_rect_px": float(rect["P1"][0, 0]),
+        "lr_rejected": lr_rejected,
+        "rectified_size": pair.rect["size"],
+        "focal_rect_px": float(pair.rect["P1"][0, 0]),
         "baseline_mm": calib.baseline_mm,
-        "minDisparity": min_disp,
-        "numDisparities": num_disp,
+        "minDisparity": pair.min_disp,
+        "numDisparities": pair.num_disp,
         "wls": bool(p["wls"]),
         "grown_px": n_grown,
         "filled_px": n_filled,
         "timings_s": timings,
     }
-    return xyz, report
 
 
 def _grey(image: np.ndarray, name: str, source: str | PathLike[str]) -> np.ndarray:
