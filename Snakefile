@@ -14,7 +14,12 @@ configfile: "config/config.yaml"
 report: "workflow/report/workflow.rst"
 
 
+# helpers, in dependency order: the tables first, then the functions over them (no rules)
 include: "workflow/rules/common.smk"
+include: "workflow/rules/inputs.smk"
+include: "workflow/rules/outputs.smk"
+include: "workflow/rules/report_inputs.smk"
+include: "workflow/rules/sweep_inputs.smk"
 
 
 wildcard_constraints:
@@ -39,6 +44,7 @@ include: "workflow/rules/sweeps.smk"
 
 
 rule all:
+    """Build every subject's store, figures and report, the synthetic subjects' accuracy and the cohort summary."""
     default_target: True
     input:
         get_final_outputs(),

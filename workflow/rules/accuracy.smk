@@ -2,6 +2,7 @@
 
 
 rule accuracy:
+    """Measure a synthetic subject's fits, motion and models against the ground truth."""
     input:
         store="results/{subject}/{subject}.h5",
         truths=get_truth_files,

@@ -2,6 +2,7 @@
 
 
 rule align:
+    """Rigidly align one take's fitted mesh to the subject's neutral: Kabsch on point pairs, then ICP on the upper face."""
     input:
         take="results/{subject}/takes/{take}/fit.h5",
         neutral=get_neutral_fit,

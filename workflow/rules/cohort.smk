@@ -2,6 +2,7 @@
 
 
 rule cohort:
+    """Summarise every subject in one cohort table and comparison plot."""
     input:
         stores=expand("results/{subject}/{subject}.h5", subject=SUBJECTS),
         accuracy=expand("results/{subject}/accuracy.json", subject=synthetic_subjects()),

@@ -2,6 +2,7 @@
 
 
 rule figures_fit:
+    """Draw the template-fitting figures of a subject from its store."""
     input:
         store="results/{subject}/{subject}.h5",
     output:
@@ -19,6 +20,7 @@ rule figures_fit:
 
 
 rule figures_motion:
+    """Draw the alignment and viseme-motion figures of a subject from its store."""
     input:
         store="results/{subject}/{subject}.h5",
     output:
@@ -36,6 +38,7 @@ rule figures_motion:
 
 
 rule figures_morph:
+    """Draw the morphable-model figures of a subject, PCA and blends, from its store."""
     input:
         store="results/{subject}/{subject}.h5",
     output:
@@ -53,6 +56,7 @@ rule figures_morph:
 
 
 rule figures_modal:
+    """Draw the modal-analysis figures of a subject, modes and expressions, from its store."""
     input:
         store="results/{subject}/{subject}.h5",
     output:

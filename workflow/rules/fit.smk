@@ -2,6 +2,7 @@
 
 
 rule template:
+    """Build the 2D template mesh with its fiducial sets."""
     output:
         "resources/template.npz",
     log:
@@ -14,6 +15,7 @@ rule template:
 
 
 rule template_part:
+    """Write the faces and fiducials of the subject's subdivided template as a store part."""
     input:
         template="resources/template.npz",
     output:
@@ -27,6 +29,7 @@ rule template_part:
 
 
 rule fit:
+    """Fit the template mesh to one take's range image by TPS warp to the fiducials and subdivision; export it as OBJ."""
     input:
         part="results/{subject}/takes/{take}/repair.h5",
         template="resources/template.npz",

@@ -3,6 +3,7 @@
 
 
 rule check_subject:
+    """Fail a subject whose sheet rows are broken, e.g. a missing or bad input file, naming file and row."""
     output:
         "results/{subject}/check.json",
     log:
@@ -14,6 +15,7 @@ rule check_subject:
 
 
 rule ingest:
+    """Read one take's scan files onto the pixel grid with checksums, reconstructing a stereo pair into a range image."""
     input:
         unpack(get_take_inputs),
         check="results/{subject}/check.json",

@@ -2,6 +2,7 @@
 
 
 rule modal:
+    """Compute the shell-FEM modal basis of the neutral face and the expressions' modal coordinates."""
     input:
         motion="results/{subject}/motion.h5",
         template="resources/template.npz",

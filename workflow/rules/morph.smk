@@ -2,6 +2,7 @@
 
 
 rule morph:
+    """Build the subject's morphable model: PCA over neutral and viseme meshes, blends, glTF and OBJ exports."""
     input:
         motion="results/{subject}/motion.h5",
         neutral_fit=get_neutral_fit,

@@ -3,6 +3,7 @@
 
 
 rule motion:
+    """Compute masked, smoothed viseme motion vectors and expression displacement fields against the neutral."""
     input:
         neutral_fit=get_neutral_fit,
         neutral_align=get_neutral_align,
@@ -28,6 +29,7 @@ rule motion:
 
 
 rule motion_noise:
+    """Measure the landmark click precision and the click-noise error bar of each viseme's motion."""
     input:
         neutral=get_neutral_repair,
         visemes=get_viseme_repairs,

@@ -2,6 +2,7 @@
 
 
 rule repair:
+    """Repair one take's range image: remove spikes, fill small holes."""
     input:
         part="results/{subject}/takes/{take}/ingest.h5",
     output:

@@ -3,6 +3,7 @@
 
 
 rule report_subject:
+    """Write the subject's self-contained HTML report: inputs, figures, tables, accuracy and provenance."""
     input:
         store="results/{subject}/{subject}.h5",
         figures=get_subject_figures,

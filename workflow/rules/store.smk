@@ -2,6 +2,7 @@
 
 
 rule store:
+    """Merge the subject's stage parts into its versioned HDF5 store, checked against the layout."""
     input:
         parts=get_subject_parts,
         layout=LAYOUT,

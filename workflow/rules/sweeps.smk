@@ -2,10 +2,13 @@
 # sweep table (config key `sweeps`, one column per swept config path) and each synthetic subject,
 # the stages from the first one that reads a swept key are re-run on the subject's stored parts
 # and measured against the ground truth (scan2morph.report.sweep). The table is checked against
-# the config schema when the workflow loads: a bad column or value stops the run before any job.
+# the config schema when the workflow loads: a bad column or value stops the run before any job
+# (workflow/rules/sweep_inputs.smk).
+import re
 
 
 rule sweep:
+    """Re-run the stages of one synthetic subject with one sweep combination's config values and measure the accuracy."""
     input:
         store="results/{subject}/{subject}.h5",
         raw=get_sweep_raw,
@@ -33,6 +36,7 @@ rule sweep:
 
 
 rule sweep_summary:
+    """Collect the accuracy of every sweep combination into a table and plot."""
     input:
         get_sweep_results,
     output:
@@ -56,5 +60,6 @@ rule sweep_summary:
 
 
 rule sweep_all:
+    """Run the whole parameter sweep on demand; not part of the default target."""
     input:
         rules.sweep_summary.output,

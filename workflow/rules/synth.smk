@@ -8,6 +8,7 @@
 for _group in synth_groups():
 
     rule:
+        """Render every take of one synthetic subject, range scans or stereo pairs with landmark clicks, and its exact ground truth."""
         name:
             _group["name"]
         output:

@@ -1,0 +1,150 @@
+# Input and params functions of the stage rules (ingest to accuracy): each takes the job's
+# wildcards and looks the subject or take up in the take table of common.smk.
+from pathlib import Path
+
+
+# --- one take ---
+def take_row(wildcards):
+    """The sheet row of a take, as a plain dict (tracked as a param)."""
+    row = TAKES.loc[(wildcards.subject, wildcards.take)]
+    return {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+
+
+def get_take_inputs(wildcards):
+    """The input files of a take that exist or will be generated (a missing one is reported
+    by the subject's check job, so that the DAG still builds and other subjects run)."""
+    row = TAKES.loc[(wildcards.subject, wildcards.take)]
+    # the same roles table is in workflow/scripts/ingest.py
+    roles = {
+        "range": ["xyz", "color", "landmarks"],
+        "stereo": ["left", "right", "calibration", "landmarks"],
+    }
+    files = {}
+    for role in roles.get(row["modality"], []):
+        path = row[role]
+        if path and (row["synthetic"] or Path(path).is_file()):
+            files[role] = path
+    return files
+
+
+def get_stereo_params(wildcards):
+    """Stereo reconstruction parameters of a stereo take; {} for other takes, so that changing
+    them reruns only stereo takes."""
+    modality = TAKES.loc[(wildcards.subject, wildcards.take), "modality"]
+    return dict(config["stereo"]) if modality == "stereo" else {}
+
+
+def get_fiducial_set(wildcards):
+    kind = TAKES.loc[(wildcards.subject, wildcards.take), "kind"]
+    return config["template"]["fiducials"].get(kind, "closed")
+
+
+# --- the takes of a subject ---
+def get_subject_problems(wildcards):
+    return PROBLEMS.get(wildcards.subject, [])
+
+
+def get_takes(wildcards):
+    return takes_of(wildcards.subject)
+
+
+def get_neutral_take(wildcards):
+    neutral = takes_of_kind(wildcards.subject, "neutral")
+    return neutral[0] if neutral else ""
+
+
+def get_viseme_takes(wildcards):
+    return takes_of_kind(wildcards.subject, "viseme")
+
+
+def get_expression_takes(wildcards):
+    return takes_of_kind(wildcards.subject, "expression")
+
+
+def get_other_takes(wildcards):
+    """Visemes then expressions (the order the motion script zips with its inputs)."""
+    return get_viseme_takes(wildcards) + get_expression_takes(wildcards)
+
+
+def get_take_labels(wildcards):
+    rows = TAKES.loc[wildcards.subject]
+    return dict(zip(rows["take"], rows["label"]))
+
+
+def get_fiducial_sets(wildcards):
+    """Fiducial set of every take of a subject (take -> set name)."""
+    rows = TAKES.loc[wildcards.subject]
+    sets = config["template"]["fiducials"]
+    return {t: sets.get(k, "closed") for t, k in zip(rows["take"], rows["kind"])}
+
+
+# --- the per-take parts a subject-level stage reads ---
+def get_neutral_repair(wildcards):
+    take = get_neutral_take(wildcards)
+    return f"results/{wildcards.subject}/takes/{take}/repair.h5" if take else []
+
+
+def get_neutral_fit(wildcards):
+    take = get_neutral_take(wildcards)
+    return f"results/{wildcards.subject}/takes/{take}/fit.h5" if take else []
+
+
+def get_neutral_align(wildcards):
+    take = get_neutral_take(wildcards)
+    return f"results/{wildcards.subject}/takes/{take}/align.h5" if take else []
+
+
+def get_other_fits(wildcards):
+    return _take_files(
+        "results/{subject}/takes/{take}/fit.h5",
+        wildcards.subject,
+        get_other_takes(wildcards),
+    )
+
+
+def get_other_aligns(wildcards):
+    return _take_files(
+        "results/{subject}/takes/{take}/align.h5",
+        wildcards.subject,
+        get_other_takes(wildcards),
+    )
+
+
+def get_viseme_repairs(wildcards):
+    return _take_files(
+        "results/{subject}/takes/{take}/repair.h5",
+        wildcards.subject,
+        get_viseme_takes(wildcards),
+    )
+
+
+def get_viseme_aligns(wildcards):
+    return _take_files(
+        "results/{subject}/takes/{take}/align.h5",
+        wildcards.subject,
+        get_viseme_takes(wildcards),
+    )
+
+
+def get_subject_parts(wildcards):
+    """Every part merged into the subject's store."""
+    takes = takes_of(wildcards.subject)
+    per_take = [
+        _take_files(
+            f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
+        )
+        for stage in ("repair", "fit", "align")
+    ]
+    per_subject = [
+        f"results/{wildcards.subject}/{stage}.h5"
+        for stage in ("template", "motion", "motion_noise", "morph", "modal")
+    ]
+    return sum(per_take, []) + per_subject
+
+
+def get_truth_files(wildcards):
+    return expand(
+        f"{SYNTH_ROOT}/{{subject}}/truth/{{take}}.npz",
+        subject=wildcards.subject,
+        take=takes_of(wildcards.subject),
+    )

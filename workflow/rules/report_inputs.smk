@@ -1,0 +1,40 @@
+# Input and params functions of the per-subject report page (report.smk).
+from glob import glob
+from pathlib import Path
+
+from scan2morph.render.figures import STAGE_FIGURES, figure_names
+
+
+def get_subject_figures(wildcards):
+    """Every figure of the subject that the figures rules draw (a stage whose rule is not in the
+    workflow contributes the PNGs already in the figures folder)."""
+    files = []
+    for stage in STAGE_FIGURES:
+        if rules.has(f"figures_{stage}"):
+            files += expand(
+                "results/{subject}/figures/{stem}.png",
+                subject=wildcards.subject,
+                stem=figure_names(stage),
+            )
+        else:
+            files += sorted(glob(f"results/{wildcards.subject}/figures/{stage}_*.png"))
+    return files
+
+
+def get_figure_captions(wildcards):
+    """The caption file of each figure that has one (workflow/report/figures/{stem}.rst)."""
+    folder = Path(workflow.basedir) / "workflow" / "report" / "figures"
+    stems = [Path(f).stem for f in get_subject_figures(wildcards)]
+    return [str(folder / f"{s}.rst") for s in stems if (folder / f"{s}.rst").is_file()]
+
+
+def get_subject_accuracy(wildcards):
+    """The subject's accuracy.json (synthetic subjects), else nothing."""
+    if wildcards.subject in synthetic_subjects():
+        return [f"results/{wildcards.subject}/accuracy.json"]
+    return []
+
+
+def get_rule_order(wildcards):
+    """Rule names in the order the workflow defines them (the stage order of the timings)."""
+    return [r.name for r in workflow.rules]
