@@ -1,0 +1,300 @@
+"""The implicit head shape of one identity, and rays cast against it.
+
+The head is the zero set of a smooth implicit function: smooth unions of ellipsoids for the
+skull, face, jaw, neck, ears, cheeks, brows, nose and lips, and smooth subtractions for the
+eye sockets and the eye openings. The function is negative inside and roughly a distance in
+mm near the surface. Positions are in the head frame (mm; see :mod:`scan2morph.synth.head`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scan2morph.synth.identity import Identity
+
+
+def _smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
+    """Polynomial smooth minimum (smooth union) with blend radius ``k`` mm."""
+    h = np.clip(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
+    return b + (a - b) * h - k * h * (1.0 - h)
+
+
+def _smax(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
+    """Polynomial smooth maximum (smooth intersection / subtraction) with blend radius ``k`` mm."""
+    return -_smin(-a, -b, k)
+
+
+def _smoothstep(x: np.ndarray, e0: float, e1: float) -> np.ndarray:
+    """Cubic step from 0 at ``e0`` to 1 at ``e1`` (same units as ``x``), flat outside."""
+    t = np.clip((x - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    """Logistic function ``1 / (1 + exp(-x))``."""
+    return 0.5 * (1.0 + np.tanh(0.5 * x))
+
+
+def _rot_x(angle: float) -> np.ndarray:
+    """(3, 3) rotation by ``angle`` rad about x."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_z(angle: float) -> np.ndarray:
+    """(3, 3) rotation by ``angle`` rad about z."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class _Ellipsoid:
+    """An ellipsoid: ``centre`` (3,) and semi-axes ``radii`` (3,) in mm, optionally rotated.
+
+    ``rot`` (3, 3) maps the ellipsoid's axes to the head axes (orthonormal); None is
+    axis-aligned.
+    """
+
+    centre: tuple
+    radii: tuple
+    rot: np.ndarray | None = None
+
+    def _local(self, p: np.ndarray) -> np.ndarray:
+        """Positions (N, 3) relative to the centre in the ellipsoid's axes, mm."""
+        q = p - np.asarray(self.centre)
+        if self.rot is not None:
+            q = q @ self.rot  # head -> local (rot is orthonormal)
+        return q
+
+    def sdf(self, p: np.ndarray) -> np.ndarray:
+        """Approximate signed distance (a close lower bound near the surface), mm; (N,)."""
+        q = self._local(p)
+        rx, ry, rz = self.radii
+        qx, qy, qz = q[:, 0], q[:, 1], q[:, 2]
+        k0 = np.sqrt((qx / rx) ** 2 + (qy / ry) ** 2 + (qz / rz) ** 2)
+        k1 = np.sqrt((qx / rx**2) ** 2 + (qy / ry**2) ** 2 + (qz / rz**2) ** 2)
+        return k0 * (k0 - 1.0) / np.maximum(k1, 1e-12)
+
+    def level(self, p: np.ndarray) -> np.ndarray:
+        """Normalised radius of positions (N, 3): < 1 inside; (N,)."""
+        return np.linalg.norm(self._local(p) / np.asarray(self.radii), axis=-1)
+
+    def mirrored(self) -> _Ellipsoid:
+        """The mirror image across the plane x = 0."""
+        c = (-self.centre[0], self.centre[1], self.centre[2])
+        rot = None
+        if self.rot is not None:
+            m = np.diag([-1.0, 1.0, 1.0])
+            rot = m @ self.rot @ m
+        return _Ellipsoid(c, self.radii, rot)
+
+
+def _round_cone(p: np.ndarray, a: np.ndarray, b: np.ndarray, ra: float, rb: float) -> np.ndarray:
+    """Approximate distance (N,) from ``p`` (N, 3) to a capsule from ``a`` to ``b`` (3,).
+
+    The capsule's radius goes from ``ra`` at ``a`` to ``rb`` at ``b``; all in mm.
+    """
+    ab = b - a
+    t = np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1) - (ra + t * (rb - ra))
+
+
+class _Shape:
+    """The implicit head of one identity (negative inside, roughly a distance in mm).
+
+    Parameters
+    ----------
+    idt : Identity
+
+    Attributes
+    ----------
+    idt : Identity
+    scale : (3,) float64
+        The identity's width, height and depth factors.
+    eye_centre : (3,) float64
+        Centre of the subject's left eyeball (x > 0), mm; the right one is its mirror image.
+    eye_radius : float
+        Eyeball radius, mm.
+    stomion_y, lip_front_z : float
+        Height of the mouth line and depth of the lip fronts, mm.
+    mouth_half_width : float
+        Half the mouth width, mm.
+    brow_y0 : float
+        Height of the inner brow, mm.
+    nose_tip : (3,) float64
+        Tip of the nose chain, mm.
+    almond, almonds, ears, ... : _Ellipsoid or list of _Ellipsoid
+        The parts (lists hold both sides).
+    """
+
+    def __init__(self, idt: Identity):
+        sx, sy, sz = idt.width, idt.height, idt.depth
+        self.scale = np.array([sx, sy, sz])
+        self.idt = idt
+
+        def E(c, r, rot=None):
+            return _Ellipsoid(
+                (c[0] * sx, c[1] * sy, c[2] * sz), (r[0] * sx, r[1] * sy, r[2] * sz), rot
+            )
+
+        n, nw, lp, mw, es = idt.nose, idt.nose_width, idt.lips, idt.mouth_width, idt.eye_spacing
+        self.eye_centre = np.array([32.5 * es * sx, 21.0 * sy, 71.0 * sz])
+        self.eye_radius = 12.0
+        self.stomion_y = -52.0 * sy
+        self.lip_front_z = 97.0 * sz
+        self.mouth_half_width = 25.0 * mw * sx
+        self.brow_y0 = self.eye_centre[1] + 15.0 + idt.brow_mm
+
+        self.cranium = E((0, 28, -5), (75, 100, 100))
+        self.midface = E((0, -5, 25), (58, 55, 62))
+        self.jaw = E((0, -55, 15), (52, 48, 62))
+        self.chin = E((0, -90, 66), (24 * idt.chin, 15, 19))
+        self.muzzle = E((0, -45, 58), (30 * mw, 25, 34))
+        self.cheekbones = [E((48, 5, 55), (18, 12, 20))]
+        self.cheeks = [E((38, -24, 50), (24, 24, 24))]
+        self.brows = [E((27, 38 + idt.brow_mm * 0.5, 82), (26, 9, 12), _rot_z(-0.12))]
+        self.ears = [E((73, 2, -10), (13, 30, 17), _rot_x(-0.2))]
+        ecx, ecy = self.eye_centre[0], self.eye_centre[1]
+        self.sockets = [_Ellipsoid((ecx, ecy + 2, 92 * sz), (19, 13, 12))]
+        # the eye opening: an almond tilted up at the outer corner, carved deep behind the eyeball
+        self.almond = _Ellipsoid((ecx, ecy - 0.8, 86.0 * sz), (16.0, 4.7, 13.0), _rot_z(0.07))
+        self.almonds = [self.almond]
+        # nose: a chain from the nasion to the tip, tip ball, alae, columella
+        nasion = np.array([0.0, 22.0 * sy, 90.0 * sz])
+        tip = nasion + n * np.array([0.0, -40.0 * sy, 26.0])
+        self.nose_tip = tip
+        self.nose_bridge = (nasion, tip + np.array([0.0, 3.0, -5.0]), 5.0 * nw, 7.5 * nw)
+        self.nose_ball = _Ellipsoid(tuple(tip + [0.0, -1.0, -7.5]), (8.0 * nw, 7.5, 8.0))
+        self.alae = [
+            _Ellipsoid((10.0 * nw * n, tip[1] - 5.0 * n, tip[2] - 14.0 * n), (6.5 * nw, 5.5, 7.5))
+        ]
+        self.columella = _Ellipsoid(
+            (0.0, tip[1] - 8.0 * n, tip[2] - 12.0 * n), (5.0 * nw, 4.0, 8.0)
+        )
+        sty = self.stomion_y
+        self.upper_lip = _Ellipsoid(
+            (0.0, sty + 6.5 * lp, 86.0 * sz), (23.0 * mw * sx, 8.0 * lp, 10.5 * lp)
+        )
+        self.lower_lip = _Ellipsoid(
+            (0.0, sty - 7.0 * lp, 85.0 * sz), (21.0 * mw * sx, 8.5 * lp, 10.5 * lp)
+        )
+        self.neck_radii = (50.0 * sx, 50.0 * sz)
+        self.neck_centre_z = -22.0 * sz
+        self.neck_top = -40.0 * sy
+        self.neck_bottom = -250.0
+
+        for name in ("cheekbones", "cheeks", "brows", "ears", "sockets", "almonds", "alae"):
+            lst = getattr(self, name)
+            setattr(self, name, lst + [e.mirrored() for e in lst])
+
+    def neck(self, p: np.ndarray) -> np.ndarray:
+        """Approximate signed distance (N,) of positions (N, 3) to the neck alone, mm.
+
+        The neck is an elliptic cylinder along y that flares below y = -150 mm, cut at
+        ``neck_top`` and ``neck_bottom``.
+        """
+        yb = -150.0 - p[:, 1]
+        flare = 1.0 + 0.002 * (yb + np.sqrt(yb * yb + 400.0))
+        rx, rz = self.neck_radii[0] * flare, self.neck_radii[1] * flare
+        qx, qz = p[:, 0], p[:, 2] - self.neck_centre_z
+        k0 = np.hypot(qx / rx, qz / rz)
+        k1 = np.hypot(qx / rx**2, qz / rz**2)
+        d2 = k0 * (k0 - 1.0) / np.maximum(k1, 1e-12)
+        return np.maximum(d2, np.maximum(p[:, 1] - self.neck_top, self.neck_bottom - p[:, 1]))
+
+    def brow_line(self, ax):
+        """Height of the middle of an eyebrow at ``|x| = ax`` (mm; array or scalar), mm.
+
+        Also returns the fraction ``t`` in [0, 1] of the way from the brow's inner end
+        (12 mm from the midline) to its outer end (54 mm).
+        """
+        t = np.clip((ax - 12.0) / 42.0, 0.0, 1.0)
+        return self.brow_y0 + 4.5 * np.sin(np.pi * t * 0.9), t
+
+    def clear_of_ears(self, p: np.ndarray) -> np.ndarray:
+        """(N,) bool: positions (N, 3) clear of both ears."""
+        out = np.ones(len(p), bool)
+        for e in self.ears:
+            out &= e.level(p) > 1.35
+        return out
+
+    def __call__(self, p: np.ndarray, carve: bool = True) -> np.ndarray:
+        """The implicit function at positions ``p`` (N, 3), mm; (N,), negative inside.
+
+        With ``carve=False`` the eye openings are left closed (the lids run over the eyes).
+        """
+        d = self.cranium.sdf(p)
+        d = _smin(d, self.midface.sdf(p), 25.0)
+        d = _smin(d, self.jaw.sdf(p), 22.0)
+        d = _smin(d, self.neck(p), 25.0)
+        for e in self.cheekbones:
+            d = _smin(d, e.sdf(p), 15.0)
+        for e in self.cheeks:
+            d = _smin(d, e.sdf(p), 22.0)
+        d = _smin(d, self.muzzle.sdf(p), 14.0)
+        d = _smin(d, self.chin.sdf(p), 18.0)
+        for e in self.brows:
+            d = _smin(d, e.sdf(p), 14.0)
+        for e in self.ears:
+            d = _smin(d, e.sdf(p), 5.0)
+        for e in self.sockets:
+            d = _smax(d, -e.sdf(p), 8.0)
+        nose = _round_cone(p, *self.nose_bridge)
+        nose = _smin(nose, self.nose_ball.sdf(p), 6.0)
+        for e in self.alae:
+            nose = _smin(nose, e.sdf(p), 4.0)
+        nose = _smin(nose, self.columella.sdf(p), 3.0)
+        d = _smin(d, nose, 7.0)
+        d = _smin(d, self.upper_lip.sdf(p), 5.0)
+        d = _smin(d, self.lower_lip.sdf(p), 5.0)
+        if carve:
+            for e in self.almonds:
+                d = _smax(d, -e.sdf(p), 1.2)
+        return d
+
+
+def _trace(
+    shape: _Shape, origins: np.ndarray, dirs: np.ndarray, r_start: float = 320.0
+) -> np.ndarray:
+    """Distance along rays (from inside points) to the outermost crossing of the surface.
+
+    Sphere-traces inward from ``r_start`` with steps of 0.6 x the implicit value (a lower
+    bound of the distance), then bisects the bracketing step.
+
+    Parameters
+    ----------
+    shape : _Shape
+    origins : (R, 3) float64
+        Ray origins inside the head, mm.
+    dirs : (R, 3) float64
+        Unit ray directions.
+    r_start : float
+        Distance along each ray to start from (outside the head), mm.
+
+    Returns
+    -------
+    (R,) float64
+        Distance from each origin to the surface, mm.
+    """
+    n = len(dirs)
+    r = np.full(n, r_start)
+    r_out = np.full(n, r_start)
+    active = np.arange(n)
+    for _ in range(600):
+        if active.size == 0:
+            break
+        d = shape(origins[active] + dirs[active] * r[active, None])
+        outside = d > 0.0
+        keep = active[outside]
+        r_out[keep] = r[keep]
+        r[keep] -= np.maximum(0.6 * d[outside], 0.1)
+        active = keep
+    lo, hi = r.copy(), r_out.copy()  # lo inside, hi outside
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        inside = shape(origins + dirs * mid[:, None]) <= 0.0
+        lo = np.where(inside, mid, lo)
+        hi = np.where(inside, hi, mid)
+    return 0.5 * (lo + hi)
