@@ -28,7 +28,7 @@ import yaml
 from scan2morph.evaluate.truth import read_truth
 from scan2morph.report import rerun_accuracy
 from scan2morph.report.sweep import sweep_settings
-from scan2morph.store import read_part
+from scan2morph.store import paths, read_part
 from scan2morph.template import load_template
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,8 +64,8 @@ def main(subjects: list[str]) -> int:
             data = dict(store)
             for t in takes:
                 exact = truths[t].landmarks2d
-                data[f"/takes/{t}/landmarks"] = exact + (sigma / nominal) * (
-                    np.asarray(store[f"/takes/{t}/landmarks"]) - exact
+                data[paths.landmarks(t)] = exact + (sigma / nominal) * (
+                    np.asarray(store[paths.landmarks(t)]) - exact
                 )
             t0 = time.perf_counter()
             acc = rerun_accuracy(data, settings, template, takes, truths, "fit", subject)
@@ -94,7 +94,7 @@ def check_error_bar(subject, store, settings, template, takes, truths, sigma, fl
         data = dict(store)
         for t in takes:
             exact = truths[t].landmarks2d
-            data[f"/takes/{t}/landmarks"] = exact + sigma * rng.standard_normal(exact.shape)
+            data[paths.landmarks(t)] = exact + sigma * rng.standard_normal(exact.shape)
         acc = rerun_accuracy(data, settings, template, takes, truths, "fit", subject)
         precision.append(acc["summary"]["click_noise_px_measured"])
         for v in visemes:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import cv2
 import h5py
@@ -12,7 +13,7 @@ import pytest
 
 from scan2morph.errors import InputError
 from scan2morph.report import cohort_table, motion_rms, subject_summary, write_cohort_summary
-from scan2morph.store import merge_parts, write_part
+from scan2morph.store import merge_parts, paths, write_part
 from tests.tiny_run import SUBJECT, tiny_run
 
 V = 50
@@ -22,13 +23,16 @@ def _store(tmp_path, subject, takes, motions, ccr, freqs, noise=None):
     """A store with the datasets the summary reads: takes (kind, label), viseme motion, PCA CCR,
     modal frequencies, and optionally the click-noise error bar (take -> relative)."""
     part = tmp_path / f"{subject}_part.h5"
-    data = {f"/visemes/{t}/motion": m for t, m in motions.items()}
+    data = {paths.viseme(t, "motion"): m for t, m in motions.items()}
     if noise:
-        data["/motion_noise/takes"] = np.array(list(noise), dtype=object)
-        data["/motion_noise/relative"] = np.array(list(noise.values()))
-    data |= {"/pca/ccr": np.asarray(ccr, float), "/modal/frequencies_hz": np.asarray(freqs, float)}
-    data |= {f"/takes/{t}/landmarks": np.zeros((68, 2)) for t in takes}
-    attrs = {f"/takes/{t}": {"kind": k, "label": lab} for t, (k, lab) in takes.items()}
+        data[paths.motion_noise("takes")] = np.array(list(noise), dtype=object)
+        data[paths.motion_noise("relative")] = np.array(list(noise.values()))
+    data |= {
+        paths.pca("ccr"): np.asarray(ccr, float),
+        paths.modal("frequencies_hz"): np.asarray(freqs, float),
+    }
+    data |= {paths.landmarks(t): np.zeros((68, 2)) for t in takes}
+    attrs = {paths.take(t): {"kind": k, "label": lab} for t, (k, lab) in takes.items()}
     write_part(part, data, attrs)
     path = tmp_path / f"{subject}.h5"
     merge_parts(path, [part], subject, "0" * 64)
@@ -142,9 +146,10 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
 def test_bad_inputs_are_named(stores, tmp_path):
     alice, _, _ = stores
     with h5py.File(alice, "a") as h5:
-        del h5["pca/ccr"]
+        del h5[paths.pca("ccr")]
     with pytest.raises(
-        InputError, match=r"alice.h5: /pca/ccr: missing \(the subject did not finish\)"
+        InputError,
+        match=rf"alice.h5: {re.escape(paths.pca('ccr'))}: missing \(the subject did not finish\)",
     ):
         subject_summary(alice)
     with pytest.raises(InputError, match="store not found"):
@@ -164,10 +169,10 @@ def test_cohort_rule_summarises_the_tiny_run(tmp_path_factory):
     assert (row["n_takes"], row["n_visemes"], row["n_expressions"]) == (4, 2, 1)
     with h5py.File(run.path("results", SUBJECT, f"{SUBJECT}.h5")) as h5:
         for take in ("car", "too"):
-            m = h5[f"visemes/{take}/motion"][()]
+            m = h5[paths.viseme(take, "motion")][()]
             want = np.sqrt(np.sum(m**2) / len(m))
             assert row[f"motion_rms_mm_{take}"] == pytest.approx(want, rel=1e-5)
-        ccr, f1 = h5["pca/ccr"][()], h5["modal/frequencies_hz"][0]
+        ccr, f1 = h5[paths.pca("ccr")][()], h5[paths.modal("frequencies_hz")][0]
     want = np.full(3, np.nan)
     want[: min(3, len(ccr))] = ccr[:3]  # neutral + two visemes: two components, ccr_3 is NA
     np.testing.assert_allclose([row["ccr_1"], row["ccr_2"], row["ccr_3"]], want, rtol=1e-5)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from matplotlib import colormaps
@@ -35,7 +37,7 @@ from scan2morph.render.views import (
     figure_to_array,
     render_view,
 )
-from scan2morph.store import merge_parts, write_part
+from scan2morph.store import merge_parts, paths, write_part
 
 SCALE_MM = 45.0  # template unit (half the outer-eye distance) in mm
 DEPTH_MM = 1000.0
@@ -112,10 +114,10 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
     frame = Rotation.random(random_state=rng).as_matrix()  # the neutral frame, arbitrary
     camera = np.column_stack([SCALE_MM * xy, DEPTH_MM - _height(xy)])
     store: dict[str, np.ndarray] = {
-        "/template/faces": faces.astype(np.int64),
-        "/template/vertices2d": xy.astype(float),
-        "/template/fiducials/names": np.asarray(names, dtype=object),
-        "/template/fiducials/indices": np.asarray(indices, dtype=np.int64),
+        paths.template("faces"): faces.astype(np.int64),
+        paths.template("vertices2d"): xy.astype(float),
+        paths.template("fiducials/names"): np.asarray(names, dtype=object),
+        paths.template("fiducials/indices"): np.asarray(indices, dtype=np.int64),
     }
     yy, xx = np.mgrid[0:HEIGHT, 0:WIDTH]
     takes = ["neutral", "car", "too", "smile1", "smile2", "sad1"]
@@ -152,24 +154,23 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
             marks = rng.uniform([u.min(), w.min()], [u.max(), w.max()], (68, 2))
         else:
             marks = np.asarray(ibug_xy) * SCALE_MM * FOCAL_PX / DEPTH_MM + [WIDTH / 2, HEIGHT / 2]
-        g = f"/takes/{take}"
         store |= {
-            f"{g}/range/color": color,
-            f"{g}/landmarks": marks,
-            f"{g}/mesh/vertices": scan,
-            f"{g}/mesh/uv": np.column_stack([(u + 0.5) / WIDTH, (w + 0.5) / HEIGHT]),
-            f"{g}/mesh/valid": valid,
-            f"{g}/mesh/points2d": points2d,
-            f"{g}/align/transform": to_neutral,
-            f"{g}/align/vertices": aligned[take],
+            paths.range_image(take, "color"): color,
+            paths.landmarks(take): marks,
+            paths.mesh(take, "vertices"): scan,
+            paths.mesh(take, "uv"): np.column_stack([(u + 0.5) / WIDTH, (w + 0.5) / HEIGHT]),
+            paths.mesh(take, "valid"): valid,
+            paths.mesh(take, "points2d"): points2d,
+            paths.align(take, "transform"): to_neutral,
+            paths.align(take, "vertices"): aligned[take],
         }
     neutral = aligned["neutral"]
     suppressed = xy[:, 1] < 0.3
     store |= {
-        "/neutral/vertices": neutral,
-        "/neutral/filled": np.zeros(v, dtype=bool),
-        "/mask/suppressed": suppressed,
-        "/mask/seeds": np.flatnonzero(np.abs(xy[:, 1] + 0.4) < 0.2),
+        paths.neutral("vertices"): neutral,
+        paths.neutral("filled"): np.zeros(v, dtype=bool),
+        paths.mask("suppressed"): suppressed,
+        paths.mask("seeds"): np.flatnonzero(np.abs(xy[:, 1] + 0.4) < 0.2),
     }
     models = {}
     for take in ("car", "too"):
@@ -177,17 +178,17 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
         motion = np.where(suppressed[:, None], 0.0, np.nan_to_num(raw))
         models[take] = neutral + motion
         store |= {
-            f"/visemes/{take}/motion_raw": raw,
-            f"/visemes/{take}/motion": motion,
-            f"/visemes/{take}/model": models[take],
+            paths.viseme(take, "motion_raw"): raw,
+            paths.viseme(take, "motion"): motion,
+            paths.viseme(take, "model"): models[take],
         }
     # click-noise error bar: 1 mm on car, 0.5 mm on too, nothing under the mask
     noise = {t: np.where(suppressed, 0.0, a) for t, a in (("car", 1.0), ("too", 0.5))}
-    store |= {f"/visemes/{t}/noise_rms_mm": n for t, n in noise.items()}
+    store |= {paths.viseme(t, "noise_rms_mm"): n for t, n in noise.items()}
     store |= {
-        "/motion_noise/takes": np.asarray(["car", "too"], dtype=object),
-        "/motion_noise/relative": np.array([0.1, 0.2]),
-        "/motion_noise/rms_error_mm": np.array([1.0, 0.5]),
+        paths.motion_noise("takes"): np.asarray(["car", "too"], dtype=object),
+        paths.motion_noise("relative"): np.array([0.1, 0.2]),
+        paths.motion_noise("rms_error_mm"): np.array([1.0, 0.5]),
     }
     # PCA over neutral + viseme models (the paper's convention: eigenvalue = sum of coef^2)
     shapes = np.stack([neutral, *models.values()])
@@ -197,23 +198,21 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
     k = len(shapes) - 1
     comps, eig = vt[:k], s[:k] ** 2
     store |= {
-        "/pca/mean": mean,
-        "/pca/components": comps.reshape(k, v, 3),
-        "/pca/eigenvalues": eig,
-        "/pca/cr": eig / eig.sum(),
-        "/pca/ccr": np.cumsum(eig) / eig.sum(),
-        "/pca/coefficients": centred @ comps.T,
-        "/pca/takes": np.asarray(["neutral", "car", "too"], dtype=object),
+        paths.pca("mean"): mean,
+        paths.pca("components"): comps.reshape(k, v, 3),
+        paths.pca("eigenvalues"): eig,
+        paths.pca("cr"): eig / eig.sum(),
+        paths.pca("ccr"): np.cumsum(eig) / eig.sum(),
+        paths.pca("coefficients"): centred @ comps.T,
+        paths.pca("takes"): np.asarray(["neutral", "car", "too"], dtype=object),
     }
     for label in ("car", "too"):
         for pct in (30, 60, 90):
-            store[f"/blends/{label}_{pct}/vertices"] = neutral + pct / 100 * (
-                models[label] - neutral
-            )
-    store["/blends/too50_car20/vertices"] = (
+            store[paths.blend(f"{label}_{pct}")] = neutral + pct / 100 * (models[label] - neutral)
+    store[paths.blend("too50_car20")] = (
         neutral + 0.5 * (models["too"] - neutral) + 0.2 * (models["car"] - neutral)
     )
-    store["/pca_blends/pca_blend1/vertices"] = mean + (
+    store[paths.pca_blend("pca_blend1")] = mean + (
         0.5 * np.sqrt(eig[0]) * comps[0] + 1.0 * np.sqrt(eig[1]) * comps[1]
     ).reshape(v, 3)
     # modal basis: smooth normal-direction patterns on the face, frequencies ascending
@@ -231,12 +230,12 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
     )
     ks = np.array([1, 2, 5, 8])
     store |= {
-        "/modal/frequencies_hz": 40.0 * np.arange(1, n_modes + 1),
-        "/modal/modes": modes,
-        "/modal/dof_modes": np.concatenate([modes, np.zeros_like(modes)], axis=2),
-        "/modal/thickness_mm": np.ones(len(faces)),
-        "/modal/fixed_vertices": np.zeros(v, dtype=bool),
-        "/modal/reconstruction_k": ks,
+        paths.modal("frequencies_hz"): 40.0 * np.arange(1, n_modes + 1),
+        paths.modal("modes"): modes,
+        paths.modal("dof_modes"): np.concatenate([modes, np.zeros_like(modes)], axis=2),
+        paths.modal("thickness_mm"): np.ones(len(faces)),
+        paths.modal("fixed_vertices"): np.zeros(v, dtype=bool),
+        paths.modal("reconstruction_k"): ks,
     }
     flat = modes.reshape(n_modes, -1)
     coords = {}
@@ -249,19 +248,19 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
             for kk in ks
         ]
         store |= {
-            f"/expressions/{take}/displacement": disp,
-            f"/expressions/{take}/coordinates": q,
-            f"/expressions/{take}/reconstruction_rms_mm": np.asarray(rms),
-            f"/expressions/{take}/synthesized": (q @ flat).reshape(v, 3),
+            paths.expression(take, "displacement"): disp,
+            paths.expression(take, "coordinates"): q,
+            paths.expression(take, "reconstruction_rms_mm"): np.asarray(rms),
+            paths.expression(take, "synthesized"): (q @ flat).reshape(v, 3),
         }
     smile = np.stack([coords["smile1"], coords["smile2"]])
     store |= {
-        "/modal/statistics/smile/mean": smile.mean(axis=0),
-        "/modal/statistics/smile/std": smile.std(axis=0, ddof=1),
-        "/modal/statistics/smile/takes": np.asarray(["smile1", "smile2"], dtype=object),
-        "/modal/statistics/sad/mean": coords["sad1"],
-        "/modal/statistics/sad/std": np.full(n_modes, np.nan),
-        "/modal/statistics/sad/takes": np.asarray(["sad1"], dtype=object),
+        paths.modal_statistics("smile", "mean"): smile.mean(axis=0),
+        paths.modal_statistics("smile", "std"): smile.std(axis=0, ddof=1),
+        paths.modal_statistics("smile", "takes"): np.asarray(["smile1", "smile2"], dtype=object),
+        paths.modal_statistics("sad", "mean"): coords["sad1"],
+        paths.modal_statistics("sad", "std"): np.full(n_modes, np.nan),
+        paths.modal_statistics("sad", "takes"): np.asarray(["sad1"], dtype=object),
     }
     return store
 
@@ -355,7 +354,7 @@ def test_takes_by_kind(store):
 
 
 def test_pca_alphas_recover_the_blend_parameters(store):
-    alpha = pca_alphas(store, store["/pca_blends/pca_blend1/vertices"])
+    alpha = pca_alphas(store, store[paths.pca_blend("pca_blend1")])
     np.testing.assert_allclose(alpha, [0.5, 1.0], atol=1e-9)
 
 
@@ -396,10 +395,12 @@ def test_model_figure_has_three_panels_of_the_face(store):
 
 def test_expression_figure_maps_a_known_field_to_its_colours(store):
     known = dict(store)
-    xy = store["/template/vertices2d"]
+    xy = store[paths.template("vertices2d")]
     for take in expression_takes(store):  # 2 mm on the image's left half, 8 mm on its right half
         magnitude = np.where(xy[:, 0] < 0, 2.0, 8.0)
-        known[f"/expressions/{take}/displacement"] = magnitude[:, None] * np.array([0.6, 0.0, 0.8])
+        known[paths.expression(take, "displacement")] = magnitude[:, None] * np.array(
+            [0.6, 0.0, 0.8]
+        )
     scale_max = 8.0
     fig = fig_expressions(known)
     image = figure_to_array(fig)
@@ -430,16 +431,16 @@ def _car_panel(fig, scale_max):
 
 def test_distance_figure_colours_a_vertex_by_its_distance(store):
     known = dict(store)
-    xy = store["/template/vertices2d"]
-    target = store["/takes/car/align/vertices"].copy()
-    model = np.where(np.isfinite(target), target, store["/neutral/vertices"])
+    xy = store[paths.template("vertices2d")]
+    target = store[paths.align("car", "vertices")].copy()
+    model = np.where(np.isfinite(target), target, store[paths.neutral("vertices")])
     far = xy[:, 1] > 1.0  # the lower face is 6 mm off, the rest exact
     model[far] += [6.0, 0.0, 0.0]
-    known["/visemes/car/model"] = model
-    known["/visemes/too/model"] = np.where(
-        np.isfinite(store["/takes/too/align/vertices"]),
-        store["/takes/too/align/vertices"],
-        store["/neutral/vertices"],
+    known[paths.viseme("car", "model")] = model
+    known[paths.viseme("too", "model")] = np.where(
+        np.isfinite(store[paths.align("too", "vertices")]),
+        store[paths.align("too", "vertices")],
+        store[paths.neutral("vertices")],
     )
     title, top, bottom = _car_panel(fig_distance(known), 6.0)
     assert "RMS" in title
@@ -448,12 +449,14 @@ def test_distance_figure_colours_a_vertex_by_its_distance(store):
 
 def test_click_noise_figure_colours_each_viseme_by_its_error_bar(store):
     known = dict(store)
-    xy = store["/template/vertices2d"]
-    known["/visemes/car/noise_rms_mm"] = np.where(xy[:, 1] > 1.0, 2.0, 0.0)  # the lower face
+    xy = store[paths.template("vertices2d")]
+    known[paths.viseme("car", "noise_rms_mm")] = np.where(
+        xy[:, 1] > 1.0, 2.0, 0.0
+    )  # the lower face
     title, top, bottom = _car_panel(fig_click_noise(known), 2.0)
     assert title == "car: 1.00 mm, 10% of the motion"
     assert top < 0.2 and bottom > 1.8
-    bare = {k: v for k, v in store.items() if not k.startswith("/motion_noise")}
+    bare = {k: v for k, v in store.items() if not k.startswith(paths.MOTION_NOISE)}
     assert any("no click-noise" in t.get_text() for t in fig_click_noise(bare).texts)
 
 
@@ -470,10 +473,15 @@ def test_mask_figure_shows_the_mask_in_orange(store):
 
 
 def test_missing_data_gives_a_figure_that_says_so(store):
+    blends = [f"{label}_{pct}" for label in ("car", "too") for pct in (30, 60, 90)]
+    dropped = {paths.blend(n) for n in [*blends, "too50_car20"]} | {
+        paths.modal_statistics(label, name)
+        for label in ("smile", "sad")
+        for name in ("mean", "std", "takes")
+    }
+    assert dropped <= store.keys()
     bare = {
-        k: v
-        for k, v in store.items()
-        if not k.startswith(("/blends", "/expressions", "/modal/statistics"))
+        k: v for k, v in store.items() if k not in dropped and not k.startswith(paths.EXPRESSIONS)
     }
     fig = fig_gradual(bare)
     assert any("no blend" in t.get_text() for t in fig.texts)
@@ -495,7 +503,7 @@ def test_write_stage_figures_from_an_hdf5_store(tmp_path, store):
     _write_store(path, store)
     with StoreMapping(path) as mapping:
         assert set(mapping) == set(store)
-        assert list(mapping["/pca/takes"]) == ["neutral", "car", "too"]
+        assert list(mapping[paths.pca("takes")]) == ["neutral", "car", "too"]
     written = write_stage_figures(path, tmp_path / "figures", "fit")
     assert [p.name for p in written] == [f"{s}.png" for s in figure_names("fit")]
     for p in written:
@@ -509,24 +517,28 @@ def test_bad_input(tmp_path, store):
         figure_names("render")
     with pytest.raises(InputError, match="store not found"):
         write_stage_figures(tmp_path / "none.h5", tmp_path, "fit")
-    missing = {k: v for k, v in store.items() if k != "/neutral/vertices"}
+    missing = {k: v for k, v in store.items() if k != paths.neutral("vertices")}
     with pytest.raises(
-        InputError, match=r"dataset /neutral/vertices is missing \(needed for the mask figure\)"
+        InputError,
+        match=rf"dataset {re.escape(paths.neutral('vertices'))} is missing \(needed for the mask figure\)",
     ):
         fig_mask(missing)
-    short = dict(store) | {"/visemes/car/model": store["/visemes/car/model"][:-1]}
-    with pytest.raises(InputError, match=r"/visemes/car/model: expected shape"):
+    car = paths.viseme("car", "model")
+    short = dict(store) | {car: store[car][:-1]}
+    with pytest.raises(InputError, match=rf"{re.escape(car)}: expected shape"):
         fig_distance(short)
-    two = dict(store) | {"/takes/extra/mesh/vertices": store["/takes/neutral/mesh/vertices"]}
+    two = dict(store) | {paths.mesh("extra", "vertices"): store[paths.mesh("neutral", "vertices")]}
     with pytest.raises(InputError, match="exactly one neutral take"):
         fig_model(two)
-    rows = dict(store) | {"/pca/coefficients": store["/pca/coefficients"][:-1]}
-    with pytest.raises(InputError, match=r"/pca/coefficients: expected 3 rows"):
+    coef = paths.pca("coefficients")
+    rows = dict(store) | {coef: store[coef][:-1]}
+    with pytest.raises(InputError, match=rf"{re.escape(coef)}: expected 3 rows"):
         stage_figures(rows, "morph")
-    ks = dict(store) | {"/modal/reconstruction_k": np.array([1, 2])}
+    ks = dict(store) | {paths.modal("reconstruction_k"): np.array([1, 2])}
     with pytest.raises(InputError, match=r"reconstruction_rms_mm: expected shape \(2,\)"):
         stage_figures(ks, "modal")
-    names = dict(store) | {"/template/fiducials/names": store["/template/fiducials/names"][:-1]}
+    fid = paths.template("fiducials/names")
+    names = dict(store) | {fid: store[fid][:-1]}
     with pytest.raises(InputError, match="names and indices differ in length"):
         stage_figures(names, "motion")
     xy, faces, *_ = grid_template()

@@ -38,6 +38,7 @@ from scan2morph.report import (
     thumbnail_jpeg,
     write_subject_report,
 )
+from scan2morph.store import paths
 from tests.tiny_run import SUBJECT, TAKES, tiny_run
 from tests.workflow_api import REPO
 
@@ -353,8 +354,8 @@ def test_pca_tables_match_the_store(report):
     page = _parse(path.read_text())
     t1, t2 = _table(page, "Table 1"), _table(page, "Table 2")
     with h5py.File(store) as h5:
-        eig, cr, ccr = (h5[f"pca/{k}"][()] for k in ("eigenvalues", "cr", "ccr"))
-        coeff, names = h5["pca/coefficients"][()], h5["pca/takes"].asstr()[()]
+        eig, cr, ccr = (h5[paths.pca(k)][()] for k in ("eigenvalues", "cr", "ccr"))
+        coeff, names = h5[paths.pca("coefficients")][()], h5[paths.pca("takes")].asstr()[()]
     body = np.array([_floats(r) for r in t1[1:]])
     np.testing.assert_array_equal(body[:, 0], np.arange(1, len(eig) + 1))
     np.testing.assert_allclose(body[:, 1], eig, rtol=1e-3)
@@ -369,9 +370,10 @@ def test_click_noise_table_matches_the_store(report):
     path, store, *_ = report
     table = _table(_parse(path.read_text()), "Error that landmark clicks")
     with h5py.File(store) as h5:
-        names = h5["motion_noise/takes"].asstr()[()]
-        err, rel = h5["motion_noise/rms_error_mm"][()], h5["motion_noise/relative"][()]
-        failed = h5["motion_noise/failed_draws"][()]
+        names = h5[paths.motion_noise("takes")].asstr()[()]
+        err = h5[paths.motion_noise("rms_error_mm")][()]
+        rel = h5[paths.motion_noise("relative")][()]
+        failed = h5[paths.motion_noise("failed_draws")][()]
     assert table[0] == ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
     assert [r[0] for r in table[1:]] == list(names)
     body = np.array([_floats(r[1:]) for r in table[1:]])
@@ -385,12 +387,12 @@ def test_modal_tables_match_the_store(report):
     coords, recon = _table(page, "Modal coordinates"), _table(page, "RMS error")
     freqs = _table(page, "Natural frequencies")
     with h5py.File(store) as h5:
-        q = h5["expressions/smile1/coordinates"][()]
+        q = h5[paths.expression("smile1", "coordinates")][()]
         rms, ks = (
-            h5["expressions/smile1/reconstruction_rms_mm"][()],
-            h5["modal/reconstruction_k"][()],
+            h5[paths.expression("smile1", "reconstruction_rms_mm")][()],
+            h5[paths.modal("reconstruction_k")][()],
         )
-        f = h5["modal/frequencies_hz"][()]
+        f = h5[paths.modal("frequencies_hz")][()]
     assert coords[0] == ["expression", "q1", "q2", "q3", "q4"]
     assert coords[1][0] == "smile1 (smile)"
     np.testing.assert_allclose(_floats(coords[1][1:]), q[:4], rtol=1e-3)
@@ -449,7 +451,7 @@ def test_inputs_are_thumbnails_of_the_color_images(report):
     thumbs = [i for i in page.images if i["src"].startswith("data:image/jpeg;base64,")]
     assert [i["alt"] for i in thumbs] == [t["take"] for t in TAKES]
     with h5py.File(store) as h5:
-        color = h5["takes/car/range/color"][()]
+        color = h5[paths.range_image("car", "color")][()]
     car = next(i for i in thumbs if i["alt"] == "car")
     data = np.frombuffer(base64.b64decode(car["src"].split(",", 1)[1]), np.uint8)
     got = cv2.imdecode(data, cv2.IMREAD_COLOR)[..., ::-1]

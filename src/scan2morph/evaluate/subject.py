@@ -13,6 +13,7 @@ from scan2morph.evaluate.truth import Truth
 from scan2morph.geometry import vertex_normals
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.uncertainty import noise_by_take
+from scan2morph.store import paths
 
 #: Segment label of skin in a stereo truth's ``segment`` image (``scan2morph.synth.head.SEG_SKIN``;
 #: not imported, so that evaluating does not load the renderer).
@@ -57,25 +58,25 @@ def subject_accuracy(
         ``{"units": ..., "takes": {take: {"mesh": ..., "align": ..., "motion": ...}}, "summary": ...}``
     """
     takes: dict[str, dict] = {}
-    n_vertices = store[f"/takes/{neutral}/mesh/vertices"]
-    n_normals = vertex_normals(n_vertices, store["/template/faces"])
+    n_vertices = store[paths.mesh(neutral, "vertices")]
+    n_normals = vertex_normals(n_vertices, store[paths.template("faces")])
     # the pipeline's own error bar (no truth), shown beside the error the truth shows
     bars = noise_by_take(store)
     for take, truth in truths.items():
-        v, valid = store[f"/takes/{take}/mesh/vertices"], store[f"/takes/{take}/mesh/valid"]
+        v, valid = store[paths.mesh(take, "vertices")], store[paths.mesh(take, "valid")]
         entry = {"mesh": mesh_accuracy(v, valid, truth)}
-        if "xyz_true" in truth.extra and f"/takes/{take}/range/xyz" in store:
+        if "xyz_true" in truth.extra and paths.range_image(take, "xyz") in store:
             # a stereo take: depth error and coverage of the reconstruction over the face
             face = face_region(truth.extra["segment"] == SEG_SKIN, truth.landmarks2d)
             entry["stereo"] = stereo_accuracy(
-                np.asarray(store[f"/takes/{take}/range/xyz"], dtype=np.float64),
+                np.asarray(store[paths.range_image(take, "xyz")], dtype=np.float64),
                 truth.extra["xyz_true"],
                 face,
                 source=take,
             )
         if take != neutral:
             entry["align"] = alignment_accuracy(
-                store[f"/takes/{take}/align/transform"], v, valid, truth, truths[neutral]
+                store[paths.align(take, "transform")], v, valid, truth, truths[neutral]
             )
         if take in visemes:
             material = true_motion(n_vertices, truths[neutral], truth)
@@ -87,18 +88,18 @@ def subject_accuracy(
             if smoothing is not None:
                 processed = laplacian_smooth(
                     ideal,
-                    store["/template/faces"],
+                    store[paths.template("faces")],
                     w=smoothing["w"],
                     iterations=smoothing["iterations"],
-                    fixed=store["/mask/suppressed"],
+                    fixed=store[paths.mask("suppressed")],
                     missing=~np.isfinite(ideal).all(axis=1),
                 )
             entry["motion"] = motion_accuracy(
-                store[f"/visemes/{take}/motion"],
-                store[f"/visemes/{take}/motion_raw"],
+                store[paths.viseme(take, "motion")],
+                store[paths.viseme(take, "motion_raw")],
                 ideal,
                 material,
-                store["/mask/suppressed"],
+                store[paths.mask("suppressed")],
                 processed,
                 normals=n_normals,
             )
@@ -144,17 +145,16 @@ def _click_noise(store, truths, neutral, visemes) -> dict:
     True: RMS over the stable points, the neutral and the visemes, and both image coordinates of
     the clicked minus the exact landmarks (px); empty without ``/motion_noise/stable_points``.
     """
-    if "/motion_noise/stable_points" not in store:
+    if paths.motion_noise("stable_points") not in store:
         return {}
-    idx = np.asarray(store["/motion_noise/stable_points"], dtype=np.int64) - 1
+    idx = np.asarray(store[paths.motion_noise("stable_points")], dtype=np.int64) - 1
     diffs = [
-        np.asarray(store[f"/takes/{t}/landmarks"], dtype=np.float64)[idx]
-        - truths[t].landmarks2d[idx]
+        np.asarray(store[paths.landmarks(t)], dtype=np.float64)[idx] - truths[t].landmarks2d[idx]
         for t in [neutral, *visemes]
     ]
-    measured = float(store["/motion_noise/click_noise_measured_px"])
+    measured = float(store[paths.motion_noise("click_noise_measured_px")])
     return {
         "click_noise_px_true": float(np.sqrt(np.mean(np.square(diffs)))),
         "click_noise_px_measured": measured if np.isfinite(measured) else None,
-        "click_noise_px_used": float(store["/motion_noise/click_noise_px"]),
+        "click_noise_px_used": float(store[paths.motion_noise("click_noise_px")]),
     }

@@ -19,6 +19,7 @@ from scan2morph.render.source import (
     template_faces,
 )
 from scan2morph.render.views import Panel, face_view, panel_figure, render_view, subplots
+from scan2morph.store import paths
 from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIP_CORNERS, INNER_LIPS
 
 #: Colour of the wireframe's edges (sRGB).
@@ -38,7 +39,7 @@ def fig_template(store: Mapping[str, np.ndarray]) -> Figure:
     mouth orange, the named points that later stages use (ICP pairs, mask path ends) green, the
     other iBUG vertices small grey dots.
     """
-    xy = need(store, "/template/vertices2d", "the template figure").astype(float)
+    xy = need(store, paths.template("vertices2d"), "the template figure").astype(float)
     faces = template_faces(store, "the template figure")
     fid = fiducials(store)
     ibug = {int(n[4:]): i for n, i in fid.items() if n.startswith("ibug") and n[4:].isdigit()}
@@ -176,14 +177,14 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
     )
     for row, take in enumerate(takes):
         what = f"the landmark figure of take {take}"
-        color = need(store, f"/takes/{take}/range/color", what)
-        marks = need(store, f"/takes/{take}/landmarks", what).astype(float)
-        pts = need(store, f"/takes/{take}/mesh/points2d", what).astype(float)
-        valid = need(store, f"/takes/{take}/mesh/valid", what).astype(bool)
+        color = need(store, paths.range_image(take, "color"), what)
+        marks = need(store, paths.landmarks(take), what).astype(float)
+        pts = need(store, paths.mesh(take, "points2d"), what).astype(float)
+        valid = need(store, paths.mesh(take, "valid"), what).astype(bool)
         if pts.shape != (len(valid), 2) or marks.shape != (68, 2):
             raise InputError(
                 source_of(store),
-                f"/takes/{take}: points2d, valid or landmarks have the wrong shape",
+                f"{paths.take(take)}: points2d, valid or landmarks have the wrong shape",
             )
         x0, x1, y0, y1 = _crop_box(np.vstack([pts, marks]), color.shape)
         for ax in axes[row]:
@@ -211,11 +212,11 @@ def fig_model(store: Mapping[str, np.ndarray]) -> Figure:
     faces = template_faces(store, "the model figure")
     take = neutral_take(store)
     what = f"the model figure of take {take}"
-    vertices = mesh(store, f"/takes/{take}/mesh/vertices", what)
-    uv = need(store, f"/takes/{take}/mesh/uv", what)
-    color = need(store, f"/takes/{take}/range/color", what)
+    vertices = mesh(store, paths.mesh(take, "vertices"), what)
+    uv = need(store, paths.mesh(take, "uv"), what)
+    color = need(store, paths.range_image(take, "color"), what)
     view = face_view(
-        vertices, faces, need(store, "/template/vertices2d", what), source=source_of(store)
+        vertices, faces, need(store, paths.template("vertices2d"), what), source=source_of(store)
     )
     panels = [
         Panel(render_view(vertices, faces, view), "(a) shaded"),

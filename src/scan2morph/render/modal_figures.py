@@ -26,19 +26,23 @@ from scan2morph.render.views import (
     render_view,
     subplots,
 )
+from scan2morph.store import paths
 
 #: Modes shown on the neutral (the paper's Fig. 5 shows a few of the lowest).
 N_MODES = 6
 #: Units of a modal coordinate q = Q^T M v: v in mm, M in tonnes, Q mass-orthonormal (t^-1/2).
 Q_UNITS = "mm·t$^{1/2}$"
+#: Root of the per-label coordinate statistics.
+_STATISTICS = "/modal/statistics"  # TODO paths: paths.MODAL_STATISTICS (root for paths.ids)
 
 
 def _modes(store: Mapping, what: str) -> np.ndarray:
-    modes = need(store, "/modal/modes", what).astype(float)
-    v = len(need(store, "/template/vertices2d", what))
+    modes = need(store, paths.modal("modes"), what).astype(float)
+    v = len(need(store, paths.template("vertices2d"), what))
     if modes.ndim != 3 or modes.shape[1:] != (v, 3):
         raise InputError(
-            source_of(store), f"/modal/modes: expected shape (k, {v}, 3), got {modes.shape}"
+            source_of(store),
+            f"{paths.modal('modes')}: expected shape (k, {v}, 3), got {modes.shape}",
         )
     return modes
 
@@ -55,9 +59,9 @@ def fig_modes(store: Mapping[str, np.ndarray]) -> Figure:
     """The lowest natural modes on the neutral, colour = displacement magnitude (Fig. 5)."""
     what = "the mode-shape figure"
     f = template_faces(store, what)
-    base = mesh(store, "/neutral/vertices", what)
+    base = mesh(store, paths.neutral("vertices"), what)
     modes = _modes(store, what)[:N_MODES]
-    freq = need(store, "/modal/frequencies_hz", what).astype(float)
+    freq = need(store, paths.modal("frequencies_hz"), what).astype(float)
     view = neutral_view(store, what)
     scale = ColorScale(0.0, 1.0, "|mode displacement| / its maximum")
     panels = []
@@ -76,7 +80,9 @@ def fig_modes(store: Mapping[str, np.ndarray]) -> Figure:
 
 
 def _displacements(store: Mapping, what: str) -> dict[str, np.ndarray]:
-    return {t: mesh(store, f"/expressions/{t}/displacement", what) for t in expression_takes(store)}
+    return {
+        t: mesh(store, paths.expression(t, "displacement"), what) for t in expression_takes(store)
+    }
 
 
 def fig_expressions(store: Mapping[str, np.ndarray]) -> Figure:
@@ -86,7 +92,7 @@ def fig_expressions(store: Mapping[str, np.ndarray]) -> Figure:
     if not fields:
         return message_figure("Expression displacement fields", "the store has no expression takes")
     f = template_faces(store, what)
-    base = mesh(store, "/neutral/vertices", what)
+    base = mesh(store, paths.neutral("vertices"), what)
     view = neutral_view(store, what)
     scale = _field_scale(list(fields.values()), "displacement magnitude (mm)")
     panels = [
@@ -122,7 +128,7 @@ def fig_coordinates(store: Mapping[str, np.ndarray]) -> Figure:
         return message_figure("Expression coordinates", "the store has no expression takes")
     fig, axes = _bar_grid(len(takes))
     for ax, take in zip(axes, takes, strict=True):
-        q = need(store, f"/expressions/{take}/coordinates", what).astype(float)
+        q = need(store, paths.expression(take, "coordinates"), what).astype(float)
         ax.bar(np.arange(1, len(q) + 1), q, width=0.8, color="tab:blue")
         ax.axhline(0, color="0.3", lw=0.5)
         ax.set_ylabel(f"q ({Q_UNITS})", fontsize=7)
@@ -139,15 +145,13 @@ def fig_reconstruction(store: Mapping[str, np.ndarray]) -> Figure:
     takes = expression_takes(store)
     if not takes:
         return message_figure("Reconstruction error", "the store has no expression takes")
-    ks = need(store, "/modal/reconstruction_k", what).astype(int)
+    ks = need(store, paths.modal("reconstruction_k"), what).astype(int)
     fig, ax = subplots(figsize=(5.0, 3.4))
     for take in takes:
-        rms = need(store, f"/expressions/{take}/reconstruction_rms_mm", what).astype(float)
+        key = paths.expression(take, "reconstruction_rms_mm")
+        rms = need(store, key, what).astype(float)
         if rms.shape != ks.shape:
-            raise InputError(
-                source_of(store),
-                f"/expressions/{take}/reconstruction_rms_mm: expected shape {ks.shape}, got {rms.shape}",
-            )
+            raise InputError(source_of(store), f"{key}: expected shape {ks.shape}, got {rms.shape}")
         ax.plot(ks, rms, "o-", ms=3, label=take)
     ax.set_xscale("log")
     ax.set_xlabel("number of modes K")
@@ -162,14 +166,14 @@ def fig_reconstruction(store: Mapping[str, np.ndarray]) -> Figure:
 def fig_statistics(store: Mapping[str, np.ndarray]) -> Figure:
     """Mean and standard deviation of the coordinates over the takes of each label."""
     what = "the statistics chart"
-    labels = groups(store, "/modal/statistics", "mean")
+    labels = groups(store, _STATISTICS, "mean")
     if not labels:
-        return message_figure("Coordinate statistics", "no expression label in /modal/statistics")
+        return message_figure("Coordinate statistics", f"no expression label in {_STATISTICS}")
     fig, axes = _bar_grid(len(labels))
     for ax, label in zip(axes, labels, strict=True):
-        mean = need(store, f"/modal/statistics/{label}/mean", what).astype(float)
-        std = need(store, f"/modal/statistics/{label}/std", what).astype(float)
-        key = f"/modal/statistics/{label}/takes"
+        mean = need(store, paths.modal_statistics(label, "mean"), what).astype(float)
+        std = need(store, paths.modal_statistics(label, "std"), what).astype(float)
+        key = paths.modal_statistics(label, "takes")
         n = len(np.atleast_1d(store[key])) if key in store else None
         x = np.arange(1, len(mean) + 1)
         err = np.where(np.isfinite(std), std, 0.0)
@@ -197,8 +201,8 @@ def fig_synthesis(store: Mapping[str, np.ndarray]) -> Figure:
     if not fields:
         return message_figure("Expression synthesis", "the store has no expression takes")
     f = template_faces(store, what)
-    base = mesh(store, "/neutral/vertices", what)
-    synth = {t: mesh(store, f"/expressions/{t}/synthesized", what) for t in fields}
+    base = mesh(store, paths.neutral("vertices"), what)
+    synth = {t: mesh(store, paths.expression(t, "synthesized"), what) for t in fields}
     shapes = [base + d for d in fields.values()] + [base + s for s in synth.values()]
     view = frame_view(neutral_view(store, what), shapes, f)
     scale = _field_scale(list(fields.values()), "displacement magnitude or difference (mm)")

@@ -26,6 +26,7 @@ from scan2morph.render.views import (
     render_view,
     subplots,
 )
+from scan2morph.store import paths
 
 #: Eigen models shown (the paper shows the top five).
 N_EIGEN = 5
@@ -35,6 +36,9 @@ EIGEN_ALPHAS = (-3.0, 0.0, 3.0)
 _GRADUAL = re.compile(r"^(?P<label>[A-Za-z][A-Za-z0-9-]*)_(?P<percent>\d{1,3})$")
 #: A mixed blend is named by ``{label}{percent}`` parts joined by ``_`` (``man60_eel30``).
 _MIXED_PART = re.compile(r"^(?P<label>[A-Za-z][A-Za-z-]*)(?P<percent>\d{1,3})$")
+#: Roots of the named blends and PCA blends.
+_BLENDS = "/blends"  # TODO paths: paths.BLENDS (root for paths.ids)
+_PCA_BLENDS = "/pca_blends"  # TODO paths: paths.PCA_BLENDS (root for paths.ids)
 
 
 def _render_shapes(
@@ -67,17 +71,17 @@ def fig_gradual(store: Mapping[str, np.ndarray]) -> Figure:
     """Gradual deformation from the base model towards single visemes (Fig. 11)."""
     what = "the gradual-deformation figure"
     series: dict[str, list[tuple[int, str]]] = {}
-    for name in groups(store, "/blends", "vertices"):
+    for name in groups(store, _BLENDS, "vertices"):
         m = _GRADUAL.match(name)
         if m:
             series.setdefault(m["label"], []).append((int(m["percent"]), name))
     if not series:
-        return message_figure("Gradual deformation", "no blend named {label}_{percent} in /blends")
+        return message_figure(
+            "Gradual deformation", f"no blend named {{label}}_{{percent}} in {_BLENDS}"
+        )
     ncols = max(len(s) for s in series.values())
     names = [name for label in series for _, name in sorted(series[label])]
-    images = _render_shapes(
-        store, {n: mesh(store, f"/blends/{n}/vertices", what) for n in names}, what
-    )
+    images = _render_shapes(store, {n: mesh(store, paths.blend(n), what) for n in names}, what)
     panels = []
     for label, items in series.items():
         row = [Panel(images[name], f"{label}, w = {pct / 100:g}") for pct, name in sorted(items)]
@@ -92,12 +96,10 @@ def fig_gradual(store: Mapping[str, np.ndarray]) -> Figure:
 def fig_blends(store: Mapping[str, np.ndarray]) -> Figure:
     """Blends of several visemes (Fig. 12): every named blend that is not a gradual series."""
     what = "the blend figure"
-    names = [n for n in groups(store, "/blends", "vertices") if not _GRADUAL.match(n)]
+    names = [n for n in groups(store, _BLENDS, "vertices") if not _GRADUAL.match(n)]
     if not names:
-        return message_figure("Blends of visemes", "no mixed blend in /blends")
-    images = _render_shapes(
-        store, {n: mesh(store, f"/blends/{n}/vertices", what) for n in names}, what
-    )
+        return message_figure("Blends of visemes", f"no mixed blend in {_BLENDS}")
+    images = _render_shapes(store, {n: mesh(store, paths.blend(n), what) for n in names}, what)
     panels = [Panel(images[n], blend_title(n)) for n in names]
     return panel_figure(panels, ncols=min(len(panels), 4), title="Blends of viseme models (Eq. 1)")
 
@@ -106,26 +108,27 @@ def fig_mean(store: Mapping[str, np.ndarray]) -> Figure:
     """The mean model of the PCA (Fig. 13), shaded and with the neutral's texture."""
     what = "the mean-model figure"
     faces = template_faces(store, what)
-    mean = mesh(store, "/pca/mean", what)
+    mean = mesh(store, paths.pca("mean"), what)
     neutral = neutral_take(store)
-    uv = need(store, f"/takes/{neutral}/mesh/uv", what)
-    color = need(store, f"/takes/{neutral}/range/color", what)
+    uv = need(store, paths.mesh(neutral, "uv"), what)
+    color = need(store, paths.range_image(neutral, "color"), what)
     view = frame_view(neutral_view(store, what), [mean], faces)
     panels = [
         Panel(render_view(mean, faces, view), "shaded"),
         Panel(render_view(mean, faces, view, texture=color, uv=uv), "textured (neutral image)"),
     ]
-    n = len(need(store, "/pca/takes", what))
+    n = len(need(store, paths.pca("takes"), what))
     return panel_figure(panels, ncols=2, title=f"Average face model of the {n} models of the PCA")
 
 
 def _pca(store: Mapping, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    mean = mesh(store, "/pca/mean", what)
-    comps = need(store, "/pca/components", what).astype(float)
-    eig = need(store, "/pca/eigenvalues", what).astype(float)
+    mean = mesh(store, paths.pca("mean"), what)
+    comps = need(store, paths.pca("components"), what).astype(float)
+    eig = need(store, paths.pca("eigenvalues"), what).astype(float)
     if comps.ndim != 3 or comps.shape[1:] != mean.shape or len(eig) != len(comps):
         raise InputError(
             source_of(store),
+            # TODO paths: a builder of the /pca group
             f"/pca: components {comps.shape} and eigenvalues {eig.shape} do not match the mean {mean.shape}",
         )
     return mean, comps, eig
@@ -174,10 +177,10 @@ def pca_alphas(store: Mapping[str, np.ndarray], shape: np.ndarray) -> np.ndarray
 def fig_pca_blends(store: Mapping[str, np.ndarray]) -> Figure:
     """Models synthesised from the PCA (Eq. 2, Fig. 16), titled with their alphas."""
     what = "the PCA blend figure"
-    names = groups(store, "/pca_blends", "vertices")
+    names = groups(store, _PCA_BLENDS, "vertices")
     if not names:
-        return message_figure("PCA blends", "no model in /pca_blends")
-    shapes = {n: mesh(store, f"/pca_blends/{n}/vertices", what) for n in names}
+        return message_figure("PCA blends", f"no model in {_PCA_BLENDS}")
+    shapes = {n: mesh(store, paths.pca_blend(n), what) for n in names}
     images = _render_shapes(store, shapes, what)
     panels = []
     for n in names:
@@ -193,9 +196,9 @@ def fig_pca_blends(store: Mapping[str, np.ndarray]) -> Figure:
 def fig_contribution(store: Mapping[str, np.ndarray]) -> Figure:
     """Contribution rate (bars) and cumulative contribution rate (line) per component (Table 1)."""
     what = "the contribution-rate chart"
-    cr = need(store, "/pca/cr", what).astype(float)
-    ccr = need(store, "/pca/ccr", what).astype(float)
-    eig = need(store, "/pca/eigenvalues", what).astype(float)
+    cr = need(store, paths.pca("cr"), what).astype(float)
+    ccr = need(store, paths.pca("ccr"), what).astype(float)
+    eig = need(store, paths.pca("eigenvalues"), what).astype(float)
     k = np.arange(1, len(cr) + 1)
     fig, ax = subplots(figsize=(5.0, 3.4))
     ax.bar(k, cr, color="tab:blue", label="CR")
@@ -229,12 +232,13 @@ def fig_contribution(store: Mapping[str, np.ndarray]) -> Figure:
 def fig_coefficients(store: Mapping[str, np.ndarray]) -> Figure:
     """PCA coefficients of every model (Fig. 15, Table 2): grouped bars, one group per model."""
     what = "the coefficient chart"
-    coef = need(store, "/pca/coefficients", what).astype(float)
-    takes = [str(t) for t in need(store, "/pca/takes", what)]
+    coef = need(store, paths.pca("coefficients"), what).astype(float)
+    takes = [str(t) for t in need(store, paths.pca("takes"), what)]
     if coef.ndim != 2 or coef.shape[0] != len(takes):
         raise InputError(
             source_of(store),
-            f"/pca/coefficients: expected {len(takes)} rows (/pca/takes), got {coef.shape}",
+            f"{paths.pca('coefficients')}: expected {len(takes)} rows ({paths.pca('takes')}), "
+            f"got {coef.shape}",
         )
     k = min(N_EIGEN, coef.shape[1])
     width = 0.8 / max(k, 1)

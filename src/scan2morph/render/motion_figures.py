@@ -29,6 +29,7 @@ from scan2morph.render.views import (
     panel_figure,
     render_view,
 )
+from scan2morph.store import paths
 from scan2morph.template.mesh import ICP_POINTS
 
 #: Radius of the coloured spot that marks a point on a mesh, mm.
@@ -70,11 +71,11 @@ def fig_point_pairs(store: Mapping[str, np.ndarray]) -> Figure:
             "Point pairs for the initial alignment", "no ICP point is a fiducial of this template"
         )
     colors = colormaps["tab10"](np.arange(len(names)))[:, :3]
-    xy = need(store, "/template/vertices2d", what)
+    xy = need(store, paths.template("vertices2d"), what)
     takes = [neutral_take(store)] + [t for t in [example_take(store)] if t is not None]
     panels = []
     for take in takes:
-        vertices = mesh(store, f"/takes/{take}/mesh/vertices", what)
+        vertices = mesh(store, paths.mesh(take, "vertices"), what)
         idx = np.array([fid[n] for n in names])
         rgb = _spots(vertices, vertices[idx], colors)
         view = face_view(vertices, faces, xy, source=source_of(store))
@@ -112,10 +113,10 @@ def fig_alignment(store: Mapping[str, np.ndarray]) -> Figure:
         )
     faces = template_faces(store, what)
     neutral = neutral_take(store)
-    base = mesh(store, f"/takes/{neutral}/align/vertices", what)
+    base = mesh(store, paths.align(neutral, "vertices"), what)
     rows = {
-        "before (scanner frames)": mesh(store, f"/takes/{take}/mesh/vertices", what),
-        "after alignment": mesh(store, f"/takes/{take}/align/vertices", what),
+        "before (scanner frames)": mesh(store, paths.mesh(take, "vertices"), what),
+        "after alignment": mesh(store, paths.align(take, "vertices"), what),
     }
     direction = neutral_view(store, what)
     panels = []
@@ -138,9 +139,9 @@ def fig_mask(store: Mapping[str, np.ndarray]) -> Figure:
     """Seed vertices (on the Dijkstra paths) and the stencil mask on the neutral (Fig. 7)."""
     what = "the mask figure"
     faces = template_faces(store, what)
-    base = mesh(store, "/neutral/vertices", what)
-    suppressed = need(store, "/mask/suppressed", what).astype(bool)
-    seeds = need(store, "/mask/seeds", what).astype(np.int64)
+    base = mesh(store, paths.neutral("vertices"), what)
+    suppressed = need(store, paths.mask("suppressed"), what).astype(bool)
+    seeds = need(store, paths.mask("seeds"), what).astype(np.int64)
     view = neutral_view(store, what)
     seed_rgb = np.tile(SKIN_RGB, (len(base), 1))
     seed_rgb[seeds] = SEED_RGB
@@ -172,7 +173,7 @@ def _viseme_fields(
     if not takes:
         return message_figure(title, "the store has no viseme takes")
     faces = template_faces(store, what)
-    models = {take: mesh(store, f"/visemes/{take}/model", what) for take in takes}
+    models = {take: mesh(store, paths.viseme(take, "model"), what) for take in takes}
     values, titles = {}, {}
     for take in takes:
         values[take], titles[take] = field(take, models[take])
@@ -192,7 +193,7 @@ def fig_distance(store: Mapping[str, np.ndarray]) -> Figure:
     what = "the viseme distance figure"
 
     def distance(take, model):
-        d = np.linalg.norm(model - mesh(store, f"/takes/{take}/align/vertices", what), axis=1)
+        d = np.linalg.norm(model - mesh(store, paths.align(take, "vertices"), what), axis=1)
         rms = float(np.sqrt(np.nanmean(d**2))) if np.isfinite(d).any() else float("nan")
         return d, f"{take}: RMS {rms:.2f} mm"
 
@@ -212,11 +213,11 @@ def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:
     bars = noise_by_take(store)
     if not bars:
         return message_figure(title, "the store has no click-noise estimate")
-    if "/motion_noise/click_noise_px" in store:
-        title += f" (clicks of {float(store['/motion_noise/click_noise_px']):.2f} px)"
+    if paths.motion_noise("click_noise_px") in store:
+        title += f" (clicks of {float(store[paths.motion_noise('click_noise_px')]):.2f} px)"
 
     def noise(take, model):
-        values = need(store, f"/visemes/{take}/noise_rms_mm", what)
+        values = need(store, paths.viseme(take, "noise_rms_mm"), what)
         if take not in bars:
             return values, take
         bar = bars[take]
@@ -233,10 +234,10 @@ def fig_visemes(store: Mapping[str, np.ndarray]) -> Figure:
     what = "the viseme models figure"
     faces = template_faces(store, what)
     neutral = neutral_take(store)
-    shapes = {f"{neutral} (base)": mesh(store, "/neutral/vertices", what)}
-    shapes |= {take: mesh(store, f"/visemes/{take}/model", what) for take in viseme_takes(store)}
-    uv = need(store, f"/takes/{neutral}/mesh/uv", what)
-    color = need(store, f"/takes/{neutral}/range/color", what)
+    shapes = {f"{neutral} (base)": mesh(store, paths.neutral("vertices"), what)}
+    shapes |= {take: mesh(store, paths.viseme(take, "model"), what) for take in viseme_takes(store)}
+    uv = need(store, paths.mesh(neutral, "uv"), what)
+    color = need(store, paths.range_image(neutral, "color"), what)
     view = frame_view(neutral_view(store, what), list(shapes.values()), faces)
     shaded = [Panel(render_view(v, faces, view), name) for name, v in shapes.items()]
     textured = [

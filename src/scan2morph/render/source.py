@@ -7,7 +7,6 @@ store holds every take's range images; a figure needs only a few arrays).
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
@@ -16,7 +15,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.render.views import View, face_view
-from scan2morph.store import open_store
+from scan2morph.store import open_store, paths
 
 
 class StoreMapping(Mapping):
@@ -87,7 +86,7 @@ def need(store: Mapping, key: str, what: str) -> np.ndarray:
 
 def n_vertices(store: Mapping) -> int:
     """V, the template's vertex count."""
-    return len(need(store, "/template/vertices2d", "every mesh figure"))
+    return len(need(store, paths.template("vertices2d"), "every mesh figure"))
 
 
 def mesh(store: Mapping, key: str, what: str) -> np.ndarray:
@@ -101,20 +100,19 @@ def mesh(store: Mapping, key: str, what: str) -> np.ndarray:
     return value
 
 
-def groups(store: Mapping, prefix: str, leaf: str) -> list[str]:
-    """Names ``g`` for which ``{prefix}/{g}/{leaf}`` exists, in sorted order."""
-    pattern = re.compile(rf"^{re.escape(prefix)}/([^/]+)/{re.escape(leaf)}$")
-    return sorted({m.group(1) for key in store if (m := pattern.match(key))})
+def groups(store: Mapping, root: str, dataset: str) -> list[str]:
+    """The ids under ``root`` that hold ``dataset`` (:func:`paths.ids`), in sorted order."""
+    return sorted(paths.ids(store, root, dataset))
 
 
 def viseme_takes(store: Mapping) -> list[str]:
     """Takes with a viseme model, sorted."""
-    return groups(store, "/visemes", "model")
+    return groups(store, paths.VISEMES, "model")
 
 
 def expression_takes(store: Mapping) -> list[str]:
     """Takes with an expression displacement field, sorted."""
-    return groups(store, "/expressions", "displacement")
+    return groups(store, paths.EXPRESSIONS, "displacement")
 
 
 def neutral_take(store: Mapping) -> str:
@@ -125,13 +123,13 @@ def neutral_take(store: Mapping) -> str:
     InputError
         None or several such takes.
     """
-    takes = groups(store, "/takes", "mesh/vertices")
+    takes = groups(store, paths.TAKES, "mesh/vertices")
     others = set(viseme_takes(store)) | set(expression_takes(store))
     neutral = [t for t in takes if t not in others]
     if len(neutral) != 1:
         raise InputError(
             source_of(store),
-            f"/takes: expected exactly one neutral take (meshed, not a viseme or expression), found {neutral}",
+            f"{paths.TAKES}: expected exactly one neutral take (meshed, not a viseme or expression), found {neutral}",
         )
     return neutral[0]
 
@@ -143,13 +141,13 @@ def example_take(store: Mapping) -> str | None:
     with the largest displacement, else None.
     """
     for takes, key in (
-        (viseme_takes(store), "/visemes/{}/motion"),
-        (expression_takes(store), "/expressions/{}/displacement"),
+        (viseme_takes(store), lambda t: paths.viseme(t, "motion")),
+        (expression_takes(store), lambda t: paths.expression(t, "displacement")),
     ):
         sizes = {
-            t: float(np.nansum(np.asarray(store[key.format(t)], dtype=float) ** 2))
+            t: float(np.nansum(np.asarray(store[key(t)], dtype=float) ** 2))
             for t in takes
-            if key.format(t) in store
+            if key(t) in store
         }
         if sizes:
             return max(sizes, key=sizes.get)
@@ -158,18 +156,19 @@ def example_take(store: Mapping) -> str | None:
 
 def fiducials(store: Mapping) -> dict[str, int]:
     """Fiducial name -> vertex index, from ``/template/fiducials``."""
-    names = need(store, "/template/fiducials/names", "fiducials")
-    indices = need(store, "/template/fiducials/indices", "fiducials")
+    names = need(store, paths.template("fiducials/names"), "fiducials")
+    indices = need(store, paths.template("fiducials/indices"), "fiducials")
     if names.shape != indices.shape:
         raise InputError(
-            source_of(store), "/template/fiducials: names and indices differ in length"
+            source_of(store),
+            "/template/fiducials: names and indices differ in length",  # TODO paths: group builder
         )
     return {str(n): int(i) for n, i in zip(names, indices, strict=True)}
 
 
 def template_faces(store: Mapping, what: str) -> np.ndarray:
     """The template's faces (F, 3) int64."""
-    return need(store, "/template/faces", what).astype(np.int64)
+    return need(store, paths.template("faces"), what).astype(np.int64)
 
 
 def neutral_view(store: Mapping[str, np.ndarray], what: str) -> View:
@@ -178,9 +177,9 @@ def neutral_view(store: Mapping[str, np.ndarray], what: str) -> View:
     Derived from the neutral base model (complete, no NaN) when the store has it, else from the
     neutral take's mesh.
     """
-    key = "/neutral/vertices"
+    key = paths.neutral("vertices")
     if key not in store:
-        key = f"/takes/{neutral_take(store)}/mesh/vertices"
+        key = paths.mesh(neutral_take(store), "vertices")
     vertices = mesh(store, key, what)
-    xy = need(store, "/template/vertices2d", what)
+    xy = need(store, paths.template("vertices2d"), what)
     return face_view(vertices, template_faces(store, what), xy, source=source_of(store))

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from scan2morph.errors import InputError
-from scan2morph.store import open_store
+from scan2morph.store import open_store, paths
 from scan2morph.tol import VISEMES
 
 #: Number of leading CCR values in the table.
@@ -75,10 +75,10 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
         Unreadable store, or one without PCA (``/pca/ccr``) or modal frequencies.
     """
     with open_store(store_path) as h5:
-        for need in ("pca/ccr", "modal/frequencies_hz"):
+        for need in (paths.pca("ccr"), paths.modal("frequencies_hz")):
             if need not in h5:
-                raise InputError(store_path, f"/{need}: missing (the subject did not finish)")
-        takes = h5["takes"] if "takes" in h5 else {}
+                raise InputError(store_path, f"{need}: missing (the subject did not finish)")
+        takes = h5[paths.TAKES] if paths.TAKES in h5 else {}
         kinds = {t: _attr(takes[t], "kind") for t in takes}
         row: dict[str, object] = {
             "subject": _attr(h5, "subject") or Path(store_path).stem,
@@ -87,15 +87,15 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
             "n_expressions": sum(k == "expression" for k in kinds.values()),
         }
         by_label: dict[str, list[float]] = {}
-        for take in h5["visemes"] if "visemes" in h5 else []:
+        for take in h5[paths.VISEMES] if paths.VISEMES in h5 else []:
             label = _attr(takes[take], "label") if take in takes else take
             by_label.setdefault(label or take, []).append(
-                motion_rms(h5["visemes"][take]["motion"][()])
+                motion_rms(h5[paths.viseme(take, "motion")][()])
             )
         noise_by_label: dict[str, list[float]] = {}
-        if "motion_noise/relative" in h5:
-            names = h5["motion_noise/takes"].asstr()[()]
-            for take, rel in zip(names, h5["motion_noise/relative"][()], strict=True):
+        if paths.motion_noise("relative") in h5:
+            names = h5[paths.motion_noise("takes")].asstr()[()]
+            for take, rel in zip(names, h5[paths.motion_noise("relative")][()], strict=True):
                 label = _attr(takes[take], "label") if take in takes else take
                 noise_by_label.setdefault(label or take, []).append(float(rel))
         order = {v: i for i, v in enumerate(VISEMES)}
@@ -103,10 +103,10 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
             row[f"motion_rms_mm_{label}"] = float(np.mean(by_label[label]))
         for label in sorted(noise_by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
             row[f"motion_noise_relative_{label}"] = float(np.mean(noise_by_label[label]))
-        ccr = np.asarray(h5["pca/ccr"][()], dtype=np.float64)
+        ccr = np.asarray(h5[paths.pca("ccr")][()], dtype=np.float64)
         for i in range(N_CCR):
             row[f"ccr_{i + 1}"] = float(ccr[i]) if i < len(ccr) else float("nan")
-        freqs = h5["modal/frequencies_hz"][()]
+        freqs = h5[paths.modal("frequencies_hz")][()]
         row["modal_f1_hz"] = float(freqs[0]) if len(freqs) else float("nan")
     summary = (accuracy or {}).get("summary", {})
     for key, value in summary.items():

@@ -27,7 +27,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.report.provenance import software_versions, store_provenance
-from scan2morph.store import open_store
+from scan2morph.store import open_store, paths
 
 #: Image types a report embeds: file suffix -> (MIME type, leading magic bytes).
 IMAGE_TYPES = {
@@ -189,11 +189,11 @@ def _attr(obj: h5py.HLObject, key: str, default: str = "") -> str:
 
 
 def _take_order(h5: h5py.File, takes: Sequence[str] | None) -> list[str]:
-    present = list(h5["takes"]) if "takes" in h5 else []
+    present = list(h5[paths.TAKES]) if paths.TAKES in h5 else []
     if takes is not None:
         return [t for t in takes if t in present] + [t for t in present if t not in takes]
     rank = {k: i for i, k in enumerate(KIND_ORDER)}
-    return sorted(present, key=lambda t: (rank.get(_attr(h5["takes"][t], "kind"), 99), t))
+    return sorted(present, key=lambda t: (rank.get(_attr(h5[paths.take(t)], "kind"), 99), t))
 
 
 def _inputs_section(h5: h5py.File, takes: list[str], thumbnail_px: int) -> str:
@@ -201,13 +201,13 @@ def _inputs_section(h5: h5py.File, takes: list[str], thumbnail_px: int) -> str:
         return _note("The store holds no takes.")
     items = []
     for take in takes:
-        group = h5["takes"][take]
+        group = h5[paths.take(take)]
         kind, label = _attr(group, "kind", "?"), _attr(group, "label", "?")
         modality = _attr(group, "modality", "?")
-        if "range/color" not in group:
+        if paths.range_image(take, "color") not in h5:
             items.append(f"<figure><figcaption>{_esc(take)}: no color image</figcaption></figure>")
             continue
-        color = group["range/color"][()]
+        color = h5[paths.range_image(take, "color")][()]
         h, w = color.shape[:2]
         uri = data_uri(thumbnail_jpeg(color, thumbnail_px), "image/jpeg")
         text = f"{take}: {kind} {label}, {modality}, {w}x{h} px"
@@ -240,10 +240,9 @@ def _figures_section(figures: Sequence[ReportFigure]) -> str:
 
 
 def _pca_section(h5: h5py.File) -> str:
-    if "pca/eigenvalues" not in h5:
+    if paths.pca("eigenvalues") not in h5:
         return _note("The store holds no PCA.")
-    pca = h5["pca"]
-    eig, cr, ccr = pca["eigenvalues"][()], pca["cr"][()], pca["ccr"][()]
+    eig, cr, ccr = (h5[paths.pca(k)][()] for k in ("eigenvalues", "cr", "ccr"))
     rows1 = [
         [i + 1, float(e), float(100 * c), float(100 * cc)]
         for i, (e, c, cc) in enumerate(zip(eig, cr, ccr, strict=True))
@@ -253,8 +252,8 @@ def _pca_section(h5: h5py.File) -> str:
         rows1,
         "Table 1: eigenvalues, contribution rate (CR) and cumulative contribution rate (CCR)",
     )
-    coeff = pca["coefficients"][()]
-    names = pca["takes"].asstr()[()]
+    coeff = h5[paths.pca("coefficients")][()]
+    names = h5[paths.pca("takes")].asstr()[()]
     rows2 = [[str(t), *map(float, row)] for t, row in zip(names, coeff, strict=True)]
     table2 = _table(
         ["model", *[f"w{i + 1}" for i in range(coeff.shape[1])]],
@@ -265,14 +264,15 @@ def _pca_section(h5: h5py.File) -> str:
 
 
 def _motion_noise_section(h5: h5py.File) -> str:
-    if "motion_noise/relative" not in h5:
+    if paths.motion_noise("relative") not in h5:
         return _note("The store holds no click-noise estimate.")
-    group = h5["motion_noise"]
-    names = group["takes"].asstr()[()]
-    rel, err = group["relative"][()], group["rms_error_mm"][()]
+    group = h5[paths.MOTION_NOISE]
+    names = h5[paths.motion_noise("takes")].asstr()[()]
+    rel, err = h5[paths.motion_noise("relative")][()], h5[paths.motion_noise("rms_error_mm")][()]
+    failed = h5[paths.motion_noise("failed_draws")][()]
     rows = [
         [str(t), float(e), float(100 * r), f]
-        for t, e, r, f in zip(names, err, rel, group["failed_draws"][()], strict=True)
+        for t, e, r, f in zip(names, err, rel, failed, strict=True)
     ]
     draws, note = _attr(group, "draws", "?"), _attr(group, "click_noise_note", "")
     caption = (
@@ -286,9 +286,9 @@ def _motion_noise_section(h5: h5py.File) -> str:
 
 
 def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
-    if "modal/frequencies_hz" not in h5:
+    if paths.modal("frequencies_hz") not in h5:
         return _note("The store holds no modal basis.")
-    freqs = h5["modal/frequencies_hz"][()]
+    freqs = h5[paths.modal("frequencies_hz")][()]
     n = min(int(n_coordinates), len(freqs))
     out = [
         _table(
@@ -297,19 +297,17 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
             f"Natural frequencies of the first {n} of {len(freqs)} modes",
         )
     ]
-    exprs = list(h5["expressions"]) if "expressions" in h5 else []
+    exprs = list(h5[paths.EXPRESSIONS]) if paths.EXPRESSIONS in h5 else []
     if not exprs:
         return "".join(out) + _note("The subject has no expression takes.")
-    label = {
-        t: _attr(h5["takes"][t], "label", "") if t in h5.get("takes", {}) else "" for t in exprs
-    }
+    label = {t: _attr(h5[paths.take(t)], "label", "") if paths.take(t) in h5 else "" for t in exprs}
     rows = [
         [
             f"{t} ({label[t]})" if label[t] else t,
-            *map(float, h5["expressions"][t]["coordinates"][:n]),
+            *map(float, h5[paths.expression(t, "coordinates")][:n]),
         ]
         for t in exprs
-        if "coordinates" in h5["expressions"][t]
+        if paths.expression(t, "coordinates") in h5
     ]
     out.append(
         _table(
@@ -318,12 +316,12 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
             f"Modal coordinates q = Q^T M v of each expression, first {n} modes",
         )
     )
-    if "modal/reconstruction_k" in h5:
-        ks = h5["modal/reconstruction_k"][()]
+    if paths.modal("reconstruction_k") in h5:
+        ks = h5[paths.modal("reconstruction_k")][()]
         rows = [
-            [t, *map(float, h5["expressions"][t]["reconstruction_rms_mm"][()])]
+            [t, *map(float, h5[paths.expression(t, "reconstruction_rms_mm")][()])]
             for t in exprs
-            if "reconstruction_rms_mm" in h5["expressions"][t]
+            if paths.expression(t, "reconstruction_rms_mm") in h5
         ]
         out.append(
             _table(
