@@ -1,14 +1,30 @@
-"""Time take-to-neutral alignment and motion smoothing at template sizes (1.7k and 7k vertices).
+"""Take-to-neutral alignment: accuracy on the synthetic cohort, and timing.
 
-Run: ``.venv/bin/python benchmarks/bench_align.py``. Prints the median wall time in ms of
-``align_take`` (both refinements) and ``laplacian_smooth`` (w = 0.1, 30 iterations, with a
-suppressed mask and a few missing vertices), and the alignment error against the known motion.
+Run: ``.venv/bin/python benchmarks/bench_align.py [--subjects 4] [--config config/config.yaml]``.
+Simulates the subjects' takes in memory exactly as the pipeline does (``make_take`` with the
+config's ``synthetic.scanner``, seed and takes; ``repair_range``; ``fit_take`` with the config's
+template options and fiducial set per kind), aligns every take to its subject's neutral as the
+align stage does (``align.point_pairs`` for the initial pose, ICP on ``align.icp_region``, the
+rest of ``align`` as :func:`~scan2morph.align.align_take`'s settings) and prints per take the
+rotation (deg) and translation (mm, at the face centroid) error against the truth (as the
+accuracy report computes them), ICP's fitness, inlier RMSE (mm, point to point), the
+point-to-plane RMSE of the kept region (mm), iterations, convergence and the verdict.
+
+The code before a change: ``PYTHONPATH=/tmp/base/src .venv/bin/python benchmarks/bench_align.py
+--config /tmp/base/config/config.yaml`` (an older library lacks the verdict: ``-``).
+
+``--timing``: the median wall time in ms of ``align_take`` (both refinements) and
+``laplacian_smooth`` (w = 0.1, 30 iterations, with a suppressed mask and a few missing
+vertices) on a face-like grid at 1.7k and 7k vertices, and the alignment error against the
+known motion.
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -53,7 +69,8 @@ def _median_ms(fn, repeats: int) -> float:
     return 1e3 * float(np.median(times))
 
 
-def main(seed: int = 0, repeats: int = 7) -> None:
+def timing(seed: int = 0, repeats: int = 7) -> None:
+    """Median time of ``align_take`` and ``laplacian_smooth`` on a face-like grid."""
     rng = np.random.default_rng(seed)
     print(f"{'V':>6} {'method':>16} {'align ms':>9} {'rot err deg':>12} {'t err mm':>9}")
     for nx, ny in ((37, 46), (75, 94)):
@@ -90,6 +107,157 @@ def main(seed: int = 0, repeats: int = 7) -> None:
         missing = rng.random(len(v)) < 0.02
         ms = _median_ms(partial(laplacian_smooth, d, f, 0.1, 30, fixed, missing), repeats)
         print(f"{len(v):>6} {'laplacian_smooth':>16} {ms:>9.2f}   (w=0.1, 30 iterations)")
+
+
+def _align_settings(config: dict) -> tuple[list, str, dict]:
+    """Point pairs, ICP region and align_take's settings, as the align stage splits them."""
+    align = config["align"]
+    icp = {k: v for k, v in align.items() if k not in ("point_pairs", "icp_region")}
+    return list(align["point_pairs"]), align["icp_region"], icp
+
+
+def simulate(config: dict, template, subject: str) -> tuple[dict, dict]:
+    """A subject's range takes as the pipeline sees them: repaired, template fitted.
+
+    Returns
+    -------
+    meshes : dict take -> fit_take's output
+    truths : dict take -> Truth
+    """
+    from scan2morph.evaluate.truth import Truth
+    from scan2morph.scan import repair_range
+    from scan2morph.synth.cohort import make_take
+    from scan2morph.template import fit_options, fit_take
+
+    syn, tpl = config["synthetic"], config["template"]
+    meshes, truths = {}, {}
+    for t in _range_takes(config):
+        take = make_take(
+            subject, t["label"], t["kind"], t["take"], int(syn["seed"]), syn["scanner"]
+        )
+        xyz, _ = repair_range(take["xyz"], dict(config["repair"]), source=t["take"])
+        meshes[t["take"]] = fit_take(
+            template,
+            take["landmarks"],
+            xyz,
+            (xyz.shape[1], xyz.shape[0]),
+            fiducial_set=tpl["fiducials"].get(t["kind"], "closed"),
+            source=f"{subject}/{t['take']}",
+            **fit_options(tpl),
+        )
+        truths[t["take"]] = Truth.from_arrays(take["truth"])
+    return meshes, truths
+
+
+def _range_takes(config: dict) -> list[dict]:
+    return [t for t in config["synthetic"]["takes"] if t.get("modality", "range") == "range"]
+
+
+def cohort(config_path: Path, n_subjects: int) -> list[dict]:
+    """Alignment errors against the truth of every take of ``n_subjects`` synthetic subjects."""
+    import yaml
+
+    from scan2morph.errors import InputError
+    from scan2morph.evaluate.mesh import alignment_accuracy
+    from scan2morph.template import build_template, subdivide_template
+    from scan2morph.template.regions import icp_region, named_indices
+
+    config = yaml.safe_load(config_path.read_text())
+    template = build_template()
+    fine = subdivide_template(template, int(config["template"]["subdivision_levels"]))
+    pair_names, region, icp = _align_settings(config)
+    pairs = named_indices(fine, pair_names, "align.point_pairs")
+    stable = np.flatnonzero(icp_region(fine, region))
+    takes = _range_takes(config)
+    neutral = next(t["take"] for t in takes if t["kind"] == "neutral")
+    rows = []
+    for i in range(1, n_subjects + 1):
+        subject = f"{config['synthetic']['prefix']}{i:02d}"
+        meshes, truths = simulate(config, template, subject)
+        n = meshes[neutral]
+        for t in takes:
+            if t["take"] == neutral:
+                continue
+            m = meshes[t["take"]]
+            row = {"subject": subject, "take": t["take"], "kind": t["kind"]}
+            try:
+                res = align_take(
+                    m["vertices"],
+                    m["valid"],
+                    n["vertices"],
+                    n["valid"],
+                    fine.faces,
+                    pairs,
+                    stable,
+                    icp,
+                    source=f"{subject}/{t['take']}",
+                )
+            except InputError as exc:
+                rows.append(row | {"error": str(exc)})
+                continue
+            acc = alignment_accuracy(
+                res.transform, m["vertices"], m["valid"], truths[t["take"]], truths[neutral]
+            )
+            ok = getattr(res, "ok", None)
+            row |= {
+                "rot_deg": acc["rotation_deg"],
+                "t_mm": acc["translation_mm"],
+                "fitness": res.fitness,
+                "rmse_mm": res.inlier_rmse,
+                "plane_mm": getattr(res, "residual_rmse", float("nan")),
+                "iterations": res.iterations,
+                "converged": res.converged,
+                "ok": ok,
+                "problems": list(getattr(res, "problems", ())),
+                "recovery": list(getattr(res, "recovery", ())),
+            }
+            rows.append(row)
+            _print_row(row)
+    return rows
+
+
+def _print_row(r: dict) -> None:
+    verdict = "-" if r["ok"] is None else ("ok" if r["ok"] else "FLAG")
+    print(
+        f"{r['subject']:>8} {r['take']:>7} {r['rot_deg']:>8.3f} {r['t_mm']:>7.3f} "
+        f"{r['fitness']:>7.3f} {r['rmse_mm']:>7.3f} {r['plane_mm']:>8.3f} {r['iterations']:>4d} "
+        f"{str(r['converged']):>5} {verdict:>5} {'; '.join(r['recovery'] + r['problems'])}",
+        flush=True,
+    )
+
+
+def _summary(rows: list[dict]) -> None:
+    print(f"{'kind':>10} {'n':>3} {'max deg':>8} {'max mm':>7} {'flagged':>7} {'errors':>6}")
+    for kind in ("viseme", "expression"):
+        rs = [r for r in rows if r["kind"] == kind]
+        ok = [r for r in rs if "error" not in r]
+        if not rs:
+            continue
+        deg = max((r["rot_deg"] for r in ok), default=float("nan"))
+        mm = max((r["t_mm"] for r in ok), default=float("nan"))
+        flagged = sum(r["ok"] is False for r in ok)
+        print(f"{kind:>10} {len(rs):>3} {deg:>8.3f} {mm:>7.3f} {flagged:>7} {len(rs) - len(ok):>6}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", type=Path, default=Path(__file__).parents[1] / "config/config.yaml")
+    ap.add_argument("--subjects", type=int, default=4)
+    ap.add_argument("--timing", action="store_true", help="time align_take instead")
+    args = ap.parse_args()
+    if args.timing:
+        timing()
+        return
+    print(
+        f"{'subject':>8} {'take':>7} {'rot deg':>8} {'t mm':>7} {'fitness':>7} {'rmse mm':>7} "
+        f"{'plane mm':>8} "
+        f"{'it':>4} {'conv':>5} {'ok':>5} recovery / problems"
+    )
+    rows = cohort(args.config, args.subjects)
+    for r in rows:
+        if "error" in r:
+            print(f"{r['subject']:>8} {r['take']:>7} failed: {r['error']}")
+    _summary(rows)
 
 
 if __name__ == "__main__":

@@ -294,3 +294,40 @@ def test_bad_input_raises(kwargs, match):
 def test_write_take_rejects_incomplete_result(tmp_path):
     with pytest.raises(InputError, match="missing key"):
         cohort.write_take({"xyz": np.zeros((2, 2, 3))}, *(tmp_path / n for n in "abcd"))
+
+
+def test_expressions_move_the_upper_face_at_realistic_amplitudes():
+    """Smile: cheek raise (AU6) and squint; sad: inner-brow raise (AU1) and brow lowering (AU4).
+    Visemes and the neutral leave the upper face still."""
+    from scan2morph.synth.articulation import FIELDS, LINKED, label_coefficients
+
+    head = _head()
+    rest = head.vertices
+    disp = {lab: articulate(head, LABEL_COEFFS[lab]) - rest for lab in LABEL_COEFFS}
+    lm = rest[head.landmarks]
+    # below the lower lids (iBUG 41/42, 47/48), 12 mm down: the infraorbital skin rises 3-6 mm
+    for a, b in ((40, 41), (46, 47)):
+        below = lm[[a, b]].mean(axis=0) - np.array([0.0, 12.0, 0.0])
+        i = np.argmin(np.linalg.norm(rest - below, axis=1))
+        assert 3.0 < disp["smile"][i, 1] < 6.0, disp["smile"][i]
+    # inner brow ends (iBUG 22, 23) rise, the brows come together; mid-brows (20, 25) drop
+    inner, mid = head.landmarks[[21, 22]], head.landmarks[[19, 24]]
+    assert (disp["sad"][inner, 1] > 1.5).all(), disp["sad"][inner]
+    assert (np.sign(rest[inner, 0]) * disp["sad"][inner, 0] < -1.0).all()
+    assert (disp["sad"][mid, 1] < 0.0).all(), disp["sad"][mid]
+    brow_fields = [f for fs in LINKED.values() for f in fs]
+    assert set(brow_fields) <= set(FIELDS)
+    top = np.linalg.norm(np.stack([head.fields[f] for f in brow_fields]), axis=2).max(axis=1)
+    assert (top > 1.9).all() and (top < 6.0).all(), top
+    # visemes hardly move the brows (only the far fade of the jaw rotation reaches them)
+    brows = np.linalg.norm(rest[:, None, :] - lm[None, 17:27], axis=2).min(axis=1) < 10
+    for lab in ("car", "man", "she", "eel", "too", "neutral"):
+        assert np.abs(disp[lab][brows]).max() < 0.5, lab
+    assert np.abs(disp["sad"][brows]).max() > 3.0
+    # linked fields follow their driver's intensity (one draw per driver)
+    rng = np.random.default_rng(0)
+    c = label_coefficients("smile", rng)
+    assert c["cheek_raise"] == c["squint"] == c["smile"] != 1.0
+    twin = np.random.default_rng(0)
+    twin.standard_normal()
+    assert rng.bit_generator.state == twin.bit_generator.state

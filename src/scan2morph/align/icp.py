@@ -17,22 +17,39 @@ Two refinements are offered (``params["method"]``):
     closed-form alternative is an iteratively reweighted Kabsch fit over the upper-face
     vertices (same robust kernel on the 3D residuals). It needs no closest-point search, but
     it inherits any tangential sliding of the template fit, which ICP ignores.
+
+The stable region is not stable in every expression: a smile's cheek raise draws the skin of the
+temples towards the eyes, a sad face's inner-brow raise lifts the lower forehead. After the
+first refinement the region is therefore trimmed (``trim_rounds``): each vertex's point-to-plane
+residual is averaged over its neighbours within ``trim_radius_mm`` (moving skin moves in
+patches, noise does not), the vertices whose averaged residual exceeds ``trim_sigma`` robust
+standard deviations are left out, and the refinement resumes on the rest, until the kept set
+stops changing. A refinement that does not converge is re-initialised from the point pairs on
+the kept region, then given a convex (Huber) kernel. The result carries a verdict (``ok``,
+``problems``) instead of raising: not converged after that recovery, fitness below
+``min_fitness``, point-to-plane RMSE above ``max_rmse_mm``, less than ``min_inlier_fraction``
+of the region kept.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import sparse
+from scipy.spatial import cKDTree
 
-from scan2morph.align.rigid import kabsch, transform_points
+from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
 
 #: Default ICP parameters (mm where a unit applies). ``relative_fitness`` / ``relative_rmse``
 #: stop the iteration when both the fitness and the inlier RMSE change by less than that
-#: between iterations (open3d's criterion: absolute changes, despite the name).
+#: between iterations (open3d's criterion: absolute changes, despite the name); so does a pose
+#: step below ``step_deg`` and ``step_mm``. ``trim_*``: trimming of the region's moving parts
+#: (``trim_rounds`` 0: off). ``min_fitness``, ``max_rmse_mm`` and ``min_inlier_fraction`` are
+#: the quality gate of :attr:`AlignResult.ok`.
 DEFAULT_ICP: dict[str, Any] = {
     "method": "icp",
     "max_correspondence_mm": 10.0,
@@ -42,7 +59,17 @@ DEFAULT_ICP: dict[str, Any] = {
     "min_fitness": 0.5,
     "relative_fitness": 1e-6,
     "relative_rmse": 1e-6,
+    "step_deg": 0.01,
+    "step_mm": 0.01,
+    "trim_rounds": 6,
+    "trim_radius_mm": 8.0,
+    "trim_sigma": 3.0,
+    "max_rmse_mm": 0.5,
+    "min_inlier_fraction": 0.3,
 }
+
+#: Averaged residuals below this never count as motion, mm (a floor to the robust threshold).
+_TRIM_FLOOR_MM = 0.05
 
 _METHODS = ("icp", "correspondence")
 _KERNELS = ("tukey", "huber", "none")
@@ -66,11 +93,25 @@ class AlignResult:
     iterations : int
         Iterations run.
     converged : bool
-        True if the stopping criterion was met before ``max_iterations``.
+        True if the final refinement met its stopping criterion before ``max_iterations``
+        (after any recovery).
     method : str
         ``"icp"`` or ``"correspondence"``.
     n_points : int
         Number of upper-face source vertices used.
+    residual_rmse : float
+        RMS point-to-plane distance of the kept region vertices to the neutral mesh at the
+        final pose, mm (the scan noise when the alignment is right; gated by ``max_rmse_mm``).
+    inlier_fraction : float
+        Share of the region's vertices kept after trimming its moving parts, in [0, 1]
+        (gated by ``min_inlier_fraction``).
+    ok : bool
+        The alignment passed its quality gate: ``problems`` is empty.
+    problems : list of str
+        Why it did not (not converged after recovery, fitness, RMSE, too little of the region
+        kept); empty when ``ok``.
+    recovery : list of str
+        What was done beyond the plain refinement: trimming, re-initialisation, kernel change.
     """
 
     transform: np.ndarray
@@ -81,6 +122,11 @@ class AlignResult:
     converged: bool
     method: str = "icp"
     n_points: int = 0
+    residual_rmse: float = 0.0
+    inlier_fraction: float = 1.0
+    ok: bool = True
+    problems: list[str] = field(default_factory=list)
+    recovery: list[str] = field(default_factory=list)
 
 
 def _params(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
@@ -101,26 +147,32 @@ def _params(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
             source,
             f"icp params: robust_kernel must be one of {_KERNELS}, got {p['robust_kernel']!r}",
         )
-    for key in ("max_correspondence_mm", "kernel_k_mm"):
+    for key in (
+        "max_correspondence_mm",
+        "kernel_k_mm",
+        "trim_radius_mm",
+        "trim_sigma",
+        "max_rmse_mm",
+    ):
         v = float(p[key])
         if not (np.isfinite(v) and v > 0):
             raise InputError(source, f"icp params: {key} must be a positive number, got {p[key]!r}")
         p[key] = v
-    for key in ("relative_fitness", "relative_rmse"):
+    for key in ("relative_fitness", "relative_rmse", "step_deg", "step_mm"):
         v = float(p[key])
         if not (np.isfinite(v) and v >= 0):
             raise InputError(source, f"icp params: {key} must be >= 0, got {p[key]!r}")
         p[key] = v
-    v = float(p["min_fitness"])
-    if not 0.0 <= v <= 1.0:
-        raise InputError(
-            source, f"icp params: min_fitness must be in [0, 1], got {p['min_fitness']!r}"
-        )
-    p["min_fitness"] = v
-    it = p["max_iterations"]
-    if isinstance(it, bool) or int(it) != it or it < 1:
-        raise InputError(source, f"icp params: max_iterations must be an integer >= 1, got {it!r}")
-    p["max_iterations"] = int(it)
+    for key in ("min_fitness", "min_inlier_fraction"):
+        v = float(p[key])
+        if not 0.0 <= v <= 1.0:
+            raise InputError(source, f"icp params: {key} must be in [0, 1], got {p[key]!r}")
+        p[key] = v
+    for key, least in (("max_iterations", 1), ("trim_rounds", 0)):
+        it = p[key]
+        if isinstance(it, bool) or int(it) != it or it < least:
+            raise InputError(source, f"icp params: {key} must be an integer >= {least}, got {it!r}")
+        p[key] = int(it)
     return p
 
 
@@ -177,6 +229,14 @@ def _residual_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -
     return r, fitness, rmse
 
 
+def _small_step(t_new: np.ndarray, t_old: np.ndarray, prm: dict) -> bool:
+    """True if the pose moved by less than ``step_deg`` and ``step_mm`` in one iteration."""
+    d = t_new @ invert(t_old)
+    return rotation_angle_deg(d[:3, :3]) < prm["step_deg"] and bool(
+        np.linalg.norm(d[:3, 3]) < prm["step_mm"]
+    )
+
+
 def _refine_correspondence(p, q, initial, prm, source):
     """Iteratively reweighted Kabsch over vertex-to-vertex correspondences."""
     t = initial
@@ -193,12 +253,12 @@ def _refine_correspondence(p, q, initial, prm, source):
         )
         if np.count_nonzero(w) < 3:
             break
-        t = kabsch(p, q, w, source=source)
+        t_old, t = t, kabsch(p, q, w, source=source)
         r, f_new, rmse_new = _residual_stats(p, q, t, prm["max_correspondence_mm"])
         done = (
             abs(f_new - fitness) < prm["relative_fitness"]
             and abs(rmse_new - rmse) < prm["relative_rmse"]
-        )
+        ) or (it > 1 and _small_step(t, t_old, prm))
         fitness, rmse = f_new, rmse_new
         if done:
             converged = True
@@ -206,8 +266,12 @@ def _refine_correspondence(p, q, initial, prm, source):
     return t, fitness, rmse, it, converged
 
 
-def _refine_icp(p, q, q_normals, initial, prm):
-    """open3d point-to-plane ICP, stepped one iteration at a time to report iterations."""
+def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
+    """open3d point-to-plane ICP, stepped one iteration at a time to report iterations.
+
+    The kernel scale halves from ``k_start`` (default ``max_correspondence_mm``) to
+    ``kernel_k_mm``.
+    """
     import open3d as o3d
 
     reg = o3d.pipelines.registration
@@ -215,7 +279,7 @@ def _refine_icp(p, q, q_normals, initial, prm):
     tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(q))
     tgt.normals = o3d.utility.Vector3dVector(q_normals)
     k_final = prm["kernel_k_mm"]
-    k = max(prm["max_correspondence_mm"], k_final)
+    k = max(prm["max_correspondence_mm"] if k_start is None else k_start, k_final)
     loss = {"tukey": reg.TukeyLoss, "huber": reg.HuberLoss}.get(prm["robust_kernel"])
     one_step = reg.ICPConvergenceCriteria(relative_fitness=0.0, relative_rmse=0.0, max_iteration=1)
     max_d = prm["max_correspondence_mm"]
@@ -229,11 +293,13 @@ def _refine_icp(p, q, q_normals, initial, prm):
             break
         est = reg.TransformationEstimationPointToPlane(loss(k) if loss else reg.L2Loss())
         res = reg.registration_icp(src, tgt, max_d, t, est, one_step)
-        t = np.asarray(res.transformation)
-        done = (
-            k == k_final
-            and abs(res.fitness - fitness) < prm["relative_fitness"]
-            and abs(res.inlier_rmse - rmse) < prm["relative_rmse"]
+        t_old, t = t, np.asarray(res.transformation)
+        done = k == k_final and (
+            (
+                abs(res.fitness - fitness) < prm["relative_fitness"]
+                and abs(res.inlier_rmse - rmse) < prm["relative_rmse"]
+            )
+            or _small_step(t, t_old, prm)
         )
         k = max(k / 2.0, k_final)
         fitness, rmse = res.fitness, res.inlier_rmse
@@ -277,21 +343,26 @@ def align_take(
     params : dict, optional
         Overrides of :data:`DEFAULT_ICP`: ``method`` ('icp' | 'correspondence'),
         ``max_correspondence_mm``, ``max_iterations``, ``robust_kernel``
-        ('tukey' | 'huber' | 'none'), ``kernel_k_mm``, ``min_fitness``, ``relative_fitness``,
-        ``relative_rmse``.
+        ('tukey' | 'huber' | 'none'), ``kernel_k_mm``, ``relative_fitness``, ``relative_rmse``,
+        ``step_deg``, ``step_mm`` (convergence); ``trim_rounds``, ``trim_radius_mm``,
+        ``trim_sigma`` (trimming the region's moving parts); ``min_fitness``, ``max_rmse_mm``,
+        ``min_inlier_fraction`` (the quality gate).
     source : str
         ``subject/take`` label for error messages.
 
     Returns
     -------
     AlignResult
-        ``transform`` maps the take's scanner frame to the neutral frame.
+        ``transform`` maps the take's scanner frame to the neutral frame; ``ok`` is False, with
+        the reasons in ``problems``, when the alignment failed its quality gate (not converged
+        after recovery, fitness below ``min_fitness``, point-to-plane RMSE above
+        ``max_rmse_mm``, less than ``min_inlier_fraction`` of the region kept).
 
     Raises
     ------
     InputError
-        Bad shapes or indices, a pair vertex invalid in either mesh, too few valid upper-face
-        vertices, or a final fitness below ``min_fitness`` (the alignment did not converge).
+        Bad shapes, indices or params, a pair vertex invalid in either mesh, too few valid
+        upper-face vertices.
     """
     prm = _params(params, source)
     src, sv = _mesh(src_vertices, src_valid, "src", source)
@@ -317,8 +388,8 @@ def align_take(
 
     upper = np.zeros(n_v, dtype=bool)
     upper[_indices(icp_indices, n_v, "icp_indices", source)] = True
+    normals = vertex_normals(dst, f)
     if prm["method"] == "icp":
-        normals = vertex_normals(dst, f)
         p_idx = np.flatnonzero(upper & sv)
         q_idx = np.flatnonzero(upper & dv & np.isfinite(normals).all(axis=1))
     else:
@@ -329,32 +400,153 @@ def align_take(
             f"icp_indices: only {min(p_idx.size, q_idx.size)} upper-face vertices are valid; "
             "expected at least 3",
         )
+    p, q = src[p_idx], dst[q_idx]
+    plane = _PlaneResiduals(dst, normals, upper & dv & np.isfinite(normals).all(axis=1))
+
+    def refine(keep, start, prm_=prm, k_start=None):
+        if prm["method"] == "icp":
+            return _refine_icp(p[keep], q, normals[q_idx], start, prm_, k_start)
+        return _refine_correspondence(p[keep], q[keep], start, prm_, source)
+
+    keep = np.ones(p_idx.size, dtype=bool)
+    t, fitness, rmse, iterations, conv = refine(keep, initial)
+    recovery = []
+    keep, t, conv, n_it = _trim(p, keep, t, conv, refine, plane, prm, recovery)
+    iterations += n_it
+    if not conv:
+        # re-initialise on the kept region from the point pairs, then a convex kernel
+        attempts = [("re-initialised from the point pairs", initial, prm, None)]
+        if prm["method"] == "icp" and prm["robust_kernel"] != "none":
+            huber = prm | {"robust_kernel": "huber"}
+            attempts.append(("resumed with a Huber kernel", None, huber, prm["kernel_k_mm"]))
+        for what, start, prm_, k_start in attempts:
+            t_new, _, _, n_it, conv = refine(keep, t if start is None else start, prm_, k_start)
+            iterations += n_it
+            recovery.append(f"not converged: {what} ({'converged' if conv else 'not converged'})")
+            if np.isfinite(t_new).all():
+                t = t_new
+            if conv:
+                break
+    if not np.isfinite(t).all():
+        t = initial
+        recovery.append("non-finite pose: fell back to the point-pair pose")
     if prm["method"] == "icp":
-        t, fitness, rmse, it, conv = _refine_icp(
-            src[p_idx], dst[q_idx], normals[q_idx], initial, prm
-        )
+        fitness, rmse = _nearest_stats(p, q, t, prm["max_correspondence_mm"])
     else:
-        t, fitness, rmse, it, conv = _refine_correspondence(
-            src[p_idx], dst[q_idx], initial, prm, source
-        )
-    if not np.isfinite(t).all() or fitness < prm["min_fitness"]:
-        raise InputError(
-            source,
-            f"alignment did not converge: fitness {fitness:.3f} < min_fitness "
-            f"{prm['min_fitness']:.3f} (fraction of upper-face vertices within "
-            f"max_correspondence_mm={prm['max_correspondence_mm']:g} of the neutral mesh); "
-            "check pair_indices and that the take shows the same subject",
-        )
+        _, fitness, rmse = _residual_stats(p, q, t, prm["max_correspondence_mm"])
+    r = plane(transform_points(t, p[keep]))
+    residual_rmse = float(np.sqrt(np.mean(r**2))) if r.size else float("inf")
+    kept = float(keep.mean())
+    problems = _verdict(conv, iterations, fitness, residual_rmse, kept, recovery, prm)
     return AlignResult(
         transform=t,
         initial=initial,
         fitness=float(fitness),
         inlier_rmse=float(rmse),
-        iterations=int(it),
+        iterations=int(iterations),
         converged=bool(conv),
         method=prm["method"],
         n_points=int(p_idx.size),
+        residual_rmse=residual_rmse,
+        inlier_fraction=kept,
+        ok=not problems,
+        problems=problems,
+        recovery=recovery,
     )
+
+
+class _PlaneResiduals:
+    """Signed point-to-plane distance of points to the nearest vertex of a target region."""
+
+    def __init__(self, vertices: np.ndarray, normals: np.ndarray, region: np.ndarray):
+        idx = np.flatnonzero(region)
+        self.points, self.normals = vertices[idx], normals[idx]
+        self.tree = cKDTree(self.points)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        _, j = self.tree.query(x)
+        return np.einsum("ij,ij->i", x - self.points[j], self.normals[j])
+
+
+def _nearest_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -> tuple:
+    """open3d's fitness and inlier RMSE: closest-point distances within ``max_d``."""
+    d, _ = cKDTree(q).query(transform_points(t, p))
+    inl = d <= max_d
+    return float(inl.mean()), float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else 0.0
+
+
+def _trim(p, keep, t, conv, refine, plane, prm, recovery) -> tuple:
+    """Leave out the parts of the region that moved, refining again after each change.
+
+    A vertex's residual averaged over its neighbours within ``trim_radius_mm`` (of the take's
+    region vertices) separates a patch of moving skin from noise; the vertices whose average
+    exceeds ``trim_sigma`` robust standard deviations of the kept ones' (at least
+    :data:`_TRIM_FLOOR_MM`) are left out. Stops when the kept set repeats, after
+    ``trim_rounds`` rounds, or when fewer than 3 vertices would be kept.
+
+    Returns
+    -------
+    keep : (n,) bool
+    t : (4, 4) the pose refined on ``keep``
+    converged : bool
+        Of the last refinement.
+    iterations : int
+        Iterations of the refinements run here.
+    """
+    if prm["trim_rounds"] == 0 or not np.isfinite(t).all():
+        return keep, t, conv, 0
+    pairs = cKDTree(p).query_pairs(prm["trim_radius_mm"], output_type="ndarray")
+    n = len(p)
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(n)])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
+    adj = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
+    mean = sparse.diags(1.0 / np.asarray(adj.sum(axis=1)).ravel()) @ adj
+    iterations, rounds = 0, 0
+    for rounds in range(1, prm["trim_rounds"] + 1):  # noqa: B007 (rounds is reported)
+        r = mean @ plane(transform_points(t, p))
+        rk = r[keep]
+        sigma = 1.4826 * np.median(np.abs(rk - np.median(rk)))
+        new = keep & (np.abs(r) <= max(prm["trim_sigma"] * sigma, _TRIM_FLOOR_MM))
+        if new.sum() < 3 or np.array_equal(new, keep):
+            break
+        keep = new
+        t_new, _, _, n_it, conv = refine(keep, t)
+        iterations += n_it
+        if not np.isfinite(t_new).all():
+            conv = False
+            break
+        t = t_new
+    if not keep.all():
+        recovery.append(
+            f"left out {int((~keep).sum())} of {n} region vertices that moved "
+            f"({rounds} trimming rounds)"
+        )
+    return keep, t, conv, iterations
+
+
+def _verdict(conv, iterations, fitness, residual_rmse, kept, recovery, prm) -> list[str]:
+    """The problems of an alignment against its quality gate; empty when it passed."""
+    problems = []
+    if not conv:
+        tried = "; ".join(r for r in recovery if r.startswith("not converged")) or "none"
+        problems.append(f"ICP did not converge ({iterations} iterations; recovery tried: {tried})")
+    if fitness < prm["min_fitness"]:
+        problems.append(
+            f"fitness {fitness:.3f} < min_fitness {prm['min_fitness']:.3f} (share of the "
+            f"region within max_correspondence_mm={prm['max_correspondence_mm']:g} of the "
+            "neutral mesh): check the point pairs and that the take shows the same subject"
+        )
+    if not residual_rmse <= prm["max_rmse_mm"]:
+        problems.append(
+            f"point-to-plane RMSE {residual_rmse:.3f} mm > max_rmse_mm "
+            f"{prm['max_rmse_mm']:g} over the kept region"
+        )
+    if kept < prm["min_inlier_fraction"]:
+        problems.append(
+            f"only {100 * kept:.0f}% of the region kept (min_inlier_fraction "
+            f"{prm['min_inlier_fraction']:g}): the stable region itself moved"
+        )
+    return problems
 
 
 __all__ = ["DEFAULT_ICP", "AlignResult", "align_take", "vertex_normals"]

@@ -1,9 +1,12 @@
 """Articulation: displacement fields, the jaw rotation, and the weights of each label.
 
 Articulation is a small set of displacement fields (lip protrusion, rounding, spreading, upper
-lip raise, smile, sad) plus a jaw rotation about an axis near the ears whose weight is one on
-the chin and lower lip and fades smoothly into the cheeks. All takes of one subject share one
-topology; only the vertex positions change.
+lip raise, smile, sad, and the upper-face action units of the expressions: cheek raise and lid
+squint in a smile, inner-brow raise and brow lowering in a sad face) plus a jaw rotation about an
+axis near the ears whose weight is one on the chin and lower lip and fades smoothly into the
+cheeks. All takes of one subject share one topology; only the vertex positions change. The fields
+are functions of each vertex's rest position, so they move the skin (brows, lashes, landmarks)
+and the truth's displacement is exact.
 """
 
 from __future__ import annotations
@@ -37,12 +40,29 @@ LABEL_COEFFS: dict[str, dict[str, float]] = {
     "she": {"jaw": 2.0, "protrude": 1.0, "round": 0.55, "raise": 0.8},
     "eel": {"jaw": 2.5, "spread": 1.0, "raise": 0.35},
     "too": {"jaw": 2.5, "round": 1.0, "protrude": 1.0},
-    "smile": {"smile": 1.0},
-    "sad": {"sad": 1.0},
+    "smile": {"smile": 1.0, "cheek_raise": 1.0, "squint": 1.0},
+    "sad": {"sad": 1.0, "brow_inner_raise": 1.0, "brow_lower": 1.0},
 }
 
 #: Names of the displacement fields (``jaw`` is a rotation, not a field).
-FIELDS = ("protrude", "round", "spread", "raise", "smile", "sad")
+FIELDS = (
+    "protrude",
+    "round",
+    "spread",
+    "raise",
+    "smile",
+    "sad",
+    "cheek_raise",
+    "squint",
+    "brow_inner_raise",
+    "brow_lower",
+)
+
+#: Fields that contract with another one: a take draws one intensity for the driver (the key
+#: here) and its linked fields follow it (a Duchenne smile raises the cheeks as much as it pulls
+#: the mouth corners). This also keeps a take's random stream, hence its pose and defects, the
+#: same as with the driver alone.
+LINKED = {"smile": ("cheek_raise", "squint"), "sad": ("brow_inner_raise", "brow_lower")}
 
 
 @dataclass(frozen=True)
@@ -87,7 +107,9 @@ def _lip_coords(mesh: _RestMesh) -> _LipCoords:
     return _LipCoords(p=pe, s=s, u=u, v=v, below=below)
 
 
-def _unit_fields(lc: _LipCoords, mouth: _Mouth, brow_y0: float) -> dict[str, np.ndarray]:
+def _unit_fields(
+    lc: _LipCoords, mouth: _Mouth, brow_y0: float, eye: np.ndarray
+) -> dict[str, np.ndarray]:
     """Displacement fields at unit weight on the skin (before fading into the pocket).
 
     Parameters
@@ -95,7 +117,9 @@ def _unit_fields(lc: _LipCoords, mouth: _Mouth, brow_y0: float) -> dict[str, np.
     lc : _LipCoords
     mouth : _Mouth
     brow_y0 : float
-        Height of the inner brow, mm (the sad field raises it).
+        Height of the inner brow, mm.
+    eye : (3,) float64
+        Centre of the left eyeball (x > 0), mm.
 
     Returns
     -------
@@ -135,10 +159,66 @@ def _unit_fields(lc: _LipCoords, mouth: _Mouth, brow_y0: float) -> dict[str, np.
         4.0 * sgx * C, 6.0 * C + 3.0 * K + 1.0 * up * lipx * near, -3.0 * C + 2.5 * K
     )
     ment = np.exp(-(((y - (ym - 22.0)) / 10.0) ** 2)) * lipx * frontw
-    B = np.exp(-((ax - 14.0) ** 2 / (2 * 10.0**2) + (y - brow_y0) ** 2 / (2 * 12.0**2)))
-    B = B * _smoothstep(z, 55.0, 75.0)
-    fields["sad"] = vec(-1.0 * sgx * C - 1.2 * sgx * B, -4.0 * C + 2.0 * ment + 5.0 * B, 0.0)
-    return fields
+    fields["sad"] = vec(-1.0 * sgx * C, -4.0 * C + 2.0 * ment, 0.0)
+    return fields | _upper_face_fields(lc.p, brow_y0, eye)
+
+
+def _upper_face_fields(p: np.ndarray, brow_y0: float, eye: np.ndarray) -> dict[str, np.ndarray]:
+    """The expressions' upper-face action units at unit weight (nominal amplitude), mm.
+
+    ``cheek_raise`` (AU6, orbicularis oculi, orbital part): the infraorbital skin rises 4.5 mm
+    and bulges 1.5 mm, the skin lateral to the eye (crow's feet, the temples) is drawn 1.5 mm
+    towards the eye and up. ``squint`` (lid tightening): the lower lid rises 2 mm, the upper lid
+    drops 1.2 mm. ``brow_inner_raise`` (AU1, medial frontalis): the inner brow rises 5.5 mm; the
+    forehead above follows, less towards the hairline (a third at 25 mm above the brow).
+    ``brow_lower`` (AU4, corrugator, procerus): the brow drops 3.5 mm and moves 2.5 mm towards
+    the midline, the glabella drops 1.5 mm and bunches forward. Amplitudes within the measured
+    ranges (cheek raise 3-6 mm, inner brow raise 4-8 mm, brow lowering 3-5 mm).
+
+    Parameters
+    ----------
+    p : (N, 3) float64
+        Rest position of each vertex's skin source, mm.
+    brow_y0 : float
+        Height of the inner brow, mm.
+    eye : (3,) float64
+        Centre of the left eyeball, mm (the right one mirrors it).
+    """
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    ax = np.abs(x)
+    odd = np.tanh(x / 4.0)  # sign(x), smooth across the midline
+    ex, ey = ax - eye[0], y - eye[1]
+    face = _smoothstep(z, 20.0, 45.0)  # the front of the head, temples included
+    forehead = _smoothstep(z, 55.0, 75.0)
+    zeros = np.zeros_like(x)
+
+    def vec(dx, dy, dz):
+        return np.stack([dx + zeros, dy + zeros, dz + zeros], axis=1)
+
+    # AU6: infraorbital triangle (narrower towards the nose) and the lateral orbit
+    sx = np.where(ex < 2.0, 9.0, 14.0)
+    infra = np.exp(-((ex - 2.0) ** 2) / (2 * sx**2) - (ey + 17.0) ** 2 / (2 * 9.0**2)) * face
+    lateral = np.exp(-((ex - 20.0) ** 2) / (2 * 9.0**2) - (ey + 2.0) ** 2 / (2 * 11.0**2)) * face
+    cheek = vec(-1.5 * odd * lateral, 4.5 * infra + 1.5 * lateral, 1.5 * infra)
+    # lid tightening: both lids over the width of the eye opening
+    lid = np.exp(-((ex / 14.0) ** 4)) * face
+    squint = vec(
+        0.0,
+        lid * (2.0 * np.exp(-(((ey + 7.0) / 4.0) ** 2)) - 1.2 * np.exp(-(((ey - 7.0) / 4.0) ** 2))),
+        0.0,
+    )
+    # AU1: medial brow, the forehead above it (fading towards the hairline), the upper lid below
+    yb = y - brow_y0
+    up = np.where(yb >= 0.0, np.exp(-((yb / 24.0) ** 2)), np.exp(-((yb / 9.0) ** 2)))
+    medial = np.exp(-((ax - 11.0) ** 2) / (2 * 11.0**2)) * forehead
+    inner = vec(0.0, 5.5 * medial * up, 0.0)
+    # AU4: brows down and in, the glabella down and forward
+    down = np.where(yb >= 0.0, np.exp(-((yb / 14.0) ** 2)), np.exp(-((yb / 8.0) ** 2)))
+    body = np.exp(-((ax - 20.0) ** 2) / (2 * 12.0**2)) * down * forehead
+    pull = np.exp(-((ax - 14.0) ** 2) / (2 * 10.0**2)) * down * forehead
+    glabella = np.exp(-((ax / 8.0) ** 2) - ((yb + 6.0) / 8.0) ** 2) * forehead
+    lower = vec(-2.5 * odd * pull, -3.5 * body - 1.5 * glabella, 0.8 * glabella)
+    return {"cheek_raise": cheek, "squint": squint, "brow_inner_raise": inner, "brow_lower": lower}
 
 
 def _jaw(mesh: _RestMesh, lc: _LipCoords, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,7 +272,7 @@ def _articulation(mesh: _RestMesh) -> tuple[dict[str, np.ndarray], np.ndarray, n
     lc = _lip_coords(mesh)
     decay = np.where(mesh.kind == _KIND_POCKET, (1.0 - mesh.depth) ** 2, 1.0)
     decay[mesh.kind == _KIND_EYE] = 0.0
-    unit = _unit_fields(lc, mesh.mouth, mesh.shape.brow_y0)
+    unit = _unit_fields(lc, mesh.mouth, mesh.shape.brow_y0, mesh.shape.eye_centre)
     fields = {k: f * decay[:, None] for k, f in unit.items()}
     jaw_weight, jaw_pivot = _jaw(mesh, lc, mesh.shape.scale)
     return fields, jaw_weight, jaw_pivot
@@ -207,7 +287,8 @@ def label_coefficients(label: str, rng: np.random.Generator | None = None) -> di
         A key of :data:`LABEL_COEFFS`.
     rng : numpy.random.Generator, optional
         When given, each weight is scaled by ``1 + 0.08 N(0, 1)`` (clipped to [0.8, 1.2]),
-        so repeated takes of one label differ slightly in intensity.
+        so repeated takes of one label differ slightly in intensity; the fields
+        :data:`LINKED` to a driver take its factor (one draw per driver).
 
     Returns
     -------
@@ -216,7 +297,11 @@ def label_coefficients(label: str, rng: np.random.Generator | None = None) -> di
     base = LABEL_COEFFS[label]
     if rng is None:
         return dict(base)
+    linked = {f for fs in LINKED.values() for f in fs}
     out = {}
-    for k in sorted(base):
-        out[k] = float(base[k] * np.clip(1.0 + 0.08 * rng.standard_normal(), 0.8, 1.2))
-    return out
+    for k in sorted(set(base) - linked):
+        factor = float(np.clip(1.0 + 0.08 * rng.standard_normal(), 0.8, 1.2))
+        for f in (k, *LINKED.get(k, ())):
+            if f in base:
+                out[f] = float(base[f] * factor)
+    return {k: out[k] for k in sorted(out)}
