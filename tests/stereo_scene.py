@@ -70,9 +70,29 @@ def rot_y(angle: float) -> np.ndarray:
 
 
 def rig_cameras(
-    width: int = 640, height: int = 480, baseline_mm: float = 120.0, toe_in_deg: float = 3.0
+    width: int = 640,
+    height: int = 480,
+    baseline_mm: float = 120.0,
+    toe_in_deg: float = 3.0,
+    focal_px: float | None = None,
+    k1: float | None = None,
 ) -> tuple[list[dict], StereoCalibration]:
     """Both cameras (intrinsics and pose in the rig frame) and their calibration.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size, px.
+    baseline_mm : float
+        Distance of the camera centres, mm.
+    toe_in_deg : float
+        Each camera turned inwards by this angle, degrees.
+    focal_px : float, optional
+        Focal length of the left camera, px (the right one's is 0.6 % longer); default
+        ``900 width / 640``.
+    k1 : float, optional
+        Radial distortion of the left camera (the right one's distortion scales with it);
+        default -0.05.
 
     Returns
     -------
@@ -82,30 +102,35 @@ def rig_cameras(
     calib : StereoCalibration
         x2 = R x1 + T from the left to the right camera.
     """
-    s = width / 640.0  # intrinsics scale with the image so the scene framing is the same
+    c = width / 640.0  # intrinsics scale with the image so the scene framing is the same
+    s = c if focal_px is None else focal_px / 900.0
     toe = np.deg2rad(toe_in_deg)
+    d1 = np.array([-0.05, 0.01, 0.0, 0.0, 0.0])
+    d2 = np.array([-0.045, 0.0, 0.0005, -0.0003, 0.0])
+    if k1 is not None:
+        d1, d2 = d1 * (k1 / -0.05), d2 * (k1 / -0.05)
     cams = [
         {
             "K": np.array(
                 [
-                    [900.0 * s, 0, 0.5 * width - 0.5 + 3.2 * s],
-                    [0, 902.0 * s, 0.5 * height - 0.5 - 2.1 * s],
+                    [900.0 * s, 0, 0.5 * width - 0.5 + 3.2 * c],
+                    [0, 902.0 * s, 0.5 * height - 0.5 - 2.1 * c],
                     [0, 0, 1],
                 ]
             ),
-            "D": np.array([-0.05, 0.01, 0.0, 0.0, 0.0]),
+            "D": d1,
             "R": rot_y(toe),
             "C": np.array([-0.5 * baseline_mm, 0.0, 0.0]),
         },
         {
             "K": np.array(
                 [
-                    [905.0 * s, 0, 0.5 * width - 0.5 - 4.0 * s],
-                    [0, 906.0 * s, 0.5 * height - 0.5 + 1.5 * s],
+                    [905.0 * s, 0, 0.5 * width - 0.5 - 4.0 * c],
+                    [0, 906.0 * s, 0.5 * height - 0.5 + 1.5 * c],
                     [0, 0, 1],
                 ]
             ),
-            "D": np.array([-0.045, 0.0, 0.0005, -0.0003, 0.0]),
+            "D": d2,
             "R": rot_y(-toe)
             @ np.array(
                 [[1.0, 0, 0], [0, np.cos(0.004), -np.sin(0.004)], [0, np.sin(0.004), np.cos(0.004)]]
@@ -167,37 +192,59 @@ def _speckle(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
     return np.clip(128.0 + 55.0 * tex, 5.0, 250.0)
 
 
-def _plane_texture(tex: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _plane_texture(
+    tex: np.ndarray, x: np.ndarray, y: np.ndarray, speckle_mm: float = SPECKLE_MM
+) -> np.ndarray:
     """Speckle ``tex`` (centred on x = y = 0) at the plane coordinates (x, y) mm, flattened."""
-    half = np.array(tex.shape) * SPECKLE_MM / 2
-    rows = ((y + half[0]) / SPECKLE_MM).ravel()
-    cols = ((x + half[1]) / SPECKLE_MM).ravel()
+    half = np.array(tex.shape) * speckle_mm / 2
+    rows = ((y + half[0]) / speckle_mm).ravel()
+    cols = ((x + half[1]) / speckle_mm).ravel()
     return ndimage.map_coordinates(tex, [rows, cols], order=1)
 
 
-def _cast(origin: np.ndarray, dirs: np.ndarray, tex_sphere: np.ndarray, tex_plane: np.ndarray):
+#: The sphere scene's geometry (rig frame, mm); ``plane_flat``: the plane has no texture.
+_SPHERE_SCENE = {
+    "centre": SPHERE_CENTRE_MM,
+    "radius": SPHERE_RADIUS_MM,
+    "plane_z": PLANE_Z_MM,
+    "speckle_mm": SPECKLE_MM,
+    "plane_flat": False,
+}
+
+
+def _cast(
+    origin: np.ndarray,
+    dirs: np.ndarray,
+    tex_sphere: np.ndarray,
+    tex_plane: np.ndarray,
+    geometry: dict = _SPHERE_SCENE,
+):
     """Hit distance, surface id and intensity of rig-frame rays ``origin + t dirs``."""
-    oc = origin - SPHERE_CENTRE_MM
+    centre, radius, speckle_mm = geometry["centre"], geometry["radius"], geometry["speckle_mm"]
+    oc = origin - centre
     b = np.einsum("...k,k->...", dirs, oc)
-    disc = b * b - (oc @ oc - SPHERE_RADIUS_MM**2)
+    disc = b * b - (oc @ oc - radius**2)
     with np.errstate(invalid="ignore"):
         t_sphere = np.where(disc >= 0, -b - np.sqrt(np.maximum(disc, 0.0)), np.inf)
     t_sphere = np.where(t_sphere > 0, t_sphere, np.inf)
     with np.errstate(divide="ignore"):
-        t_plane = (PLANE_Z_MM - origin[2]) / dirs[..., 2]
+        t_plane = (geometry["plane_z"] - origin[2]) / dirs[..., 2]
     t_plane = np.where(t_plane > 0, t_plane, np.inf)
     surface = np.where(t_sphere < t_plane, 0, np.where(np.isfinite(t_plane), 1, -1)).astype(np.int8)
     t = np.minimum(t_sphere, t_plane)
     p = origin + np.where(np.isfinite(t), t, 0.0)[..., None] * dirs
 
     # sphere: arc lengths along longitude (about +y, 0 towards the rig) and latitude
-    q = (p - SPHERE_CENTRE_MM) / SPHERE_RADIUS_MM
+    q = (p - centre) / radius
     lon = np.arctan2(q[..., 0], -q[..., 2])
     lat = np.arcsin(np.clip(q[..., 1], -1.0, 1.0))
-    rows_s = (SPHERE_RADIUS_MM * lat + 0.5 * np.pi * SPHERE_RADIUS_MM) / SPECKLE_MM
-    cols_s = (SPHERE_RADIUS_MM * lon + np.pi * SPHERE_RADIUS_MM) / SPECKLE_MM
+    rows_s = (radius * lat + 0.5 * np.pi * radius) / speckle_mm
+    cols_s = (radius * lon + np.pi * radius) / speckle_mm
     i_sphere = ndimage.map_coordinates(tex_sphere, [rows_s.ravel(), cols_s.ravel()], order=1)
-    i_plane = _plane_texture(tex_plane, p[..., 0], p[..., 1])
+    if geometry["plane_flat"]:
+        i_plane = np.full(t.size, 90.0)
+    else:
+        i_plane = _plane_texture(tex_plane, p[..., 0], p[..., 1], speckle_mm)
     # diffuse ("blur") lighting from the rig: view independent, so both views agree
     normal = np.where((surface == 0)[..., None], q, np.array([0.0, 0.0, -1.0]))
     shade = 0.65 + 0.35 * np.clip(-np.sum(normal * dirs, axis=-1), 0.0, 1.0)
@@ -232,6 +279,74 @@ def render_scene(
     cams, calib = rig_cameras(width, height)
     images, xyz, surface, rays_cam = _render(
         cams, lambda o, d: _cast(o, d, tex_sphere, tex_plane), rng, width, height, noise
+    )
+    return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam)
+
+
+#: A rig of :func:`render_rig_scene`: the sphere scene's ball at another working distance.
+DEFAULT_RIG_SCENE = {
+    "distance_mm": 750.0,  # rig to the front of the ball
+    "baseline_mm": 120.0,
+    "width": 640,
+    "height": 480,
+    "focal_px": 900.0,  # left camera
+    "toe_in_deg": 3.0,
+    "k1": -0.05,
+    "background": "flat",  # "flat" (untextured plane) or "textured"
+}
+#: Radius of the face-sized ball of :func:`render_rig_scene`, mm.
+BALL_RADIUS_MM = 100.0
+
+
+def render_rig_scene(rig: dict | None = None, seed: int = 7, noise: float = 1.0) -> StereoScene:
+    """A face-sized speckled ball before a far plane, seen by a rig at any working distance.
+
+    The ball (radius :data:`BALL_RADIUS_MM`) has its front ``distance_mm`` before the rig
+    (its centre 10 mm right of and 5 mm above the rig's axis); the plane stands 0.8
+    ``distance_mm`` behind the ball's front, untextured (``background: "flat"``, like a
+    backdrop) or speckled. The speckle spacing is 1.6 px at ``distance_mm`` for any focal
+    length.
+
+    Parameters
+    ----------
+    rig : dict, optional
+        Overrides of :data:`DEFAULT_RIG_SCENE`.
+    seed : int
+        Seed of the textures and the sensor noise.
+    noise : float
+        Standard deviation of additive Gaussian sensor noise, grey levels.
+
+    Returns
+    -------
+    StereoScene
+        ``surface`` 0 is the ball, 1 the plane.
+    """
+    r = {**DEFAULT_RIG_SCENE, **(rig or {})}
+    distance, width, height = r["distance_mm"], int(r["width"]), int(r["height"])
+    speckle_mm = 1.6 * distance / r["focal_px"]
+    geometry = {
+        "centre": np.array([10.0, -5.0, distance + BALL_RADIUS_MM]),
+        "radius": BALL_RADIUS_MM,
+        "plane_z": 1.8 * distance,
+        "speckle_mm": speckle_mm,
+        "plane_flat": r["background"] == "flat",
+    }
+    rng = np.random.default_rng(seed)
+    ball_cells = np.pi * BALL_RADIUS_MM / speckle_mm
+    tex_ball = _speckle(rng, (int(ball_cells) + 4, int(2 * ball_cells) + 4))
+    # the plane's texture covers the field of view at its depth (with a margin)
+    plane_cells = 1.5 * geometry["plane_z"] / r["focal_px"] * np.array([height, width])
+    tex_plane = _speckle(rng, tuple((plane_cells / speckle_mm).astype(int) + 4))
+    cams, calib = rig_cameras(
+        width, height, r["baseline_mm"], r["toe_in_deg"], r["focal_px"], r["k1"]
+    )
+    images, xyz, surface, rays_cam = _render(
+        cams,
+        lambda o, d: _cast(o, d, tex_ball, tex_plane, geometry),
+        rng,
+        width,
+        height,
+        noise,
     )
     return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam)
 

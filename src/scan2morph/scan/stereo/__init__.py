@@ -5,29 +5,34 @@ The pipeline (OpenCV throughout):
 1. **rectify** both images (:func:`cv2.stereoRectify` with zero disparity at infinity, then
    :func:`cv2.initUndistortRectifyMap` / :func:`cv2.remap`), keeping every source pixel
    (``alpha = 1``) at the source resolution (the rectified canvas grows instead);
-2. **dense disparity** by semi-global matching (:func:`cv2.StereoSGBM_create`, 1/16 px) of the
+2. the **disparity search range**: from ``min_depth_mm``/``max_depth_mm`` when given, else
+   (the default) **derived from the pair** by a coarse pass (a Gaussian pyramid of the rectified
+   pair, semi-global matching over depths of 0.2-5 m, the robust disparity extent of the
+   textured surfaces both views see, plus ``depth_margin_mm``), so that rigs at any working
+   distance, baseline and image size work untuned;
+3. **dense disparity** by semi-global matching (:func:`cv2.StereoSGBM_create`, 1/16 px) of the
    left view and of the right view (:func:`cv2.ximgproc.createRightMatcher`), on a canvas padded
    so that SGBM's unmatched border bands hold no image content;
-3. a **left-right consistency check** (the two disparities must agree within
+4. a **left-right consistency check** (the two disparities must agree within
    ``lr_max_diff_px``); optionally opencv-contrib's WLS filter
    (:func:`cv2.ximgproc.createDisparityWLSFilter`), still masked by the check because WLS fills
    holes with guesses; pixels without local texture are dropped (SGM propagates guesses into
    them);
-4. **sub-pixel refinement** of SGBM's disparity by windowed Gauss-Newton on locally normalised
+5. **sub-pixel refinement** of SGBM's disparity by windowed Gauss-Newton on locally normalised
    images (removes the pixel-locking bias of SGBM's parabola fit), then **per pixel** with a
    small slanted window (the window follows the local disparity gradient, so slanted and
    foreshortened surfaces match too);
-5. **growth**: unmatched pixels next to matched ones get the disparity extrapolated from their
+6. **growth**: unmatched pixels next to matched ones get the disparity extrapolated from their
    neighbours' planes, a short local search and the per-pixel refinement; they are kept when
    their slanted window matches (SGBM's fronto-parallel windows miss much of the steep skin
    next to occlusions, along the nose and the jaw);
-6. **validation per pixel** instead of blanket bands: every pixel (grown ones included) must
+7. **validation per pixel** instead of blanket bands: every pixel (grown ones included) must
    match with its slanted window (ZNCC) and agree with the right view (left-right check); at a
    depth discontinuity only the **background side** is trimmed, a narrow band where window
    matching sticks to the wrong surface (the occluded side of an occlusion gap along the
    epipolar line, and the pixels a foreground edge looks down on); small disconnected
    segments are dropped and small holes enclosed by a consistent plane are filled;
-7. **resampling into the unrectified left image grid**: every left pixel is mapped to its
+8. **resampling into the unrectified left image grid**: every left pixel is mapped to its
    rectified position (:func:`cv2.undistortPoints` with ``R=R1, P=P1``); it gets a point when
    the nearest rectified pixel is valid, with the disparity interpolated bilinearly over the
    four neighbours (a neighbour that is missing or more than ``max_step_px`` off the nearest
@@ -53,7 +58,8 @@ camera (1.4-2.3 %) or seen by it at a grazing angle (disparity gradient above 0.
 steps.
 
 The package holds one module per stage: ``params`` (:data:`DEFAULT_STEREO`, the checks of
-:func:`stereo_params`), ``rectify`` (rectification, remap tables), ``sgbm`` (search range,
+:func:`stereo_params`), ``rectify`` (rectification, remap tables), ``depth_range`` (the depth
+range of the search, configured or derived by the coarse pass), ``sgbm`` (search range,
 padding, the semi-global matcher, the left-right check), ``windowed`` (texture measure and
 windowed sub-pixel refinement), ``slanted`` (the per-pixel slanted-window matcher, its
 refinement, growth and validation), ``cleanup`` (edge trim, segments, hole filling),

@@ -13,9 +13,11 @@ from scan2morph.errors import InputError
 #: carry OpenCV's names (see :func:`cv2.StereoSGBM_create`); ``None`` means "derive it" as
 #: documented there.
 DEFAULT_STEREO: dict[str, Any] = {
-    # disparity search range: derived from the expected depth range unless given
-    "min_depth_mm": 400.0,  # nearest expected surface, mm
-    "max_depth_mm": 1500.0,  # farthest expected surface, mm
+    # disparity search range: from the depth range; None derives it from the pair (a coarse
+    # pass: scan2morph.scan.stereo.depth_range)
+    "min_depth_mm": None,  # nearest expected surface, mm; None: derived (with max_depth_mm)
+    "max_depth_mm": None,  # farthest expected surface, mm; None: derived
+    "depth_margin_mm": 100.0,  # derived range: depth added before and behind the surfaces, mm
     "minDisparity": None,  # px; None: from max_depth_mm
     "numDisparities": None,  # px, multiple of 16; None: from min_depth_mm
     # semi-global matching (on the grey images)
@@ -104,12 +106,17 @@ def stereo_params(
         if key not in p:
             raise InputError(source, f"{key}: unknown stereo parameter (known: {', '.join(p)})")
         p[key] = value
-    if not 0 < p["min_depth_mm"] < p["max_depth_mm"]:
+    depths = (p["min_depth_mm"], p["max_depth_mm"])
+    if (depths[0] is None) != (depths[1] is None) or (
+        depths[0] is not None and not 0 < depths[0] < depths[1]
+    ):
         raise InputError(
             source,
-            f"min_depth_mm, max_depth_mm: expected 0 < min < max, "
-            f"got {p['min_depth_mm']}, {p['max_depth_mm']}",
+            "min_depth_mm, max_depth_mm: expected 0 < min < max (mm) or both null (derived), "
+            f"got {depths[0]}, {depths[1]}",
         )
+    if not p["depth_margin_mm"] >= 0:
+        raise InputError(source, f"depth_margin_mm: expected >= 0, got {p['depth_margin_mm']}")
     if p["numDisparities"] is not None and (p["numDisparities"] <= 0 or p["numDisparities"] % 16):
         raise InputError(
             source, f"numDisparities: expected a positive multiple of 16, got {p['numDisparities']}"

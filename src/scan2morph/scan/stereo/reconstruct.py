@@ -24,10 +24,17 @@ from scan2morph.scan.stereo.cleanup import (
     _remove_small_segments,
     _trim_discontinuities,
 )
+from scan2morph.scan.stereo.depth_range import _search_depths, _SearchDepths
 from scan2morph.scan.stereo.params import stereo_params
 from scan2morph.scan.stereo.rectify import _rectify, _remap
 from scan2morph.scan.stereo.resample import _resample_left
-from scan2morph.scan.stereo.sgbm import _disparity_range, _lr_consistent, _padding, _sgbm_matcher
+from scan2morph.scan.stereo.sgbm import (
+    _disparity_range,
+    _lr_consistent,
+    _match_views,
+    _pad_views,
+    _sgbm_matcher,
+)
 from scan2morph.scan.stereo.slanted import _grow, _PatchMatcher, _refine_patches, _validate
 from scan2morph.scan.stereo.windowed import _local_std, _refine_subpixel
 
@@ -60,20 +67,24 @@ def reconstruct_stereo(
     report : dict
         ``coverage`` (fraction of left pixels with a point), ``lr_rejected`` (fraction of SGBM
         matches the left-right check rejected), ``rectified_size`` ``(w, h)``,
-        ``focal_rect_px``, ``baseline_mm``, ``minDisparity``, ``numDisparities``, ``wls``,
-        ``grown_px`` (rectified pixels added by the growth, before validation), ``filled_px``
-        (rectified pixels of the small holes filled), and ``timings_s`` per stage
-        (``rectify``, ``sgbm`` (both views), ``lr_check``, ``wls``, ``refine`` (texture
-        check, windowed and per-pixel refinement), ``grow``, ``validate`` (window ZNCC and
-        left-right check per pixel, edge trim, segments, hole filling), ``resample``,
-        ``total``).
+        ``focal_rect_px``, ``baseline_mm``, ``depth_range_mm`` ``[near, far]`` (the depth
+        range searched, mm; ``far`` None when given disparities reach infinity),
+        ``depth_range_source`` (``"derived"`` by the coarse pass of
+        :mod:`~scan2morph.scan.stereo.depth_range`, or ``"config"``), ``coarse_scale``
+        (its pyramid factor, 0 when not derived), ``minDisparity``, ``numDisparities``,
+        ``wls``, ``grown_px`` (rectified pixels added by the growth, before validation),
+        ``filled_px`` (rectified pixels of the small holes filled), and ``timings_s`` per
+        stage (``rectify``, ``depth_range`` (the coarse pass), ``sgbm`` (both views),
+        ``lr_check``, ``wls``, ``refine`` (texture check, windowed and per-pixel
+        refinement), ``grow``, ``validate`` (window ZNCC and left-right check per pixel, edge
+        trim, segments, hole filling), ``resample``, ``total``).
 
     Raises
     ------
     InputError
         Images not uint8 (H, W[, 3]), of different sizes, or of a size other than the
-        calibration's; a vertical rig; bad ``params``; images that do not overlap (fewer
-        left pixels reconstructed than ``min_coverage``).
+        calibration's; a vertical rig; bad ``params``; images that do not overlap (no depth
+        range can be derived, or fewer left pixels reconstructed than ``min_coverage``).
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
@@ -82,10 +93,13 @@ def reconstruct_stereo(
     size = (grey_l.shape[1], grey_l.shape[0])
 
     with _timed(timings, "rectify"):
-        pair = _rectify_pair(grey_l, grey_r, calib, size, p, source)
-    matcher = _sgbm_matcher(p, pair.min_disp, pair.num_disp)
+        views = _rectify_views(grey_l, grey_r, calib, size, p, source)
+    with _timed(timings, "depth_range"):
+        depths = _search_depths(*views, p, source)
     with _timed(timings, "sgbm"):
-        disp_l16, disp_r16, min_disp_r = _match(matcher, pair)
+        pair = _pad_pair(*views, depths, p)
+        matcher = _sgbm_matcher(p, pair.min_disp, pair.num_disp)
+        disp_l16, disp_r16, min_disp_r = _match_views(matcher, pair.left, pair.right)
     with _timed(timings, "lr_check"):
         matched_r, consistent, lr_rejected = _check_left_right(
             pair, disp_l16, disp_r16, min_disp_r, p
@@ -101,7 +115,7 @@ def reconstruct_stereo(
     with _timed(timings, "resample"):
         xyz = _resample_left(disparity, pair.rect, calib, size, p["max_step_px"])
 
-    coverage = _coverage(xyz, p, source)
+    coverage = _coverage(xyz, p, depths, source)
     timings["total"] = time.perf_counter() - t_start
     report = _report(coverage, lr_rejected, n_grown, n_filled, pair, calib, p, timings)
     return xyz, report
@@ -181,6 +195,8 @@ class _RectifiedPair:
         SGBM's ``minDisparity`` and ``numDisparities``, px.
     pad_l, pad_r : int
         Columns added on the left and right of the rectified canvas, px.
+    depths : _SearchDepths
+        The depth range the search covers and where it came from.
     """
 
     rect: dict[str, Any]
@@ -192,17 +208,18 @@ class _RectifiedPair:
     num_disp: int
     pad_l: int
     pad_r: int
+    depths: _SearchDepths
 
 
-def _rectify_pair(
+def _rectify_views(
     grey_l: np.ndarray,
     grey_r: np.ndarray,
     calib: StereoCalibration,
     size: tuple[int, int],
     p: Mapping[str, Any],
     source: str | PathLike[str],
-) -> _RectifiedPair:
-    """Rectify both views and pad the canvas so that SGBM's unmatched bands hold no content.
+) -> tuple[dict[str, Any], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rectify both views.
 
     Parameters
     ----------
@@ -213,54 +230,67 @@ def _rectify_pair(
     size : (int, int)
         ``(W, H)`` of the source images, px.
     p : mapping
-        Checked stereo parameters (``blockSize`` px, the disparity range, rectification).
+        Checked stereo parameters (``blockSize`` px, rectification).
     source : str or path-like
         Label named in errors.
+
+    Returns
+    -------
+    rect : dict
+        The rectification (:func:`~scan2morph.scan.stereo.rectify._rectify`).
+    left, right : (Hr, Wr) uint8
+        Rectified grey views, 0 outside the images.
+    valid_l, valid_r : (Hr, Wr) bool
+        Rectified pixels at least ``(blockSize - 1) / 2`` px inside the source image.
+    """
+    rect = _rectify(calib, size, p, source)
+    margin = 0.5 * (int(p["blockSize"]) - 1)
+    left_r, valid_l = _remap(grey_l, rect["maps1"], margin)
+    right_r, valid_r = _remap(grey_r, rect["maps2"], margin)
+    return rect, left_r, right_r, valid_l, valid_r
+
+
+def _pad_pair(
+    rect: dict[str, Any],
+    left_r: np.ndarray,
+    right_r: np.ndarray,
+    valid_l: np.ndarray,
+    valid_r: np.ndarray,
+    depths: _SearchDepths,
+    p: Mapping[str, Any],
+) -> _RectifiedPair:
+    """The search range of ``depths``; the canvas padded so SGBM's unmatched bands are empty.
+
+    Parameters
+    ----------
+    rect : dict
+        The rectification.
+    left_r, right_r : (Hr, Wr) uint8
+        Rectified grey views.
+    valid_l, valid_r : (Hr, Wr) bool
+        Their content masks.
+    depths : _SearchDepths
+        The depth range to search, mm.
+    p : mapping
+        Checked stereo parameters (``minDisparity``, ``numDisparities``).
 
     Returns
     -------
     _RectifiedPair
         Both views on the padded rectified canvas, their content masks and the search range.
     """
-    rect = _rectify(calib, size, p, source)
-    margin = 0.5 * (int(p["blockSize"]) - 1)
-    left_r, valid_l = _remap(grey_l, rect["maps1"], margin)
-    right_r, valid_r = _remap(grey_r, rect["maps2"], margin)
-    min_disp, num_disp = _disparity_range(rect, p)
+    near, far = depths.depth_mm
+    range_p = {**p, "min_depth_mm": near, "max_depth_mm": far}
+    min_disp, num_disp = _disparity_range(rect, range_p)
     # SGBM leaves the first minDisparity + numDisparities columns of the left view without a
     # disparity (and the right matcher as many last columns of the right view): pad the canvas
     # so that no image content falls in those bands.
-    pad_l, pad_r = _padding(valid_l, valid_r, min_disp, num_disp)
-    left_r, right_r, valid_l, valid_r = (
-        cv2.copyMakeBorder(a, 0, 0, pad_l, pad_r, cv2.BORDER_CONSTANT, value=0)
-        for a in (left_r, right_r, valid_l.view(np.uint8), valid_r.view(np.uint8))
+    left_r, right_r, valid_l, valid_r, pad_l, pad_r = _pad_views(
+        left_r, right_r, valid_l, valid_r, min_disp, num_disp
     )
-    valid_l, valid_r = valid_l.astype(bool), valid_r.astype(bool)
-    return _RectifiedPair(rect, left_r, right_r, valid_l, valid_r, min_disp, num_disp, pad_l, pad_r)
-
-
-def _match(matcher: cv2.StereoSGBM, pair: _RectifiedPair) -> tuple[np.ndarray, np.ndarray, int]:
-    """Semi-global matching of the left view and of the right view.
-
-    Parameters
-    ----------
-    matcher : cv2.StereoSGBM
-        The left view's matcher.
-    pair : _RectifiedPair
-        The padded rectified views, (Hr, Wp) uint8.
-
-    Returns
-    -------
-    disp_l16, disp_r16 : (Hr, Wp) int16
-        Disparities of the left and right view, 1/16 px (below the matcher's
-        ``minDisparity``: no match).
-    min_disp_r : int
-        ``minDisparity`` of the right view's matcher, px.
-    """
-    disp_l16 = matcher.compute(pair.left, pair.right)
-    right_matcher = cv2.ximgproc.createRightMatcher(matcher)
-    disp_r16 = right_matcher.compute(pair.right, pair.left)
-    return disp_l16, disp_r16, right_matcher.getMinDisparity()
+    return _RectifiedPair(
+        rect, left_r, right_r, valid_l, valid_r, min_disp, num_disp, pad_l, pad_r, depths
+    )
 
 
 def _check_left_right(
@@ -492,7 +522,9 @@ def _clean(
     return disparity[:, pair.pad_l : disparity.shape[1] - pair.pad_r], n_filled
 
 
-def _coverage(xyz: np.ndarray, p: Mapping[str, Any], source: str | PathLike[str]) -> float:
+def _coverage(
+    xyz: np.ndarray, p: Mapping[str, Any], depths: _SearchDepths, source: str | PathLike[str]
+) -> float:
     """Fraction of the left pixels with a point; an error below ``p["min_coverage"]``.
 
     Parameters
@@ -500,7 +532,9 @@ def _coverage(xyz: np.ndarray, p: Mapping[str, Any], source: str | PathLike[str]
     xyz : (H, W, 3) float64
         Points of the left pixels, mm; NaN where there is no data.
     p : mapping
-        Checked stereo parameters (``min_coverage``, the depth range in mm for the message).
+        Checked stereo parameters (``min_coverage``).
+    depths : _SearchDepths
+        The depth range searched, mm (named in the message).
     source : str or path-like
         Label named in errors.
 
@@ -517,12 +551,14 @@ def _coverage(xyz: np.ndarray, p: Mapping[str, Any], source: str | PathLike[str]
     n_valid = int(np.count_nonzero(np.isfinite(xyz[..., 2])))
     coverage = n_valid / float(xyz.shape[1] * xyz.shape[0])
     if n_valid == 0 or coverage < p["min_coverage"]:
+        near, far = depths.depth_mm
+        far_text = "infinity" if far is None else f"{far:.0f}"
         raise InputError(
             source,
             f"left/right: the images do not overlap as a stereo pair: {100 * coverage:.2f}% of "
             f"the left pixels were matched (floor {100 * p['min_coverage']:g}%); check that left "
             "and right belong to this calibration, are textured and see the same surface within "
-            f"{p['min_depth_mm']:g}-{p['max_depth_mm']:g} mm",
+            f"{near:.0f}-{far_text} mm (depth range {depths.source})",
         )
     return coverage
 
@@ -548,7 +584,8 @@ def _report(
     n_grown, n_filled : int
         Rectified pixels added by the growth and by the hole filling, px.
     pair : _RectifiedPair
-        The rectification (``size`` ``(Wr, Hr)`` px, focal length in px) and search range.
+        The rectification (``size`` ``(Wr, Hr)`` px, focal length in px), the search range and
+        its depths.
     calib : StereoCalibration
         The rig (baseline, mm).
     p : mapping
@@ -560,8 +597,8 @@ def _report(
     -------
     report : dict
         ``coverage``, ``lr_rejected``, ``rectified_size``, ``focal_rect_px``, ``baseline_mm``,
-        ``minDisparity``, ``numDisparities``, ``wls``, ``grown_px``, ``filled_px`` and
-        ``timings_s``.
+        ``depth_range_mm``, ``depth_range_source``, ``coarse_scale``, ``minDisparity``,
+        ``numDisparities``, ``wls``, ``grown_px``, ``filled_px`` and ``timings_s``.
     """
     return {
         "coverage": coverage,
@@ -569,6 +606,9 @@ def _report(
         "rectified_size": pair.rect["size"],
         "focal_rect_px": float(pair.rect["P1"][0, 0]),
         "baseline_mm": calib.baseline_mm,
+        "depth_range_mm": list(pair.depths.depth_mm),
+        "depth_range_source": pair.depths.source,
+        "coarse_scale": pair.depths.coarse_scale,
         "minDisparity": pair.min_disp,
         "numDisparities": pair.num_disp,
         "wls": bool(p["wls"]),

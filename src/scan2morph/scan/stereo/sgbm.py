@@ -50,22 +50,91 @@ def _sgbm_matcher(p: Mapping[str, Any], min_disp: int, num_disp: int) -> cv2.Ste
     )
 
 
-def _disparity_range(rect: Mapping[str, Any], p: Mapping[str, Any]) -> tuple[int, int]:
-    """SGBM's ``minDisparity`` and ``numDisparities`` covering the expected depth range.
+def _depth_to_disparity(rect: Mapping[str, Any], depth_mm: np.ndarray | float) -> np.ndarray:
+    """Rectified disparity of depths: ``d(Z) = (cx1 - cx2) - f Tx / Z``, px.
 
-    In the rectified pair ``d(Z) = (cx1 - cx2) - f Tx / Z`` with ``Tx = P2[0, 3] / f``.
+    Parameters
+    ----------
+    rect : mapping
+        The rectification (``P1``, ``P2``); ``Tx = P2[0, 3] / f``, mm.
+    depth_mm : float or array
+        Depth along the rectified optical axis, mm (> 0).
+
+    Returns
+    -------
+    array of the shape of ``depth_mm``
+        Disparity, px.
     """
     P1, P2 = rect["P1"], rect["P2"]
-    f = P1[0, 0]
     tx = P2[0, 3] / P2[0, 0]
-    d = [(P1[0, 2] - P2[0, 2]) - f * tx / z for z in (p["min_depth_mm"], p["max_depth_mm"])]
-    lo, hi = int(np.floor(min(d))) - 1, int(np.ceil(max(d))) + 1
+    return (P1[0, 2] - P2[0, 2]) - P1[0, 0] * tx / np.asarray(depth_mm, dtype=np.float64)
+
+
+def _disparity_to_depth(rect: Mapping[str, Any], disparity: np.ndarray | float) -> np.ndarray:
+    """Depth of rectified disparities, mm (the inverse of :func:`_depth_to_disparity`).
+
+    Parameters
+    ----------
+    rect : mapping
+        The rectification (``P1``, ``P2``).
+    disparity : float or array
+        Disparity, px.
+
+    Returns
+    -------
+    array of the shape of ``disparity``
+        Depth, mm; ``inf`` for disparities at or beyond the one of infinity (no depth).
+    """
+    P1, P2 = rect["P1"], rect["P2"]
+    tx = P2[0, 3] / P2[0, 0]
+    offset = np.asarray(disparity, dtype=np.float64) - (P1[0, 2] - P2[0, 2])
+    with np.errstate(divide="ignore"):
+        depth = -P1[0, 0] * tx / offset
+    return np.where(depth > 0, depth, np.inf)
+
+
+def _disparity_range(rect: Mapping[str, Any], p: Mapping[str, Any]) -> tuple[int, int]:
+    """SGBM's ``minDisparity`` and ``numDisparities`` covering the depth range of ``p``.
+
+    In the rectified pair ``d(Z) = (cx1 - cx2) - f Tx / Z`` with ``Tx = P2[0, 3] / f``
+    (:func:`_depth_to_disparity`); explicit ``minDisparity`` / ``numDisparities`` win.
+    """
+    if p["minDisparity"] is not None and p["numDisparities"] is not None:
+        return int(p["minDisparity"]), int(p["numDisparities"])
+    d = _depth_to_disparity(rect, [p["min_depth_mm"], p["max_depth_mm"]])
+    lo, hi = int(np.floor(d.min())) - 1, int(np.ceil(d.max())) + 1
     min_disp = int(p["minDisparity"]) if p["minDisparity"] is not None else lo
     if p["numDisparities"] is not None:
         num_disp = int(p["numDisparities"])
     else:
         num_disp = int(16 * np.ceil(max(hi - min_disp, 16) / 16))
     return min_disp, num_disp
+
+
+def _match_views(
+    matcher: cv2.StereoSGBM, left: np.ndarray, right: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Semi-global matching of the left view and of the right view.
+
+    Parameters
+    ----------
+    matcher : cv2.StereoSGBM
+        The left view's matcher.
+    left, right : (h, w) uint8
+        Rectified (padded) views.
+
+    Returns
+    -------
+    disp_l16, disp_r16 : (h, w) int16
+        Disparities of the left and right view, 1/16 px (below the matcher's
+        ``minDisparity``: no match).
+    min_disp_r : int
+        ``minDisparity`` of the right view's matcher, px.
+    """
+    disp_l16 = matcher.compute(left, right)
+    right_matcher = cv2.ximgproc.createRightMatcher(matcher)
+    disp_r16 = right_matcher.compute(right, left)
+    return disp_l16, disp_r16, right_matcher.getMinDisparity()
 
 
 def _padding(
@@ -85,6 +154,42 @@ def _padding(
     pad_l = max(0, reach - int(cols_l[0]), 1 - min_disp - int(cols_r[0]))
     pad_r = max(0, int(cols_r[-1]) + reach - w, int(cols_l[-1]) - min_disp + 1 - w)
     return pad_l, pad_r
+
+
+def _pad_views(
+    left: np.ndarray,
+    right: np.ndarray,
+    valid_l: np.ndarray,
+    valid_r: np.ndarray,
+    min_disp: int,
+    num_disp: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """Both views and their content masks on a canvas padded by :func:`_padding`.
+
+    Parameters
+    ----------
+    left, right : (h, w) uint8
+        Rectified views.
+    valid_l, valid_r : (h, w) bool
+        Their content masks.
+    min_disp, num_disp : int
+        SGBM's ``minDisparity`` and ``numDisparities``, px.
+
+    Returns
+    -------
+    left, right : (h, w + pad_l + pad_r) uint8
+        Padded views (0 in the padding).
+    valid_l, valid_r : (h, w + pad_l + pad_r) bool
+        Padded content masks.
+    pad_l, pad_r : int
+        Columns added on the left and on the right, px.
+    """
+    pad_l, pad_r = _padding(valid_l, valid_r, min_disp, num_disp)
+    left, right, valid_l, valid_r = (
+        cv2.copyMakeBorder(a, 0, 0, pad_l, pad_r, cv2.BORDER_CONSTANT, value=0)
+        for a in (left, right, valid_l.view(np.uint8), valid_r.view(np.uint8))
+    )
+    return left, right, valid_l.astype(bool), valid_r.astype(bool), pad_l, pad_r
 
 
 def _lr_consistent(
