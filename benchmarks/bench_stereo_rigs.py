@@ -14,7 +14,9 @@ Usage::
         [--fixed 500 900]
 
 ``--quick`` skips the rigs above 1280 px; ``--fixed NEAR FAR`` also runs every rig with that
-fixed depth range (e.g. the former default, 500-900 mm) for comparison.
+fixed depth range (e.g. the former default, 500-900 mm) for comparison (slow on the large
+far rigs: that range spans thousands of px of disparity there); ``--only I ...`` runs those
+rows of ``RIGS``.
 """
 
 from __future__ import annotations
@@ -81,6 +83,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="only rigs up to 1280 px wide")
     parser.add_argument("--fixed", type=float, nargs=2, metavar=("NEAR", "FAR"))
     parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--only", type=int, nargs="+", metavar="I", help="rows of RIGS, 0-based")
     args = parser.parse_args()
     stereo = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["stereo"]
 
@@ -93,8 +96,8 @@ def main() -> None:
         head += f" | fixed {args.fixed[0]:g}-{args.fixed[1]:g}: cov, rms"
     print(head)
     print(" mm    mm     px        deg           px        mm          mm" + 36 * " " + "mm  mm  s")
-    for rig in RIGS:
-        if args.quick and rig[2] > 1280:
+    for i, rig in enumerate(RIGS):
+        if (args.quick and rig[2] > 1280) or (args.only and i not in args.only):
             continue
         params = _rig(*rig)
         take = make_stereo_take("s1", "car", "viseme", "car", seed=args.seed, params=params)
