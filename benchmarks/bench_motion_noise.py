@@ -4,7 +4,7 @@ Run after ``make run``: ``.venv/bin/python benchmarks/bench_motion_noise.py [sub
 For each synthetic subject of the default cohort it scales the click noise of every take's
 landmarks (stored landmarks minus the exact projected ones) to a range of standard deviations,
 re-runs fitting, alignment and motion from the subject's store with the run's config
-(``scan2morph.report.rerun_accuracy``, as a parameter sweep does) and prints, per viseme, the
+(``scan2morph.sweep.rerun_accuracy``, as a parameter sweep does) and prints, per viseme, the
 motion error relative to the ideal motion (``relative_error``) and its part along the surface
 normal (``normal_relative_error``).
 
@@ -26,9 +26,9 @@ import numpy as np
 import yaml
 
 from scan2morph.evaluate.truth import read_truth
-from scan2morph.report import rerun_accuracy
-from scan2morph.report.sweep import sweep_settings
+from scan2morph.stages import Run, Subject
 from scan2morph.store import paths, read_part
+from scan2morph.sweep import rerun_accuracy, sweep_settings
 from scan2morph.template import load_template
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,6 +43,7 @@ def main(subjects: list[str]) -> int:
     config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     nominal = float(config["synthetic"]["scanner"]["click_noise_px"])
     takes = {t["take"]: t["kind"] for t in config["synthetic"]["takes"]}
+    labels = {t["take"]: t["label"] for t in config["synthetic"]["takes"]}
     template = load_template(ROOT / "resources" / "template.npz")
     settings = sweep_settings(config, {})
     # the error bar at the nominal noise (not measured per draw): the check is of its propagation
@@ -53,6 +54,7 @@ def main(subjects: list[str]) -> int:
             print(f"{store_path}: missing; run `make run` first")
             return 0
         store = read_part(store_path)
+        run = Run(Subject(subject, takes, labels), template, settings)
         truths = {
             t: read_truth(ROOT / "results" / "synthetic" / subject / "truth" / f"{t}.npz")
             for t in takes
@@ -68,7 +70,7 @@ def main(subjects: list[str]) -> int:
                     np.asarray(store[paths.landmarks(t)]) - exact
                 )
             t0 = time.perf_counter()
-            acc = rerun_accuracy(data, settings, template, takes, truths, "fit", subject)
+            acc = rerun_accuracy(data, run, truths, "fit")
             cells = [
                 f"{acc['takes'][v]['motion']['relative_error']:6.3f} "
                 f"({acc['takes'][v]['motion']['normal_relative_error']:.3f})"
@@ -78,11 +80,11 @@ def main(subjects: list[str]) -> int:
             print(f"   {time.perf_counter() - t0:.1f}")
             if sigma == 0.0:
                 floor = {v: acc["takes"][v]["motion"]["relative_error"] for v in visemes}
-        check_error_bar(subject, store, settings, template, takes, truths, nominal, floor)
+        check_error_bar(subject, store, run, takes, truths, nominal, floor)
     return 0
 
 
-def check_error_bar(subject, store, settings, template, takes, truths, sigma, floor):
+def check_error_bar(subject, store, run, takes, truths, sigma, floor):
     """Print the reported click-noise error bar against the click-noise error the truth shows."""
     rng = np.random.default_rng(SEED)
     visemes = list(floor)
@@ -95,7 +97,7 @@ def check_error_bar(subject, store, settings, template, takes, truths, sigma, fl
         for t in takes:
             exact = truths[t].landmarks2d
             data[paths.landmarks(t)] = exact + sigma * rng.standard_normal(exact.shape)
-        acc = rerun_accuracy(data, settings, template, takes, truths, "fit", subject)
+        acc = rerun_accuracy(data, run, truths, "fit")
         precision.append(acc["summary"]["click_noise_px_measured"])
         for v in visemes:
             measured[v].append(acc["takes"][v]["motion"]["relative_error"])

@@ -146,10 +146,14 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
 def test_bad_inputs_are_named(stores, tmp_path):
     alice, _, _ = stores
     with h5py.File(alice, "a") as h5:
-        del h5[paths.pca("ccr")]
+        del h5[paths.pca("ccr")]  # a subject without visemes: no PCA, NaN in the CCR columns
+    row = subject_summary(alice).row
+    assert all(np.isnan(row[f"ccr_{i}"]) for i in (1, 2, 3))
+    with h5py.File(alice, "a") as h5:
+        del h5[paths.modal("frequencies_hz")]
     with pytest.raises(
         InputError,
-        match=rf"alice.h5: {re.escape(paths.pca('ccr'))}: missing \(the subject did not finish\)",
+        match=rf"alice.h5: {re.escape(paths.modal('frequencies_hz'))}: missing \(the subject did not finish\)",
     ):
         subject_summary(alice)
     with pytest.raises(InputError, match="store not found"):

@@ -20,9 +20,9 @@ import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import read_truth
-from scan2morph.report import read_sweep_table, rerun_accuracy, sweep_settings
-from scan2morph.report.sweep import first_stage
-from scan2morph.store import read_part
+from scan2morph.stages import Run, Subject
+from scan2morph.store import paths, read_part
+from scan2morph.sweep import first_stage, read_sweep_table, rerun_accuracy, sweep_settings
 from scan2morph.template import load_template
 from tests.tiny_run import SUBJECT, TAKES, tiny_config, tiny_run
 from tests.workflow_api import REPO
@@ -81,7 +81,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
     ]
     assert table.first_stage == "fit"
     assert first_stage(["smoothing.w", "align.kernel_k_mm"]) == "align"
-    assert first_stage(["motion_noise.click_noise_px"]) == "motion"
+    assert first_stage(["motion_noise.click_noise_px"]) == "motion_noise"
     assert first_stage(["repair.max_hole_px", "mask.radius_mm"]) == "repair"
     assert read_sweep_table(_table(tmp_path, "# nothing\n"), SCHEMA).rows == ()
 
@@ -147,7 +147,15 @@ def test_sweep_settings_override_a_copy():
     assert type(settings["smoothing"]["iterations"]) is int  # numpy scalars become Python's
     assert settings["template"]["fiducials"]["viseme"] == "closed"
     assert CONFIG["template"]["fiducials"]["viseme"] == "open"  # the config is untouched
-    assert set(settings) == {"repair", "template", "align", "mask", "smoothing", "motion_noise"}
+    assert set(settings) == {
+        "repair",
+        "template",
+        "align",
+        "mask",
+        "smoothing",
+        "motion_noise",
+        "quality",
+    }
 
 
 # --- load-time validation through Snakemake ---
@@ -265,14 +273,12 @@ def test_rerun_from_repair_reproduces_the_pipeline(run):
         t: read_truth(run.path("results", "synthetic", SUBJECT, "truth", f"{t}.npz")) for t in takes
     }
     settings = sweep_settings(CONFIG, {})  # the tiny config keeps these sections as they are
+    subject = Subject(SUBJECT, *_kinds_labels())
     result = rerun_accuracy(
         read_part(run.path("results", SUBJECT, f"{SUBJECT}.h5")),
-        settings,
-        load_template(run.path("resources", "template.npz")),
-        {t["take"]: t["kind"] for t in TAKES},
+        Run(subject, load_template(run.path("resources", "template.npz")), settings),
         truths,
         "repair",
-        SUBJECT,
         raw=raw,
     )
     _assert_same_accuracy(
@@ -282,15 +288,21 @@ def test_rerun_from_repair_reproduces_the_pipeline(run):
 
 @pytest.mark.slow
 def test_rerun_refuses_bad_input(run):
-    store = {"/takes/neutral/landmarks": np.zeros((68, 2))}
-    kinds = {t["take"]: t["kind"] for t in TAKES}
+    store = {paths.landmarks("neutral"): np.zeros((68, 2))}
     tpl = load_template(run.path("resources", "template.npz"))
     settings = sweep_settings(CONFIG, {})
+    good = Run(Subject(SUBJECT, *_kinds_labels()), tpl, settings)
     with pytest.raises(
-        InputError, match=r"start stage: expected one of \('repair', 'fit', 'align', 'motion'\)"
+        InputError,
+        match=r"start stage: expected one of \('repair', 'fit', 'align', 'motion', 'motion_noise'\)",
     ):
-        rerun_accuracy(store, settings, tpl, kinds, {}, "morph", SUBJECT)
+        rerun_accuracy(store, good, {}, "morph")
     with pytest.raises(InputError, match="/takes/neutral/raw/xyz: missing"):
-        rerun_accuracy(store, settings, tpl, kinds, {}, "repair", SUBJECT)
+        rerun_accuracy(store, good, {}, "repair")
+    no_neutral = Run(Subject(SUBJECT, {"car": "viseme"}, {"car": "car"}), tpl, settings)
     with pytest.raises(InputError, match=r"takes: expected exactly one neutral take, got \[\]"):
-        rerun_accuracy(store, settings, tpl, {"car": "viseme"}, {}, "motion", SUBJECT)
+        rerun_accuracy(store, no_neutral, {}, "motion")
+
+
+def _kinds_labels():
+    return {t["take"]: t["kind"] for t in TAKES}, {t["take"]: t["label"] for t in TAKES}

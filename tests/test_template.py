@@ -252,3 +252,26 @@ def test_stable_region_covers_forehead_ridge_and_temples_only(template):
     np.testing.assert_array_equal(icp_region(fine, "upper_face"), upper_face(fine))
     with pytest.raises(InputError, match="align.icp_region: 'lips' unknown"):
         icp_region(fine, "lips")
+
+
+def test_obj_opens_in_meshlab_with_every_vertex_in_order(tmp_path, template):
+    """MeshLab's own reader (pymeshlab) keeps every template vertex in its slot, invalid ones
+    included (their faces are left out), so vertex i is template vertex i there too."""
+    import pymeshlab
+
+    fine = subdivide_template(template, 1)
+    rng = np.random.default_rng(7)
+    v = np.column_stack([fine.vertices * 40.0, 900.0 + rng.normal(0, 1, fine.n_vertices)])
+    valid = rng.uniform(size=fine.n_vertices) > 0.05
+    uv = rng.uniform(size=(fine.n_vertices, 2))
+    write_obj(
+        tmp_path / "m.obj", v, fine.faces, uv=uv, texture=np.zeros((4, 4, 3), np.uint8), valid=valid
+    )
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(tmp_path / "m.obj"))
+    mesh = ms.current_mesh()
+    assert mesh.vertex_number() == fine.n_vertices
+    np.testing.assert_allclose(mesh.vertex_matrix(), v, atol=1e-5)
+    kept = valid[fine.faces].all(axis=1)
+    assert mesh.face_number() == kept.sum()
+    np.testing.assert_array_equal(mesh.face_matrix(), fine.faces[kept])

@@ -16,12 +16,9 @@ rule accuracy:
     log:
         "logs/accuracy/{subject}.log",
     params:
-        takes=get_takes,
-        neutral=get_neutral_take,
-        visemes=get_viseme_takes,
-        fiducial_sets=get_fiducial_sets,
-        levels=config["template"]["subdivision_levels"],
+        kinds=get_take_kinds,
+        labels=get_take_labels,
+        template=config["template"],
         smoothing=config["smoothing"],
-        max_slope_deg=config["template"]["max_slope_deg"],
     script:
         "../scripts/accuracy.py"

@@ -14,7 +14,8 @@ rule align:
     benchmark:
         "benchmarks/rules/align/{subject}/{take}.tsv"
     params:
+        neutral=get_neutral_take,
         align=config["align"],
-        levels=config["template"]["subdivision_levels"],
+        template=config["template"],
     script:
         "../scripts/align.py"

@@ -23,7 +23,7 @@ rule template_part:
     log:
         "logs/template_part/{subject}.log",
     params:
-        levels=config["template"]["subdivision_levels"],
+        template=config["template"],
     script:
         "../scripts/template_part.py"
 
@@ -45,7 +45,7 @@ rule fit:
     resources:
         mem_mb=1000,
     params:
-        fiducials=get_fiducial_set,
+        kind=get_take_kind,
         template=config["template"],
     script:
         "../scripts/fit.py"

@@ -29,6 +29,7 @@ rule ingest:
         mem_mb=1000,
     params:
         row=take_row,
+        roles=get_take_roles,
         stereo=get_stereo_params,
     script:
         "../scripts/ingest.py"

@@ -2,6 +2,8 @@
 # wildcards and looks the subject or take up in the take table of common.smk.
 from pathlib import Path
 
+from scan2morph.sheet import FILES
+
 
 # --- one take ---
 def take_row(wildcards):
@@ -14,13 +16,8 @@ def get_take_inputs(wildcards):
     """The input files of a take that exist or will be generated (a missing one is reported
     by the subject's check job, so that the DAG still builds and other subjects run)."""
     row = TAKES.loc[(wildcards.subject, wildcards.take)]
-    # the same roles table is in workflow/scripts/ingest.py
-    roles = {
-        "range": ["xyz", "color", "landmarks"],
-        "stereo": ["left", "right", "calibration", "landmarks"],
-    }
     files = {}
-    for role in roles.get(row["modality"], []):
+    for role in FILES.get(row["modality"], ()):
         path = row[role]
         if path and (row["synthetic"] or Path(path).is_file()):
             files[role] = path
@@ -34,9 +31,14 @@ def get_stereo_params(wildcards):
     return dict(config["stereo"]) if modality == "stereo" else {}
 
 
-def get_fiducial_set(wildcards):
-    kind = TAKES.loc[(wildcards.subject, wildcards.take), "kind"]
-    return config["template"]["fiducials"].get(kind, "closed")
+def get_take_roles(wildcards):
+    """The sheet columns that name the take's input files (its modality's; none for an unknown
+    modality, which the subject's check job reports)."""
+    return list(FILES.get(TAKES.loc[(wildcards.subject, wildcards.take), "modality"], ()))
+
+
+def get_take_kind(wildcards):
+    return TAKES.loc[(wildcards.subject, wildcards.take), "kind"]
 
 
 # --- the takes of a subject ---
@@ -57,13 +59,10 @@ def get_viseme_takes(wildcards):
     return takes_of_kind(wildcards.subject, "viseme")
 
 
-def get_expression_takes(wildcards):
-    return takes_of_kind(wildcards.subject, "expression")
-
-
-def get_other_takes(wildcards):
-    """Visemes then expressions (the order the motion script zips with its inputs)."""
-    return get_viseme_takes(wildcards) + get_expression_takes(wildcards)
+def get_take_kinds(wildcards):
+    """Kind of every take of the subject (take -> kind), in sheet order."""
+    rows = TAKES.loc[wildcards.subject]
+    return dict(zip(rows["take"], rows["kind"]))
 
 
 def get_take_labels(wildcards):
@@ -71,14 +70,28 @@ def get_take_labels(wildcards):
     return dict(zip(rows["take"], rows["label"]))
 
 
-def get_fiducial_sets(wildcards):
-    """Fiducial set of every take of a subject (take -> set name)."""
-    rows = TAKES.loc[wildcards.subject]
-    sets = config["template"]["fiducials"]
-    return {t: sets.get(k, "closed") for t, k in zip(rows["take"], rows["kind"])}
-
-
 # --- the per-take parts a subject-level stage reads ---
+def get_take_parts(stage):
+    """An input function: the ``stage`` part of every take of the subject."""
+
+    def parts(wildcards):
+        return _take_files(
+            f"results/{{subject}}/takes/{{take}}/{stage}.h5",
+            wildcards.subject,
+            takes_of(wildcards.subject),
+        )
+
+    return parts
+
+
+def get_noise_repairs(wildcards):
+    """The repair parts of the neutral and the visemes (the click-noise refits' data)."""
+    takes = takes_of_kind(wildcards.subject, "neutral") + get_viseme_takes(wildcards)
+    return _take_files(
+        "results/{subject}/takes/{take}/repair.h5", wildcards.subject, takes
+    )
+
+
 def get_neutral_repair(wildcards):
     take = get_neutral_take(wildcards)
     return f"results/{wildcards.subject}/takes/{take}/repair.h5" if take else []
@@ -87,35 +100,6 @@ def get_neutral_repair(wildcards):
 def get_neutral_fit(wildcards):
     take = get_neutral_take(wildcards)
     return f"results/{wildcards.subject}/takes/{take}/fit.h5" if take else []
-
-
-def get_neutral_align(wildcards):
-    take = get_neutral_take(wildcards)
-    return f"results/{wildcards.subject}/takes/{take}/align.h5" if take else []
-
-
-def get_other_fits(wildcards):
-    return _take_files(
-        "results/{subject}/takes/{take}/fit.h5",
-        wildcards.subject,
-        get_other_takes(wildcards),
-    )
-
-
-def get_other_aligns(wildcards):
-    return _take_files(
-        "results/{subject}/takes/{take}/align.h5",
-        wildcards.subject,
-        get_other_takes(wildcards),
-    )
-
-
-def get_viseme_repairs(wildcards):
-    return _take_files(
-        "results/{subject}/takes/{take}/repair.h5",
-        wildcards.subject,
-        get_viseme_takes(wildcards),
-    )
 
 
 def get_viseme_aligns(wildcards):

@@ -27,9 +27,9 @@ rule modal:
     resources:
         mem_mb=4000,
     params:
-        expressions=get_expression_takes,
+        kinds=get_take_kinds,
         labels=get_take_labels,
         modal=config["modal"],
-        levels=config["template"]["subdivision_levels"],
+        template=config["template"],
     script:
         "../scripts/modal.py"

@@ -27,9 +27,9 @@ rule morph:
     benchmark:
         "benchmarks/rules/morph/{subject}.tsv"
     params:
-        visemes=get_viseme_takes,
+        kinds=get_take_kinds,
         labels=get_take_labels,
         morph=config["morph"],
-        levels=config["template"]["subdivision_levels"],
+        template=config["template"],
     script:
         "../scripts/morph.py"

@@ -5,10 +5,8 @@
 rule motion:
     """Compute masked, smoothed viseme motion vectors and expression displacement fields against the neutral."""
     input:
-        neutral_fit=get_neutral_fit,
-        neutral_align=get_neutral_align,
-        fits=get_other_fits,
-        aligns=get_other_aligns,
+        fits=get_take_parts("fit"),
+        aligns=get_take_parts("align"),
         template="resources/template.npz",
     output:
         part="results/{subject}/motion.h5",
@@ -17,13 +15,12 @@ rule motion:
     benchmark:
         "benchmarks/rules/motion/{subject}.tsv"
     params:
-        neutral=get_neutral_take,
-        others=get_other_takes,
-        visemes=get_viseme_takes,
-        expressions=get_expression_takes,
+        kinds=get_take_kinds,
+        labels=get_take_labels,
         mask=config["mask"],
         smoothing=config["smoothing"],
-        levels=config["template"]["subdivision_levels"],
+        template=config["template"],
+        quality=config["quality"],
     script:
         "../scripts/motion.py"
 
@@ -31,8 +28,7 @@ rule motion:
 rule motion_noise:
     """Measure the landmark click precision and the click-noise error bar of each viseme's motion."""
     input:
-        neutral=get_neutral_repair,
-        visemes=get_viseme_repairs,
+        repairs=get_noise_repairs,
         aligns=get_viseme_aligns,
         motion="results/{subject}/motion.h5",
         template="resources/template.npz",
@@ -46,9 +42,8 @@ rule motion_noise:
     resources:
         mem_mb=1000,
     params:
-        neutral=get_neutral_take,
-        visemes=get_viseme_takes,
-        fiducials=get_fiducial_sets,
+        kinds=get_take_kinds,
+        labels=get_take_labels,
         noise=config["motion_noise"],
         smoothing=config["smoothing"],
         template=config["template"],

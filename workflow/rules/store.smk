@@ -14,5 +14,6 @@ rule store:
         "benchmarks/rules/store/{subject}.tsv"
     params:
         config_sha256=CONFIG_SHA256,
+        quality=config["quality"],
     script:
         "../scripts/store.py"

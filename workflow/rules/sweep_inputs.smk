@@ -7,7 +7,7 @@ import pandas as pd
 from snakemake.utils import Paramspace
 
 from scan2morph.errors import InputError
-from scan2morph.report.sweep import read_sweep_table, sweep_settings
+from scan2morph.sweep import read_sweep_table, sweep_settings
 
 SWEEP_TABLE = (
     read_sweep_table(
@@ -44,11 +44,6 @@ def get_sweep_settings(wildcards):
 
 def get_sweep_row(wildcards):
     return dict(SWEEP_ROWS[wildcards.params])
-
-
-def get_take_kinds(wildcards):
-    rows = TAKES.loc[wildcards.subject]
-    return dict(zip(rows["take"], rows["kind"]))
 
 
 def get_sweep_results(wildcards):

@@ -1,7 +1,7 @@
 # Parameter sweeps, run on demand (`snakemake sweep_all`), not by `rule all`: for each row of the
 # sweep table (config key `sweeps`, one column per swept config path) and each synthetic subject,
 # the stages from the first one that reads a swept key are re-run on the subject's stored parts
-# and measured against the ground truth (scan2morph.report.sweep). The table is checked against
+# and measured against the ground truth (scan2morph.sweep). The table is checked against
 # the config schema when the workflow loads: a bad column or value stops the run before any job
 # (workflow/rules/sweep_inputs.smk).
 import re
@@ -29,8 +29,8 @@ rule sweep:
         row=get_sweep_row,
         settings=get_sweep_settings,
         start=SWEEP_TABLE.first_stage if SWEEP_TABLE else "",
-        takes=get_takes,
         kinds=get_take_kinds,
+        labels=get_take_labels,
     script:
         "../scripts/sweep.py"
 

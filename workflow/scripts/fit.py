@@ -1,51 +1,22 @@
 """Fit the template to one take: mesh vertices, texture coordinates, validity; OBJ export."""
 
-import logging
-
 from scan2morph.io import write_obj
 from scan2morph.jobs import run_job
-from scan2morph.store import read_attrs, read_part, write_part
-from scan2morph.template import fit_options, fit_take, load_template
+from scan2morph.stages import fit
+from scan2morph.store import paths, read_attrs, read_part, write_part
+from scan2morph.template import load_template
 
 
 def main(snakemake):
     def job():
-        w, p, out = snakemake.wildcards, snakemake.params, snakemake.output
-        g = f"/takes/{w.take}"
-        data = read_part(snakemake.input.part)
-        xyz, color = data[f"{g}/range/xyz"], data[f"{g}/range/color"]
-        mesh = fit_take(
-            load_template(snakemake.input.template),
-            data[f"{g}/landmarks"],
-            xyz,
-            image_size=(xyz.shape[1], xyz.shape[0]),
-            fiducial_set=p.fiducials,
-            source=f"{w.subject}/{w.take}",
-            **fit_options(p.template),
-        )
-        logging.info(
-            "%s: %d vertices, %.1f%% valid, %d folded triangles",
-            w.take,
-            len(mesh["valid"]),
-            100 * mesh["valid"].mean(),
-            mesh["n_folded"],
-        )
-        write_part(
-            out.part,
-            {f"{g}/mesh/{k}": mesh[k] for k in ("vertices", "uv", "valid", "points2d")},
-            attrs={
-                g: read_attrs(snakemake.input.part, g)
-                | {"fiducial_set": p.fiducials, "n_folded": mesh["n_folded"]}
-            },
-        )
-        write_obj(
-            out.obj,
-            mesh["vertices"],
-            mesh["faces"],
-            uv=mesh["uv"],
-            texture=color,
-            valid=mesh["valid"],
-        )
+        w, p, inp, out = snakemake.wildcards, snakemake.params, snakemake.input, snakemake.output
+        params = fit.Params.from_config(p.template, p.kind)
+        attrs = read_attrs(inp.part, paths.take(w.take))
+        template, data = load_template(inp.template), read_part(inp.part)
+        part = fit.run(template, w.take, data, attrs, params, f"{w.subject}/{w.take}")
+        write_part(out.part, part.datasets, attrs=part.attrs)
+        mesh = {k: part.datasets[paths.mesh(w.take, k)] for k in ("vertices", "uv", "valid")}
+        write_obj(out.obj, faces=part.files["faces"], texture=part.files["texture"], **mesh)
 
     run_job(snakemake.log[0], job)
 

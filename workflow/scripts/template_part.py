@@ -1,17 +1,15 @@
 """The subject's template group: faces and fiducials of the subdivided template."""
 
 from scan2morph.jobs import run_job
+from scan2morph.stages import fit
 from scan2morph.store import write_part
-from scan2morph.template import load_template, subdivide_template
-from scan2morph.template.datasets import template_datasets
+from scan2morph.template import load_template
 
 
 def main(snakemake):
     def job():
-        template = subdivide_template(
-            load_template(snakemake.input.template), snakemake.params.levels
-        )
-        write_part(snakemake.output.part, template_datasets(template))
+        part = fit.template_part(load_template(snakemake.input.template), snakemake.params.template)
+        write_part(snakemake.output.part, part.datasets)
 
     run_job(snakemake.log[0], job)
 

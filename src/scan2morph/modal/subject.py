@@ -15,6 +15,7 @@ from scan2morph.modal.project import (
     reconstruction_error_curve,
     semantic_basis,
 )
+from scan2morph.store import paths
 
 
 def subject_modal(
@@ -57,22 +58,22 @@ def subject_modal(
     basis = modal_basis(neutral, faces, params, upper_face, fixed=fixed, source=source)
     ks = sorted({int(k) for k in ks if 1 <= int(k) <= basis.n_modes} | {basis.n_modes})
     data = {
-        "/modal/frequencies_hz": basis.frequencies_hz,
-        "/modal/modes": basis.modes,
-        "/modal/dof_modes": basis.dof_modes,
-        "/modal/thickness_mm": basis.thickness_mm,
-        "/modal/fixed_vertices": basis.fixed_vertices,
-        "/modal/reconstruction_k": np.asarray(ks),
+        paths.modal("frequencies_hz"): basis.frequencies_hz,
+        paths.modal("modes"): basis.modes,
+        paths.modal("dof_modes"): basis.dof_modes,
+        paths.modal("thickness_mm"): basis.thickness_mm,
+        paths.modal("fixed_vertices"): basis.fixed_vertices,
+        paths.modal("reconstruction_k"): np.asarray(ks),
     }
     coords = {}
     for take, field in displacements.items():
         q = project(basis, field, source=f"{source}/{take}")
         coords[take] = q
-        data[f"/expressions/{take}/coordinates"] = q
-        data[f"/expressions/{take}/reconstruction_rms_mm"] = reconstruction_error_curve(
+        data[paths.expression(take, "coordinates")] = q
+        data[paths.expression(take, "reconstruction_rms_mm")] = reconstruction_error_curve(
             basis, field, ks, weighting="vertex"
         )
-        data[f"/expressions/{take}/synthesized"] = reconstruct(basis, q)
+        data[paths.expression(take, "synthesized")] = reconstruct(basis, q)
     unknown = [t for t in semantic_takes if t not in displacements]
     if unknown:
         raise InputError(
@@ -83,15 +84,15 @@ def subject_modal(
         sem = semantic_basis(
             basis, [displacements[t] for t in semantic_takes], list(semantic_takes), source=source
         )
-        data["/modal/semantic/names"] = np.asarray(sem.names, dtype=object)
-        data["/modal/semantic/modes"] = sem.modes
+        data[paths.modal("semantic/names")] = np.asarray(sem.names, dtype=object)
+        data[paths.modal("semantic/modes")] = sem.modes
         for take, field in displacements.items():
-            data[f"/expressions/{take}/semantic_coordinates"] = project(
+            data[paths.expression(take, "semantic_coordinates")] = project(
                 sem, field, source=f"{source}/{take}"
             )
     if coords:
         for label, stats in coordinate_statistics(coords, {t: labels[t] for t in coords}).items():
-            g = f"/modal/statistics/{label}"
-            data[f"{g}/mean"], data[f"{g}/std"] = stats.mean, stats.std
-            data[f"{g}/takes"] = np.asarray(stats.takes, dtype=object)
+            data[paths.modal_statistics(label, "mean")] = stats.mean
+            data[paths.modal_statistics(label, "std")] = stats.std
+            data[paths.modal_statistics(label, "takes")] = np.asarray(stats.takes, dtype=object)
     return basis, data

@@ -88,19 +88,6 @@ def subject_morph(
     return model, blend_shapes, pca_shapes
 
 
-def pca_datasets(model: PCAModel) -> dict[str, np.ndarray]:
-    """The ``/pca`` group of the store (DESIGN.md)."""
-    return {
-        "/pca/mean": model.mean,
-        "/pca/components": model.components,
-        "/pca/eigenvalues": model.eigenvalues,
-        "/pca/cr": model.cr,
-        "/pca/ccr": model.ccr,
-        "/pca/coefficients": model.coefficients,
-        "/pca/takes": np.asarray(model.names, dtype=object),
-    }
-
-
 def pca_component_targets(model: PCAModel) -> dict[str, np.ndarray]:
     """One shape per component at +1 standard deviation (alpha_i = 1), for morph-target export."""
     return {

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scan2morph.store import paths
+
 
 @dataclass(frozen=True)
 class ClickedTake:
@@ -36,11 +38,10 @@ def clicked_take(store: Mapping[str, np.ndarray], take: str, fiducial_set: str) 
     Reads ``/takes/{take}/range/xyz``, ``/takes/{take}/landmarks`` and, when present,
     ``/takes/{take}/align/transform`` (identity otherwise: the neutral).
     """
-    g = f"/takes/{take}"
-    transform = store.get(f"{g}/align/transform")
+    transform = store.get(paths.align(take, "transform"))
     return ClickedTake(
-        store[f"{g}/range/xyz"],
-        store[f"{g}/landmarks"],
+        store[paths.range_image(take, "xyz")],
+        store[paths.landmarks(take)],
         fiducial_set,
         np.eye(4) if transform is None else transform,
     )

@@ -20,6 +20,7 @@ from scan2morph.geometry import unique_edges
 from scan2morph.motion.mask import stencil_mask
 from scan2morph.motion.smooth import fill_missing, laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
+from scan2morph.store import paths
 
 
 @dataclass(frozen=True)
@@ -121,10 +122,10 @@ def viseme_motion(
     base, filled = complete_neutral(neutral, faces, source)
     suppressed, seeds = stencil_mask(base, faces, mask_paths, radius_mm=radius_mm, source=source)
     out = {
-        "/mask/suppressed": suppressed,
-        "/mask/seeds": seeds,
-        "/neutral/vertices": base,
-        "/neutral/filled": filled,
+        paths.mask("suppressed"): suppressed,
+        paths.mask("seeds"): seeds,
+        paths.neutral("vertices"): base,
+        paths.neutral("filled"): filled,
     }
     for take, mesh in visemes.items():
         raw = motion_vectors(
@@ -140,9 +141,9 @@ def viseme_motion(
             missing=missing,
             source=f"{source}/{take}",
         )
-        out[f"/visemes/{take}/motion_raw"] = raw
-        out[f"/visemes/{take}/motion"] = smooth
-        out[f"/visemes/{take}/model"] = base + smooth
+        out[paths.viseme(take, "motion_raw")] = raw
+        out[paths.viseme(take, "motion")] = smooth
+        out[paths.viseme(take, "model")] = base + smooth
     return out
 
 
@@ -155,7 +156,7 @@ def expression_displacements(
         raw = motion_vectors(
             mesh.vertices, neutral.vertices, mesh.valid, neutral.valid, source=f"{source}/{take}"
         )
-        out[f"/expressions/{take}/displacement"] = fill_missing(
+        out[paths.expression(take, "displacement")] = fill_missing(
             raw, faces, source=f"{source}/{take}"
         )
     return out

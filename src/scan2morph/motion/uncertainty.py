@@ -25,28 +25,29 @@ from scan2morph.motion.clicks import ClickedTake, clicked_take
 from scan2morph.motion.precision import resolve_click_noise
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
+from scan2morph.store import paths
 from scan2morph.template.sample import fit_take
 
 
 def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
     """Store datasets of :func:`click_noise_motion`'s result (see ``schemas/store.layout.yaml``)."""
-    data = {f"/visemes/{t}/noise_rms_mm": r["rms_mm"] for t, r in result.items()}
-    data["/motion_noise/takes"] = np.array(list(result), dtype=object)
+    data = {paths.viseme(t, "noise_rms_mm"): r["rms_mm"] for t, r in result.items()}
+    data[paths.motion_noise("takes")] = np.array(list(result), dtype=object)
     for key in ("relative", "rms_error_mm"):
-        data[f"/motion_noise/{key}"] = np.array([r[key] for r in result.values()], dtype=float)
+        data[paths.motion_noise(key)] = np.array([r[key] for r in result.values()], dtype=float)
     failed = [r["failed_draws"] for r in result.values()]
-    data["/motion_noise/failed_draws"] = np.array(failed, dtype=np.int64)
+    data[paths.motion_noise("failed_draws")] = np.array(failed, dtype=np.int64)
     return data
 
 
 def noise_by_take(store: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]]:
     """Per viseme, ``relative`` and ``rms_error_mm`` from a store's ``/motion_noise`` datasets
     (the inverse of :func:`noise_datasets`); empty when the store has none."""
-    if "/motion_noise/takes" not in store:
+    if paths.motion_noise("takes") not in store:
         return {}
-    names = [str(n) for n in np.asarray(store["/motion_noise/takes"]).tolist()]
-    rel = np.asarray(store["/motion_noise/relative"], dtype=np.float64)
-    err = np.asarray(store["/motion_noise/rms_error_mm"], dtype=np.float64)
+    names = [str(n) for n in np.asarray(store[paths.motion_noise("takes")]).tolist()]
+    rel = np.asarray(store[paths.motion_noise("relative")], dtype=np.float64)
+    err = np.asarray(store[paths.motion_noise("rms_error_mm")], dtype=np.float64)
     return {
         t: {"relative": float(r), "rms_error_mm": float(e)}
         for t, r, e in zip(names, rel, err, strict=True)
@@ -59,7 +60,6 @@ def _fit(template, take: ClickedTake, landmarks, fit_options, source):
         template,
         landmarks,
         xyz,
-        image_size=(xyz.shape[1], xyz.shape[0]),
         fiducial_set=take.fiducial_set,
         source=source,
         **fit_options,
@@ -276,7 +276,7 @@ def subject_motion_noise(
         template,
         takes[neutral],
         {t: takes[t] for t in visemes},
-        store["/mask/suppressed"],
+        store[paths.mask("suppressed")],
         smoothing,
         fit_options,
         noise["click_noise_px"],
@@ -285,7 +285,7 @@ def subject_motion_noise(
         source=source,
     )
     data = noise_datasets(result)
-    data["/motion_noise/click_noise_px"] = np.float64(noise["click_noise_px"])
-    data["/motion_noise/click_noise_measured_px"] = np.float64(noise["measured_px"])
-    data["/motion_noise/stable_points"] = np.array(points, dtype=np.int64)
+    data[paths.motion_noise("click_noise_px")] = np.float64(noise["click_noise_px"])
+    data[paths.motion_noise("click_noise_measured_px")] = np.float64(noise["measured_px"])
+    data[paths.motion_noise("stable_points")] = np.array(points, dtype=np.int64)
     return data, result, noise

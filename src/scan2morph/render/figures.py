@@ -11,7 +11,7 @@ Figure functions take a ``Mapping[str, ndarray]`` keyed by store path (see
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,12 @@ def stage_figures(store: Mapping[str, np.ndarray], stage: str) -> dict[str, Figu
     }
 
 
-def write_stage_figures(store_path: str | Path, out_dir: str | Path, stage: str) -> list[Path]:
+def write_stage_figures(
+    store_path: str | Path,
+    out_dir: str | Path,
+    stage: str,
+    expected: Sequence[str | Path] | None = None,
+) -> list[Path]:
     """Render a stage's figures from a subject store to ``{out_dir}/{stage}_{name}.png``.
 
     Parameters
@@ -64,6 +69,9 @@ def write_stage_figures(store_path: str | Path, out_dir: str | Path, stage: str)
     out_dir : str or Path
         Folder of the PNG files (created).
     stage : {"fit", "motion", "morph", "modal"}
+    expected : sequence of paths, optional
+        The files the caller declared (a workflow rule's outputs); checked against
+        :func:`figure_names` before anything is drawn.
 
     Returns
     -------
@@ -73,10 +81,19 @@ def write_stage_figures(store_path: str | Path, out_dir: str | Path, stage: str)
     Raises
     ------
     InputError
-        Unknown stage, unreadable store, or a dataset a figure needs is missing or misshapen.
+        Unknown stage, unreadable store, a dataset a figure needs is missing or misshapen, or
+        ``expected`` names other files than the stage draws.
     """
-    figure_names(stage)
     out_dir = Path(out_dir)
+    drawn = [out_dir / f"{stem}.png" for stem in figure_names(stage)]
+    if expected is not None:
+        want = {Path(p).resolve() for p in expected}
+        if want != {p.resolve() for p in drawn}:
+            raise InputError(
+                "workflow/rules/figures.smk",
+                f"outputs {sorted(map(str, expected))} differ from the figures drawn "
+                f"{sorted(map(str, drawn))}",
+            )
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     with StoreMapping(store_path) as store:

@@ -33,7 +33,7 @@ N_MODES = 6
 #: Units of a modal coordinate q = Q^T M v: v in mm, M in tonnes, Q mass-orthonormal (t^-1/2).
 Q_UNITS = "mm·t$^{1/2}$"
 #: Root of the per-label coordinate statistics.
-_STATISTICS = "/modal/statistics"  # TODO paths: paths.MODAL_STATISTICS (root for paths.ids)
+_STATISTICS = paths.MODAL_STATISTICS
 
 
 def _modes(store: Mapping, what: str) -> np.ndarray:

@@ -37,8 +37,8 @@ _GRADUAL = re.compile(r"^(?P<label>[A-Za-z][A-Za-z0-9-]*)_(?P<percent>\d{1,3})$"
 #: A mixed blend is named by ``{label}{percent}`` parts joined by ``_`` (``man60_eel30``).
 _MIXED_PART = re.compile(r"^(?P<label>[A-Za-z][A-Za-z-]*)(?P<percent>\d{1,3})$")
 #: Roots of the named blends and PCA blends.
-_BLENDS = "/blends"  # TODO paths: paths.BLENDS (root for paths.ids)
-_PCA_BLENDS = "/pca_blends"  # TODO paths: paths.PCA_BLENDS (root for paths.ids)
+_BLENDS = paths.BLENDS
+_PCA_BLENDS = paths.PCA_BLENDS
 
 
 def _render_shapes(
@@ -128,8 +128,7 @@ def _pca(store: Mapping, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     if comps.ndim != 3 or comps.shape[1:] != mean.shape or len(eig) != len(comps):
         raise InputError(
             source_of(store),
-            # TODO paths: a builder of the /pca group
-            f"/pca: components {comps.shape} and eigenvalues {eig.shape} do not match the mean {mean.shape}",
+            f"{paths.PCA}: components {comps.shape} and eigenvalues {eig.shape} do not match the mean {mean.shape}",
         )
     return mean, comps, eig
 
@@ -256,12 +255,28 @@ def fig_coefficients(store: Mapping[str, np.ndarray]) -> Figure:
 
 
 #: Figure name -> function, in the order the report shows them.
+def _needs_model(name: str, func):
+    """``func``, or for a subject without a morphable model (no viseme takes: the morph stage
+    skipped PCA and blends) a figure that says so."""
+
+    def draw(store: Mapping[str, np.ndarray]) -> Figure:
+        if paths.pca("mean") in store:
+            return func(store)
+        why = "no viseme takes: no blend shapes or PCA for this subject"
+        return message_figure(name.replace("_", " ").capitalize(), why)
+
+    return draw
+
+
 FIGURES = {
-    "gradual": fig_gradual,
-    "blends": fig_blends,
-    "mean": fig_mean,
-    "eigen": fig_eigen,
-    "pca_blends": fig_pca_blends,
-    "contribution": fig_contribution,
-    "coefficients": fig_coefficients,
+    name: _needs_model(name, func)
+    for name, func in {
+        "gradual": fig_gradual,
+        "blends": fig_blends,
+        "mean": fig_mean,
+        "eigen": fig_eigen,
+        "pca_blends": fig_pca_blends,
+        "contribution": fig_contribution,
+        "coefficients": fig_coefficients,
+    }.items()
 }

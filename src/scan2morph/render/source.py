@@ -161,7 +161,7 @@ def fiducials(store: Mapping) -> dict[str, int]:
     if names.shape != indices.shape:
         raise InputError(
             source_of(store),
-            "/template/fiducials: names and indices differ in length",  # TODO paths: group builder
+            f"{paths.FIDUCIALS}: names and indices differ in length",
         )
     return {str(n): int(i) for n, i in zip(names, indices, strict=True)}
 

@@ -1,4 +1,4 @@
-"""Reports: the per-subject HTML page, provenance, the cohort summary and parameter sweeps.
+"""Reports: the per-subject HTML page, provenance, the cohort summary and parameter sweep summaries.
 
 The last step of the data flow (io -> scan -> template -> align -> motion -> morph/modal ->
 store/render/report): it reads stores, figures and accuracy files and writes reports.
@@ -16,41 +16,29 @@ from scan2morph.report.html import (
     ReportFigure,
     image_uri,
     read_caption,
+    report_figures,
     subject_report_html,
     thumbnail_jpeg,
     write_subject_report,
 )
 from scan2morph.report.provenance import software_versions, stage_timings, store_provenance
-from scan2morph.report.sweep import (
-    SweepTable,
-    first_stage,
-    plot_sweep,
-    read_sweep_table,
-    rerun_accuracy,
-    sweep_settings,
-    sweep_summary,
-    write_sweep_summary,
-)
+from scan2morph.report.sweep import plot_sweep, sweep_summary, write_sweep_summary
 
 __all__ = [
     "ReportFigure",
     "SubjectSummary",
-    "SweepTable",
     "cohort_table",
-    "first_stage",
     "image_uri",
     "motion_rms",
     "plot_cohort",
     "plot_sweep",
     "read_caption",
-    "read_sweep_table",
-    "rerun_accuracy",
+    "report_figures",
     "software_versions",
     "stage_timings",
     "store_provenance",
     "subject_report_html",
     "subject_summary",
-    "sweep_settings",
     "sweep_summary",
     "thumbnail_jpeg",
     "write_cohort_summary",

@@ -72,10 +72,11 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     Raises
     ------
     InputError
-        Unreadable store, or one without PCA (``/pca/ccr``) or modal frequencies.
+        Unreadable store, or one without modal frequencies. A subject without visemes has no
+        PCA: its CCR columns are NaN.
     """
     with open_store(store_path) as h5:
-        for need in (paths.pca("ccr"), paths.modal("frequencies_hz")):
+        for need in (paths.modal("frequencies_hz"),):
             if need not in h5:
                 raise InputError(store_path, f"{need}: missing (the subject did not finish)")
         takes = h5[paths.TAKES] if paths.TAKES in h5 else {}
@@ -103,7 +104,7 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
             row[f"motion_rms_mm_{label}"] = float(np.mean(by_label[label]))
         for label in sorted(noise_by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
             row[f"motion_noise_relative_{label}"] = float(np.mean(noise_by_label[label]))
-        ccr = np.asarray(h5[paths.pca("ccr")][()], dtype=np.float64)
+        ccr = np.asarray(h5[paths.pca("ccr")][()] if paths.pca("ccr") in h5 else [], dtype=float)
         for i in range(N_CCR):
             row[f"ccr_{i + 1}"] = float(ccr[i]) if i < len(ccr) else float("nan")
         freqs = h5[paths.modal("frequencies_hz")][()]

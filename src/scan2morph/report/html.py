@@ -27,6 +27,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.report.provenance import software_versions, store_provenance
+from scan2morph.stages.quality import read_warnings, skipped_stages
 from scan2morph.store import open_store, paths
 
 #: Image types a report embeds: file suffix -> (MIME type, leading magic bytes).
@@ -58,6 +59,7 @@ code{font-size:.8rem;word-break:break-all}
 figure.fig{margin:1rem 0 2rem}figure.fig img{max-width:100%;height:auto;border:1px solid #eee}
 figcaption{font-size:.85rem;color:#444}
 .note{color:#666;font-size:.9rem}.scroll{overflow-x:auto}
+.warnings table{border-left:4px solid #c60}.warnings caption{color:#a40}
 """
 
 
@@ -88,6 +90,18 @@ def read_caption(path: str | Path) -> str:
     text = re.sub(r"\*\*(.+?)\*\*", r"\1", text)
     text = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"\1", text)
     return re.sub(r"`(.+?)`(_{1,2})?", r"\1", text)
+
+
+def report_figures(
+    figure_files: Sequence[str | Path], caption_files: Sequence[str | Path]
+) -> list[ReportFigure]:
+    """The figures of a report with their captions: a figure's caption is the caption file of
+    the same stem (:func:`read_caption`), else its stem in words."""
+    captions = {Path(c).stem: read_caption(c) for c in caption_files}
+    return [
+        ReportFigure(Path(f), captions.get(Path(f).stem, Path(f).stem.replace("_", " ")))
+        for f in figure_files
+    ]
 
 
 def data_uri(data: bytes, mime: str) -> str:
@@ -237,6 +251,26 @@ def _figures_section(figures: Sequence[ReportFigure]) -> str:
                 "</figcaption></figure>"
             )
     return "".join(out)
+
+
+def _status_section(h5: h5py.File) -> str:
+    """The subject's warnings (a take left out of the models, refused refits, ...) and the
+    stages it skipped, first on the page: what not to trust."""
+    warnings = read_warnings(h5)
+    skipped = skipped_stages(h5)
+    parts = []
+    if warnings:
+        rows = [(w.stage, w.take or "(subject)", w.message) for w in warnings]
+        parts.append(
+            '<div class="warnings">'
+            + _table(["stage", "take", "warning"], rows, f"{len(warnings)} warnings")
+            + "</div>"
+        )
+    else:
+        parts.append(_note("No warnings: every take passed the quality gates."))
+    if skipped:
+        parts.append(_table(["skipped", "why"], sorted(skipped.items()), "Stages not run"))
+    return "".join(parts)
 
 
 def _pca_section(h5: h5py.File) -> str:
@@ -468,6 +502,7 @@ def subject_report_html(
         subject = attrs.get("subject", Path(store_path).stem)
         order = _take_order(h5, takes)
         sections = [
+            ("status", "Warnings and skipped stages", _status_section(h5)),
             ("inputs", "Inputs", _inputs_section(h5, order, thumbnail_px)),
             ("figures", "Figures", _figures_section(figures)),
             ("motion-noise", "Viseme motion: click-noise error", _motion_noise_section(h5)),

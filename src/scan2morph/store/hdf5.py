@@ -22,7 +22,7 @@ from scan2morph import __version__
 from scan2morph.errors import InputError
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
-FORMAT_VERSION = "1.1.0"
+FORMAT_VERSION = "1.2.0"
 #: Datasets at least this large are chunked and gzip-compressed.
 _COMPRESS_BYTES = 1 << 16
 
@@ -207,3 +207,18 @@ def open_store(path: str | Path) -> h5py.File:
             f"(reads {FORMAT_VERSION.split('.')[0]}.x); convert it or use a matching release",
         )
     return h5
+
+
+def read_parts(paths: Iterable[str | Path]) -> dict[str, np.ndarray]:
+    """Every dataset of several parts, merged into one dict keyed by store path."""
+    out: dict[str, np.ndarray] = {}
+    for path in paths:
+        out |= read_part(path)
+    return out
+
+
+def write_datasets(path: str | Path, datasets: Mapping[str, object]) -> None:
+    """Add datasets to an existing part or store (written as :func:`write_part` writes them)."""
+    with h5py.File(path, "a") as h5:
+        for name, value in datasets.items():
+            _write_dataset(h5, name, value)

@@ -246,7 +246,7 @@ def fit_take(
     template,
     landmarks: np.ndarray,
     xyz: np.ndarray,
-    image_size: tuple[int, int],
+    image_size: tuple[int, int] | None = None,
     fiducial_set: str = "closed",
     levels: int = 1,
     source: str = "take",
@@ -264,7 +264,9 @@ def fit_take(
     landmarks : (68, 2) float
         iBUG-68 landmarks, pixel coordinates.
     xyz : (H, W, 3) float, mm, NaN = no data
-    image_size : (width, height)
+    image_size : (width, height), optional
+        The image the landmarks were clicked on; default the range image's (they are pixel to
+        pixel).
     fiducial_set : str
         ``"closed"``, ``"open"`` or ``"open_corners"`` (see ``template.mesh.FIDUCIAL_SETS``).
     levels : int
@@ -303,6 +305,8 @@ def fit_take(
     xyz = np.asarray(xyz, dtype=np.float64)
     if xyz.ndim != 3 or xyz.shape[2] != 3:
         raise InputError(source, f"xyz: expected (H, W, 3), got {xyz.shape}")
+    if image_size is None:
+        image_size = (xyz.shape[1], xyz.shape[0])
     width, height = (int(n) for n in image_size)
     if (height, width) != xyz.shape[:2]:
         raise InputError(

@@ -1,0 +1,143 @@
+"""Align: each take rigidly onto the neutral, from six stable point pairs (Kabsch), then ICP on
+the stable face (Yano & Harada 2009, sec. 3.2). The neutral's own transform is the identity."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from scan2morph.align import align_take, transform_points
+from scan2morph.stages.part import Part, Run, need
+from scan2morph.store import paths
+from scan2morph.template import Template, subdivide_template
+from scan2morph.template.regions import icp_region, named_indices
+
+#: Config sections this stage reads (``template`` for the subdivision level).
+SECTIONS = ("align", "template")
+log = logging.getLogger("scan2morph")
+
+
+@dataclass(frozen=True)
+class Params:
+    """Alignment parameters.
+
+    Attributes
+    ----------
+    levels : int
+        Template subdivisions (the meshes' topology).
+    point_pairs : list of str
+        Named template points of the initial pose (``align.point_pairs``).
+    icp_region : str
+        The region ICP refines on (``align.icp_region``).
+    icp : dict
+        Everything else of ``align``: :func:`scan2morph.align.align_take`'s settings.
+    """
+
+    levels: int
+    point_pairs: list
+    icp_region: str
+    icp: dict
+
+    @classmethod
+    def from_config(cls, align: Mapping, template: Mapping) -> Params:
+        """From the config sections ``align`` and ``template``."""
+        icp = {k: v for k, v in align.items() if k not in ("point_pairs", "icp_region")}
+        return cls(
+            int(template["subdivision_levels"]),
+            list(align["point_pairs"]),
+            align["icp_region"],
+            icp,
+        )
+
+
+def run(
+    template: Template,
+    take: str,
+    neutral: str,
+    data: Mapping[str, np.ndarray],
+    params: Params,
+    source: str,
+) -> Part:
+    """Align one take to the neutral.
+
+    Parameters
+    ----------
+    template : Template
+        The base template.
+    take, neutral : str
+        The take and the subject's neutral take (equal: the identity).
+    data : mapping store path -> array
+        The fit parts of both (``mesh/vertices``, ``mesh/valid``).
+    params : Params
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    Part
+        ``align/transform`` (4, 4), scanner frame -> neutral frame, and ``align/vertices``
+        (V, 3) mm, and ``align/ok``: the alignment passed its quality gate; the ``align``
+        group's attributes hold ICP's fitness, inlier RMSE (mm), the point-to-plane RMSE of
+        the kept stable region (``residual_rmse_mm``) and its share (``inlier_fraction``),
+        iterations, convergence, method, the ``recovery`` tried and the ``problems`` of a failed
+        gate.
+    """
+    src = need(data, paths.mesh(take, "vertices"), source)
+    attrs, ok = {}, True
+    if take == neutral:
+        transform = np.eye(4)
+    else:
+        fine = subdivide_template(template, params.levels)
+        result = align_take(
+            src,
+            need(data, paths.mesh(take, "valid"), source),
+            need(data, paths.mesh(neutral, "vertices"), source),
+            need(data, paths.mesh(neutral, "valid"), source),
+            fine.faces,
+            named_indices(fine, params.point_pairs, "align.point_pairs"),
+            np.flatnonzero(icp_region(fine, params.icp_region)),
+            params.icp,
+            source=source,
+        )
+        transform = result.transform
+        ok = bool(result.ok)
+        attrs = {
+            paths.align_group(take): dict(
+                fitness=result.fitness,
+                inlier_rmse_mm=result.inlier_rmse,
+                residual_rmse_mm=result.residual_rmse,
+                inlier_fraction=result.inlier_fraction,
+                iterations=result.iterations,
+                converged=result.converged,
+                method=result.method,
+                problems=list(result.problems),
+                recovery=list(result.recovery),
+            )
+        }
+        log.info("%s: %s", take, attrs[paths.align_group(take)])
+        if not ok:
+            log.warning(
+                "%s: alignment failed its quality gate: %s", take, "; ".join(result.problems)
+            )
+    return Part(
+        {
+            paths.align(take, "transform"): transform,
+            paths.align(take, "vertices"): transform_points(transform, src),
+            paths.align(take, "ok"): np.bool_(ok),
+        },
+        attrs=attrs,
+    )
+
+
+def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
+    """Every take of a subject held in memory."""
+    params = Params.from_config(run_.config["align"], run_.config["template"])
+    neutral = run_.subject.neutral
+    out = {}
+    for take in run_.subject.kinds:
+        part = run(run_.template, take, neutral, data, params, run_.subject.source(take))
+        out |= part.datasets
+    return out

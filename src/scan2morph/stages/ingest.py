@@ -1,0 +1,69 @@
+"""Ingest: one take's input files -> its range image, colour and landmarks on one pixel grid.
+
+A range take is read as it is; a stereo take is reconstructed into the range image of its left
+camera. The part records the sheet row and a checksum of every input file.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+
+from scan2morph.errors import InputError
+from scan2morph.io import read_range_take, read_stereo_take
+from scan2morph.jobs import sha256_file
+from scan2morph.scan import reconstruct_stereo
+from scan2morph.sheet import FILES
+from scan2morph.stages.part import Part
+from scan2morph.store import paths
+
+#: Config section this stage reads (stereo takes only).
+SECTIONS = ("stereo",)
+log = logging.getLogger("scan2morph")
+
+
+def run(row: Mapping[str, str], files: Mapping[str, str], stereo: Mapping) -> Part:
+    """Read one take.
+
+    Parameters
+    ----------
+    row : mapping
+        The take's sheet row (``subject``, ``take``, ``kind``, ``label``, ``modality``).
+    files : mapping role -> path
+        The input files by sheet column (:data:`scan2morph.sheet.FILES` of the modality).
+    stereo : mapping
+        The config section ``stereo`` (used by stereo takes).
+
+    Returns
+    -------
+    Part
+        ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8 and ``landmarks`` (68, 2) px of
+        the take; the take group's attributes hold the row and input checksums.
+    """
+    take, modality = row["take"], row["modality"]
+    attrs = {k: row[k] for k in ("kind", "label", "modality")}
+    if modality == "range":
+        scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
+        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
+    elif modality == "stereo":
+        pair = read_stereo_take(
+            files["left"], files["right"], files["calibration"], files["landmarks"]
+        )
+        source = f"{files['left']}, {files['right']}"
+        xyz, report = reconstruct_stereo(
+            pair.left, pair.right, pair.calib, dict(stereo), source=source
+        )
+        log.info("%s: stereo %s", take, report)
+        color, landmarks = pair.left, pair.landmarks
+        attrs["stereo"] = report
+    else:
+        raise InputError(f"{row['subject']}/{take}", f"modality {modality!r} not supported")
+    attrs |= {f"input_sha256_{r}": sha256_file(files[r]) for r in FILES[modality]}
+    return Part(
+        {
+            paths.raw(take, "xyz"): xyz,
+            paths.raw(take, "color"): color,
+            paths.landmarks(take): landmarks,
+        },
+        attrs={paths.take(take): attrs},
+    )

@@ -1,0 +1,158 @@
+"""Modal: the shell finite-element modal basis of the neutral face, (K - w^2 M) Q = 0, and the
+expressions' modal coordinates, reconstruction errors and statistics (modal-analysis paper)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from scan2morph.io import write_obj
+from scan2morph.modal import ModalParams, ShellMaterial
+from scan2morph.modal.subject import subject_modal
+from scan2morph.stages.part import Part, Subject, need
+from scan2morph.stages.quality import modelled
+from scan2morph.store import paths
+from scan2morph.template import Template, subdivide_template
+from scan2morph.template.regions import upper_face
+
+#: Config sections this stage reads (``template`` for the subdivision level).
+SECTIONS = ("modal", "template")
+#: Why a subject without expression takes gets the modal basis only (recorded in the store).
+NO_EXPRESSIONS = "no expression takes: the modal basis only, no modal coordinates"
+log = logging.getLogger("scan2morph")
+
+
+@dataclass(frozen=True)
+class Params:
+    """Modal parameters.
+
+    Attributes
+    ----------
+    levels : int
+        Template subdivisions.
+    modal : ModalParams
+        Modes, shell thickness (mm), stiffening, material, threads, seed.
+    stiff_above : str
+        Named point above which the face is stiffened (``modal.stiff_above``).
+    semantic_labels : list of str
+        Expression labels whose first take becomes a semantic mode.
+    reconstruction_k : list of int
+        Numbers of modes at which the reconstruction error is reported.
+    """
+
+    levels: int
+    modal: ModalParams
+    stiff_above: str
+    semantic_labels: list
+    reconstruction_k: list
+
+    @classmethod
+    def from_config(cls, modal: Mapping, template: Mapping, threads: int = 1) -> Params:
+        """From the config sections ``modal`` and ``template`` and the job's threads."""
+        params = ModalParams(
+            n_modes=modal["modes"],
+            thickness_mm=modal["thickness_mm"],
+            upper_thickness_factor=modal["stiff_factor"],
+            material=ShellMaterial(
+                modal["youngs_modulus_mpa"], modal["poisson_ratio"], modal["density_t_per_mm3"]
+            ),
+            threads=threads,
+            seed=modal["seed"],
+        )
+        return cls(
+            int(template["subdivision_levels"]),
+            params,
+            modal["stiff_above"],
+            list(modal["semantic_labels"]),
+            list(modal["reconstruction_k"]),
+        )
+
+
+def semantic_takes(subject: Subject, labels: list) -> list[str]:
+    """The first expression take of each semantic label the subject has, in label order."""
+    expressions = subject.expressions
+    return [
+        next(t for t in expressions if subject.labels[t] == lab)
+        for lab in labels
+        if any(subject.labels[t] == lab for t in expressions)
+    ]
+
+
+def run(
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
+) -> Part:
+    """Modal basis and expression coordinates of one subject.
+
+    Parameters
+    ----------
+    template, subject
+        The base template and the subject (the contract of :mod:`scan2morph.stages`).
+    data : mapping store path -> array
+        The motion part (``/neutral/vertices``, ``/expressions/{take}/displacement``).
+    params : Params
+
+    Returns
+    -------
+    Part
+        ``/modal/*`` and ``/expressions/{take}/coordinates|reconstruction_rms_mm|synthesized|
+        semantic_coordinates``; ``files``: the ``coordinates`` and ``reconstruction`` tables, and
+        the measured and synthesised expression ``meshes`` with their ``faces``.
+    """
+    subject = modelled(subject, data)
+    fine = subdivide_template(template, params.levels)
+    name = subject.name
+    base = need(data, paths.neutral("vertices"), name)
+    fields = {t: need(data, paths.expression(t, "displacement"), name) for t in subject.expressions}
+    # The paper fixes the face's outline; the mouth loop (the lips) stays free.
+    outline = np.zeros(fine.n_vertices, dtype=bool)
+    outline[fine.boundary] = True
+    basis, datasets = subject_modal(
+        base,
+        fine.faces,
+        upper_face(fine, params.stiff_above),
+        params.modal,
+        fields,
+        subject.labels,
+        semantic_takes(subject, params.semantic_labels),
+        params.reconstruction_k,
+        source=name,
+        fixed=outline,
+    )
+    freq = basis.frequencies_hz
+    log.info("%s: %d modes, %.1f to %.1f Hz", name, basis.n_modes, freq[0], freq[-1])
+    takes = subject.expressions
+    coords = {t: datasets[paths.expression(t, "coordinates")] for t in takes}
+    columns = [f"q{i + 1}" for i in range(basis.n_modes)]
+    ks = datasets[paths.modal("reconstruction_k")]
+    errors = {t: datasets[paths.expression(t, "reconstruction_rms_mm")] for t in takes}
+    meshes = {}
+    for t in takes:  # each expression as measured and as synthesised from its coordinates
+        meshes[f"{t}_measured"] = base + fields[t]
+        meshes[f"{t}_synthesized"] = base + datasets[paths.expression(t, "synthesized")]
+    files = {
+        "coordinates": pd.DataFrame.from_dict(coords, orient="index", columns=columns),
+        "reconstruction": pd.DataFrame.from_dict(
+            errors, orient="index", columns=[f"K={k}" for k in ks]
+        ),
+        "faces": fine.faces,
+        "meshes": meshes,
+    }
+    attrs = {} if takes else {paths.SKIPPED: {"modal_coordinates": NO_EXPRESSIONS}}
+    return Part(datasets, attrs=attrs, files=files)
+
+
+def write_files(part: Part, coordinates: str, reconstruction: str, meshes: str) -> None:
+    """Write the coordinate and reconstruction tables (TSV, one row per expression take) and the
+    measured and synthesised expression meshes (OBJ) into the folder ``meshes``."""
+    f = part.files
+    f["coordinates"].rename_axis("take").to_csv(coordinates, sep="\t", float_format="%.6g")
+    f["reconstruction"].rename_axis("take").to_csv(reconstruction, sep="\t", float_format="%.4f")
+    folder = Path(meshes)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, vertices in f["meshes"].items():
+        write_obj(folder / f"{name}.obj", vertices, f["faces"])

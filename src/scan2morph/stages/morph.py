@@ -1,0 +1,106 @@
+"""Morph: PCA over the neutral and the viseme models (Yano & Harada 2009, sec. 5, Tables 1-3),
+named blend shapes (Eq. 1) and PCA blends (Eq. 2), and their exports (glTF, OBJ)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from scan2morph.io import write_glb, write_obj
+from scan2morph.morph import pca_tables
+from scan2morph.morph.pca import PCAModel
+from scan2morph.morph.subject import pca_component_targets, subject_morph
+from scan2morph.stages.part import Part, Subject, need
+from scan2morph.stages.quality import modelled
+from scan2morph.store import paths
+from scan2morph.template import Template, subdivide_template
+
+#: Config sections this stage reads (``template`` for the subdivision level).
+SECTIONS = ("morph", "template")
+#: Why a subject without viseme takes gets no PCA or blends (recorded in the store).
+NO_VISEMES = "no viseme takes: no blend shapes or PCA (the glTF and OBJ hold the neutral only)"
+
+
+def pca_datasets(model: PCAModel) -> dict[str, np.ndarray]:
+    """The ``/pca`` group of the store."""
+    return {
+        paths.pca("mean"): model.mean,
+        paths.pca("components"): model.components,
+        paths.pca("eigenvalues"): model.eigenvalues,
+        paths.pca("cr"): model.cr,
+        paths.pca("ccr"): model.ccr,
+        paths.pca("coefficients"): model.coefficients,
+        paths.pca("takes"): np.asarray(model.names, dtype=object),
+    }
+
+
+def run(
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], config: Mapping
+) -> Part:
+    """PCA, blends and export shapes of one subject.
+
+    Parameters
+    ----------
+    template, subject
+        The base template and the subject (the contract of :mod:`scan2morph.stages`).
+    data : mapping store path -> array
+        The motion part, the neutral's fit part (``mesh/uv``) and repair part (``range/color``).
+    config : mapping section -> mapping
+        The sections ``morph`` (``blends``, ``pca_blends``, ``alpha_limit``) and ``template``.
+
+    Returns
+    -------
+    Part
+        ``/pca/*``, ``/blends/{name}/vertices``, ``/pca_blends/{name}/vertices`` (mm);
+        ``files``: the PCA tables (``eigen``, ``coefficients``), the ``faces``, ``uv`` and
+        ``texture`` of the neutral, the glTF morph ``targets`` and the OBJ ``shapes``. A subject
+        without visemes gets no datasets, empty tables, the neutral alone as its shapes, and
+        the reason under ``/skipped`` (attribute ``morph``).
+    """
+    subject = modelled(subject, data)
+    m, name, neutral = config["morph"], subject.name, subject.neutral
+    faces = subdivide_template(template, int(config["template"]["subdivision_levels"])).faces
+    base = need(data, paths.neutral("vertices"), name)
+    files = {
+        "eigen": pd.DataFrame(columns=["component", "eigenvalue", "cr", "ccr"]),
+        "coefficients": pd.DataFrame(columns=["take"]),
+        "faces": faces,
+        "uv": need(data, paths.mesh(neutral, "uv"), name),
+        "texture": need(data, paths.range_image(neutral, "color"), name),
+        "targets": {},
+        "shapes": {"neutral": base},
+    }
+    if not subject.visemes:
+        return Part(attrs={paths.SKIPPED: {"morph": NO_VISEMES}}, files=files)
+    models = {t: need(data, paths.viseme(t, "model"), name) for t in subject.visemes}
+    model, blends, pca_shapes = subject_morph(
+        base, models, subject.labels, m["blends"], m["pca_blends"], m["alpha_limit"], source=name
+    )
+    datasets = pca_datasets(model)
+    datasets |= {paths.blend(k): v for k, v in blends.items()}
+    datasets |= {paths.pca_blend(k): v for k, v in pca_shapes.items()}
+    eigen, coefficients = pca_tables(model)
+    files |= {
+        "eigen": pd.DataFrame(eigen),
+        "coefficients": pd.DataFrame(coefficients),
+        "targets": models | pca_component_targets(model),
+        "shapes": {"neutral": base, **models, **blends, **pca_shapes},
+    }
+    return Part(datasets, files=files)
+
+
+def write_files(part: Part, eigen: str, coefficients: str, glb: str, models: str) -> None:
+    """Write the PCA tables (TSV), the glTF with one morph target per viseme and PCA component,
+    and one OBJ per model and blend into the folder ``models``."""
+    f = part.files
+    f["eigen"].to_csv(eigen, sep="\t", index=False, float_format="%.6g")
+    f["coefficients"].to_csv(coefficients, sep="\t", index=False, float_format="%.6g")
+    base = f["shapes"]["neutral"]
+    write_glb(glb, base, f["faces"], uv=f["uv"], texture=f["texture"], targets=f["targets"])
+    folder = Path(models)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, shape in f["shapes"].items():
+        write_obj(folder / f"{name}.obj", shape, f["faces"], uv=f["uv"], texture=f["texture"])

@@ -1,0 +1,122 @@
+"""Motion: viseme motion vectors with the stencil mask and Laplacian smoothing, viseme models
+(Yano & Harada 2009, sec. 4), and expression displacement fields (for the modal stage)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
+from scan2morph.stages.part import Part, Run, Subject, need
+from scan2morph.stages.quality import aligned_takes
+from scan2morph.store import paths
+from scan2morph.template import Template, subdivide_template
+from scan2morph.template.regions import named_indices
+
+#: Config sections this stage reads (``template`` for the subdivision level).
+SECTIONS = ("mask", "smoothing", "template", "quality")
+log = logging.getLogger("scan2morph")
+
+
+@dataclass(frozen=True)
+class Params:
+    """Motion parameters.
+
+    Attributes
+    ----------
+    levels : int
+        Template subdivisions.
+    mask_paths : list of (str, str)
+        Named start and goal points of the Dijkstra paths that seed the stencil mask.
+    radius_mm : float
+        Sphere radius of the mask, mm.
+    w : float
+        Laplacian smoothing weight.
+    iterations : int
+        Smoothing iterations.
+    include_failed : bool
+        Keep takes whose alignment failed its gate (``quality.include_failed_takes``).
+    """
+
+    levels: int
+    mask_paths: list
+    radius_mm: float
+    w: float
+    iterations: int
+    include_failed: bool = False
+
+    @classmethod
+    def from_config(
+        cls, mask: Mapping, smoothing: Mapping, template: Mapping, quality: Mapping
+    ) -> Params:
+        """From the config sections ``mask``, ``smoothing``, ``template`` and ``quality``."""
+        return cls(
+            int(template["subdivision_levels"]),
+            list(mask["paths"]),
+            mask["radius_mm"],
+            smoothing["w"],
+            smoothing["iterations"],
+            bool(quality["include_failed_takes"]),
+        )
+
+
+def aligned_mesh(data: Mapping[str, np.ndarray], take: str, source: str) -> AlignedMesh:
+    """A take's aligned mesh and validity from its fit and align parts."""
+    return AlignedMesh(
+        need(data, paths.align(take, "vertices"), source),
+        need(data, paths.mesh(take, "valid"), source),
+    )
+
+
+def run(
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
+) -> Part:
+    """Motion of every viseme and displacement of every expression of one subject.
+
+    Parameters
+    ----------
+    template, subject
+        The base template and the subject (the contract of :mod:`scan2morph.stages`).
+    data : mapping store path -> array
+        The fit and align parts of every take.
+    params : Params
+
+    Returns
+    -------
+    Part
+        ``/mask/*``, ``/neutral/*``, ``/visemes/{take}/motion_raw|motion|model`` and
+        ``/expressions/{take}/displacement`` (mm) of every take whose alignment passed its gate
+        (``/takes/{take}/align/ok``; all with ``include_failed``). The later stages model the
+        takes this stage kept.
+    """
+    fine = subdivide_template(template, params.levels)
+    others = [t for t in subject.kinds if t != subject.neutral]
+    subject = subject.keep(aligned_takes(data, others, params.include_failed))
+    name = subject.name
+    neutral = aligned_mesh(data, subject.neutral, name)
+    out = viseme_motion(
+        neutral,
+        {t: aligned_mesh(data, t, name) for t in subject.visemes},
+        fine.faces,
+        named_indices(fine, params.mask_paths, "mask.paths"),
+        params.radius_mm,
+        params.w,
+        params.iterations,
+        source=name,
+    )
+    out |= expression_displacements(
+        neutral, {t: aligned_mesh(data, t, name) for t in subject.expressions}, fine.faces, name
+    )
+    suppressed = out[paths.mask("suppressed")]
+    log.info("%s: %d of %d vertices suppressed", name, suppressed.sum(), len(suppressed))
+    return Part(out)
+
+
+def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
+    """The stage for a subject held in memory."""
+    c = run_.config
+    params = Params.from_config(c["mask"], c["smoothing"], c["template"], c["quality"])
+    return run(run_.template, run_.subject, data, params).datasets

@@ -1,0 +1,94 @@
+"""Motion noise: the click precision measured from the subject's own takes, and the
+click-noise error bar of each viseme's motion (refits with perturbed landmarks; no ground truth).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+
+from scan2morph.motion.uncertainty import subject_motion_noise
+from scan2morph.stages.fit import fiducial_set
+from scan2morph.stages.part import Part, Run, Subject
+from scan2morph.stages.quality import modelled
+from scan2morph.store import paths
+from scan2morph.template import Template, fit_options
+
+#: Config sections this stage reads.
+SECTIONS = ("motion_noise", "smoothing", "template")
+#: Columns of ``tables/motion_noise.tsv``: result key -> column name.
+COLUMNS = {
+    "motion_rms_mm": "motion_rms_mm",
+    "rms_error_mm": "noise_rms_mm",
+    "relative": "noise_relative",
+    "failed_draws": "failed_draws",
+}
+log = logging.getLogger("scan2morph")
+
+
+def run(
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], config: Mapping
+) -> Part:
+    """The error bar of one subject.
+
+    Parameters
+    ----------
+    template, subject
+        The base template and the subject (the contract of :mod:`scan2morph.stages`).
+    data : mapping store path -> array
+        The repair parts of the neutral and the visemes, their align parts and the motion
+        part (the visemes it modelled, ``/mask``).
+    config : mapping section -> mapping
+        The sections ``motion_noise``, ``smoothing`` and ``template``.
+
+    Returns
+    -------
+    Part
+        ``/visemes/{take}/noise_rms_mm`` and ``/motion_noise/*``; ``files["table"]`` is the
+        per-viseme table (``motion_rms_mm``, ``noise_rms_mm``, ``noise_relative``,
+        ``failed_draws``, ``click_noise_px``).
+    """
+    subject = modelled(subject, data)
+    noise_cfg, section = config["motion_noise"], config["template"]
+    fiducials = {t: fiducial_set(section, k) for t, k in subject.kinds.items()}
+    datasets, result, noise = subject_motion_noise(
+        template,
+        data,
+        subject.neutral,
+        subject.visemes,
+        fiducials,
+        config["smoothing"],
+        fit_options(section),
+        noise_cfg,
+        source=subject.name,
+    )
+    log.info("%s: click noise %s", subject.name, noise["note"])
+    for take, name, r in noise["misclicks"]:
+        log.warning(
+            "%s/%s: landmark %d is %.1f px off the others (mis-click?)", subject.name, take, name, r
+        )
+    for take, r in result.items():
+        log.info("%s: click noise moves the motion by %.1f%%", take, 100 * r["relative"])
+    attrs = {
+        paths.MOTION_NOISE: {
+            "draws": noise_cfg["draws"],
+            "seed": noise_cfg["seed"],
+            "click_noise_source": noise["source"],
+            "click_noise_note": noise["note"],
+            "misclicks": [list(m) for m in noise["misclicks"]],
+        }
+    }
+    rows = [{"take": t, **{c: r[k] for k, c in COLUMNS.items()}} for t, r in result.items()]
+    table = pd.DataFrame(rows, columns=["take", *COLUMNS.values()])
+    table["click_noise_px"] = noise["click_noise_px"]
+    if not subject.visemes:
+        attrs[paths.SKIPPED] = {"motion_noise": "no viseme takes: no click-noise error bar"}
+    return Part(datasets, attrs=attrs, files={"table": table})
+
+
+def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
+    """The stage for a subject held in memory."""
+    return run(run_.template, run_.subject, data, run_.config).datasets

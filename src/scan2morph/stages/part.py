@@ -1,0 +1,103 @@
+"""What every stage hands on: the datasets it writes, and the subject it runs for."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.template import Template
+
+
+@dataclass
+class Part:
+    """A stage's result.
+
+    Attributes
+    ----------
+    datasets : dict store path -> array
+        What the stage writes into its part file (paths from :mod:`scan2morph.store.paths`).
+    attrs : dict group path -> dict
+        HDF5 attributes per group (``"/"`` is the root).
+    files : dict
+        Products written beside the part (tables, meshes): name -> object, for the stage's own
+        writer.
+    """
+
+    datasets: dict[str, object] = field(default_factory=dict)
+    attrs: dict[str, dict] = field(default_factory=dict)
+    files: dict[str, object] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Subject:
+    """A subject's takes, in sheet order.
+
+    Attributes
+    ----------
+    name : str
+        Subject id (for messages).
+    kinds : mapping take -> ``neutral`` | ``viseme`` | ``expression``
+    labels : mapping take -> label (``car``, ``smile``, ...)
+    """
+
+    name: str
+    kinds: Mapping[str, str]
+    labels: Mapping[str, str]
+
+    @property
+    def neutral(self) -> str:
+        """The one neutral take."""
+        neutral = [t for t, k in self.kinds.items() if k == "neutral"]
+        if len(neutral) != 1:
+            raise InputError(self.name, f"takes: expected exactly one neutral take, got {neutral}")
+        return neutral[0]
+
+    @property
+    def visemes(self) -> list[str]:
+        return [t for t, k in self.kinds.items() if k == "viseme"]
+
+    @property
+    def expressions(self) -> list[str]:
+        return [t for t, k in self.kinds.items() if k == "expression"]
+
+    def keep(self, takes) -> Subject:
+        """The same subject with only the neutral and ``takes`` (e.g. those a stage used)."""
+        keep = set(takes) | {self.neutral}
+        return Subject(
+            self.name,
+            {t: k for t, k in self.kinds.items() if t in keep},
+            {t: lab for t, lab in self.labels.items() if t in keep},
+        )
+
+    def source(self, take: str | None = None) -> str:
+        """``subject`` or ``subject/take``, for messages."""
+        return self.name if take is None else f"{self.name}/{take}"
+
+
+@dataclass(frozen=True)
+class Run:
+    """A whole subject run in memory (the parameter sweeps).
+
+    Attributes
+    ----------
+    subject : Subject
+    template : Template
+        The base template (``resources/template.npz``).
+    config : mapping section -> mapping
+        The config sections the stages read (``repair``, ``template``, ``align``, ``mask``,
+        ``smoothing``, ``motion_noise``), with any swept values set.
+    """
+
+    subject: Subject
+    template: Template
+    config: Mapping[str, Mapping]
+
+
+def need(data: Mapping[str, np.ndarray], key: str, source: str) -> np.ndarray:
+    """``data[key]``, or a clear error naming the dataset and where it was expected from."""
+    if key not in data:
+        raise InputError(source, f"{key}: missing (expected from the parts of earlier stages)")
+    return data[key]

@@ -1,0 +1,160 @@
+"""Quality gates: one list of warnings per subject, and which takes the models leave out.
+
+Every stage that can go quietly wrong records how it went (ICP convergence, fitness and RMSE;
+folded triangles and valid share of a fit; refused refits and click precision of the error bar).
+This module turns those records into one list of warnings, written to the store (``/warnings``),
+shown first in the report and copied into ``accuracy.json``. A take whose alignment failed its
+gate is left out of the models (motion, PCA, modal coordinates) unless the config's
+``quality.include_failed_takes`` says otherwise: a model built on a misaligned take moves the
+whole face.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import h5py
+import numpy as np
+
+from scan2morph.store import paths
+
+#: Config section this module reads.
+SECTIONS = ("quality",)
+
+
+@dataclass(frozen=True)
+class Warning:
+    """One problem of one subject.
+
+    Attributes
+    ----------
+    stage : str
+        The stage that found it (``align``, ``fit``, ``motion_noise``, ...).
+    take : str
+        The take it concerns (empty: the whole subject).
+    message : str
+        What went wrong and what was done about it, in one line.
+    """
+
+    stage: str
+    take: str
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.take}: " if self.take else ""
+        return f"[{self.stage}] {where}{self.message}"
+
+
+def aligned_takes(data: Mapping[str, np.ndarray], takes, include_failed: bool) -> list[str]:
+    """The takes whose alignment passed its gate (``/takes/{take}/align/ok``), or all of
+    ``takes`` with ``include_failed`` (``quality.include_failed_takes``)."""
+    return [t for t in takes if include_failed or bool(data.get(paths.align(t, "ok"), True))]
+
+
+def modelled(subject, data: Mapping[str, np.ndarray]):
+    """The subject restricted to the takes the motion stage modelled (its datasets in ``data``):
+    what the stages after it work on."""
+    takes = [t for t in subject.visemes if paths.viseme(t, "model") in data]
+    takes += [t for t in subject.expressions if paths.expression(t, "displacement") in data]
+    return subject.keep(takes)
+
+
+def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
+    """Every warning of a subject's merged store.
+
+    Parameters
+    ----------
+    h5 : h5py.File
+        The subject's store (open for reading).
+    settings : mapping
+        The config section ``quality``: ``include_failed_takes`` (bool), ``max_click_noise_px``
+        (px), ``min_valid_fraction`` (share of template vertices with data).
+
+    Returns
+    -------
+    list of Warning
+        In stage order, then take order.
+    """
+    out: list[Warning] = []
+    takes = h5.get(paths.TAKES, {})
+    for take in takes:
+        valid = h5.get(paths.mesh(take, "valid"))
+        if valid is not None and valid[()].mean() < settings["min_valid_fraction"]:
+            share = 100 * valid[()].mean()
+            out.append(Warning("fit", take, f"only {share:.0f}% of the template has data"))
+        folded = int(takes[take].attrs.get("n_folded", 0))
+        if folded:
+            out.append(Warning("fit", take, f"{folded} folded triangles in the fitted template"))
+    for take in takes:
+        if bool(h5.get(paths.align(take, "ok"), True)[()]):
+            continue
+        problems = json.loads(h5[paths.align_group(take)].attrs.get("problems", "[]")) or [
+            "the alignment failed its quality gate"
+        ]
+        if problems:
+            fate = (
+                "kept in the models (quality.include_failed_takes)"
+                if settings["include_failed_takes"]
+                else "left out of the models"
+            )
+            out.append(Warning("align", take, f"{'; '.join(problems)}: {fate}"))
+    out += _motion_noise_warnings(h5, settings)
+    return out
+
+
+def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
+    out = []
+    if paths.motion_noise("failed_draws") in h5:
+        names = h5[paths.motion_noise("takes")].asstr()[()]
+        failed = h5[paths.motion_noise("failed_draws")][()]
+        draws = int(h5[paths.MOTION_NOISE].attrs.get("draws", 0))
+        for take, n in zip(names, failed, strict=True):
+            if n:
+                message = (
+                    f"{int(n)} of {draws} click-noise refits refused: its error bar is partial"
+                )
+                out.append(Warning("motion_noise", str(take), message))
+    key = paths.motion_noise("click_noise_measured_px")
+    if key in h5:
+        measured = float(h5[key][()])
+        limit = float(settings["max_click_noise_px"])
+        if np.isfinite(measured) and measured > limit:
+            message = (
+                f"the landmark clicks scatter by {measured:.2f} px, above {limit:g} px: the motion "
+                "of small visemes is not to be trusted"
+            )
+            out.append(Warning("motion_noise", "", message))
+    return out
+
+
+def warning_datasets(warnings: list[Warning]) -> dict[str, np.ndarray]:
+    """The ``/warnings`` group of the store: ``stage``, ``take`` and ``message``, one per warning."""
+    return {
+        paths.warnings(field): np.asarray([getattr(w, field) for w in warnings], dtype=object)
+        for field in ("stage", "take", "message")
+    }
+
+
+def read_warnings(data: Mapping[str, np.ndarray]) -> list[Warning]:
+    """The warnings of a store (an open h5py file, or a mapping from
+    :func:`scan2morph.store.read_part`); none for a store written before format 1.2."""
+    if paths.warnings("message") not in data:
+        return []
+    cols = [_text(data[paths.warnings(f)]) for f in ("stage", "take", "message")]
+    return [Warning(str(s), str(t), str(m)) for s, t, m in zip(*cols, strict=True)]
+
+
+def _text(value) -> list[str]:
+    if hasattr(value, "asstr"):  # an h5py dataset
+        value = value.asstr()[()]
+    return [str(v) for v in np.asarray(value, dtype=object).tolist()]
+
+
+def skipped_stages(h5: h5py.File) -> dict[str, str]:
+    """Stages (or parts of them) a subject skipped: name -> why."""
+    group = h5.get(paths.SKIPPED)
+    if group is None:
+        return {}
+    return {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in group.attrs.items()}

@@ -1,0 +1,63 @@
+"""Store: merge a subject's parts into its versioned HDF5 file, add its warnings, check it."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import h5py
+
+from scan2morph.errors import InputError
+from scan2morph.stages.quality import subject_warnings, warning_datasets
+from scan2morph.store import merge_parts, validate_store
+from scan2morph.store.hdf5 import write_datasets
+
+#: Config section this stage reads.
+SECTIONS = ("quality",)
+log = logging.getLogger("scan2morph")
+
+
+def run(
+    path: str | Path,
+    parts: Iterable[str | Path],
+    subject: str,
+    config_sha256: str,
+    quality: Mapping,
+    layout: dict,
+) -> list:
+    """Write ``results/{subject}/{subject}.h5``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The store (replaced).
+    parts : iterable of paths
+        Every stage part of the subject.
+    subject, config_sha256 : str
+        Root attributes.
+    quality : mapping
+        The config section ``quality`` (:func:`scan2morph.stages.quality.subject_warnings`).
+    layout : dict
+        ``schemas/store.layout.yaml``, loaded.
+
+    Returns
+    -------
+    list of Warning
+        The subject's warnings, also written to ``/warnings`` and logged.
+
+    Raises
+    ------
+    InputError
+        Two parts writing one dataset, or a store that does not match the layout.
+    """
+    merge_parts(path, parts, subject, config_sha256)
+    with h5py.File(path, "r") as h5:
+        warnings = subject_warnings(h5, quality)
+    write_datasets(path, warning_datasets(warnings))
+    for warning in warnings:
+        log.warning("%s: %s", subject, warning)
+    problems = validate_store(path, layout)
+    if problems:
+        raise InputError(path, "does not match schemas/store.layout.yaml: " + "; ".join(problems))
+    return warnings

@@ -1,0 +1,317 @@
+"""Parameter sweeps: accuracy against ground truth as a function of config values.
+
+A sweep table (``config/sweeps.tsv``) has one column per swept config key, named by its dotted
+path (``smoothing.iterations``, ``mask.radius_mm``, ``template.subdivision_levels``), and one row
+per combination. :func:`read_sweep_table` checks it against the config schema before anything
+runs. For one combination and one synthetic subject, :func:`rerun_accuracy` re-runs the stages
+from the first one that reads a swept key with the changed values, starting from the subject's
+store (and its ingest parts for repair): the same stage functions the workflow runs
+(:mod:`scan2morph.stages`), then the accuracy stage. Which stage reads which config section
+comes from the stage modules (``SECTIONS``), which datasets a stage writes from
+:mod:`scan2morph.store.paths`. The summary table and plot are :mod:`scan2morph.report.sweep`'s.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+from jsonschema import Draft202012Validator, validators
+
+from scan2morph.errors import InputError
+from scan2morph.evaluate.truth import Truth
+from scan2morph.stages import accuracy, align, fit, motion, motion_noise, repair
+from scan2morph.stages.part import Run
+from scan2morph.store import paths
+
+#: The stages a sweep can re-run, in pipeline order (the accuracy stage always follows).
+_MODULES = {
+    "repair": repair,
+    "fit": fit,
+    "align": align,
+    "motion": motion,
+    "motion_noise": motion_noise,
+}
+STAGES = tuple(_MODULES)
+#: Config sections a sweep may vary -> the first stage that reads them.
+SECTION_STAGE = {
+    section: next(s for s, module in _MODULES.items() if section in module.SECTIONS)
+    for section in dict.fromkeys(sec for module in _MODULES.values() for sec in module.SECTIONS)
+}
+
+#: JSON Schema types a swept value may have (a value becomes part of a folder name).
+_SCALAR_TYPES = {"integer", "number", "string", "boolean"}
+_SAFE_STRING = re.compile(r"^[A-Za-z0-9_.+-]+$")
+
+
+def _strict_validator(schema: dict):
+    """A Draft 2020-12 validator whose ``integer`` excludes floats (JSON Schema lets 30.0 pass,
+    but a float iteration count breaks the stage that reads it)."""
+    checker = Draft202012Validator.TYPE_CHECKER.redefine(
+        "integer", lambda _, value: isinstance(value, int) and not isinstance(value, bool)
+    )
+    return validators.extend(Draft202012Validator, type_checker=checker)(schema)
+
+
+@dataclass(frozen=True)
+class SweepTable:
+    """A checked sweep table.
+
+    Attributes
+    ----------
+    source : str
+        The file read.
+    columns : tuple of str
+        Dotted config paths, in file order.
+    rows : tuple of dict
+        One per combination: column -> value (Python ``int``, ``float``, ``bool`` or ``str``).
+    """
+
+    source: str
+    columns: tuple[str, ...]
+    rows: tuple[dict[str, object], ...]
+
+    @property
+    def folder_names(self) -> dict[str, str]:
+        """Column -> its name in result folders: the dotted path with ``.`` replaced by ``_``
+        (``smoothing.iterations`` -> ``smoothing_iterations``), a Python identifier."""
+        return {c: folder_name(c) for c in self.columns}
+
+    def frame(self) -> pd.DataFrame:
+        """The rows as a DataFrame of Python objects, columns named by :attr:`folder_names`.
+
+        For ``snakemake.utils.Paramspace``, which names folders ``{column}~{value}`` and reads
+        rows as named tuples (so columns must be identifiers).
+        """
+        frame = pd.DataFrame(list(self.rows), columns=list(self.columns), dtype=object)
+        return frame.rename(columns=self.folder_names)
+
+    @property
+    def first_stage(self) -> str | None:
+        """The earliest stage reading a swept key (None for an empty table)."""
+        return first_stage(self.columns) if self.columns else None
+
+
+def folder_name(column: str) -> str:
+    """A swept column's name in result folders (see :attr:`SweepTable.folder_names`)."""
+    return column.replace(".", "_")
+
+
+def first_stage(columns: Sequence[str]) -> str:
+    """The earliest of :data:`STAGES` that reads one of the dotted config paths ``columns``."""
+    return min((SECTION_STAGE[c.split(".")[0]] for c in columns), key=STAGES.index)
+
+
+def _subschema(schema: dict, column: str, source: str) -> dict:
+    node = schema
+    parts = column.split(".")
+    for depth, part in enumerate(parts):
+        props = node.get("properties", {}) if isinstance(node, dict) else {}
+        if part not in props:
+            where = ".".join(parts[:depth]) or "the top level"
+            known = ", ".join(sorted(props)) or "none"
+            raise InputError(
+                source,
+                f"column {column!r}: names no config key (no {part!r} under {where}; "
+                f"keys there: {known})",
+            )
+        node = props[part]
+    return node
+
+
+def _parse_value(text: str):
+    """A cell's text as int, float, bool or str (YAML-like, but 1e-3 is a float)."""
+    for convert in (int, float):
+        try:
+            value = convert(text)
+        except ValueError:
+            continue
+        return value
+    low = text.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    return text
+
+
+def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTable:
+    """Read and check a sweep table.
+
+    The file is tab-separated; blank lines and lines starting with ``#`` are skipped, the first
+    other line is the header. Each column names a config key by its dotted path, in a section a
+    sweep can re-run (:data:`SECTION_STAGE`), whose schema type is a scalar; each cell must be
+    valid for that key's schema (type, bounds, enum).
+
+    Parameters
+    ----------
+    path : str or Path
+        The table (``config/sweeps.tsv``).
+    schema : mapping, str or Path
+        The config JSON Schema (``schemas/config.schema.yaml``) or its file.
+
+    Returns
+    -------
+    SweepTable
+
+    Raises
+    ------
+    InputError
+        Missing file; a column that names no config key, sits outside the sweepable sections or
+        is not a scalar; a ragged or repeated row; a value of the wrong type or out of range;
+        a string value that cannot be part of a folder name.
+    """
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise InputError(source, "sweep table not found")
+    if not isinstance(schema, Mapping):
+        with open(schema, encoding="utf-8") as fh:
+            schema = yaml.safe_load(fh)
+    lines = [
+        (n, line.rstrip("\r\n"))
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1)
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    if not lines:
+        return SweepTable(source, (), ())
+    columns = tuple(c.strip() for c in lines[0][1].split("\t"))
+    if len(set(columns)) != len(columns):
+        raise InputError(source, f"header: repeated column in {list(columns)}")
+    folders = [folder_name(c) for c in columns]
+    if len(set(folders)) != len(folders):
+        raise InputError(
+            source, f"header: columns {list(columns)} give the same folder names {folders}"
+        )
+    checks = {}
+    for column in columns:
+        section = column.split(".")[0]
+        sub = _subschema(dict(schema), column, source)
+        if section not in SECTION_STAGE:
+            raise InputError(
+                source,
+                f"column {column!r}: a sweep re-runs the stages from repair to accuracy, so it "
+                f"can vary keys of {sorted(SECTION_STAGE)}, not of {section!r}",
+            )
+        types = sub.get("type")
+        types = {types} if isinstance(types, str) else set(types or ())
+        if not types or not types <= _SCALAR_TYPES:
+            raise InputError(
+                source,
+                f"column {column!r}: a swept key must hold a scalar, this one is {sorted(types) or 'untyped'}",
+            )
+        checks[column] = _strict_validator(sub)
+    rows: list[dict[str, object]] = []
+    seen: dict[tuple, int] = {}
+    for n, line in lines[1:]:
+        cells = [c.strip() for c in line.split("\t")]
+        if len(cells) != len(columns):
+            raise InputError(
+                source, f"line {n}: {len(cells)} fields, expected {len(columns)} (one per column)"
+            )
+        row = {}
+        for column, cell in zip(columns, cells, strict=True):
+            where = f"line {n}, column {column!r}"
+            if not cell:
+                raise InputError(source, f"{where}: empty value")
+            value = _parse_value(cell)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise InputError(source, f"{where}: {cell!r} is not a finite number")
+            error = next(iter(checks[column].iter_errors(value)), None)
+            if error is not None:
+                raise InputError(
+                    source,
+                    f"{where}: {error.message} (schemas/config.schema.yaml: {column} is "
+                    f"{checks[column].schema.get('type')}: {checks[column].schema.get('description', '')})",
+                )
+            if isinstance(value, str) and not _SAFE_STRING.match(value):
+                raise InputError(
+                    source, f"{where}: {cell!r}: expected letters, digits and . _ + - only"
+                )
+            row[column] = value
+        key = tuple(row.values())
+        if key in seen:
+            raise InputError(source, f"line {n}: repeats the combination of line {seen[key]}")
+        seen[key] = n
+        rows.append(row)
+    return SweepTable(source, columns, tuple(rows))
+
+
+def sweep_settings(config: Mapping, row: Mapping[str, object]) -> dict[str, dict]:
+    """The config sections a sweep reads (:data:`SECTION_STAGE`) with one combination set.
+
+    Parameters
+    ----------
+    config : mapping
+        The run's (validated) config.
+    row : mapping
+        Dotted config path -> value.
+
+    Returns
+    -------
+    dict
+        Section name -> a deep copy of the section with the row's values in place.
+    """
+    settings = {s: copy.deepcopy(dict(config.get(s, {}))) for s in SECTION_STAGE}
+    for column, value in row.items():
+        *parents, leaf = column.split(".")
+        node = settings
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value.item() if isinstance(value, np.generic) else value
+    return settings
+
+
+def rerun_accuracy(
+    store: Mapping[str, np.ndarray],
+    run: Run,
+    truths: Mapping[str, Truth],
+    start: str,
+    raw: Mapping[str, np.ndarray] | None = None,
+) -> dict:
+    """Re-run the stages from ``start`` with a run's settings and measure the accuracy.
+
+    The subject's store provides everything upstream of ``start``; the datasets that ``start``
+    and every later stage write (:func:`scan2morph.store.paths.written_by`, including morph and
+    modal, which a sweep does not re-run: nothing stale is measured) are dropped, the stages'
+    ``apply`` functions recompute theirs in memory, and the accuracy stage measures the result.
+
+    Parameters
+    ----------
+    store : mapping store path -> array
+        The subject's store (``read_part(results/{subject}/{subject}.h5)``).
+    run : Run
+        The subject, the base template and the config sections with the combination's values
+        (:func:`sweep_settings`).
+    truths : mapping take -> Truth
+        Ground truth of every take.
+    start : str
+        One of :data:`STAGES`.
+    raw : mapping store path -> array, optional
+        The ingest parts' datasets of every take; needed when ``start`` is ``repair``.
+
+    Returns
+    -------
+    dict
+        As ``accuracy.json`` (:func:`scan2morph.stages.accuracy.run`).
+
+    Raises
+    ------
+    InputError
+        Unknown stage, a missing dataset, or any stage's own bad-input error.
+    """
+    source = run.subject.name
+    if start not in STAGES:
+        raise InputError(source, f"start stage: expected one of {STAGES}, got {start!r}")
+    step = paths.STAGES.index(start)
+    drop = paths.written_by(paths.STAGES[step:])
+    data = {k: v for k, v in store.items() if not drop.match(k)}
+    data |= dict(raw or {})
+    for name in STAGES[STAGES.index(start) :]:
+        data |= _MODULES[name].apply(data, run)
+    return accuracy.run(run.template, run.subject, data, truths, run.config)

@@ -1,0 +1,84 @@
+"""Quality gates: warnings from a store's records, takes left out of the models."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from scan2morph.stages import Subject
+from scan2morph.stages.quality import (
+    Warning,
+    aligned_takes,
+    modelled,
+    read_warnings,
+    skipped_stages,
+    subject_warnings,
+    warning_datasets,
+)
+from scan2morph.store import paths, read_part, write_part
+
+SETTINGS = {"include_failed_takes": False, "max_click_noise_px": 1.5, "min_valid_fraction": 0.5}
+
+
+@pytest.fixture
+def store(tmp_path):
+    valid = np.ones(10, bool)
+    sparse = valid.copy()
+    sparse[:7] = False
+    data = {
+        paths.mesh("n", "valid"): valid,
+        paths.mesh("car", "valid"): valid,
+        paths.mesh("smile", "valid"): sparse,
+        paths.align("n", "ok"): np.bool_(True),
+        paths.align("car", "ok"): np.bool_(True),
+        paths.align("smile", "ok"): np.bool_(False),
+        paths.motion_noise("takes"): ["car"],
+        paths.motion_noise("failed_draws"): np.array([3]),
+        paths.motion_noise("click_noise_measured_px"): np.float64(2.25),
+    }
+    attrs = {
+        paths.take("car"): {"n_folded": 2},
+        paths.align_group("smile"): {"problems": ["ICP did not converge (50 iterations)"]},
+        paths.MOTION_NOISE: {"draws": 16},
+        paths.SKIPPED: {"morph": "no viseme takes"},
+    }
+    path = tmp_path / "s.h5"
+    write_part(path, data, attrs=attrs)
+    return path
+
+
+def test_every_gate_gives_one_line(store):
+    with h5py.File(store) as h5:
+        warnings = subject_warnings(h5, SETTINGS)
+        assert skipped_stages(h5) == {"morph": "no viseme takes"}
+    assert [str(w) for w in warnings] == [
+        "[fit] car: 2 folded triangles in the fitted template",
+        "[fit] smile: only 30% of the template has data",
+        "[align] smile: ICP did not converge (50 iterations): left out of the models",
+        "[motion_noise] car: 3 of 16 click-noise refits refused: its error bar is partial",
+        "[motion_noise] the landmark clicks scatter by 2.25 px, above 1.5 px: the motion of "
+        "small visemes is not to be trusted",
+    ]
+    kept = subject_warnings(h5py.File(store), SETTINGS | {"include_failed_takes": True})
+    assert "kept in the models (quality.include_failed_takes)" in kept[2].message
+
+
+def test_warnings_round_trip_through_the_store(store, tmp_path):
+    warnings = [Warning("align", "smile", "bad"), Warning("motion_noise", "", "noisy")]
+    write_part(tmp_path / "w.h5", warning_datasets(warnings))
+    assert read_warnings(read_part(tmp_path / "w.h5")) == warnings
+    with h5py.File(tmp_path / "w.h5") as h5:
+        assert read_warnings(h5) == warnings
+    write_part(tmp_path / "none.h5", warning_datasets([]))
+    assert read_warnings(read_part(tmp_path / "none.h5")) == []
+    assert read_warnings({}) == []  # a store from before format 1.2
+
+
+def test_failed_alignments_are_left_out_of_the_models(store):
+    data = read_part(store)
+    assert aligned_takes(data, ["car", "smile"], include_failed=False) == ["car"]
+    assert aligned_takes(data, ["car", "smile"], include_failed=True) == ["car", "smile"]
+    subject = Subject("s", {"n": "neutral", "car": "viseme", "smile": "expression"}, {})
+    motion = {paths.viseme("car", "model"): np.zeros((10, 3))}
+    assert modelled(subject, motion).kinds == {"n": "neutral", "car": "viseme"}

@@ -1,0 +1,96 @@
+"""The stage contract: each stage's parameters from its config sections, the datasets it owns,
+and the sweep's stage table derived from the stage modules."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from scan2morph.errors import InputError
+from scan2morph.stages import Subject, align, fit, modal, motion
+from scan2morph.store import paths, read_part
+from scan2morph.sweep import SECTION_STAGE, STAGES
+from tests.tiny_run import SUBJECT, TAKES, tiny_run
+
+CONFIG = yaml.safe_load(
+    (Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text()
+)
+
+
+def test_subject_takes_by_kind_in_sheet_order():
+    s = Subject("s1", {"n": "neutral", "b": "viseme", "x": "expression", "a": "viseme"}, {})
+    assert (s.neutral, s.visemes, s.expressions) == ("n", ["b", "a"], ["x"])
+    assert s.source("a") == "s1/a"
+    with pytest.raises(InputError, match=r"s2: takes: expected exactly one neutral take, got \[\]"):
+        _ = Subject("s2", {"a": "viseme"}, {}).neutral
+    with pytest.raises(InputError, match=r"got \['n', 'm'\]"):
+        _ = Subject("s3", {"n": "neutral", "m": "neutral"}, {}).neutral
+
+
+def test_fiducial_set_of_each_kind():
+    section = CONFIG["template"]
+    assert fit.Params.from_config(section, "viseme").fiducial_set == section["fiducials"]["viseme"]
+    # a kind the config does not name gets the closed-mouth set
+    assert fit.fiducial_set({"fiducials": {}}, "expression") == "closed"
+    assert fit.Params.from_config(section, "neutral").options["levels"] == 1
+
+
+def test_params_from_config_sections():
+    a = align.Params.from_config(CONFIG["align"], CONFIG["template"])
+    assert a.point_pairs == CONFIG["align"]["point_pairs"]
+    assert "point_pairs" not in a.icp and "icp_region" not in a.icp
+    assert a.icp["max_iterations"] == CONFIG["align"]["max_iterations"]
+    m = motion.Params.from_config(
+        CONFIG["mask"], CONFIG["smoothing"], CONFIG["template"], CONFIG["quality"]
+    )
+    assert (m.radius_mm, m.w, m.iterations) == (20.0, 0.1, 30)  # the paper's values
+    assert m.include_failed is False
+    p = modal.Params.from_config(CONFIG["modal"], CONFIG["template"], threads=2)
+    assert p.modal.thickness_mm == 1.0 and p.modal.threads == 2
+
+
+def test_semantic_takes_first_take_of_each_label():
+    s = Subject(
+        "s",
+        {"n": "neutral", "sm1": "expression", "sad1": "expression", "sm2": "expression"},
+        {"n": "neutral", "sm1": "smile", "sad1": "sad", "sm2": "smile"},
+    )
+    assert modal.semantic_takes(s, ["sad", "smile", "anger"]) == ["sad1", "sm1"]
+
+
+def test_sweep_stage_table_is_derived_from_the_stage_modules():
+    assert STAGES == ("repair", "fit", "align", "motion", "motion_noise")
+    assert SECTION_STAGE == {
+        "repair": "repair",
+        "template": "fit",
+        "align": "align",
+        "mask": "motion",
+        "smoothing": "motion",
+        "quality": "motion",
+        "motion_noise": "motion_noise",
+    }
+
+
+@pytest.mark.slow
+def test_each_part_holds_the_datasets_its_stage_owns(tmp_path_factory):
+    """Every dataset of a stage's part is written by that stage (paths.DATASETS), or passed on
+    from an earlier one; and every dataset of the store comes from the part of its stage."""
+    takes = [t["take"] for t in TAKES]
+    parts = {f"takes/{t}/{s}.h5": s for t in takes for s in ("ingest", "repair", "fit", "align")}
+    parts |= {f"{s}.h5": s for s in ("motion", "motion_noise", "morph", "modal")}
+    parts[f"{SUBJECT}.h5"] = "store"
+    parts["template.h5"] = "fit"
+    run = tiny_run(tmp_path_factory, [f"results/{SUBJECT}/{SUBJECT}.h5"])
+    owner = {}
+    for rel, stage in parts.items():
+        keys = read_part(run.path("results", SUBJECT, rel)).keys()
+        later = paths.written_by(paths.STAGES[paths.STAGES.index(stage) + 1 :])
+        assert not [k for k in keys if later.match(k)], rel
+        own = paths.written_by([stage])
+        assert any(own.match(k) for k in keys), rel
+        owner |= {k: stage for k in keys if own.match(k)}
+    store = read_part(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
+    for key in store:
+        assert owner.get(key) is not None and paths.written_by([owner[key]]).match(key), key
