@@ -32,11 +32,12 @@ $(STAMP): requirements.lock pyproject.toml | $(DEB_STAMP)
 	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
 	@touch $@
 
+# `make run CONFIG=my.yaml`: your own config file on top of config/config.yaml (its keys win).
 run: setup
-	$(BIN)/snakemake --cores $(CORES) --keep-going --rerun-incomplete
+	$(BIN)/snakemake --cores $(CORES) --keep-going --rerun-incomplete $(if $(CONFIG),--configfile $(CONFIG))
 
 dry-run: setup
-	$(BIN)/snakemake -n
+	$(BIN)/snakemake -n $(if $(CONFIG),--configfile $(CONFIG))
 
 test: setup
 	$(BIN)/python -m pytest -q
