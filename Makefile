@@ -7,12 +7,19 @@ CORES ?= 2
 # Debian packages: libusb for open3d, EGL/OSMesa for headless rendering, chromium for the report test.
 DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium
 STAMP := $(VENV)/.setup-stamp
+# The Khronos glTF validator (npm; tests/test_gltf_viewer.py), installed with `npm ci` from the
+# committed lock. node and npm come from Debian (nodejs npm) only when npm is absent: a NodeSource
+# nodejs bundles npm and conflicts with Debian's npm package.
+NODE_DEB_PACKAGES := nodejs npm
+VALIDATOR := tools/gltf-validator
+VALIDATOR_STAMP := $(VALIDATOR)/node_modules/.ci-stamp
 DEB_STAMP := $(VENV)/.deb-stamp
 export PYOPENGL_PLATFORM ?= osmesa
 
 .PHONY: setup run test bench lint dry-run clean
 
 setup: $(STAMP)
+setup: $(VALIDATOR_STAMP)
 
 $(DEB_STAMP):
 	@missing=""; for p in $(DEB_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
@@ -30,6 +37,14 @@ $(STAMP): requirements.lock pyproject.toml | $(DEB_STAMP)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
+	@touch $@
+
+$(VALIDATOR_STAMP): $(VALIDATOR)/package.json $(VALIDATOR)/package-lock.json | $(DEB_STAMP)
+	@command -v npm >/dev/null 2>&1 || { \
+	  echo "installing Debian packages: $(NODE_DEB_PACKAGES)"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $(NODE_DEB_PACKAGES); }
+	cd $(VALIDATOR) && npm ci --no-audit --no-fund --loglevel=error
 	@touch $@
 
 # `make run CONFIG=my.yaml`: your own config file on top of config/config.yaml (its keys win).

@@ -19,7 +19,7 @@ from scan2morph.render.figures import (
 )
 from scan2morph.render.fit_figures import fig_model
 from scan2morph.render.modal_figures import fig_expressions
-from scan2morph.render.morph_figures import blend_title, fig_gradual, pca_alphas
+from scan2morph.render.morph_figures import blend_title, fig_eigen, fig_gradual, pca_alphas
 from scan2morph.render.motion_figures import fig_click_noise, fig_distance, fig_mask
 from scan2morph.render.source import (
     StoreMapping,
@@ -205,7 +205,11 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
         paths.pca("ccr"): np.cumsum(eig) / eig.sum(),
         paths.pca("coefficients"): centred @ comps.T,
         paths.pca("takes"): np.asarray(["neutral", "car", "too"], dtype=object),
+        # the default convention: sigma = sample std of the coefficients
+        paths.pca("sigma"): np.std(centred @ comps.T, axis=0, ddof=1),
+        paths.pca("sigma_convention"): "sample",
     }
+    sigma = store[paths.pca("sigma")]
     for label in ("car", "too"):
         for pct in (30, 60, 90):
             store[paths.blend(f"{label}_{pct}")] = neutral + pct / 100 * (models[label] - neutral)
@@ -213,7 +217,7 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
         neutral + 0.5 * (models["too"] - neutral) + 0.2 * (models["car"] - neutral)
     )
     store[paths.pca_blend("pca_blend1")] = mean + (
-        0.5 * np.sqrt(eig[0]) * comps[0] + 1.0 * np.sqrt(eig[1]) * comps[1]
+        0.5 * sigma[0] * comps[0] + 1.0 * sigma[1] * comps[1]
     ).reshape(v, 3)
     # modal basis: smooth normal-direction patterns on the face, frequencies ascending
     normal = frame @ np.array([0.0, 0.0, -1.0])
@@ -356,6 +360,34 @@ def test_takes_by_kind(store):
 def test_pca_alphas_recover_the_blend_parameters(store):
     alpha = pca_alphas(store, store[paths.pca_blend("pca_blend1")])
     np.testing.assert_allclose(alpha, [0.5, 1.0], atol=1e-9)
+
+
+def test_pca_alphas_follow_the_stores_sigma_convention(store):
+    paper = {
+        k: v
+        for k, v in store.items()
+        if k not in (paths.pca("sigma"), paths.pca("sigma_convention"))
+    }
+    eig = store[paths.pca("eigenvalues")]
+    # a store without /pca/sigma (older) is read in the paper's convention, sqrt(eigenvalue)
+    alpha = pca_alphas(paper, store[paths.pca_blend("pca_blend1")])
+    np.testing.assert_allclose(
+        alpha, [0.5, 1.0] * store[paths.pca("sigma")] / np.sqrt(eig), atol=1e-9
+    )
+    np.testing.assert_allclose(np.sqrt(eig) / store[paths.pca("sigma")], np.sqrt(2), rtol=1e-12)
+
+
+def test_eigen_figure_names_its_sigma_and_stays_near_the_models(store):
+    fig = fig_eigen(store)
+    titles = " ".join(t.get_text() for t in fig.findobj(lambda o: hasattr(o, "get_text")))
+    assert "sample std of the coefficients" in titles
+    sigma = store[paths.pca("sigma")]
+    assert f"PC1: σ = {sigma[0]:.1f} mm" in titles
+    paper = {k: v for k, v in store.items() if k != paths.pca("sigma")}
+    titles = " ".join(
+        t.get_text() for t in fig_eigen(paper).findobj(lambda o: hasattr(o, "get_text"))
+    )
+    assert "√eigenvalue, as in the paper" in titles
 
 
 def test_blend_titles():

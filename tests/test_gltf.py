@@ -14,7 +14,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pygltflib.validator import validate
 
 from scan2morph.errors import InputError
-from scan2morph.io.gltf import MM_TO_M, read_glb_targets, write_glb
+from scan2morph.io.gltf import MM_TO_M, MorphTargets, read_glb_frame, read_glb_targets, write_glb
 
 OFFSET = np.array([812.3, -1034.7, 1487.9])  # mm: a face ~1000 mm from the scanner origin
 
@@ -114,16 +114,19 @@ def test_structure_with_pygltflib(written):
     assert mesh.extras["targetNames"] == ["car", "eel", "too"]
     assert mesh.weights == [0.0, 0.0, 0.0]
     assert len(prim.targets) == 3
-    for t in prim.targets:
+    for t in prim.targets:  # pygltflib parses targets as dicts
         pos = g.accessors[t["POSITION"]]
         assert pos.count == v and len(pos.min) == 3 and len(pos.max) == 3
         assert g.accessors[t["NORMAL"]].count == v
-    # Node hierarchy: root scales mm to m, the mesh node carries the bounding-box centre.
-    root, node = g.nodes
-    assert root.scale == [MM_TO_M] * 3 and root.children == [1] and node.mesh == 0
-    assert_allclose(node.translation, 0.5 * (vertices.min(0) + vertices.max(0)), rtol=1e-15)
+    # One node: without a frame, metres in the scanner frame; the face lies ~2 m from the origin,
+    # so the node carries the bounding-box centre and the positions are relative to it.
+    (node,) = g.nodes
+    assert node.mesh == 0 and node.scale is None and node.rotation is None
+    centre = MM_TO_M * 0.5 * (vertices.min(0) + vertices.max(0))
+    assert_allclose(node.translation, centre, rtol=1e-15)
+    assert_allclose(node.extras["source_to_gltf"], np.diag([MM_TO_M] * 3 + [1.0]), rtol=0)
     local = _accessor(g, prim.attributes.POSITION)
-    assert np.abs(local).max() < 0.6 * np.ptp(vertices, axis=0).max()
+    assert np.abs(local).max() < 0.6 * MM_TO_M * np.ptp(vertices, axis=0).max()
     # Texture: embedded PNG, bound as the base color texture, decoding to the same pixels.
     material = g.materials[prim.material]
     assert material.pbrMetallicRoughness.baseColorTexture.index == 0
@@ -238,3 +241,66 @@ def test_read_glb_targets_rejects_non_glb(tmp_path):
     path.write_bytes(b"not a glb file at all")
     with pytest.raises(InputError, match=r"x\.glb: not a binary glTF file"):
         read_glb_targets(path)
+
+
+def _similarity(seed: int, origin: np.ndarray) -> np.ndarray:
+    """A head-frame-like transform: a proper rotation, mm -> m, ``origin`` to zero."""
+    rng = np.random.default_rng(seed)
+    rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    rot *= np.sign(np.linalg.det(rot))
+    out = np.eye(4)
+    out[:3, :3] = MM_TO_M * rot
+    out[:3, 3] = -MM_TO_M * rot @ origin
+    return out
+
+
+def test_frame_places_the_mesh_and_targets_add(tmp_path):
+    vertices, faces, uv, texture, targets = _face_grid(2)
+    frame = _similarity(3, vertices.mean(axis=0))
+    path = tmp_path / "framed.glb"
+    framed = MorphTargets(targets, frame=frame, frame_name="test frame", notes={"car": "a note"})
+    write_glb(path, vertices, faces, uv, texture, framed)
+    assert_array_equal(read_glb_frame(path), frame)
+    g = pygltflib.GLTF2().load_binary(str(path))
+    (node,) = g.nodes
+    assert node.translation is None  # near the origin: no node transform, the file's frame
+    assert node.extras["frame"] == g.asset.extras["frame"] == "test frame"
+    assert g.meshes[0].extras["targetNotes"] == {"car": "a note"}
+    # as a viewer sees it: the frame applied, metres
+    base, read = read_glb_targets(path, frame="gltf")
+    world = vertices @ frame[:3, :3].T + frame[:3, 3]
+    assert_allclose(base, world, rtol=0, atol=1e-8)
+    scene = trimesh.load(path, process=False)
+    assert_allclose(scene.to_geometry().vertices, world, rtol=0, atol=1e-8)
+    # displacements add: base + sum_k w_k (target_k - base) for several weights at once
+    w = {"car": 0.7, "eel": -1.0, "too": 2.0}
+    shown = base + sum(wk * (read[k] - base) for k, wk in w.items())
+    expected = vertices + sum(wk * (targets[k] - vertices) for k, wk in w.items())
+    assert_allclose(shown, expected @ frame[:3, :3].T + frame[:3, 3], rtol=0, atol=1e-8)
+    # and back in the source frame (mm)
+    src_base, src = read_glb_targets(path)
+    assert_allclose(src_base, vertices, rtol=0, atol=1e-4)
+    assert max(np.abs(src[k] - targets[k]).max() for k in targets) < 1e-4
+    # normals are those of the placed mesh (rotated with it)
+    prim = g.meshes[0].primitives[0]
+    oracle = trimesh.Trimesh(world, faces, process=False).vertex_normals
+    normals = _accessor(g, prim.attributes.NORMAL)
+    assert np.min(np.sum(normals * oracle, axis=1)) > np.cos(np.radians(3.0))
+    # an explicit frame wins over the targets' one
+    write_glb(path, vertices, faces, targets=framed, frame=np.eye(4))
+    assert_array_equal(read_glb_frame(path), np.eye(4))
+
+
+def test_frame_must_be_a_proper_similarity(tmp_path):
+    vertices, faces, *_ = _face_grid(1, nx=5, ny=4, w=8, h=8)
+    path = tmp_path / "bad.glb"
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
+    with pytest.raises(InputError, match=r"frame: expected a rotation times a positive scale"):
+        write_glb(path, vertices, faces, frame=mirror)
+    with pytest.raises(InputError, match=r"frame: expected a rotation times a positive scale"):
+        write_glb(path, vertices, faces, frame=np.diag([1.0, 2.0, 1.0, 1.0]))
+    with pytest.raises(InputError, match=r"frame: expected a finite \(4, 4\)"):
+        write_glb(path, vertices, faces, frame=np.eye(3))
+    with pytest.raises(InputError, match=r"frame: 'head' unknown"):
+        read_glb_targets(path, frame="head")
+    assert not path.exists()

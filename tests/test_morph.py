@@ -19,6 +19,10 @@ from scan2morph.morph import (
     project,
     synthesize,
 )
+from scan2morph.morph.frame import apply_frame, head_frame
+from scan2morph.morph.pca import SIGMA_CONVENTIONS
+from scan2morph.morph.subject import pca_component_targets
+from scan2morph.template import build_template
 
 # The paper's Table 1 (eigenvalue, CR, CCR) and Table 2 (coefficients, rows: base, too, man,
 # she, eel, car; columns omega_1..omega_5), as printed.
@@ -198,7 +202,7 @@ def test_reconstruction_from_all_components_is_exact_and_project_matches():
 
 def test_synthesis_follows_equation_2():
     shapes = _face_set(13)
-    model = pca(shapes)
+    model = pca(shapes, sigma="paper")  # Eq. 2 as printed: sigma_i = sqrt(lambda_i)
     assert_array_equal(synthesize(model, np.zeros(model.n_components)), model.mean)
     assert_array_equal(synthesize(model, []), model.mean)
     # alpha_i = omega_i / sqrt(lambda_i) rebuilds an input shape (|alpha| <= 1 by construction).
@@ -220,12 +224,54 @@ def test_default_pca_blends_are_table_3_and_synthesize():
         "pca_blend2": (1.0, 0.0, -2.0),
         "pca_blend3": (-0.5, -0.9, 0.9),
     }
-    model = pca(_face_set(14))
+    model = pca(_face_set(14), sigma="paper")
     for alpha in DEFAULT_PCA_BLENDS.values():
         out = synthesize(model, alpha)
         assert_allclose(
             project(model, out)[:3], np.array(alpha) * np.sqrt(model.eigenvalues[:3]), atol=1e-9
         )
+
+
+def test_sigma_is_the_sample_std_of_the_coefficients_by_default():
+    shapes = _face_set(21)
+    model = pca(shapes)
+    m = shapes.shape[0]
+    assert model.sigma_convention == "sample"
+    assert_allclose(model.sigma, np.std(model.coefficients, axis=0, ddof=1), rtol=1e-12)
+    assert_allclose(model.sigma, np.sqrt(model.eigenvalues / (m - 1)), rtol=1e-10)
+    # the eigenvalues stay the paper's (no 1/M): Table 1 is unchanged by the convention
+    paper = pca(shapes, sigma="paper")
+    assert paper.sigma_convention == "paper"
+    assert_allclose(paper.sigma, np.sqrt(paper.eigenvalues), rtol=1e-15)
+    assert_array_equal(paper.eigenvalues, model.eigenvalues)
+    assert_allclose(paper.sigma / model.sigma, np.sqrt(m - 1), rtol=1e-10)
+    # synthesis and the tables follow the model's convention
+    out = synthesize(model, [0.0, 3.0])
+    assert_allclose(project(model, out)[:2], [0.0, 3.0 * model.sigma[1]], atol=1e-9)
+    rows, _ = pca_tables(model)
+    assert list(rows[0]) == ["component", "eigenvalue", "cr", "ccr", "sigma_sample_mm"]
+    assert_allclose([r["sigma_sample_mm"] for r in rows], model.sigma, rtol=0)
+    assert "sigma_paper_mm" in pca_tables(paper)[0][0]
+    with pytest.raises(InputError, match=r"morph.sigma: 'population' unknown"):
+        pca(shapes, sigma="population")
+
+
+def test_pca_targets_add_up_to_the_synthesis():
+    """neutral + sum_k w_k (target_k - neutral) is Eq. 2 for several weights at once."""
+    shapes = _face_set(22)
+    neutral = shapes[0]
+    for convention in SIGMA_CONVENTIONS:
+        model = pca(shapes, sigma=convention)
+        targets = pca_component_targets(model, neutral)
+        assert list(targets) == ["pca_mean", *(f"pca_{k + 1}" for k in range(5))]
+        assert_allclose(targets["pca_mean"], model.mean, rtol=0)
+        alpha = np.array([1.0, -0.7, 0.0, 2.0])
+        weights = {"pca_mean": 1.0, "pca_1": 1.0, "pca_2": -0.7, "pca_4": 2.0}
+        morphed = neutral + sum(w * (targets[k] - neutral) for k, w in weights.items())
+        assert_allclose(morphed, synthesize(model, alpha), rtol=0, atol=1e-9)
+        # each component target alone moves the neutral by sigma_k along e_k, not by the mean
+        step = targets["pca_2"] - neutral
+        assert_allclose(np.linalg.norm(step), model.sigma[1], rtol=1e-12)
 
 
 def test_rank_deficient_data_keeps_only_the_nonzero_components():
@@ -364,3 +410,55 @@ def test_synthesize_and_project_reject_bad_input():
 def test_contribution_rates_reject_bad_input(eigenvalues, match):
     with pytest.raises(InputError, match=match):
         contribution_rates(eigenvalues)
+
+
+# ----------------------------------------------------------------------------- head frame
+
+UNIT_MM = 45.0  # canonical template unit: half the outer-eye distance
+
+
+def _canonical_face():
+    """The template as a face in a head-like frame (mm): x = subject's left, y up, z out of the
+    face; flat except for a nose up to 25 mm high (eyes and mouth corners at depth 0)."""
+    template = build_template()
+    u, v = template.vertices[:, 0], template.vertices[:, 1]
+    nose = 25.0 * np.clip(1.0 - (u**2 + (v - 0.9) ** 2) / 0.1, 0.0, None) ** 2  # compact
+    return template, np.column_stack([UNIT_MM * u, -UNIT_MM * v, nose])
+
+
+def _rigid(rng):
+    rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    rot *= np.sign(np.linalg.det(rot))  # a proper rotation: scanner frames are right-handed
+    return rot, rng.normal(0, 800.0, 3)
+
+
+def test_head_frame_is_orthonormal_right_handed_and_frame_independent():
+    template, face = _canonical_face()
+    named = template.named
+    eyes = face[[named[n] for n in ("eye_r_outer", "eye_r_inner", "eye_l_inner", "eye_l_outer")]]
+    expected = 1e-3 * (face - eyes.mean(axis=0))  # the canonical frame is the head frame here
+    rng = np.random.default_rng(30)
+    for _ in range(4):
+        rot, shift = _rigid(rng)  # an arbitrary scanner frame: no axis is up or forward
+        scanner = face @ rot.T + shift
+        h = head_frame(scanner, named)
+        r = h[:3, :3] / 1e-3
+        assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+        assert_allclose(np.linalg.det(r), 1.0, atol=1e-12)
+        assert_array_equal(h[3], [0, 0, 0, 1])
+        head = apply_frame(h, scanner)
+        assert_allclose(head, expected, atol=1e-12)  # metres, whatever the scanner frame
+        eye_y = head[[named["eye_r_outer"], named["eye_l_outer"]], 1].mean()
+        mouth_y = head[[named["mouth_r"], named["mouth_l"]], 1].mean()
+        assert eye_y - mouth_y > 0.07  # eyes 77 mm above the mouth corners
+        assert head[named["eye_l_outer"], 0] > 0.04 > -0.04 > head[named["eye_r_outer"], 0]
+        assert head[named["nose_tip"], 2] > 0.015  # the nose points to +Z (the viewer)
+        assert np.ptp(head[:, 0]) == pytest.approx(0.14, abs=0.03)  # a face across, metres
+
+
+def test_head_frame_rejects_a_mirrored_face_and_missing_points():
+    template, face = _canonical_face()
+    with pytest.raises(InputError, match="mirrored"):
+        head_frame(face * [1.0, 1.0, -1.0], template.named)
+    with pytest.raises(InputError, match=r"missing: \['nose_tip'\]"):
+        head_frame(face, {k: i for k, i in template.named.items() if k != "nose_tip"})

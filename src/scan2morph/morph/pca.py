@@ -12,10 +12,15 @@ Centring removes one degree of freedom, so there are at most M - 1 components; e
 below ``EIGEN_RTOL`` times the largest are dropped. Each component's sign is fixed so that its
 largest-magnitude entry (as a 3V vector, first one on ties) is positive.
 
-A novel face is :math:`S = \\bar S + \\sum_i \\alpha_i \\sqrt{\\lambda_i}\\, e_i` with
-:math:`-3 \\le \\alpha_i \\le 3` (Eq. 2). With the paper's unnormalised C,
-:math:`\\sqrt{\\lambda_i}` is :math:`\\sqrt{M}` times the population standard deviation of
-:math:`\\omega_i`; we follow the paper as printed.
+A novel face is :math:`S = \\bar S + \\sum_i \\alpha_i \\sigma_i\\, e_i` with
+:math:`-3 \\le \\alpha_i \\le 3` (Eq. 2). The paper writes :math:`\\sigma_i = \\sqrt{\\lambda_i}`;
+with its unnormalised C that is :math:`\\sqrt{M}` times the population standard deviation of
+:math:`\\omega_i` (:math:`\\sqrt{M - 1}` times the sample one), so its +-3 sigma faces lie far
+outside the shapes the model was built from and self-intersect. The **sigma convention**
+(:data:`SIGMA_CONVENTIONS`) chooses :math:`\\sigma_i`: ``"sample"`` (the default) is the sample
+standard deviation of the coefficients, ``std(omega_i, ddof=1) = sqrt(lambda_i / (M - 1))``;
+``"paper"`` is :math:`\\sqrt{\\lambda_i}`. Eigenvalues, CR and CCR are the paper's either way
+(Table 1).
 """
 
 from __future__ import annotations
@@ -34,6 +39,11 @@ EIGEN_RTOL = 1e-12
 SPREAD_RTOL = 1e-12
 #: Eq. 2's bound on the blending parameters: -ALPHA_LIMIT <= alpha_i <= ALPHA_LIMIT.
 ALPHA_LIMIT = 3.0
+#: The unit sigma_i of Eq. 2's alphas: name -> what it is (config ``morph.sigma``).
+SIGMA_CONVENTIONS = {
+    "sample": "sample standard deviation of the coefficients, sqrt(eigenvalue / (M - 1))",
+    "paper": "sqrt(eigenvalue) of C = X'X'^T (no 1/M), as printed in the paper",
+}
 
 #: The paper's Table 3: name -> (alpha_1, alpha_2, alpha_3) of Eq. 2 (Fig. 16).
 DEFAULT_PCA_BLENDS: dict[str, tuple[float, ...]] = {
@@ -62,6 +72,11 @@ class PCAModel:
         :math:`\\omega` of each input shape (Table 2): ``components . (S_j - mean)``.
     names : tuple of str, length M
         Names of the input shapes, in input order.
+    sigma : (K,) float64, mm
+        The unit of Eq. 2's alphas per component (:data:`SIGMA_CONVENTIONS`); ``None`` when
+        constructing: computed from the coefficients and ``sigma_convention``.
+    sigma_convention : str
+        ``"sample"`` (default) or ``"paper"``.
     """
 
     mean: np.ndarray
@@ -71,9 +86,17 @@ class PCAModel:
     ccr: np.ndarray
     coefficients: np.ndarray
     names: tuple[str, ...]
+    sigma: np.ndarray | None = None
+    sigma_convention: str = "sample"
 
     def __post_init__(self):
-        for field in ("mean", "components", "eigenvalues", "cr", "ccr", "coefficients"):
+        if self.sigma is None:
+            object.__setattr__(
+                self,
+                "sigma",
+                sigmas(self.eigenvalues, self.coefficients, self.sigma_convention),
+            )
+        for field in ("mean", "components", "eigenvalues", "cr", "ccr", "coefficients", "sigma"):
             arr = np.array(getattr(self, field), dtype=np.float64)
             arr.flags.writeable = False
             object.__setattr__(self, field, arr)
@@ -83,6 +106,36 @@ class PCAModel:
     def n_components(self) -> int:
         """K, the number of principal components."""
         return int(self.eigenvalues.shape[0])
+
+
+def sigmas(eigenvalues, coefficients, convention: str = "sample", *, source: str = "pca"):
+    """The unit sigma_i of Eq. 2's alphas (:data:`SIGMA_CONVENTIONS`).
+
+    Parameters
+    ----------
+    eigenvalues : (K,) float, mm^2
+        Of the paper's C = X'X'^T (no 1/M).
+    coefficients : (M, K) float, mm
+        The coefficients of the M input shapes (centred: each column sums to zero).
+    convention : ``"sample"`` or ``"paper"``
+        ``sample``: ``std(coefficients, axis=0, ddof=1)``; ``paper``: ``sqrt(eigenvalues)``.
+
+    Returns
+    -------
+    (K,) float64, mm
+    """
+    _check_convention(convention, source)
+    if convention == "paper":
+        return np.sqrt(np.asarray(eigenvalues, dtype=np.float64))
+    return np.std(np.asarray(coefficients, dtype=np.float64), axis=0, ddof=1)
+
+
+def _check_convention(convention: str, source: str) -> None:
+    if convention not in SIGMA_CONVENTIONS:
+        raise InputError(
+            source,
+            f"morph.sigma: {convention!r} unknown (expected one of {sorted(SIGMA_CONVENTIONS)})",
+        )
 
 
 def contribution_rates(eigenvalues, *, source: str = "pca") -> tuple[np.ndarray, np.ndarray]:
@@ -171,7 +224,13 @@ def _fix_signs(components: np.ndarray) -> np.ndarray:
     return components * np.where(pivot < 0, -1.0, 1.0)[:, None]
 
 
-def pca(shapes, names: Sequence[str] | None = None, *, source: str = "pca") -> PCAModel:
+def pca(
+    shapes,
+    names: Sequence[str] | None = None,
+    *,
+    sigma: str = "sample",
+    source: str = "pca",
+) -> PCAModel:
     """PCA of M aligned shapes through the M x M Gram matrix, in the paper's convention.
 
     Parameters
@@ -180,6 +239,8 @@ def pca(shapes, names: Sequence[str] | None = None, *, source: str = "pca") -> P
         The aligned shapes (e.g. neutral and viseme models), M >= 2, no NaN.
     names : sequence of M str, optional
         Shape names (default ``"0"``, ..., ``"M-1"``, or the mapping's keys).
+    sigma : ``"sample"`` or ``"paper"``
+        The sigma convention of the model's synthesis (:data:`SIGMA_CONVENTIONS`).
     source : str
         Label used in error messages (e.g. the subject id).
 
@@ -187,7 +248,7 @@ def pca(shapes, names: Sequence[str] | None = None, *, source: str = "pca") -> P
     -------
     PCAModel
         Mean, K <= M - 1 unit-norm components sorted by decreasing eigenvalue, eigenvalues
-        (``C = X'X'^T``, no 1/M), CR, CCR and the (M, K) coefficients of the inputs.
+        (``C = X'X'^T``, no 1/M), CR, CCR, the (M, K) coefficients of the inputs and sigma.
 
     Raises
     ------
@@ -195,6 +256,7 @@ def pca(shapes, names: Sequence[str] | None = None, *, source: str = "pca") -> P
         On fewer than two shapes, shapes that are not (V, 3) or differ in vertex count, a NaN or
         infinite coordinate (naming the shape), or shapes that are all identical.
     """
+    _check_convention(sigma, source)
     stack, names = _stack_shapes(shapes, names, source)
     m = stack.shape[0]
     mean = stack.mean(axis=0)
@@ -225,6 +287,8 @@ def pca(shapes, names: Sequence[str] | None = None, *, source: str = "pca") -> P
         ccr=ccr,
         coefficients=coefficients,
         names=names,
+        sigma=sigmas(mu, coefficients, sigma, source=source),
+        sigma_convention=sigma,
     )
 
 
@@ -258,7 +322,8 @@ def synthesize(
 ) -> np.ndarray:
     """A novel shape from the PCA model (Eq. 2).
 
-    :math:`S = \\bar S + \\sum_i \\alpha_i \\sqrt{\\lambda_i} e_i`.
+    :math:`S = \\bar S + \\sum_i \\alpha_i \\sigma_i e_i`, sigma in the model's convention
+    (``model.sigma``; the paper's is sqrt(lambda_i)).
 
     Parameters
     ----------
@@ -296,7 +361,7 @@ def synthesize(
             f"alpha[{i}] (component {i + 1}) = {a[i]}: expected within "
             f"[-{alpha_limit:g}, {alpha_limit:g}]",
         )
-    scale = a * np.sqrt(model.eigenvalues[: a.size])
+    scale = a * model.sigma[: a.size]
     return model.mean + np.tensordot(scale, model.components[: a.size], axes=1)
 
 
@@ -306,13 +371,24 @@ def pca_tables(model: PCAModel) -> tuple[list[dict], list[dict]]:
     Returns
     -------
     eigen_rows : list of K dict
-        ``{"component": i (1-based), "eigenvalue", "cr", "ccr"}`` (Table 1).
+        ``{"component": i (1-based), "eigenvalue", "cr", "ccr", "sigma_{convention}_mm"}``
+        (Table 1; the last column, sigma_i of Eq. 2, names its convention:
+        ``sigma_sample_mm`` or ``sigma_paper_mm``).
     coefficient_rows : list of M dict
         ``{"take": name, "w1": ..., "wK": ...}`` (Table 2), in input order.
     """
+    sigma = f"sigma_{model.sigma_convention}_mm"
     eigen_rows = [
-        {"component": i + 1, "eigenvalue": float(lam), "cr": float(cr), "ccr": float(ccr)}
-        for i, (lam, cr, ccr) in enumerate(zip(model.eigenvalues, model.cr, model.ccr, strict=True))
+        {
+            "component": i + 1,
+            "eigenvalue": float(lam),
+            "cr": float(cr),
+            "ccr": float(ccr),
+            sigma: float(s),
+        }
+        for i, (lam, cr, ccr, s) in enumerate(
+            zip(model.eigenvalues, model.cr, model.ccr, model.sigma, strict=True)
+        )
     ]
     coefficient_rows = [
         {"take": name, **{f"w{i + 1}": float(w) for i, w in enumerate(row)}}
@@ -326,9 +402,11 @@ __all__ = [
     "DEFAULT_PCA_BLENDS",
     "EIGEN_RTOL",
     "PCAModel",
+    "SIGMA_CONVENTIONS",
     "contribution_rates",
     "pca",
     "pca_tables",
     "project",
+    "sigmas",
     "synthesize",
 ]

@@ -34,6 +34,7 @@ def subject_morph(
     pca_blends: Mapping[str, Sequence[float]],
     alpha_limit: float,
     source: str,
+    sigma: str = "sample",
 ) -> tuple[PCAModel, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """PCA and named blends of one subject.
 
@@ -52,6 +53,8 @@ def subject_morph(
     alpha_limit : float
     source : str
         Subject label for messages.
+    sigma : ``"sample"`` or ``"paper"``
+        The sigma convention of Eq. 2 (config ``morph.sigma``, :data:`~scan2morph.morph.pca.SIGMA_CONVENTIONS`).
 
     Returns
     -------
@@ -64,7 +67,12 @@ def subject_morph(
     """
     if not models:
         raise InputError(source, "no viseme takes: the morphable model needs at least one viseme")
-    model = pca([neutral, *models.values()], names=["neutral", *models], source=f"{source}/pca")
+    model = pca(
+        [neutral, *models.values()],
+        names=["neutral", *models],
+        sigma=sigma,
+        source=f"{source}/pca",
+    )
     per_label = label_models(models, labels)
     blend_shapes = {}
     for name, weights in blends.items():
@@ -88,9 +96,31 @@ def subject_morph(
     return model, blend_shapes, pca_shapes
 
 
-def pca_component_targets(model: PCAModel) -> dict[str, np.ndarray]:
-    """One shape per component at +1 standard deviation (alpha_i = 1), for morph-target export."""
-    return {
-        f"pca_{i + 1}": model.mean + np.sqrt(model.eigenvalues[i]) * model.components[i]
-        for i in range(model.n_components)
-    }
+#: Name of the morph target that moves the neutral to the PCA mean.
+PCA_MEAN_TARGET = "pca_mean"
+
+
+def pca_component_targets(model: PCAModel, neutral: np.ndarray) -> dict[str, np.ndarray]:
+    """The PCA as morph targets that add up (absolute positions, exported as target - neutral).
+
+    ``pca_mean`` is the mean (displacement ``mean - neutral``) and ``pca_{k}`` is
+    ``neutral + sigma_k e_k`` (displacement ``sigma_k e_k``, sigma in the model's convention), so
+    that weights ``1`` on ``pca_mean`` and ``alpha_k`` on ``pca_{k}`` give Eq. 2's
+    ``mean + sum_k alpha_k sigma_k e_k`` exactly, for any number of components at once.
+
+    Parameters
+    ----------
+    model : PCAModel
+    neutral : (V, 3) float, mm
+        The base mesh of the export (the neutral model S_0).
+
+    Returns
+    -------
+    dict name -> (V, 3) float64, mm
+        ``pca_mean``, ``pca_1``, ..., ``pca_K`` in that order.
+    """
+    base = np.asarray(neutral, dtype=np.float64)
+    out = {PCA_MEAN_TARGET: np.array(model.mean)}
+    for i in range(model.n_components):
+        out[f"pca_{i + 1}"] = base + model.sigma[i] * model.components[i]
+    return out

@@ -30,8 +30,13 @@ from scan2morph.store import paths
 
 #: Eigen models shown (the paper shows the top five).
 N_EIGEN = 5
-#: Multiples of sigma = sqrt(eigenvalue) of the eigen-model columns (alpha limits of Eq. 2).
+#: Multiples of sigma (``/pca/sigma``) of the eigen-model columns (alpha limits of Eq. 2).
 EIGEN_ALPHAS = (-3.0, 0.0, 3.0)
+#: How each sigma convention (``/pca/sigma_convention``) is named in the figures.
+SIGMA_TITLES = {
+    "sample": "σ = sample std of the coefficients",
+    "paper": "σ = √eigenvalue, as in the paper",
+}
 #: A gradual-series blend is named ``{label}_{percent}`` (config ``morph.blends``: ``car_30``).
 _GRADUAL = re.compile(r"^(?P<label>[A-Za-z][A-Za-z0-9-]*)_(?P<percent>\d{1,3})$")
 #: A mixed blend is named by ``{label}{percent}`` parts joined by ``_`` (``man60_eel30``).
@@ -121,6 +126,17 @@ def fig_mean(store: Mapping[str, np.ndarray]) -> Figure:
     return panel_figure(panels, ncols=2, title=f"Average face model of the {n} models of the PCA")
 
 
+def pca_sigma(store: Mapping, what: str) -> tuple[np.ndarray, str]:
+    """``/pca/sigma`` and its convention; a store without them (older than sigma conventions)
+    gives the paper's sqrt(eigenvalue)."""
+    if paths.pca("sigma") in store:
+        sigma = need(store, paths.pca("sigma"), what).astype(float)
+        return sigma, str(need(store, paths.pca("sigma_convention"), what))
+    return np.sqrt(
+        np.maximum(need(store, paths.pca("eigenvalues"), what).astype(float), 0)
+    ), "paper"
+
+
 def _pca(store: Mapping, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     mean = mesh(store, paths.pca("mean"), what)
     comps = need(store, paths.pca("components"), what).astype(float)
@@ -134,9 +150,11 @@ def _pca(store: Mapping, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def fig_eigen(store: Mapping[str, np.ndarray]) -> Figure:
-    """The first eigen models at mean - 3 sigma, mean and mean + 3 sigma (Fig. 14)."""
+    """The first eigen models at mean - 3 sigma, mean and mean + 3 sigma (Fig. 14); sigma is
+    ``/pca/sigma`` (by default the sample std of the coefficients), named in the title."""
     what = "the eigen-model figure"
     mean, comps, eig = _pca(store, what)
+    sigmas, convention = pca_sigma(store, what)
     n = min(N_EIGEN, int(np.sum(eig > 1e-12 * max(eig.max(initial=0.0), 1e-300))))
     if n == 0:
         return message_figure(
@@ -144,33 +162,34 @@ def fig_eigen(store: Mapping[str, np.ndarray]) -> Figure:
         )
     shapes = {}
     for i in range(n):
-        sigma = np.sqrt(eig[i])
         for a in EIGEN_ALPHAS:
-            shapes[(i, a)] = mean + a * sigma * comps[i]
+            shapes[(i, a)] = mean + a * sigmas[i] * comps[i]
     images = _render_shapes(store, shapes, what)
     panels = []
     for i in range(n):
         for a in EIGEN_ALPHAS:
             label = "mean" if a == 0 else f"mean {'+' if a > 0 else '−'} {abs(a):g}σ"
             panels.append(Panel(images[(i, a)], f"PC{i + 1}: {label}"))
-    rows = [f"PC{i + 1}: σ = {np.sqrt(eig[i]):.1f} mm" for i in range(n)]
+    rows = [f"PC{i + 1}: σ = {sigmas[i]:.1f} mm" for i in range(n)]
     return panel_figure(
         panels,
         ncols=len(EIGEN_ALPHAS),
-        title="Principal eigen face models (σ = √eigenvalue)",
+        title=f"Principal eigen face models ({SIGMA_TITLES.get(convention, convention)})",
         row_labels=rows,
     )
 
 
 def pca_alphas(store: Mapping[str, np.ndarray], shape: np.ndarray) -> np.ndarray:
-    """The alphas of Eq. 2 that give ``shape``: ``alpha_i = e_i . (S - mean) / sqrt(lambda_i)``.
+    """The alphas of Eq. 2 that give ``shape``: ``alpha_i = e_i . (S - mean) / sigma_i``
+    (``/pca/sigma``, in the store's sigma convention).
 
     Components with a zero eigenvalue are left out. Returns (K',) float.
     """
     mean, comps, eig = _pca(store, "PCA alphas")
+    sigma, _ = pca_sigma(store, "PCA alphas")
     keep = eig > 1e-12 * max(eig.max(initial=0.0), 1e-300)
     proj = comps[keep].reshape(keep.sum(), -1) @ (np.asarray(shape, float) - mean).ravel()
-    return proj / np.sqrt(eig[keep])
+    return proj / sigma[keep]
 
 
 def fig_pca_blends(store: Mapping[str, np.ndarray]) -> Figure:

@@ -10,9 +10,11 @@ import numpy as np
 import pandas as pd
 
 from scan2morph.io import write_glb, write_obj
+from scan2morph.io.gltf import MorphTargets
 from scan2morph.morph import pca_tables
-from scan2morph.morph.pca import PCAModel
-from scan2morph.morph.subject import pca_component_targets, subject_morph
+from scan2morph.morph.frame import HEAD_FRAME_NAME, head_frame
+from scan2morph.morph.pca import SIGMA_CONVENTIONS, PCAModel
+from scan2morph.morph.subject import PCA_MEAN_TARGET, pca_component_targets, subject_morph
 from scan2morph.stages.part import Part, Subject, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
@@ -25,7 +27,8 @@ NO_VISEMES = "no viseme takes: no blend shapes or PCA (the glTF and OBJ hold the
 
 
 def pca_datasets(model: PCAModel) -> dict[str, np.ndarray]:
-    """The ``/pca`` group of the store."""
+    """The ``/pca`` group of the store (``sigma``: the unit of Eq. 2's alphas, mm, in the
+    convention ``sigma_convention`` names)."""
     return {
         paths.pca("mean"): model.mean,
         paths.pca("components"): model.components,
@@ -34,7 +37,20 @@ def pca_datasets(model: PCAModel) -> dict[str, np.ndarray]:
         paths.pca("ccr"): model.ccr,
         paths.pca("coefficients"): model.coefficients,
         paths.pca("takes"): np.asarray(model.names, dtype=object),
+        paths.pca("sigma"): model.sigma,
+        paths.pca("sigma_convention"): model.sigma_convention,
     }
+
+
+def _target_notes(model: PCAModel | None, visemes) -> dict[str, str]:
+    """What each glTF morph target is (``mesh.extras.targetNotes``)."""
+    notes = {t: "viseme model - neutral" for t in visemes}
+    if model is not None:
+        notes[PCA_MEAN_TARGET] = "PCA mean - neutral (weight 1 with the pca_k for Eq. 2)"
+        convention = SIGMA_CONVENTIONS[model.sigma_convention]
+        for k in range(model.n_components):
+            notes[f"pca_{k + 1}"] = f"sigma_{k + 1} e_{k + 1}; sigma: {convention}"
+    return notes
 
 
 def run(
@@ -49,47 +65,67 @@ def run(
     data : mapping store path -> array
         The motion part, the neutral's fit part (``mesh/uv``) and repair part (``range/color``).
     config : mapping section -> mapping
-        The sections ``morph`` (``blends``, ``pca_blends``, ``alpha_limit``) and ``template``.
+        The sections ``morph`` (``blends``, ``pca_blends``, ``alpha_limit``, ``sigma``) and
+        ``template``.
 
     Returns
     -------
     Part
-        ``/pca/*``, ``/blends/{name}/vertices``, ``/pca_blends/{name}/vertices`` (mm);
-        ``files``: the PCA tables (``eigen``, ``coefficients``), the ``faces``, ``uv`` and
-        ``texture`` of the neutral, the glTF morph ``targets`` and the OBJ ``shapes``. A subject
-        without visemes gets no datasets, empty tables, the neutral alone as its shapes, and
-        the reason under ``/skipped`` (attribute ``morph``).
+        ``/neutral/head_frame`` (neutral frame mm -> head frame m, the glTF's frame),
+        ``/pca/*`` (with ``sigma`` and ``sigma_convention``), ``/blends/{name}/vertices``,
+        ``/pca_blends/{name}/vertices`` (mm); ``files``: the PCA tables (``eigen``,
+        ``coefficients``), the ``faces``, ``uv`` and ``texture`` of the neutral, the glTF morph
+        ``targets`` (a :class:`~scan2morph.io.gltf.MorphTargets` carrying the head frame: one
+        per viseme, ``pca_mean`` and one per PCA component, see
+        :func:`~scan2morph.morph.subject.pca_component_targets`) and the OBJ ``shapes``. A
+        subject without visemes gets the head frame only, empty tables, the neutral alone as its
+        shapes and glTF, and the reason under ``/skipped`` (attribute ``morph``).
     """
     subject = modelled(subject, data)
     m, name, neutral = config["morph"], subject.name, subject.neutral
     faces = subdivide_template(template, int(config["template"]["subdivision_levels"])).faces
     base = need(data, paths.neutral("vertices"), name)
+    frame = head_frame(base, template.named, source=f"{name}/head frame")
+    frame_data = {paths.neutral("head_frame"): frame}
     files = {
         "eigen": pd.DataFrame(columns=["component", "eigenvalue", "cr", "ccr"]),
         "coefficients": pd.DataFrame(columns=["take"]),
         "faces": faces,
         "uv": need(data, paths.mesh(neutral, "uv"), name),
         "texture": need(data, paths.range_image(neutral, "color"), name),
-        "targets": {},
+        "targets": MorphTargets(frame=frame, frame_name=HEAD_FRAME_NAME),
         "shapes": {"neutral": base},
     }
     if not subject.visemes:
-        return Part(attrs={paths.SKIPPED: {"morph": NO_VISEMES}}, files=files)
+        return Part(frame_data, attrs={paths.SKIPPED: {"morph": NO_VISEMES}}, files=files)
     models = {t: need(data, paths.viseme(t, "model"), name) for t in subject.visemes}
     model, blends, pca_shapes = subject_morph(
-        base, models, subject.labels, m["blends"], m["pca_blends"], m["alpha_limit"], source=name
+        base,
+        models,
+        subject.labels,
+        m["blends"],
+        m["pca_blends"],
+        m["alpha_limit"],
+        source=name,
+        sigma=m.get("sigma", "sample"),
     )
-    datasets = pca_datasets(model)
+    datasets = frame_data | pca_datasets(model)
     datasets |= {paths.blend(k): v for k, v in blends.items()}
     datasets |= {paths.pca_blend(k): v for k, v in pca_shapes.items()}
     eigen, coefficients = pca_tables(model)
     files |= {
         "eigen": pd.DataFrame(eigen),
         "coefficients": pd.DataFrame(coefficients),
-        "targets": models | pca_component_targets(model),
+        "targets": MorphTargets(
+            models | pca_component_targets(model, base),
+            frame=frame,
+            frame_name=HEAD_FRAME_NAME,
+            notes=_target_notes(model, models),
+        ),
         "shapes": {"neutral": base, **models, **blends, **pca_shapes},
     }
-    return Part(datasets, files=files)
+    attrs = {paths.PCA: {"sigma_convention": model.sigma_convention}}
+    return Part(datasets, attrs=attrs, files=files)
 
 
 def write_files(part: Part, eigen: str, coefficients: str, glb: str, models: str) -> None:

@@ -28,6 +28,7 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/takes/{take}/align", "align", ("transform", "vertices", "ok")),
     ("/mask", "motion", ("suppressed", "seeds")),
     ("/neutral", "motion", ("vertices", "filled")),
+    ("/neutral", "morph", ("head_frame",)),
     ("/visemes/{take}", "motion", ("motion_raw", "motion", "model")),
     ("/expressions/{take}", "motion", ("displacement",)),
     ("/visemes/{take}", "motion_noise", ("noise_rms_mm",)),
@@ -44,7 +45,21 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
             "failed_draws",
         ),
     ),
-    ("/pca", "morph", ("mean", "components", "eigenvalues", "cr", "ccr", "coefficients", "takes")),
+    (
+        "/pca",
+        "morph",
+        (
+            "mean",
+            "components",
+            "eigenvalues",
+            "cr",
+            "ccr",
+            "coefficients",
+            "takes",
+            "sigma",
+            "sigma_convention",
+        ),
+    ),
     ("/blends/{name}", "morph", ("vertices",)),
     ("/pca_blends/{name}", "morph", ("vertices",)),
     (
@@ -149,7 +164,8 @@ def mask(name: str) -> str:
 
 
 def neutral(name: str) -> str:
-    """``vertices`` or ``filled`` of the base model S_0."""
+    """``vertices`` or ``filled`` of the base model S_0, or its ``head_frame`` (the glTF's frame:
+    neutral frame mm -> head frame m, written by morph)."""
     return _build("/neutral", name)
 
 
@@ -170,7 +186,8 @@ def motion_noise(name: str) -> str:
 
 
 def pca(name: str) -> str:
-    """``mean``, ``components``, ``eigenvalues``, ``cr``, ``ccr``, ``coefficients`` or ``takes``."""
+    """``mean``, ``components``, ``eigenvalues``, ``cr``, ``ccr``, ``coefficients``, ``takes``,
+    ``sigma`` or ``sigma_convention``."""
     return _build(PCA, name)
 
 
