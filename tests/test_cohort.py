@@ -12,8 +12,16 @@ import pandas as pd
 import pytest
 
 from scan2morph.errors import InputError
-from scan2morph.report import cohort_table, motion_rms, subject_summary, write_cohort_summary
+from scan2morph.report import cohort as cohort_module
+from scan2morph.report import (
+    cohort_table,
+    motion_rms,
+    plot_cohort,
+    subject_summary,
+    write_cohort_summary,
+)
 from scan2morph.store import merge_parts, paths, write_part
+from scan2morph.tables import read_dictionary
 from tests.tiny_run import SUBJECT, tiny_run
 
 V = 50
@@ -84,10 +92,10 @@ def test_subject_summary_matches_analytic_values(stores):
         "n_takes": 5,
         "n_visemes": 3,
         "n_expressions": 1,
-        "motion_rms_mm_car": 5.0,
-        "motion_rms_mm_too": 2.0,  # mean of 1 and 3 over the two takes of the label
-        "motion_noise_relative_car": 0.1,
-        "motion_noise_relative_too": pytest.approx(0.25),
+        "motion_rms_all_mm_car": 5.0,
+        "motion_rms_all_mm_too": 2.0,  # mean of 1 and 3 over the two takes of the label
+        "noise_relative_unmasked_car": 0.1,
+        "noise_relative_unmasked_too": pytest.approx(0.25),
         "ccr_1": 0.5,
         "ccr_2": 0.8,
         "ccr_3": 0.95,
@@ -98,7 +106,7 @@ def test_subject_summary_matches_analytic_values(stores):
     }
     np.testing.assert_array_equal(s.ccr, [0.5, 0.8, 0.95, 1.0])
     b = subject_summary(bob).row
-    assert b["motion_rms_mm_car"] == pytest.approx(np.sqrt((bob_car**2).sum() / V), rel=1e-12)
+    assert b["motion_rms_all_mm_car"] == pytest.approx(np.sqrt((bob_car**2).sum() / V), rel=1e-12)
     assert np.isnan(b["ccr_3"]) and b["ccr_2"] == 1.0 and b["modal_f1_hz"] == 30.0
 
 
@@ -112,10 +120,10 @@ def test_cohort_table_fills_missing_columns_with_nan(stores):
         "n_takes",
         "n_visemes",
         "n_expressions",
-        "motion_rms_mm_car",
-        "motion_rms_mm_too",  # paper order of the visemes
-        "motion_noise_relative_car",
-        "motion_noise_relative_too",
+        "motion_rms_all_mm_car",
+        "motion_rms_all_mm_too",  # paper order of the visemes
+        "noise_relative_unmasked_car",
+        "noise_relative_unmasked_too",
         "ccr_1",
         "ccr_2",
         "ccr_3",
@@ -123,7 +131,9 @@ def test_cohort_table_fills_missing_columns_with_nan(stores):
         "mesh_rms_mm_max",
     ]
     assert list(table["subject"]) == ["bob", "alice"]
-    assert np.isnan(table.loc[0, "motion_rms_mm_too"]) and np.isnan(table.loc[0, "mesh_rms_mm_max"])
+    assert np.isnan(table.loc[0, "motion_rms_all_mm_too"]) and np.isnan(
+        table.loc[0, "mesh_rms_mm_max"]
+    )
     assert table.loc[1, "mesh_rms_mm_max"] == 0.5
 
 
@@ -136,11 +146,67 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
         out_tsv,
         out_png,
     )
-    back = pd.read_csv(out_tsv, sep="\t")
+    back = pd.read_csv(out_tsv, sep="\t", comment="#")
     pd.testing.assert_frame_equal(back, table, check_dtype=False, rtol=1e-5)
     assert back["mesh_rms_mm_max"].isna().tolist() == [False, True]
+    # the column dictionary on top: every column (families by pattern), unit and definition
+    dictionary = read_dictionary(out_tsv).set_index("column")
+    assert dictionary.index.tolist() == [
+        "subject",
+        "n_takes",
+        "n_visemes",
+        "n_expressions",
+        "motion_rms_all_mm_{label}",
+        "noise_relative_unmasked_{label}",
+        "ccr_{k}",
+        "modal_f1_hz",
+        "mesh_rms_mm_max",
+    ]
+    assert dictionary.loc["motion_rms_all_mm_{label}", "unit"] == "mm"
+    assert "over all template vertices" in dictionary.loc["motion_rms_all_mm_{label}", "definition"]
+    assert dictionary.loc["mesh_rms_mm_max", "unit"] == "mm"
     img = cv2.imread(str(out_png))
     assert img is not None and img.shape[0] > 100 and img.shape[1] > 300
+
+
+def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
+    """Motion (mm), CCR (%), then the accuracy split by unit: mm, degrees, fraction, px."""
+    alice, bob, _ = stores
+    summary = {
+        "mesh_rms_mm_max": 0.5,
+        "align_rotation_deg_max": 0.25,
+        "motion_relative_error_max": 0.1,
+        "click_noise_px_used": 0.5,
+    }
+    table = cohort_table([subject_summary(alice, {"summary": summary}), subject_summary(bob)])
+    drawn = {}
+    real = cohort_module.Figure.savefig
+
+    def savefig(fig, path, **kwargs):
+        drawn["labels"] = [ax.get_ylabel() for ax in fig.axes if ax.get_visible()]
+        drawn["ticks"] = [
+            [t.get_text() for t in ax.get_xticklabels()] for ax in fig.axes if ax.get_visible()
+        ]
+        return real(fig, path, **kwargs)
+
+    monkeypatch.setattr(cohort_module.Figure, "savefig", savefig)
+    plot_cohort(table, {}, tmp_path / "c.png")
+    assert drawn["labels"] == [
+        "motion RMS over all vertices (mm)",
+        "CCR (%)",
+        "mm",
+        "degrees",
+        "fraction",
+        "px",
+    ]
+    assert drawn["ticks"][0] == ["car", "too"]
+    assert drawn["ticks"][2:] == [
+        ["mesh_rms_mm_max"],
+        ["align_rotation_deg_max"],
+        ["motion_relative_error_max"],
+        ["click_noise_px_used"],
+    ]
+    assert (tmp_path / "c.png").stat().st_size > 0
 
 
 def test_bad_inputs_are_named(stores, tmp_path):
@@ -166,7 +232,7 @@ def test_bad_inputs_are_named(stores, tmp_path):
 @pytest.mark.slow
 def test_cohort_rule_summarises_the_tiny_run(tmp_path_factory):
     run = tiny_run(tmp_path_factory, ["results/cohort/summary.tsv"])
-    table = pd.read_csv(run.path("results", "cohort", "summary.tsv"), sep="\t")
+    table = pd.read_csv(run.path("results", "cohort", "summary.tsv"), sep="\t", comment="#")
     assert run.path("results", "cohort", "summary.png").stat().st_size > 0
     assert list(table["subject"]) == [SUBJECT]
     row = table.iloc[0]
@@ -175,7 +241,7 @@ def test_cohort_rule_summarises_the_tiny_run(tmp_path_factory):
         for take in ("car", "too"):
             m = h5[paths.viseme(take, "motion")][()]
             want = np.sqrt(np.sum(m**2) / len(m))
-            assert row[f"motion_rms_mm_{take}"] == pytest.approx(want, rel=1e-5)
+            assert row[f"motion_rms_all_mm_{take}"] == pytest.approx(want, rel=1e-5)
         ccr, f1 = h5[paths.pca("ccr")][()], h5[paths.modal("frequencies_hz")][0]
     want = np.full(3, np.nan)
     want[: min(3, len(ccr))] = ccr[:3]  # neutral + two visemes: two components, ccr_3 is NA

@@ -175,3 +175,26 @@ def test_reference_motion_is_the_pipelines_and_takes_do_not_share_noise(template
     both = _run(template, (neutral, two), suppressed=mask, smoothing=smoothing)
     assert_array_equal(both["she"]["rms_mm"], alone["rms_mm"])
     assert not np.array_equal(both["car"]["rms_mm"], alone["rms_mm"])
+
+
+def test_the_table_states_its_rms_is_over_the_unmasked_vertices(template, takes):
+    """tables/motion_noise.tsv's motion RMS is over the vertices outside the mask; the cohort's
+    motion_rms_all_mm_{label} is over all of them, so the two differ and are named apart."""
+    from scan2morph.report.cohort import motion_rms
+    from scan2morph.stages import motion_noise
+    from scan2morph.tables import MOTION_NOISE, describe
+
+    mask = template.vertices[:, 1] > np.median(template.vertices[:, 1])
+    res = _run(template, takes, suppressed=mask, draws=3)["she"]
+    free = res["motion"][~mask]
+    unmasked = np.sqrt(np.mean(np.sum(free**2, axis=1)))
+    assert res["motion_rms_mm"] == pytest.approx(unmasked, rel=1e-12)
+    assert motion_rms(res["motion"]) < 0.9 * unmasked  # over all vertices: the masked ones too
+    assert motion_noise.COLUMNS == {
+        "motion_rms_mm": "motion_rms_unmasked_mm",
+        "rms_error_mm": "noise_rms_unmasked_mm",
+        "relative": "noise_relative_unmasked",
+        "failed_draws": "failed_draws",
+    }
+    names = ["take", *motion_noise.COLUMNS.values(), "click_noise_px_used"]
+    assert [c.name for c in describe(names, MOTION_NOISE)] == names

@@ -494,6 +494,43 @@ def test_report_without_figures_or_ground_truth_says_so(report):
 
 
 # --- unit tests ---
+def test_each_table_shows_its_column_dictionary():
+    """Under each table with a TSV twin: a folded dictionary of the TSV's columns (issue #19)."""
+    from scan2morph import tables
+    from scan2morph.report import html as report_html
+
+    with h5py.File("sections.h5", "w", driver="core", backing_store=False) as h5:
+        h5[paths.pca("eigenvalues")] = [4.0, 1.0]
+        h5[paths.pca("cr")], h5[paths.pca("ccr")] = [0.8, 0.2], [0.8, 1.0]
+        h5[paths.pca("coefficients")] = np.ones((3, 2))
+        h5[paths.pca("takes")] = np.array(["neutral", "car", "too"], dtype=object)
+        h5[paths.motion_noise("takes")] = np.array(["car"], dtype=object)
+        h5[paths.motion_noise("relative")], h5[paths.motion_noise("rms_error_mm")] = [0.1], [0.5]
+        h5[paths.motion_noise("failed_draws")] = [0]
+        h5[paths.modal("frequencies_hz")] = [10.0, 20.0]
+        h5[paths.modal("reconstruction_k")] = [1, 2]
+        h5[paths.expression("smile1", "coordinates")] = [0.5, 0.25]
+        h5[paths.expression("smile1", "reconstruction_rms_mm")] = [1.0, 0.5]
+        text = (
+            report_html._pca_section(h5)
+            + report_html._motion_noise_section(h5)
+            + report_html._modal_section(h5, 2)
+        )
+    page = _parse(text)
+    for name, dictionary in {
+        "pca_eigenvalues": tables.PCA_EIGENVALUES,
+        "pca_coefficients": tables.PCA_COEFFICIENTS,
+        "motion_noise": tables.MOTION_NOISE,
+        "modal_coordinates": tables.MODAL_COORDINATES,
+        "modal_reconstruction": tables.MODAL_RECONSTRUCTION,
+    }.items():
+        assert f"<summary>Columns of tables/{name}.tsv</summary>" in text
+        rows = _table(page, f"Column dictionary: {name}.tsv")
+        assert rows[0] == ["column", "unit", "definition"]
+        assert rows[1:] == [[c.name, c.unit, c.definition] for c in dictionary]
+    assert text.count("<details") == text.count("</details>") == 5
+
+
 def test_read_caption_strips_inline_markup(tmp_path):
     f = tmp_path / "c.rst"
     f.write_text("The ``q`` field,\n  *emphasised* and **strong**, see `Eq. 7`_.\n")

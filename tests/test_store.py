@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import h5py
@@ -83,6 +85,21 @@ def test_layout_validation_finds_problems(tmp_path):
     problems = validate_store(out, _range_layout())
     assert "/takes/neutral/range/filled: required dataset missing" in problems
     assert any("/takes/neutral/landmarks: shape (67, 2)" in p for p in problems)
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o027, 0o640)])
+def test_parts_and_stores_honour_the_umask(tmp_path, umask, mode):
+    """Written as any new file is (issue #19: the atomic write's temporary kept mode 0600)."""
+    old = os.umask(umask)
+    try:
+        _take_part(tmp_path / "a.h5", "neutral")
+        merge_parts(tmp_path / "s" / "s.h5", [tmp_path / "a.h5"], "s", "0")
+        _take_part(tmp_path / "a.h5", "car")  # replacing a file gives the same mode
+    finally:
+        os.umask(old)
+    for path in (tmp_path / "a.h5", tmp_path / "s" / "s.h5"):
+        assert stat.S_IMODE(path.stat().st_mode) == mode, path
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a.h5", "s", "s.h5"]
 
 
 def test_two_parts_writing_one_dataset_is_an_error(tmp_path):

@@ -20,9 +20,18 @@ import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import read_truth
+from scan2morph.report import sweep as sweep_module
+from scan2morph.report.sweep import (
+    config_values,
+    one_at_a_time,
+    plot_sweep,
+    sweep_summary,
+    write_sweep_summary,
+)
 from scan2morph.stages import Run, Subject
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import first_stage, read_sweep_table, rerun_accuracy, sweep_settings
+from scan2morph.tables import read_dictionary
 from scan2morph.template import load_template
 from tests.tiny_run import SUBJECT, TAKES, tiny_config, tiny_run
 from tests.workflow_api import REPO
@@ -238,7 +247,7 @@ def test_changed_values_change_only_the_stages_they_feed(sweep):
 
 @pytest.mark.slow
 def test_summary_collects_every_combination(sweep):
-    table = pd.read_csv(sweep.path("results", "sweeps", "summary.tsv"), sep="\t")
+    table = pd.read_csv(sweep.path("results", "sweeps", "summary.tsv"), sep="\t", comment="#")
     assert list(table.columns[:3]) == ["smoothing.iterations", "mask.radius_mm", "subject"]
     assert table[["smoothing.iterations", "mask.radius_mm"]].values.tolist() == [
         [30, 20.0],
@@ -252,6 +261,100 @@ def test_summary_collects_every_combination(sweep):
             assert row[key] == pytest.approx(value, rel=1e-5)
     img = cv2.imread(str(sweep.path("results", "sweeps", "summary.png")))
     assert img is not None and img.shape[0] > 200
+    # the dictionary names the config's value of each swept key
+    dictionary = read_dictionary(sweep.path("results", "sweeps", "summary.tsv"))
+    definition = dict(zip(dictionary["column"], dictionary["definition"], strict=True))
+    assert definition["smoothing.iterations"].endswith("the config's value: 30")
+    assert set(dictionary["column"]) == set(table.columns)
+
+
+# --- the summary table and plot (made-up accuracy) ---
+_ROWS = [
+    {"smoothing.iterations": 30, "mask.radius_mm": 20.0},  # the config's values
+    {"smoothing.iterations": 0, "mask.radius_mm": 20.0},
+    {"smoothing.iterations": 100, "mask.radius_mm": 20.0},
+    {"smoothing.iterations": 30, "mask.radius_mm": 10},
+    {"smoothing.iterations": 0, "mask.radius_mm": 10},  # two keys off the config
+]
+_PARAMS = ["smoothing.iterations", "mask.radius_mm"]
+_DEFAULTS = {"smoothing.iterations": 30, "mask.radius_mm": 20.0}
+
+
+def _results():
+    out = []
+    for i, row in enumerate(_ROWS):
+        for k, subject in enumerate(("synth01", "synth02")):
+            summary = {
+                "mesh_rms_mm_max": 0.1 + k,
+                "align_translation_mm_max": 0.2,
+                "align_rotation_deg_max": 0.05 * i,
+                "motion_relative_error_max": 0.1 + 0.01 * i,
+                "masked_true_motion_share_max": 0.001,
+                "click_noise_px_used": 0.5,
+                "stereo_coverage_min": None,
+            }
+            out.append((row, subject, {"summary": summary}))
+    return out
+
+
+def test_config_values_reads_dotted_paths():
+    config = {"smoothing": {"iterations": 30, "w": 0.1}, "mask": {"radius_mm": 20.0}}
+    assert config_values(config, _PARAMS) == _DEFAULTS
+    with pytest.raises(InputError, match="mask.nope: not in the config"):
+        config_values(config, ["mask.nope"])
+
+
+def test_rows_are_sorted_into_one_key_at_a_time_slices():
+    table = sweep_summary(_results())
+    default, varied = one_at_a_time(table, _PARAMS, _DEFAULTS)
+    assert default.tolist() == [True, True] + [False] * 8  # 20 and 20.0 are one value
+    assert varied["smoothing.iterations"].tolist() == [False] * 2 + [True] * 4 + [False] * 4
+    assert varied["mask.radius_mm"].tolist() == [False] * 6 + [True] * 2 + [False] * 2
+
+
+def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_path, monkeypatch):
+    table = sweep_summary(_results())
+    drawn = {}
+    real = sweep_module.Figure.savefig
+
+    def savefig(fig, path, **kwargs):
+        drawn["axes"] = fig.axes
+        return real(fig, path, **kwargs)
+
+    monkeypatch.setattr(sweep_module.Figure, "savefig", savefig)
+    plot_sweep(table, _PARAMS, tmp_path / "s.png", _DEFAULTS)
+    axes = np.array(drawn["axes"]).reshape(-1, len(_PARAMS))
+    # mm, degrees, fraction, px; the all-NA metric is left out
+    assert [row[0].get_ylabel() for row in axes] == ["mm", "degrees", "fraction", "px"]
+    assert axes[-1, 0].get_xlabel().startswith("smoothing.iterations")
+    assert axes[-1, 1].get_xlabel().startswith("mask.radius_mm")
+    degrees = axes[1]
+    # the config's value: a dashed vertical line; per subject, one line through the slice
+    for ax, x_default, xs in ((degrees[0], 30, [0, 30, 100]), (degrees[1], 20, [10, 20])):
+        lines = [ln for ln in ax.get_lines() if ln.get_linestyle() != ":"]
+        vertical = [ln for ln in lines if np.ptp(ln.get_xdata()) == 0 and len(ln.get_xdata()) == 2]
+        assert [float(ln.get_xdata()[0]) for ln in vertical] == [x_default]
+        data = [ln for ln in lines if ln not in vertical]
+        assert len(data) == 2  # two subjects, one metric
+        for ln in data:
+            assert np.asarray(ln.get_xdata(), float).tolist() == xs
+    # the row off the config in two keys (rotation 0.2) is drawn nowhere
+    ys = np.concatenate([ln.get_ydata() for ax in degrees for ln in ax.get_lines()])
+    assert not np.isclose(ys.astype(float), 0.2).any()
+    assert (tmp_path / "s.png").stat().st_size > 0
+
+
+def test_the_sweep_summary_table_carries_its_dictionary(tmp_path):
+    table = write_sweep_summary(
+        _results(), _PARAMS, tmp_path / "summary.tsv", tmp_path / "summary.png", _DEFAULTS
+    )
+    back = pd.read_csv(tmp_path / "summary.tsv", sep="\t", comment="#")
+    pd.testing.assert_frame_equal(back, table, check_dtype=False)
+    dictionary = read_dictionary(tmp_path / "summary.tsv").set_index("column")
+    assert dictionary.index.tolist() == list(table.columns)
+    assert dictionary.loc["mask.radius_mm", "unit"] == "mm"
+    assert dictionary.loc["align_rotation_deg_max", "unit"] == "deg"
+    assert dictionary.loc["stereo_coverage_min", "unit"] == "fraction"
 
 
 @pytest.mark.slow

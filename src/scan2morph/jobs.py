@@ -8,8 +8,11 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
+import secrets
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from scan2morph.errors import InputError
@@ -58,6 +61,36 @@ def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
 def config_sha256(config: dict) -> str:
     """SHA-256 of a configuration, independent of key order."""
     return hashlib.sha256(json.dumps(config, sort_keys=True, default=str).encode()).hexdigest()
+
+
+@contextmanager
+def atomic_output(path: str | Path) -> Iterator[Path]:
+    """A temporary file beside ``path`` that replaces ``path`` when the block ends without error.
+
+    Write to the yielded path; a failed block leaves ``path`` untouched and removes the
+    temporary. The temporary is created (exclusively, under a random name) with mode 0o666, so
+    the kernel applies the user's umask (and a directory's default ACL) exactly as for any
+    ``open(path, "w")``: the result is 0644 under umask 022, 0640 under 027, never the private
+    0600 of :func:`tempfile.mkstemp`. The umask itself is never read or changed (changing it is
+    not thread-safe).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
+        try:
+            os.close(os.open(tmp, flags, 0o666))
+            break
+        except FileExistsError:
+            continue
+    else:  # pragma: no cover - 100 collisions of 48 random bits
+        raise FileExistsError(f"{path}: no free temporary name beside it")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def write_json(path: str | Path, data: dict) -> None:

@@ -55,6 +55,8 @@ rule sweep_summary:
     params:
         results=get_sweep_result_rows,
         columns=list(SWEEP_TABLE.columns) if SWEEP_TABLE else [],
+        # the config sections a sweep reads, unchanged: the default value of each swept key
+        defaults=sweep_settings(config, {}),
     script:
         "../scripts/sweep_summary.py"
 

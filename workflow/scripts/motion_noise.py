@@ -3,6 +3,7 @@
 from scan2morph.jobs import run_job
 from scan2morph.stages import Subject, motion_noise
 from scan2morph.store import read_part, read_parts, write_part
+from scan2morph.tables import MOTION_NOISE, write_table
 from scan2morph.template import load_template
 
 
@@ -14,7 +15,7 @@ def main(snakemake):
         config = {"motion_noise": p.noise, "smoothing": p.smoothing, "template": p.template}
         part = motion_noise.run(load_template(inp.template), subject, data, config)
         write_part(out.part, part.datasets, attrs=part.attrs)
-        part.files["table"].to_csv(out.table, sep="\t", index=False, float_format="%.6g")
+        write_table(out.table, part.files["table"], MOTION_NOISE)
 
     run_job(snakemake.log[0], job)
 

@@ -2,9 +2,10 @@
 
 Per subject: the number of takes (and of visemes and expressions), the RMS over all template
 vertices of the processed motion's length for each viseme label (mean over repeated takes of a
-label), the cumulative contribution rate of the first three principal components, the lowest
-natural frequency of the modal basis, and the accuracy summary against ground truth where there
-is one.
+label), the click-noise error bar per label, the cumulative contribution rate of the first three
+principal components, the lowest natural frequency of the modal basis, and the accuracy summary
+against ground truth where there is one. The table's column dictionary is
+:data:`scan2morph.tables.COHORT` (and :func:`scan2morph.tables.accuracy_column`).
 """
 
 from __future__ import annotations
@@ -20,10 +21,22 @@ from matplotlib.ticker import MaxNLocator
 
 from scan2morph.errors import InputError
 from scan2morph.store import open_store, paths
+from scan2morph.tables import COHORT, accuracy_column, write_table
 from scan2morph.tol import VISEMES
 
 #: Number of leading CCR values in the table.
 N_CCR = 3
+#: Column prefixes of the per-label families: motion RMS over all vertices, click-noise error bar.
+MOTION_PREFIX, NOISE_PREFIX = "motion_rms_all_mm_", "noise_relative_unmasked_"
+#: Panels of the accuracy part of the plot, one per unit: unit -> axis label.
+UNIT_LABELS = {
+    "mm": "mm",
+    "deg": "degrees",
+    "fraction": "fraction",
+    "px": "px",
+    "Hz": "Hz",
+    "-": "no unit",
+}
 
 
 @dataclass(frozen=True)
@@ -65,9 +78,10 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     -------
     SubjectSummary
         ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``,
-        ``motion_rms_mm_{label}`` per viseme label, ``motion_noise_relative_{label}`` (the
-        click-noise error bar, when the store has ``/motion_noise``), ``ccr_1`` .. ``ccr_3``,
-        ``modal_f1_hz``, and the accuracy summary keys; ``ccr``: the whole CCR curve.
+        ``motion_rms_all_mm_{label}`` per viseme label (RMS over all vertices),
+        ``noise_relative_unmasked_{label}`` (the click-noise error bar, over the vertices outside
+        the mask, when the store has ``/motion_noise``), ``ccr_1`` .. ``ccr_3``, ``modal_f1_hz``,
+        and the accuracy summary keys; ``ccr``: the whole CCR curve.
 
     Raises
     ------
@@ -101,9 +115,9 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
                 noise_by_label.setdefault(label or take, []).append(float(rel))
         order = {v: i for i, v in enumerate(VISEMES)}
         for label in sorted(by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
-            row[f"motion_rms_mm_{label}"] = float(np.mean(by_label[label]))
+            row[f"{MOTION_PREFIX}{label}"] = float(np.mean(by_label[label]))
         for label in sorted(noise_by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
-            row[f"motion_noise_relative_{label}"] = float(np.mean(noise_by_label[label]))
+            row[f"{NOISE_PREFIX}{label}"] = float(np.mean(noise_by_label[label]))
         ccr = np.asarray(h5[paths.pca("ccr")][()] if paths.pca("ccr") in h5 else [], dtype=float)
         for i in range(N_CCR):
             row[f"ccr_{i + 1}"] = float(ccr[i]) if i < len(ccr) else float("nan")
@@ -127,7 +141,7 @@ def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     for s in summaries:
         columns += [c for c in s.row if c not in columns]
     motion = []
-    for prefix in ("motion_rms_mm_", "motion_noise_relative_"):
+    for prefix in (MOTION_PREFIX, NOISE_PREFIX):
         order = {f"{prefix}{v}": i for i, v in enumerate(VISEMES)}
         group = [c for c in columns if c.startswith(prefix)]
         motion += sorted(group, key=lambda c: (order.get(c, len(order)), c))
@@ -137,10 +151,43 @@ def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     return pd.DataFrame([s.row for s in summaries], columns=head + motion + fixed + rest)
 
 
+def accuracy_columns(table: pd.DataFrame) -> list[str]:
+    """The accuracy summary columns of a cohort table (those after the fixed ones)."""
+    fixed = {c.name for c in COHORT if not c.is_pattern}
+    return [
+        c
+        for c in table.columns
+        if c not in fixed and not c.startswith((MOTION_PREFIX, NOISE_PREFIX, "ccr_"))
+    ]
+
+
+def _bars(
+    ax, rows: pd.DataFrame, columns: Sequence[str], labels: Sequence[str], colour: Mapping
+) -> None:
+    """One group of bars per column, one bar per subject (``colour``: subject -> colour index)."""
+    x = np.arange(len(columns))
+    width = 0.8 / max(len(rows), 1)
+    for i, (_, row) in enumerate(rows.iterrows()):
+        ax.bar(
+            x + (i - (len(rows) - 1) / 2) * width,
+            row[list(columns)].astype(float),
+            width,
+            color=f"C{colour[row['subject']]}",
+            label=row["subject"],
+        )
+    rotate = any(len(str(lab)) > 8 for lab in labels)
+    ax.set_xticks(x, labels, rotation=30 if rotate else 0, ha="right" if rotate else "center")
+    pad = max(0.0, (3 - len(columns)) / 2)  # a lone metric keeps slim bars
+    ax.set_xlim(-0.5 - pad, len(columns) - 0.5 + pad)
+    ax.grid(axis="y", alpha=0.3)
+
+
 def plot_cohort(
     table: pd.DataFrame, ccr: Mapping[str, np.ndarray], path: str | Path, dpi: int = 110
 ) -> None:
-    """Compare subjects: motion RMS per viseme label, CCR curves, accuracy where known.
+    """Compare subjects, one panel per unit: motion RMS per viseme label (mm), CCR curves
+    (fraction, as %), and the accuracy against ground truth where known, one panel for each of
+    its units (mm, degrees, fraction, px: the metric's unit in the column dictionary).
 
     Parameters
     ----------
@@ -150,61 +197,46 @@ def plot_cohort(
     path : str or Path
         PNG written.
     """
-    motion_cols = [c for c in table.columns if c.startswith("motion_rms_mm_")]
-    fixed = {"subject", "n_takes", "n_visemes", "n_expressions", "modal_f1_hz"}
-    acc_cols = [
-        c
-        for c in table.columns
-        if c not in fixed and c not in motion_cols and not c.startswith("ccr_")
-    ]
-    has_acc = bool(acc_cols) and table[acc_cols].notna().any().any()
-    n_panels = 3 if has_acc else 2
-    fig = Figure(figsize=(5.2 * n_panels, 4.2), layout="constrained")  # no pyplot: no global state
-    axes = fig.subplots(1, n_panels)
+    motion_cols = [c for c in table.columns if c.startswith(MOTION_PREFIX)]
+    acc_cols = [c for c in accuracy_columns(table) if table[c].notna().any()]
+    known = table[table[acc_cols].notna().any(axis=1)] if acc_cols else table.iloc[:0]
+    by_unit: dict[str, list[str]] = {}
+    for c in acc_cols:
+        by_unit.setdefault(accuracy_column(c).unit, []).append(c)
+    order = {u: i for i, u in enumerate(UNIT_LABELS)}
+    units = sorted(by_unit, key=lambda u: (order.get(u, len(order)), u))
+    n_panels = 2 + len(units)
+    n_cols = min(n_panels, 3)
+    n_rows = -(-n_panels // n_cols)
+    # no pyplot: no global state
+    fig = Figure(figsize=(5.2 * n_cols, 4.2 * n_rows), layout="constrained")
+    axes = fig.subplots(n_rows, n_cols, squeeze=False).ravel()
     subjects = list(table["subject"])
-    width = 0.8 / max(len(subjects), 1)
+    colour = {s: i for i, s in enumerate(subjects)}
     ax = axes[0]
-    labels = [c.removeprefix("motion_rms_mm_") for c in motion_cols]
-    x = np.arange(len(labels))
-    for i, (_, row) in enumerate(table.iterrows()):
-        ax.bar(
-            x + (i - (len(subjects) - 1) / 2) * width,
-            row[motion_cols].astype(float),
-            width,
-            label=row["subject"],
-        )
-    ax.set_xticks(x, labels)
-    ax.set_ylabel("motion RMS over vertices (mm)")
-    ax.set_title("Viseme motion magnitude")
-    if not labels:
+    _bars(ax, table, motion_cols, [c.removeprefix(MOTION_PREFIX) for c in motion_cols], colour)
+    ax.set_ylabel("motion RMS over all vertices (mm)")
+    ax.set_title("Viseme motion magnitude (mm)")
+    if not motion_cols:
         ax.text(0.5, 0.5, "no viseme takes", ha="center", transform=ax.transAxes)
     ax.legend(fontsize="small")
     ax = axes[1]
-    for subject in subjects:
+    for i, subject in enumerate(subjects):
         curve = np.asarray(ccr.get(subject, []), dtype=float)
-        ax.plot(np.arange(1, len(curve) + 1), 100 * curve, marker="o", label=subject)
+        ax.plot(np.arange(1, len(curve) + 1), 100 * curve, "o-", color=f"C{i}", label=subject)
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("number of principal components")
     ax.set_ylabel("CCR (%)")
-    ax.set_title("Cumulative contribution rate")
+    ax.set_title("Cumulative contribution rate (%)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
-    if has_acc:
-        ax = axes[2]
-        known = table[table[acc_cols].notna().any(axis=1)]
-        xa = np.arange(len(acc_cols))
-        wa = 0.8 / max(len(known), 1)
-        for i, (_, row) in enumerate(known.iterrows()):
-            ax.bar(
-                xa + (i - (len(known) - 1) / 2) * wa,
-                row[acc_cols].astype(float),
-                wa,
-                label=row["subject"],
-            )
-        ax.set_xticks(xa, acc_cols, rotation=35, ha="right", fontsize="small")
-        ax.set_title("Accuracy against ground truth (worst take)")
-        ax.set_ylabel("mm, degrees or fraction (see name)")
+    for ax, unit in zip(axes[2:], units, strict=False):
+        _bars(ax, known, by_unit[unit], by_unit[unit], colour)
+        ax.set_ylabel(UNIT_LABELS.get(unit, unit))
+        ax.set_title(f"Accuracy against ground truth ({UNIT_LABELS.get(unit, unit)})")
         ax.legend(fontsize="small")
+    for ax in axes[n_panels:]:
+        ax.set_visible(False)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi, facecolor="white")
 
@@ -215,7 +247,8 @@ def write_cohort_summary(
     table_path: str | Path,
     plot_path: str | Path,
 ) -> pd.DataFrame:
-    """Summarise subjects into ``table_path`` (TSV) and ``plot_path`` (PNG).
+    """Summarise subjects into ``table_path`` (TSV with its column dictionary on top) and
+    ``plot_path`` (PNG).
 
     Parameters
     ----------
@@ -231,7 +264,7 @@ def write_cohort_summary(
         raise InputError("cohort", "no subjects to summarise")
     summaries = {s: subject_summary(p, accuracies.get(s)) for s, p in stores.items()}
     table = cohort_table(list(summaries.values()))
-    Path(table_path).parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(table_path, sep="\t", index=False, float_format="%.6g", na_rep="NA")
+    dictionary = [*COHORT, *(accuracy_column(c) for c in accuracy_columns(table))]
+    write_table(table_path, table, dictionary)
     plot_cohort(table, {str(v.row["subject"]): v.ccr for v in summaries.values()}, plot_path)
     return table

@@ -273,6 +273,26 @@ def _status_section(h5: h5py.File) -> str:
     return "".join(parts)
 
 
+def _columns(table: str) -> str:
+    """The column dictionary of ``tables/{table}.tsv`` (:mod:`scan2morph.tables`), folded
+    under the page's table that shows the same numbers."""
+    from scan2morph import tables
+
+    dictionary = {
+        "pca_eigenvalues": tables.PCA_EIGENVALUES,
+        "pca_coefficients": tables.PCA_COEFFICIENTS,
+        "motion_noise": tables.MOTION_NOISE,
+        "modal_coordinates": tables.MODAL_COORDINATES,
+        "modal_reconstruction": tables.MODAL_RECONSTRUCTION,
+    }[table]
+    rows = [[c.name, c.unit, c.definition] for c in dictionary]
+    return (
+        f'<details class="columns"><summary>Columns of tables/{_esc(table)}.tsv</summary>'
+        + _table(["column", "unit", "definition"], rows, f"Column dictionary: {table}.tsv")
+        + "</details>"
+    )
+
+
 def _pca_section(h5: h5py.File) -> str:
     if paths.pca("eigenvalues") not in h5:
         return _note("The store holds no PCA.")
@@ -294,7 +314,7 @@ def _pca_section(h5: h5py.File) -> str:
         rows2,
         "Table 2: PCA coefficients of each model (mm)",
     )
-    return table1 + table2
+    return table1 + _columns("pca_eigenvalues") + table2 + _columns("pca_coefficients")
 
 
 def _motion_noise_section(h5: h5py.File) -> str:
@@ -316,7 +336,7 @@ def _motion_noise_section(h5: h5py.File) -> str:
         "clicking"
     )
     columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
-    return _table(columns, rows, caption)
+    return _table(columns, rows, caption) + _columns("motion_noise")
 
 
 def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
@@ -349,6 +369,7 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
             rows,
             f"Modal coordinates q = Q^T M v of each expression, first {n} modes",
         )
+        + _columns("modal_coordinates")
     )
     if paths.modal("reconstruction_k") in h5:
         ks = h5[paths.modal("reconstruction_k")][()]
@@ -363,6 +384,7 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
                 rows,
                 "RMS error (mm) of each expression rebuilt from its first K modes",
             )
+            + _columns("modal_reconstruction")
         )
     return "".join(out)
 

@@ -1,16 +1,85 @@
 """Parameter sweep summaries: one row per combination and subject, and a plot of each accuracy
-metric against each swept key (the sweeps themselves: :mod:`scan2morph.sweep`)."""
+metric against the swept key that varied (the sweeps themselves: :mod:`scan2morph.sweep`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
 
 from scan2morph.errors import InputError
+from scan2morph.tables import accuracy_column, sweep_dictionary, write_table
+
+#: Panel rows of the plot, one per unit: unit -> axis label (other units follow, by name).
+UNIT_LABELS = {"mm": "mm", "deg": "degrees", "fraction": "fraction", "px": "px", "Hz": "Hz"}
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X")
+_LINES = ("-", "--", ":", "-.")
+
+
+def config_values(config: Mapping, params: Sequence[str]) -> dict[str, object]:
+    """The config's value of each swept key.
+
+    Parameters
+    ----------
+    config : mapping
+        The config, or the sections a sweep reads (:func:`scan2morph.sweep.sweep_settings`).
+    params : sequence of str
+        Dotted config paths (``mask.radius_mm``).
+
+    Raises
+    ------
+    InputError
+        A path the config does not hold.
+    """
+    out = {}
+    for param in params:
+        node = config
+        for part in param.split("."):
+            if not isinstance(node, Mapping) or part not in node:
+                raise InputError("sweep summary", f"{param}: not in the config (no default value)")
+            node = node[part]
+        out[param] = node
+    return out
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+        value, (bool, np.bool_)
+    )
+
+
+def _same(a, b) -> bool:
+    """Two swept values are the same (20 and 20.0 are)."""
+    if _number(a) and _number(b):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    return str(a) == str(b)
+
+
+def one_at_a_time(
+    table: pd.DataFrame, params: Sequence[str], defaults: Mapping[str, object]
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Which rows are the config's own combination, and which vary one key only.
+
+    Returns
+    -------
+    default : (N,) bool
+        Rows equal to ``defaults`` in every swept key.
+    varied : dict key -> (N,) bool
+        Rows that differ from ``defaults`` in exactly that key. Rows differing in two or more
+        keys are in neither.
+    """
+    differs = {
+        p: np.array([not _same(v, defaults[p]) for v in table[p]], dtype=bool) for p in params
+    }
+    n_diff = np.sum([differs[p] for p in params], axis=0) if params else np.zeros(len(table), int)
+    default = n_diff == 0
+    return default, {p: differs[p] & (n_diff == 1) for p in params}
 
 
 def sweep_summary(
@@ -36,51 +105,126 @@ def sweep_summary(
 
 
 def plot_sweep(
-    table: pd.DataFrame, params: Sequence[str], path: str | Path, dpi: int = 100
+    table: pd.DataFrame,
+    params: Sequence[str],
+    path: str | Path,
+    defaults: Mapping[str, object] | None = None,
+    dpi: int = 100,
 ) -> None:
-    """Each accuracy metric (rows) against each swept key (columns), one colour per subject.
+    """Each accuracy metric against the swept key that varied, one panel row per unit.
 
-    Markers are combinations; in the panel of one key, a line joins the combinations that differ
-    in that key only (the other swept keys equal), so each line is a one-at-a-time slice.
+    Columns of panels are the swept keys, rows the units of the metrics (mm, degrees, fraction,
+    px: :func:`scan2morph.tables.accuracy_column`). The panel of key ``k`` shows, per metric
+    (colour) and subject (marker), the rows that differ from the config's values ``defaults`` in
+    ``k`` only, joined with the config's own row; a dashed vertical line marks the config's
+    value of ``k``, a dotted horizontal line per metric and subject the config row's value.
+    Rows that differ from the config in two or more keys are left out (the figure says how
+    many).
+
+    Parameters
+    ----------
+    table : DataFrame
+        :func:`sweep_summary`.
+    params : sequence of str
+        The swept keys (columns of ``table``).
+    path : str or Path
+        PNG written.
+    defaults : mapping key -> value, optional
+        The config's value of each swept key (:func:`config_values`); default: the table's first
+        row (the sweep table's convention: the papers' values first).
     """
     metrics = [c for c in table.columns if c not in (*params, "subject")]
-    if not metrics or not params:
+    if not metrics or not params or table.empty:
         raise InputError("sweep summary", "no accuracy metric or no swept key to plot")
-    # no pyplot: no global state
-    fig = Figure(figsize=(3.8 * len(params), 2.6 * len(metrics)), layout="constrained")
-    axes = fig.subplots(len(metrics), len(params), squeeze=False)
+    if defaults is None:
+        defaults = {p: table[p].iloc[0] for p in params}
+    missing = [p for p in params if p not in defaults]
+    if missing:
+        raise InputError("sweep summary", f"no default (config) value for {missing}")
+    default, varied = one_at_a_time(table, params, defaults)
+    by_unit: dict[str, list[str]] = {}
+    for m in metrics:
+        if table[m].notna().any():
+            by_unit.setdefault(accuracy_column(m).unit, []).append(m)
+    order = {u: i for i, u in enumerate(UNIT_LABELS)}
+    units = sorted(by_unit, key=lambda u: (order.get(u, len(order)), u))
+    # colours by metric within a unit's row (a row holds a few metrics)
+    colour = {m: f"C{i % 10}" for ms in by_unit.values() for i, m in enumerate(ms)}
     subjects = list(dict.fromkeys(table["subject"]))
+    style = {
+        s: (_MARKERS[i % len(_MARKERS)], _LINES[i % len(_LINES)]) for i, s in enumerate(subjects)
+    }
+    # no pyplot: no global state
+    fig = Figure(figsize=(3.6 * len(params) + 3.4, 2.9 * len(units) + 0.6), layout="constrained")
+    axes = fig.subplots(len(units), len(params), squeeze=False)
     for j, param in enumerate(params):
-        values = list(dict.fromkeys(table[param]))
-        numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
-        pos = {v: float(v) for v in values} if numeric else {v: k for k, v in enumerate(values)}
-        others = [p for p in params if p != param]
-        for i, metric in enumerate(metrics):
+        rows = table[default | varied[param]]
+        values = list(dict.fromkeys([*table[param], defaults[param]]))
+        numeric = all(_number(v) for v in values)
+        if numeric:
+            pos = {v: float(v) for v in values}
+        else:
+            cats = list(dict.fromkeys(str(v) for v in values))
+            pos = {v: float(cats.index(str(v))) for v in values}
+        x_default = pos[defaults[param]]
+        for i, unit in enumerate(units):
             ax = axes[i, j]
-            for c, subject in enumerate(subjects):
-                rows = table[table["subject"] == subject]
-                x = np.array([pos[v] for v in rows[param]])
-                ax.plot(x, rows[metric].astype(float), "o", color=f"C{c}", label=str(subject))
-                slices = rows.groupby(others, sort=False) if others else [((), rows)]
-                for _, group in slices:
-                    if len(group) > 1:
-                        xs = np.array([pos[v] for v in group[param]])
-                        k = np.argsort(xs)
-                        ax.plot(
-                            xs[k],
-                            group[metric].to_numpy(dtype=float)[k],
-                            "-",
-                            color=f"C{c}",
-                            alpha=0.7,
-                        )
+            ax.axvline(x_default, color="0.45", ls="--", lw=1.0, zorder=0)
+            for subject in subjects:
+                mine = rows[rows["subject"] == subject]
+                xs = np.array([pos[v] for v in mine[param]], dtype=float)
+                k = np.argsort(xs, kind="stable")
+                base = table[default & (table["subject"] == subject).to_numpy()]
+                marker, line = style[subject]
+                for metric in by_unit[unit]:
+                    ys = mine[metric].to_numpy(dtype=float)[k]
+                    ax.plot(xs[k], ys, marker=marker, ls=line, color=colour[metric], ms=4)
+                    if len(base):
+                        ref = float(base[metric].iloc[0])
+                        ax.axhline(ref, color=colour[metric], ls=":", lw=0.8, alpha=0.7)
             if not numeric:
-                ax.set_xticks(range(len(values)), [str(v) for v in values])
-            if i == len(metrics) - 1:
-                ax.set_xlabel(param)
+                ax.set_xticks(range(len(cats)), cats)
+            elif all(float(v).is_integer() for v in values):
+                ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+            if i == 0:
+                n = int(varied[param].sum() // max(len(subjects), 1))
+                other = f"{n} other value{'s' if n != 1 else ''}"
+                ax.set_title(f"{param} varied ({other})", fontsize="medium")
+            if i == len(units) - 1:
+                ax.set_xlabel(f"{param} (dashed: the config's {defaults[param]})")
             if j == 0:
-                ax.set_ylabel(metric, fontsize="small")
+                ax.set_ylabel(UNIT_LABELS.get(unit, unit))
+            ax.margins(x=0.08)  # the config's value is often at an end
             ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize="small")
+        for i, unit in enumerate(units):
+            if j == len(params) - 1:
+                handles = [Line2D([], [], color=colour[m], marker="o", ms=4) for m in by_unit[unit]]
+                axes[i, j].legend(
+                    handles,
+                    by_unit[unit],
+                    fontsize="small",
+                    loc="center left",
+                    bbox_to_anchor=(1.02, 0.5),
+                    title=UNIT_LABELS.get(unit, unit),
+                )
+    notes = []
+    if len(subjects) > 1:
+        handles = [
+            Line2D([], [], color="0.3", marker=style[s][0], ls=style[s][1]) for s in subjects
+        ]
+        fig.legend(handles, subjects, loc="outside lower center", ncols=len(subjects))
+    elif subjects:
+        notes.append(f"subject {subjects[0]}")
+    left_out = int(len(table) - default.sum() - sum(v.sum() for v in varied.values()))
+    if left_out:
+        notes.append(f"{left_out} rows differ from the config in two or more keys (not drawn)")
+    if not default.any():
+        notes.append("no row equals the config (no reference lines)")
+    fig.suptitle(
+        "Accuracy against each swept key, one key varied at a time; dotted: the config's row"
+        + ("\n" + "; ".join(notes) if notes else ""),
+        fontsize="medium",
+    )
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi, facecolor="white")
 
@@ -90,12 +234,18 @@ def write_sweep_summary(
     params: Sequence[str],
     table_path: str | Path,
     plot_path: str | Path,
+    defaults: Mapping[str, object] | None = None,
 ) -> pd.DataFrame:
-    """Write :func:`sweep_summary` as TSV and :func:`plot_sweep` as PNG; returns the table."""
+    """Write :func:`sweep_summary` as TSV (with its column dictionary on top) and
+    :func:`plot_sweep` as PNG; returns the table.
+
+    ``defaults``: the config's value of each swept key (:func:`config_values`); see
+    :func:`plot_sweep`.
+    """
     if not results:
         raise InputError("sweep summary", "no sweep results to summarise")
     table = sweep_summary(results)
-    Path(table_path).parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(table_path, sep="\t", index=False, float_format="%.6g", na_rep="NA")
-    plot_sweep(table, params, plot_path)
+    metrics = [c for c in table.columns if c not in (*params, "subject")]
+    write_table(table_path, table, sweep_dictionary(params, metrics, defaults))
+    plot_sweep(table, params, plot_path, defaults)
     return table

@@ -147,11 +147,16 @@ def run(
 
 
 def write_files(part: Part, coordinates: str, reconstruction: str, meshes: str) -> None:
-    """Write the coordinate and reconstruction tables (TSV, one row per expression take) and the
-    measured and synthesised expression meshes (OBJ) into the folder ``meshes``."""
+    """Write the coordinate and reconstruction tables (TSV with their column dictionaries, one
+    row per expression take) and the measured and synthesised expression meshes (OBJ) into the
+    folder ``meshes``."""
+    from scan2morph.tables import MODAL_COORDINATES, MODAL_RECONSTRUCTION, write_table
+
     f = part.files
-    f["coordinates"].rename_axis("take").to_csv(coordinates, sep="\t", float_format="%.6g")
-    f["reconstruction"].rename_axis("take").to_csv(reconstruction, sep="\t", float_format="%.4f")
+    coords = f["coordinates"].rename_axis("take").reset_index()
+    write_table(coordinates, coords, MODAL_COORDINATES)
+    recon = f["reconstruction"].rename_axis("take").reset_index()
+    write_table(reconstruction, recon, MODAL_RECONSTRUCTION, float_format="%.4f")
     folder = Path(meshes)
     folder.mkdir(parents=True, exist_ok=True)
     for name, vertices in f["meshes"].items():

@@ -129,11 +129,13 @@ def run(
 
 
 def write_files(part: Part, eigen: str, coefficients: str, glb: str, models: str) -> None:
-    """Write the PCA tables (TSV), the glTF with one morph target per viseme and PCA component,
-    and one OBJ per model and blend into the folder ``models``."""
+    """Write the PCA tables (TSV with their column dictionaries), the glTF with one morph target
+    per viseme and PCA component, and one OBJ per model and blend into the folder ``models``."""
+    from scan2morph.tables import PCA_COEFFICIENTS, PCA_EIGENVALUES, write_table
+
     f = part.files
-    f["eigen"].to_csv(eigen, sep="\t", index=False, float_format="%.6g")
-    f["coefficients"].to_csv(coefficients, sep="\t", index=False, float_format="%.6g")
+    write_table(eigen, f["eigen"], PCA_EIGENVALUES)
+    write_table(coefficients, f["coefficients"], PCA_COEFFICIENTS)
     base = f["shapes"]["neutral"]
     write_glb(glb, base, f["faces"], uv=f["uv"], texture=f["texture"], targets=f["targets"])
     folder = Path(models)

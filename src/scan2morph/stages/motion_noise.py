@@ -19,11 +19,12 @@ from scan2morph.template import Template, fit_options
 
 #: Config sections this stage reads.
 SECTIONS = ("motion_noise", "smoothing", "template")
-#: Columns of ``tables/motion_noise.tsv``: result key -> column name.
+#: Columns of ``tables/motion_noise.tsv``: result key -> column name (the RMS values are over
+#: the vertices outside the mask; dictionary: :data:`scan2morph.tables.MOTION_NOISE`).
 COLUMNS = {
-    "motion_rms_mm": "motion_rms_mm",
-    "rms_error_mm": "noise_rms_mm",
-    "relative": "noise_relative",
+    "motion_rms_mm": "motion_rms_unmasked_mm",
+    "rms_error_mm": "noise_rms_unmasked_mm",
+    "relative": "noise_relative_unmasked",
     "failed_draws": "failed_draws",
 }
 log = logging.getLogger("scan2morph")
@@ -48,8 +49,9 @@ def run(
     -------
     Part
         ``/visemes/{take}/noise_rms_mm`` and ``/motion_noise/*``; ``files["table"]`` is the
-        per-viseme table (``motion_rms_mm``, ``noise_rms_mm``, ``noise_relative``,
-        ``failed_draws``, ``click_noise_px``).
+        per-viseme table (``motion_rms_unmasked_mm``, ``noise_rms_unmasked_mm``,
+        ``noise_relative_unmasked``, ``failed_draws``, ``click_noise_px_used``; written by
+        :func:`scan2morph.tables.write_table` with :data:`scan2morph.tables.MOTION_NOISE`).
     """
     subject = modelled(subject, data)
     noise_cfg, section = config["motion_noise"], config["template"]
@@ -83,7 +85,7 @@ def run(
     }
     rows = [{"take": t, **{c: r[k] for k, c in COLUMNS.items()}} for t, r in result.items()]
     table = pd.DataFrame(rows, columns=["take", *COLUMNS.values()])
-    table["click_noise_px"] = noise["click_noise_px"]
+    table["click_noise_px_used"] = noise["click_noise_px"]
     if not subject.visemes:
         attrs[paths.SKIPPED] = {"motion_noise": "no viseme takes: no click-noise error bar"}
     return Part(datasets, attrs=attrs, files={"table": table})

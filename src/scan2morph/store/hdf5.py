@@ -4,14 +4,13 @@ Each stage writes a *part*: a small HDF5 file whose datasets already sit at thei
 the subject's store (for example ``/takes/car/mesh/vertices``). The store rule merges the parts of a
 subject into ``results/{subject}/{subject}.h5`` and adds the root attributes of the contract.
 Writing goes to a temporary file that is renamed into place, so a failed job never leaves a
-half-written store behind.
+half-written store behind; the file gets the mode the user's umask gives any new file
+(:func:`scan2morph.jobs.atomic_output`).
 """
 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -20,18 +19,12 @@ import numpy as np
 
 from scan2morph import __version__
 from scan2morph.errors import InputError
+from scan2morph.jobs import atomic_output
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
 FORMAT_VERSION = "1.2.0"
 #: Datasets at least this large are chunked and gzip-compressed.
 _COMPRESS_BYTES = 1 << 16
-
-
-def _atomic_h5(path: Path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    return Path(tmp)
 
 
 def _write_dataset(h5: h5py.File, name: str, value) -> None:
@@ -76,18 +69,12 @@ def write_part(
     attrs : mapping of str to mapping, optional
         Group or dataset path to its attributes; ``"/"`` is the root.
     """
-    path = Path(path)
-    tmp = _atomic_h5(path)
-    try:
-        with h5py.File(tmp, "w") as h5:
-            for name, value in datasets.items():
-                _write_dataset(h5, name, value)
-            for name, group_attrs in (attrs or {}).items():
-                obj = h5.require_group(name) if name not in h5 else h5[name]
-                _set_attrs(obj, group_attrs)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    with atomic_output(path) as tmp, h5py.File(tmp, "w") as h5:
+        for name, value in datasets.items():
+            _write_dataset(h5, name, value)
+        for name, group_attrs in (attrs or {}).items():
+            obj = h5.require_group(name) if name not in h5 else h5[name]
+            _set_attrs(obj, group_attrs)
 
 
 def read_part(path: str | Path, prefix: str = "/") -> dict[str, np.ndarray]:
@@ -138,30 +125,24 @@ def merge_parts(
     ``input_sha256_<role>``) are gathered into the root attribute ``input_sha256``: a JSON object
     take -> role -> hex digest.
     """
-    path = Path(path)
-    tmp = _atomic_h5(path)
-    try:
-        with h5py.File(tmp, "w") as out:
-            for part in parts:
-                with h5py.File(part, "r") as src:
-                    _merge_group(src, out, Path(part))
-            out.attrs["format_version"] = FORMAT_VERSION
-            out.attrs["scan2morph_version"] = __version__
-            out.attrs["config_sha256"] = config_sha256
-            out.attrs["subject"] = subject
-            out.attrs["units"] = "mm"
-            checksums = {
-                take: {
-                    key.removeprefix("input_sha256_"): str(value)
-                    for key, value in group.attrs.items()
-                    if key.startswith("input_sha256_")
-                }
-                for take, group in out.get("takes", {}).items()
+    with atomic_output(path) as tmp, h5py.File(tmp, "w") as out:
+        for part in parts:
+            with h5py.File(part, "r") as src:
+                _merge_group(src, out, Path(part))
+        out.attrs["format_version"] = FORMAT_VERSION
+        out.attrs["scan2morph_version"] = __version__
+        out.attrs["config_sha256"] = config_sha256
+        out.attrs["subject"] = subject
+        out.attrs["units"] = "mm"
+        checksums = {
+            take: {
+                key.removeprefix("input_sha256_"): str(value)
+                for key, value in group.attrs.items()
+                if key.startswith("input_sha256_")
             }
-            out.attrs["input_sha256"] = json.dumps(checksums, sort_keys=True)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+            for take, group in out.get("takes", {}).items()
+        }
+        out.attrs["input_sha256"] = json.dumps(checksums, sort_keys=True)
 
 
 def _merge_group(src: h5py.Group, dst: h5py.Group, part: Path) -> None:
