@@ -19,6 +19,7 @@ import yaml
 from scan2morph.io import write_color
 from scan2morph.store import load_layout, open_store, validate_store
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
+from scan2morph.tables import read_table
 from tests.workflow_api import REPO, run_workflow
 
 pytestmark = pytest.mark.slow
@@ -217,12 +218,12 @@ def test_exports_and_accuracy_of_a_finished_subject(cohort):
     # the click-noise error bar: in the store, its table and beside the measured motion error
     noise = read_part(work / "results" / "synth01" / "synth01.h5", "/motion_noise")
     assert list(noise["/motion_noise/takes"]) == ["car"]
-    table = (work / "results" / "synth01" / "tables" / "motion_noise.tsv").read_text()
-    assert table.splitlines()[0].split("\t")[:4] == [
+    table = read_table(work / "results" / "synth01" / "tables" / "motion_noise.tsv")
+    assert table.columns[:4].tolist() == [
         "take",
-        "motion_rms_mm",
-        "noise_rms_mm",
-        "noise_relative",
+        "motion_rms_unmasked_mm",
+        "noise_rms_unmasked_mm",
+        "noise_relative_unmasked",
     ]
     car = acc["takes"]["car"]["motion"]
     assert car["click_noise_relative"] == pytest.approx(noise["/motion_noise/relative"][0])
