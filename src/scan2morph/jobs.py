@@ -23,11 +23,17 @@ log = logging.getLogger("scan2morph")
 def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
     """Run ``func`` with logging to ``log_path``.
 
-    An :class:`~scan2morph.errors.InputError` is written to the log and to stderr as one clear line
-    and the process exits with status 1 (no traceback: the message says what to fix). Any other
-    exception is logged with its traceback and re-raised.
+    Everything (INFO and up, libraries included) goes to the job's log file; the console (stderr,
+    which Snakemake shows beside its progress) gets only warnings and errors, one line each, so
+    that a run's console shows its progress and its problems, not library chatter (PyOpenGL logs
+    hundreds of INFO lines at shutdown). An :class:`~scan2morph.errors.InputError` is written to
+    the log and to stderr as one clear line and the process exits with status 1 (no traceback:
+    the message says what to fix). Any other exception is logged with its traceback and
+    re-raised.
     """
-    handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
+    console = logging.StreamHandler(sys.stderr)
+    console.setLevel(logging.WARNING)
+    handlers: list[logging.Handler] = [console]
     if log_path:
         Path(log_path).parent.mkdir(parents=True, exist_ok=True)
         handlers.append(logging.FileHandler(log_path, mode="w", encoding="utf-8"))

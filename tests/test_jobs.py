@@ -1,0 +1,50 @@
+"""A job's logging: everything in its log file, only problems on the console (one line each)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+JOB = """
+import logging, sys
+from scan2morph.errors import InputError
+from scan2morph.jobs import run_job
+
+def job():
+    for _ in range(300):
+        logging.getLogger("OpenGL.platform").info("Platform import failed (likely during shutdown)")
+    logging.getLogger("scan2morph").info("car: 1682 vertices")
+    logging.getLogger("scan2morph").warning("car: alignment failed its quality gate")
+    if sys.argv[2] == "bad":
+        raise InputError("alice/car.pts", "n_points: expected 68 (iBUG-68), got 67")
+
+run_job(sys.argv[1], job)
+"""
+
+
+def _run(tmp_path, mode):
+    log = tmp_path / "job.log"
+    res = subprocess.run(
+        [sys.executable, "-c", JOB, str(log), mode], capture_output=True, text=True, timeout=120
+    )
+    return res, log.read_text()
+
+
+def test_console_gets_problems_only_and_the_log_everything(tmp_path):
+    res, log = _run(tmp_path, "good")
+    assert res.returncode == 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].endswith("WARNING car: alignment failed its quality gate")
+    assert log.count("Platform import failed") == 300
+    assert "INFO car: 1682 vertices" in log
+
+
+def test_bad_input_is_one_line_and_exit_status_1(tmp_path):
+    res, log = _run(tmp_path, "bad")
+    assert res.returncode == 1
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 2  # the warning, then the bad input: no traceback
+    assert lines[1].endswith(
+        "ERROR bad input: alice/car.pts: n_points: expected 68 (iBUG-68), got 67"
+    )
+    assert "Traceback" not in res.stderr and "bad input" in log
