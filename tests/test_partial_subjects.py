@@ -102,4 +102,4 @@ def test_one_viseme_gives_blends_and_a_pca_of_two_shapes(partial):
             "modal_coordinates": "no expression takes: the modal basis only, no modal coordinates"
         }
     _, targets = read_glb_targets(partial / "results" / "one" / "one.glb")
-    assert set(targets) == {"car", "pca_1"}
+    assert set(targets) == {"car", "pca_mean", "pca_1"}

@@ -78,7 +78,9 @@ def test_subject_morph_pca_blends_and_labels(face):
     per_label = label_models(models, labels)
     np.testing.assert_allclose(per_label["too"], (models["too"] + models["too2"]) / 2)
     blends = {"half_car": {"car": 0.5}, "mix": {"car": 0.2, "too": 0.3}}
-    model, b, p = subject_morph(v, models, labels, blends, {"pb": [0.5, -1.0, 0.0, 0.0]}, 3.0, "s")
+    model, b, p = subject_morph(
+        v, models, labels, blends, {"pb": [0.5, -1.0, 0.0, 0.0]}, 3.0, "s", sigma="paper"
+    )
     assert list(model.names) == ["neutral", "car", "too", "too2"]
     np.testing.assert_allclose(b["half_car"], 0.5 * v + 0.5 * models["car"])
     np.testing.assert_allclose(b["mix"], 0.5 * v + 0.2 * models["car"] + 0.3 * per_label["too"])
@@ -89,8 +91,9 @@ def test_subject_morph_pca_blends_and_labels(face):
         + 0.5 * np.sqrt(lam[0]) * model.components[0]
         - np.sqrt(lam[1]) * model.components[1],
     )
-    t = pca_component_targets(model)
-    np.testing.assert_allclose(np.linalg.norm(t["pca_1"] - model.mean), np.sqrt(lam[0]))
+    t = pca_component_targets(model, v)
+    np.testing.assert_allclose(np.linalg.norm(t["pca_1"] - v), model.sigma[0])
+    np.testing.assert_allclose(model.sigma[0], np.sqrt(lam[0]))  # the paper's convention
     _, b2, p2 = subject_morph(
         v, models, labels, {"eel": {"eel": 0.5}}, {"needs5": [0, 0, 0, 0, 1.0]}, 3.0, "s"
     )

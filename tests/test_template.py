@@ -10,6 +10,7 @@ from scipy.sparse import csgraph, csr_array
 
 from scan2morph.errors import InputError
 from scan2morph.io import write_obj
+from scan2morph.io.obj import read_obj
 from scan2morph.template import (
     TPS,
     build_template,
@@ -232,10 +233,8 @@ def test_obj_round_trip_with_trimesh(tmp_path):
     valid = np.array([True, True, True, False])
     write_obj(tmp_path / "n.obj", v, f, valid=valid)
     lines = (tmp_path / "n.obj").read_text().splitlines()
-    assert (
-        sum(ln.startswith("v ") for ln in lines) == 4
-        and sum(ln.startswith("f ") for ln in lines) == 1
-    )
+    assert sum(ln.startswith("v ") for ln in lines) == 4
+    assert [ln for ln in lines if ln.startswith("f ")] == ["f 1 3 2", "f 4 4 4"]
 
 
 def test_stable_region_covers_forehead_ridge_and_temples_only(template):
@@ -272,6 +271,25 @@ def test_obj_opens_in_meshlab_with_every_vertex_in_order(tmp_path, template):
     mesh = ms.current_mesh()
     assert mesh.vertex_number() == fine.n_vertices
     np.testing.assert_allclose(mesh.vertex_matrix(), v, atol=1e-5)
-    kept = valid[fine.faces].all(axis=1)
-    assert mesh.face_number() == kept.sum()
+    kept = valid[fine.faces].all(axis=1)  # MeshLab drops the degenerate marker faces
     np.testing.assert_array_equal(mesh.face_matrix(), fine.faces[kept])
+
+
+def test_obj_keeps_every_vertex_in_order_with_uv_in_trimesh(tmp_path, template):
+    """trimesh drops the vertices no face references (and splits by texture coordinate): the
+    invalid vertices' degenerate faces keep vertex i = template vertex i, with its uv."""
+    fine = subdivide_template(template, 1)
+    rng = np.random.default_rng(3)
+    v = np.column_stack([fine.vertices * 40.0, 900.0 + rng.normal(0, 1, fine.n_vertices)])
+    valid = rng.uniform(size=fine.n_vertices) > 0.08
+    uv = rng.uniform(size=(fine.n_vertices, 2))
+    write_obj(
+        tmp_path / "m.obj", v, fine.faces, uv=uv, texture=np.zeros((4, 4, 3), np.uint8), valid=valid
+    )
+    mesh = trimesh.load(tmp_path / "m.obj", process=False)
+    assert len(mesh.vertices) == fine.n_vertices
+    np.testing.assert_allclose(mesh.vertices[valid], v[valid], atol=1e-5)
+    np.testing.assert_allclose(mesh.visual.uv, np.column_stack([uv[:, 0], 1 - uv[:, 1]]), atol=1e-6)
+    back = read_obj(tmp_path / "m.obj")
+    np.testing.assert_array_equal(back["valid"], valid)
+    np.testing.assert_array_equal(back["faces"], fine.faces[valid[fine.faces].all(axis=1)])

@@ -36,6 +36,16 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
     texture : (H, W, 3) uint8, optional
     valid : (V,) bool, optional
         Faces touching an invalid (or non-finite) vertex are not written.
+
+    Notes
+    -----
+    Vertex i of the file is vertex i of ``vertices`` in every common reader (trimesh, MeshLab,
+    Blender): an invalid vertex keeps its slot, at the mesh's centroid (no data there), is
+    listed on the ``# invalid:`` line (1-based, read back by :func:`read_obj`); every vertex no
+    written face uses (invalid ones, and valid ones whose faces all touch an invalid vertex) is
+    referenced by one degenerate (zero-area) face ``f i i i`` after the real faces, since readers
+    such as trimesh drop the vertices no face references (MeshLab drops the degenerate faces
+    and keeps the vertices).
     """
     path = Path(path)
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -70,12 +80,16 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
     v = np.where(finite[:, None], vertices, centre)
     lines += [f"v {a:.6f} {b:.6f} {c:.6f}" for a, b, c in v]
     f1 = faces[keep] + 1
+    referenced = np.zeros(len(vertices), dtype=bool)
+    referenced[faces[keep].ravel()] = True
+    lonely = np.flatnonzero(~referenced) + 1  # one degenerate face each keeps them everywhere
+    corner = "{0}/{0}" if uv is not None else "{0}"
     if uv is not None:
         uv = np.asarray(uv, dtype=np.float64)
         lines += [f"vt {a:.7f} {1.0 - b:.7f}" for a, b in uv]
-        lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in f1]
-    else:
-        lines += [f"f {a} {b} {c}" for a, b, c in f1]
+    lines += ["f " + " ".join(corner.format(i) for i in tri) for tri in f1]
+    if lonely.size:
+        lines += [f"f {corner.format(i)} {corner.format(i)} {corner.format(i)}" for i in lonely]
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -115,7 +129,9 @@ def read_obj(path) -> dict[str, np.ndarray]:
                     raise InputError(
                         path, f"line {n}: expected a triangle, got {len(parts) - 1} corners"
                     )
-                faces.append([int(t.split("/")[0]) - 1 for t in parts[1:]])
+                tri = [int(t.split("/")[0]) - 1 for t in parts[1:]]
+                if len(set(tri)) > 1:  # a degenerate face only marks an invalid vertex
+                    faces.append(tri)
         except ValueError as exc:
             raise InputError(path, f"line {n}: cannot parse {line[:40]!r} ({exc})") from None
     vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
