@@ -313,8 +313,11 @@ def test_fit_take_bad_input(template, xyz):
     with pytest.raises(InputError, match=r"^s/t: fiducials: image point 0 \(iBUG 9\) .* outside"):
         fit_take(template, out, xyz, (W, H), source="s/t")
     same = lm.copy()
-    same[:, 0] = 320.0  # all landmarks on one vertical line: the warp collapses the template
-    with pytest.raises(InputError, match=r"^s/t: landmarks fold the template: \d+ of 3200"):
+    same[:, 0] = 320.0  # all landmarks on one vertical line: the warp would collapse the template
+    with pytest.raises(InputError, match=r"^s/t: fiducials: the image points all lie on one line"):
+        fit_take(template, same, xyz, (W, H), source="s/t")
+    same[:, 1] = 200.0  # all on one point
+    with pytest.raises(InputError, match=r"^s/t: fiducials: the image points all coincide"):
         fit_take(template, same, xyz, (W, H), source="s/t")
     with pytest.raises(InputError, match="^config: template.subdivision_levels: .* got -1"):
         fit_take(template, lm, xyz, (W, H), levels=-1, source="s/t")

@@ -7,7 +7,12 @@ tells the user what to fix without a traceback hunt.
 
 from __future__ import annotations
 
+import errno
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from os import PathLike
+from pathlib import Path
 
 
 class InputError(ValueError):
@@ -27,4 +32,51 @@ class InputError(ValueError):
         super().__init__(f"{self.source}: {problem}")
 
 
-__all__ = ["InputError"]
+#: ``errno`` values of a full disk (or a used-up quota).
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+class OutputError(InputError):
+    """An output file could not be written because the disk is full: one line naming the file.
+
+    A subclass of :class:`InputError` so that a job reports it as one line without a traceback
+    (:func:`scan2morph.jobs.run_job`); ``str(exc)`` is ``no space left on device writing <file>``.
+    """
+
+    def __init__(self, path: str | PathLike[str]):
+        super().__init__(path, f"no space left on device writing {path}")
+        self.args = (f"no space left on device writing {path}",)
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+
+def disk_full(exc: BaseException) -> bool:
+    """True when ``exc`` is an ``OSError`` of a full disk (ENOSPC / EDQUOT, also as h5py and
+    other libraries word it in the message)."""
+    if not isinstance(exc, OSError):
+        return False
+    return exc.errno in _DISK_FULL or "no space left on device" in str(exc).lower()
+
+
+@contextmanager
+def writing(path: str | PathLike[str]) -> Iterator[None]:
+    """Turn a full-disk ``OSError`` raised while writing ``path`` into :class:`OutputError`."""
+    try:
+        yield
+    except OSError as exc:
+        if disk_full(exc):
+            raise OutputError(path) from None
+        raise
+
+
+def no_space_left(path: str | PathLike[str], needed: int = 1) -> bool:
+    """True when the folder of ``path`` has fewer than ``needed`` bytes free (for writers, such
+    as OpenCV's, that report a failed write without the reason)."""
+    try:
+        return shutil.disk_usage(Path(path).resolve().parent).free < needed
+    except OSError:
+        return False
+
+
+__all__ = ["InputError", "OutputError", "disk_full", "no_space_left", "writing"]

@@ -9,7 +9,9 @@ subject's jobs fail, with a message naming the file and the row.
 
 from __future__ import annotations
 
+import copy
 import re
+from os import PathLike
 from pathlib import Path
 
 import pandas as pd
@@ -172,18 +174,31 @@ def synthetic_rows(
     return pd.DataFrame(rows, columns=[*COLUMNS, "sheet_row", "sheet", "synthetic"])
 
 
-def subject_problems(table: pd.DataFrame, check_files: bool = True) -> dict[str, list[str]]:
+def subject_problems(
+    table: pd.DataFrame,
+    check_files: bool = True,
+    schema: str | PathLike[str] | None = None,
+) -> dict[str, list[str]]:
     """Problems per subject that make that subject's run fail (and only that subject's).
 
     Checks: kind and modality known, the modality's files named (and present when
-    ``check_files``, for user rows), take ids unique per subject, exactly one neutral take.
+    ``check_files``, for user rows), take ids unique per subject, exactly one neutral take, and,
+    with ``schema`` (``schemas/sheet.schema.yaml``), every user row against it (e.g. an empty
+    ``label``). Each problem is one line naming the sheet row and the column.
     """
     problems: dict[str, list[str]] = {}
     table = table.reset_index(drop=True)
+    row_schema = load_schema(schema) if schema is not None else None
     for subject, rows in table.groupby("subject", sort=False):
         out = []
         for rec in rows.itertuples(index=False):
             where = f"{rec.sheet} row {rec.sheet_row} ({subject}/{rec.take})"
+            if row_schema is not None and not rec.synthetic:
+                record = {c: getattr(rec, c) for c in COLUMNS}
+                for key, problem in schema_errors(record, row_schema):
+                    empty = problem == "empty"
+                    if not (empty and key in FILES.get(rec.modality, ())):  # reported below
+                        out.append(f"{where}: column '{key}': {problem}")
             if rec.kind not in KINDS:
                 out.append(f"{where}: kind {rec.kind!r} unknown (expected one of {list(KINDS)})")
             if rec.modality not in MODALITIES:
@@ -209,6 +224,110 @@ def subject_problems(table: pd.DataFrame, check_files: bool = True) -> dict[str,
             )
         problems[subject] = out
     return problems
+
+
+def load_schema(path: str | PathLike[str]) -> dict:
+    """A JSON schema from a YAML (or JSON) file."""
+    import yaml
+
+    with open(path, encoding="utf-8") as fh:
+        return yaml.safe_load(fh)
+
+
+def schema_errors(data: object, schema: dict) -> list[tuple[str, str]]:
+    """Every way ``data`` breaks ``schema`` (JSON Schema draft 2020-12), as short
+    ``(key path, problem)`` pairs, shallowest first. ``key path`` is dotted (``a.b[2].c``),
+    ``<top>`` for the whole document; the problem never quotes more than 80 characters of
+    the value (jsonschema's own messages can hold a whole schema or config section).
+    """
+    from jsonschema import Draft202012Validator
+
+    validator = Draft202012Validator(schema)
+    errors = sorted(
+        validator.iter_errors(data), key=lambda e: (len(e.path), list(map(str, e.path)))
+    )
+    out = []
+    for e in errors:
+        path = list(e.absolute_path)
+        if e.validator == "additionalProperties" and isinstance(e.instance, dict):
+            known = e.schema.get("properties", {})
+            extra = [k for k in e.instance if k not in known]
+            allowed = ", ".join(sorted(known))
+            out += [(_key_path([*path, k]), f"unknown key (known: {allowed})") for k in extra]
+        else:
+            out.append((_key_path(path), _problem(e)))
+    return out
+
+
+def validate_config(config: dict, schema: str | PathLike[str], source: str = "config") -> dict:
+    """Check a config against its schema and fill in the schema's defaults, in place.
+
+    Defaults are set as :func:`snakemake.utils.validate` sets them: while validating, every
+    property with a ``default`` missing from its object is set to (a copy of) that default,
+    and the default's own properties are then checked and filled in turn.
+
+    Raises
+    ------
+    InputError
+        Naming ``source``, the first problem's key path and what is wrong (one line; the number
+        of further problems is appended).
+    """
+    from jsonschema import Draft202012Validator, validators
+
+    schema_doc = load_schema(schema)
+    properties = Draft202012Validator.VALIDATORS["properties"]
+
+    def set_defaults(validator, props, instance, sub):
+        if isinstance(instance, dict):
+            for name, subschema in props.items():
+                if isinstance(subschema, dict) and "default" in subschema:
+                    instance.setdefault(name, copy.deepcopy(subschema["default"]))
+        yield from properties(validator, props, instance, sub)
+
+    filling = validators.extend(Draft202012Validator, {"properties": set_defaults})
+    for _ in filling(schema_doc).iter_errors(config):
+        pass  # the errors are reported below, from a plain validator on the filled config
+    problems = schema_errors(config, schema_doc)
+    if problems:
+        key, problem = problems[0]
+        more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""
+        raise InputError(source, f"{key}: {problem}{more}")
+    return config
+
+
+def _key_path(path) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "<top>"
+
+
+def _short(value: object, limit: int = 80) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _problem(error) -> str:
+    """A short description of a jsonschema ValidationError."""
+    kind, arg, value = error.validator, error.validator_value, error.instance
+    if kind == "minLength" and value == "":
+        return "empty"
+    if kind == "required":
+        missing = [k for k in arg if isinstance(value, dict) and k not in value]
+        return f"missing key {', '.join(repr(k) for k in missing)}"
+    if kind == "type":
+        return f"expected {arg if isinstance(arg, str) else ' or '.join(arg)}, got {_short(value)}"
+    if kind == "enum":
+        return f"expected one of {list(arg)}, got {_short(value)}"
+    if kind == "pattern":
+        return f"{_short(value)} does not match {arg!r}"
+    if kind in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        bound = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">"}.get(kind, "<")
+        return f"expected a value {bound} {arg}, got {_short(value)}"
+    if kind in ("minItems", "maxItems", "minLength", "maxLength"):
+        return f"{kind} {arg}: got {_short(value)}"
+    message = error.message
+    return message if len(message) <= 160 else message[:157] + "..."
 
 
 def take_table(sheet: pd.DataFrame, synthetic: pd.DataFrame) -> pd.DataFrame:

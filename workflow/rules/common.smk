@@ -3,32 +3,55 @@
 import logging
 from pathlib import Path
 
+import sys
+
 import pandas as pd
 
-from snakemake.utils import validate
-
+from scan2morph.errors import InputError
 from scan2morph.jobs import config_sha256
-from scan2morph.sheet import read_sheet, subject_problems, synthetic_rows, take_table
+from scan2morph.sheet import (
+    read_sheet,
+    subject_problems,
+    synthetic_rows,
+    take_table,
+    validate_config,
+)
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
-validate(config, "../../schemas/config.schema.yaml")
+SCHEMAS = Path(workflow.basedir) / "schemas"
+
+
+def stop_run(exc):
+    """Stop the whole run on a config or sheet error: one line, no traceback."""
+    sys.stderr.write(f"Error: {exc}\n")
+    sys.exit(1)
+
+
+try:
+    validate_config(config, SCHEMAS / "config.schema.yaml", source="config")
+except InputError as _exc:
+    stop_run(_exc)
 
 SYNTH_ROOT = "results/synthetic"
 SYNTH_TAKES = [t["take"] for t in config["synthetic"]["takes"]]
 LAYOUT = str(Path(workflow.basedir) / "schemas" / "store.layout.yaml")
-SHEET = read_sheet(config["subjects"])
-for _i, _row in enumerate(SHEET.to_dict("records")):
-    validate(_row, "../../schemas/sheet.schema.yaml")
-SYNTH = synthetic_rows(
-    config["synthetic"]["subjects"],
-    config["synthetic"]["prefix"],
-    config["synthetic"]["takes"],
-    SYNTH_ROOT,
-    config["synthetic"]["stereo"],
-)
-TAKES = take_table(SHEET, SYNTH)
+try:
+    SHEET = read_sheet(config["subjects"])
+    SYNTH = synthetic_rows(
+        config["synthetic"]["subjects"],
+        config["synthetic"]["prefix"],
+        config["synthetic"]["takes"],
+        SYNTH_ROOT,
+        config["synthetic"]["stereo"],
+    )
+    TAKES = take_table(SHEET, SYNTH)
+except InputError as _exc:
+    stop_run(_exc)
 SUBJECTS = list(dict.fromkeys(TAKES["subject"]))
-PROBLEMS = subject_problems(pd.concat([SHEET, SYNTH]))
+# a row that breaks the sheet's schema (e.g. an empty label) fails only its subject
+PROBLEMS = subject_problems(
+    pd.concat([SHEET, SYNTH]), schema=SCHEMAS / "sheet.schema.yaml"
+)
 for _subject, _problems in PROBLEMS.items():
     for _problem in _problems:
         logging.getLogger("snakemake").warning(

@@ -19,6 +19,7 @@ from scan2morph.io.range_image import (
 from scan2morph.io.take import (
     RangeTake,
     StereoTake,
+    check_face,
     check_landmarks_inside,
     read_range_take,
     read_stereo_take,
@@ -28,6 +29,7 @@ __all__ = [
     "RangeTake",
     "StereoCalibration",
     "StereoTake",
+    "check_face",
     "check_landmarks_inside",
     "read_abs",
     "read_color",

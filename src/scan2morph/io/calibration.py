@@ -28,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, OutputError, no_space_left, writing
 
 #: Largest ``max|R^T R - I|`` accepted for the rig rotation (files written with ~6 digits pass).
 ROTATION_TOL = 1e-4
@@ -249,6 +249,8 @@ def write_stereo_calibration(path: str | PathLike[str], calib: StereoCalibration
     ------
     InputError
         ``calib`` fails :func:`validate_stereo_calibration`.
+    OutputError
+        The disk is full.
     OSError
         The file cannot be opened for writing.
     """
@@ -256,7 +258,14 @@ def write_stereo_calibration(path: str | PathLike[str], calib: StereoCalibration
     validate_stereo_calibration(calib, path)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML_1_0)
     if not fs.isOpened():
+        if no_space_left(path, 4096):
+            raise OutputError(path)
         raise OSError(f"{path}: cannot open for writing")
+    with writing(path):
+        _write_fields(fs, calib)
+
+
+def _write_fields(fs: cv2.FileStorage, calib: StereoCalibration) -> None:
     try:
         fs.writeComment("Stereo calibration (cv2.stereoCalibrate convention): x2 = R x1 + T, mm")
         fs.write("K1", calib.K1)

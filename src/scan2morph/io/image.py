@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, OutputError, no_space_left, writing
 
 COLOR_SUFFIXES = (".png", ".ppm", ".pnm", ".jpg", ".jpeg")
 
@@ -47,5 +47,9 @@ def write_color(path: str | Path, color: np.ndarray) -> None:
     color = np.asarray(color)
     if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
         raise InputError(path, f"color: expected (H, W, 3) uint8, got {color.shape} {color.dtype}")
-    if not cv2.imwrite(str(path), np.ascontiguousarray(color[:, :, ::-1])):
+    with writing(path):
+        ok = cv2.imwrite(str(path), np.ascontiguousarray(color[:, :, ::-1]))
+    if not ok:
+        if no_space_left(path, color.nbytes // 8 + 1):
+            raise OutputError(path)
         raise InputError(path, "color: could not write the image (unknown suffix or bad path)")

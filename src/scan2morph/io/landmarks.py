@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.tol import N_IBUG
 
 
@@ -100,4 +100,5 @@ def write_pts(path: str | Path, points: np.ndarray) -> None:
     lines = ["version: 1", f"n_points: {len(points)}", "{"]
     lines += [f"{x + 1.0:.4f} {y + 1.0:.4f}" for x, y in points]
     lines.append("}")
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with writing(path):
+        Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -26,10 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 
 #: The placeholder FRGC writes for the coordinates of a pixel without data.
 ABS_INVALID = -999999.0
+#: Largest R*C an ``.abs`` header may promise (FRGC scans are 640x480; 50 Mpx allows any
+#: scanner): a larger header is refused before anything is read or allocated.
+MAX_ABS_PIXELS = 50_000_000
 
 _HEADER_RE = (
     re.compile(r"^\s*(\d+)\s+rows\s*$", re.IGNORECASE),
@@ -70,32 +73,19 @@ def read_abs(path: str | Path) -> np.ndarray:
         raise InputError(path, "file not found (expected an FRGC .abs or .abs.gz range image)")
     try:
         with _open_text(path, "r") as fh:
-            lines = fh.read().splitlines()
+            lines = [fh.readline() for _ in range(3)]
+            lines = [ln.rstrip("\r\n") for ln in lines if ln]
+            if len(lines) < 3:
+                raise InputError(
+                    path,
+                    "truncated header: expected 'R rows', 'C columns', 'pixels (flag X Y Z):'",
+                )
+            rows, cols = _abs_header(lines, path)
+            lines += fh.read().splitlines()
     except EOFError as exc:
         raise InputError(path, f"truncated gzip stream: {exc}") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as FRGC .abs text: {exc}") from exc
-    if len(lines) < 3:
-        raise InputError(
-            path, "truncated header: expected 'R rows', 'C columns', 'pixels (flag X Y Z):'"
-        )
-    dims = []
-    for i, (line, pattern, what) in enumerate(
-        zip(
-            lines[:3],
-            _HEADER_RE,
-            ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"),
-            strict=True,
-        )
-    ):
-        m = pattern.match(line)
-        if m is None:
-            raise InputError(path, f"header line {i + 1}: expected {what}, got {line[:60]!r}")
-        if m.groups():
-            dims.append(int(m.group(1)))
-    rows, cols = dims
-    if rows <= 0 or cols <= 0:
-        raise InputError(path, f"header: expected positive rows and columns, got {rows} x {cols}")
     n = rows * cols
     data_lines = [ln for ln in lines[3:] if ln.strip()]
     names = ("flag", "X", "Y", "Z")
@@ -128,6 +118,34 @@ def read_abs(path: str | Path) -> np.ndarray:
     return xyz
 
 
+def _abs_header(lines: list[str], path: Path) -> tuple[int, int]:
+    """Rows and columns of an ``.abs`` header's three lines; refuses a size that makes no sense."""
+    dims = []
+    for i, (line, pattern, what) in enumerate(
+        zip(
+            lines[:3],
+            _HEADER_RE,
+            ("'<R> rows'", "'<C> columns'", "'pixels (flag X Y Z):'"),
+            strict=True,
+        )
+    ):
+        m = pattern.match(line)
+        if m is None:
+            raise InputError(path, f"header line {i + 1}: expected {what}, got {line[:60]!r}")
+        if m.groups():
+            dims.append(int(m.group(1)))
+    rows, cols = dims
+    if rows <= 0 or cols <= 0:
+        raise InputError(path, f"header: expected positive rows and columns, got {rows} x {cols}")
+    if rows * cols > MAX_ABS_PIXELS:
+        raise InputError(
+            path,
+            f"header: {rows} rows x {cols} columns = {rows * cols:.3g} pixels, expected at most "
+            f"{MAX_ABS_PIXELS:.3g} (a corrupt header?); refused before reading the data",
+        )
+    return rows, cols
+
+
 def _is_number(token: str) -> bool:
     try:
         float(token)
@@ -156,7 +174,7 @@ def write_abs(path: str | Path, xyz: np.ndarray) -> None:
     flat = xyz.reshape(-1, 3).copy()
     flat[~valid] = ABS_INVALID
     path = Path(path)
-    with _open_text(path, "w") as fh:
+    with writing(path), _open_text(path, "w") as fh:
         fh.write(f"{rows} rows\n{cols} columns\npixels (flag X Y Z):\n")
         fh.write(" ".join(np.where(valid, "1", "0")) + "\n")
         for k in range(3):
@@ -200,7 +218,9 @@ def read_npz_range(path: str | Path) -> np.ndarray:
 
 def write_npz_range(path: str | Path, xyz: np.ndarray) -> None:
     """Write a range image as ``.npz`` with key ``xyz`` (compressed)."""
-    np.savez_compressed(Path(path), xyz=_check_xyz(xyz, path))
+    xyz = _check_xyz(xyz, path)
+    with writing(path):
+        np.savez_compressed(Path(path), xyz=xyz)
 
 
 def read_range(path: str | Path) -> np.ndarray:

@@ -13,6 +13,18 @@ from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import read_pts
 from scan2morph.io.range_image import read_range
 
+#: Smallest range or colour image accepted, px (width and height).
+MIN_IMAGE_PX = 16
+#: Plausible 3D distance between the outer eye corners (iBUG 37 and 46) of a face, mm.
+EYE_SPAN_MM = (70.0, 130.0)
+#: A face whose outer eye corners are closer in the image than this share of the nose-bridge to
+#: chin distance (iBUG 28 to 9) is seen from the side (frontal faces: about 0.8).
+MIN_EYE_SPAN_RATIO = 0.3
+#: Window (radius, px, and share of the image width) searched for range data at a landmark.
+_LIFT_RADIUS = (2, 0.03)
+#: Units a face-size error may come from: (name, factor to mm).
+_UNITS = (("metres", 1000.0), ("cm", 10.0), ("inches", 25.4), ("0.1 mm", 0.1), ("µm", 1e-3))
+
 
 @dataclass(frozen=True)
 class RangeTake:
@@ -45,6 +57,7 @@ def read_range_take(
         the range image holds no data at all.
     """
     xyz = read_range(xyz_path)
+    check_image_size(xyz.shape, xyz_path, "xyz")
     color = read_color(color_path)
     if color.shape[:2] != xyz.shape[:2]:
         raise InputError(
@@ -146,6 +159,7 @@ def read_stereo_take(
         a landmark lies outside the left image (names the ``.pts`` file).
     """
     left = read_color(left_path)
+    check_image_size(left.shape, left_path, "left")
     right = read_color(right_path)
     h, w = left.shape[:2]
     if right.shape[:2] != (h, w):
@@ -165,3 +179,126 @@ def read_stereo_take(
     landmarks = read_pts(landmarks_path)
     check_landmarks_inside(landmarks, w, h, landmarks_path)
     return StereoTake(left=left, right=right, calib=calib, landmarks=landmarks)
+
+
+def check_image_size(shape: tuple[int, ...], source: str | Path, field: str) -> None:
+    """Refuse an image smaller than :data:`MIN_IMAGE_PX` on a side (names ``source``)."""
+    h, w = shape[:2]
+    if min(h, w) < MIN_IMAGE_PX:
+        raise InputError(
+            source,
+            f"{field}: the image is {w}x{h} px (WxH); a face scan needs at least "
+            f"{MIN_IMAGE_PX}x{MIN_IMAGE_PX}",
+        )
+
+
+def lift_landmarks(xyz: np.ndarray, landmarks: np.ndarray, numbers) -> np.ndarray:
+    """3D points of the range image at some landmarks: the per-coordinate median of the pixels
+    with data around each (a window of :data:`_LIFT_RADIUS`, robust to a spike).
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+    landmarks : (68, 2) float, 0-based pixel coordinates
+    numbers : sequence of int
+        iBUG numbers (1-based) of the landmarks to lift.
+
+    Returns
+    -------
+    (len(numbers), 3) float64, NaN for a landmark without data in its window.
+    """
+    h, w = xyz.shape[:2]
+    r = max(_LIFT_RADIUS[0], int(round(_LIFT_RADIUS[1] * w)))
+    out = np.full((len(numbers), 3), np.nan)
+    for i, n in enumerate(numbers):
+        x, y = (int(round(v)) for v in landmarks[n - 1])
+        patch = xyz[max(y - r, 0) : y + r + 1, max(x - r, 0) : x + r + 1].reshape(-1, 3)
+        patch = patch[np.isfinite(patch).all(axis=1)]
+        if len(patch):
+            out[i] = np.median(patch, axis=0)
+    return out
+
+
+def check_face(
+    xyz: np.ndarray,
+    landmarks: np.ndarray,
+    xyz_source: str | Path,
+    landmarks_source: str | Path,
+    unit_hint: str = "",
+) -> float:
+    """Check that the landmarks mark a plausible, roughly frontal face on range data in mm.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data (a range image, or a stereo reconstruction)
+    landmarks : (68, 2) float, 0-based pixel coordinates on the same grid
+    xyz_source : str or path-like
+        Named in the size (unit) errors: the range file, or the stereo calibration.
+    landmarks_source : str or path-like
+        Named in the landmark errors: the ``.pts`` file.
+    unit_hint : str
+        Appended to a size error (e.g. what to check in a stereo calibration).
+
+    Returns
+    -------
+    float
+        The 3D distance between the outer eye corners (iBUG 37 and 46), mm.
+
+    Raises
+    ------
+    InputError
+        The landmarks all coincide; the outer eye corners are nearly coincident in the image
+        against the nose-bridge to chin distance (a profile view); the landmarks are mirrored
+        left/right (eye corners and chin wind the wrong way); an outer eye corner has no range
+        data around it (landmarks on the background, or of another scan); the outer eye
+        corners are not 70-130 mm apart in 3D (names the value and the unit it suggests).
+    """
+    lm = np.asarray(landmarks, dtype=np.float64)
+    spread = float(np.ptp(lm, axis=0).max())
+    if spread < 1.0:
+        raise InputError(
+            landmarks_source,
+            f"landmarks: all 68 points coincide (within {spread:.2g} px at "
+            f"{(lm.mean(axis=0) + 1).round(1).tolist()}, 1-based); expected points spread over a face",
+        )
+    eyes = float(np.linalg.norm(lm[45] - lm[36]))
+    height = float(np.linalg.norm(lm[8] - lm[27]))
+    if eyes < MIN_EYE_SPAN_RATIO * height:
+        raise InputError(
+            landmarks_source,
+            f"head pose: the outer eye corners (iBUG 37, 46) are {eyes:.1f} px apart in the image "
+            f"against {height:.1f} px from the nose bridge to the chin (iBUG 28, 9): a profile or "
+            f"extreme head pose (expected a roughly frontal face, ratio >= {MIN_EYE_SPAN_RATIO:g})",
+        )
+    d1, d2 = lm[45] - lm[36], lm[8] - lm[36]
+    if d1[0] * d2[1] - d1[1] * d2[0] <= 0:  # image y down: 37 -> 46 -> chin turns clockwise
+        raise InputError(
+            landmarks_source,
+            "landmarks: mirrored left/right (the outer eye corners iBUG 37 -> 46 and the chin 9 "
+            "wind the wrong way; iBUG 37 is the outer corner of the eye on the image's left)",
+        )
+    lifted = lift_landmarks(xyz, lm, (37, 46))
+    for k, n in enumerate((37, 46)):
+        if not np.isfinite(lifted[k]).all():
+            raise InputError(
+                landmarks_source,
+                f"landmarks: iBUG {n} at {(lm[n - 1] + 1).round(1).tolist()} (1-based px) lies "
+                "where the range image has no data: are the landmarks on the face and of this "
+                "scan?",
+            )
+    span = float(np.linalg.norm(lifted[1] - lifted[0]))
+    lo, hi = EYE_SPAN_MM
+    if not lo <= span <= hi:
+        unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
+        if unit is not None:
+            likely = f"the coordinates look like {unit}, not mm"
+        elif span > 0:
+            likely = f"a face {span / 100.0:.2g} times the usual size"
+        else:
+            likely = "no extent at all"
+        raise InputError(
+            xyz_source,
+            f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} mm apart in 3D, "
+            f"expected {lo:g}-{hi:g} mm ({likely}){unit_hint}",
+        )
+    return span

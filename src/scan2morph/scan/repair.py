@@ -2,7 +2,9 @@
 
 A range image is ``xyz`` (H, W, 3) float64 in mm, NaN where the scanner saw nothing, in an
 arbitrary right-handed scanner frame. Nothing here assumes which axis is depth: spikes are
-judged by 3D distances and holes are filled in all three coordinates with one matte.
+judged by 3D distances to a neighbourhood median taken in the scanner's own frame (estimated
+from the pixel grid, :func:`scan2morph.template.sample.scanner_view`), and holes are filled in
+all three coordinates with one matte, so a rigid motion of the data moves the result with it.
 
 Hole filling follows the algorithm the paper takes from L. Williams (1990), "3D paint":
 
@@ -32,6 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from scan2morph.errors import InputError
+from scan2morph.template.sample import scanner_view
 
 #: Default parameters of :func:`repair_range` (the ``repair`` section of the config).
 DEFAULT_REPAIR: dict[str, float | int] = {
@@ -128,7 +131,8 @@ def remove_spikes(
     """Set isolated outliers ("spikes") of a range image to NaN.
 
     A valid pixel is a spike when its 3D distance to the median of its ``window`` x ``window``
-    neighbourhood (per-coordinate median over the valid neighbours, the pixel itself excluded)
+    neighbourhood (per-coordinate median over the valid neighbours, the pixel itself excluded,
+    in the scanner's frame: :func:`~scan2morph.template.sample.scanner_view`)
     exceeds ``threshold_mm``, and fewer than ``min_support`` of its valid neighbours lie within
     ``threshold_mm`` of it. The second test keeps the rim of a foreground surface in front of
     another valid surface: there the neighbourhood median may come from the far surface, but the
@@ -165,11 +169,15 @@ def remove_spikes(
     arr, valid = _check_xyz(xyz, source)
     threshold_mm = _check_float(threshold_mm, "threshold_mm", _PARAMS)
     window = _check_int(window, "window", _PARAMS, minimum=3, odd=True)
+    # The per-coordinate median turns with the frame: take it in the scanner's own frame
+    # (estimated from the pixel grid; the conventional frame is used as it is).
+    view = scanner_view(arr)
+    data = (arr - view.centre) @ view.rotation.T if view.estimated else arr
     min_support = _check_int(min_support, "min_support", _PARAMS, minimum=1)
     r = window // 2
     h, w = valid.shape
     # coordinate-major padded copy: gathers give (3, n, K) rows contiguous along K
-    pad = np.pad(arr, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
+    pad = np.pad(data, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
     pad = np.ascontiguousarray(pad.reshape(-1, 3).T)
     offsets, _ = _neighbour_offsets(w + 2 * r, r, centre=False)
     min_valid = max(3, (window * window - 1) // 4)

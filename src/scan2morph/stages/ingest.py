@@ -10,7 +10,7 @@ import logging
 from collections.abc import Mapping
 
 from scan2morph.errors import InputError
-from scan2morph.io import read_range_take, read_stereo_take
+from scan2morph.io import StereoCalibration, check_face, read_range_take, read_stereo_take
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
 from scan2morph.sheet import FILES
@@ -45,16 +45,33 @@ def run(row: Mapping[str, str], files: Mapping[str, str], stereo: Mapping) -> Pa
     if modality == "range":
         scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
         xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
+        check_face(xyz, landmarks, files["xyz"], files["landmarks"])
     elif modality == "stereo":
         pair = read_stereo_take(
             files["left"], files["right"], files["calibration"], files["landmarks"]
         )
         source = f"{files['left']}, {files['right']}"
-        xyz, report = reconstruct_stereo(
-            pair.left, pair.right, pair.calib, dict(stereo), source=source
-        )
+        try:
+            xyz, report = reconstruct_stereo(
+                pair.left, pair.right, pair.calib, dict(stereo), source=source
+            )
+        except InputError as exc:
+            hint = _stereo_hint(pair.left, pair.right, pair.calib, stereo, files)
+            if hint:
+                raise InputError(exc.source, f"{exc.problem}; {hint}") from None
+            raise
         log.info("%s: stereo %s", take, report)
         color, landmarks = pair.left, pair.landmarks
+        check_face(
+            xyz,
+            landmarks,
+            files["calibration"],
+            files["landmarks"],
+            unit_hint=(
+                f"; the stereo reconstruction takes its scale from T (baseline |T| = "
+                f"{pair.calib.baseline_mm:.4g}): is T in mm?"
+            ),
+        )
         attrs["stereo"] = report
     else:
         raise InputError(f"{row['subject']}/{take}", f"modality {modality!r} not supported")
@@ -67,3 +84,37 @@ def run(row: Mapping[str, str], files: Mapping[str, str], stereo: Mapping) -> Pa
         },
         attrs={paths.take(take): attrs},
     )
+
+
+def _stereo_hint(left, right, calib: StereoCalibration, stereo: Mapping, files) -> str:
+    """Why a stereo pair that matched nothing may have failed, tried on the failure path only:
+    the images exchanged (with the same calibration), or T in cm or metres instead of mm."""
+    tries = [
+        (
+            right,
+            left,
+            calib,
+            "with left and right exchanged the pair matches: left and right may be swapped",
+        ),
+    ]
+    for factor, unit in ((10.0, "cm"), (1000.0, "metres")):
+        scaled = StereoCalibration(
+            calib.K1, calib.D1, calib.K2, calib.D2, calib.R, calib.T * factor, calib.image_size
+        )
+        tries.append(
+            (
+                left,
+                right,
+                scaled,
+                f"with T x {factor:g} the pair matches: T in "
+                f"{files['calibration']} may be in {unit} (baseline |T| = {calib.baseline_mm:.4g}), "
+                "expected mm",
+            )
+        )
+    for a, b, c, hint in tries:
+        try:
+            reconstruct_stereo(a, b, c, dict(stereo), source="retry")
+        except InputError:
+            continue
+        return hint
+    return ""

@@ -76,7 +76,8 @@ class TPS:
         ------
         InputError
             Fewer than 3 points, non-finite points, duplicate points, all points collinear
-            (singular system) or destination points outside the image.
+            (singular system), image points that all coincide or lie on one line, or
+            destination points outside the image.
         """
         src = np.asarray(src, dtype=np.float64)
         dst = np.asarray(dst, dtype=np.float64)
@@ -107,6 +108,14 @@ class TPS:
         if sv[1] <= RCOND * 1e2 * max(sv[0], 1e-300):
             raise InputError(
                 source, "fiducials: all points are collinear (the spline's system is singular)"
+            )
+        dst_spread = np.linalg.svd(dst - dst.mean(axis=0), compute_uv=False)
+        if dst_spread[1] <= 1e-3 * max(dst_spread[0], 1e-300) or dst_spread[0] < 1e-6:
+            what = "all coincide" if dst_spread[0] < 1e-6 else "all lie on one line"
+            raise InputError(
+                source,
+                f"fiducials: the image points {what} (at {dst.mean(axis=0).round(1).tolist()}); "
+                "expected landmarks spread over a face",
             )
         if image_size is not None:
             w, h = image_size

@@ -1,0 +1,436 @@
+"""Bad input, wider (issue #14 part 4): every case works or fails its subject with one clear line.
+
+Library level: the readers, :func:`scan2morph.stages.ingest.run` and :func:`fit_take` on small
+synthetic takes written as a user would bring them.
+"""
+
+from __future__ import annotations
+
+import copy
+import errno
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from scan2morph.errors import InputError, OutputError
+from scan2morph.io import (
+    read_abs,
+    read_color,
+    read_range_take,
+    read_stereo_calibration,
+    write_abs,
+    write_color,
+    write_npz_range,
+    write_pts,
+    write_stereo_calibration,
+)
+from scan2morph.sheet import read_sheet, subject_problems, validate_config
+from scan2morph.stages import ingest
+from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
+from scan2morph.template import build_template, fit_options, fit_take
+from scan2morph.template.sample import SCANNER_FRAME, scanner_view
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = dict(width=160, height=120, focal_px=362.5, distance_mm=1000.0)
+TINY_RIG = dict(width=160, height=120, focal_px=325.0)
+ROW = dict(subject="s1", take="neutral", kind="neutral", label="neutral", modality="range")
+HEADER = "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tleft\tright\tcalibration\tlandmarks\n"
+
+
+@pytest.fixture(scope="module")
+def take():
+    return make_take("s1", "neutral", "neutral", "neutral", seed=3, params=dict(TINY))
+
+
+@pytest.fixture(scope="module")
+def stereo():
+    return make_stereo_take("s1", "neutral", "neutral", "neutral", seed=3, params=dict(TINY_RIG))
+
+
+@pytest.fixture(scope="module")
+def template():
+    return build_template()
+
+
+def _write(tmp_path, take, xyz=None, landmarks=None, name="t"):
+    res = dict(take)
+    if xyz is not None:
+        res["xyz"] = xyz
+    if landmarks is not None:
+        res["landmarks"] = landmarks
+    files = {
+        "xyz": tmp_path / f"{name}.abs.gz",
+        "color": tmp_path / f"{name}.png",
+        "landmarks": tmp_path / f"{name}.pts",
+    }
+    write_take(res, files["xyz"], files["color"], files["landmarks"], tmp_path / f"{name}.npz")
+    return files
+
+
+def _ingest(files, modality="range"):
+    return ingest.run(dict(ROW, modality=modality), {k: str(v) for k, v in files.items()}, {})
+
+
+def _one_line(exc: pytest.ExceptionInfo, source) -> str:
+    text = str(exc.value)
+    assert "\n" not in text and text.startswith(str(source))
+    return text
+
+
+def test_a_good_take_passes_the_face_checks(tmp_path, take):
+    part = _ingest(_write(tmp_path, take))
+    assert part is not None
+
+
+# --- degenerate landmarks -------------------------------------------------------------------
+
+
+def _all_equal(lm):
+    return np.tile(lm[30], (68, 1))
+
+
+def _mirrored(lm):
+    return np.column_stack([TINY["width"] - 1 - lm[:, 0], lm[:, 1]])
+
+
+@pytest.mark.parametrize(
+    "change, at_ingest, at_fit",
+    [
+        (_all_equal, "landmarks: all 68 points coincide", "the image points all coincide"),
+        (_mirrored, "landmarks: mirrored left/right", "landmarks fold the template"),
+    ],
+)
+def test_degenerate_landmarks(tmp_path, take, template, change, at_ingest, at_fit):
+    landmarks = change(take["landmarks"])
+    files = _write(tmp_path, take, landmarks=landmarks)
+    with pytest.raises(InputError, match=at_ingest) as exc:
+        _ingest(files)
+    _one_line(exc, files["landmarks"])
+    with pytest.raises(InputError, match=at_fit):
+        fit_take(template, landmarks, take["xyz"], source="s1/neutral")
+
+
+def test_landmarks_on_the_background(tmp_path, take, template):
+    lm = take["landmarks"]
+    corner = (lm - lm.min(axis=0)) * 0.25 + 1.0  # a small face in the top-left corner
+    assert np.isnan(take["xyz"][:15, :15]).all()
+    files = _write(tmp_path, take, landmarks=corner)
+    with pytest.raises(InputError, match="iBUG 37 at .* lies where the range image has no data"):
+        _ingest(files)
+    with pytest.raises(InputError, match="fall on range data"):
+        fit_take(template, corner, take["xyz"], source="s1/neutral")
+
+
+def test_landmarks_outside_the_image_or_nan(tmp_path, take):
+    lm = take["landmarks"].copy()
+    lm[36] = [200.0, 50.0]
+    files = _write(tmp_path, take, landmarks=lm)
+    with pytest.raises(InputError, match="point 37 lies outside the 160x120 image") as exc:
+        _ingest(files)
+    _one_line(exc, files["landmarks"])
+    text = files["landmarks"].read_text().splitlines()
+    text[3 + 36] = "nan 50.0"
+    files["landmarks"].write_text("\n".join(text) + "\n")
+    with pytest.raises(InputError, match="point 37: non-finite coordinate"):
+        _ingest(files)
+
+
+# --- implausible scale ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "factor, match",
+    [
+        (
+            1e-3,
+            r"are 0\.09\d+ mm apart in 3D, expected 70-130 mm \(the coordinates look like metres",
+        ),
+        (0.1, r"are 9\.\d+ mm apart .* \(the coordinates look like cm"),
+        (3.0, r"are 28\d\.\d mm apart .* \(a face 2\.\d times the usual size\)"),
+    ],
+)
+def test_a_subject_in_metres_or_a_head_too_large(tmp_path, take, factor, match):
+    files = _write(tmp_path, take, xyz=take["xyz"] * factor)
+    with pytest.raises(
+        InputError, match=r"face size: the outer eye corners \(iBUG 37, 46\) " + match
+    ) as exc:
+        _ingest(files)
+    _one_line(exc, files["xyz"])
+
+
+def _stereo_files(tmp_path, stereo, calib=None, swap=False):
+    res = dict(stereo)
+    if calib is not None:
+        res["calib"] = calib
+    names = {k: tmp_path / f"n{s}" for k, s in (("left", "_l.png"), ("right", "_r.png"))}
+    names |= {"calibration": tmp_path / "n.yaml", "landmarks": tmp_path / "n.pts"}
+    write_stereo_take(res, *names.values(), tmp_path / "n.npz")
+    if swap:
+        names["left"], names["right"] = names["right"], names["left"]
+    return names
+
+
+def test_stereo_calibration_in_cm_or_metres(tmp_path, stereo):
+    c = stereo["calib"]
+    in_cm = type(c)(c.K1, c.D1, c.K2, c.D2, c.R, c.T / 10.0, c.image_size)
+    files = _stereo_files(tmp_path, stereo, in_cm)
+    with pytest.raises(
+        InputError, match=r"n.yaml may be in cm \(baseline \|T\| = 12\), expected mm$"
+    ) as exc:
+        _ingest(files, "stereo")
+    _one_line(exc, files["left"])
+    in_m = type(c)(c.K1, c.D1, c.K2, c.D2, c.R, c.T / 1000.0, c.image_size)
+    path = tmp_path / "m.yaml"
+    with pytest.raises(InputError, match=r"T: baseline \|T\| = 0\.12\d* is below 1 mm; .*metres"):
+        write_stereo_calibration(path, in_m)
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML_1_0)
+    for name in ("K1", "D1", "K2", "D2", "R", "T"):
+        fs.write(name, np.asarray(getattr(in_m, name)))
+    fs.release()
+    with pytest.raises(InputError, match=r"m.yaml: T: baseline \|T\| = 0\.12\d* .*metres"):
+        read_stereo_calibration(path)
+
+
+def test_swapped_stereo_images_are_named(tmp_path, stereo):
+    files = _stereo_files(tmp_path, stereo, swap=True)
+    with pytest.raises(InputError, match="left and right may be swapped") as exc:
+        _ingest(files, "stereo")
+    _one_line(exc, files["left"])
+    assert _ingest(_stereo_files(tmp_path, stereo), "stereo") is not None
+
+
+# --- pose, tiny and empty scans, huge headers ---------------------------------------------------
+
+
+def test_profile_view(tmp_path, take):
+    lm = take["landmarks"].copy()
+    cx = lm[30, 0]
+    lm[:, 0] = cx + 0.1 * (lm[:, 0] - cx)  # eye corners nearly coincident in the image
+    files = _write(tmp_path, take, landmarks=lm)
+    with pytest.raises(InputError, match=r"head pose: the outer eye corners .* profile") as exc:
+        _ingest(files)
+    _one_line(exc, files["landmarks"])
+
+
+def test_one_pixel_and_all_invalid_scans(tmp_path):
+    write_abs(tmp_path / "one.abs", np.ones((1, 1, 3)))
+    write_color(tmp_path / "one.png", np.zeros((1, 1, 3), np.uint8))
+    write_pts(tmp_path / "p.pts", np.zeros((68, 2)))
+    with pytest.raises(InputError, match=r"one.abs: xyz: the image is 1x1 px .* at least 16x16"):
+        read_range_take(tmp_path / "one.abs", tmp_path / "one.png", tmp_path / "p.pts")
+    write_abs(tmp_path / "none.abs", np.full((20, 20, 3), np.nan))
+    write_color(tmp_path / "none.png", np.zeros((20, 20, 3), np.uint8))
+    with pytest.raises(InputError, match="none.abs: xyz: no valid pixel"):
+        read_range_take(tmp_path / "none.abs", tmp_path / "none.png", tmp_path / "p.pts")
+
+
+def test_abs_header_promising_a_huge_image_is_refused_before_reading(tmp_path):
+    path = tmp_path / "huge.abs"
+    path.write_text("200000 rows\n300000 columns\npixels (flag X Y Z):\n1 0\n1 2\n3 4\n5 6\n")
+    with pytest.raises(InputError, match=r"header: 200000 rows x 300000 columns = 6e\+10 pixels"):
+        read_abs(path)
+
+
+# --- colour images -------------------------------------------------------------------------------
+
+
+def test_grey_rgba_and_16_bit_colour_images_are_converted(tmp_path):
+    rng = np.random.default_rng(1)
+    rgb = rng.integers(0, 256, (20, 30, 3), dtype=np.uint8)
+    grey = rgb[:, :, 0]
+    cv2.imwrite(str(tmp_path / "grey.png"), grey)
+    np.testing.assert_array_equal(
+        read_color(tmp_path / "grey.png"), np.repeat(grey[..., None], 3, 2)
+    )
+    bgra = np.dstack([rgb[:, :, ::-1], np.full((20, 30), 128, np.uint8)])
+    cv2.imwrite(str(tmp_path / "rgba.png"), bgra)
+    np.testing.assert_array_equal(read_color(tmp_path / "rgba.png"), rgb)
+    cv2.imwrite(str(tmp_path / "deep.png"), rgb[:, :, ::-1].astype(np.uint16) * 257)
+    np.testing.assert_array_equal(read_color(tmp_path / "deep.png"), rgb)
+    cv2.imwrite(str(tmp_path / "deep_grey.png"), grey.astype(np.uint16) * 256)
+    out = read_color(tmp_path / "deep_grey.png")
+    assert out.shape == (20, 30, 3) and out.dtype == np.uint8
+    np.testing.assert_array_equal(out[:, :, 1], np.round(grey * 256.0 / 257).astype(np.uint8))
+
+
+# --- ids -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "column, value", [("subject", "../x"), ("subject", "a/b"), ("take", "my take")]
+)
+def test_unsafe_ids_are_refused_naming_the_row(tmp_path, column, value):
+    row = dict(subject="alice", take="n", kind="neutral", label="neutral", modality="range")
+    row[column] = value
+    cells = [
+        row["subject"],
+        row["take"],
+        "neutral",
+        "neutral",
+        "range",
+        "a.abs",
+        "a.png",
+        "",
+        "",
+        "",
+        "a.pts",
+    ]
+    sheet = tmp_path / "s.tsv"
+    sheet.write_text(
+        HEADER + "alice\tm\tviseme\tcar\trange\ta\tb\t\t\t\tc\n" + "\t".join(cells) + "\n"
+    )
+    with pytest.raises(InputError, match=f"row 3, column '{column}': '{value}' is not an id"):
+        read_sheet(sheet)
+
+
+# --- a rotated scanner frame -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("degrees", [30.0, 60.0])
+def test_a_rotated_scanner_frame_gives_the_same_fit(take, template, degrees):
+    axis = np.array([0.3, -0.8, 0.52])
+    R = Rotation.from_rotvec(np.radians(degrees) * axis / np.linalg.norm(axis)).as_matrix()
+    t = np.array([120.0, -40.0, 300.0])
+    options = fit_options(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["template"])
+    a = fit_take(template, take["landmarks"], take["xyz"], source="s1/a", **options)
+    b = fit_take(template, take["landmarks"], take["xyz"] @ R.T + t, source="s1/b", **options)
+    np.testing.assert_array_equal(a["valid"], b["valid"])
+    ok = a["valid"]
+    np.testing.assert_allclose(b["vertices"][ok], a["vertices"][ok] @ R.T + t, rtol=0, atol=1e-9)
+    # the scanner is found where it is: the conventional frame as given, the rotated one moved
+    assert scanner_view(take["xyz"]) is SCANNER_FRAME
+    view = scanner_view(take["xyz"] @ R.T + t)
+    np.testing.assert_allclose(view.centre, t, atol=1e-6)
+    assert abs(view.axis @ R[:, 2]) > 1 - 1e-9
+    np.testing.assert_allclose(np.abs(view.rotation @ R), np.eye(3), atol=1e-9)
+
+
+def test_a_rotated_scanner_frame_gives_the_same_repair(take):
+    from scan2morph.scan.repair import repair_range
+
+    R = Rotation.from_rotvec([0.2, -0.5, 0.3]).as_matrix()
+    t = np.array([100.0, 20.0, -300.0])
+    a = repair_range(take["xyz"])[0]
+    b = repair_range(take["xyz"] @ R.T + t)[0]
+    np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
+    np.testing.assert_allclose(b, a @ R.T + t, rtol=0, atol=1e-9)
+
+
+def test_a_rotated_scanner_frame_passes_ingest(tmp_path, take):
+    R = Rotation.from_euler("xyz", [30.0, -20.0, 45.0], degrees=True).as_matrix()
+    part = _ingest(_write(tmp_path, take, xyz=take["xyz"] @ R.T + [10.0, 500.0, -80.0]))
+    assert part is not None
+
+
+# --- a full disk -----------------------------------------------------------------------------------
+
+
+def _no_space(*args, **kwargs):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def test_a_full_disk_is_one_line_naming_the_file(tmp_path, monkeypatch):
+    import scan2morph.io.range_image as range_image
+
+    xyz = np.ones((4, 5, 3))
+    monkeypatch.setattr(Path, "write_text", _no_space)
+    with pytest.raises(OutputError) as exc:
+        write_pts(tmp_path / "a.pts", np.zeros((68, 2)))
+    assert str(exc.value) == f"no space left on device writing {tmp_path / 'a.pts'}"
+    monkeypatch.setattr(np, "savez_compressed", _no_space)
+    with pytest.raises(OutputError, match="no space left on device writing .*a.npz$"):
+        write_npz_range(tmp_path / "a.npz", xyz)
+    monkeypatch.setattr(range_image, "_open_text", _no_space)
+    with pytest.raises(OutputError, match="no space left on device writing .*a.abs.gz$"):
+        write_abs(tmp_path / "a.abs.gz", xyz)
+    # other OS errors stay what they are
+    monkeypatch.setattr(range_image, "_open_text", lambda *a: open(tmp_path / "nowhere" / "x", "w"))
+    with pytest.raises(FileNotFoundError):
+        write_abs(tmp_path / "b.abs", xyz)
+
+
+def test_a_full_disk_in_a_job_logs_one_line(tmp_path):
+    code = (
+        "import errno, numpy as np\n"
+        "from pathlib import Path\n"
+        "from scan2morph.jobs import run_job\n"
+        "from scan2morph.io import write_pts\n"
+        "def full(*a, **k):\n"
+        "    raise OSError(errno.ENOSPC, 'No space left on device')\n"
+        "Path.write_text = full\n"
+        f"run_job(None, lambda: write_pts({str(tmp_path / 'a.pts')!r}, np.zeros((68, 2))))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 1
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].endswith(
+        f"no space left on device writing {tmp_path / 'a.pts'}"
+    )
+
+
+# --- errors that stop the whole run -------------------------------------------------------------------
+
+
+def test_config_validation_fills_defaults_as_snakemake_does():
+    from snakemake.utils import validate
+
+    schema = ROOT / "schemas" / "config.schema.yaml"
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    for cfg in (config, {}):
+        ours, theirs = copy.deepcopy(cfg), copy.deepcopy(cfg)
+        validate_config(ours, schema)
+        validate(theirs, str(schema))
+        assert ours == theirs
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ({"bogus_key": 1}, r"^config: bogus_key: unknown key \(known: align, "),
+        ({"synthetic": {"scanner": {"foo": 2}}}, r"^config: synthetic\.scanner\.foo: unknown key"),
+        (
+            {"template": {"max_slope_deg": 95}},
+            r"^config: template\.max_slope_deg: expected a value < 90, got 95$",
+        ),
+    ],
+)
+def test_config_errors_are_one_short_line(extra, match):
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    for key, value in extra.items():
+        config[key] = value if not isinstance(config.get(key), dict) else {**config[key], **value}
+    with pytest.raises(InputError, match=match) as exc:
+        validate_config(config, ROOT / "schemas" / "config.schema.yaml")
+    assert "\n" not in str(exc.value) and len(str(exc.value)) < 400
+
+
+def test_an_empty_cell_fails_only_its_subject(tmp_path):
+    sheet = tmp_path / "s.tsv"
+    sheet.write_text(HEADER + "bob\tn\tneutral\t\trange\ta.abs\ta.png\t\t\t\t\n")
+    problems = subject_problems(read_sheet(sheet), schema=ROOT / "schemas" / "sheet.schema.yaml")
+    assert problems["bob"][:1] == [f"{sheet} row 2 (bob/n): column 'label': empty"]
+    assert (
+        f"{sheet} row 2 (bob/n): column 'landmarks' is empty (a range take needs it)"
+        in problems["bob"]
+    )
+
+
+def test_a_bad_config_key_stops_snakemake_in_a_few_lines(tmp_path):
+    (tmp_path / "bad.yaml").write_text("bogus_key: 1\n")
+    out = subprocess.run(
+        [
+            str(Path(sys.executable).parent / "snakemake"),
+            "-s", str(ROOT / "Snakefile"), "-n",
+            "--configfile", str(ROOT / "config" / "config.yaml"), "bad.yaml",
+        ],
+        cwd=tmp_path, capture_output=True, text=True,
+    )  # fmt: skip
+    assert out.returncode != 0
+    lines = (out.stdout + out.stderr).strip().splitlines()
+    assert len(lines) <= 3
+    assert "config: bogus_key: unknown key" in lines[-1]
