@@ -383,14 +383,16 @@ def test_align_take_is_deterministic():
     s = _scene(seed=1, brow_mm=5.0)
     take = s["take"]
     a, b = _align(s, take=take), _align(s, take=take)
-    assert np.array_equal(a.transform, b.transform)
+    # open3d's ICP sums in parallel: equal up to the last bits, not bit for bit
+    np.testing.assert_allclose(a.transform, b.transform, rtol=0, atol=1e-9)
     assert (a.ok, a.problems, a.recovery, a.iterations) == (
         b.ok,
         b.problems,
         b.recovery,
         b.iterations,
     )
-    assert a.residual_rmse == b.residual_rmse and a.inlier_fraction == b.inlier_fraction
+    assert a.residual_rmse == pytest.approx(b.residual_rmse, abs=1e-9)
+    assert a.inlier_fraction == b.inlier_fraction
 
 
 def test_align_take_pair_on_invalid_vertex_raises():

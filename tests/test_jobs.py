@@ -17,6 +17,9 @@ def job():
     logging.getLogger("scan2morph").warning("car: alignment failed its quality gate")
     if sys.argv[2] == "bad":
         raise InputError("alice/car.pts", "n_points: expected 68 (iBUG-68), got 67")
+    if sys.argv[2] == "full":
+        import errno
+        raise OSError(errno.ENOSPC, "No space left on device", "results/alice/alice.h5")
 
 run_job(sys.argv[1], job)
 """
@@ -48,3 +51,14 @@ def test_bad_input_is_one_line_and_exit_status_1(tmp_path):
         "ERROR bad input: alice/car.pts: n_points: expected 68 (iBUG-68), got 67"
     )
     assert "Traceback" not in res.stderr and "bad input" in log
+
+
+def test_a_full_disk_is_one_line(tmp_path):
+    res, log = _run(tmp_path, "full")
+    assert res.returncode == 1
+    assert (
+        res.stderr.strip()
+        .splitlines()[-1]
+        .endswith("ERROR no space left on device writing results/alice/alice.h5")
+    )
+    assert "Traceback" not in res.stderr

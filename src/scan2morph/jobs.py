@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, OutputError, disk_full
 
 log = logging.getLogger("scan2morph")
 
@@ -46,10 +46,16 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
     try:
         func()
     except InputError as exc:
-        log.error("bad input: %s", exc)
+        log.error("%s", exc if isinstance(exc, OutputError) else f"bad input: {exc}")
         logging.shutdown()
         sys.exit(1)
-    except Exception:
+    except Exception as exc:
+        if disk_full(exc):  # any writer (HDF5, OBJ, glTF, JSON): one line, no traceback
+            log.error(
+                "no space left on device writing %s", getattr(exc, "filename", None) or "an output"
+            )
+            logging.shutdown()
+            sys.exit(1)
         log.exception("job failed")
         logging.shutdown()
         raise
