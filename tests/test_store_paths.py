@@ -64,3 +64,10 @@ def test_written_by_splits_the_layout_by_stage():
 def test_ids_in_key_order():
     keys = ["/takes/b/mesh/vertices", "/takes/a/mesh/vertices", "/takes/a/mesh/uv", "/takes/c/x"]
     assert paths.ids(keys, paths.TAKES, "mesh/vertices") == ["b", "a"]
+
+
+def test_every_layout_dataset_has_units_and_a_description():
+    """What describe_store writes onto each dataset of a store (text for HDF5 viewers)."""
+    for entry in load_layout(LAYOUT)["datasets"]:
+        assert isinstance(entry.get("units"), str), entry["path"]
+        assert entry.get("description", "").strip(), entry["path"]

@@ -14,4 +14,13 @@ try:
 except PackageNotFoundError:  # running from a source tree that was not installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "load_model"]
+
+
+def __getattr__(name: str):
+    # scan2morph.load_model without importing h5py and the stages for every `import scan2morph`
+    if name == "load_model":
+        from scan2morph.model import load_model
+
+        return load_model
+    raise AttributeError(f"module 'scan2morph' has no attribute {name!r}")

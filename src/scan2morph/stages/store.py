@@ -10,7 +10,7 @@ import h5py
 
 from scan2morph.errors import InputError
 from scan2morph.stages.quality import subject_warnings, warning_datasets
-from scan2morph.store import merge_parts, validate_store
+from scan2morph.store import describe_store, merge_parts, validate_store
 from scan2morph.store.hdf5 import write_datasets
 
 #: Config section this stage reads.
@@ -55,6 +55,7 @@ def run(
     with h5py.File(path, "r") as h5:
         warnings = subject_warnings(h5, quality)
     write_datasets(path, warning_datasets(warnings))
+    describe_store(path, layout)
     for warning in warnings:
         log.warning("%s: %s", subject, warning)
     problems = validate_store(path, layout)

@@ -10,10 +10,11 @@ from scan2morph.store.hdf5 import (
     read_parts,
     write_part,
 )
-from scan2morph.store.layout import load_layout, validate_store
+from scan2morph.store.layout import describe_store, load_layout, validate_store
 
 __all__ = [
     "FORMAT_VERSION",
+    "describe_store",
     "load_layout",
     "merge_parts",
     "open_store",

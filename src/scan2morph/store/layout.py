@@ -105,3 +105,25 @@ def validate_store(path: str | Path, layout: dict) -> list[str]:
                     table[key] = got
                     bound.update({k: v for k, v in scope.items() if "@" in k})
     return problems
+
+
+def describe_store(path: str | Path, layout: dict) -> int:
+    """Give every dataset of a store the ``units`` and ``description`` attributes of its layout
+    entry, so that the file explains itself in any HDF5 viewer (HDFView, h5dump, h5py).
+
+    Returns
+    -------
+    int
+        The number of datasets described.
+    """
+    entries = [(_pattern_regex(e["path"]), e) for e in layout["datasets"]]
+    found: list[str] = []
+    with h5py.File(path, "a") as h5:
+        h5.visititems(lambda n, o: found.append("/" + n) if isinstance(o, h5py.Dataset) else None)
+        for name in found:
+            entry = next((e for rx, e in entries if rx.match(name)), None)
+            if entry is None:
+                continue
+            h5[name].attrs["units"] = str(entry.get("units", ""))
+            h5[name].attrs["description"] = " ".join(str(entry.get("description", "")).split())
+    return len(found)

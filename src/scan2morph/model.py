@@ -1,0 +1,199 @@
+"""A subject's morphable face model, read back from its store: the Python API of the product.
+
+>>> import scan2morph
+>>> model = scan2morph.load_model("results/synth01/synth01.h5")
+>>> face = model.blend({"car": 0.5})          # (V, 3) mm, Eq. 1 of Yano & Harada
+>>> other = model.pca([1.0, -0.5])            # (V, 3) mm, Eq. 2 (alphas in units of sigma)
+>>> model.faces.shape, model.warnings
+
+Everything is in the neutral take's scanner frame, mm, as in the store; ``model.head_frame``
+maps it to the glTF's head frame (metres, +Y up, +Z out of the face).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.morph.blend import blend
+from scan2morph.morph.pca import ALPHA_LIMIT
+from scan2morph.stages.quality import Warning, read_warnings, skipped_stages
+from scan2morph.store import open_store, paths
+
+
+@dataclass(frozen=True)
+class Model:
+    """One subject's model.
+
+    Attributes
+    ----------
+    subject : str
+    neutral : (V, 3) float, mm
+        The base model S_0 (the neutral mesh, invalid vertices filled from neighbours).
+    faces : (F, 3) int
+        Template faces, shared by every mesh of the subject.
+    uv : (V, 2) float or None
+        Texture coordinates of the neutral into its colour image (top-left origin).
+    texture : (H, W, 3) uint8 or None
+        The neutral's colour image.
+    visemes : dict take -> (V, 3) mm
+        Viseme models (neutral + masked, smoothed motion), in the neutral frame.
+    labels : dict take -> label
+        The label (``car``, ``smile``, ...) of every take.
+    pca_mean, pca_components, pca_sigma : arrays or None
+        (V, 3), (K, V, 3) unit-norm components, (K,) mm; None without visemes.
+    sigma_convention : str or None
+        ``sample`` (the coefficients' sample standard deviation) or ``paper`` (sqrt eigenvalue).
+    frequencies_hz : (k,) float
+        Natural frequencies of the modal basis.
+    modes : (k, V, 3) float
+        Mode shapes (translational part), mass-orthonormal.
+    coordinates : dict take -> (k,) float
+        Modal coordinates of each expression.
+    head_frame : (4, 4) float or None
+        Neutral frame (mm) -> glTF head frame (m).
+    warnings : list of Warning
+        What not to trust (misaligned takes left out, refused refits, ...).
+    skipped : dict stage -> why
+    provenance : dict
+        The store's root attributes (format and software versions, config hash, checksums).
+    """
+
+    subject: str
+    neutral: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray | None
+    texture: np.ndarray | None
+    visemes: dict[str, np.ndarray]
+    labels: dict[str, str]
+    pca_mean: np.ndarray | None
+    pca_components: np.ndarray | None
+    pca_sigma: np.ndarray | None
+    sigma_convention: str | None
+    frequencies_hz: np.ndarray
+    modes: np.ndarray
+    coordinates: dict[str, np.ndarray]
+    head_frame: np.ndarray | None
+    warnings: list[Warning] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+    provenance: dict[str, object] = field(default_factory=dict)
+
+    def blend(self, weights: Mapping[str, float]) -> np.ndarray:
+        """A blend shape (Eq. 1): ``(1 - sum w) S_0 + sum_l w_l S_l``.
+
+        Parameters
+        ----------
+        weights : mapping label or take -> weight
+            Weights of viseme labels (``{"car": 0.5}``; repeated takes of a label are averaged)
+            or of take ids; non-negative, summing to at most 1.
+
+        Returns
+        -------
+        (V, 3) float, mm
+        """
+        shapes: dict[str, list[np.ndarray]] = {}
+        for take, shape in self.visemes.items():
+            shapes.setdefault(self.labels.get(take, take), []).append(shape)
+        by_name = {label: np.mean(s, axis=0) for label, s in shapes.items()} | self.visemes
+        return blend(self.neutral, by_name, dict(weights), source=f"{self.subject}/blend")
+
+    def pca(self, alphas: Sequence[float], alpha_limit: float = ALPHA_LIMIT) -> np.ndarray:
+        """A PCA synthesis (Eq. 2): ``mean + sum_k alpha_k sigma_k e_k``.
+
+        Parameters
+        ----------
+        alphas : sequence of float
+            One per leading component (at most K), each within ``[-alpha_limit, alpha_limit]``.
+
+        Returns
+        -------
+        (V, 3) float, mm
+        """
+        if self.pca_mean is None:
+            raise InputError(self.subject, "pca: the subject has no PCA (no viseme takes)")
+        a = np.asarray(alphas, dtype=np.float64).ravel()
+        k = len(self.pca_sigma)
+        if a.size > k or not np.isfinite(a).all() or (np.abs(a) > alpha_limit).any():
+            raise InputError(
+                self.subject,
+                f"pca: expected at most {k} finite alphas within +-{alpha_limit}, got {a.tolist()}",
+            )
+        weights = a * self.pca_sigma[: a.size]
+        return self.pca_mean + np.tensordot(weights, self.pca_components[: a.size], axes=1)
+
+    def expression(self, coordinates: Sequence[float]) -> np.ndarray:
+        """The neutral displaced by modal coordinates ``q`` (the first len(q) modes), mm."""
+        q = np.asarray(coordinates, dtype=np.float64).ravel()
+        if q.size > len(self.modes) or not np.isfinite(q).all():
+            raise InputError(
+                self.subject, f"expression: expected at most {len(self.modes)} finite coordinates"
+            )
+        return self.neutral + np.tensordot(q, self.modes[: q.size], axes=1)
+
+
+def _get(h5, key):
+    return h5[key][()] if key in h5 else None
+
+
+def load_model(path: str | Path) -> Model:
+    """Read a subject's model from ``results/{subject}/{subject}.h5``.
+
+    Raises
+    ------
+    InputError
+        Not a store, an unknown major format version (:func:`scan2morph.store.open_store`).
+    """
+    with open_store(path) as h5:
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5.attrs.items()}
+        takes = h5.get(paths.TAKES, {})
+        labels = {t: str(takes[t].attrs.get("label", t)) for t in takes}
+        neutral = [t for t in takes if takes[t].attrs.get("kind") == "neutral"]
+        visemes = paths.ids(_keys(h5, paths.VISEMES), paths.VISEMES, "model")
+        expressions = paths.ids(_keys(h5, paths.EXPRESSIONS), paths.EXPRESSIONS, "coordinates")
+        convention = _get(h5, paths.pca("sigma_convention"))
+        return Model(
+            subject=str(attrs.get("subject", Path(path).stem)),
+            neutral=h5[paths.neutral("vertices")][()],
+            faces=h5[paths.template("faces")][()],
+            uv=_get(h5, paths.mesh(neutral[0], "uv")) if neutral else None,
+            texture=_get(h5, paths.range_image(neutral[0], "color")) if neutral else None,
+            visemes={t: h5[paths.viseme(t, "model")][()] for t in visemes},
+            labels=labels,
+            pca_mean=_get(h5, paths.pca("mean")),
+            pca_components=_get(h5, paths.pca("components")),
+            pca_sigma=_get(h5, paths.pca("sigma")),
+            sigma_convention=None if convention is None else _text(convention),
+            frequencies_hz=h5[paths.modal("frequencies_hz")][()],
+            modes=h5[paths.modal("modes")][()],
+            coordinates={t: h5[paths.expression(t, "coordinates")][()] for t in expressions},
+            head_frame=_get(h5, paths.neutral("head_frame")),
+            warnings=read_warnings(h5),
+            skipped=skipped_stages(h5),
+            provenance={k: _json(v) for k, v in attrs.items()},
+        )
+
+
+def _keys(h5, root: str) -> list[str]:
+    if root not in h5:
+        return []
+    out = []
+    h5[root].visititems(lambda name, obj: out.append(f"{root}/{name}"))
+    return out
+
+
+def _text(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _json(value):
+    if isinstance(value, str) and value[:1] in "{[":
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value.item() if isinstance(value, np.generic) else value

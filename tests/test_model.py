@@ -1,0 +1,63 @@
+"""The model API (scan2morph.load_model) against the store and glTF the pipeline wrote."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+import scan2morph
+from scan2morph.errors import InputError
+from scan2morph.io import read_glb_targets
+from scan2morph.store import paths, read_part
+from tests.tiny_run import SUBJECT, tiny_run
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return tiny_run(tmp_path_factory, [f"results/{SUBJECT}/{SUBJECT}.h5"])
+
+
+def test_model_reads_the_store(run):
+    store_path = run.path("results", SUBJECT, f"{SUBJECT}.h5")
+    model = scan2morph.load_model(store_path)
+    store = read_part(store_path)
+    assert model.subject == SUBJECT and model.labels["car"] == "car"
+    np.testing.assert_array_equal(model.neutral, store[paths.neutral("vertices")])
+    assert set(model.visemes) == {"car", "too"} and set(model.coordinates) == {"smile1"}
+    assert model.sigma_convention == "sample" and model.provenance["format_version"]
+    assert model.head_frame.shape == (4, 4) and model.texture.dtype == np.uint8
+    with h5py.File(store_path) as h5:  # the file explains itself in any HDF5 viewer
+        ds = h5[paths.mesh("car", "vertices")]
+        assert ds.attrs["units"] == "mm" and "Template vertices" in ds.attrs["description"]
+        assert h5[paths.modal("frequencies_hz")].attrs["units"] == "Hz"
+    # a blend by label equals the morph stage's named blend (Eq. 1)
+    np.testing.assert_allclose(model.blend({"car": 0.6}), store[paths.blend("car_60")], atol=1e-12)
+    # an expression from its modal coordinates equals the modal stage's synthesis
+    q = model.coordinates["smile1"]
+    want = model.neutral + store[paths.expression("smile1", "synthesized")]
+    np.testing.assert_allclose(model.expression(q), want, atol=1e-9)
+
+
+def test_pca_equals_the_gltf_targets_added(run):
+    """Eq. 2 through the API and through the glTF's additive morph targets agree."""
+    model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
+    base, targets = read_glb_targets(run.path("results", SUBJECT, f"{SUBJECT}.glb"))
+    alphas = [1.0, -0.5][: len(model.pca_sigma)]
+    glb = base + (targets["pca_mean"] - base)
+    for k, a in enumerate(alphas):
+        glb = glb + a * (targets[f"pca_{k + 1}"] - base)
+    np.testing.assert_allclose(model.pca(alphas), glb, atol=1e-3)  # glTF stores float32 metres
+    np.testing.assert_allclose(model.pca([]), model.pca_mean)
+
+
+def test_bad_arguments_are_refused(run):
+    model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
+    with pytest.raises(InputError, match=r"pca: expected at most \d+ finite alphas within \+-3"):
+        model.pca([5.0])
+    with pytest.raises(InputError, match="expression: expected at most 10 finite coordinates"):
+        model.expression(np.zeros(11))
+    with pytest.raises(InputError, match="store not found"):
+        scan2morph.load_model(run.path("nothing.h5"))
