@@ -82,3 +82,17 @@ def test_failed_alignments_are_left_out_of_the_models(store):
     subject = Subject("s", {"n": "neutral", "car": "viseme", "smile": "expression"}, {})
     motion = {paths.viseme("car", "model"): np.zeros((10, 3))}
     assert modelled(subject, motion).kinds == {"n": "neutral", "car": "viseme"}
+
+
+def test_the_report_shows_warnings_and_skipped_stages_first(store):
+    from scan2morph.report.html import _status_section
+    from scan2morph.store.hdf5 import write_datasets
+
+    with h5py.File(store) as h5:
+        warnings = subject_warnings(h5, SETTINGS)
+    write_datasets(store, warning_datasets(warnings))  # as the store stage does
+    with h5py.File(store) as h5:
+        html = _status_section(h5)
+    assert html.startswith('<div class="warnings">') and "5 warnings" in html
+    assert "ICP did not converge (50 iterations): left out of the models" in html
+    assert "no viseme takes" in html  # the skipped stages' table
