@@ -12,6 +12,7 @@ import base64
 import csv
 import json
 import os
+import re
 import shutil
 import socket
 import struct
@@ -628,3 +629,18 @@ def test_snakemake_report_builds(run, tmp_path):
         assert category in text
     caption = " ".join((REPO / "workflow" / "report" / "cohort_table.rst").read_text().split())
     assert caption[:60] in text
+
+
+def test_the_page_links_its_products_and_keeps_the_navigation_in_view(report, run):
+    path, _, _, _ = report
+    text = path.read_text()
+    hrefs = re.findall(r'<p class="files">(.*?)</p>', text)[0]
+    for product in (f"{SUBJECT}.h5", f"{SUBJECT}.glb", "meshes/", "tables/", "accuracy.json"):
+        assert f'href="{product}"' in hrefs
+        # relative to the page, as the workflow places it in results/{subject}/
+        assert run.path("results", SUBJECT, product.rstrip("/")).exists(), product
+    assert (
+        "nav{position:sticky" in text
+        and "white-space:nowrap}" not in text.split("caption{")[1][:80]
+    )
+    assert text.index('id="status"') < text.index('id="inputs"')  # warnings come first

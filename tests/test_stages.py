@@ -5,13 +5,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
 from scan2morph.errors import InputError
-from scan2morph.stages import Subject, align, fit, modal, motion
+from scan2morph.stages import Subject, align, fit, modal, morph, motion
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import SECTION_STAGE, STAGES
+from scan2morph.template import load_template
 from tests.tiny_run import SUBJECT, TAKES, tiny_run
 
 CONFIG = yaml.safe_load(
@@ -94,3 +96,31 @@ def test_each_part_holds_the_datasets_its_stage_owns(tmp_path_factory):
     store = read_part(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
     for key in store:
         assert owner.get(key) is not None and paths.written_by([owner[key]]).match(key), key
+
+
+@pytest.mark.slow
+def test_a_take_that_failed_its_alignment_gate_is_left_out_of_the_models(tmp_path_factory):
+    """motion.run models only the takes whose /takes/{take}/align/ok holds (unless
+    quality.include_failed_takes); the stages after it (morph) work on what it modelled."""
+    run = tiny_run(tmp_path_factory, [f"results/{SUBJECT}/{SUBJECT}.h5"])
+    takes = [t["take"] for t in TAKES]
+    data = {}
+    for take in takes:
+        for stage in ("repair", "fit", "align"):
+            data |= read_part(run.path("results", SUBJECT, "takes", take, f"{stage}.h5"))
+    data[paths.align("car", "ok")] = np.bool_(False)
+    subject = Subject(
+        SUBJECT, {t["take"]: t["kind"] for t in TAKES}, {t["take"]: t["label"] for t in TAKES}
+    )
+    template = load_template(run.path("resources", "template.npz"))
+    c = CONFIG
+    strict = motion.Params.from_config(c["mask"], c["smoothing"], c["template"], c["quality"])
+    out = motion.run(template, subject, data, strict).datasets
+    assert paths.viseme("car", "model") not in out and paths.viseme("too", "model") in out
+    assert paths.expression("smile1", "displacement") in out
+    pca = morph.run(template, subject, data | out, c).datasets
+    assert list(pca[paths.pca("takes")]) == ["neutral", "too"]
+    lenient = motion.Params.from_config(
+        c["mask"], c["smoothing"], c["template"], {"include_failed_takes": True}
+    )
+    assert paths.viseme("car", "model") in motion.run(template, subject, data, lenient).datasets

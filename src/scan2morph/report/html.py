@@ -48,9 +48,10 @@ _CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0 auto;
 max-width:1200px;padding:0 1.5rem 3rem;color:#222;line-height:1.45}
 h1{margin-top:1.5rem}h2{border-bottom:2px solid #ddd;padding-bottom:.2rem;margin-top:2.5rem}
-nav a{margin-right:1rem}
+nav{position:sticky;top:0;background:#fff;padding:.4rem 0;border-bottom:1px solid #ddd;
+z-index:1}nav a{margin-right:1rem;white-space:nowrap}.files a{margin-right:.8rem}
 table{border-collapse:collapse;margin:.6rem 0 1.2rem;font-size:.9rem}
-caption{text-align:left;font-weight:600;padding:.3rem 0;white-space:nowrap}
+caption{text-align:left;font-weight:600;padding:.3rem 0;white-space:normal;max-width:60rem}
 th,td{border:1px solid #ccc;padding:.2rem .5rem}th{background:#f3f3f3}
 td.num{text-align:right;font-variant-numeric:tabular-nums}
 code{font-size:.8rem;word-break:break-all}
@@ -550,8 +551,25 @@ def subject_report_html(
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>scan2morph report: {_esc(subject)}</title><style>{_CSS}</style></head>"
         f"<body><header><h1>scan2morph report: {_esc(subject)}</h1><p>{_esc(lead)}</p>"
-        f"<nav>{nav}</nav></header>{body}</body></html>\n"
+        f"{_files_line(subject, accuracy is not None)}"
+        f"</header><nav>{nav}</nav>{body}</body></html>\n"
     )
+
+
+def _files_line(subject: str, synthetic: bool) -> str:
+    """Links to the products the page describes (relative: the page sits in
+    ``results/{subject}/`` beside them)."""
+    files = {
+        f"{subject}.h5": "store (HDF5)",
+        f"{subject}.glb": "model (glTF)",
+        "meshes/": "meshes (OBJ)",
+        "tables/": "tables (TSV)",
+        "figures/": "figures (PNG)",
+    }
+    if synthetic:
+        files["accuracy.json"] = "accuracy (JSON)"
+    links = "".join(f'<a href="{_esc(f)}">{_esc(what)}</a>' for f, what in files.items())
+    return f'<p class="files">Files: {links}</p>'
 
 
 def write_subject_report(path: str | Path, store_path: str | Path, **kwargs) -> None:
