@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 # Debian packages: libusb for open3d, EGL/OSMesa for headless rendering, chromium for the report test.
-DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium
+DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium slurm-wlm munge
 STAMP := $(VENV)/.setup-stamp
 # The Khronos glTF validator (npm; tests/test_gltf_viewer.py), installed with `npm ci` from the
 # committed lock. node and npm come from Debian (nodejs npm) only when npm is absent: a NodeSource

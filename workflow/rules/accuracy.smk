@@ -15,6 +15,11 @@ rule accuracy:
         ),
     log:
         "logs/accuracy/{subject}.log",
+    benchmark:
+        "benchmarks/rules/accuracy/{subject}.tsv"
+    resources:
+        mem_mb=1900,
+        runtime=4,
     params:
         kinds=get_take_kinds,
         labels=get_take_labels,

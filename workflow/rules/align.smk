@@ -13,6 +13,9 @@ rule align:
         "logs/align/{subject}/{take}.log",
     benchmark:
         "benchmarks/rules/align/{subject}/{take}.tsv"
+    resources:
+        mem_mb=900,
+        runtime=2,
     params:
         neutral=get_neutral_take,
         align=config["align"],

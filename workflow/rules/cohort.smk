@@ -19,6 +19,8 @@ rule cohort:
         ),
     log:
         "logs/cohort/cohort.log",
+    benchmark:
+        "benchmarks/rules/cohort/cohort.tsv"
     params:
         subjects=SUBJECTS,
         accuracy_subjects=synthetic_subjects(),

@@ -12,7 +12,8 @@ rule figures_fit:
     benchmark:
         "benchmarks/rules/figures_fit/{subject}.tsv"
     resources:
-        mem_mb=1500,
+        mem_mb=900,
+        runtime=2,
     params:
         stage="fit",
     script:
@@ -30,7 +31,8 @@ rule figures_motion:
     benchmark:
         "benchmarks/rules/figures_motion/{subject}.tsv"
     resources:
-        mem_mb=1500,
+        mem_mb=900,
+        runtime=3,
     params:
         stage="motion",
     script:
@@ -48,7 +50,8 @@ rule figures_morph:
     benchmark:
         "benchmarks/rules/figures_morph/{subject}.tsv"
     resources:
-        mem_mb=1500,
+        mem_mb=900,
+        runtime=5,
     params:
         stage="morph",
     script:
@@ -66,7 +69,8 @@ rule figures_modal:
     benchmark:
         "benchmarks/rules/figures_modal/{subject}.tsv"
     resources:
-        mem_mb=1500,
+        mem_mb=900,
+        runtime=5,
     params:
         stage="modal",
     script:

@@ -7,6 +7,11 @@ rule template:
         "resources/template.npz",
     log:
         "logs/template/template.log",
+    benchmark:
+        "benchmarks/rules/template/template.tsv"
+    resources:
+        mem_mb=600,
+        runtime=5,
     params:
         # the library's fiducial sets, saved with the template: a change rebuilds it
         fiducial_sets=FIDUCIAL_SETS,
@@ -22,6 +27,11 @@ rule template_part:
         part="results/{subject}/template.h5",
     log:
         "logs/template_part/{subject}.log",
+    benchmark:
+        "benchmarks/rules/template_part/{subject}.tsv"
+    resources:
+        mem_mb=600,
+        runtime=1,
     params:
         template=config["template"],
     script:
@@ -43,7 +53,8 @@ rule fit:
     benchmark:
         "benchmarks/rules/fit/{subject}/{take}.tsv"
     resources:
-        mem_mb=1000,
+        mem_mb=700,
+        runtime=2,
     params:
         kind=get_take_kind,
         template=config["template"],

@@ -8,6 +8,11 @@ rule check_subject:
         "results/{subject}/check.json",
     log:
         "logs/check_subject/{subject}.log",
+    benchmark:
+        "benchmarks/rules/check_subject/{subject}.tsv"
+    resources:
+        mem_mb=500,
+        runtime=1,
     params:
         problems=get_subject_problems,
     script:
@@ -26,7 +31,8 @@ rule ingest:
     benchmark:
         "benchmarks/rules/ingest/{subject}/{take}.tsv"
     resources:
-        mem_mb=1000,
+        mem_mb=800,
+        runtime=2,
     params:
         row=take_row,
         roles=get_take_roles,

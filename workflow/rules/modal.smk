@@ -25,7 +25,8 @@ rule modal:
         "benchmarks/rules/modal/{subject}.tsv"
     threads: 2
     resources:
-        mem_mb=4000,
+        mem_mb=900,
+        runtime=2,
     params:
         kinds=get_take_kinds,
         labels=get_take_labels,

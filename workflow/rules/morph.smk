@@ -26,6 +26,9 @@ rule morph:
         "logs/morph/{subject}.log",
     benchmark:
         "benchmarks/rules/morph/{subject}.tsv"
+    resources:
+        mem_mb=700,
+        runtime=2,
     params:
         kinds=get_take_kinds,
         labels=get_take_labels,

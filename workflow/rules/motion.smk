@@ -14,6 +14,9 @@ rule motion:
         "logs/motion/{subject}.log",
     benchmark:
         "benchmarks/rules/motion/{subject}.tsv"
+    resources:
+        mem_mb=600,
+        runtime=1,
     params:
         kinds=get_take_kinds,
         labels=get_take_labels,
@@ -40,7 +43,8 @@ rule motion_noise:
     benchmark:
         "benchmarks/rules/motion_noise/{subject}.tsv"
     resources:
-        mem_mb=1000,
+        mem_mb=700,
+        runtime=2,
     params:
         kinds=get_take_kinds,
         labels=get_take_labels,

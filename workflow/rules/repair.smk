@@ -13,7 +13,8 @@ rule repair:
     benchmark:
         "benchmarks/rules/repair/{subject}/{take}.tsv"
     resources:
-        mem_mb=1000,
+        mem_mb=800,
+        runtime=2,
     params:
         repair=config["repair"],
     script:

@@ -18,6 +18,9 @@ rule report_subject:
         ),
     log:
         "logs/report_subject/{subject}.log",
+    resources:
+        mem_mb=800,
+        runtime=2,
     params:
         benchmarks="benchmarks/rules",
         stage_order=get_rule_order,

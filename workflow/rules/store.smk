@@ -12,6 +12,9 @@ rule store:
         "logs/store/{subject}.log",
     benchmark:
         "benchmarks/rules/store/{subject}.tsv"
+    resources:
+        mem_mb=500,
+        runtime=1,
     params:
         config_sha256=CONFIG_SHA256,
         quality=config["quality"],

@@ -46,7 +46,8 @@ for _group in synth_groups():
         wildcard_constraints:
             subject="|".join(_group["subjects"]),
         resources:
-            mem_mb=2000,
+            mem_mb=1800 if "stereo" in _group["name"] else 1200,
+            runtime=7 if "stereo" in _group["name"] else 5,
         params:
             takes=_group["takes"],
             seed=config["synthetic"]["seed"],

@@ -1,0 +1,188 @@
+"""The cost model of a cohort (issue #17): how wall time, CPU time, memory and store size grow
+with the number of subjects.
+
+``.venv/bin/python benchmarks/bench_scaling.py [--subjects 1 2 4 8] [--width 320 --height 240]
+[--cores 2] [--keep DIR]`` runs the default workflow target (stores, figures, reports, accuracy,
+cohort summary) on a synthetic cohort of each size, locally, each in a fresh working directory,
+with the default config's takes (one neutral, five visemes, four expressions: 10 per subject), all
+range scans (no stereo takes, so that every subject costs the same) at a reduced image size
+(``--width/--height``, the focal length scaled with them; the default config scans 640 x 480). It
+prints per cohort size the wall time, the CPU time of all jobs (user + system of every process
+Snakemake waited for), the largest job's peak memory, the store sizes, and the per-subject and
+per-take figures; then the job time per rule (Snakemake's benchmark files) split into per-take
+rules and per-subject rules, and the extrapolation to ``--database`` subjects/scans on
+``--extrapolate-cores`` cores. Nothing is asserted; the printed tables are the measurement.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = Path(sys.executable).with_name("snakemake")
+#: Rules that run once per take; every other rule runs once per subject (template, cohort: once).
+PER_TAKE = ("ingest", "repair", "fit", "align")
+ONCE = ("template", "cohort")
+
+
+def write_config(work: Path, subjects: int, width: int, height: int) -> Path:
+    base = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["synthetic"]["scanner"]
+    scale = width / base["width"]
+    (work / "subjects.tsv").write_text(
+        "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tleft\tright\tcalibration\tlandmarks\n"
+    )
+    cfg = dict(
+        subjects="subjects.tsv",
+        synthetic=dict(
+            subjects=subjects,
+            scanner=dict(width=width, height=height, focal_px=base["focal_px"] * scale),
+            stereo=dict(subjects=[]),
+        ),
+        sweeps="sweeps.tsv",
+    )
+    path = work / "scaling.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def run(work: Path, subjects: int, args) -> dict:
+    """One local run of the default target; returns its measurements."""
+    config = write_config(work, subjects, args.width, args.height)
+    cmd = [
+        str(SNAKEMAKE),
+        "--cores",
+        str(args.cores),
+        "-s",
+        str(ROOT / "Snakefile"),
+        "--configfile",
+        str(ROOT / "config" / "config.yaml"),
+        str(config),
+        "--quiet",
+    ]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    with open(work / "snakemake.out", "w") as out:
+        code = subprocess.run(cmd, cwd=work, stdout=out, stderr=subprocess.STDOUT).returncode
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if code:
+        sys.exit(f"snakemake failed ({code}): see {work / 'snakemake.out'}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    jobs = job_benchmarks(work)
+    takes = len(yaml.safe_load(config.read_text()).get("synthetic", {}).get("takes", [])) or len(
+        yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["synthetic"]["takes"]
+    )
+    stores = [work / "results" / s / f"{s}.h5" for s in synthetic_ids(subjects)]
+    results = sum(f.stat().st_size for f in (work / "results").rglob("*") if f.is_file())
+    return dict(
+        subjects=subjects,
+        takes=subjects * takes,
+        jobs=len(jobs),
+        wall_s=wall,
+        cpu_s=cpu,
+        job_s=jobs.s.sum(),
+        peak_rss_mb=jobs.max_rss.max(),
+        store_mb=sum(f.stat().st_size for f in stores) / 2**20,
+        results_mb=results / 2**20,
+        rules=jobs,
+    )
+
+
+def synthetic_ids(n: int) -> list[str]:
+    return [f"synth{i:02d}" for i in range(1, n + 1)]
+
+
+def job_benchmarks(work: Path) -> pd.DataFrame:
+    """Every job's benchmark line (benchmarks/rules/<rule>/...tsv) with its rule."""
+    rows = []
+    for f in (work / "benchmarks" / "rules").rglob("*.tsv"):
+        d = pd.read_csv(f, sep="\t")
+        d["rule"] = f.relative_to(work / "benchmarks" / "rules").parts[0]
+        rows.append(d)
+    return pd.concat(rows, ignore_index=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--subjects", type=int, nargs="+", default=[1, 2, 4, 8])
+    ap.add_argument("--width", type=int, default=320)
+    ap.add_argument("--height", type=int, default=240)
+    ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument("--keep", type=Path, help="keep the working directories under DIR")
+    ap.add_argument("--database", type=int, nargs=2, default=[470, 4000], metavar=("SUBJ", "SCANS"))
+    ap.add_argument("--extrapolate-cores", type=int, nargs="+", default=[2, 16, 64, 256])
+    args = ap.parse_args(argv)
+
+    root = Path(args.keep or tempfile.mkdtemp(prefix="bench_scaling-"))
+    runs = []
+    for n in args.subjects:
+        work = root / f"subjects_{n}"
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        r = run(work, n, args)
+        runs.append(r)
+        print(
+            f"{n} subjects: {r['wall_s']:.0f} s wall, {r['cpu_s']:.0f} s CPU, {r['jobs']} jobs",
+            flush=True,
+        )
+
+    summarize(runs, args)
+    print(f"working directories: {root}")
+    return 0
+
+
+def summarize(runs: list[dict], args) -> None:
+    """Print the per-size table, the job time per rule and the extrapolation."""
+    print(f"\n{args.width} x {args.height} px, {args.cores} cores, default takes (range scans)")
+    table = pd.DataFrame([{k: v for k, v in r.items() if k != "rules"} for r in runs])
+    for col in ("wall_s", "cpu_s", "job_s", "store_mb"):
+        table[f"{col}/subject"] = table[col] / table.subjects
+    table["cpu_s/take"] = table.cpu_s / table.takes
+    print(table.round(1).to_string(index=False))
+
+    # per rule, from the largest run: job seconds per take (per-take rules) or per subject
+    big = runs[-1]
+    jobs = big["rules"]
+    per = jobs.groupby("rule").agg(
+        jobs=("s", "size"), job_s=("s", "sum"), max_s=("s", "max"), max_rss_mb=("max_rss", "max")
+    )
+    per["per"] = [
+        "take" if r in PER_TAKE else "once" if r in ONCE else "subject" for r in per.index
+    ]
+    per["job_s_each"] = per.job_s / per.jobs
+    print(f"\njob time per rule ({big['subjects']} subjects, {big['takes']} takes):")
+    print(per.round(1).sort_values(["per", "job_s"]).to_string())
+    take_s = per.job_s[per.per == "take"].sum() / big["takes"]
+    subject_s = per.job_s[per.per == "subject"].sum() / big["subjects"]
+    # job time counts waits for a busy machine; scale it to the measured CPU time
+    cpu_ratio = big["cpu_s"] / big["job_s"]
+    n_subj, n_scans = args.database
+    total_cpu = (n_subj * subject_s + n_scans * take_s) * cpu_ratio
+    print(
+        f"\nper take {take_s:.1f} job-s, per subject {subject_s:.1f} job-s (+ takes), "
+        f"CPU/job time {cpu_ratio:.2f}"
+    )
+    print(f"{n_subj} subjects / {n_scans} scans: {total_cpu / 3600:.1f} CPU-hours")
+    for cores in args.extrapolate_cores:
+        print(f"  on {cores:4d} cores: {total_cpu / cores / 3600:8.2f} h (perfect packing)")
+    store_per_subject = big["store_mb"] / big["subjects"]
+    results_per_subject = big["results_mb"] / big["subjects"]
+    print(
+        f"stores {store_per_subject:.1f} MB/subject -> {n_subj * store_per_subject / 1024:.1f} GB; "
+        f"all results {results_per_subject:.1f} MB/subject -> "
+        f"{n_subj * results_per_subject / 1024:.1f} GB (at {args.width} x {args.height})"
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())
