@@ -20,6 +20,7 @@ export PYOPENGL_PLATFORM ?= osmesa
 
 setup: $(STAMP)
 setup: $(VALIDATOR_STAMP)
+	@[ tools/viewer/node_modules/.package-lock.json -nt tools/viewer/package-lock.json ] || (cd tools/viewer && npm ci --no-audit --no-fund --loglevel=error)
 
 $(DEB_STAMP):
 	@missing=""; for p in $(DEB_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \

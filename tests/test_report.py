@@ -27,8 +27,10 @@ import cv2
 import h5py
 import numpy as np
 import pytest
+import yaml
 
 from scan2morph.errors import InputError
+from scan2morph.io import read_glb_targets
 from scan2morph.report import (
     ReportFigure,
     image_uri,
@@ -39,7 +41,9 @@ from scan2morph.report import (
     thumbnail_jpeg,
     write_subject_report,
 )
+from scan2morph.report.viewer import bundle, script_hash, three_unavailable
 from scan2morph.store import paths
+from scan2morph.template import build_template, subdivide_template
 from tests.tiny_run import SUBJECT, TAKES, tiny_run
 from tests.workflow_api import REPO
 
@@ -48,6 +52,9 @@ needs_chromium = pytest.mark.skipif(
     CHROMIUM is None,
     reason="headless Chromium not installed (Debian package 'chromium', installed by make setup)",
 )
+#: Why the report has no 3D viewer here (three.js not installed by make setup), or None.
+THREE_MISSING = three_unavailable()
+needs_three = pytest.mark.skipif(THREE_MISSING is not None, reason=str(THREE_MISSING))
 CAPTIONS = REPO / "workflow" / "report" / "figures"
 THUMB_PX = 80
 
@@ -130,6 +137,10 @@ class Browser:
                 "--headless",
                 "--no-sandbox",
                 "--disable-gpu",
+                # WebGL for the 3D viewer on the CPU (SwiftShader), without the deprecation
+                # warning of the automatic fallback
+                "--use-angle=swiftshader",
+                "--enable-unsafe-swiftshader",
                 "--disable-quic",
                 "--no-first-run",
                 "--disable-background-networking",
@@ -151,8 +162,13 @@ class Browser:
             time.sleep(0.05)
         self.port = int(port_file.read_text().split()[0])
 
-    def inspect(self, url: str) -> dict:
-        """Load ``url`` in a new tab; its errors, images, fetched resources and scripts."""
+    def inspect(self, url: str, actions=None) -> dict:
+        """Load ``url`` in a new tab; its errors, images, fetched resources and scripts.
+
+        ``actions(evaluate, call)``, when given, runs after the load event (``evaluate`` returns
+        a JavaScript expression's value, awaiting promises; ``call`` sends a DevTools command);
+        what it returns is the result's ``actions``.
+        """
         req = urllib.request.Request(
             f"http://127.0.0.1:{self.port}/json/new?about:blank", method="PUT"
         )
@@ -174,9 +190,12 @@ class Browser:
                 events.append(msg)
 
         def evaluate(expression):
-            return call("Runtime.evaluate", expression=expression, returnByValue=True)["result"][
-                "value"
-            ]
+            result = call(
+                "Runtime.evaluate", expression=expression, returnByValue=True, awaitPromise=True
+            )
+            if "exceptionDetails" in result:
+                raise RuntimeError(f"{expression[:80]}: {result['exceptionDetails']}")
+            return result["result"].get("value")
 
         try:
             for domain in ("Runtime", "Log", "Page"):
@@ -191,8 +210,15 @@ class Browser:
                     "data: i.src.startsWith('data:')})))"
                 )
             )
+            done = actions(evaluate, call) if actions is not None else None
             resources = evaluate("performance.getEntriesByType('resource').map(e => e.name)")
-            active = evaluate("document.querySelectorAll('script, link, iframe, object').length")
+            active = evaluate(
+                "document.querySelectorAll('script[src], link, iframe, object, embed').length"
+            )
+            scripts = evaluate(
+                "Array.from(document.scripts, s => ({type: s.type, src: s.src, "
+                "chars: s.text.length}))"
+            )
         finally:
             ws.close()
         errors = []
@@ -204,7 +230,8 @@ class Browser:
                 errors.append(" ".join(str(a.get("value")) for a in params.get("args", [])))
             elif method == "Log.entryAdded" and params["entry"]["level"] == "error":
                 errors.append(params["entry"]["text"])
-        return dict(errors=errors, images=images, resources=resources, active=active)
+        found = dict(errors=errors, images=images, resources=resources, active=active)
+        return found | {"scripts": scripts, "actions": done}
 
     def close(self) -> None:
         self.proc.terminate()
@@ -305,6 +332,7 @@ def report(run, tmp_path_factory):
         takes=[t["take"] for t in TAKES],
         n_coordinates=4,
         thumbnail_px=THUMB_PX,
+        glb=run.path("results", SUBJECT, f"{SUBJECT}.glb"),
     )
     return path, store, figures, accuracy
 
@@ -329,8 +357,15 @@ def test_report_loads_in_chromium_without_errors_and_every_image_renders(report,
     for img in state["images"]:
         assert img["complete"] and img["width"] > 0 and img["height"] > 0, img
         assert img["data"], img
-    assert state["resources"] == []  # nothing fetched: everything is embedded
-    assert state["active"] == 0  # no script, stylesheet link or frame
+    # nothing fetched but the viewer's own blob: URLs (the glTF's texture): everything is embedded
+    assert [r for r in state["resources"] if not r.startswith("blob:")] == []
+    assert state["active"] == 0  # no external script, stylesheet link or frame
+    # no script but the viewer's one inline module (none without three.js)
+    assert state["scripts"] == (
+        []
+        if THREE_MISSING
+        else [{"type": "module", "src": "", "chars": state["scripts"][0]["chars"]}]
+    )
 
 
 @pytest.mark.slow
@@ -346,6 +381,211 @@ def test_the_browser_check_catches_broken_images_and_external_resources(report, 
     widths = {i["alt"]: i["width"] for i in state["images"]}
     assert widths["broken"] == 0 and widths["external"] == 0
     assert widths["neutral"] > 0
+
+
+# --- the 3D viewer ---
+VIEWER = "document.getElementById('viewer3d')"
+
+
+def _viewer_ready(evaluate, timeout: float = 120.0) -> None:
+    """Wait until the viewer has loaded the glTF and drawn it (or failed)."""
+    deadline = time.monotonic() + timeout
+    while (state := evaluate(f"{VIEWER}.dataset.state")) == "loading":
+        assert time.monotonic() < deadline, "the viewer did not load in time"
+        time.sleep(0.2)
+    assert state == "ready", evaluate(f"{VIEWER}.querySelector('.viewer-status').textContent")
+
+
+def _canvas(evaluate) -> np.ndarray:
+    """The viewer's canvas as drawn, (H, W, 3) uint8 RGB."""
+    uri = evaluate(f"{VIEWER}.querySelector('canvas').toDataURL('image/png')")
+    png = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
+    return cv2.imdecode(png, cv2.IMREAD_COLOR)[..., ::-1]
+
+
+def _set(evaluate, name: str, value) -> None:
+    """Set a slider or checkbox of the viewer as a user would (with its input/change event)."""
+    evaluate(
+        f"(() => {{ const e = {VIEWER}.querySelector('input[name={json.dumps(name)}]');"
+        f" if (e.type === 'checkbox') {{ e.checked = {json.dumps(bool(value))};"
+        " e.dispatchEvent(new Event('change', {bubbles: true})); }"
+        f" else {{ e.value = {json.dumps(value)}; e.dispatchEvent(new Event('input', {{bubbles:"
+        " true})); } })()"
+    )
+
+
+def _changed(a: np.ndarray, b: np.ndarray) -> int:
+    """Pixels that differ by more than 8 levels in some channel."""
+    return int((np.abs(a.astype(int) - b.astype(int)).max(axis=2) > 8).sum())
+
+
+@pytest.mark.slow
+@needs_chromium
+@needs_three
+def test_viewer_controls_change_the_rendered_pixels(report, browser):
+    path, store, *_ = report
+    with h5py.File(store) as h5:
+        visemes = list(h5[paths.VISEMES]) if paths.VISEMES in h5 else []
+    names = re.findall(r'<input type="range" data-target="\d+" name="([^"]+)"', path.read_text())
+    assert visemes and set(visemes) <= set(names) and {"pca_mean", "pca_1"} <= set(names)
+
+    def act(evaluate, call):
+        _viewer_ready(evaluate)
+        base = _canvas(evaluate)
+        moved = {}
+        for name in [*visemes, "pca_1"]:
+            _set(evaluate, name, 3 if name == "pca_1" else 1)
+            moved[name] = _changed(base, _canvas(evaluate))
+            _set(evaluate, name, 0)
+        back = _canvas(evaluate)
+        _set(evaluate, "texture", False)
+        untextured = _canvas(evaluate)
+        _set(evaluate, "texture", True)
+        _set(evaluate, "wireframe", True)
+        wire = _canvas(evaluate)
+        return base, moved, back, untextured, wire
+
+    state = browser.inspect(path.resolve().as_uri(), act)
+    assert state["errors"] == []
+    base, moved, back, untextured, wire = state["actions"]
+    assert (
+        _changed(base, np.full_like(base, (228, 231, 235))) > 0.05 * base[..., 0].size
+    )  # a face is drawn
+    for name, n in moved.items():
+        assert n > 200, (name, n)  # each morph target moves the face on screen
+    assert _changed(base, back) == 0  # every weight back at 0: the same picture
+    assert _changed(base, untextured) > 1000 and _changed(base, wire) > 1000
+
+
+@pytest.mark.slow
+@needs_chromium
+@needs_three
+def test_viewer_shows_the_face_upright_from_the_front(report, run, browser, tmp_path):
+    """The template's named vertices, as the page placed and projected them, fall on the drawn
+    face, forehead above the eyes above the nose tip above the mouth above the chin, the
+    subject's left eye on the viewer's right and the nose tip nearest the camera."""
+    path, *_ = report
+    glb = run.path("results", SUBJECT, f"{SUBJECT}.glb")
+    levels = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["template"]
+    template = subdivide_template(build_template(), levels["subdivision_levels"])
+    names = ["forehead_centre", "eye_r_outer", "eye_r_inner", "eye_l_inner", "eye_l_outer"]
+    names += ["nose_tip", "mouth_r", "mouth_l", "chin"]
+    index = [template.named[n] for n in names]
+
+    def act(evaluate, call):
+        _viewer_ready(evaluate)
+        count = evaluate("window.__viewer.mesh.geometry.attributes.position.count")
+        screen = evaluate(
+            "(() => { const v = window.__viewer, c = v.renderer.domElement;"
+            " const p = v.mesh.geometry.attributes.position;"
+            f" return {json.dumps(index)}.map(i => {{ const w = new v.THREE.Vector3()"
+            ".fromBufferAttribute(p, i).applyMatrix4(v.mesh.matrixWorld).project(v.camera);"
+            " return [(w.x + 1) / 2 * c.width, (1 - w.y) / 2 * c.height, w.z]; }); })()"
+        )
+        face = _canvas(evaluate)
+        evaluate("window.__viewer.mesh.visible = false; window.__viewer.render()")
+        empty = _canvas(evaluate)
+        evaluate("window.__viewer.mesh.visible = true; window.__viewer.render()")
+        shot = call("Page.captureScreenshot", format="png")["data"]
+        return count, screen, face, empty, shot
+
+    state = browser.inspect(path.resolve().as_uri(), act)
+    assert state["errors"] == []
+    count, screen, face, empty, shot = state["actions"]
+    (tmp_path / "viewer.png").write_bytes(base64.b64decode(shot))  # for a look when it fails
+    assert count == len(template.vertices) == len(read_glb_targets(glb)[0])
+    pts = dict(zip(names, np.asarray(screen), strict=True))
+    covered = np.abs(face.astype(int) - empty.astype(int)).max(axis=2) > 8
+    h, w = covered.shape
+    for name, (x, y, _) in pts.items():
+        assert 0 <= x < w and 0 <= y < h, (name, x, y)
+        r, c = int(y), int(x)
+        assert covered[max(r - 2, 0) : r + 3, max(c - 2, 0) : c + 3].any(), name  # on the face
+    eyes = np.mean([pts[n][:2] for n in names[1:5]], axis=0)
+    mouth = np.mean([pts["mouth_r"][:2], pts["mouth_l"][:2]], axis=0)
+    rows = [pts["forehead_centre"][1], eyes[1], pts["nose_tip"][1], mouth[1], pts["chin"][1]]
+    assert np.all(np.diff(rows) > 0), rows  # upright: image rows grow downwards
+    assert pts["eye_l_outer"][0] > pts["eye_r_outer"][0]  # seen from the front, not mirrored
+    assert pts["mouth_l"][0] > pts["mouth_r"][0]
+    assert pts["nose_tip"][2] == min(p[2] for p in pts.values())  # nearest the camera
+    # the face fills a good part of the canvas, all of it inside
+    rs, cs = np.nonzero(covered)
+    assert rs.min() > 0 and cs.min() > 0 and rs.max() < h - 1 and cs.max() < w - 1
+    assert rs.max() - rs.min() > 0.35 * h
+
+
+@pytest.mark.slow
+def test_viewer_script_is_the_one_the_policy_allows(report):
+    path, *_ = report
+    text = path.read_text()
+    policy = re.search(r'http-equiv="Content-Security-Policy" content="([^"]+)"', text)[1]
+    scripts = re.findall(r"<script([^>]*)>(.*?)</script>", text, re.S)
+    if THREE_MISSING:
+        assert scripts == [] and "script-src" not in policy
+        assert "No 3D viewer: three.js is not installed" in text
+        pytest.skip(THREE_MISSING)
+    ((attrs, code),) = scripts
+    assert attrs == ' type="module"'
+    directives = dict(d.strip().split(" ", 1) for d in policy.split(";"))
+    assert directives["default-src"] == "'none'"
+    assert directives["script-src"] == script_hash(code)
+    assert "http" not in policy and "unsafe-eval" not in policy
+    assert re.search(r"^\s*(import|export)\b", code, re.M) is None  # one bundled module
+
+
+@pytest.mark.slow
+def test_report_without_three_says_why(report, run, tmp_path):
+    _, store, *_ = report
+    glb = run.path("results", SUBJECT, f"{SUBJECT}.glb")
+    text = subject_report_html(store, versions={}, glb=glb, three_dir=tmp_path / "three")
+    assert "No 3D viewer: three.js is not installed" in text and "make setup" in text
+    assert "<script" not in text and "script-src" not in text
+    text = subject_report_html(store, versions={}, glb=tmp_path / "absent.glb")
+    assert "No 3D viewer: absent.glb was not written" in text and "<script" not in text
+
+
+def test_bundle_rewrites_imports_and_exports_into_one_script(tmp_path):
+    three = tmp_path / "three"
+    (three / "build").mkdir(parents=True)
+    (three / "examples" / "jsm" / "utils").mkdir(parents=True)
+    (three / "build" / "three.module.min.js").write_text(
+        "const a=1,b=class{};export{a as ONE,b as Thing};"
+    )
+    (three / "examples" / "jsm" / "utils" / "u.js").write_text(
+        "import { ONE } from 'three';\nexport function two() { return ONE + 1; }\n"
+    )
+    (three / "examples" / "jsm" / "addon.js").write_text(
+        "import {\n\tThing as T,\n\tONE\n} from 'three';\n"
+        "import { two } from './utils/u.js';\n"
+        "/**\n * @example import { Addon } from 'three/addons/addon.js';\n */\n"
+        "class Addon extends T { n() { return two() + ONE; } }\nexport { Addon };\n"
+    )
+    entry = tmp_path / "main.js"
+    entry.write_text(
+        "import * as THREE from 'three';\nimport { Addon } from 'three/addons/addon.js';\n"
+        "globalThis.out = [new Addon().n(), THREE.ONE];\n"
+    )
+    code = bundle(entry, three)
+    assert re.search(r"^\s*(import|export)\b", code, re.M) is None
+    node = shutil.which("node")
+    if node is not None:
+        out = subprocess.run(
+            [node, "--input-type=module", "-e", code + "console.log(JSON.stringify(out));"],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        assert json.loads(out.stdout) == [3, 1]
+    refused = {
+        "export default 1;\n": "unsupported module syntax",
+        "import x from 'three';\n": "unsupported module syntax",
+        "import { a } from 'https://example.org/x.js';\n": "cannot resolve",
+        "const s = '</script>';\n": "</script",
+    }
+    for code, why in refused.items():
+        entry.write_text(code)
+        with pytest.raises(InputError, match=why):
+            bundle(entry, three)
 
 
 # --- the page's content against its sources ---

@@ -6,6 +6,7 @@ rule report_subject:
     """Write the subject's self-contained HTML report: inputs, figures, tables, accuracy and provenance."""
     input:
         store="results/{subject}/{subject}.h5",
+        glb="results/{subject}/{subject}.glb",
         figures=get_subject_figures,
         captions=get_figure_captions,
         accuracy=get_subject_accuracy,

@@ -9,7 +9,7 @@ def main(snakemake):
         inp, p, subject = snakemake.input, snakemake.params, snakemake.wildcards.subject
         timings = {"benchmarks": p.benchmarks, "subject": subject, "order": p.stage_order}
         out, figures = snakemake.output[0], (inp.figures, inp.captions, inp.accuracy)
-        report.run(out, inp.store, *figures, timings, p.takes, p.report)
+        report.run(out, inp.store, *figures, timings, p.takes, p.report, glb=inp.glb)
 
     run_job(snakemake.log[0], job)
 

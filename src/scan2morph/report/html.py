@@ -1,12 +1,14 @@
 """The per-subject report: one self-contained HTML page (``results/{subject}/report.html``).
 
-The page embeds everything it shows (images as base64 ``data:`` URIs, inline CSS, no script) so it
-opens from disk with no server, and declares a Content-Security-Policy that forbids loading
-anything else. Sections: the subject's inputs (a thumbnail of each take's color image), every
-figure with a one-line caption, the PCA tables (Yano and Harada, Tables 1 and 2), the modal
-coordinates of the expressions and their reconstruction error against the number of modes, the
-accuracy against ground truth (synthetic subjects), and provenance (store attributes, input
-checksums, software versions, run time per stage). Every text is HTML-escaped.
+The page embeds everything it shows (images as base64 ``data:`` URIs, inline CSS, the glTF and
+the one script of the 3D viewer, :mod:`scan2morph.report.viewer`) so it opens from disk with no
+server, and declares a Content-Security-Policy that forbids loading anything else (the viewer's
+script is allowed by its hash). Sections: the subject's inputs (a thumbnail of each take's color
+image), the 3D viewer of the subject's glTF, every figure with a one-line caption, the PCA
+tables (Yano and Harada, Tables 1 and 2), the modal coordinates of the expressions and their
+reconstruction error against the number of modes, the accuracy against ground truth (synthetic
+subjects), and provenance (store attributes, input checksums, software versions, run time per
+stage). Every text is HTML-escaped.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import h5py
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.report import viewer
 from scan2morph.report.provenance import software_versions, store_provenance
 from scan2morph.stages.quality import read_warnings, skipped_stages
 from scan2morph.store import open_store, paths
@@ -41,8 +44,20 @@ KIND_ORDER = ("neutral", "viseme", "expression")
 #: Section titles of the figure stages (file stems are ``{stage}_{name}``).
 STAGE_TITLES = {"fit": "Fit", "motion": "Motion", "morph": "Morphable model", "modal": "Modal"}
 #: Only embedded data and inline styles may load (a stray external reference is blocked and
-#: reported by the browser instead of being fetched).
+#: reported by the browser instead of being fetched); :func:`csp` adds the viewer's script.
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+
+
+def csp(script: str | None = None) -> str:
+    """The page's Content-Security-Policy: :data:`CSP`, and with the viewer's inline ``script``
+    that script alone (by hash) and the ``blob:``/``data:`` loads its glTF loader makes."""
+    if script is None:
+        return CSP
+    return (
+        f"default-src 'none'; {viewer.CSP_SOURCES}; style-src 'unsafe-inline'; "
+        f"script-src {viewer.script_hash(script)}"
+    )
+
 
 _CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0 auto;
@@ -484,6 +499,8 @@ def subject_report_html(
     takes: Sequence[str] | None = None,
     n_coordinates: int = 10,
     thumbnail_px: int = 160,
+    glb: str | Path | None = None,
+    three_dir: str | Path = viewer.THREE_DIR,
 ) -> str:
     """The report page of one subject.
 
@@ -506,6 +523,11 @@ def subject_report_html(
         Number of modal coordinates (and frequencies) shown per expression.
     thumbnail_px : int
         Width of the input thumbnails, pixels.
+    glb : str or Path, optional
+        ``results/{subject}/{subject}.glb``, shown in the 3D viewer (without it, or without
+        three.js in ``three_dir``, the viewer section says why there is none).
+    three_dir : str or Path
+        The npm package ``three`` (default ``tools/viewer/node_modules/three``).
 
     Returns
     -------
@@ -515,8 +537,12 @@ def subject_report_html(
     Raises
     ------
     InputError
-        Unreadable store or figure, a figure of an unsupported type, bad checksum attribute.
+        Unreadable store, glTF or figure, a figure of an unsupported type, bad checksum attribute.
     """
+    if glb is None:
+        view, script = _note("No 3D viewer: no glTF file was given."), None
+    else:
+        view, script = viewer.viewer_html(glb, three_dir)
     if n_coordinates < 1 or thumbnail_px < 1:
         raise InputError("report", "n_coordinates and thumbnail_px: expected positive integers")
     versions = software_versions() if versions is None else versions
@@ -527,6 +553,7 @@ def subject_report_html(
         sections = [
             ("status", "Warnings and skipped stages", _status_section(h5)),
             ("inputs", "Inputs", _inputs_section(h5, order, thumbnail_px)),
+            ("viewer", "3D model (glTF viewer)", view),
             ("figures", "Figures", _figures_section(figures)),
             ("motion-noise", "Viseme motion: click-noise error", _motion_noise_section(h5)),
             ("pca", "PCA (Yano and Harada, Tables 1 and 2)", _pca_section(h5)),
@@ -547,12 +574,15 @@ def subject_report_html(
     )
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-        f'<meta http-equiv="Content-Security-Policy" content="{CSP}">'
+        f'<meta http-equiv="Content-Security-Policy" content="{csp(script)}">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f"<title>scan2morph report: {_esc(subject)}</title><style>{_CSS}</style></head>"
+        f"<title>scan2morph report: {_esc(subject)}</title><style>{_CSS}{viewer.CSS}</style>"
+        "</head>"
         f"<body><header><h1>scan2morph report: {_esc(subject)}</h1><p>{_esc(lead)}</p>"
         f"{_files_line(subject, accuracy is not None)}"
-        f"</header><nav>{nav}</nav>{body}</body></html>\n"
+        f"</header><nav>{nav}</nav>{body}"
+        + ("" if script is None else f'<script type="module">{script}</script>')
+        + "</body></html>\n"
     )
 
 

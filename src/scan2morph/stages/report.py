@@ -21,6 +21,7 @@ def run(
     timings: Mapping,
     takes: Sequence[str],
     settings: Mapping,
+    glb: str | Path | None = None,
 ) -> None:
     """Write a subject's report.
 
@@ -40,6 +41,8 @@ def run(
     settings : mapping
         The config section ``report``: ``coordinates`` (modal coordinates shown) and
         ``thumbnail_px``.
+    glb : str or Path, optional
+        ``results/{subject}/{subject}.glb``, shown in the page's 3D viewer.
     """
     write_subject_report(
         out,
@@ -50,4 +53,5 @@ def run(
         takes=takes,
         n_coordinates=settings["coordinates"],
         thumbnail_px=settings["thumbnail_px"],
+        glb=glb,
     )
