@@ -22,8 +22,8 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.morph.blend import blend
 from scan2morph.morph.pca import ALPHA_LIMIT
-from scan2morph.stages.quality import Warning, read_warnings, skipped_stages
 from scan2morph.store import open_store, paths
+from scan2morph.store.warnings import Warning, read_warnings, skipped_stages
 
 
 @dataclass(frozen=True)

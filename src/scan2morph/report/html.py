@@ -30,8 +30,8 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.report import viewer
 from scan2morph.report.provenance import software_versions, store_provenance
-from scan2morph.stages.quality import read_warnings, skipped_stages
 from scan2morph.store import open_store, paths
+from scan2morph.store.warnings import read_warnings, skipped_stages
 
 #: Image types a report embeds: file suffix -> (MIME type, leading magic bytes).
 IMAGE_TYPES = {

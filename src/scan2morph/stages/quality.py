@@ -13,38 +13,15 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import h5py
 import numpy as np
 
 from scan2morph.store import paths
+from scan2morph.store.warnings import Warning, read_warnings, skipped_stages, warning_datasets
 
 #: Config section this module reads.
 SECTIONS = ("quality",)
-
-
-@dataclass(frozen=True)
-class Warning:
-    """One problem of one subject.
-
-    Attributes
-    ----------
-    stage : str
-        The stage that found it (``align``, ``fit``, ``motion_noise``, ...).
-    take : str
-        The take it concerns (empty: the whole subject).
-    message : str
-        What went wrong and what was done about it, in one line.
-    """
-
-    stage: str
-    take: str
-    message: str
-
-    def __str__(self) -> str:
-        where = f"{self.take}: " if self.take else ""
-        return f"[{self.stage}] {where}{self.message}"
 
 
 def aligned_takes(data: Mapping[str, np.ndarray], takes, include_failed: bool) -> list[str]:
@@ -129,32 +106,12 @@ def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     return out
 
 
-def warning_datasets(warnings: list[Warning]) -> dict[str, np.ndarray]:
-    """The ``/warnings`` group of the store: ``stage``, ``take`` and ``message``, one per warning."""
-    return {
-        paths.warnings(field): np.asarray([getattr(w, field) for w in warnings], dtype=object)
-        for field in ("stage", "take", "message")
-    }
-
-
-def read_warnings(data: Mapping[str, np.ndarray]) -> list[Warning]:
-    """The warnings of a store (an open h5py file, or a mapping from
-    :func:`scan2morph.store.read_part`); none for a store written before format 1.2."""
-    if paths.warnings("message") not in data:
-        return []
-    cols = [_text(data[paths.warnings(f)]) for f in ("stage", "take", "message")]
-    return [Warning(str(s), str(t), str(m)) for s, t, m in zip(*cols, strict=True)]
-
-
-def _text(value) -> list[str]:
-    if hasattr(value, "asstr"):  # an h5py dataset
-        value = value.asstr()[()]
-    return [str(v) for v in np.asarray(value, dtype=object).tolist()]
-
-
-def skipped_stages(h5: h5py.File) -> dict[str, str]:
-    """Stages (or parts of them) a subject skipped: name -> why."""
-    group = h5.get(paths.SKIPPED)
-    if group is None:
-        return {}
-    return {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in group.attrs.items()}
+__all__ = [
+    "Warning",
+    "aligned_takes",
+    "modelled",
+    "read_warnings",
+    "skipped_stages",
+    "subject_warnings",
+    "warning_datasets",
+]
