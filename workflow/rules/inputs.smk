@@ -34,7 +34,9 @@ def get_stereo_params(wildcards):
 def get_take_roles(wildcards):
     """The sheet columns that name the take's input files (its modality's; none for an unknown
     modality, which the subject's check job reports)."""
-    return list(FILES.get(TAKES.loc[(wildcards.subject, wildcards.take), "modality"], ()))
+    return list(
+        FILES.get(TAKES.loc[(wildcards.subject, wildcards.take), "modality"], ())
+    )
 
 
 def get_take_kind(wildcards):
