@@ -12,7 +12,6 @@ maps it to the glTF's head frame (metres, +Y up, +Z out of the face).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +22,7 @@ from scan2morph.errors import InputError
 from scan2morph.morph.blend import blend
 from scan2morph.morph.pca import ALPHA_LIMIT
 from scan2morph.store import open_store, paths
+from scan2morph.store.hdf5 import attr_value
 from scan2morph.store.warnings import Warning, read_warnings, skipped_stages
 
 
@@ -167,14 +167,14 @@ def load_model(path: str | Path) -> Model:
             pca_mean=_get(h5, paths.pca("mean")),
             pca_components=_get(h5, paths.pca("components")),
             pca_sigma=_get(h5, paths.pca("sigma")),
-            sigma_convention=None if convention is None else _text(convention),
+            sigma_convention=None if convention is None else str(attr_value(convention)),
             frequencies_hz=h5[paths.modal("frequencies_hz")][()],
             modes=h5[paths.modal("modes")][()],
             coordinates={t: h5[paths.expression(t, "coordinates")][()] for t in expressions},
             head_frame=_get(h5, paths.neutral("head_frame")),
             warnings=read_warnings(h5),
             skipped=skipped_stages(h5),
-            provenance={k: _json(v) for k, v in attrs.items()},
+            provenance={k: attr_value(v) for k, v in attrs.items()},
         )
 
 
@@ -184,16 +184,3 @@ def _keys(h5, root: str) -> list[str]:
     out = []
     h5[root].visititems(lambda name, obj: out.append(f"{root}/{name}"))
     return out
-
-
-def _text(value) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
-
-
-def _json(value):
-    if isinstance(value, str) and value[:1] in "{[":
-        try:
-            return json.loads(value)
-        except ValueError:
-            return value
-    return value.item() if isinstance(value, np.generic) else value

@@ -22,7 +22,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from scan2morph.store.hdf5 import read_part
+from scan2morph.store.hdf5 import attr_value, read_part
 
 #: Root attributes that describe the run rather than its numbers.
 RUN_ATTRIBUTES = ("scan2morph_version", "config_sha256")
@@ -82,7 +82,7 @@ def _attributes(path: str | Path) -> dict[str, object]:
             if key in TIMING_KEYS or (name == "/" and key in RUN_ATTRIBUTES):
                 continue
             value = value.decode() if isinstance(value, bytes) else value
-            parsed = _json(value)
+            parsed = attr_value(value)
             if isinstance(parsed, dict):
                 for k, v in parsed.items():
                     if k not in TIMING_KEYS:
@@ -94,15 +94,6 @@ def _attributes(path: str | Path) -> dict[str, object]:
         add("/", h5)
         h5.visititems(lambda name, obj: add(f"/{name}", obj))
     return out
-
-
-def _json(value):
-    if isinstance(value, str) and value[:1] in "{[":
-        try:
-            return json.loads(value)
-        except ValueError:
-            return None
-    return None
 
 
 def _differences(key: str, x: np.ndarray, y: np.ndarray, atol: float, rtol: float) -> list[str]:

@@ -53,6 +53,19 @@ def _set_attrs(obj, attrs: Mapping) -> None:
         obj.attrs[key] = value
 
 
+def attr_value(value):
+    """An attribute as written by :func:`write_part`, back as Python: bytes decoded, JSON-valued
+    text (dicts and lists are written as JSON) parsed, numpy scalars as Python scalars."""
+    if isinstance(value, bytes):
+        value = value.decode()
+    if isinstance(value, str) and value[:1] in "{[":
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def write_part(
     path: str | Path,
     datasets: Mapping[str, object],
