@@ -27,6 +27,7 @@ from scan2morph.synth.head import (
     sample_identity,
 )
 from scan2morph.synth.scanner import camera_matrix, head_pose, project, scan
+from scan2morph.synth.texture import texture_seed
 
 #: Scanner and camera parameters of a synthetic take, with their defaults.
 DEFAULT_PARAMS: dict[str, float | int] = {
@@ -42,6 +43,7 @@ DEFAULT_PARAMS: dict[str, float | int] = {
     "hole_blobs": 4,  # random round holes on the skin
     "click_noise_px": 0.5,  # landmark clicking noise
     "grazing_deg": 75.0,  # dropout beyond this angle between normal and view ray
+    "skin_texture": 1.0,  # strength of the skin's freckles and mottling (0: flat albedo)
 }
 
 _INT_PARAMS = ("width", "height", "hole_blobs")
@@ -156,6 +158,7 @@ def _check_params(params: dict | None, source: str) -> dict:
         "spike_mm",
         "hole_blobs",
         "click_noise_px",
+        "skin_texture",
     ):
         if out[k] < 0:
             raise InputError(source, f"params.{k}: expected >= 0, got {out[k]}")
@@ -285,6 +288,8 @@ def make_take(
         spike_mm=p["spike_mm"],
         hole_blobs=p["hole_blobs"],
         grazing_deg=p["grazing_deg"],
+        skin_texture=p["skin_texture"],
+        texture_seed=texture_seed(subject, seed),
     )
     lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
     lm2 = project(K, lm3)

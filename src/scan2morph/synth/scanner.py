@@ -32,6 +32,7 @@ from scan2morph.synth.head import (  # noqa: E402
     SEG_SKIN,
     HeadModel,
 )
+from scan2morph.synth.texture import detail_image  # noqa: E402
 
 #: Segments a scanner returns data for (before dropout): skin, brows, hair, sclera/iris.
 _MEASURED = (SEG_SKIN, SEG_BROW, SEG_HAIR, SEG_EYE)
@@ -176,6 +177,8 @@ def render(
     K: np.ndarray,
     width: int,
     height: int,
+    skin_texture: float = 0.0,
+    texture_seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Render colour, depth and segment images of a posed head.
 
@@ -190,6 +193,11 @@ def render(
     K : (3, 3) float
         Intrinsics (project convention).
     width, height : int
+    skin_texture : float
+        Strength of the skin's freckles and mottling, fixed to the skin
+        (:func:`~scan2morph.synth.texture.skin_detail`); 0 = the flat albedo.
+    texture_seed : int
+        The subject's skin-detail seed.
 
     Returns
     -------
@@ -203,6 +211,11 @@ def render(
     v_cam = vertices_head @ pose[:3, :3].T + pose[:3, 3]
     colors = shade(head.albedo, v_cam, vertex_normals(v_cam, head.faces, fill=0.0))
     color, depth, seg = render_colors(head, v_cam, colors, K, (width, height))
+    if skin_texture > 0:
+        detail = detail_image(
+            seg == SEG_SKIN, v_cam, head.faces, head.vertices, K, texture_seed, skin_texture
+        )
+        color = np.clip(np.rint(color * detail), 0, 255).astype(np.uint8)
     return np.ascontiguousarray(color), depth, seg
 
 
@@ -332,6 +345,8 @@ def scan(
     spike_mm: float = 30.0,
     hole_blobs: int = 4,
     grazing_deg: float = 75.0,
+    skin_texture: float = 0.0,
+    texture_seed: int = 0,
 ) -> dict:
     """Scan a posed head: XYZ with realistic defects and the colour image.
 
@@ -356,6 +371,8 @@ def scan(
         Number of random round holes (radius 1.5 to 4 mm on the face).
     grazing_deg : float
         Pixels whose surface normal is farther than this from the view ray are dropped.
+    skin_texture, texture_seed
+        The skin detail (see :func:`render`).
 
     Returns
     -------
@@ -363,7 +380,9 @@ def scan(
         ``xyz`` (H, W, 3) float64 mm, NaN = no data; ``color`` (H, W, 3) uint8;
         ``segment`` (H, W) int8 (-1 = background); ``depth`` (H, W) float64, exact camera Z.
     """
-    color, depth, seg = render(head, vertices_head, pose, K, width, height)
+    color, depth, seg = render(
+        head, vertices_head, pose, K, width, height, skin_texture, texture_seed
+    )
     xyz_true = backproject(K, depth)
     valid = np.isin(seg, _MEASURED)  # no data from the background, the cavity or a pupil
     xyz = np.where(valid[..., None], xyz_true, np.nan)

@@ -55,6 +55,7 @@ from scan2morph.synth.scanner import (  # noqa: E402
     render_colors,
     shade,
 )
+from scan2morph.synth.texture import detail_image, texture_seed, value_noise  # noqa: E402
 
 #: Rig and image parameters of a synthetic stereo take, with their defaults.
 DEFAULT_RIG: dict[str, float | int] = {
@@ -72,6 +73,7 @@ DEFAULT_RIG: dict[str, float | int] = {
     "image_noise": 1.5,  # sensor noise, grey levels (std)
     "click_noise_px": 0.5,  # landmark clicking noise
     "supersample": 3,  # rendered sub-pixels per pixel and axis (odd: one sits on the centre)
+    "skin_texture": 1.0,  # strength of the skin's freckles and mottling (0: flat albedo)
 }
 
 _INT_RIG = ("width", "height", "supersample")
@@ -115,7 +117,7 @@ def rig_params(params: dict | None = None, source: str = "params") -> dict:
         raise InputError(
             source, f"params.speckle_contrast: expected 0..1, got {p['speckle_contrast']}"
         )
-    for k in ("pose_sigma_deg", "pose_sigma_mm", "image_noise", "click_noise_px"):
+    for k in ("pose_sigma_deg", "pose_sigma_mm", "image_noise", "click_noise_px", "skin_texture"):
         if p[k] < 0:
             raise InputError(source, f"params.{k}: expected >= 0, got {p[k]}")
     if not (1 <= p["supersample"] <= 7 and p["supersample"] % 2 == 1):
@@ -205,37 +207,9 @@ def speckle(points: np.ndarray, cell_mm: float, seed: int) -> np.ndarray:
     (n,) float64
         In [0, 1]; 1 = darkest speckle.
     """
-    q = np.asarray(points, dtype=np.float64) / float(cell_mm)
-    base = np.floor(q)
-    frac = q - base
-    base = base.astype(np.int64)
-    weights = [(1.0 - frac[:, k], frac[:, k]) for k in range(3)]
-    # per axis and corner offset: the lattice coordinate times that axis's hash multiplier
-    keys = [[(base[:, k] + d).astype(np.uint64) * _HASH_MUL[k] for d in (0, 1)] for k in range(3)]
-    value = np.zeros(len(q))
-    for dx, dy, dz in np.ndindex(2, 2, 2):
-        h = keys[0][dx] ^ keys[1][dy] ^ keys[2][dz] ^ np.uint64(seed)
-        value += weights[0][dx] * weights[1][dy] * weights[2][dz] * _mix_uniform(h)
+    value = value_noise(points, cell_mm, seed)
     # trilinear interpolation of uniform values spreads less (std ~0.12): stretch to speckle
     return np.clip(0.5 + (value - 0.5) / 0.3, 0.0, 1.0)
-
-
-#: Odd 64-bit multipliers combining the three lattice coordinates into one hash key.
-_HASH_MUL = (
-    np.uint64(0x9E3779B97F4A7C15),
-    np.uint64(0xC2B2AE3D27D4EB4F),
-    np.uint64(0x165667B19E3779F9),
-)
-
-
-def _mix_uniform(h: np.ndarray) -> np.ndarray:
-    """Uniform [0, 1) values from uint64 keys (splitmix64's finaliser), same shape."""
-    h = h ^ (h >> np.uint64(30))
-    h *= np.uint64(0xBF58476D1CE4E5B9)
-    h ^= h >> np.uint64(27)
-    h *= np.uint64(0x94D049BB133111EB)
-    h ^= h >> np.uint64(31)
-    return (h >> np.uint64(11)).astype(np.float64) / float(1 << 53)
 
 
 def _remap_tables(K: np.ndarray, D: np.ndarray, width: int, height: int, s: int):
@@ -280,16 +254,21 @@ def _view(
     cam: dict,
     head_from_rig: np.ndarray,
     p: dict,
-    speckle_seed: int,
+    seeds: tuple[int, int],
     rng: np.random.Generator,
 ) -> np.ndarray:
-    """The raw (distorted) image of one camera, (height, width, 3) uint8."""
+    """The raw (distorted) image of one camera, (height, width, 3) uint8.
+
+    ``seeds`` are the speckle's and the skin detail's."""
     s = int(p["supersample"])
     K_u, size, map_x, map_y = _remap_tables(cam["K"], cam["D"], p["width"], p["height"], s)
     v_cam = (v_rig - cam["C"]) @ cam["R"]
     color, depth, seg = render_colors(head, v_cam, colors, K_u, size)
-    image = color.astype(np.float32)
     skin = seg == SEG_SKIN
+    detail = detail_image(
+        skin, v_cam, head.faces, head.vertices, K_u, seeds[1], p["skin_texture"], 1
+    )
+    image = (color * detail).astype(np.float32)
     if p["speckle_contrast"] > 0 and skin.any():
         rows, cols = np.nonzero(skin)
         z = depth[rows, cols]
@@ -299,7 +278,7 @@ def _view(
         p_rig = p_cam @ cam["R"].T + cam["C"]
         p_head = p_rig @ head_from_rig[:3, :3].T + head_from_rig[:3, 3]
         cell_mm = p["speckle_px"] * p["distance_mm"] / p["focal_px"]
-        dots = speckle(p_head, cell_mm, speckle_seed)
+        dots = speckle(p_head, cell_mm, seeds[0])
         image[rows, cols] *= (1.0 - p["speckle_contrast"] * dots)[:, None].astype(np.float32)
     sampled = cv2.remap(
         image,
@@ -384,10 +363,8 @@ def make_stereo_take(
     v_rig = vertices @ rig_from_head[:3, :3].T + rig_from_head[:3, 3]
     # lights fixed in the rig: both cameras see the same shading
     colors = shade(head.albedo, v_rig, vertex_normals(v_rig, head.faces, fill=0.0))
-    speckle_seed = (_key(subject) ^ int(seed)) & 0xFFFFFFFFFFFFFFFF
-    left, right = (
-        _view(head, v_rig, colors, cam, head_from_rig, p, speckle_seed, rng) for cam in cams
-    )
+    seeds = ((_key(subject) ^ int(seed)) & 0xFFFFFFFFFFFFFFFF, texture_seed(subject, seed))
+    left, right = (_view(head, v_rig, colors, cam, head_from_rig, p, seeds, rng) for cam in cams)
 
     cam1 = cams[0]
     left_from_rig = np.eye(4)
