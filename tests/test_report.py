@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import csv
+import html
 import json
 import os
 import re
@@ -433,10 +434,17 @@ def test_viewer_controls_change_the_rendered_pixels(report, browser):
         _viewer_ready(evaluate)
         base = _canvas(evaluate)
         moved = {}
-        for name in [*visemes, "pca_1"]:
-            _set(evaluate, name, 3 if name == "pca_1" else 1)
+        for name in [*visemes, "pca_1", "mode_1"]:
+            _set(evaluate, name, {"pca_1": 3, "mode_1": 0.05}.get(name, 1))
             moved[name] = _changed(base, _canvas(evaluate))
             _set(evaluate, name, 0)
+        _click(evaluate, 'button[name="preset-smile1"]')
+        moved["preset smile1"] = _changed(base, _canvas(evaluate))
+        _click(evaluate, 'button[name="modal-zero"]')
+        for take in ("car", "smile1"):
+            _pick_take(evaluate, [t["take"] for t in TAKES].index(take))
+            moved[f"take {take}"] = _changed(base, _canvas(evaluate))
+        _pick_take(evaluate, "")
         back = _canvas(evaluate)
         _set(evaluate, "texture", False)
         untextured = _canvas(evaluate)
@@ -452,8 +460,8 @@ def test_viewer_controls_change_the_rendered_pixels(report, browser):
         _changed(base, np.full_like(base, (228, 231, 235))) > 0.05 * base[..., 0].size
     )  # a face is drawn
     for name, n in moved.items():
-        assert n > 200, (name, n)  # each morph target moves the face on screen
-    assert _changed(base, back) == 0  # every weight back at 0: the same picture
+        assert n > 200, (name, n)  # each slider, preset and take changes the face on screen
+    assert _changed(base, back) == 0  # every weight back at 0, the model shown: the same picture
     assert _changed(base, untextured) > 1000 and _changed(base, wire) > 1000
 
 
@@ -514,11 +522,196 @@ def test_viewer_shows_the_face_upright_from_the_front(report, run, browser, tmp_
     assert rs.max() - rs.min() > 0.35 * h
 
 
+#: Largest difference allowed between a vertex the page draws and the model API's, m (1 um):
+#: float32 positions (~1e-8 m at a head's size) plus half a quantization step of the page's
+#: int16 modal and take vectors (on the tiny run <= 0.6 um: 36 mm of take motion / 65534).
+VIEWER_ATOL_M = 1e-6
+
+
+def _drawn(evaluate) -> np.ndarray:
+    """World positions of every vertex as the page draws them (morphs applied), (V, 3) m."""
+    return np.asarray(evaluate("window.__viewer.positions()"), dtype=np.float64).reshape(-1, 3)
+
+
+def _click(evaluate, selector: str) -> None:
+    evaluate(f"{VIEWER}.querySelector({json.dumps(selector)}).click()")
+
+
+def _pick_take(evaluate, index: int | str) -> None:
+    evaluate(
+        f"(() => {{ const s = {VIEWER}.querySelector('select[name=take]');"
+        f" s.value = {json.dumps(str(index))};"
+        " s.dispatchEvent(new Event('change', {bubbles: true})); })()"
+    )
+
+
+@pytest.mark.slow
+@needs_chromium
+@needs_three
+def test_viewer_sliders_and_takes_draw_the_model_api_shapes(report, browser):
+    """Semantic sliders (viseme weights, pca_mean and pca_k in sample sigmas), modal sliders and
+    expression presets, and each fitted take, read back from the page in head-frame metres,
+    against load_model(...).blend / .pca / .expression and the store's aligned meshes."""
+    from scan2morph import load_model
+
+    path, store, *_ = report
+    model = load_model(store)
+    frame = model.head_frame
+    head = lambda p: p @ frame[:3, :3].T + frame[:3, 3]  # noqa: E731
+    neutral = model.neutral
+    q = model.coordinates["smile1"]
+    with h5py.File(store) as h5:
+        takes = [t["take"] for t in TAKES]
+        aligned = {t: h5[paths.align(t, "vertices")][()] for t in takes}
+
+    def act(evaluate, call):
+        _viewer_ready(evaluate)
+        got = {"model at rest": _drawn(evaluate)}
+        _set(evaluate, "car", 0.5)
+        got["car 0.5"] = _drawn(evaluate)
+        _set(evaluate, "too", 0.25)
+        got["car 0.5 too 0.25"] = _drawn(evaluate)
+        _set(evaluate, "car", 0)
+        _set(evaluate, "too", 0)
+        _set(evaluate, "pca_mean", 1)
+        _set(evaluate, "pca_1", 1.5)
+        _set(evaluate, "pca_2", -2)
+        got["pca 1.5 -2"] = _drawn(evaluate)
+        _set(evaluate, "mode_2", 0.02)
+        got["pca + mode 2"] = _drawn(evaluate)
+        _click(evaluate, 'button[name="reset"]')
+        got["reset"] = _drawn(evaluate)
+        _click(evaluate, 'button[name="preset-smile1"]')
+        got["smile1 preset"] = _drawn(evaluate)
+        _click(evaluate, 'button[name="modal-zero"]')
+        for i, take in enumerate(takes):
+            _pick_take(evaluate, i)
+            faces = evaluate("window.__viewer.mesh.geometry.index.count") // 3
+            got[take] = (_drawn(evaluate), faces)
+        _click(evaluate, 'button[name="next-take"]')  # past the last take: back to the model
+        got["after the takes"] = _drawn(evaluate)
+        return got
+
+    state = browser.inspect(path.resolve().as_uri(), act)
+    assert state["errors"] == []
+    got = {k: v if isinstance(v, tuple) else np.asarray(v) for k, v in state["actions"].items()}
+    pca = model.pca([1.5, -2.0])
+    want = {
+        "model at rest": neutral,
+        "car 0.5": model.blend({"car": 0.5}),
+        "car 0.5 too 0.25": model.blend({"car": 0.5, "too": 0.25}),
+        "pca 1.5 -2": pca,
+        # the modal displacement adds to the semantic shape
+        "pca + mode 2": pca + model.expression([0.0, 0.02]) - neutral,
+        "reset": neutral,
+        "smile1 preset": model.expression(q),  # all 10 coordinates: 4 sliders + the rest
+        "after the takes": neutral,
+    }
+    for name, shape in want.items():
+        err = np.abs(got[name] - head(shape)).max()
+        assert err < VIEWER_ATOL_M, (name, err)
+        assert (
+            name == "model at rest"
+            or name in ("reset", "after the takes")
+            or (np.abs(head(shape) - head(neutral)).max() > 1e-3)
+        ), name  # each of these moves the face by more than 1 mm
+    faces = model.faces
+    for take in takes:
+        drawn, n_faces = got[take]
+        valid = np.isfinite(aligned[take]).all(axis=1)
+        assert 0.5 * len(valid) < valid.sum() < len(valid)  # some invalid vertices to hide
+        err = np.abs(np.asarray(drawn)[valid] - head(aligned[take][valid])).max()
+        assert err < VIEWER_ATOL_M, (take, err)
+        assert n_faces == int(valid[faces].all(axis=1).sum())  # faces on invalid vertices hidden
+
+
+@pytest.fixture(scope="module")
+def bare_subject(report, run, tmp_path_factory):
+    """The tiny subject as a subject with the neutral take only would be stored (no visemes:
+    no /visemes, /pca, blends, click-noise; no expressions: no /expressions; /skipped says so,
+    with the stages' own words) and its neutral-only glTF, and its report page."""
+    from scan2morph import load_model
+    from scan2morph.io import write_glb
+    from scan2morph.stages.modal import NO_EXPRESSIONS
+    from scan2morph.stages.morph import NO_VISEMES
+
+    _, store, *_ = report
+    out = tmp_path_factory.mktemp("bare")
+    bare = out / "bare.h5"
+    shutil.copy(store, bare)
+    with h5py.File(bare, "a") as h5:
+        for group in ("visemes", "pca", "blends", "pca_blends", "motion_noise", "expressions"):
+            if group in h5:
+                del h5[group]
+        for take in ("car", "too", "smile1"):
+            del h5[paths.take(take)]
+        skipped = h5.require_group(paths.SKIPPED)
+        skipped.attrs["morph"] = NO_VISEMES
+        skipped.attrs["modal_coordinates"] = NO_EXPRESSIONS
+    model = load_model(bare)
+    glb = out / "bare.glb"
+    write_glb(
+        glb, model.neutral, model.faces, uv=model.uv, texture=model.texture, frame=model.head_frame
+    )
+    page = out / "report.html"
+    write_subject_report(page, bare, versions={}, glb=glb, n_coordinates=4)
+    return page, model
+
+
+@pytest.mark.slow
+@needs_three
+def test_viewer_of_a_subject_without_visemes_or_expressions_says_what_is_missing(bare_subject):
+    page, _ = bare_subject
+    text = page.read_text()
+    missing = re.search(r'<ul class="missing">(.*?)</ul>', text, re.S)[1]
+    for line in (
+        "No viseme sliders: the subject has no viseme models.",
+        "No PCA sliders: the subject has no PCA (it needs viseme takes).",
+        "No expression presets: the subject has no expression takes.",
+        "morph: no viseme takes: no blend shapes or PCA",
+        "modal_coordinates: no expression takes",
+    ):
+        assert line in missing, line
+    assert "data-target=" not in text and "data-preset=" not in text
+    assert "No semantic sliders: the glTF has no morph targets." in text
+    assert len(re.findall(r'data-mode="\d+"', text)) == 4
+
+
+@pytest.mark.slow
+@needs_chromium
+@needs_three
+def test_viewer_of_a_subject_without_visemes_or_expressions_works(bare_subject, browser):
+    page, model = bare_subject
+    frame = model.head_frame
+    head = lambda p: p @ frame[:3, :3].T + frame[:3, 3]  # noqa: E731
+
+    def act(evaluate, call):
+        _viewer_ready(evaluate)
+        base = _canvas(evaluate)
+        _set(evaluate, "mode_1", 0.02)
+        moved, drawn = _canvas(evaluate), _drawn(evaluate)
+        options = evaluate(
+            f"Array.from({VIEWER}.querySelectorAll('select[name=take] option'), o => o.text)"
+        )
+        _click(evaluate, 'button[name="next-take"]')
+        return base, moved, drawn, options, _drawn(evaluate)
+
+    state = browser.inspect(page.resolve().as_uri(), act)
+    assert state["errors"] == []
+    base, moved, drawn, options, neutral_take = state["actions"]
+    assert _changed(np.asarray(base, np.uint8), np.asarray(moved, np.uint8)) > 200
+    err = np.abs(np.asarray(drawn) - head(model.expression([0.02]))).max()
+    assert err < VIEWER_ATOL_M, err
+    assert options == ["model (the sliders below)", "neutral: neutral"]
+    assert np.isfinite(neutral_take).all()
+
+
 @pytest.mark.slow
 def test_viewer_script_is_the_one_the_policy_allows(report):
     path, *_ = report
     text = path.read_text()
     policy = re.search(r'http-equiv="Content-Security-Policy" content="([^"]+)"', text)[1]
+    policy = html.unescape(policy)  # the template escapes the quotes of 'sha256-...'
     scripts = re.findall(r"<script([^>]*)>(.*?)</script>", text, re.S)
     if THREE_MISSING:
         assert scripts == [] and "script-src" not in policy
@@ -720,7 +913,9 @@ def test_text_is_escaped(report, tmp_path):
     nasty = '<script>alert("x")</script> & <b>'
     text = subject_report_html(store, figures=[ReportFigure(figures[0].path, nasty)], versions={})
     assert "<script" not in text
-    assert "&lt;script&gt;alert(&quot;x&quot;)&lt;/script&gt; &amp; &lt;b&gt;" in text
+    # Jinja2's autoescape (markupsafe) writes the double quote as &#34;
+    assert "&lt;script&gt;alert(&#34;x&#34;)&lt;/script&gt; &amp; &lt;b&gt;" in text
+    assert f"{figures[0].path.stem}: {nasty}" in _parse(text).captions  # the same text, shown
     flat = subject_report_html(store, accuracy={"summary": {"<i>": 1.0}}, versions={"a<b": "c&d"})
     assert "&lt;i&gt;" in flat and "a&lt;b" in flat and "c&amp;d" in flat and "<i>" not in flat
 
@@ -752,7 +947,7 @@ def test_each_table_shows_its_column_dictionary():
         h5[paths.modal("reconstruction_k")] = [1, 2]
         h5[paths.expression("smile1", "coordinates")] = [0.5, 0.25]
         h5[paths.expression("smile1", "reconstruction_rms_mm")] = [1.0, 0.5]
-        text = (
+        text = report_html.render_blocks(
             report_html._pca_section(h5)
             + report_html._motion_noise_section(h5)
             + report_html._modal_section(h5, 2)
@@ -770,6 +965,65 @@ def test_each_table_shows_its_column_dictionary():
         assert rows[0] == ["column", "unit", "definition"]
         assert rows[1:] == [[c.name, c.unit, c.definition] for c in dictionary]
     assert text.count("<details") == text.count("</details>") == 5
+
+
+def test_viewer_data_decodes_to_the_store_within_half_a_step():
+    """The viewer's binary block, decoded as the page does (int16 * scale, -32768 = invalid),
+    gives the modes, the expressions' remaining modes and the aligned takes in the glTF frame."""
+    from scan2morph.report.viewer import INVALID, viewer_data
+
+    rng = np.random.default_rng(3)
+    n_v, k = 40, 3
+    rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    rot *= np.sign(np.linalg.det(rot))
+    frame = np.eye(4)
+    frame[:3, :3], frame[:3, 3] = 1e-3 * rot, [0.1, -0.2, 0.3]
+    neutral = rng.normal(scale=50.0, size=(n_v, 3))
+    modes = rng.normal(scale=100.0, size=(k, n_v, 3))
+    q = np.array([0.01, -0.02, 0.005])
+    aligned = neutral + rng.normal(scale=3.0, size=(n_v, 3))
+    aligned[[2, 7]] = np.nan
+    with h5py.File("viewer.h5", "w", driver="core", backing_store=False) as h5:
+        h5[paths.neutral("vertices")] = neutral
+        h5[paths.modal("modes")], h5[paths.modal("frequencies_hz")] = modes, [1.0, 2.0, 3.0]
+        h5[paths.expression("smile1", "coordinates")] = q
+        h5[paths.align("car", "vertices")], h5[paths.align("car", "ok")] = aligned, False
+        h5[paths.take("car")].attrs.update(kind="viseme", label="car")
+        h5.require_group(paths.take("smile1")).attrs.update(kind="expression", label="smile")
+        layout, block = viewer_data(h5, ["car"], n_modes=2, frame=frame)
+
+    def decoded(entry):
+        steps = np.frombuffer(block, "<i2", 3 * n_v, entry["offset"]).reshape(n_v, 3)
+        return np.where(steps == INVALID, np.nan, steps * entry["scale"]), entry["scale"]
+
+    expected = [modes[0] @ frame[:3, :3].T, modes[1] @ frame[:3, :3].T]
+    expected.append((q[2] * modes[2]) @ frame[:3, :3].T)  # smile1's mode beyond the sliders
+    expected.append((aligned - neutral) @ frame[:3, :3].T)
+    entries = [*layout["modes"], layout["presets"][0]["rest"], layout["takes"][0]]
+    for entry, want in zip(entries, expected, strict=True):
+        got, scale = decoded(entry)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        assert scale == pytest.approx(np.nanmax(np.abs(want)) / 32767)
+        assert np.nanmax(np.abs(got - want)) <= 0.5 * scale * (1 + 1e-9)
+    assert len(block) == 4 * n_v * 3 * 2
+    assert [m["mode"] for m in layout["modes"]] == [1, 2]
+    assert layout["presets"][0] | {"rest": None} == {
+        "take": "smile1",
+        "label": "smile",
+        "q": q[:2].tolist(),
+        "modes": 3,
+        "rest": None,
+    }
+    for i, m in enumerate(layout["modes"]):
+        peak = np.linalg.norm(modes[i], axis=1).max()
+        assert m["range"] == pytest.approx(max(10.0 / peak, 1.25 * abs(q[i])))
+    take = layout["takes"][0]
+    assert (take["take"], take["kind"], take["valid"], take["aligned"]) == (
+        "car",
+        "viseme",
+        38,
+        False,
+    )
 
 
 def test_read_caption_strips_inline_markup(tmp_path):

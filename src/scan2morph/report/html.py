@@ -8,13 +8,19 @@ image), the 3D viewer of the subject's glTF, every figure with a one-line captio
 tables (Yano and Harada, Tables 1 and 2), the modal coordinates of the expressions and their
 reconstruction error against the number of modes, the accuracy against ground truth (synthetic
 subjects), and provenance (store attributes, input checksums, software versions, run time per
-stage). Every text is HTML-escaped.
+stage).
+
+The page comes from Jinja2 templates (package data in ``report/templates``: ``subject.html.j2``
+the page, ``macros.html.j2`` its blocks, ``viewer.html.j2`` the 3D viewer, ``report.css``) with
+autoescaping on, so every text is HTML-escaped; this module only gathers what the page shows.
+A section's content is a list of blocks (dicts with a ``kind``: ``note``, ``table``,
+``columns``, ``thumbs``, ``figures``, ``viewer``) that ``macros.html.j2`` renders.
 """
 
 from __future__ import annotations
 
 import base64
-import html
+import functools
 import json
 import math
 import os
@@ -25,7 +31,9 @@ from pathlib import Path
 
 import cv2
 import h5py
+import jinja2
 import numpy as np
+from markupsafe import Markup
 
 from scan2morph.errors import InputError
 from scan2morph.report import viewer
@@ -59,24 +67,20 @@ def csp(script: str | None = None) -> str:
     )
 
 
-_CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0 auto;
-max-width:1200px;padding:0 1.5rem 3rem;color:#222;line-height:1.45}
-h1{margin-top:1.5rem}h2{border-bottom:2px solid #ddd;padding-bottom:.2rem;margin-top:2.5rem}
-nav{position:sticky;top:0;background:#fff;padding:.4rem 0;border-bottom:1px solid #ddd;
-z-index:1}nav a{margin-right:1rem;white-space:nowrap}.files a{margin-right:.8rem}
-table{border-collapse:collapse;margin:.6rem 0 1.2rem;font-size:.9rem}
-caption{text-align:left;font-weight:600;padding:.3rem 0;white-space:normal;max-width:60rem}
-th,td{border:1px solid #ccc;padding:.2rem .5rem}th{background:#f3f3f3}
-td.num{text-align:right;font-variant-numeric:tabular-nums}
-code{font-size:.8rem;word-break:break-all}
-.thumbs{display:flex;flex-wrap:wrap;gap:.8rem}
-.thumbs figure{margin:0;width:min-content}
-figure.fig{margin:1rem 0 2rem}figure.fig img{max-width:100%;height:auto;border:1px solid #eee}
-figcaption{font-size:.85rem;color:#444}
-.note{color:#666;font-size:.9rem}.scroll{overflow-x:auto}
-.warnings table{border-left:4px solid #c60}.warnings caption{color:#a40}
-"""
+@functools.lru_cache(maxsize=1)
+def environment() -> jinja2.Environment:
+    """The report templates (package data ``scan2morph/report/templates``), autoescaping on."""
+    return jinja2.Environment(
+        loader=jinja2.PackageLoader("scan2morph.report", "templates"),
+        autoescape=True,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+
+
+def render_blocks(blocks: Sequence[Mapping]) -> str:
+    """HTML of a section's blocks (``macros.html.j2``)."""
+    return environment().get_template("macros.html.j2").module.blocks(list(blocks))
 
 
 @dataclass(frozen=True)
@@ -176,10 +180,6 @@ def thumbnail_jpeg(color: np.ndarray, width_px: int, quality: int = 85) -> bytes
     return buf.tobytes()
 
 
-def _esc(value: object) -> str:
-    return html.escape(str(value), quote=True)
-
-
 def _fmt(value: object, spec: str = ".4g") -> str:
     if value is None:
         return "n/a"
@@ -192,25 +192,23 @@ def _fmt(value: object, spec: str = ".4g") -> str:
     return str(value)
 
 
-def _table(columns: Sequence[str], rows: Sequence[Sequence[object]], caption: str = "") -> str:
-    """An HTML table; numbers right-aligned, every text escaped."""
-    head = "".join(f"<th>{_esc(c)}</th>" for c in columns)
-    body = []
-    for row in rows:
-        cells = []
-        for i, cell in enumerate(row):
-            tag = "th" if i == 0 else "td"
-            numeric = isinstance(cell, (int, float, np.number)) and not isinstance(cell, bool)
-            cls = ' class="num"' if numeric and tag == "td" else ""
-            cells.append(f"<{tag}{cls}>{_esc(_fmt(cell))}</{tag}>")
-        body.append("<tr>" + "".join(cells) + "</tr>")
-    cap = f"<caption>{_esc(caption)}</caption>" if caption else ""
-    table = f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
-    return f'<div class="scroll">{table}</div>'
+def _table(columns: Sequence[str], rows: Sequence[Sequence[object]], caption: str = "") -> dict:
+    """A table block: cells as text (numbers formatted, right-aligned by the template)."""
+    cells = [
+        [
+            {
+                "text": _fmt(cell),
+                "numeric": isinstance(cell, (int, float, np.number)) and not isinstance(cell, bool),
+            }
+            for cell in row
+        ]
+        for row in rows
+    ]
+    return {"kind": "table", "table": {"columns": list(columns), "rows": cells, "caption": caption}}
 
 
-def _note(text: str) -> str:
-    return f'<p class="note">{_esc(text)}</p>'
+def _note(text: str) -> dict:
+    return {"kind": "note", "text": text}
 
 
 def _attr(obj: h5py.HLObject, key: str, default: str = "") -> str:
@@ -226,50 +224,43 @@ def _take_order(h5: h5py.File, takes: Sequence[str] | None) -> list[str]:
     return sorted(present, key=lambda t: (rank.get(_attr(h5[paths.take(t)], "kind"), 99), t))
 
 
-def _inputs_section(h5: h5py.File, takes: list[str], thumbnail_px: int) -> str:
+def _inputs_section(h5: h5py.File, takes: list[str], thumbnail_px: int) -> list[dict]:
     if not takes:
-        return _note("The store holds no takes.")
+        return [_note("The store holds no takes.")]
     items = []
     for take in takes:
         group = h5[paths.take(take)]
         kind, label = _attr(group, "kind", "?"), _attr(group, "label", "?")
         modality = _attr(group, "modality", "?")
         if paths.range_image(take, "color") not in h5:
-            items.append(f"<figure><figcaption>{_esc(take)}: no color image</figcaption></figure>")
+            items.append({"take": take, "uri": None, "text": f"{take}: no color image"})
             continue
         color = h5[paths.range_image(take, "color")][()]
         h, w = color.shape[:2]
         uri = data_uri(thumbnail_jpeg(color, thumbnail_px), "image/jpeg")
         text = f"{take}: {kind} {label}, {modality}, {w}x{h} px"
-        items.append(
-            f'<figure><img src="{uri}" alt="{_esc(take)}" width="{min(w, thumbnail_px)}">'
-            f"<figcaption>{_esc(text)}</figcaption></figure>"
-        )
-    return '<div class="thumbs">' + "".join(items) + "</div>"
+        items.append({"take": take, "uri": uri, "width": min(w, thumbnail_px), "text": text})
+    return [{"kind": "thumbs", "thumbs": items}]
 
 
-def _figures_section(figures: Sequence[ReportFigure]) -> str:
+def _figures_section(figures: Sequence[ReportFigure]) -> list[dict]:
     if not figures:
-        return _note("No figures were drawn for this subject.")
-    groups: dict[str, list[ReportFigure]] = {}
+        return [_note("No figures were drawn for this subject.")]
+    groups: dict[str, list[dict]] = {}
     for fig in figures:
         stem = Path(fig.path).stem
         stage = stem.split("_", 1)[0] if "_" in stem else "other"
-        groups.setdefault(stage, []).append(fig)
-    out = []
-    for stage, figs in groups.items():
-        out.append(f"<h3>{_esc(STAGE_TITLES.get(stage, stage.capitalize()))}</h3>")
-        for fig in figs:
-            stem = Path(fig.path).stem
-            out.append(
-                f'<figure class="fig" id="fig-{_esc(stem)}"><img src="{image_uri(fig.path)}" '
-                f'alt="{_esc(stem)}"><figcaption><b>{_esc(stem)}</b>: {_esc(fig.caption)}'
-                "</figcaption></figure>"
-            )
-    return "".join(out)
+        groups.setdefault(stage, []).append(
+            {"stem": stem, "uri": image_uri(fig.path), "caption": fig.caption}
+        )
+    titles = [
+        {"title": STAGE_TITLES.get(stage, stage.capitalize()), "figures": figs}
+        for stage, figs in groups.items()
+    ]
+    return [{"kind": "figures", "groups": titles}]
 
 
-def _status_section(h5: h5py.File) -> str:
+def _status_section(h5: h5py.File) -> list[dict]:
     """The subject's warnings (a take left out of the models, refused refits, ...) and the
     stages it skipped, first on the page: what not to trust."""
     warnings = read_warnings(h5)
@@ -277,19 +268,16 @@ def _status_section(h5: h5py.File) -> str:
     parts = []
     if warnings:
         rows = [(w.stage, w.take or "(subject)", w.message) for w in warnings]
-        parts.append(
-            '<div class="warnings">'
-            + _table(["stage", "take", "warning"], rows, f"{len(warnings)} warnings")
-            + "</div>"
-        )
+        table = _table(["stage", "take", "warning"], rows, f"{len(warnings)} warnings")
+        parts.append(table | {"cls": "warnings"})
     else:
         parts.append(_note("No warnings: every take passed the quality gates."))
     if skipped:
         parts.append(_table(["skipped", "why"], sorted(skipped.items()), "Stages not run"))
-    return "".join(parts)
+    return parts
 
 
-def _columns(table: str) -> str:
+def _columns(table: str) -> dict:
     """The column dictionary of ``tables/{table}.tsv`` (:mod:`scan2morph.tables`), folded
     under the page's table that shows the same numbers."""
     from scan2morph import tables
@@ -302,16 +290,13 @@ def _columns(table: str) -> str:
         "modal_reconstruction": tables.MODAL_RECONSTRUCTION,
     }[table]
     rows = [[c.name, c.unit, c.definition] for c in dictionary]
-    return (
-        f'<details class="columns"><summary>Columns of tables/{_esc(table)}.tsv</summary>'
-        + _table(["column", "unit", "definition"], rows, f"Column dictionary: {table}.tsv")
-        + "</details>"
-    )
+    columns = _table(["column", "unit", "definition"], rows, f"Column dictionary: {table}.tsv")
+    return {"kind": "columns", "name": table, "table": columns["table"]}
 
 
-def _pca_section(h5: h5py.File) -> str:
+def _pca_section(h5: h5py.File) -> list[dict]:
     if paths.pca("eigenvalues") not in h5:
-        return _note("The store holds no PCA.")
+        return [_note("The store holds no PCA.")]
     eig, cr, ccr = (h5[paths.pca(k)][()] for k in ("eigenvalues", "cr", "ccr"))
     rows1 = [
         [i + 1, float(e), float(100 * c), float(100 * cc)]
@@ -330,12 +315,12 @@ def _pca_section(h5: h5py.File) -> str:
         rows2,
         "Table 2: PCA coefficients of each model (mm)",
     )
-    return table1 + _columns("pca_eigenvalues") + table2 + _columns("pca_coefficients")
+    return [table1, _columns("pca_eigenvalues"), table2, _columns("pca_coefficients")]
 
 
-def _motion_noise_section(h5: h5py.File) -> str:
+def _motion_noise_section(h5: h5py.File) -> list[dict]:
     if paths.motion_noise("relative") not in h5:
-        return _note("The store holds no click-noise estimate.")
+        return [_note("The store holds no click-noise estimate.")]
     group = h5[paths.MOTION_NOISE]
     names = h5[paths.motion_noise("takes")].asstr()[()]
     rel, err = h5[paths.motion_noise("relative")][()], h5[paths.motion_noise("rms_error_mm")][()]
@@ -352,12 +337,12 @@ def _motion_noise_section(h5: h5py.File) -> str:
         "clicking"
     )
     columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
-    return _table(columns, rows, caption) + _columns("motion_noise")
+    return [_table(columns, rows, caption), _columns("motion_noise")]
 
 
-def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
+def _modal_section(h5: h5py.File, n_coordinates: int) -> list[dict]:
     if paths.modal("frequencies_hz") not in h5:
-        return _note("The store holds no modal basis.")
+        return [_note("The store holds no modal basis.")]
     freqs = h5[paths.modal("frequencies_hz")][()]
     n = min(int(n_coordinates), len(freqs))
     out = [
@@ -369,7 +354,7 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
     ]
     exprs = list(h5[paths.EXPRESSIONS]) if paths.EXPRESSIONS in h5 else []
     if not exprs:
-        return "".join(out) + _note("The subject has no expression takes.")
+        return [*out, _note("The subject has no expression takes.")]
     label = {t: _attr(h5[paths.take(t)], "label", "") if paths.take(t) in h5 else "" for t in exprs}
     rows = [
         [
@@ -385,8 +370,8 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
             rows,
             f"Modal coordinates q = Q^T M v of each expression, first {n} modes",
         )
-        + _columns("modal_coordinates")
     )
+    out.append(_columns("modal_coordinates"))
     if paths.modal("reconstruction_k") in h5:
         ks = h5[paths.modal("reconstruction_k")][()]
         rows = [
@@ -400,9 +385,9 @@ def _modal_section(h5: h5py.File, n_coordinates: int) -> str:
                 rows,
                 "RMS error (mm) of each expression rebuilt from its first K modes",
             )
-            + _columns("modal_reconstruction")
         )
-    return "".join(out)
+        out.append(_columns("modal_reconstruction"))
+    return out
 
 
 def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
@@ -418,9 +403,9 @@ def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
     return out
 
 
-def _accuracy_section(accuracy: Mapping | None) -> str:
+def _accuracy_section(accuracy: Mapping | None) -> list[dict]:
     if accuracy is None:
-        return _note("No ground truth: accuracy is measured on synthetic subjects only.")
+        return [_note("No ground truth: accuracy is measured on synthetic subjects only.")]
     out = []
     units = accuracy.get("units")
     if isinstance(units, Mapping):
@@ -442,7 +427,7 @@ def _accuracy_section(accuracy: Mapping | None) -> str:
         columns = list(dict.fromkeys(k for row in flat.values() for k in row))
         rows = [[t, *[row.get(c) for c in columns]] for t, row in flat.items()]
         out.append(_table(["take", *columns], rows, "Per take"))
-    return "".join(out) or _note("The accuracy file holds no numbers.")
+    return out or [_note("The accuracy file holds no numbers.")]
 
 
 def _provenance_section(
@@ -450,7 +435,7 @@ def _provenance_section(
     checksums: Mapping[str, Mapping[str, str]],
     versions: Mapping[str, str],
     timings: Sequence[Mapping[str, object]],
-) -> str:
+) -> list[dict]:
     out = [_table(["attribute", "value"], [[k, v] for k, v in attrs.items()], "Store")]
     rows = [[t, r, h] for t, roles in checksums.items() for r, h in roles.items()]
     out.append(
@@ -487,7 +472,7 @@ def _provenance_section(
         )
     else:
         out.append(_note("No benchmark files were found for this subject."))
-    return "".join(out)
+    return out
 
 
 def subject_report_html(
@@ -539,21 +524,18 @@ def subject_report_html(
     InputError
         Unreadable store, glTF or figure, a figure of an unsupported type, bad checksum attribute.
     """
-    if glb is None:
-        view, script = _note("No 3D viewer: no glTF file was given."), None
-    else:
-        view, script = viewer.viewer_html(glb, three_dir)
     if n_coordinates < 1 or thumbnail_px < 1:
         raise InputError("report", "n_coordinates and thumbnail_px: expected positive integers")
     versions = software_versions() if versions is None else versions
     with open_store(store_path) as h5:
         attrs, checksums = store_provenance(h5)
-        subject = attrs.get("subject", Path(store_path).stem)
+        subject = str(attrs.get("subject", Path(store_path).stem))
         order = _take_order(h5, takes)
+        view, script = viewer.viewer_context(glb, h5, order, n_coordinates, three_dir)
         sections = [
             ("status", "Warnings and skipped stages", _status_section(h5)),
             ("inputs", "Inputs", _inputs_section(h5, order, thumbnail_px)),
-            ("viewer", "3D model (glTF viewer)", view),
+            ("viewer", "3D model (glTF viewer)", [{"kind": "viewer", "viewer": view}]),
             ("figures", "Figures", _figures_section(figures)),
             ("motion-noise", "Viseme motion: click-noise error", _motion_noise_section(h5)),
             ("pca", "PCA (Yano and Harada, Tables 1 and 2)", _pca_section(h5)),
@@ -561,32 +543,26 @@ def subject_report_html(
             ("accuracy", "Accuracy against ground truth", _accuracy_section(accuracy)),
             ("provenance", "Provenance", _provenance_section(attrs, checksums, versions, timings)),
         ]
-    nav = "".join(
-        f'<a href="#{sid}">{_esc(title.split(" (")[0])}</a>' for sid, title, _ in sections
-    )
-    body = "".join(
-        f'<section id="{sid}"><h2>{_esc(title)}</h2>{content}</section>'
-        for sid, title, content in sections
-    )
     lead = (
         f"{len(order)} takes; store format {attrs.get('format_version', '?')}, "
         f"scan2morph {attrs.get('scan2morph_version', '?')}; units: mm, angles in degrees."
     )
     return (
-        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-        f'<meta http-equiv="Content-Security-Policy" content="{csp(script)}">'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f"<title>scan2morph report: {_esc(subject)}</title><style>{_CSS}{viewer.CSS}</style>"
-        "</head>"
-        f"<body><header><h1>scan2morph report: {_esc(subject)}</h1><p>{_esc(lead)}</p>"
-        f"{_files_line(subject, accuracy is not None)}"
-        f"</header><nav>{nav}</nav>{body}"
-        + ("" if script is None else f'<script type="module">{script}</script>')
-        + "</body></html>\n"
+        environment()
+        .get_template("subject.html.j2")
+        .render(
+            subject=subject,
+            lead=lead,
+            csp=csp(script),
+            files=_files(subject, accuracy is not None),
+            sections=[{"id": i, "title": t, "blocks": b} for i, t, b in sections],
+            # the bundle refuses '</script' and '<!--': safe to embed as it is (and hashed as is)
+            script=None if script is None else Markup(script),
+        )
     )
 
 
-def _files_line(subject: str, synthetic: bool) -> str:
+def _files(subject: str, synthetic: bool) -> list[dict]:
     """Links to the products the page describes (relative: the page sits in
     ``results/{subject}/`` beside them)."""
     files = {
@@ -598,8 +574,7 @@ def _files_line(subject: str, synthetic: bool) -> str:
     }
     if synthetic:
         files["accuracy.json"] = "accuracy (JSON)"
-    links = "".join(f'<a href="{_esc(f)}">{_esc(what)}</a>' for f, what in files.items())
-    return f'<p class="files">Files: {links}</p>'
+    return [{"href": f, "what": what} for f, what in files.items()]
 
 
 def write_subject_report(path: str | Path, store_path: str | Path, **kwargs) -> None:

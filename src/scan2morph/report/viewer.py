@@ -15,8 +15,23 @@ scope, so the minified names of three.js cannot collide with the add-ons'. Only 
 and export forms these files use are supported; anything else raises.
 
 The viewer shows the mesh under a camera on +Z looking down -Z (+Y up: the head frame of
-:mod:`scan2morph.io.gltf`), orbit controls, one range slider per morph target (visemes and
-``pca_mean`` 0..1, ``pca_k`` -3..3: the targets are ``sigma_k e_k``), texture on/off and wireframe.
+:mod:`scan2morph.io.gltf`), orbit controls, texture on/off and wireframe, and three groups of
+controls (the section's template is ``templates/viewer.html.j2``):
+
+- semantic modes: one range slider per morph target of the glTF (visemes and ``pca_mean``
+  0..1, ``pca_k`` -3..3: the targets are ``sigma_k e_k``, sigma the sample standard deviation of
+  the PCA coefficients unless the store says otherwise), drawn by three.js's morphing;
+- modal modes: one slider per modal coordinate of the first ``n`` modes of the FEM basis, and one
+  button per expression take that sets them to its coordinates and adds its remaining modes
+  (so the face is the expression synthesised from all its coordinates, ``Model.expression``);
+- fitted takes: a selector with previous/next buttons over the subject's takes, each shown as
+  its aligned mesh (``/takes/{take}/align/vertices``), the faces on its invalid vertices hidden.
+
+The user's ``.glb`` stays as it is (the morph targets a glTF viewer shows): the modes and the
+takes reach the page as one extra binary block (:func:`viewer_data`: int16-quantized
+displacements from the neutral in the glTF frame, one scale per vector; about 10 kB per vector
+of 1,682 vertices) in the ``data-block`` attribute, described by the JSON of ``data-layout``,
+which the page's script adds to the glTF's base positions on the CPU.
 """
 
 from __future__ import annotations
@@ -24,13 +39,18 @@ from __future__ import annotations
 import base64
 import functools
 import hashlib
-import html
 import json
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
+import h5py
+import numpy as np
+
 from scan2morph.errors import InputError
-from scan2morph.io.gltf import _read_glb
+from scan2morph.io.gltf import _read_glb, read_glb_frame, read_glb_targets
+from scan2morph.store import paths
+from scan2morph.store.warnings import skipped_stages
 
 #: The npm package that pins three.js (``npm ci`` installs it into ``node_modules``).
 VIEWER_PACKAGE = Path(__file__).resolve().parents[3] / "tools" / "viewer"
@@ -40,6 +60,15 @@ VIEWER_JS = Path(__file__).with_name("viewer") / "viewer.js"
 #: Range of the weight sliders: ``pca_k`` in standard deviations, everything else 0..1.
 PCA_RANGE = (-3.0, 3.0)
 WEIGHT_RANGE = (0.0, 1.0)
+#: What a pca_k slider's unit is, per /pca/sigma_convention.
+SIGMA_WORDS = {
+    "sample": "sample standard deviations of the PCA coefficients",
+    "paper": "square roots of the eigenvalues (the paper's sigma, no 1/M)",
+}
+#: A modal slider's half range moves the mode's largest vertex by this much, mm.
+MODE_PEAK_MM = 10.0
+#: The int16 that marks an invalid vertex in the viewer's binary block (:func:`quantize`).
+INVALID = -32768
 #: The CSP sources the viewer needs besides its script: GLTFLoader hands the embedded texture to
 #: the browser as a ``blob:`` URL, which it fetches.
 CSP_SOURCES = "img-src data: blob:; connect-src data: blob:"
@@ -204,63 +233,208 @@ def _range(name: str) -> tuple[float, float]:
     return PCA_RANGE if re.fullmatch(r"pca_\d+", name) else WEIGHT_RANGE
 
 
-def _esc(value: object) -> str:
-    return html.escape(str(value), quote=True)
+def quantize(values: np.ndarray) -> tuple[np.ndarray, float]:
+    """Values as int16 steps of one scale: ``values ~ steps * scale``; NaN -> :data:`INVALID`.
+
+    Parameters
+    ----------
+    values : (V, 3) float
+        Displacements (head frame, m); NaN rows are invalid vertices.
+
+    Returns
+    -------
+    steps : (V, 3) int16
+        ``round(values / scale)`` within +-32767; :data:`INVALID` (-32768) where NaN.
+    scale : float
+        ``max |values| / 32767`` (1 when all are zero or NaN): the error is at most scale / 2.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    invalid = ~np.isfinite(values)
+    peak = float(np.abs(values[~invalid]).max(initial=0.0))
+    scale = peak / 32767 if peak > 0 else 1.0
+    steps = np.round(np.where(invalid, 0.0, values) / scale).astype(np.int16)
+    steps[invalid] = INVALID
+    return steps, scale
 
 
-def viewer_html(glb: str | Path, three_dir: str | Path = THREE_DIR) -> tuple[str, str | None]:
-    """The viewer section's HTML and its script (None, with a note instead, when three.js is not
-    installed or there is no ``.glb``).
+def viewer_data(
+    h5: h5py.File, takes: Sequence[str], n_modes: int, frame: np.ndarray
+) -> tuple[dict, bytes]:
+    """What the page's viewer adds to the glTF: the first modes, the expressions' modal
+    coordinates and the fitted takes, as a layout (JSON-able) and one binary block.
+
+    Every vector is a (V, 3) displacement from the glTF's base (the neutral, ``/neutral/vertices``)
+    in the glTF frame (metres), quantized by :func:`quantize` (int16 little-endian, its own
+    scale; ``offset`` in bytes into the block):
+
+    - ``modes[i]``: mode i + 1 per unit modal coordinate (``/modal/modes``, m per mm t^1/2);
+      ``range`` is the slider's half range: the coordinate that moves a vertex by
+      :data:`MODE_PEAK_MM`, widened to 1.25 times every expression's coordinate;
+    - ``presets[j]``: an expression take's first ``n_modes`` coordinates ``q`` and, as
+      ``rest``, the displacement of its remaining modes (``sum_{i > n} q_i mode_i``), so that the
+      preset shows the expression synthesised from all its coordinates (``Model.expression``);
+    - ``takes[j]``: the take's aligned mesh (``/takes/{take}/align/vertices``) minus the
+      neutral, :data:`INVALID` where the take has no valid vertex.
+
+    Parameters
+    ----------
+    h5 : h5py.File
+        The subject's store.
+    takes : sequence of str
+        Take order of the flip-through.
+    n_modes : int
+        Modes with a slider.
+    frame : (4, 4) float
+        Neutral frame (mm) -> glTF frame (m): its 3 x 3 part maps the displacements.
+
+    Returns
+    -------
+    layout : dict
+    block : bytes
+    """
+    rot = np.asarray(frame, dtype=np.float64)[:3, :3]
+    neutral = h5[paths.neutral("vertices")][()]
+    chunks: list[bytes] = []
+    size = 0
+
+    def add(displacement_mm: np.ndarray) -> dict:
+        nonlocal size
+        steps, scale = quantize(displacement_mm @ rot.T)
+        chunks.append(steps.astype("<i2").tobytes())
+        entry = {"offset": size, "scale": scale}
+        size += len(chunks[-1])
+        return entry
+
+    layout: dict = {"vertices": len(neutral), "modes": [], "presets": [], "takes": []}
+    modes = h5[paths.modal("modes")][()] if paths.modal("modes") in h5 else np.zeros((0, 1, 3))
+    freqs = h5[paths.modal("frequencies_hz")][()] if modes.size else []
+    n = min(int(n_modes), len(modes))
+    exprs = sorted(h5[paths.EXPRESSIONS]) if paths.EXPRESSIONS in h5 else []
+    coords = {
+        t: h5[paths.expression(t, "coordinates")][()]
+        for t in exprs
+        if paths.expression(t, "coordinates") in h5
+    }
+    for i in range(n):
+        peak = float(np.linalg.norm(modes[i], axis=1).max())
+        half = MODE_PEAK_MM / peak if peak > 0 else 1.0
+        half = max([half, *(1.25 * abs(float(q[i])) for q in coords.values())])
+        layout["modes"].append(
+            {"mode": i + 1, "frequency_hz": float(freqs[i]), "range": half} | add(modes[i])
+        )
+    for take, q in coords.items():
+        preset = {"take": take, "label": _attr(h5, paths.take(take), "label"), "q": q[:n].tolist()}
+        preset["modes"] = len(q)
+        if len(q) > n:
+            preset["rest"] = add(np.tensordot(q[n:], modes[n : len(q)], axes=1))
+        layout["presets"].append(preset)
+    for take in takes:
+        if paths.align(take, "vertices") not in h5:
+            continue
+        aligned = h5[paths.align(take, "vertices")][()]
+        ok = h5[paths.align(take, "ok")][()] if paths.align(take, "ok") in h5 else True
+        entry = {
+            "take": take,
+            "kind": _attr(h5, paths.take(take), "kind"),
+            "label": _attr(h5, paths.take(take), "label"),
+            "valid": int(np.isfinite(aligned).all(axis=1).sum()),
+            "aligned": bool(ok),
+        }
+        layout["takes"].append(entry | add(aligned - neutral))
+    return layout, b"".join(chunks)
+
+
+def _sigma_convention(h5: h5py.File) -> str:
+    if paths.pca("sigma_convention") not in h5:
+        return ""
+    value = h5[paths.pca("sigma_convention")][()]
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _attr(h5: h5py.File, group: str, key: str) -> str:
+    value = h5[group].attrs.get(key, "") if group in h5 else ""
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _missing(h5: h5py.File, layout: dict, names: Sequence[str]) -> list[str]:
+    """What the viewer cannot show for this subject, and why (the store's /skipped reasons)."""
+    skipped = skipped_stages(h5)
+    why = "; ".join(f"{k}: {v}" for k, v in skipped.items())
+    out = []
+    if not any(not n.startswith("pca_") for n in names):
+        out.append("No viseme sliders: the subject has no viseme models.")
+    if not any(n.startswith("pca_") for n in names):
+        out.append("No PCA sliders: the subject has no PCA (it needs viseme takes).")
+    if not layout["modes"]:
+        out.append("No modal sliders: the store holds no modal basis.")
+    if not layout["presets"]:
+        out.append("No expression presets: the subject has no expression takes.")
+    if not layout["takes"]:
+        out.append("No fitted takes to flip through: the store holds no aligned take meshes.")
+    if out and why:
+        out.append(f"Skipped stages: {why}.")
+    return out
+
+
+def viewer_context(
+    glb: str | Path | None,
+    h5: h5py.File,
+    takes: Sequence[str],
+    n_modes: int,
+    three_dir: str | Path = THREE_DIR,
+) -> tuple[dict, str | None]:
+    """The viewer section's template context and its script (None, with ``unavailable`` saying
+    why, when there is no ``.glb`` or three.js is not installed).
 
     Raises
     ------
     InputError
-        An unreadable ``.glb``.
+        An unreadable ``.glb``, or one whose vertex count differs from the store's.
     """
+    if glb is None:
+        return {"unavailable": "no glTF file was given"}, None
     glb = Path(glb)
     if not glb.is_file():
-        return f'<p class="note">No 3D viewer: {_esc(glb.name)} was not written.</p>', None
+        return {"unavailable": f"{glb.name} was not written"}, None
     reason = three_unavailable(three_dir)
     if reason is not None:
-        return f'<p class="note">No 3D viewer: {_esc(reason)}.</p>', None
+        return {"unavailable": reason}, None
     names, notes = glb_target_names(glb)
     sliders = []
     for i, name in enumerate(names):
         lo, hi = _range(name)
-        step = 0.01 if hi - lo <= 1 else 0.05
+        kind = "pca" if name.startswith("pca_") else "viseme"
         sliders.append(
-            f'<label title="{_esc(notes.get(name, name))}"><span>{_esc(name)}</span>'
-            f'<input type="range" data-target="{i}" name="{_esc(name)}" min="{lo:g}" '
-            f'max="{hi:g}" step="{step:g}" value="0"><output>0</output></label>'
+            {
+                "index": i,
+                "name": name,
+                "note": notes.get(name, name),
+                "min": lo,
+                "max": hi,
+                "step": 0.01 if hi - lo <= 1 else 0.05,
+                "kind": kind,
+            }
         )
-    data = base64.b64encode(glb.read_bytes()).decode("ascii")
-    size_kb = glb.stat().st_size / 1024
-    caption = (
-        f"{glb.name} ({size_kb:.0f} kB) in three.js {three_version(three_dir)}: drag to orbit, "
-        "wheel to zoom, right-drag to pan. Camera on +Z (the head frame: +Y up, +Z out of the "
-        "face). Sliders: morph target weights (viseme takes and pca_mean 0..1; pca_k in "
-        "standard deviations, with pca_mean at 1 they give Eq. 2)."
-    )
-    body = (
-        f'<div id="viewer3d" class="viewer" data-state="loading" data-glb="{data}">'
-        '<canvas width="640" height="480"></canvas><div class="controls">'
-        '<label><input type="checkbox" name="texture" checked> texture</label>'
-        '<label><input type="checkbox" name="wireframe"> wireframe</label>'
-        '<button type="button" name="reset">reset weights</button>'
-        f'<div class="sliders">{"".join(sliders)}</div></div>'
-        f'<p class="note viewer-status">Loading the 3D viewer (needs JavaScript and WebGL)...</p>'
-        f"<p>{_esc(caption)}</p></div>"
-    )
-    return body, viewer_script(three_dir)
-
-
-#: The viewer's layout (added to the page's style sheet).
-CSS = """
-.viewer{display:flex;flex-wrap:wrap;gap:1rem;align-items:flex-start}
-.viewer canvas{border:1px solid #ccc;max-width:100%;touch-action:none}
-.viewer .controls{flex:1;min-width:16rem;font-size:.85rem}
-.viewer .sliders{max-height:420px;overflow-y:auto;margin-top:.4rem}
-.viewer .sliders label{display:grid;grid-template-columns:7rem 1fr 3rem;gap:.4rem;
-align-items:center}.viewer output{font-variant-numeric:tabular-nums;text-align:right}
-.viewer .controls>label{margin-right:1rem}.viewer>p{flex-basis:100%;margin:0}
-"""
+    layout, block = viewer_data(h5, takes, n_modes, read_glb_frame(glb))
+    base, _ = read_glb_targets(glb)
+    if len(base) != layout["vertices"]:
+        raise InputError(
+            glb, f"vertices: {len(base)} in the glTF, {layout['vertices']} in the store"
+        )
+    context = {
+        "glb": base64.b64encode(glb.read_bytes()).decode("ascii"),
+        "glb_name": glb.name,
+        "glb_kb": glb.stat().st_size / 1024,
+        "three_version": three_version(three_dir),
+        "sliders": sliders,
+        "layout": json.dumps(layout, separators=(",", ":")),
+        "data": base64.b64encode(block).decode("ascii"),
+        "data_kb": len(block) / 1024,
+        "modes": layout["modes"],
+        "n_modes_total": len(h5[paths.modal("frequencies_hz")]) if layout["modes"] else 0,
+        "presets": layout["presets"],
+        "takes": layout["takes"],
+        "missing": _missing(h5, layout, names),
+        "sigma": SIGMA_WORDS.get(_sigma_convention(h5), "sigma_k of the store's /pca/sigma"),
+    }
+    return context, viewer_script(three_dir)
