@@ -260,7 +260,7 @@ def _figures_section(figures: Sequence[ReportFigure]) -> list[dict]:
     return [{"kind": "figures", "groups": titles}]
 
 
-def _status_section(h5: h5py.File) -> list[dict]:
+def _status_blocks(h5: h5py.File) -> list[dict]:
     """The subject's warnings (a take left out of the models, refused refits, ...) and the
     stages it skipped, first on the page: what not to trust."""
     warnings = read_warnings(h5)
@@ -275,6 +275,11 @@ def _status_section(h5: h5py.File) -> list[dict]:
     if skipped:
         parts.append(_table(["skipped", "why"], sorted(skipped.items()), "Stages not run"))
     return parts
+
+
+def _status_section(h5: h5py.File) -> str:
+    """The HTML of the page's first section (:func:`_status_blocks` rendered)."""
+    return render_blocks(_status_blocks(h5)).strip()
 
 
 def _columns(table: str) -> dict:
@@ -533,7 +538,7 @@ def subject_report_html(
         order = _take_order(h5, takes)
         view, script = viewer.viewer_context(glb, h5, order, n_coordinates, three_dir)
         sections = [
-            ("status", "Warnings and skipped stages", _status_section(h5)),
+            ("status", "Warnings and skipped stages", _status_blocks(h5)),
             ("inputs", "Inputs", _inputs_section(h5, order, thumbnail_px)),
             ("viewer", "3D model (glTF viewer)", [{"kind": "viewer", "viewer": view}]),
             ("figures", "Figures", _figures_section(figures)),
