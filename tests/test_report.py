@@ -523,8 +523,9 @@ def test_viewer_shows_the_face_upright_from_the_front(report, run, browser, tmp_
 
 
 #: Largest difference allowed between a vertex the page draws and the model API's, m (1 um):
-#: float32 positions (~1e-8 m at a head's size) plus half a quantization step of the page's
-#: int16 modal and take vectors (on the tiny run <= 0.6 um: 36 mm of take motion / 65534).
+#: float32 positions (~1e-8 m at a head's size) plus the page's int16 modal vectors (measured on
+#: the tiny run: <= 6e-9 m for the glTF's targets, <= 1e-7 m for modes and presets). The takes
+#: are held to half their own quantization step instead.
 VIEWER_ATOL_M = 1e-6
 
 
@@ -587,7 +588,8 @@ def test_viewer_sliders_and_takes_draw_the_model_api_shapes(report, browser):
         for i, take in enumerate(takes):
             _pick_take(evaluate, i)
             faces = evaluate("window.__viewer.mesh.geometry.index.count") // 3
-            got[take] = (_drawn(evaluate), faces)
+            scale = evaluate(f"window.__viewer.layout.takes[{i}].scale")
+            got[take] = (_drawn(evaluate), faces, scale)
         _click(evaluate, 'button[name="next-take"]')  # past the last take: back to the model
         got["after the takes"] = _drawn(evaluate)
         return got
@@ -617,11 +619,13 @@ def test_viewer_sliders_and_takes_draw_the_model_api_shapes(report, browser):
         ), name  # each of these moves the face by more than 1 mm
     faces = model.faces
     for take in takes:
-        drawn, n_faces = got[take]
+        drawn, n_faces, scale = got[take]
         valid = np.isfinite(aligned[take]).all(axis=1)
         assert 0.5 * len(valid) < valid.sum() < len(valid)  # some invalid vertices to hide
         err = np.abs(np.asarray(drawn)[valid] - head(aligned[take][valid])).max()
-        assert err < VIEWER_ATOL_M, (take, err)
+        # half a quantization step of the take's motion (its largest / 65534) plus float32
+        # rounding; on the tiny run 0.45-0.53 um for steps of 0.9-1.1 um
+        assert err <= 0.5 * scale + 2e-8, (take, err, scale)
         assert n_faces == int(valid[faces].all(axis=1).sum())  # faces on invalid vertices hidden
 
 
