@@ -938,6 +938,7 @@ def test_each_table_shows_its_column_dictionary():
     """Under each table with a TSV twin: a folded dictionary of the TSV's columns (issue #19)."""
     from scan2morph import tables
     from scan2morph.report import html as report_html
+    from scan2morph.report import sections
 
     with h5py.File("sections.h5", "w", driver="core", backing_store=False) as h5:
         h5[paths.pca("eigenvalues")] = [4.0, 1.0]
@@ -952,9 +953,7 @@ def test_each_table_shows_its_column_dictionary():
         h5[paths.expression("smile1", "coordinates")] = [0.5, 0.25]
         h5[paths.expression("smile1", "reconstruction_rms_mm")] = [1.0, 0.5]
         text = report_html.render_blocks(
-            report_html._pca_section(h5)
-            + report_html._motion_noise_section(h5)
-            + report_html._modal_section(h5, 2)
+            sections.pca(h5) + sections.motion_noise(h5) + sections.modal(h5, 2)
         )
     page = _parse(text)
     for name, dictionary in {

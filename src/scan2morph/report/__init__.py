@@ -12,16 +12,15 @@ from scan2morph.report.cohort import (
     subject_summary,
     write_cohort_summary,
 )
-from scan2morph.report.html import (
+from scan2morph.report.html import subject_report_html, write_subject_report
+from scan2morph.report.provenance import software_versions, stage_timings, store_provenance
+from scan2morph.report.sections import (
     ReportFigure,
     image_uri,
     read_caption,
     report_figures,
-    subject_report_html,
     thumbnail_jpeg,
-    write_subject_report,
 )
-from scan2morph.report.provenance import software_versions, stage_timings, store_provenance
 from scan2morph.report.sweep import plot_sweep, sweep_summary, write_sweep_summary
 
 __all__ = [
