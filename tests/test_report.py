@@ -711,6 +711,28 @@ def test_viewer_of_a_subject_without_visemes_or_expressions_works(bare_subject, 
 
 
 @pytest.mark.slow
+@needs_three
+def test_viewer_of_a_glb_without_its_frame_keeps_its_sliders_and_says_why(report, run, tmp_path):
+    """A .glb written before the head frame (no node.extras.source_to_gltf): the page keeps its
+    morph-target sliders and says why the modes and takes are not shown."""
+    import pygltflib
+
+    _, store, *_ = report
+    gltf = pygltflib.GLTF2.load(run.path("results", SUBJECT, f"{SUBJECT}.glb"))
+    for node in gltf.nodes:
+        node.extras = {}
+    old = tmp_path / "old.glb"
+    gltf.save_binary(str(old))
+    text = subject_report_html(store, versions={}, glb=old, n_coordinates=4)
+    missing = re.search(r'<ul class="missing">(.*?)</ul>', text, re.S)[1]
+    assert "No modal sliders or fitted takes: old.glb does not say its frame" in missing
+    assert "data-mode=" not in text and '<select name="take">' not in text
+    assert {"car", "too", "pca_mean", "pca_1"} <= set(
+        re.findall(r'data-target="\d+" name="(\w+)"', text)
+    )
+
+
+@pytest.mark.slow
 def test_viewer_script_is_the_one_the_policy_allows(report):
     path, *_ = report
     text = path.read_text()

@@ -48,7 +48,7 @@ import h5py
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.io.gltf import _read_glb, read_glb_frame, read_glb_targets
+from scan2morph.io.gltf import _read_glb, read_glb_frame
 from scan2morph.store import paths
 from scan2morph.store.warnings import skipped_stages
 
@@ -356,8 +356,9 @@ def _attr(h5: h5py.File, group: str, key: str) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
-def _missing(h5: h5py.File, layout: dict, names: Sequence[str]) -> list[str]:
-    """What the viewer cannot show for this subject, and why (the store's /skipped reasons)."""
+def _missing(h5: h5py.File, layout: dict | None, names: Sequence[str]) -> list[str]:
+    """What the viewer cannot show for this subject, and why (the store's /skipped reasons);
+    without a ``layout``, only what the glTF lacks."""
     skipped = skipped_stages(h5)
     why = "; ".join(f"{k}: {v}" for k, v in skipped.items())
     out = []
@@ -365,11 +366,11 @@ def _missing(h5: h5py.File, layout: dict, names: Sequence[str]) -> list[str]:
         out.append("No viseme sliders: the subject has no viseme models.")
     if not any(n.startswith("pca_") for n in names):
         out.append("No PCA sliders: the subject has no PCA (it needs viseme takes).")
-    if not layout["modes"]:
+    if layout is not None and not layout["modes"]:
         out.append("No modal sliders: the store holds no modal basis.")
-    if not layout["presets"]:
+    if layout is not None and not layout["presets"]:
         out.append("No expression presets: the subject has no expression takes.")
-    if not layout["takes"]:
+    if layout is not None and not layout["takes"]:
         out.append("No fitted takes to flip through: the store holds no aligned take meshes.")
     if out and why:
         out.append(f"Skipped stages: {why}.")
@@ -415,12 +416,24 @@ def viewer_context(
                 "kind": kind,
             }
         )
-    layout, block = viewer_data(h5, takes, n_modes, read_glb_frame(glb))
-    base, _ = read_glb_targets(glb)
-    if len(base) != layout["vertices"]:
-        raise InputError(
-            glb, f"vertices: {len(base)} in the glTF, {layout['vertices']} in the store"
+    gltf = _read_glb(glb)
+    count = gltf.accessors[gltf.meshes[0].primitives[0].attributes.POSITION].count
+    try:
+        frame, old = read_glb_frame(glb), None
+    except InputError as err:  # a file from before the head frame: its own sliders only
+        frame, old = (
+            None,
+            (
+                f"No modal sliders or fitted takes: {glb.name} does not say its frame ({err}); "
+                "rerun the morph stage to write it anew."
+            ),
         )
+    if frame is None:
+        layout, block = {"vertices": count, "modes": [], "presets": [], "takes": []}, b""
+    else:
+        layout, block = viewer_data(h5, takes, n_modes, frame)
+    if count != layout["vertices"]:
+        raise InputError(glb, f"vertices: {count} in the glTF, {layout['vertices']} in the store")
     context = {
         "glb": base64.b64encode(glb.read_bytes()).decode("ascii"),
         "glb_name": glb.name,
@@ -434,7 +447,7 @@ def viewer_context(
         "n_modes_total": len(h5[paths.modal("frequencies_hz")]) if layout["modes"] else 0,
         "presets": layout["presets"],
         "takes": layout["takes"],
-        "missing": _missing(h5, layout, names),
+        "missing": [old, *_missing(h5, None, names)] if old else _missing(h5, layout, names),
         "sigma": SIGMA_WORDS.get(_sigma_convention(h5), "sigma_k of the store's /pca/sigma"),
     }
     return context, viewer_script(three_dir)
