@@ -11,8 +11,10 @@ from scan2morph.template.mesh import (
 from scan2morph.template.sample import (
     behind_steps,
     check_no_folds,
+    fit_map,
     fit_options,
     fit_take,
+    sample_mesh,
     sample_range,
     texture_uv,
 )
@@ -30,9 +32,11 @@ __all__ = [
     "Template",
     "build_template",
     "check_no_folds",
+    "fit_map",
     "fit_options",
     "fit_take",
     "load_template",
+    "sample_mesh",
     "sample_range",
     "save_template",
     "subdivide",

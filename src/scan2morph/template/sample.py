@@ -389,6 +389,87 @@ def fit_options(section: Mapping[str, object]) -> dict[str, object]:
     }
 
 
+def sample_mesh(
+    xyz: np.ndarray,
+    points: np.ndarray,
+    faces: np.ndarray,
+    source: str = "range image",
+    min_weight: float = 1.0,
+    max_slope_deg: float | None = None,
+    exclude: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh's vertices sampled from a range image at their pixel positions.
+
+    :func:`sample_range` with the fit's depth-step rules: with ``max_slope_deg`` a vertex is
+    also invalid behind a depth step of the mesh (:func:`behind_steps`), both along the
+    scanner's viewing direction estimated from ``xyz`` (:func:`scanner_view`).
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+    points : (V, 2) float
+        Pixel positions of the vertices.
+    faces : (F, 3) int
+        The mesh's triangles.
+    source, min_weight, max_slope_deg
+        As in :func:`sample_range`.
+    exclude : (k,) int, optional
+        Vertices invalid whatever the data (on folded triangles).
+
+    Returns
+    -------
+    vertices : (V, 3) float64, mm; NaN where invalid
+    valid : (V,) bool
+    """
+    view = scanner_view(xyz) if max_slope_deg is not None else SCANNER_FRAME
+    vertices, valid = sample_range(
+        xyz, points, source=source, min_weight=min_weight, max_slope_deg=max_slope_deg, view=view
+    )
+    if exclude is not None:
+        valid[exclude] = False
+    if max_slope_deg is not None:
+        valid &= ~behind_steps(
+            np.where(valid[:, None], vertices, np.nan), faces, max_slope_deg, view.centre
+        )
+    vertices[~valid] = np.nan
+    return vertices, valid
+
+
+def fit_map(
+    template,
+    landmarks: np.ndarray,
+    fiducial_set: str = "closed",
+    source: str = "take",
+    image_size: tuple[int, int] | None = None,
+) -> TPS:
+    """The fit's map from template coordinates to a take's pixels: the thin-plate spline
+    through the take's fiducials (:func:`fit_take` samples it at the template's vertices).
+
+    Parameters
+    ----------
+    template : Template
+        The base template.
+    landmarks : (68, 2) float
+        iBUG-68 landmarks, px.
+    fiducial_set : str
+        As in :func:`fit_take`.
+    source : str
+        ``subject/take`` for messages.
+    image_size : (width, height), optional
+        The image, for the spline's checks.
+
+    Returns
+    -------
+    TPS
+        Callable: template coordinates (n, 2) -> pixel coordinates (n, 2).
+    """
+    numbers, base_idx = template.fiducial_set(fiducial_set, source=source)
+    landmarks = np.asarray(landmarks, dtype=np.float64)
+    return TPS.fit(
+        template.vertices[base_idx], landmarks[numbers - 1], source=source, image_size=image_size
+    )
+
+
 def fit_take(
     template,
     landmarks: np.ndarray,
@@ -473,21 +554,11 @@ def fit_take(
             f"is outside the {width}x{height} image ({int(out.sum())} fiducials outside)",
         )
     fine = subdivide_template(template, levels)
-    spline = TPS.fit(
-        template.vertices[base_idx], landmarks[numbers - 1], source=source, image_size=image_size
-    )
-    points = spline(fine.vertices)
+    points = fit_map(template, landmarks, fiducial_set, source, image_size)(fine.vertices)
     folded = check_no_folds(points, fine.faces, source, max_fold_fraction)
-    view = scanner_view(xyz) if max_slope_deg is not None else SCANNER_FRAME
-    vertices, valid = sample_range(
-        xyz, points, source=source, min_weight=min_weight, max_slope_deg=max_slope_deg, view=view
+    vertices, valid = sample_mesh(
+        xyz, points, fine.faces, source, min_weight, max_slope_deg, np.unique(fine.faces[folded])
     )
-    valid[np.unique(fine.faces[folded])] = False
-    if max_slope_deg is not None:
-        valid &= ~behind_steps(
-            np.where(valid[:, None], vertices, np.nan), fine.faces, max_slope_deg, view.centre
-        )
-    vertices[~valid] = np.nan
     share = float(valid.mean())
     if share < min_valid_fraction:
         raise InputError(

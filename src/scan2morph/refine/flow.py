@@ -1,0 +1,192 @@
+"""Image correlation in template space: a measured displacement field with a confidence, and
+its fusion into a smooth correction that falls back to the template fit where the skin shows
+nothing to correlate.
+
+The measurement is dense inverse-search optical flow (:func:`cv2.DISOpticalFlow`, Kroeger et
+al. 2016) between contrast-normalised images (a local high-pass divided by the local contrast
+scale of the whole face), so that the slowly varying shading, which changes when the face
+deforms, does not count. Each measured vector is trusted by
+
+- the local texture: the high-pass energy against the image noise (flat skin: no weight);
+- forward-backward consistency (the flow from the take back to the neutral undoes it);
+- the correlation (ZNCC) of the two images' high-passes after the displacement.
+
+The fusion minimises, over the correction field ``f`` on the grid,
+``sum_g w_g |f_g - m_g|^2 + lambda sum_(g~h) |f_g - f_h|^2 + sum_g mu^2 / (w_g + mu) |f_g|^2
++ sum_l k_l |f_(g_l)|^2``: the measurements ``m`` weighted by their confidence, a membrane
+(elastic) term, a weak pull to zero where nothing is measured (the template fit:
+``sqrt(lambda / mu)`` grid pixels is the distance over which a measured correction fades) and the fiducials,
+where the fit put the clicked landmarks, as soft constraints weighted by the click precision.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy import sparse
+from scipy.ndimage import gaussian_filter
+from scipy.sparse.linalg import splu
+
+
+def high_pass(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Local high-pass of an image with missing values, and its local RMS.
+
+    Parameters
+    ----------
+    image : (rows, columns) float
+        NaN where there is no image.
+    sigma : float
+        Gaussian scale of the local mean, px.
+
+    Returns
+    -------
+    hp : (rows, columns) float64
+        Image minus its local (normalised, masked) Gaussian mean; 0 where missing.
+    rms : (rows, columns) float64
+        Local RMS of ``hp`` over a Gaussian of ``2 sigma``; 0 where missing.
+    """
+    mask = np.isfinite(image)
+    img = np.where(mask, image, 0.0).astype(np.float64)
+    m = mask.astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = gaussian_filter(img, sigma) / gaussian_filter(m, sigma)
+        hp = np.where(mask, img - mean, 0.0)
+        rms = np.sqrt(gaussian_filter(hp**2, 2 * sigma) / gaussian_filter(m, 2 * sigma))
+    return hp, np.where(mask, np.nan_to_num(rms), 0.0)
+
+
+def _to_u8(hp: np.ndarray, scale: float) -> np.ndarray:
+    return np.clip(np.rint(128.0 + hp * scale), 0, 255).astype(np.uint8)
+
+
+def _warp(field: np.ndarray, flow: np.ndarray) -> np.ndarray:
+    """``field`` (rows, cols[, k]) sampled at each grid point plus ``flow`` (rows, cols, 2)."""
+    rows, cols = flow.shape[:2]
+    gx, gy = np.meshgrid(np.arange(cols, dtype=np.float32), np.arange(rows, dtype=np.float32))
+    return cv2.remap(
+        field.astype(np.float32),
+        gx + flow[..., 0].astype(np.float32),
+        gy + flow[..., 1].astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+
+
+def measure_flow(
+    reference: np.ndarray,
+    moving: np.ndarray,
+    sigma: float = 4.0,
+    noise: float = 2.0,
+    max_fb_px: float = 0.5,
+    patch: float = 3.0,
+    min_zncc: float = 0.5,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Displacement ``m`` with ``moving(x + m(x)) ~ reference(x)``, and its confidence.
+
+    Parameters
+    ----------
+    reference, moving : (rows, columns) float
+        Grey images on the same grid, NaN where missing.
+    sigma : float
+        High-pass scale, px: shading varies more slowly than this.
+    noise : float
+        Image noise, grey levels (std): texture weaker than this is not trusted.
+    max_fb_px : float
+        Forward-backward inconsistency beyond which a vector gets no weight, px.
+    patch : float
+        Gaussian scale of the ZNCC window, px.
+    min_zncc : float
+        ZNCC after the displacement below which a vector gets no weight.
+
+    Returns
+    -------
+    flow : (rows, columns, 2) float64
+        (x, y) displacement, px.
+    confidence : (rows, columns) float64
+        In [0, 1]: texture share times the consistency and correlation tests.
+    """
+    hp_r, rms_r = high_pass(reference, sigma)
+    hp_m, rms_m = high_pass(moving, sigma)
+    both = np.isfinite(reference) & np.isfinite(moving)
+    level = float(np.median(rms_r[both])) if both.any() else 0.0
+    if level <= 0:
+        shape = reference.shape
+        return np.zeros((*shape, 2)), np.zeros(shape)
+    scale = 40.0 / level  # the face's median contrast spans +-40 grey levels
+    r8, m8 = _to_u8(hp_r, scale), _to_u8(hp_m, scale)
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    fw = dis.calc(r8, m8, None).astype(np.float64)
+    bw = dis.calc(m8, r8, None)
+    fb = np.linalg.norm(fw + _warp(bw, fw), axis=-1)
+    # ZNCC of the two high-passes over a Gaussian window, after the displacement
+    mw = _warp(hp_m, fw).astype(np.float64)
+    g = lambda a: gaussian_filter(a, patch)  # noqa: E731
+    num = g(hp_r * mw)
+    den = np.sqrt(np.maximum(g(hp_r**2) * g(mw**2), 1e-12))
+    zncc = num / den
+    texture = rms_r**2 / (rms_r**2 + noise**2)
+    ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & np.isfinite(fw).all(axis=-1)
+    conf = np.where(ok, texture * np.clip((zncc - min_zncc) / (1 - min_zncc), 0, 1), 0.0)
+    return np.where(ok[..., None], fw, 0.0), conf
+
+
+def fuse(
+    measured: np.ndarray,
+    weight: np.ndarray,
+    inside: np.ndarray,
+    smooth: float,
+    prior: float,
+    anchors: np.ndarray | None = None,
+    anchor_weight: float = 0.0,
+) -> np.ndarray:
+    """The smooth correction field that best fits weighted measurements (see module docstring).
+
+    Parameters
+    ----------
+    measured : (rows, columns, 2) float
+        Measured displacements, px.
+    weight : (rows, columns) float
+        Their weights (>= 0).
+    inside : (rows, columns) bool
+        Grid points that carry the field (the template domain); 0 elsewhere.
+    smooth : float
+        Membrane weight ``lambda`` per grid edge.
+    prior : float
+        Pull to zero ``mu`` per grid point (> 0 keeps the system definite).
+    anchors : (n, 2) int, optional
+        Grid (row, column) of the fiducials, pulled to zero with ``anchor_weight`` each.
+
+    Returns
+    -------
+    (rows, columns, 2) float64
+        The correction, px; 0 outside ``inside``.
+    """
+    rows, cols = inside.shape
+    idx = np.full(inside.shape, -1, dtype=np.int64)
+    n = int(inside.sum())
+    idx[inside] = np.arange(n)
+    w = np.where(inside, weight, 0.0)[inside]
+    # the pull to zero acts where nothing is measured (mu^2 / (w + mu): mu at w = 0, vanishing
+    # where w >> mu), so that it does not shrink what is measured
+    diag = w + prior**2 / (w + prior)
+    if anchors is not None and len(anchors):
+        a = np.asarray(anchors, dtype=np.int64)
+        keep = (a[:, 0] >= 0) & (a[:, 0] < rows) & (a[:, 1] >= 0) & (a[:, 1] < cols)
+        ai = idx[a[keep, 0], a[keep, 1]]
+        np.add.at(diag, ai[ai >= 0], anchor_weight)
+    pairs = []
+    for a_, b_ in ((idx[:, :-1], idx[:, 1:]), (idx[:-1, :], idx[1:, :])):
+        both = (a_ >= 0) & (b_ >= 0)
+        pairs.append(np.stack([a_[both], b_[both]], axis=1))
+    e = np.concatenate(pairs)
+    deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
+    lap = sparse.coo_matrix(
+        (np.full(2 * len(e), -smooth), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+        shape=(n, n),
+    )
+    A = (sparse.diags(diag + smooth * deg) + lap).tocsc()
+    lu = splu(A)
+    out = np.zeros((rows, cols, 2))
+    for k in range(2):
+        out[..., k][inside] = lu.solve(w * measured[..., k][inside])
+    return out

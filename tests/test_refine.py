@@ -1,0 +1,125 @@
+"""Dense correspondence refinement: template space, flow measurement and fusion, and the whole
+refinement against a known displacement (the oracle)."""
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter, map_coordinates
+
+from scan2morph.refine import RefineParams, refine_points
+from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.refine.template_space import pull_back, template_grid
+from scan2morph.template import build_template, subdivide_template
+
+
+@pytest.fixture(scope="module")
+def fine():
+    return subdivide_template(build_template(), 1)
+
+
+def _texture(shape, seed, blob_px=1.5, contrast=25.0):
+    """A skin-like random texture: blurred noise, grey levels around 150."""
+    rng = np.random.default_rng(seed)
+    t = gaussian_filter(rng.standard_normal(shape), blob_px)
+    return 150.0 + contrast * t / t.std()
+
+
+def _warp(image, dx, dy):
+    """``image(x + dx(x), y + dy(x))`` (bilinear), the image seen through a displacement."""
+    yy, xx = np.mgrid[0 : image.shape[0], 0 : image.shape[1]].astype(np.float64)
+    return map_coordinates(image, [yy + dy, xx + dx], order=3, mode="nearest")
+
+
+def test_template_grid_reproduces_affine_functions(fine):
+    grid = template_grid(fine.vertices, fine.faces, 0.02)
+    A = np.array([[3.0, -1.0], [0.5, 2.0]])
+    values = fine.vertices @ A.T + np.array([7.0, -4.0])
+    field = grid.interpolate(values)
+    rows, cols = np.nonzero(grid.inside)
+    pts = grid.to_template(np.column_stack([cols, rows]))
+    np.testing.assert_allclose(field[rows, cols], pts @ A.T + np.array([7.0, -4.0]), atol=1e-9)
+    # the grid covers the template: its area matches the triangles' area
+    a = fine.vertices[fine.faces]
+    e1, e2 = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    assert abs(grid.inside.sum() * 0.02**2 / area - 1) < 0.02
+
+
+def test_pull_back_matches_bilinear_sampling_and_marks_outside():
+    img = _texture((40, 50), 1)
+    px = np.array([[[3.25, 4.5], [48.9, 0.1]], [[-1.0, 3.0], [np.nan, 2.0]]])
+    out = pull_back(img, px)
+    ref = map_coordinates(img, [px[0, :, 1], px[0, :, 0]], order=1)
+    np.testing.assert_allclose(out[0], ref, rtol=1e-5)
+    assert np.isnan(out[1]).all()
+
+
+def test_flow_recovers_a_known_smooth_displacement():
+    ref = _texture((160, 160), 2)
+    yy, xx = np.mgrid[0:160, 0:160] / 160.0
+    dx = 2.5 * np.sin(np.pi * yy) * np.cos(np.pi * xx)  # up to 2.5 px
+    dy = -1.5 * np.sin(np.pi * xx)
+    # moving(x + d(x)) = ref(x)  <=>  moving = ref warped by the inverse: build it point-wise
+    moving = _warp(ref, -dx, -dy)  # first-order inverse; the flow must give d within ~0.1 px
+    flow, conf = measure_flow(ref, moving, noise=1.0)
+    inner = np.s_[20:-20, 20:-20]
+    good = conf[inner] > 0.3
+    assert good.mean() > 0.8
+    err = np.hypot(flow[inner][..., 0] - dx[inner], flow[inner][..., 1] - dy[inner])[good]
+    assert np.median(err) < 0.15, np.median(err)
+
+
+def test_flat_images_give_no_correction():
+    flat = np.full((80, 80), 120.0) + np.random.default_rng(3).normal(0, 1.0, (80, 80))
+    flow, conf = measure_flow(flat, flat[::-1].copy(), noise=2.0)
+    assert conf.max() < 0.3  # noise is not texture
+    inside = np.ones((80, 80), bool)
+    f = fuse(flow, 16.0 * conf, inside, smooth=16.0 * 16, prior=16.0 * 16 / 900)
+    assert np.abs(f).max() < 0.3
+
+
+def test_fuse_interpolates_measurements_and_fades_to_zero():
+    inside = np.ones((60, 60), bool)
+    measured = np.zeros((60, 60, 2))
+    weight = np.zeros((60, 60))
+    measured[:, :20, 0] = 2.0
+    weight[:, :20] = 16.0
+    f = fuse(measured, weight, inside, smooth=16.0 * 16, prior=16.0 * 16 / 100)
+    assert abs(f[30, 5, 0] - 2.0) < 0.1  # measured: kept
+    assert f[30, 55, 0] < 0.2 * f[30, 25, 0]  # far from any measurement: back towards 0
+    np.testing.assert_allclose(f[..., 1], 0.0, atol=1e-12)
+
+
+def test_refine_points_undoes_sliding_on_textured_skin(fine):
+    """The take's skin is the neutral's texture displaced by a known smooth field; the fit slid
+    by that field (it knows nothing of it). Refinement must find each vertex's skin point."""
+    shape = (420, 380)
+    neutral = _texture(shape, 4)
+    scale = 90.0  # px per template unit
+    centre = np.array([190.0, 170.0])
+    pn = fine.vertices * scale + centre  # neutral vertex pixels
+    # true motion of the skin in the image: smooth, up to ~3 px, zero at the fiducials' mean
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    ux = 3.0 * np.exp(-(((xx - 190) / 70) ** 2 + ((yy - 260) / 60) ** 2))
+    uy = 2.0 * np.exp(-(((xx - 230) / 60) ** 2 + ((yy - 200) / 70) ** 2))
+    take = _warp(neutral, -ux, -uy)  # a skin point at p in the neutral is at ~p + u(p)
+    true = pn + np.column_stack(
+        [
+            map_coordinates(ux, [pn[:, 1], pn[:, 0]], order=1),
+            map_coordinates(uy, [pn[:, 1], pn[:, 0]], order=1),
+        ]
+    )
+    fitted = pn.copy()
+    _, base = build_template().fiducial_set("closed")
+
+    def fit(s):  # the fit put every vertex at the neutral's pixel: it slid by u
+        return np.asarray(s) * scale + centre
+
+    refined, report = refine_points(
+        fine.vertices, fine.faces, fit, fit, neutral, take, base, RefineParams()
+    )
+    inner = (np.abs(pn - centre) < np.array([150, 180])).all(axis=1)
+    before = np.linalg.norm(fitted - true, axis=1)[inner]
+    after = np.linalg.norm(refined - true, axis=1)[inner]
+    assert np.sqrt(np.mean(before**2)) > 1.0
+    assert np.sqrt(np.mean(after**2)) < 0.25 * np.sqrt(np.mean(before**2))
+    assert report["confident_share"] > 0.5
