@@ -1,14 +1,17 @@
 """Take-to-neutral alignment: accuracy on the synthetic cohort, and timing.
 
-Run: ``.venv/bin/python benchmarks/bench_align.py [--subjects 4] [--config config/config.yaml]``.
-Simulates the subjects' takes in memory exactly as the pipeline does (``make_take`` with the
-config's ``synthetic.scanner``, seed and takes; ``repair_range``; ``fit_take`` with the config's
-template options and fiducial set per kind), aligns every take to its subject's neutral as the
-align stage does (``align.point_pairs`` for the initial pose, ICP on ``align.icp_region``, the
-rest of ``align`` as :func:`~scan2morph.align.align_take`'s settings) and prints per take the
-rotation (deg) and translation (mm, at the face centroid) error against the truth (as the
-accuracy report computes them), ICP's fitness, inlier RMSE (mm, point to point), the
-point-to-plane RMSE of the kept region (mm), iterations, convergence and the verdict.
+Run: ``.venv/bin/python benchmarks/bench_align.py [--subjects N] [--config config/config.yaml]``.
+Simulates the subjects' takes in memory as the pipeline does (range takes: ``make_take`` with the
+config's ``synthetic.scanner``; the stereo takes ``synthetic.stereo`` lists: ``make_stereo_take``
+with its rig and ``reconstruct_stereo`` with the config's ``stereo``; then ``repair_range`` and
+``fit_take`` with the config's template options and fiducial set per kind; subjects of other
+modalities are skipped), aligns every take to its subject's neutral as the align stage does
+(``align.point_pairs`` for the initial pose, ICP on ``align.icp_region``, the rest of ``align``
+as :func:`~scan2morph.align.align_take`'s settings) and prints per take the rotation (deg) and
+translation (mm, at the face centroid) error against the truth (as the accuracy report computes
+them), ICP's fitness, the point-to-plane RMSE of the kept region (mm), the measured noise of the
+take's and the neutral's region (mm), the RMSE limit used (mm; ``*`` absolute), the share of the
+region kept, iterations, convergence and the verdict.
 
 The code before a change: ``PYTHONPATH=/tmp/base/src .venv/bin/python benchmarks/bench_align.py
 --config /tmp/base/config/config.yaml`` (an older library lacks the verdict: ``-``).
@@ -116,8 +119,39 @@ def _align_settings(config: dict) -> tuple[list, str, dict]:
     return list(align["point_pairs"]), align["icp_region"], icp
 
 
-def simulate(config: dict, template, subject: str) -> tuple[dict, dict]:
-    """A subject's range takes as the pipeline sees them: repaired, template fitted.
+def _stereo_takes(config: dict, number: int) -> set[str]:
+    """The takes of subject ``number`` (1-based) that are stereo pairs."""
+    st = config["synthetic"].get("stereo") or {}
+    return set(st.get("takes", [])) if number in st.get("subjects", []) else set()
+
+
+def _other_modality(config: dict, number: int) -> str | None:
+    """The synthetic modality other than range and stereo of subject ``number``, if any."""
+    for key in ("mesh", "rgbd"):
+        if number in (config["synthetic"].get(key) or {}).get("subjects", []):
+            return key
+    return None
+
+
+def _scan(config: dict, subject: str, t: dict, stereo: bool) -> dict:
+    """One take's range image, landmarks and truth, as ingest hands them on."""
+    from scan2morph.scan import reconstruct_stereo
+    from scan2morph.synth.cohort import make_take
+    from scan2morph.synth.stereo import make_stereo_take
+
+    syn = config["synthetic"]
+    args = (subject, t["label"], t["kind"], t["take"], int(syn["seed"]))
+    if not stereo:
+        return make_take(*args, syn["scanner"])
+    take = make_stereo_take(*args, dict(syn["stereo"]["rig"]))
+    xyz, _ = reconstruct_stereo(
+        take["left"], take["right"], take["calib"], dict(config["stereo"]), source=t["take"]
+    )
+    return {"xyz": xyz, "landmarks": take["landmarks"], "truth": take["truth"]}
+
+
+def simulate(config: dict, template, subject: str, stereo: set[str] = frozenset()) -> tuple:
+    """A subject's takes as the pipeline sees them: repaired, template fitted.
 
     Returns
     -------
@@ -126,15 +160,12 @@ def simulate(config: dict, template, subject: str) -> tuple[dict, dict]:
     """
     from scan2morph.evaluate.truth import Truth
     from scan2morph.scan import repair_range
-    from scan2morph.synth.cohort import make_take
     from scan2morph.template import fit_options, fit_take
 
-    syn, tpl = config["synthetic"], config["template"]
+    tpl = config["template"]
     meshes, truths = {}, {}
     for t in _range_takes(config):
-        take = make_take(
-            subject, t["label"], t["kind"], t["take"], int(syn["seed"]), syn["scanner"]
-        )
+        take = _scan(config, subject, t, t["take"] in stereo)
         xyz, _ = repair_range(take["xyz"], dict(config["repair"]), source=t["take"])
         meshes[t["take"]] = fit_take(
             template,
@@ -153,7 +184,7 @@ def _range_takes(config: dict) -> list[dict]:
     return [t for t in config["synthetic"]["takes"] if t.get("modality", "range") == "range"]
 
 
-def cohort(config_path: Path, n_subjects: int) -> list[dict]:
+def cohort(config_path: Path, n_subjects: int | None) -> list[dict]:
     """Alignment errors against the truth of every take of ``n_subjects`` synthetic subjects."""
     import yaml
 
@@ -163,6 +194,7 @@ def cohort(config_path: Path, n_subjects: int) -> list[dict]:
     from scan2morph.template.regions import icp_region, named_indices
 
     config = yaml.safe_load(config_path.read_text())
+    n_subjects = int(config["synthetic"]["subjects"]) if n_subjects is None else n_subjects
     template = build_template()
     fine = subdivide_template(template, int(config["template"]["subdivision_levels"]))
     pair_names, region, icp = _align_settings(config)
@@ -173,13 +205,19 @@ def cohort(config_path: Path, n_subjects: int) -> list[dict]:
     rows = []
     for i in range(1, n_subjects + 1):
         subject = f"{config['synthetic']['prefix']}{i:02d}"
-        meshes, truths = simulate(config, template, subject)
+        other = _other_modality(config, i)
+        if other:
+            print(f"{subject:>8} skipped: {other} takes are not simulated here", flush=True)
+            continue
+        stereo = _stereo_takes(config, i)
+        meshes, truths = simulate(config, template, subject, stereo)
         n = meshes[neutral]
         for t in takes:
             if t["take"] == neutral:
                 continue
             m = meshes[t["take"]]
             row = {"subject": subject, "take": t["take"], "kind": t["kind"]}
+            row["modality"] = "stereo" if t["take"] in stereo else "range"
             try:
                 res = align_take(
                     m["vertices"],
@@ -205,6 +243,11 @@ def cohort(config_path: Path, n_subjects: int) -> list[dict]:
                 "fitness": res.fitness,
                 "rmse_mm": res.inlier_rmse,
                 "plane_mm": getattr(res, "residual_rmse", float("nan")),
+                "noise_take": getattr(res, "noise_take", float("nan")),
+                "noise_neutral": getattr(res, "noise_neutral", float("nan")),
+                "limit_mm": getattr(res, "rmse_limit", float("nan")),
+                "limit_kind": getattr(res, "rmse_limit_kind", "-"),
+                "kept": getattr(res, "inlier_fraction", float("nan")),
                 "iterations": res.iterations,
                 "converged": res.converged,
                 "ok": ok,
@@ -216,12 +259,22 @@ def cohort(config_path: Path, n_subjects: int) -> list[dict]:
     return rows
 
 
+_HEADER = (
+    f"{'subject':>8} {'take':>7} {'scan':>6} {'rot deg':>8} {'t mm':>7} {'fitness':>7} "
+    f"{'plane mm':>8} {'noise t':>7} {'noise n':>7} {'limit':>7} {'kept':>5} "
+    f"{'it':>4} {'conv':>5} {'ok':>5} recovery / problems"
+)
+
+
 def _print_row(r: dict) -> None:
     verdict = "-" if r["ok"] is None else ("ok" if r["ok"] else "FLAG")
+    star = "*" if r["limit_kind"] == "absolute" else " "
     print(
-        f"{r['subject']:>8} {r['take']:>7} {r['rot_deg']:>8.3f} {r['t_mm']:>7.3f} "
-        f"{r['fitness']:>7.3f} {r['rmse_mm']:>7.3f} {r['plane_mm']:>8.3f} {r['iterations']:>4d} "
-        f"{str(r['converged']):>5} {verdict:>5} {'; '.join(r['recovery'] + r['problems'])}",
+        f"{r['subject']:>8} {r['take']:>7} {r['modality']:>6} {r['rot_deg']:>8.3f} "
+        f"{r['t_mm']:>7.3f} {r['fitness']:>7.3f} {r['plane_mm']:>8.3f} {r['noise_take']:>7.3f} "
+        f"{r['noise_neutral']:>7.3f} {r['limit_mm']:>6.3f}{star} {r['kept']:>5.2f} "
+        f"{r['iterations']:>4d} {str(r['converged']):>5} {verdict:>5} "
+        f"{'; '.join(r['recovery'] + r['problems'])}",
         flush=True,
     )
 
@@ -242,17 +295,13 @@ def _summary(rows: list[dict]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", type=Path, default=Path(__file__).parents[1] / "config/config.yaml")
-    ap.add_argument("--subjects", type=int, default=4)
+    ap.add_argument("--subjects", type=int, default=None, help="default: synthetic.subjects")
     ap.add_argument("--timing", action="store_true", help="time align_take instead")
     args = ap.parse_args()
     if args.timing:
         timing()
         return
-    print(
-        f"{'subject':>8} {'take':>7} {'rot deg':>8} {'t mm':>7} {'fitness':>7} {'rmse mm':>7} "
-        f"{'plane mm':>8} "
-        f"{'it':>4} {'conv':>5} {'ok':>5} recovery / problems"
-    )
+    print(_HEADER)
     rows = cohort(args.config, args.subjects)
     for r in rows:
         if "error" in r:

@@ -1,6 +1,15 @@
 """Rigid alignment of a subject's takes to its neutral frame (Kabsch initial pose + ICP)."""
 
-from scan2morph.align.icp import DEFAULT_ICP, AlignResult, align_take, vertex_normals
+from scan2morph.align.icp import (
+    DEFAULT_ICP,
+    AlignResult,
+    RmseGate,
+    align_take,
+    rmse_gate,
+    rmse_limit,
+    vertex_normals,
+)
+from scan2morph.align.noise import MeshNoise, mesh_noise
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 
 __all__ = [
@@ -9,6 +18,11 @@ __all__ = [
     "align_take",
     "invert",
     "kabsch",
+    "mesh_noise",
+    "MeshNoise",
+    "RmseGate",
+    "rmse_gate",
+    "rmse_limit",
     "rotation_angle_deg",
     "transform_points",
     "vertex_normals",

@@ -25,10 +25,20 @@ residual is averaged over its neighbours within ``trim_radius_mm`` (moving skin 
 patches, noise does not), the vertices whose averaged residual exceeds ``trim_sigma`` robust
 standard deviations are left out, and the refinement resumes on the rest, until the kept set
 stops changing. A refinement that does not converge is re-initialised from the point pairs on
-the kept region, then given a convex (Huber) kernel. The result carries a verdict (``ok``,
-``problems``) instead of raising: not converged after that recovery, fitness below
-``min_fitness``, point-to-plane RMSE above ``max_rmse_mm``, less than ``min_inlier_fraction``
-of the region kept.
+the kept region, then given a convex (Huber) kernel.
+
+How far a right alignment leaves the two meshes apart depends on the scanner: 0.1 mm for a
+laser scanner, a few mm for a depth camera. Each mesh's noise is therefore measured from the
+mesh itself (:func:`scan2morph.align.noise.mesh_noise`: the roughness of its stable region
+against a local quadric), and the expected point-to-plane RMSE of a right alignment is
+``sqrt(noise_take^2 + noise_neutral^2)``. The robust kernel is never narrower than
+``kernel_noise_sigmas`` times that (a Tukey kernel of 0.3 mm on a 3 mm scan weighs almost every
+point zero), and the RMSE gate is ``max_rmse_ratio`` times it (``max_rmse_mm``, when set,
+replaces it by an absolute limit).
+
+The result carries a verdict (``ok``, ``problems``) instead of raising: not converged after that
+recovery, fitness below ``min_fitness``, point-to-plane RMSE above the limit, less than
+``min_inlier_fraction`` of the region kept.
 """
 
 from __future__ import annotations
@@ -40,6 +50,7 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from scan2morph.align.noise import mesh_noise
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
@@ -48,14 +59,17 @@ from scan2morph.geometry import vertex_normals
 #: stop the iteration when both the fitness and the inlier RMSE change by less than that
 #: between iterations (open3d's criterion: absolute changes, despite the name); so does a pose
 #: step below ``step_deg`` and ``step_mm``. ``trim_*``: trimming of the region's moving parts
-#: (``trim_rounds`` 0: off). ``min_fitness``, ``max_rmse_mm`` and ``min_inlier_fraction`` are
-#: the quality gate of :attr:`AlignResult.ok`.
+#: (``trim_rounds`` 0: off). ``kernel_k_mm`` is the kernel's least final scale; it is widened to
+#: ``kernel_noise_sigmas`` times the expected RMSE of the measured noise. ``min_fitness``,
+#: ``max_rmse_ratio`` (times the expected RMSE; ``max_rmse_mm``, if not None, is an absolute
+#: limit instead) and ``min_inlier_fraction`` are the quality gate of :attr:`AlignResult.ok`.
 DEFAULT_ICP: dict[str, Any] = {
     "method": "icp",
     "max_correspondence_mm": 10.0,
     "max_iterations": 50,
     "robust_kernel": "tukey",
     "kernel_k_mm": 3.0,
+    "kernel_noise_sigmas": 3.0,
     "min_fitness": 0.5,
     "relative_fitness": 1e-6,
     "relative_rmse": 1e-6,
@@ -64,12 +78,18 @@ DEFAULT_ICP: dict[str, Any] = {
     "trim_rounds": 6,
     "trim_radius_mm": 8.0,
     "trim_sigma": 3.0,
-    "max_rmse_mm": 0.5,
+    "max_rmse_ratio": 3.0,
+    "max_rmse_mm": None,
     "min_inlier_fraction": 0.3,
 }
 
 #: Averaged residuals below this never count as motion, mm (a floor to the robust threshold).
 _TRIM_FLOOR_MM = 0.05
+
+#: The relative RMSE limit is never below this, mm: on noise-free meshes the expected RMSE is
+#: zero, but the template's vertices of two takes sample the skin at different points and the
+#: point-to-plane residual of curved skin is not (0.02-0.05 mm on the synthetic faces).
+_RMSE_FLOOR_MM = 0.1
 
 _METHODS = ("icp", "correspondence")
 _KERNELS = ("tukey", "huber", "none")
@@ -101,7 +121,7 @@ class AlignResult:
         Number of upper-face source vertices used.
     residual_rmse : float
         RMS point-to-plane distance of the kept region vertices to the neutral mesh at the
-        final pose, mm (the scan noise when the alignment is right; gated by ``max_rmse_mm``).
+        final pose, mm (the scan noise when the alignment is right; gated by ``rmse_limit``).
     inlier_fraction : float
         Share of the region's vertices kept after trimming its moving parts, in [0, 1]
         (gated by ``min_inlier_fraction``).
@@ -112,6 +132,20 @@ class AlignResult:
         kept); empty when ``ok``.
     recovery : list of str
         What was done beyond the plain refinement: trimming, re-initialisation, kernel change.
+    noise_take, noise_neutral : float
+        Measurement noise of the take's and the neutral's ICP region, mm (standard deviation,
+        estimated from each mesh's roughness; NaN if too few vertices).
+    expected_rmse : float
+        ``sqrt(noise_take^2 + noise_neutral^2)``: the point-to-plane RMSE of a right
+        alignment, mm.
+    rmse_limit : float
+        The RMSE gate used, mm: ``max_rmse_ratio * expected_rmse`` (at least 0.1 mm), or
+        ``max_rmse_mm`` when set.
+    rmse_limit_kind : str
+        ``"relative"`` or ``"absolute"`` (``max_rmse_mm`` set).
+    kernel_k : float
+        Final scale of the robust kernel used, mm (``kernel_k_mm`` widened to
+        ``kernel_noise_sigmas * expected_rmse``).
     """
 
     transform: np.ndarray
@@ -127,6 +161,12 @@ class AlignResult:
     ok: bool = True
     problems: list[str] = field(default_factory=list)
     recovery: list[str] = field(default_factory=list)
+    noise_take: float = float("nan")
+    noise_neutral: float = float("nan")
+    expected_rmse: float = float("nan")
+    rmse_limit: float = float("nan")
+    rmse_limit_kind: str = "relative"
+    kernel_k: float = float("nan")
 
 
 def _params(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
@@ -152,12 +192,20 @@ def _params(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
         "kernel_k_mm",
         "trim_radius_mm",
         "trim_sigma",
-        "max_rmse_mm",
+        "max_rmse_ratio",
+        "kernel_noise_sigmas",
     ):
         v = float(p[key])
         if not (np.isfinite(v) and v > 0):
             raise InputError(source, f"icp params: {key} must be a positive number, got {p[key]!r}")
         p[key] = v
+    if p["max_rmse_mm"] is not None:
+        v = p["max_rmse_mm"]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
+            raise InputError(
+                source, f"icp params: max_rmse_mm must be a positive number or None, got {v!r}"
+            )
+        p["max_rmse_mm"] = float(v)
     for key in ("relative_fitness", "relative_rmse", "step_deg", "step_mm"):
         v = float(p[key])
         if not (np.isfinite(v) and v >= 0):
@@ -345,8 +393,10 @@ def align_take(
         ``max_correspondence_mm``, ``max_iterations``, ``robust_kernel``
         ('tukey' | 'huber' | 'none'), ``kernel_k_mm``, ``relative_fitness``, ``relative_rmse``,
         ``step_deg``, ``step_mm`` (convergence); ``trim_rounds``, ``trim_radius_mm``,
-        ``trim_sigma`` (trimming the region's moving parts); ``min_fitness``, ``max_rmse_mm``,
-        ``min_inlier_fraction`` (the quality gate).
+        ``trim_sigma`` (trimming the region's moving parts); ``kernel_noise_sigmas`` (the
+        kernel's least scale in units of the expected RMSE of the measured noise);
+        ``min_fitness``, ``max_rmse_ratio``, ``max_rmse_mm``, ``min_inlier_fraction`` (the
+        quality gate).
     source : str
         ``subject/take`` label for error messages.
 
@@ -356,7 +406,8 @@ def align_take(
         ``transform`` maps the take's scanner frame to the neutral frame; ``ok`` is False, with
         the reasons in ``problems``, when the alignment failed its quality gate (not converged
         after recovery, fitness below ``min_fitness``, point-to-plane RMSE above
-        ``max_rmse_mm``, less than ``min_inlier_fraction`` of the region kept).
+        :func:`rmse_limit`, less than ``min_inlier_fraction`` of the region kept); the measured
+        noise and the limit used are in the result.
 
     Raises
     ------
@@ -401,6 +452,11 @@ def align_take(
             "expected at least 3",
         )
     p, q = src[p_idx], dst[q_idx]
+    noise_take = mesh_noise(src, sv, source=source).region(p_idx)
+    noise_neutral = mesh_noise(dst, dv, source=source).region(q_idx)
+    expected = float(np.hypot(noise_take, noise_neutral))
+    known = expected if np.isfinite(expected) else 0.0
+    prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
     plane = _PlaneResiduals(dst, normals, upper & dv & np.isfinite(normals).all(axis=1))
 
     def refine(keep, start, prm_=prm, k_start=None):
@@ -434,10 +490,10 @@ def align_take(
         fitness, rmse = _nearest_stats(p, q, t, prm["max_correspondence_mm"])
     else:
         _, fitness, rmse = _residual_stats(p, q, t, prm["max_correspondence_mm"])
-    r = plane(transform_points(t, p[keep]))
-    residual_rmse = float(np.sqrt(np.mean(r**2))) if r.size else float("inf")
+    gate = _rmse_gate(plane(transform_points(t, p[keep])), noise_take, noise_neutral, prm)
     kept = float(keep.mean())
-    problems = _verdict(conv, iterations, fitness, residual_rmse, kept, recovery, prm)
+    problems = _verdict(conv, iterations, fitness, kept, recovery, prm)
+    problems += [gate.problem] if gate.problem else []
     return AlignResult(
         transform=t,
         initial=initial,
@@ -447,12 +503,120 @@ def align_take(
         converged=bool(conv),
         method=prm["method"],
         n_points=int(p_idx.size),
-        residual_rmse=residual_rmse,
+        residual_rmse=gate.residual_rmse,
         inlier_fraction=kept,
         ok=not problems,
         problems=problems,
         recovery=recovery,
+        noise_take=noise_take,
+        noise_neutral=noise_neutral,
+        expected_rmse=expected,
+        rmse_limit=gate.limit,
+        rmse_limit_kind=gate.kind,
+        kernel_k=prm["kernel_k_mm"],
     )
+
+
+@dataclass(frozen=True)
+class RmseGate:
+    """The RMSE gate of an alignment (:func:`rmse_gate`).
+
+    Attributes
+    ----------
+    residual_rmse : float
+        RMS point-to-plane distance of the region's take vertices to the neutral mesh, mm.
+    noise_take, noise_neutral : float
+        Measured noise of the take's and the neutral's region, mm.
+    limit : float
+        The limit used, mm (:func:`rmse_limit`).
+    kind : str
+        ``"relative"`` or ``"absolute"``.
+    problem : str or None
+        Why the gate failed (naming the RMSE, the measured noise and the limit); None if passed.
+    """
+
+    residual_rmse: float
+    noise_take: float
+    noise_neutral: float
+    limit: float
+    kind: str
+    problem: str | None
+
+
+def rmse_gate(
+    src_vertices: np.ndarray,
+    src_valid: np.ndarray,
+    dst_vertices: np.ndarray,
+    dst_valid: np.ndarray,
+    faces: np.ndarray,
+    icp_indices: np.ndarray,
+    transform: np.ndarray,
+    params: dict[str, Any] | None = None,
+    source: str = "subject/take",
+) -> RmseGate:
+    """Judge a given take -> neutral pose by the RMSE gate :func:`align_take` applies.
+
+    Parameters
+    ----------
+    src_vertices, src_valid, dst_vertices, dst_valid, faces, icp_indices
+        As :func:`align_take` (the whole valid region is judged: nothing is trimmed).
+    transform : (4, 4) float
+        Take scanner frame -> neutral frame.
+    params : dict, optional
+        ``max_rmse_ratio``, ``max_rmse_mm`` (overrides of :data:`DEFAULT_ICP`).
+    source : str
+        ``subject/take`` for messages.
+
+    Returns
+    -------
+    RmseGate
+    """
+    prm = _params(params, source)
+    src, sv = _mesh(src_vertices, src_valid, "src", source)
+    dst, dv = _mesh(dst_vertices, dst_valid, "dst", source, src.shape[0])
+    region = np.zeros(src.shape[0], dtype=bool)
+    region[_indices(icp_indices, src.shape[0], "icp_indices", source)] = True
+    normals = vertex_normals(dst, np.asarray(faces))
+    target = region & dv & np.isfinite(normals).all(axis=1)
+    p_idx = np.flatnonzero(region & sv)
+    if p_idx.size < 3 or np.count_nonzero(target) < 3:
+        raise InputError(source, "icp_indices: fewer than 3 valid region vertices")
+    noise_take = mesh_noise(src, sv, source=source).region(p_idx)
+    noise_neutral = mesh_noise(dst, dv, source=source).region(np.flatnonzero(target))
+    residuals = _PlaneResiduals(dst, normals, target)(transform_points(transform, src[p_idx]))
+    return _rmse_gate(residuals, noise_take, noise_neutral, prm)
+
+
+def _rmse_gate(residuals, noise_take, noise_neutral, prm) -> RmseGate:
+    rmse = float(np.sqrt(np.mean(residuals**2))) if residuals.size else float("inf")
+    limit, kind = rmse_limit(noise_take, noise_neutral, prm)
+    problem = _rmse_verdict(rmse, limit, kind, noise_take, noise_neutral, prm)
+    return RmseGate(rmse, float(noise_take), float(noise_neutral), limit, kind, problem)
+
+
+def rmse_limit(noise_take: float, noise_neutral: float, params: dict[str, Any]) -> tuple:
+    """The point-to-plane RMSE above which an alignment is poor.
+
+    Parameters
+    ----------
+    noise_take, noise_neutral : float
+        Measured noise (standard deviation) of the take's and the neutral's ICP region, mm;
+        NaN when unknown (counted as 0).
+    params : dict
+        ``max_rmse_ratio`` and ``max_rmse_mm`` (None: relative), as in :data:`DEFAULT_ICP`.
+
+    Returns
+    -------
+    limit : float
+        mm: ``max_rmse_mm`` if set, else ``max_rmse_ratio * sqrt(noise_take^2 +
+        noise_neutral^2)``, at least :data:`_RMSE_FLOOR_MM`.
+    kind : str
+        ``"absolute"`` or ``"relative"``.
+    """
+    if params.get("max_rmse_mm") is not None:
+        return float(params["max_rmse_mm"]), "absolute"
+    expected = np.hypot(*(x if np.isfinite(x) else 0.0 for x in (noise_take, noise_neutral)))
+    return float(max(params["max_rmse_ratio"] * expected, _RMSE_FLOOR_MM)), "relative"
 
 
 class _PlaneResiduals:
@@ -524,7 +688,7 @@ def _trim(p, keep, t, conv, refine, plane, prm, recovery) -> tuple:
     return keep, t, conv, iterations
 
 
-def _verdict(conv, iterations, fitness, residual_rmse, kept, recovery, prm) -> list[str]:
+def _verdict(conv, iterations, fitness, kept, recovery, prm) -> list[str]:
     """The problems of an alignment against its quality gate; empty when it passed."""
     problems = []
     if not conv:
@@ -536,11 +700,6 @@ def _verdict(conv, iterations, fitness, residual_rmse, kept, recovery, prm) -> l
             f"region within max_correspondence_mm={prm['max_correspondence_mm']:g} of the "
             "neutral mesh): check the point pairs and that the take shows the same subject"
         )
-    if not residual_rmse <= prm["max_rmse_mm"]:
-        problems.append(
-            f"point-to-plane RMSE {residual_rmse:.3f} mm > max_rmse_mm "
-            f"{prm['max_rmse_mm']:g} over the kept region"
-        )
     if kept < prm["min_inlier_fraction"]:
         problems.append(
             f"only {100 * kept:.0f}% of the region kept (min_inlier_fraction "
@@ -549,4 +708,31 @@ def _verdict(conv, iterations, fitness, residual_rmse, kept, recovery, prm) -> l
     return problems
 
 
-__all__ = ["DEFAULT_ICP", "AlignResult", "align_take", "vertex_normals"]
+def _rmse_verdict(residual_rmse, limit, kind, noise_take, noise_neutral, prm) -> str | None:
+    """The RMSE gate's problem, naming the measured noise and the limit; None when it passed."""
+    if residual_rmse <= limit:
+        return None
+    noise = f"measured noise: take {noise_take:.3f} mm, neutral {noise_neutral:.3f} mm"
+    if kind == "absolute":
+        why = f"max_rmse_mm {limit:g} (absolute; {noise})"
+    else:
+        expected = np.hypot(noise_take, noise_neutral)
+        why = (
+            f"limit {limit:.3f} mm (max_rmse_ratio {prm['max_rmse_ratio']:g} x the "
+            f"{expected:.3f} mm a right alignment leaves; {noise})"
+        )
+    return (
+        f"point-to-plane RMSE {residual_rmse:.3f} mm over the kept region > {why}: "
+        "misaligned, or the stable region moved"
+    )
+
+
+__all__ = [
+    "DEFAULT_ICP",
+    "AlignResult",
+    "RmseGate",
+    "align_take",
+    "rmse_gate",
+    "rmse_limit",
+    "vertex_normals",
+]

@@ -82,8 +82,11 @@ def run(
         (V, 3) mm, and ``align/ok``: the alignment passed its quality gate; the ``align``
         group's attributes hold ICP's fitness, inlier RMSE (mm), the point-to-plane RMSE of
         the kept stable region (``residual_rmse_mm``) and its share (``inlier_fraction``),
-        iterations, convergence, method, the ``recovery`` tried and the ``problems`` of a failed
-        gate.
+        the measured noise of the take's and the neutral's region (``noise_take_mm``,
+        ``noise_neutral_mm``), the RMSE a right alignment leaves (``expected_rmse_mm``), the
+        RMSE limit used (``rmse_limit_mm``, ``rmse_limit_kind`` relative | absolute), the
+        robust kernel's final scale (``kernel_k_mm``), iterations, convergence, method, the
+        ``recovery`` tried and the ``problems`` of a failed gate.
     """
     src = need(data, paths.mesh(take, "vertices"), source)
     attrs, ok = {}, True
@@ -110,6 +113,12 @@ def run(
                 inlier_rmse_mm=result.inlier_rmse,
                 residual_rmse_mm=result.residual_rmse,
                 inlier_fraction=result.inlier_fraction,
+                noise_take_mm=result.noise_take,
+                noise_neutral_mm=result.noise_neutral,
+                expected_rmse_mm=result.expected_rmse,
+                rmse_limit_mm=result.rmse_limit,
+                rmse_limit_kind=result.rmse_limit_kind,
+                kernel_k_mm=result.kernel_k,
                 iterations=result.iterations,
                 converged=result.converged,
                 method=result.method,

@@ -1,0 +1,130 @@
+"""Measurement noise of a fitted mesh, estimated from the mesh itself (no ground truth).
+
+A template vertex is sampled from the scan at one point; its neighbours a few mm away carry
+independent noise (the scanner's noise is correlated over a few pixels, well under the template's
+vertex spacing) but lie on the same smooth skin. The noise of a vertex is therefore what a
+smooth surface through its neighbours does not explain: a quadric height field
+``h = a + b u + c v + d u^2 + e u v + f v^2`` is fitted by least squares to the ``neighbours``
+nearest valid vertices (in the tangent frame of their principal axes) and the vertex's height
+above it is its roughness residual. Under independent Gaussian noise of standard deviation
+sigma the residual has variance ``sigma^2 (1 + h0)``, ``h0`` the leverage of the vertex in the
+fit, so ``residual^2 / (1 + h0)`` is an unbiased estimate of ``sigma^2`` per vertex. Medians of
+these over a neighbourhood (a vertex's noise) or a region (a mesh's noise) make the estimate
+robust to the few vertices where the skin is not a quadric (a crease, a nostril rim): the
+median of a chi-square with one degree of freedom is :data:`CHI2_1_MEDIAN` times its mean.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from scan2morph.errors import InputError
+
+#: Median of a chi-square variable with one degree of freedom (its mean is 1).
+CHI2_1_MEDIAN = 0.454936423119572
+
+#: Quadric terms plus a margin: fewer valid neighbours than this give no estimate at a vertex.
+MIN_NEIGHBOURS = 9
+
+
+@dataclass(frozen=True)
+class MeshNoise:
+    """Noise of a mesh's vertices, mm.
+
+    Attributes
+    ----------
+    vertex : (V,) float, mm
+        Each vertex's noise standard deviation: the robust mean square of the roughness
+        residuals of it and its ``neighbours`` nearest valid vertices; NaN where invalid or
+        without enough valid neighbours.
+    sq_residual : (V,) float, mm^2
+        Each vertex's leverage-corrected squared roughness residual (an unbiased, single-sample
+        estimate of its noise variance); NaN where not estimated.
+    """
+
+    vertex: np.ndarray
+    sq_residual: np.ndarray
+
+    def region(self, mask: np.ndarray) -> float:
+        """The noise standard deviation of the vertices in ``mask`` (robust, from the median of
+        their squared residuals), mm; NaN when none has an estimate."""
+        r = self.sq_residual[np.asarray(mask)]
+        r = r[np.isfinite(r)]
+        return float(np.sqrt(np.median(r) / CHI2_1_MEDIAN)) if r.size else float("nan")
+
+
+def mesh_noise(
+    vertices: np.ndarray,
+    valid: np.ndarray,
+    neighbours: int = 12,
+    source: str = "mesh",
+) -> MeshNoise:
+    """Estimate each vertex's measurement noise from the roughness of the mesh around it.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+        A fitted mesh (any frame); NaN where invalid.
+    valid : (V,) bool
+        Its valid vertices.
+    neighbours : int
+        Nearest valid vertices the quadric is fitted to (and over which a vertex's squared
+        residuals are pooled), at least :data:`MIN_NEIGHBOURS`.
+    source : str
+        ``subject/take`` for messages.
+
+    Returns
+    -------
+    MeshNoise
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    m = np.asarray(valid, dtype=bool)
+    if v.ndim != 2 or v.shape[1] != 3 or m.shape != (v.shape[0],):
+        raise InputError(
+            source, f"mesh_noise: expected (V, 3) vertices and (V,) valid, got {v.shape}, {m.shape}"
+        )
+    if isinstance(neighbours, bool) or int(neighbours) != neighbours or neighbours < MIN_NEIGHBOURS:
+        raise InputError(
+            source,
+            f"mesh_noise: neighbours must be an integer >= {MIN_NEIGHBOURS}, got {neighbours}",
+        )
+    n_v = v.shape[0]
+    sq = np.full(n_v, np.nan)
+    noise = np.full(n_v, np.nan)
+    idx = np.flatnonzero(m & np.isfinite(v).all(axis=1))
+    k = int(neighbours)
+    if idx.size <= k:
+        return MeshNoise(noise, sq)
+    pts = v[idx]
+    _, nn = cKDTree(pts).query(pts, k=k + 1)
+    nb = nn[:, 1:]  # the nearest is the vertex itself
+    sq[idx] = _quadric_residuals(pts, nb)
+    pooled = np.concatenate([sq[idx][:, None], sq[idx][nb]], axis=1)
+    noise[idx] = np.sqrt(np.median(pooled, axis=1) / CHI2_1_MEDIAN)
+    return MeshNoise(noise, sq)
+
+
+def _quadric_residuals(pts: np.ndarray, nb: np.ndarray) -> np.ndarray:
+    """Leverage-corrected squared height of each point above the quadric fitted to its
+    neighbours ``nb`` (n, k), mm^2."""
+    local = pts[nb] - pts[:, None, :]  # (n, k, 3), the vertex at the origin
+    centred = local - local.mean(axis=1, keepdims=True)
+    _, _, axes = np.linalg.svd(centred, full_matrices=False)  # (n, 3, 3) rows: principal axes
+    uvw = np.einsum("nkj,nij->nki", local, axes)
+    u, w_, h = uvw[..., 0], uvw[..., 1], uvw[..., 2]
+    scale = np.sqrt(np.mean(u**2 + w_**2, axis=1, keepdims=True))  # conditioning
+    u, w_ = u / scale, w_ / scale
+    x = np.stack([np.ones_like(u), u, w_, u * u, u * w_, w_ * w_], axis=-1)  # (n, k, 6)
+    xtx_inv = np.linalg.pinv(np.einsum("nki,nkj->nij", x, x))  # (n, 6, 6)
+    xth = np.einsum("nki,nk->ni", x, h)
+    # the vertex sits at the origin, its design row is (1, 0, ..., 0): the quadric's height there
+    # is the first coefficient, its leverage the first diagonal element of (X^T X)^-1
+    residual = -np.einsum("ni,ni->n", xtx_inv[:, 0, :], xth)
+    leverage = xtx_inv[:, 0, 0]
+    return residual**2 / (1.0 + leverage)
+
+
+__all__ = ["CHI2_1_MEDIAN", "MIN_NEIGHBOURS", "MeshNoise", "mesh_noise"]
