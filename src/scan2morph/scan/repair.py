@@ -46,6 +46,13 @@ DEFAULT_REPAIR: dict[str, float | int] = {
     "fill_max_iter": 100,
     "max_edge_hole_px": 50,
 }
+#: Default parameters used only for depth-camera data (``repair_range(..., depth_camera=True)``;
+#: the same config section).
+DEFAULT_DEPTH_REPAIR: dict[str, float | int] = {
+    "depth_edge_jump_mm": 10.0,
+    "depth_edge_trim_px": 2,
+    "depth_smooth_sigma_px": 1.5,
+}
 
 # Source named by parameter errors: the config section, whatever the take.
 _PARAMS = "repair"
@@ -643,22 +650,123 @@ def _fill_report(
 
 
 # --------------------------------------------------------------------------------------------
+# depth cameras (RGB-D): flying pixels at depth edges, depth noise
+
+
+def _ranges(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (H, W) of every point from the scanner's centre (estimated from the pixel grid,
+    see :func:`~scan2morph.template.sample.scanner_view`), and that centre (3,)."""
+    view = scanner_view(xyz)
+    centre = np.asarray(view.centre, dtype=np.float64) if view.estimated else np.zeros(3)
+    return np.linalg.norm(xyz - centre, axis=-1), centre
+
+
+def trim_depth_edges(
+    xyz: np.ndarray, jump_mm: float, trim_px: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the far side of depth edges: flying pixels and surfaces seen past a silhouette.
+
+    A depth camera returns, at a depth edge, points between the near and the far surface
+    (flying pixels), and an RGB-D image resampled onto the colour camera shows the far surface
+    through the gap that the baseline opens beside a silhouette. Both lie farther from the
+    scanner than a pixel ``k`` <= ``trim_px`` pixels away (chessboard distance) by more than
+    ``k`` x ``jump_mm``: a range step steeper than ``jump_mm`` per pixel, which a face's own
+    slopes reach only at grazing angles.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+    jump_mm : float
+        Least range step of a depth edge per pixel, mm.
+    trim_px : int
+        Half side of the square neighbourhood searched for a nearer surface, px (0: off).
+
+    Returns
+    -------
+    xyz_trimmed : (H, W, 3) float64, mm (a copy)
+    dropped : (H, W) bool
+    """
+    out = np.array(xyz, dtype=np.float64)
+    if trim_px <= 0:
+        return out, np.zeros(out.shape[:2], bool)
+    rng, _ = _ranges(out)
+    filled = np.where(np.isfinite(rng), rng, np.inf)
+    dropped = np.zeros(rng.shape, bool)
+    for k in range(1, trim_px + 1):  # k px away a nearer surface must be k x jump_mm nearer
+        near = ndimage.minimum_filter(filled, size=2 * k + 1)
+        with np.errstate(invalid="ignore"):
+            dropped |= np.isfinite(rng) & (rng - near > k * jump_mm)
+    out[dropped] = np.nan
+    return out, dropped
+
+
+def smooth_depth(xyz: np.ndarray, sigma_px: float, jump_mm: float) -> np.ndarray:
+    """Edge-preserving smoothing of a depth camera's noise along each pixel's ray.
+
+    Each point's distance from the scanner becomes the Gaussian-weighted mean (``sigma_px``,
+    window of 3 sigma) of its neighbours' distances within ``jump_mm`` of its own; its direction
+    is kept, so the point stays on its pixel's ray. Pixels without data stay without.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+    sigma_px : float
+        Gaussian standard deviation, px (0: off).
+    jump_mm : float
+        Neighbours farther than this in range are another surface and are left out, mm.
+
+    Returns
+    -------
+    (H, W, 3) float64, mm
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if sigma_px <= 0:
+        return xyz.copy()
+    rng, centre = _ranges(xyz)
+    r = int(np.ceil(3 * sigma_px))
+    h, w = rng.shape
+    pad = np.pad(rng, r, constant_values=np.nan)
+    num, den = np.zeros_like(rng), np.zeros_like(rng)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            nb = pad[r + dy : r + dy + h, r + dx : r + dx + w]
+            with np.errstate(invalid="ignore"):
+                same = np.abs(nb - rng) <= jump_mm
+            wgt = np.exp(-(dx * dx + dy * dy) / (2 * sigma_px**2)) * same
+            num += np.where(same, nb, 0.0) * wgt
+            den += wgt
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(den > 0, num / den / rng, np.nan)
+    return centre + (xyz - centre) * scale[..., None]
+
+
+# --------------------------------------------------------------------------------------------
 # both
 
 
 def repair_range(
-    xyz: np.ndarray, params: dict[str, Any] | None = None, *, source: str = "repair"
+    xyz: np.ndarray,
+    params: dict[str, Any] | None = None,
+    *,
+    source: str = "repair",
+    depth_camera: bool = False,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Remove spikes, then fill small holes, of a range image.
+
+    With ``depth_camera`` (RGB-D data) the far side of depth edges is dropped first
+    (:func:`trim_depth_edges`: flying pixels) and the depth noise is smoothed after the spike
+    removal (:func:`smooth_depth`).
 
     Parameters
     ----------
     xyz : (H, W, 3) float ndarray, mm
         Range image, NaN where there is no data. Not modified.
     params : dict, optional
-        Any of the keys of :data:`DEFAULT_REPAIR` (``spike_threshold_mm``, ``spike_window``,
+        Any of the keys of :data:`DEFAULT_REPAIR` and :data:`DEFAULT_DEPTH_REPAIR`
+        (``spike_threshold_mm``, ``spike_window``,
         ``max_hole_px``, ``fill_kernel_px``, ``fill_threshold``, ``fill_max_iter``,
-        ``max_edge_hole_px``); missing keys take the defaults.
+        ``max_edge_hole_px``, and for depth cameras ``depth_edge_jump_mm``,
+        ``depth_edge_trim_px``, ``depth_smooth_sigma_px``); missing keys take the defaults.
     source : str
         Names the data in ``xyz`` errors (a file or ``subject/take``); parameter errors name
         the config section ``repair``.
@@ -670,7 +778,8 @@ def repair_range(
     report : dict
         The :func:`fill_holes` report plus ``spikes`` ((H, W) bool) and ``n_spikes`` (int).
         ``filled`` marks pixels whose values were interpolated (spikes included, when their
-        hole was filled).
+        hole was filled); ``flying`` ((H, W) bool, pixels dropped at depth edges) and
+        ``n_flying``.
 
     Raises
     ------
@@ -680,12 +789,13 @@ def repair_range(
     params = {} if params is None else params
     if not isinstance(params, dict):
         raise InputError(_PARAMS, f"params: expected a dict, got {type(params).__name__}")
-    unknown = sorted(set(params) - set(DEFAULT_REPAIR))
+    known = DEFAULT_REPAIR | DEFAULT_DEPTH_REPAIR
+    unknown = sorted(set(params) - set(known))
     if unknown:
         raise InputError(
-            _PARAMS, f"params: unknown key(s) {unknown}, expected some of {sorted(DEFAULT_REPAIR)}"
+            _PARAMS, f"params: unknown key(s) {unknown}, expected some of {sorted(known)}"
         )
-    p = {**DEFAULT_REPAIR, **params}
+    p = {**known, **params}
     for key in ("spike_window", "fill_kernel_px"):
         _check_int(p[key], f"params.{key}", _PARAMS, minimum=3, odd=True)
     for key in ("max_hole_px", "fill_max_iter"):
@@ -693,7 +803,17 @@ def repair_range(
     _check_int(p["max_edge_hole_px"], "params.max_edge_hole_px", _PARAMS, minimum=0)
     _check_float(p["spike_threshold_mm"], "params.spike_threshold_mm", _PARAMS)
     _check_float(p["fill_threshold"], "params.fill_threshold", _PARAMS, upper=1.0)
+    _check_float(p["depth_edge_jump_mm"], "params.depth_edge_jump_mm", _PARAMS)
+    _check_int(p["depth_edge_trim_px"], "params.depth_edge_trim_px", _PARAMS, minimum=0)
+    if not isinstance(p["depth_smooth_sigma_px"], numbers.Real) or p["depth_smooth_sigma_px"] < 0:
+        raise InputError(_PARAMS, "params.depth_smooth_sigma_px: expected a number >= 0")
+    flying = np.zeros(np.shape(xyz)[:2], bool)
+    if depth_camera:
+        xyz = _check_xyz(xyz, source)[0]
+        xyz, flying = trim_depth_edges(xyz, p["depth_edge_jump_mm"], p["depth_edge_trim_px"])
     clean, spikes = remove_spikes(xyz, p["spike_threshold_mm"], p["spike_window"], source=source)
+    if depth_camera:
+        clean = smooth_depth(clean, p["depth_smooth_sigma_px"], p["depth_edge_jump_mm"])
     out, report = fill_holes(
         clean,
         p["max_hole_px"],
@@ -704,7 +824,17 @@ def repair_range(
         source=source,
     )
     report.update(spikes=spikes, n_spikes=int(spikes.sum()))
+    if depth_camera:
+        report.update(flying=flying, n_flying=int(flying.sum()))
     return out, report
 
 
-__all__ = ["DEFAULT_REPAIR", "fill_holes", "remove_spikes", "repair_range"]
+__all__ = [
+    "DEFAULT_REPAIR",
+    "DEFAULT_DEPTH_REPAIR",
+    "fill_holes",
+    "remove_spikes",
+    "repair_range",
+    "smooth_depth",
+    "trim_depth_edges",
+]

@@ -1,0 +1,399 @@
+"""Mesh takes: a textured mesh scan (OBJ + MTL + texture, PLY, glTF/GLB) -> a range take.
+
+The mesh is read with trimesh and rendered headlessly (pyrender, OSMesa) through a virtual
+pinhole camera placed in front of the face: centred on the landmarks' centroid, its image x axis
+along the outer eye corners (iBUG 37 -> 46, so that 37 is on the image's left), its y axis from
+the nose bridge to the chin, ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
+pixel at that distance (by default chosen so that the landmarks span ``face_share`` of the
+image). One render gives the colour image (texture or vertex colours, unlit) and
+the depth at every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised
+range image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same
+camera.
+
+Landmark file: 68 lines ``x y z`` (iBUG-68 order, the mesh's frame and units); blank lines and
+lines starting with ``#`` are skipped.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+
+import numpy as np  # noqa: E402
+
+from scan2morph.errors import InputError  # noqa: E402
+from scan2morph.io.image import read_color  # noqa: E402
+from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
+from scan2morph.io.take import (  # noqa: E402
+    _UNITS,
+    EYE_SPAN_MM,
+    RangeTake,
+    check_face,
+    check_landmarks_inside,
+)
+from scan2morph.tol import N_IBUG  # noqa: E402
+
+#: Mesh file suffixes trimesh reads for us.
+MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
+#: Default virtual camera (config section ``mesh_camera``).
+DEFAULT_MESH_CAMERA = {
+    "width": 640,
+    "height": 480,
+    "distance_mm": 1000.0,
+    "pixel_mm": None,
+    "face_share": 0.6,
+}
+#: A landmark farther than this from the mesh surface is "off the mesh", mm.
+MAX_LANDMARK_OFFSET_MM = 5.0
+#: Colour of pixels the mesh does not cover (dark blue-grey).
+BACKGROUND_RGB = (44, 46, 56)
+
+
+@dataclass(frozen=True, eq=False)
+class MeshTake(RangeTake):
+    """A rendered mesh take: the :class:`~scan2morph.io.RangeTake` plus its virtual camera.
+
+    Attributes
+    ----------
+    K : (3, 3) float64
+        Intrinsics of the virtual camera, px.
+    pose : (4, 4) float64
+        Mesh frame -> camera frame (OpenCV axes), mm.
+    size : (int, int)
+        Image (width, height), px.
+    report : dict
+        Vertex and face counts, the colour source, the coverage.
+    """
+
+    K: np.ndarray = field(default_factory=lambda: np.eye(3))
+    pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+    size: tuple[int, int] = (0, 0)
+    report: dict = field(default_factory=dict)
+
+
+def _referenced_textures(path: Path) -> list[str]:
+    """Texture files an OBJ's MTL files name (``map_Kd``), for the 'texture missing' message."""
+    names = []
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return names
+    for mtl in re.findall(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M):
+        mtl_path = path.parent / mtl
+        if mtl_path.is_file():
+            mtl_text = mtl_path.read_text(encoding="utf-8", errors="replace")
+            names += re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", mtl_text, flags=re.M)
+    return names
+
+
+def read_mesh(path: str | Path, texture: str | Path | None = None):
+    """Read a textured or vertex-coloured triangle mesh.
+
+    Parameters
+    ----------
+    path : str or path-like
+        OBJ (+ MTL + texture), PLY or glTF/GLB, in mm.
+    texture : str or path-like, optional
+        A texture image for a mesh with UV coordinates that names none (or another one).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        With ``visual`` holding the texture (and UVs) or vertex colours.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, no faces (a point cloud), a texture the file references
+        but that is missing, a ``texture`` given for a mesh without UVs, no colour at all.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected an OBJ, PLY or glTF/GLB mesh)")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise InputError(path, f"mesh: unknown format {path.suffix!r} (expected {MESH_SUFFIXES})")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds on corrupt files
+        raise InputError(path, f"mesh: cannot read: {str(exc)[:200]}") from None
+    faces = getattr(loaded, "faces", None)
+    if faces is None or len(faces) == 0:
+        n = len(getattr(loaded, "vertices", []))
+        raise InputError(
+            path, f"mesh: no faces ({n} vertices: a point cloud?); expected a triangle mesh"
+        )
+    visual = loaded.visual
+    if texture is not None:
+        uv = getattr(visual, "uv", None)
+        if uv is None or len(uv) != len(loaded.vertices):
+            raise InputError(
+                path, f"mesh: a texture ({Path(texture).name}) is given but the mesh has no UVs"
+            )
+        from PIL import Image
+
+        loaded.visual = _unlit_texture(uv, Image.fromarray(read_color(texture)))
+        return loaded
+    if visual.kind == "texture":
+        material = visual.material
+        image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
+        if image is not None:
+            loaded.visual = _unlit_texture(visual.uv, image)
+        else:
+            names = _referenced_textures(path)
+            named = f"the material names {names[0]!r}, which is missing" if names else "none"
+            raise InputError(
+                path,
+                f"texture: the mesh has UVs but no texture image ({named}); put the texture "
+                "beside the MTL or name it in the sheet's texture column",
+            )
+    elif visual.kind != "vertex":
+        raise InputError(
+            path,
+            "texture: the mesh has no texture and no vertex colours (expected a textured OBJ / "
+            "glTF, or a PLY with vertex colours)",
+        )
+    return loaded
+
+
+def _unlit_texture(uv: np.ndarray, image):
+    """Texture visuals whose rendered colour is the texel itself (an OBJ's ``Kd`` or a glTF's
+    base colour factor would scale it: a scan's texture already holds the measured colour)."""
+    import trimesh
+
+    material = trimesh.visual.material.PBRMaterial(
+        baseColorTexture=image, baseColorFactor=[255, 255, 255, 255]
+    )
+    return trimesh.visual.TextureVisuals(uv=uv, material=material)
+
+
+def read_landmarks3d(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
+    """Read 3D landmarks: ``n_points`` lines ``x y z`` (``#`` comments and blank lines skipped).
+
+    Returns
+    -------
+    (n_points, 3) float64
+        In the mesh's frame and units.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected 68 lines 'x y z' of 3D landmarks)")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read as text: {exc}") from None
+    rows = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.replace(",", " ").split()
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            raise InputError(
+                path, f"line {number}: expected 'x y z' numbers, got {line[:40]!r}"
+            ) from None
+        if len(values) != 3 or not np.isfinite(values).all():
+            raise InputError(path, f"line {number}: expected 3 finite numbers, got {line[:40]!r}")
+        rows.append(values)
+    if len(rows) != n_points:
+        raise InputError(path, f"expected {n_points} points (lines 'x y z'), got {len(rows)}")
+    return np.array(rows, dtype=np.float64)
+
+
+def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> np.ndarray:
+    """Refuse landmarks off the mesh or of another face; returns the face normal under each."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
+        o3d.core.Tensor(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
+    )
+    res = scene.compute_closest_points(o3d.core.Tensor(lm3.astype(np.float32)))
+    dist = np.linalg.norm(res["points"].numpy() - lm3, axis=1)
+    far = dist > MAX_LANDMARK_OFFSET_MM
+    if far.any():
+        k = int(np.argmax(dist))
+        raise InputError(
+            landmarks_path,
+            f"landmarks: point {k + 1} lies {dist[k]:.3g} mm from the mesh {Path(mesh_path).name} "
+            f"({int(far.sum())} points farther than {MAX_LANDMARK_OFFSET_MM:g} mm): are they of "
+            "this mesh, in its frame and units?",
+        )
+    return np.asarray(mesh.face_normals)[res["primitive_ids"].numpy().astype(np.int64)]
+
+
+def _check_units(lm3: np.ndarray, mesh_path) -> None:
+    span = float(np.linalg.norm(lm3[45] - lm3[36]))
+    lo, hi = EYE_SPAN_MM
+    if not lo <= span <= hi:
+        unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
+        likely = f"the mesh looks like {unit}, not mm" if unit else "not a face in mm"
+        raise InputError(
+            mesh_path,
+            f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} units apart, "
+            f"expected {lo:g}-{hi:g} mm ({likely})",
+        )
+
+
+def virtual_camera(lm3: np.ndarray, settings: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The virtual camera in front of a face given by its 3D landmarks (module docstring).
+
+    Parameters
+    ----------
+    lm3 : (68, 3) float
+        iBUG-68 landmarks, mm.
+    settings : dict
+        ``width``, ``height``, ``distance_mm``, ``pixel_mm`` (None: automatic), ``face_share``.
+
+    Returns
+    -------
+    K : (3, 3) float64, px
+    pose : (4, 4) float64
+        Mesh frame -> camera frame (x right, y down, z forward), mm.
+    """
+    x = lm3[45] - lm3[36]
+    down = lm3[8] - lm3[27]
+    x /= np.linalg.norm(x)
+    y = down - (down @ x) * x
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    R = np.stack([x, y, z])
+    centre = lm3.mean(axis=0)
+    pose = np.eye(4)
+    pose[:3, :3] = R
+    pose[:3, 3] = np.array([0.0, 0.0, settings["distance_mm"]]) - R @ centre
+    w, h = settings["width"], settings["height"]
+    pixel_mm = settings.get("pixel_mm")
+    if pixel_mm is None:  # the landmarks' extent across the camera fills face_share of the image
+        extent = np.ptp((lm3 - centre) @ R[:2].T, axis=0)
+        pixel_mm = max(extent[0] / w, extent[1] / h) / settings["face_share"]
+    f = settings["distance_mm"] / pixel_mm
+    K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return K, pose
+
+
+_RENDERERS: dict = {}
+
+
+def render_mesh(mesh, K: np.ndarray, pose: np.ndarray, size: tuple[int, int]):
+    """Render a mesh's colour (unlit) and depth through a pinhole camera.
+
+    Returns
+    -------
+    color : (H, W, 3) uint8
+    depth : (H, W) float64
+        Camera Z at each pixel centre, mm; NaN where the mesh is not seen.
+    """
+    import pyrender
+
+    v_cam = np.asarray(mesh.vertices) @ pose[:3, :3].T + pose[:3, 3]
+    posed = mesh.copy()
+    posed.vertices = v_cam
+    scene = pyrender.Scene(
+        bg_color=np.array([*BACKGROUND_RGB, 255]) / 255.0, ambient_light=np.ones(3)
+    )
+    scene.add(pyrender.Mesh.from_trimesh(posed, smooth=False))
+    z = v_cam[:, 2]
+    cam = pyrender.IntrinsicsCamera(
+        fx=K[0, 0],
+        fy=K[1, 1],
+        cx=K[0, 2] + 0.5,  # OpenGL samples pixel centres at (i + 0.5)
+        cy=K[1, 2] + 0.5,
+        znear=max(float(z.min()) - 10.0, 1.0),
+        zfar=float(z.max()) + 10.0,
+    )
+    scene.add(cam, pose=np.diag([1.0, -1.0, -1.0, 1.0]))  # OpenCV camera -> OpenGL camera
+    key = tuple(int(s) for s in size)
+    if key not in _RENDERERS:
+        _RENDERERS[key] = pyrender.OffscreenRenderer(*key)
+    flags = pyrender.RenderFlags.SKIP_CULL_FACES | pyrender.RenderFlags.FLAT
+    color, depth = _RENDERERS[key].render(scene, flags=flags)
+    depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
+    return np.ascontiguousarray(color[..., :3]), depth
+
+
+def read_mesh_take(
+    mesh_path: str | Path,
+    texture_path: str | Path | None,
+    landmarks_path: str | Path,
+    settings: dict | None = None,
+) -> MeshTake:
+    """Read a mesh take and render it into a range take (module docstring).
+
+    Parameters
+    ----------
+    mesh_path : str or path-like
+        OBJ / PLY / glTF / GLB, mm.
+    texture_path : str or path-like or None
+        A texture image for the mesh's UVs (the sheet's optional ``texture`` column).
+    landmarks_path : str or path-like
+        68 lines ``x y z`` in the mesh's frame and units.
+    settings : dict, optional
+        ``width``, ``height`` (px), ``distance_mm``, ``pixel_mm`` (None: automatic) and
+        ``face_share`` of the virtual camera (defaults :data:`DEFAULT_MESH_CAMERA`).
+
+    Returns
+    -------
+    MeshTake
+        ``xyz`` (H, W, 3) mm in the mesh's frame, ``color``, ``landmarks`` (68, 2) px, the
+        camera (``K``, ``pose``, ``size``) and a ``report``.
+
+    Raises
+    ------
+    InputError
+        From :func:`read_mesh` and :func:`read_landmarks3d`; a face not 70-130 mm across the
+        outer eye corners (names the unit it looks like); landmarks off the mesh; landmarks
+        whose surface faces away from the camera (mirrored: iBUG 37 must be the subject's right
+        eye's outer corner); the face checks of :func:`~scan2morph.io.check_face`.
+    """
+    cfg = dict(DEFAULT_MESH_CAMERA) | dict(settings or {})
+    mesh = read_mesh(mesh_path, texture_path)
+    lm3 = read_landmarks3d(landmarks_path)
+    _check_units(lm3, mesh_path)
+    normals = _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
+    K, pose = virtual_camera(lm3, cfg)
+    facing = -(normals @ pose[2, :3])  # > 0: the surface faces the camera
+    if np.median(facing) < 0:
+        raise InputError(
+            landmarks_path,
+            "landmarks: mirrored left/right (the surface under them faces away from a camera "
+            "that sees iBUG 37 on the image's left); iBUG 37 is the outer corner of the "
+            "subject's right eye",
+        )
+    size = (int(cfg["width"]), int(cfg["height"]))
+    color, depth = render_mesh(mesh, K, pose, size)
+    xyz_cam = depth_points(np.nan_to_num(depth, nan=0.0), PinholeCamera(K, np.zeros(5), size))
+    xyz = (xyz_cam - pose[:3, 3]) @ pose[:3, :3]  # camera -> mesh frame
+    lm_cam = lm3 @ pose[:3, :3].T + pose[:3, 3]
+    landmarks = lm_cam[:, :2] / lm_cam[:, 2:3] * np.diag(K)[:2] + K[:2, 2]
+    check_landmarks_inside(landmarks, *size, landmarks_path)
+    check_face(xyz, landmarks, mesh_path, landmarks_path)
+    report = {
+        "n_vertices": int(len(mesh.vertices)),
+        "n_faces": int(len(mesh.faces)),
+        "colour": "texture" if mesh.visual.kind == "texture" else "vertex colours",
+        "coverage": float(np.isfinite(depth).mean()),
+        "pixel_mm": float(cfg["distance_mm"] / K[0, 0]),
+    }
+    return MeshTake(
+        xyz=xyz, color=color, landmarks=landmarks, K=K, pose=pose, size=size, report=report
+    )
+
+
+__all__ = [
+    "DEFAULT_MESH_CAMERA",
+    "MeshTake",
+    "read_landmarks3d",
+    "read_mesh",
+    "read_mesh_take",
+    "render_mesh",
+    "virtual_camera",
+]

@@ -1,0 +1,485 @@
+"""RGB-D takes: a depth image, its intrinsics YAML and a colour image -> XYZ on the colour grid.
+
+Intrinsics file (plain YAML, OpenCV's pinhole convention: (0, 0) is the centre of the top-left
+pixel; distances in mm)::
+
+    width: 640            # depth image, px
+    height: 480
+    fx: 385.0             # depth camera, px
+    fy: 385.0
+    cx: 319.5
+    cy: 239.5
+    depth_scale_mm: 1.0   # mm per depth unit (RealSense: 1.0; 0.1 for 100 um units); 0 = no data
+    distortion: [k1, k2, p1, p2, k3]   # optional (OpenCV order), or a mapping k1: ... k3:
+    color:                # optional: the colour camera, when it is not the depth camera
+      width: 640
+      height: 480
+      fx: 610.0
+      fy: 610.0
+      cx: 319.5
+      cy: 239.5
+      R: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]   # depth -> colour rotation
+      T: [15.0, 0.0, 0.0]                    # depth -> colour translation, mm
+      distortion: [k1, k2, p1, p2, k3]       # optional
+
+``x_color = R @ x_depth + T``. Without a ``color`` block the colour image is taken with the
+depth camera itself (same size, pixel to pixel).
+
+The take's range image lies on the **colour** image's pixel grid (where the landmarks are
+clicked) and its XYZ in the **depth camera's** frame (mm, OpenCV axes). Every colour pixel's
+point is where its ray meets the depth surface: the depth image is triangulated (two triangles
+per 2 x 2 block of pixels with data, none across a depth step) and each triangle is rasterised
+into the colour camera exactly (inside test and perspective-correct depth in undistorted
+normalised coordinates), nearest surface first. Colour pixels the depth camera did not see (the
+shadow of the baseline beside the nose, beyond the silhouette) get no data; repair fills the
+small holes and removes flying pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from scan2morph.errors import InputError
+from scan2morph.io.image import read_color
+from scan2morph.io.landmarks import read_pts
+from scan2morph.io.take import RangeTake, check_face, check_image_size, check_landmarks_inside
+
+#: Depth file suffixes.
+DEPTH_SUFFIXES = (".png", ".npy", ".npz")
+#: A triangle of neighbouring depth pixels steeper than this to the view ray spans a depth step
+#: and is not meshed, degrees (a face's steepest measured parts, nose sides, are ~75).
+EDGE_SLOPE_DEG = 80.0
+#: Largest side of a triangle's box on the colour image, px (a colour camera with up to ~6x the
+#: depth camera's resolution); larger triangles are depth steps seen obliquely and are skipped.
+MAX_TRIANGLE_PX = 8
+#: Largest ``max|R^T R - I|`` accepted for the depth -> colour rotation.
+ROTATION_TOL = 1e-4
+_DISTORTION = ("k1", "k2", "p1", "p2", "k3")
+_PINHOLE = ("width", "height", "fx", "fy", "cx", "cy")
+
+
+@dataclass(frozen=True, eq=False)
+class PinholeCamera:
+    """One camera of an RGB-D sensor.
+
+    Attributes
+    ----------
+    K : (3, 3) float64
+        Intrinsics, px.
+    D : (5,) float64
+        OpenCV distortion ``k1 k2 p1 p2 k3`` (zeros: none).
+    size : (int, int)
+        Image ``(width, height)``, px.
+    """
+
+    K: np.ndarray
+    D: np.ndarray
+    size: tuple[int, int]
+
+
+@dataclass(frozen=True, eq=False)
+class RGBDIntrinsics:
+    """An RGB-D sensor: depth camera, colour camera and the rigid motion between them.
+
+    Attributes
+    ----------
+    depth, color : PinholeCamera
+        ``color`` is ``depth`` when the file has no ``color`` block.
+    R : (3, 3) float64
+        Depth -> colour rotation.
+    T : (3,) float64
+        Depth -> colour translation, mm (``x_color = R @ x_depth + T``).
+    depth_scale_mm : float
+        mm per depth unit.
+    """
+
+    depth: PinholeCamera
+    color: PinholeCamera
+    R: np.ndarray
+    T: np.ndarray
+    depth_scale_mm: float
+
+    @property
+    def color_from_depth(self) -> np.ndarray:
+        """(4, 4) float64 depth camera frame -> colour camera frame, mm."""
+        out = np.eye(4)
+        out[:3, :3], out[:3, 3] = self.R, self.T
+        return out
+
+
+def _number(block: dict, key: str, source, where: str, positive: bool = False) -> float:
+    if key not in block:
+        raise InputError(source, f"{where}{key}: missing (expected a number)")
+    value = block[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise InputError(source, f"{where}{key}: expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise InputError(source, f"{where}{key}: expected > 0, got {value!r}")
+    return float(value)
+
+
+def _matrix(value, shape: tuple[int, ...], source, field: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(source, f"{field}: expected {shape} numbers, got {value!r}") from None
+    if arr.size != int(np.prod(shape)) or not np.isfinite(arr).all():
+        raise InputError(source, f"{field}: expected {shape} finite numbers, got {value!r}")
+    return arr.reshape(shape)
+
+
+def _distortion(value, source, field: str) -> np.ndarray:
+    if value is None:
+        return np.zeros(5)
+    if isinstance(value, dict):
+        unknown = sorted(set(value) - set(_DISTORTION))
+        if unknown:
+            raise InputError(source, f"{field}: unknown keys {unknown} (expected {_DISTORTION})")
+        value = [value.get(k, 0.0) for k in _DISTORTION]
+    return _matrix(value, (5,), source, f"{field} (OpenCV k1 k2 p1 p2 k3)")
+
+
+def _camera(block, source, where: str) -> PinholeCamera:
+    if not isinstance(block, dict):
+        raise InputError(source, f"{where.rstrip('.') or 'file'}: expected a mapping")
+    vals = {k: _number(block, k, source, where, positive=k in _PINHOLE[:4]) for k in _PINHOLE}
+    for k in ("width", "height"):
+        if vals[k] != int(vals[k]):
+            raise InputError(source, f"{where}{k}: expected an integer, got {block[k]!r}")
+    K = np.array([[vals["fx"], 0, vals["cx"]], [0, vals["fy"], vals["cy"]], [0, 0, 1.0]])
+    D = _distortion(block.get("distortion"), source, f"{where}distortion")
+    return PinholeCamera(K, D, (int(vals["width"]), int(vals["height"])))
+
+
+def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
+    """Read an RGB-D intrinsics YAML (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        Missing file, not YAML, a key missing or not a number, a non-positive focal length or
+        size, ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3 numbers (names the key).
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected an RGB-D intrinsics YAML)")
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise InputError(path, f"cannot read as YAML: {str(exc).splitlines()[0]}") from None
+    if not isinstance(doc, dict):
+        raise InputError(path, f"expected a mapping with keys {list(_PINHOLE)}, got {doc!r:.60}")
+    depth = _camera(doc, path, "")
+    scale = _number(doc, "depth_scale_mm", path, "", positive=True)
+    color, R, T = depth, np.eye(3), np.zeros(3)
+    if doc.get("color") is not None:
+        block = doc["color"]
+        color = _camera(block, path, "color.")
+        R = _matrix(block.get("R", np.eye(3).tolist()), (3, 3), path, "color.R")
+        T = _matrix(block.get("T", [0.0, 0.0, 0.0]), (3,), path, "color.T (mm)")
+        if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOL or np.linalg.det(R) < 0:
+            raise InputError(path, "color.R: not a rotation matrix (R^T R != I or det < 0)")
+    return RGBDIntrinsics(depth, color, R, T, scale)
+
+
+def read_depth(path: str | Path) -> np.ndarray:
+    """Read a depth image in depth units: a 16-bit PNG, an ``.npy`` or an ``.npz`` with ``depth``.
+
+    Returns
+    -------
+    (H, W) float64
+        Depth units (multiply by ``depth_scale_mm``); 0 and NaN = no data.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, an 8-bit or colour PNG, an array that is not 2D, negative
+        or infinite values.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found (expected a 16-bit depth PNG, .npy or .npz)")
+    suffix = path.suffix.lower()
+    if suffix not in DEPTH_SUFFIXES:
+        raise InputError(path, f"depth: unknown format {suffix!r} (expected {DEPTH_SUFFIXES})")
+    if suffix == ".png":
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise InputError(path, "depth: cannot decode the PNG (corrupt or not an image)")
+        if img.ndim != 2 or img.dtype != np.uint16:
+            kind = f"{img.dtype} with {1 if img.ndim == 2 else img.shape[2]} channels"
+            raise InputError(path, f"depth: expected a 16-bit single-channel PNG, got {kind}")
+        depth = img.astype(np.float64)
+    else:
+        try:
+            if suffix == ".npz":
+                with np.load(path, allow_pickle=False) as data:
+                    if "depth" not in data.files:
+                        raise InputError(path, f"key 'depth' missing (found {sorted(data.files)})")
+                    depth = np.asarray(data["depth"])
+            else:
+                depth = np.asarray(np.load(path, allow_pickle=False))
+        except InputError:
+            raise
+        except Exception as exc:  # zip, pickle or format errors from numpy
+            raise InputError(path, f"depth: cannot read as {suffix}: {exc}") from None
+        if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.number):
+            raise InputError(path, f"depth: expected an (H, W) number array, got {depth.shape}")
+        depth = depth.astype(np.float64)
+    if np.isinf(depth).any() or (depth < 0).any():
+        raise InputError(path, "depth: negative or infinite values (0 or NaN = no data)")
+    return depth
+
+
+def _rays(camera: PinholeCamera) -> np.ndarray:
+    """(H, W, 2) undistorted normalised coordinates ``(x / z, y / z)`` of every pixel centre."""
+    w, h = camera.size
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    pix = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
+    if not camera.D.any():
+        K = camera.K
+        return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1]], axis=-1)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+    norm = cv2.undistortPoints(pix, camera.K, camera.D, criteria=criteria)
+    return norm.reshape(h, w, 2)
+
+
+def _to_pixels(camera: PinholeCamera, norm: np.ndarray) -> np.ndarray:
+    """Pixel coordinates (n, 2) of undistorted normalised coordinates (n, 2)."""
+    pts = np.column_stack([norm, np.ones(len(norm))])
+    return cv2.projectPoints(pts, np.zeros(3), np.zeros(3), camera.K, camera.D)[0].reshape(-1, 2)
+
+
+def depth_points(depth_mm: np.ndarray, camera: PinholeCamera) -> np.ndarray:
+    """XYZ (H, W, 3) of every depth pixel in the depth camera's frame, mm; NaN without data."""
+    z = np.where(depth_mm > 0, depth_mm, np.nan)
+    rays = _rays(camera)
+    return np.concatenate([rays * z[..., None], z[..., None]], axis=-1)
+
+
+def _triangles(z: np.ndarray, focal_px: float) -> np.ndarray:
+    """(T, 3) flat pixel indices of the triangles of a depth grid (two per 2 x 2 block whose
+    corners have data), leaving out triangles steeper than :data:`EDGE_SLOPE_DEG`."""
+    h, w = z.shape
+    idx = np.arange(h * w).reshape(h, w)
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+    tris = np.concatenate([np.stack([a, b, c], -1), np.stack([b, d, c], -1)]).reshape(-1, 3)
+    zt = z.reshape(-1)[tris]
+    ok = np.isfinite(zt).all(axis=1)
+    tris, zt = tris[ok], zt[ok]
+    # depth change across one pixel pitch (z / f) of a surface at EDGE_SLOPE_DEG to the ray
+    limit = np.tan(np.deg2rad(EDGE_SLOPE_DEG)) * zt.mean(axis=1) / focal_px
+    return tris[np.ptp(zt, axis=1) <= limit]
+
+
+def depth_to_color_grid(depth_mm: np.ndarray, intr: RGBDIntrinsics) -> np.ndarray:
+    """XYZ of every colour pixel (the depth surface on its ray), in the depth camera's frame.
+
+    Parameters
+    ----------
+    depth_mm : (Hd, Wd) float
+        Depth (camera Z) in mm; 0 or NaN = no data.
+    intr : RGBDIntrinsics
+
+    Returns
+    -------
+    (Hc, Wc, 3) float64
+        mm, NaN where the colour pixel's ray meets no meshed depth surface.
+    """
+    pts = depth_points(depth_mm, intr.depth)
+    if intr.color is intr.depth:
+        return pts
+    wc, hc = intr.color.size
+    cam = pts.reshape(-1, 3) @ intr.R.T + intr.T
+    tris = _triangles(pts[..., 2], float(intr.depth.K[0, 0]))
+    zc = cam[:, 2]
+    tris = tris[(zc[tris] > 0).all(axis=1)]
+    norm = cam[:, :2] / np.where(zc > 0, zc, np.nan)[:, None]
+    used = np.unique(tris)
+    pix = np.full((len(cam), 2), np.nan)
+    pix[used] = _to_pixels(intr.color, norm[used])
+    tp = pix[tris]  # (T, 3, 2)
+    lo = np.ceil(tp.min(axis=1)).astype(np.int64)
+    hi = np.floor(tp.max(axis=1)).astype(np.int64)
+    keep = ((hi - lo) < MAX_TRIANGLE_PX).all(axis=1) & (hi >= 0).all(axis=1)
+    keep &= (lo[:, 0] < wc) & (lo[:, 1] < hc)
+    tris, lo, hi = tris[keep], lo[keep], hi[keep]
+    n0, n1, n2 = (norm[tris[:, k]] for k in range(3))
+    inv_z = 1.0 / zc[tris]
+    e1, e2 = n1 - n0, n2 - n0
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    ok_det = np.abs(det) > 0
+    rays = _rays(intr.color).reshape(-1, 2)
+    zbuf = np.full(hc * wc, np.inf)
+    span = np.minimum(hi - lo, MAX_TRIANGLE_PX - 1)
+    for dy in range(int(span[:, 1].max(initial=-1)) + 1):
+        for dx in range(int(span[:, 0].max(initial=-1)) + 1):
+            u, v = lo[:, 0] + dx, lo[:, 1] + dy
+            sel = ok_det & (u <= hi[:, 0]) & (v <= hi[:, 1])
+            sel &= (u >= 0) & (u < wc) & (v >= 0) & (v < hc)
+            k = np.flatnonzero(sel)
+            flat = v[k] * wc + u[k]
+            q = rays[flat] - n0[k]
+            b1 = (q[:, 0] * e2[k, 1] - q[:, 1] * e2[k, 0]) / det[k]
+            b2 = (e1[k, 0] * q[:, 1] - e1[k, 1] * q[:, 0]) / det[k]
+            b0 = 1.0 - b1 - b2
+            inside = (b0 >= -1e-9) & (b1 >= -1e-9) & (b2 >= -1e-9)
+            w = np.stack([b0, b1, b2], axis=1)[inside]
+            z = 1.0 / np.sum(w * inv_z[k[inside]], axis=1)  # perspective-correct depth
+            np.minimum.at(zbuf, flat[inside], z)
+    z = np.where(np.isfinite(zbuf), zbuf, np.nan)
+    xyz_c = np.column_stack([rays * z[:, None], z])
+    return ((xyz_c - intr.T) @ intr.R).reshape(hc, wc, 3)
+
+
+@dataclass(frozen=True, eq=False)
+class RGBDTake(RangeTake):
+    """A read RGB-D take: the :class:`~scan2morph.io.RangeTake` on the colour grid plus the
+    sensor (``intrinsics``)."""
+
+    intrinsics: RGBDIntrinsics | None = None
+
+
+def read_rgbd_take(
+    depth_path: str | Path,
+    color_path: str | Path,
+    intrinsics_path: str | Path,
+    landmarks_path: str | Path,
+) -> RGBDTake:
+    """Read an RGB-D take into a range take on the colour image's grid.
+
+    Parameters
+    ----------
+    depth_path : str or path-like
+        16-bit depth PNG, ``.npy`` or ``.npz`` (key ``depth``), in depth units.
+    color_path : str or path-like
+        The colour image.
+    intrinsics_path : str or path-like
+        The sensor's intrinsics YAML (module docstring).
+    landmarks_path : str or path-like
+        iBUG 68-point ``.pts`` on the colour image.
+
+    Returns
+    -------
+    RGBDTake
+        ``xyz`` (Hc, Wc, 3) mm in the depth camera's frame, ``color``, ``landmarks`` (68, 2) px
+        and ``intrinsics``.
+
+    Raises
+    ------
+    InputError
+        From the readers; a depth or colour image whose size differs from the intrinsics'
+        ``width``/``height`` (names the intrinsics file); no depth data at all; landmarks
+        outside the colour image; the face check of :func:`~scan2morph.io.check_face`, which
+        names a ``depth_scale_mm`` off by a factor 10 or 1000 when that factor gives a face of
+        the right size.
+    """
+    intr = read_rgbd_intrinsics(intrinsics_path)
+    depth = read_depth(depth_path)
+    check_image_size(depth.shape, depth_path, "depth")
+    color = read_color(color_path)
+    for name, img, cam, where in (
+        ("depth", depth, intr.depth, ""),
+        ("color", color, intr.color, "color."),
+    ):
+        h, w = img.shape[:2]
+        if (w, h) != cam.size:
+            raise InputError(
+                intrinsics_path,
+                f"{where}width/{where}height: {cam.size[0]}x{cam.size[1]} but the {name} image "
+                f"{Path(depth_path if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
+                f"are these the intrinsics of this {name} camera?",
+            )
+    valid = np.isfinite(depth) & (depth > 0)
+    if not valid.any():
+        raise InputError(depth_path, "depth: no pixel with data (all 0 or NaN)")
+    landmarks = read_pts(landmarks_path)
+    check_landmarks_inside(landmarks, *intr.color.size, landmarks_path)
+    xyz = depth_to_color_grid(depth * intr.depth_scale_mm, intr)
+    hint = f"; check depth_scale_mm = {intr.depth_scale_mm:g} in {Path(intrinsics_path).name}"
+    try:
+        check_face(xyz, landmarks, depth_path, landmarks_path, unit_hint=hint)
+    except InputError as exc:
+        factor = _scale_factor(depth, intr, landmarks)
+        if factor is None:
+            raise
+        raise InputError(
+            intrinsics_path,
+            f"depth_scale_mm: {intr.depth_scale_mm:g} gives {exc.problem.split(';')[0]}; with "
+            f"depth_scale_mm = {intr.depth_scale_mm * factor:g} (x {factor:g}) the face has a "
+            "plausible size: is the depth scale in mm per unit?",
+        ) from None
+    return RGBDTake(xyz=xyz, color=color, landmarks=landmarks, intrinsics=intr)
+
+
+def _scale_factor(depth: np.ndarray, intr: RGBDIntrinsics, landmarks: np.ndarray) -> float | None:
+    """The factor (10, 1000, 1/10, 1/1000) of ``depth_scale_mm`` that makes the face plausible,
+    tried on the failure path only; None when none does."""
+    for factor in (1000.0, 0.001, 10.0, 0.1):
+        scaled = RGBDIntrinsics(
+            intr.depth, intr.color, intr.R, intr.T, intr.depth_scale_mm * factor
+        )
+        try:
+            check_face(
+                depth_to_color_grid(depth * scaled.depth_scale_mm, scaled), landmarks, "", ""
+            )
+        except InputError:
+            continue
+        return factor
+    return None
+
+
+def _camera_dict(camera: PinholeCamera) -> dict:
+    K = camera.K
+    out = dict(width=camera.size[0], height=camera.size[1])
+    out |= dict(fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]))
+    if camera.D.any():
+        out["distortion"] = [float(v) for v in camera.D]
+    return out
+
+
+def write_rgbd_intrinsics(path: str | Path, intr: RGBDIntrinsics) -> None:
+    """Write an RGB-D intrinsics YAML that :func:`read_rgbd_intrinsics` reads back."""
+    import yaml
+
+    from scan2morph.errors import writing
+
+    doc = _camera_dict(intr.depth) | {"depth_scale_mm": float(intr.depth_scale_mm)}
+    if intr.color is not intr.depth:
+        doc["color"] = _camera_dict(intr.color) | {
+            "R": [[float(v) for v in row] for row in intr.R],
+            "T": [float(v) for v in intr.T],
+        }
+    with writing(path):
+        Path(path).write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+
+
+def write_depth_png(path: str | Path, depth_units: np.ndarray) -> None:
+    """Write depth units (H, W) as a 16-bit PNG (values rounded, clipped to 0..65535)."""
+    from scan2morph.errors import writing
+
+    img = np.clip(np.rint(np.nan_to_num(depth_units, nan=0.0)), 0, 65535).astype(np.uint16)
+    with writing(path):
+        ok = cv2.imwrite(str(path), img)
+    if not ok:
+        raise InputError(path, "depth: could not write the PNG")
+
+
+__all__ = [
+    "PinholeCamera",
+    "RGBDIntrinsics",
+    "RGBDTake",
+    "depth_points",
+    "depth_to_color_grid",
+    "read_depth",
+    "read_rgbd_intrinsics",
+    "read_rgbd_take",
+    "write_depth_png",
+    "write_rgbd_intrinsics",
+]
