@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from scan2morph.evaluate.motion import motion_accuracy
+from scan2morph.evaluate.motion import material_accuracy, motion_accuracy
 
 
 def _case(rng, n=200):
@@ -49,3 +49,30 @@ def test_without_normals_there_is_no_split():
     reference, _, motion = _case(rng)
     out = motion_accuracy(motion, motion, reference, reference, np.zeros(len(motion), bool))
     assert "normal_rms_error_mm" not in out
+
+
+def test_material_error_leads_and_splits_into_normal_and_sliding_parts():
+    """Against the material motion: the same split, and the headline keys come first."""
+    rng = np.random.default_rng(10)
+    material, normals, motion = _case(rng)
+    ideal = motion.copy()  # what the method would give from perfect data: no error there
+    suppressed = np.zeros(len(motion), bool)
+    out = motion_accuracy(motion, motion, ideal, material, suppressed, normals=normals)
+    assert list(out)[:2] == ["material_relative_error", "material_rms_mm"]
+    assert out["material_normal_rms_error_mm"] == pytest.approx(2.0, rel=1e-12)
+    assert out["material_tangential_rms_error_mm"] == pytest.approx(3.0, rel=1e-12)
+    assert out["material_rms_error_mm"] == pytest.approx(np.sqrt(13.0), rel=1e-12)
+    ref = np.sqrt(np.mean(np.sum(material**2, axis=1)))
+    assert out["material_relative_error"] == pytest.approx(np.sqrt(13.0) / ref, rel=1e-12)
+    assert out["relative_error"] == pytest.approx(0.0, abs=1e-12)  # the ideal is met
+
+
+def test_material_accuracy_of_a_field_counts_only_where_asked():
+    rng = np.random.default_rng(11)
+    material, normals, motion = _case(rng)
+    where = np.ones(len(motion), bool)
+    where[:30] = False
+    motion[:30] = 1e3
+    out = material_accuracy(motion, material, normals, where)
+    assert out["material_normal_rms_error_mm"] == pytest.approx(2.0, rel=1e-12)
+    assert out["material_tangential_rms_error_mm"] == pytest.approx(3.0, rel=1e-12)

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from scan2morph.evaluate.mesh import alignment_accuracy, mesh_accuracy
-from scan2morph.evaluate.motion import ideal_motion, motion_accuracy, true_motion
+from scan2morph.evaluate.motion import (
+    ideal_motion,
+    material_accuracy,
+    motion_accuracy,
+    true_motion,
+)
 from scan2morph.evaluate.scan import face_region, stereo_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.geometry import vertex_normals
@@ -30,6 +35,7 @@ def subject_accuracy(
     levels: int = 1,
     smoothing: Mapping[str, float] | None = None,
     max_slope_deg: float | None = None,
+    expressions: Sequence[str] = (),
 ) -> dict:
     """Errors of one subject's pipeline outputs against its ground truth.
 
@@ -51,6 +57,9 @@ def subject_accuracy(
         motion for the ``relative_error`` reference.
     max_slope_deg : float, optional
         The fit's depth-step rule (``template.max_slope_deg``), applied to the ideal motion too.
+    expressions : sequence of str
+        Expression take ids whose displacement fields (``/expressions/{take}/displacement``)
+        are measured against the material motion (``expression`` entry).
 
     Returns
     -------
@@ -106,6 +115,12 @@ def subject_accuracy(
             if take in bars:
                 rel = bars[take]["relative"]
                 entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
+        if take in expressions and paths.expression(take, "displacement") in store:
+            material = true_motion(n_vertices, truths[neutral], truth)
+            field = np.asarray(store[paths.expression(take, "displacement")], dtype=np.float64)
+            entry["expression"] = material_accuracy(
+                field, material, n_normals, np.ones(len(field), dtype=bool)
+            )
         takes[take] = entry
 
     def worst(stage, key):
@@ -114,12 +129,13 @@ def subject_accuracy(
         return float(np.max(values)) if values else None
 
     summary = {
+        "motion_material_relative_error_max": worst("motion", "material_relative_error"),
+        "expression_material_relative_error_max": worst("expression", "material_relative_error"),
         "mesh_rms_mm_max": worst("mesh", "rms_mm"),
         "align_rotation_deg_max": worst("align", "rotation_deg"),
         "align_translation_mm_max": worst("align", "translation_mm"),
         "motion_relative_error_max": worst("motion", "relative_error"),
         "motion_normal_relative_error_max": worst("motion", "normal_relative_error"),
-        "motion_material_relative_error_max": worst("motion", "material_relative_error"),
         "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
         "motion_click_noise_relative_max": worst("motion", "click_noise_relative"),
     }

@@ -48,11 +48,12 @@ def run(
         store,
         truths,
         subject.neutral,
-        modelled(subject, store).visemes,
+        (kept := modelled(subject, store)).visemes,
         template=template,
         fiducial_sets={t: fiducial_set(section, k) for t, k in subject.kinds.items()},
         levels=int(section["subdivision_levels"]),
         smoothing=config["smoothing"],
         max_slope_deg=section["max_slope_deg"],
+        expressions=kept.expressions,
     )
     return report | {"warnings": [str(w) for w in read_warnings(store)]}
