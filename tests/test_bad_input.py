@@ -434,3 +434,171 @@ def test_a_bad_config_key_stops_snakemake_in_a_few_lines(tmp_path):
     lines = (out.stdout + out.stderr).strip().splitlines()
     assert len(lines) <= 3
     assert "config: bogus_key: unknown key" in lines[-1]
+
+
+# --- RGB-D and mesh takes (issue #18) ---
+TINY_RGBD = dict(
+    width=160, height=120, focal_px=250.0, color_width=160, color_height=120, color_focal_px=258.0
+)
+
+
+@pytest.fixture(scope="module")
+def rgbd_files(tmp_path_factory):
+    from scan2morph.synth.rgbd import make_rgbd_take, write_rgbd_take
+
+    d = tmp_path_factory.mktemp("rgbd")
+    res = make_rgbd_take("s1", "neutral", "neutral", "neutral", seed=3, params=dict(TINY_RGBD))
+    files = {
+        k: d / f for k, f in (("depth", "d.png"), ("color", "c.png"), ("intrinsics", "i.yaml"))
+    }
+    files["landmarks"] = d / "l.pts"
+    write_rgbd_take(res, *files.values(), d / "truth.npz")
+    return files
+
+
+def _rgbd(files, **changed):
+    return ingest.run(
+        dict(ROW, modality="rgbd"), {k: str(v) for k, v in (files | changed).items()}, {}
+    )
+
+
+def _edit_yaml(src, dst, edit):
+    doc = yaml.safe_load(Path(src).read_text())
+    edit(doc)
+    Path(dst).write_text(yaml.safe_dump(doc))
+    return dst
+
+
+def test_rgbd_take_reads_and_records_its_camera(rgbd_files):
+    from scan2morph.store import paths
+
+    part = _rgbd(rgbd_files)
+    assert part.datasets[paths.raw("neutral", "xyz")].shape == (120, 160, 3)
+    assert part.datasets[paths.camera("neutral", "modality")] == "rgbd"
+    assert part.datasets[paths.camera("neutral", "K")][0, 0] == 258.0
+    assert part.datasets[paths.camera("neutral", "pose")][0, 3] == -15.0  # the baseline, mm
+
+
+@pytest.mark.parametrize("factor, expected", [(0.001, "x 1000"), (1000.0, "x 0.001")])
+def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, expected):
+    def edit(doc):
+        doc["depth_scale_mm"] *= factor
+
+    bad = _edit_yaml(rgbd_files["intrinsics"], tmp_path / "i.yaml", edit)
+    with pytest.raises(InputError, match=f"depth_scale_mm: .*{expected}.*plausible") as exc:
+        _rgbd(rgbd_files, intrinsics=bad)
+    assert exc.value.source == str(bad)
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (
+            lambda d: d.update(width=320),
+            r"i.yaml: width/height: 320x120 but the depth image d.png is 160x120",
+        ),
+        (
+            lambda d: d["color"].update(height=240),
+            r"color.width/color.height: 160x240 but the color",
+        ),
+        (lambda d: d.pop("fx"), r"i.yaml: fx: missing"),
+        (
+            lambda d: d["color"].update(R=[[1, 0, 0], [0, 1, 0], [0, 0, 2]]),
+            "color.R: not a rotation",
+        ),
+        (lambda d: d.update(depth_scale_mm=0), "depth_scale_mm: expected > 0"),
+    ],
+)
+def test_rgbd_intrinsics_that_do_not_fit(rgbd_files, tmp_path, edit, match):
+    bad = _edit_yaml(rgbd_files["intrinsics"], tmp_path / "i.yaml", edit)
+    with pytest.raises(InputError, match=match) as exc:
+        _rgbd(rgbd_files, intrinsics=bad)
+    assert exc.value.source == str(bad)
+
+
+def test_rgbd_unreadable_or_wrong_depth_files(rgbd_files, tmp_path):
+    (tmp_path / "junk.png").write_bytes(b"not a png at all")
+    with pytest.raises(InputError, match="depth: cannot decode the PNG"):
+        _rgbd(rgbd_files, depth=tmp_path / "junk.png")
+    write_color(tmp_path / "rgb.png", np.zeros((120, 160, 3), np.uint8))
+    with pytest.raises(InputError, match="expected a 16-bit single-channel PNG, got uint8 with 3"):
+        _rgbd(rgbd_files, depth=tmp_path / "rgb.png")
+    np.savez(tmp_path / "d.npz", z=np.ones((120, 160)))
+    with pytest.raises(InputError, match=r"key 'depth' missing \(found \['z'\]\)"):
+        _rgbd(rgbd_files, depth=tmp_path / "d.npz")
+    (tmp_path / "i.yaml").write_text("width: [1, 2\n")
+    with pytest.raises(InputError, match="cannot read as YAML"):
+        _rgbd(rgbd_files, intrinsics=tmp_path / "i.yaml")
+
+
+@pytest.fixture(scope="module")
+def mesh_files(tmp_path_factory):
+    from scan2morph.synth.mesh_scan import make_mesh_take, write_mesh_take
+
+    d = tmp_path_factory.mktemp("mesh")
+    res = make_mesh_take("s1", "neutral", "neutral", "neutral", seed=3)
+    write_mesh_take(res, d / "m.ply", d / "m.txt", d / "truth.npz")
+    return {"mesh": d / "m.ply", "landmarks": d / "m.txt", "scan": res}
+
+
+def _mesh(files, **changed):
+    files = {k: str(v) for k, v in (files | changed).items() if k != "scan"}
+    return ingest.run(dict(ROW, modality="mesh"), files, {}, {"width": 160, "height": 120})
+
+
+def test_mesh_take_reads_and_records_its_camera(mesh_files):
+    from scan2morph.store import paths
+
+    part = _mesh(mesh_files)
+    assert part.datasets[paths.camera("neutral", "modality")] == "mesh"
+    assert part.datasets[paths.camera("neutral", "size")].tolist() == [160, 120]
+
+
+def test_mesh_without_faces(mesh_files, tmp_path):
+    import trimesh
+
+    cloud = trimesh.PointCloud(mesh_files["scan"]["vertices"])
+    cloud.export(tmp_path / "cloud.ply")
+    with pytest.raises(InputError, match=r"mesh: no faces \(\d+ vertices: a point cloud\?\)"):
+        _mesh(mesh_files, mesh=tmp_path / "cloud.ply")
+
+
+def test_mesh_texture_missing_names_the_file(mesh_files, tmp_path):
+    import trimesh
+    from PIL import Image
+
+    scan = mesh_files["scan"]
+    uv = np.zeros((len(scan["vertices"]), 2))
+    visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.new("RGB", (8, 8)))
+    trimesh.Trimesh(scan["vertices"], scan["faces"], visual=visual, process=False).export(
+        tmp_path / "face.obj"
+    )
+    for png in tmp_path.glob("*.png"):
+        png.unlink()
+    with pytest.raises(InputError, match=r"texture: .*names 'material_0.png', which is missing"):
+        _mesh(mesh_files, mesh=tmp_path / "face.obj")
+
+
+def test_mesh_landmarks_off_the_mesh_or_in_metres(mesh_files, tmp_path):
+    from scan2morph.synth.mesh_scan import write_landmarks3d
+
+    lm = mesh_files["scan"]["landmarks"]
+    write_landmarks3d(tmp_path / "off.txt", lm + [0.0, 0.0, 30.0])
+    with pytest.raises(
+        InputError, match=r"landmarks: point \d+ lies [23]\d.* mm from the mesh m.ply"
+    ):
+        _mesh(mesh_files, landmarks=tmp_path / "off.txt")
+    write_landmarks3d(tmp_path / "m.txt", lm / 1000.0)
+    with pytest.raises(InputError, match="face size: .*looks like metres, not mm"):
+        _mesh(mesh_files, landmarks=tmp_path / "m.txt")
+    (tmp_path / "short.txt").write_text("# 67 points\n" + "1 2 3\n" * 67)
+    with pytest.raises(InputError, match=r"expected 68 points \(lines 'x y z'\), got 67"):
+        _mesh(mesh_files, landmarks=tmp_path / "short.txt")
+
+
+def test_mesh_unreadable_file(mesh_files, tmp_path):
+    (tmp_path / "junk.glb").write_bytes(b"\x00garbage" * 10)
+    with pytest.raises(InputError, match="mesh: cannot read"):
+        _mesh(mesh_files, mesh=tmp_path / "junk.glb")
+    with pytest.raises(InputError, match="file not found"):
+        _mesh(mesh_files, mesh=tmp_path / "absent.obj")

@@ -5,7 +5,13 @@ from __future__ import annotations
 import pytest
 
 from scan2morph.errors import InputError
-from scan2morph.sheet import read_sheet, subject_problems, synthetic_rows, take_table
+from scan2morph.sheet import (
+    input_roles,
+    read_sheet,
+    subject_problems,
+    synthetic_rows,
+    take_table,
+)
 
 HEADER = "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tleft\tright\tcalibration\tlandmarks\n"
 
@@ -73,3 +79,56 @@ def test_comment_only_sheet_is_empty(tmp_path):
     path = tmp_path / "s.tsv"
     path.write_text("# nothing yet\n" + HEADER)
     assert len(read_sheet(path)) == 0
+
+
+def test_mesh_and_rgbd_rows(tmp_path):
+    """The new columns: a mesh take needs mesh and landmarks (texture optional, checked when
+    given), an RGB-D take depth, color, intrinsics and landmarks."""
+    _files(tmp_path, "m.obj", "m.txt", "d.png", "c.png", "i.yaml", "c.pts")
+    path = tmp_path / "sheet.tsv"
+    cols = (
+        "subject\ttake\tkind\tlabel\tmodality\tmesh\ttexture\tdepth\tcolor\tintrinsics\tlandmarks\n"
+    )
+    rows = [
+        ["m", "neutral", "neutral", "neutral", "mesh", "m.obj", "", "", "", "", "m.txt"],
+        ["t", "neutral", "neutral", "neutral", "mesh", "m.obj", "gone.png", "", "", "", "m.txt"],
+        ["r", "neutral", "neutral", "neutral", "rgbd", "", "", "d.png", "c.png", "i.yaml", "c.pts"],
+        ["q", "neutral", "neutral", "neutral", "rgbd", "", "", "d.png", "c.png", "", "c.pts"],
+    ]
+    path.write_text(cols + "".join("\t".join(r) + "\n" for r in rows))
+    sheet = read_sheet(path)
+    assert sheet.loc[0, "mesh"] == str(tmp_path / "m.obj")
+    problems = subject_problems(sheet)
+    assert problems["m"] == [] and problems["r"] == []
+    assert problems["t"] == [
+        f"{path} row 3 (t/neutral): column 'texture': file not found: {tmp_path / 'gone.png'}"
+    ]
+    assert problems["q"] == [
+        f"{path} row 5 (q/neutral): column 'intrinsics' is empty (a rgbd take needs it)"
+    ]
+    assert input_roles(sheet.loc[0]) == ["mesh", "landmarks"]
+    assert input_roles(sheet.loc[1]) == ["mesh", "landmarks", "texture"]
+
+
+def test_synthetic_mesh_and_rgbd_takes():
+    takes = [
+        dict(take="neutral", kind="neutral", label="neutral"),
+        dict(take="car", kind="viseme", label="car"),
+    ]
+    rows = synthetic_rows(
+        3, "s", takes, "r", mesh=dict(subjects=[1], takes=["neutral", "car"]),
+        rgbd=dict(subjects=[2, 7], takes=["car"]),
+    )  # fmt: skip
+    by = rows.set_index(["subject", "take"])
+    assert by.loc[("s01", "car"), "modality"] == "mesh"
+    assert by.loc[("s01", "car"), "mesh"] == "r/s01/car.ply"
+    assert by.loc[("s01", "car"), "landmarks"] == "r/s01/car_landmarks3d.txt"
+    assert by.loc[("s02", "neutral"), "modality"] == "range"
+    rgbd = by.loc[("s02", "car")]
+    assert (rgbd["modality"], rgbd["depth"], rgbd["color"], rgbd["intrinsics"]) == (
+        "rgbd", "r/s02/car_depth.png", "r/s02/car.png", "r/s02/car_intrinsics.yaml"
+    )  # fmt: skip
+    assert rgbd["landmarks"] == "r/s02/car.pts" and rgbd["xyz"] == ""
+    with pytest.raises(InputError, match="synthetic.rgbd: take 'car' of subject 1 is also listed"):
+        synthetic_rows(1, "s", takes, "r", mesh=dict(subjects=[1], takes=["car"]),
+                       rgbd=dict(subjects=[1], takes=["car"]))  # fmt: skip

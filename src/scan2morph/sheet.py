@@ -29,15 +29,27 @@ COLUMNS = (
     "left",
     "right",
     "calibration",
+    "mesh",
+    "texture",
+    "depth",
+    "intrinsics",
     "landmarks",
 )
 REQUIRED = ("subject", "take", "kind", "label", "modality", "landmarks")
 KINDS = ("neutral", "viseme", "expression")
-MODALITIES = ("range", "stereo")
+MODALITIES = ("range", "stereo", "mesh", "rgbd")
+#: The file columns each modality needs.
 FILES = {
     "range": ("xyz", "color", "landmarks"),
     "stereo": ("left", "right", "calibration", "landmarks"),
+    "mesh": ("mesh", "landmarks"),
+    "rgbd": ("depth", "color", "intrinsics", "landmarks"),
 }
+#: File columns a modality may have (used when not empty): a mesh's texture, when the mesh file
+#: does not reference one.
+OPTIONAL_FILES = {"mesh": ("texture",)}
+#: Every column that holds a file path (resolved against the sheet's folder).
+PATH_COLUMNS = tuple(c for c in COLUMNS if c not in REQUIRED or c == "landmarks")
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
@@ -83,12 +95,41 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
                     f"row {row}, column '{col}': {value!r} is not an id (letters, digits, _ and -)",
                 )
     base = path.resolve().parent
-    for col in ("xyz", "color", "left", "right", "calibration", "landmarks"):
+    for col in PATH_COLUMNS:
         df[col] = [str(base / v) if v and not Path(v).is_absolute() else v for v in df[col]]
     df["sheet_row"] = range(2, len(df) + 2)
     df["sheet"] = str(path)
     df["synthetic"] = False
     return df
+
+
+def input_roles(row) -> list[str]:
+    """The file columns of a take's row that its ingest reads: its modality's
+    :data:`FILES`, then the :data:`OPTIONAL_FILES` that are not empty."""
+    modality = row["modality"]
+    optional = [c for c in OPTIONAL_FILES.get(modality, ()) if row[c]]
+    return [*FILES.get(modality, ()), *optional]
+
+
+#: Synthetic input files of each modality (besides the landmarks): column -> name pattern.
+SYNTHETIC_FILES = {
+    "range": {"xyz": "{stem}.abs.gz", "color": "{stem}.png"},
+    "stereo": {
+        "left": "{stem}_left.png",
+        "right": "{stem}_right.png",
+        "calibration": "{stem}_calib.yaml",
+    },
+    "mesh": {"mesh": "{stem}.ply"},
+    "rgbd": {
+        "depth": "{stem}_depth.png",
+        "color": "{stem}.png",
+        "intrinsics": "{stem}_intrinsics.yaml",
+    },
+}
+#: Synthetic landmark file of each modality: 3D points on a mesh, iBUG .pts on an image.
+SYNTHETIC_LANDMARKS = {"mesh": "{stem}_landmarks3d.txt"}
+#: Modalities a synthetic take may be given for some subjects (config ``synthetic.{modality}``).
+SYNTHETIC_SWITCHED = ("stereo", "mesh", "rgbd")
 
 
 def synthetic_rows(
@@ -97,6 +138,8 @@ def synthetic_rows(
     takes: list[dict],
     root: str,
     stereo: dict | None = None,
+    mesh: dict | None = None,
+    rgbd: dict | None = None,
 ) -> pd.DataFrame:
     """Rows of the synthetic cohort, whose files the synthetic rules write under ``root``.
 
@@ -115,48 +158,59 @@ def synthetic_rows(
         ``subjects`` (1-based subject numbers) and ``takes`` (take ids of ``takes``): those
         takes of those subjects are stereo pairs too. Numbers above ``n_subjects`` are
         ignored (so that a smaller cohort keeps the same config); other keys are ignored.
+    mesh, rgbd : dict, optional
+        The same for textured mesh scans and RGB-D takes. A take listed for a subject under
+        two modalities is an error.
 
     Returns
     -------
     pandas.DataFrame
-        One row per take with the sheet's columns: a range take has ``xyz``
+        One row per take with the sheet's columns, the files of :data:`SYNTHETIC_FILES`
+        (``{stem}`` = ``{root}/{subject}/{take}``): a range take has ``xyz``
         (``{take}.abs.gz``) and ``color`` (``{take}.png``), a stereo take ``left``
         (``{take}_left.png``), ``right`` (``{take}_right.png``) and ``calibration``
-        (``{take}_calib.yaml``); both have ``landmarks`` (``{take}.pts``).
+        (``{take}_calib.yaml``), a mesh take ``mesh`` (``{take}.obj``, with its MTL and
+        texture), an RGB-D take ``depth`` (``{take}_depth.png``), ``color`` and
+        ``intrinsics`` (``{take}_intrinsics.yaml``); all have ``landmarks`` (``{take}.pts``,
+        for a mesh take ``{take}_landmarks3d.txt``).
 
     Raises
     ------
     InputError
-        ``stereo.takes`` names a take that is not in ``takes``, or ``stereo.subjects`` holds
-        something other than positive integers.
+        ``{modality}.takes`` names a take that is not in ``takes``, ``{modality}.subjects``
+        holds something other than positive integers, or a take is listed twice.
     """
-    stereo = stereo or {}
-    source = "config: synthetic.stereo"
+    switches = {"stereo": stereo or {}, "mesh": mesh or {}, "rgbd": rgbd or {}}
     take_ids = [t["take"] for t in takes]
-    unknown = [t for t in stereo.get("takes", []) if t not in take_ids]
-    if unknown:
-        raise InputError(
-            source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
-        )
-    numbers = list(stereo.get("subjects", []))
-    if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
-        raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
+    for name, switch in switches.items():
+        source = f"config: synthetic.{name}"
+        unknown = [t for t in switch.get("takes", []) if t not in take_ids]
+        if unknown:
+            raise InputError(
+                source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
+            )
+        numbers = list(switch.get("subjects", []))
+        if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
+            raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
     rows = []
     for i in range(1, n_subjects + 1):
         subject = f"{prefix}{i:02d}"
         for t in takes:
             stem = f"{root}/{subject}/{t['take']}"
-            listed = i in numbers and t["take"] in stereo.get("takes", [])
-            modality = "stereo" if listed else t.get("modality", "range")
-            files = dict(xyz="", color="", left="", right="", calibration="")
-            if modality == "stereo":
-                files |= dict(
-                    left=f"{stem}_left.png",
-                    right=f"{stem}_right.png",
-                    calibration=f"{stem}_calib.yaml",
+            listed = [
+                name
+                for name, switch in switches.items()
+                if i in switch.get("subjects", []) and t["take"] in switch.get("takes", [])
+            ]
+            if len(listed) > 1:
+                raise InputError(
+                    f"config: synthetic.{listed[1]}",
+                    f"take {t['take']!r} of subject {i} is also listed under synthetic.{listed[0]}",
                 )
-            else:
-                files |= dict(xyz=f"{stem}.abs.gz", color=f"{stem}.png")
+            modality = listed[0] if listed else t.get("modality", "range")
+            files = dict.fromkeys(PATH_COLUMNS[:-1], "")
+            files |= {c: v.format(stem=stem) for c, v in SYNTHETIC_FILES[modality].items()}
+            pattern = SYNTHETIC_LANDMARKS.get(modality, "{stem}.pts")
             rows.append(
                 dict(
                     subject=subject,
@@ -165,7 +219,7 @@ def synthetic_rows(
                     label=t["label"],
                     modality=modality,
                     **files,
-                    landmarks=f"{stem}.pts",
+                    landmarks=pattern.format(stem=stem),
                     sheet_row=0,
                     sheet="config: synthetic",
                     synthetic=True,
@@ -206,10 +260,13 @@ def subject_problems(
                     f"{where}: modality {rec.modality!r} unknown (expected one of {list(MODALITIES)})"
                 )
                 continue
-            for col in FILES[rec.modality]:
+            for col in FILES[rec.modality] + OPTIONAL_FILES.get(rec.modality, ()):
                 value = getattr(rec, col)
                 if not value:
-                    out.append(f"{where}: column '{col}' is empty (a {rec.modality} take needs it)")
+                    if col in FILES[rec.modality]:
+                        out.append(
+                            f"{where}: column '{col}' is empty (a {rec.modality} take needs it)"
+                        )
                 elif check_files and not rec.synthetic and not Path(value).is_file():
                     out.append(f"{where}: column '{col}': file not found: {value}")
         dup = rows["take"][rows["take"].duplicated()].unique()

@@ -43,6 +43,8 @@ try:
         config["synthetic"]["takes"],
         SYNTH_ROOT,
         config["synthetic"]["stereo"],
+        config["synthetic"]["mesh"],
+        config["synthetic"]["rgbd"],
     )
     TAKES = take_table(SHEET, SYNTH)
 except InputError as _exc:

@@ -1,5 +1,6 @@
 # Ingest: one take's input files -> arrays on the shared pixel grid, with input checksums.
-# A stereo take is reconstructed here into the range image of its left camera.
+# A stereo take is reconstructed here into the range image of its left camera, an RGB-D take's
+# depth resampled onto its colour camera, a mesh take rendered through a virtual camera.
 
 
 rule check_subject:
@@ -20,7 +21,7 @@ rule check_subject:
 
 
 rule ingest:
-    """Read one take's scan files onto the pixel grid with checksums, reconstructing a stereo pair into a range image."""
+    """Read one take's scan files onto the pixel grid with checksums: a stereo pair reconstructed, RGB-D depth resampled onto the colour image, a mesh rendered."""
     input:
         unpack(get_take_inputs),
         check="results/{subject}/check.json",
@@ -37,5 +38,6 @@ rule ingest:
         row=take_row,
         roles=get_take_roles,
         stereo=get_stereo_params,
+        mesh_camera=get_mesh_camera_params,
     script:
         "../scripts/ingest.py"

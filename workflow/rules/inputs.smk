@@ -2,7 +2,7 @@
 # wildcards and looks the subject or take up in the take table of common.smk.
 from pathlib import Path
 
-from scan2morph.sheet import FILES
+from scan2morph.sheet import SYNTHETIC_LANDMARKS, input_roles
 
 
 # --- one take ---
@@ -17,7 +17,7 @@ def get_take_inputs(wildcards):
     by the subject's check job, so that the DAG still builds and other subjects run)."""
     row = TAKES.loc[(wildcards.subject, wildcards.take)]
     files = {}
-    for role in FILES.get(row["modality"], ()):
+    for role in input_roles(row):
         path = row[role]
         if path and (row["synthetic"] or Path(path).is_file()):
             files[role] = path
@@ -31,12 +31,29 @@ def get_stereo_params(wildcards):
     return dict(config["stereo"]) if modality == "stereo" else {}
 
 
+def get_mesh_camera_params(wildcards):
+    """The virtual camera of a mesh take; {} for other takes (changing it reruns mesh takes only)."""
+    modality = TAKES.loc[(wildcards.subject, wildcards.take), "modality"]
+    return dict(config["mesh_camera"]) if modality == "mesh" else {}
+
+
 def get_take_roles(wildcards):
-    """The sheet columns that name the take's input files (its modality's; none for an unknown
-    modality, which the subject's check job reports)."""
-    return list(
-        FILES.get(TAKES.loc[(wildcards.subject, wildcards.take), "modality"], ())
-    )
+    """The sheet columns that name the take's input files (its modality's, and an optional
+    texture when given; none for an unknown modality, which the subject's check job reports).
+    """
+    return input_roles(TAKES.loc[(wildcards.subject, wildcards.take)])
+
+
+def synth_landmark_files(takes):
+    """The landmark files a synthetic subject's generator writes (3D points for mesh takes,
+    iBUG .pts otherwise), with ``{subject}`` kept."""
+    stem = f"{SYNTH_ROOT}/{{subject}}/{{take}}"
+    return [
+        SYNTHETIC_LANDMARKS.get(t["modality"], "{stem}.pts").format(
+            stem=stem.replace("{take}", t["take"])
+        )
+        for t in takes
+    ]
 
 
 def get_take_kind(wildcards):

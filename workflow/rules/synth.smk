@@ -1,14 +1,15 @@
 # Synthetic subjects with exact ground truth, written in the formats users bring.
 # One job per subject: the procedural head is built once and rendered for every take (a job per
 # take would pay ~1 s of imports and ~1.4 s of head building for ~0.35 s of range or ~1 s of
-# stereo rendering). A take is a range scan or a stereo pair; subjects whose takes have the same
-# modalities share one rule (synth_subject: range only; synth_stereo_subject: with stereo takes).
+# stereo rendering). A take is a range scan, a stereo pair, an RGB-D take or a mesh scan; subjects
+# whose takes have the same modalities share one rule (synth_subject: no stereo takes;
+# synth_stereo_subject: with stereo takes; numbered when several groups share a name).
 
 
 for _group in synth_groups():
 
     rule:
-        """Render every take of one synthetic subject, range scans or stereo pairs with landmark clicks, and its exact ground truth."""
+        """Render every take of one synthetic subject (range scans, stereo pairs, RGB-D takes or mesh scans) with landmark clicks, and its exact ground truth."""
         name:
             _group["name"]
         output:
@@ -33,9 +34,21 @@ for _group in synth_groups():
                 _group["takes"],
                 "stereo",
             ),
-            landmarks=synth_files(
-                f"{SYNTH_ROOT}/{{subject}}/{{take}}.pts", _group["takes"]
+            depth=synth_files(
+                f"{SYNTH_ROOT}/{{subject}}/{{take}}_depth.png", _group["takes"], "rgbd"
             ),
+            rgbd_color=synth_files(
+                f"{SYNTH_ROOT}/{{subject}}/{{take}}.png", _group["takes"], "rgbd"
+            ),
+            intrinsics=synth_files(
+                f"{SYNTH_ROOT}/{{subject}}/{{take}}_intrinsics.yaml",
+                _group["takes"],
+                "rgbd",
+            ),
+            mesh=synth_files(
+                f"{SYNTH_ROOT}/{{subject}}/{{take}}.ply", _group["takes"], "mesh"
+            ),
+            landmarks=synth_landmark_files(_group["takes"]),
             truth=synth_files(
                 f"{SYNTH_ROOT}/{{subject}}/truth/{{take}}.npz", _group["takes"]
             ),
@@ -53,5 +66,7 @@ for _group in synth_groups():
             seed=config["synthetic"]["seed"],
             scanner=config["synthetic"]["scanner"],
             rig=config["synthetic"]["stereo"]["rig"],
+            rgbd=config["synthetic"]["rgbd"]["sensor"],
+            mesh=config["synthetic"]["mesh"]["scanner"],
         script:
             "../scripts/synth_subject.py"

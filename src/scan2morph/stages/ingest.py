@@ -1,7 +1,10 @@
 """Ingest: one take's input files -> its range image, colour and landmarks on one pixel grid.
 
 A range take is read as it is; a stereo take is reconstructed into the range image of its left
-camera. The part records the sheet row and a checksum of every input file.
+camera; an RGB-D take's depth is resampled onto its colour camera's grid
+(:mod:`scan2morph.io.rgbd`); a mesh take is rendered through a virtual pinhole camera
+(:mod:`scan2morph.io.mesh_scan`). The part records the sheet row, a checksum of every input file
+and the camera of the take's pixel grid (``/takes/{take}/camera/*``).
 """
 
 from __future__ import annotations
@@ -9,20 +12,36 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 
+import numpy as np
+
 from scan2morph.errors import InputError
 from scan2morph.io import StereoCalibration, check_face, read_range_take, read_stereo_take
+from scan2morph.io.mesh_scan import read_mesh_take
+from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
 from scan2morph.sheet import FILES
 from scan2morph.stages.part import Part
 from scan2morph.store import paths
 
-#: Config section this stage reads (stereo takes only).
-SECTIONS = ("stereo",)
+#: Config sections this stage reads (stereo takes; mesh takes).
+SECTIONS = ("stereo", "mesh_camera")
+#: What the pixel grid of each modality's take is (``/takes/{take}/camera/model``).
+CAMERA_MODELS = {
+    "range": "the range scanner's (as given)",
+    "stereo": "the stereo rig's left camera (raw, distorted)",
+    "rgbd": "the RGB-D sensor's colour camera (intrinsics file)",
+    "mesh": "a virtual pinhole camera in front of the face (rendered)",
+}
 log = logging.getLogger("scan2morph")
 
 
-def run(row: Mapping[str, str], files: Mapping[str, str], stereo: Mapping) -> Part:
+def run(
+    row: Mapping[str, str],
+    files: Mapping[str, str],
+    stereo: Mapping,
+    mesh_camera: Mapping | None = None,
+) -> Part:
     """Read one take.
 
     Parameters
@@ -33,16 +52,35 @@ def run(row: Mapping[str, str], files: Mapping[str, str], stereo: Mapping) -> Pa
         The input files by sheet column (:data:`scan2morph.sheet.FILES` of the modality).
     stereo : mapping
         The config section ``stereo`` (used by stereo takes).
+    mesh_camera : mapping, optional
+        The config section ``mesh_camera`` (used by mesh takes).
 
     Returns
     -------
     Part
-        ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8 and ``landmarks`` (68, 2) px of
-        the take; the take group's attributes hold the row and input checksums.
+        ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8, ``landmarks`` (68, 2) px and
+        ``camera/*`` of the take; the take group's attributes hold the row and input checksums.
     """
     take, modality = row["take"], row["modality"]
     attrs = {k: row[k] for k in ("kind", "label", "modality")}
-    if modality == "range":
+    camera: dict = {}
+    if modality == "rgbd":
+        scan = read_rgbd_take(
+            files["depth"], files["color"], files["intrinsics"], files["landmarks"]
+        )
+        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
+        cam = scan.intrinsics.color
+        camera = dict(
+            K=cam.K, distortion=cam.D, pose=scan.intrinsics.color_from_depth, size=cam.size
+        )
+    elif modality == "mesh":
+        scan = read_mesh_take(
+            files["mesh"], files.get("texture") or None, files["landmarks"], dict(mesh_camera or {})
+        )
+        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
+        camera = dict(K=scan.K, distortion=np.zeros(5), pose=scan.pose, size=scan.size)
+        attrs["mesh"] = scan.report
+    elif modality == "range":
         scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
         xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
         check_face(xyz, landmarks, files["xyz"], files["landmarks"])
@@ -75,15 +113,25 @@ def run(row: Mapping[str, str], files: Mapping[str, str], stereo: Mapping) -> Pa
         attrs["stereo"] = report
     else:
         raise InputError(f"{row['subject']}/{take}", f"modality {modality!r} not supported")
-    attrs |= {f"input_sha256_{r}": sha256_file(files[r]) for r in FILES[modality]}
+    attrs |= {f"input_sha256_{r}": sha256_file(files[r]) for r in FILES[modality] if r in files}
+    provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | camera
     return Part(
         {
             paths.raw(take, "xyz"): xyz,
             paths.raw(take, "color"): color,
             paths.landmarks(take): landmarks,
+            **{paths.camera(take, k): _dataset(v) for k, v in provenance.items()},
         },
         attrs={paths.take(take): attrs},
     )
+
+
+def _dataset(value):
+    """A camera value as stored: text as it is, numbers as float64 (size as int64) arrays."""
+    if isinstance(value, str):
+        return value
+    arr = np.asarray(value)
+    return arr.astype(np.int64 if arr.dtype.kind in "iu" else np.float64)
 
 
 def _stereo_hint(left, right, calib: StereoCalibration, stereo: Mapping, files) -> str:

@@ -19,7 +19,8 @@ log = logging.getLogger("scan2morph")
 def run(
     take: str, data: Mapping[str, np.ndarray], attrs: Mapping, settings: Mapping, source: str
 ) -> Part:
-    """Repair one take's range image.
+    """Repair one take's range image (an RGB-D take's as depth-camera data: flying pixels at
+    depth edges dropped, depth noise smoothed).
 
     Parameters
     ----------
@@ -27,7 +28,8 @@ def run(
     data : mapping store path -> array
         The take's ingest part (``raw/xyz``, ``raw/color``, ``landmarks``).
     attrs : mapping
-        The take group's attributes so far (kept, with the repair report added).
+        The take group's attributes so far (kept, with the repair report added); ``modality``
+        ``rgbd`` marks depth-camera data.
     settings : mapping
         The config section ``repair``.
     source : str
@@ -37,12 +39,16 @@ def run(
     -------
     Part
         ``range/xyz`` (float32, mm), ``range/color``, ``range/spikes``, ``range/filled``,
-        ``landmarks``; ``files["report"]`` is the repair report (counts, holes filled and left).
+        ``landmarks`` and the ``camera/*`` provenance; ``files["report"]`` is the repair report (counts, holes filled and left).
     """
     xyz, report = repair_range(
-        need(data, paths.raw(take, "xyz"), source), dict(settings), source=source
+        need(data, paths.raw(take, "xyz"), source),
+        dict(settings),
+        source=source,
+        depth_camera=_modality(data, attrs, take) == "rgbd",
     )
     filled, spikes = report.pop("filled"), report.pop("spikes")
+    report.pop("flying", None)
     log.info("%s: %s", take, report)
     return Part(
         {
@@ -51,10 +57,29 @@ def run(
             paths.range_image(take, "spikes"): spikes,
             paths.range_image(take, "filled"): filled,
             paths.landmarks(take): need(data, paths.landmarks(take), source),
+            **camera_datasets(data, take),
         },
         attrs={paths.take(take): dict(attrs) | {"repair": report}},
         files={"report": report},
     )
+
+
+def _modality(data: Mapping[str, np.ndarray], attrs: Mapping, take: str) -> str:
+    """The take's modality: the take group's attribute, else the ingest part's dataset."""
+    if "modality" in attrs:
+        return str(attrs["modality"])
+    value = data.get(paths.camera(take, "modality"), "range")
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def camera_datasets(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:
+    """The take's ``camera/*`` provenance datasets that ``data`` holds (ingest writes them)."""
+    names = ("modality", "model", "K", "distortion", "pose", "size")
+    return {
+        paths.camera(take, n): data[paths.camera(take, n)]
+        for n in names
+        if paths.camera(take, n) in data
+    }
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
