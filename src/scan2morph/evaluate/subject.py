@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from scan2morph.evaluate.mesh import alignment_accuracy, mesh_accuracy
+from scan2morph.evaluate.modality import grid_view, modality_summary, take_modality
 from scan2morph.evaluate.motion import (
     ideal_motion,
     material_accuracy,
@@ -71,13 +72,17 @@ def subject_accuracy(
     n_normals = vertex_normals(n_vertices, store[paths.template("faces")])
     # the pipeline's own error bar (no truth), shown beside the error the truth shows
     bars = noise_by_take(store)
+    # each truth seen through the camera of its take's pixel grid (RGB-D: colour camera; mesh:
+    # the virtual camera), with the rotation from the take's frame into that camera
+    views = {take: grid_view(truth, store, take) for take, truth in truths.items()}
     for take, truth in truths.items():
         v, valid = store[paths.mesh(take, "vertices")], store[paths.mesh(take, "valid")]
-        entry = {"mesh": mesh_accuracy(v, valid, truth)}
+        modality = take_modality(store, take)
+        entry = {"modality": modality, "mesh": mesh_accuracy(v, valid, truth)}
         if "xyz_true" in truth.extra and paths.range_image(take, "xyz") in store:
-            # a stereo take: depth error and coverage of the reconstruction over the face
+            # a stereo or RGB-D take: depth error and coverage over the face
             face = face_region(truth.extra["segment"] == SEG_SKIN, truth.landmarks2d)
-            entry["stereo"] = stereo_accuracy(
+            entry["rgbd" if modality == "rgbd" else "stereo"] = stereo_accuracy(
                 np.asarray(store[paths.range_image(take, "xyz")], dtype=np.float64),
                 truth.extra["xyz_true"],
                 face,
@@ -92,7 +97,9 @@ def subject_accuracy(
             ideal = material
             if template is not None:
                 sets = (fiducial_sets[neutral], fiducial_sets[take])
-                ideal = ideal_motion(template, truths[neutral], truth, sets, levels, max_slope_deg)
+                view_n, rot_n = views[neutral]
+                ideal = ideal_motion(template, view_n, views[take][0], sets, levels, max_slope_deg)
+                ideal = ideal @ rot_n  # the neutral camera's frame -> the neutral frame
             processed = None
             if smoothing is not None:
                 processed = laplacian_smooth(
@@ -139,7 +146,7 @@ def subject_accuracy(
         "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
         "motion_click_noise_relative_max": worst("motion", "click_noise_relative"),
     }
-    summary |= _click_noise(store, truths, neutral, visemes)
+    summary |= _click_noise(store, {t: views[t][0] for t in truths}, neutral, visemes)
     stereo = [
         t["stereo"]
         for t in takes.values()
@@ -148,6 +155,7 @@ def subject_accuracy(
     if stereo:  # only subjects with stereo takes get the stereo summary
         summary["stereo_depth_rms_mm_max"] = max(s["depth_rms_mm"] for s in stereo)
         summary["stereo_coverage_min"] = min(s["coverage"] for s in stereo)
+    summary["by_modality"] = modality_summary(takes)
     return {
         "units": {"distances": "mm", "angles": "degrees", "relative": "fraction"},
         "takes": takes,
