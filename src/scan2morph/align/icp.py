@@ -43,7 +43,7 @@ recovery, fitness below ``min_fitness``, point-to-plane RMSE above the limit, le
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -78,7 +78,7 @@ DEFAULT_ICP: dict[str, Any] = {
     "trim_rounds": 6,
     "trim_radius_mm": 8.0,
     "trim_sigma": 3.0,
-    "max_rmse_ratio": 3.0,
+    "max_rmse_ratio": 2.0,
     "max_rmse_mm": None,
     "min_inlier_fraction": 0.3,
 }
@@ -533,6 +533,8 @@ class RmseGate:
         ``"relative"`` or ``"absolute"``.
     problem : str or None
         Why the gate failed (naming the RMSE, the measured noise and the limit); None if passed.
+    kept : float
+        Share of the region judged (the rest left out as moved, as :func:`align_take` trims).
     """
 
     residual_rmse: float
@@ -541,6 +543,7 @@ class RmseGate:
     limit: float
     kind: str
     problem: str | None
+    kept: float = 1.0
 
 
 def rmse_gate(
@@ -556,14 +559,17 @@ def rmse_gate(
 ) -> RmseGate:
     """Judge a given take -> neutral pose by the RMSE gate :func:`align_take` applies.
 
+    The region's parts that moved are left out as :func:`align_take` trims them (at the given
+    pose, which is not refined), and the RMSE of the rest is compared with :func:`rmse_limit`.
+
     Parameters
     ----------
     src_vertices, src_valid, dst_vertices, dst_valid, faces, icp_indices
-        As :func:`align_take` (the whole valid region is judged: nothing is trimmed).
+        As :func:`align_take`.
     transform : (4, 4) float
         Take scanner frame -> neutral frame.
     params : dict, optional
-        ``max_rmse_ratio``, ``max_rmse_mm`` (overrides of :data:`DEFAULT_ICP`).
+        ``max_rmse_ratio``, ``max_rmse_mm``, ``trim_*`` (overrides of :data:`DEFAULT_ICP`).
     source : str
         ``subject/take`` for messages.
 
@@ -583,8 +589,16 @@ def rmse_gate(
         raise InputError(source, "icp_indices: fewer than 3 valid region vertices")
     noise_take = mesh_noise(src, sv, source=source).region(p_idx)
     noise_neutral = mesh_noise(dst, dv, source=source).region(np.flatnonzero(target))
-    residuals = _PlaneResiduals(dst, normals, target)(transform_points(transform, src[p_idx]))
-    return _rmse_gate(residuals, noise_take, noise_neutral, prm)
+    plane = _PlaneResiduals(dst, normals, target)
+    p = src[p_idx]
+    t = np.asarray(transform, dtype=np.float64)
+
+    def fixed(keep, pose):  # the pose is judged, not refined
+        return pose, 0.0, 0.0, 0, True
+
+    keep, *_ = _trim(p, np.ones(len(p), dtype=bool), t, True, fixed, plane, prm, [])
+    gate = _rmse_gate(plane(transform_points(t, p[keep])), noise_take, noise_neutral, prm)
+    return replace(gate, kept=float(keep.mean()))
 
 
 def _rmse_gate(residuals, noise_take, noise_neutral, prm) -> RmseGate:
