@@ -129,6 +129,12 @@ def test_synthetic_mesh_and_rgbd_takes():
         "rgbd", "r/s02/car_depth.png", "r/s02/car.png", "r/s02/car_intrinsics.yaml"
     )  # fmt: skip
     assert rgbd["landmarks"] == "r/s02/car.pts" and rgbd["xyz"] == ""
+    # the default switches (subjects 3 and 4, every default take) stay quiet in a smaller cohort
+    # with takes of its own, and speak up when they apply
+    small = synthetic_rows(2, "s", takes, "r", mesh=dict(subjects=[3], takes=["car", "sad2"]))
+    assert set(small["modality"]) == {"range"}
+    with pytest.raises(InputError, match=r"synthetic.mesh: takes: \['sad2'\] not among"):
+        synthetic_rows(3, "s", takes, "r", mesh=dict(subjects=[3], takes=["car", "sad2"]))
     with pytest.raises(InputError, match="synthetic.rgbd: take 'car' of subject 1 is also listed"):
         synthetic_rows(1, "s", takes, "r", mesh=dict(subjects=[1], takes=["car"]),
                        rgbd=dict(subjects=[1], takes=["car"]))  # fmt: skip

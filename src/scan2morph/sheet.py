@@ -177,21 +177,24 @@ def synthetic_rows(
     Raises
     ------
     InputError
-        ``{modality}.takes`` names a take that is not in ``takes``, ``{modality}.subjects``
-        holds something other than positive integers, or a take is listed twice.
+        ``{modality}.takes`` names a take that is not in ``takes`` (for a switch with a
+        subject in the cohort), ``{modality}.subjects`` holds something other than positive
+        integers, or a take is listed twice.
     """
     switches = {"stereo": stereo or {}, "mesh": mesh or {}, "rgbd": rgbd or {}}
     take_ids = [t["take"] for t in takes]
     for name, switch in switches.items():
         source = f"config: synthetic.{name}"
-        unknown = [t for t in switch.get("takes", []) if t not in take_ids]
-        if unknown:
-            raise InputError(
-                source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
-            )
         numbers = list(switch.get("subjects", []))
         if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
             raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
+        # a switch whose subjects are all beyond the cohort is off: its takes are not checked
+        # (a smaller cohort with its own takes keeps the default switches)
+        unknown = [t for t in switch.get("takes", []) if t not in take_ids]
+        if unknown and any(n <= n_subjects for n in numbers):
+            raise InputError(
+                source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
+            )
     rows = []
     for i in range(1, n_subjects + 1):
         subject = f"{prefix}{i:02d}"
