@@ -388,6 +388,13 @@ def test_mesh_noise_measures_the_noise_it_was_given(sigma):
     assert clean.region(inner) < 0.01  # the face's own shape is not noise
     assert noisy.region(inner) == pytest.approx(sigma, rel=0.15)
     assert np.nanmedian(noisy.vertex[inner]) == pytest.approx(sigma, rel=0.2)
+    # estimated only where asked (the ICP region), from the same neighbours
+    some = np.flatnonzero(inner)[::3]
+    rng = np.random.default_rng(8)
+    scan = _normal_noise(v, f, sigma, rng)
+    part, full = mesh_noise(scan, valid, at=some), mesh_noise(scan, valid)
+    assert_allclose(part.sq_residual[some], full.sq_residual[some], rtol=1e-12)
+    assert np.isnan(np.delete(part.sq_residual, some)).all()
     # invalid vertices get no estimate and do not spoil their neighbours'
     valid[::7] = False
     masked = mesh_noise(np.where(valid[:, None], _normal_noise(v, f, sigma, rng), np.nan), valid)

@@ -452,8 +452,8 @@ def align_take(
             "expected at least 3",
         )
     p, q = src[p_idx], dst[q_idx]
-    noise_take = mesh_noise(src, sv, source=source).region(p_idx)
-    noise_neutral = mesh_noise(dst, dv, source=source).region(q_idx)
+    noise_take = mesh_noise(src, sv, at=p_idx, source=source).region(p_idx)
+    noise_neutral = mesh_noise(dst, dv, at=q_idx, source=source).region(q_idx)
     expected = float(np.hypot(noise_take, noise_neutral))
     known = expected if np.isfinite(expected) else 0.0
     prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
@@ -587,8 +587,9 @@ def rmse_gate(
     p_idx = np.flatnonzero(region & sv)
     if p_idx.size < 3 or np.count_nonzero(target) < 3:
         raise InputError(source, "icp_indices: fewer than 3 valid region vertices")
-    noise_take = mesh_noise(src, sv, source=source).region(p_idx)
-    noise_neutral = mesh_noise(dst, dv, source=source).region(np.flatnonzero(target))
+    q_idx = np.flatnonzero(target)
+    noise_take = mesh_noise(src, sv, at=p_idx, source=source).region(p_idx)
+    noise_neutral = mesh_noise(dst, dv, at=q_idx, source=source).region(q_idx)
     plane = _PlaneResiduals(dst, normals, target)
     p = src[p_idx]
     t = np.asarray(transform, dtype=np.float64)

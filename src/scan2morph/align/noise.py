@@ -60,6 +60,7 @@ def mesh_noise(
     vertices: np.ndarray,
     valid: np.ndarray,
     neighbours: int = 12,
+    at: np.ndarray | None = None,
     source: str = "mesh",
 ) -> MeshNoise:
     """Estimate each vertex's measurement noise from the roughness of the mesh around it.
@@ -73,6 +74,9 @@ def mesh_noise(
     neighbours : int
         Nearest valid vertices the quadric is fitted to (and over which a vertex's squared
         residuals are pooled), at least :data:`MIN_NEIGHBOURS`.
+    at : (n,) int, optional
+        Vertex indices to estimate at (their neighbours may be any valid vertex); default: every
+        valid vertex. A vertex's pooled estimate uses the estimated ones among its neighbours.
     source : str
         ``subject/take`` for messages.
 
@@ -94,31 +98,41 @@ def mesh_noise(
     n_v = v.shape[0]
     sq = np.full(n_v, np.nan)
     noise = np.full(n_v, np.nan)
-    idx = np.flatnonzero(m & np.isfinite(v).all(axis=1))
+    usable = m & np.isfinite(v).all(axis=1)
+    idx = np.flatnonzero(usable)
     k = int(neighbours)
     if idx.size <= k:
         return MeshNoise(noise, sq)
-    pts = v[idx]
-    _, nn = cKDTree(pts).query(pts, k=k + 1)
-    nb = nn[:, 1:]  # the nearest is the vertex itself
-    sq[idx] = _quadric_residuals(pts, nb)
-    pooled = np.concatenate([sq[idx][:, None], sq[idx][nb]], axis=1)
-    noise[idx] = np.sqrt(np.median(pooled, axis=1) / CHI2_1_MEDIAN)
+    if at is not None:
+        want = np.zeros(n_v, dtype=bool)
+        want[np.asarray(at, dtype=np.int64)] = True
+        targets = np.flatnonzero(want & usable)
+    else:
+        targets = idx
+    if targets.size == 0:
+        return MeshNoise(noise, sq)
+    _, nn = cKDTree(v[idx]).query(v[targets], k=k + 1)
+    nb = idx[nn[:, 1:]]  # the nearest is the vertex itself
+    sq[targets] = _quadric_residuals(v[targets], v[nb])
+    pooled = np.concatenate([sq[targets][:, None], sq[nb]], axis=1)
+    noise[targets] = np.sqrt(np.nanmedian(pooled, axis=1) / CHI2_1_MEDIAN)
     return MeshNoise(noise, sq)
 
 
 def _quadric_residuals(pts: np.ndarray, nb: np.ndarray) -> np.ndarray:
-    """Leverage-corrected squared height of each point above the quadric fitted to its
-    neighbours ``nb`` (n, k), mm^2."""
-    local = pts[nb] - pts[:, None, :]  # (n, k, 3), the vertex at the origin
+    """Leverage-corrected squared height of each point (n, 3) above the quadric fitted to its
+    neighbours ``nb`` (n, k, 3), mm^2."""
+    local = nb - pts[:, None, :]  # (n, k, 3), the vertex at the origin
     centred = local - local.mean(axis=1, keepdims=True)
-    _, _, axes = np.linalg.svd(centred, full_matrices=False)  # (n, 3, 3) rows: principal axes
+    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))  # ascending
+    axes = vecs[:, :, ::-1].transpose(0, 2, 1)  # (n, 3, 3) rows: principal axes, normal last
     uvw = np.einsum("nkj,nij->nki", local, axes)
     u, w_, h = uvw[..., 0], uvw[..., 1], uvw[..., 2]
     scale = np.sqrt(np.mean(u**2 + w_**2, axis=1, keepdims=True))  # conditioning
     u, w_ = u / scale, w_ / scale
     x = np.stack([np.ones_like(u), u, w_, u * u, u * w_, w_ * w_], axis=-1)  # (n, k, 6)
-    xtx_inv = np.linalg.pinv(np.einsum("nki,nkj->nij", x, x))  # (n, 6, 6)
+    xtx = np.einsum("nki,nkj->nij", x, x)  # (n, 6, 6), well scaled: u, v have unit RMS
+    xtx_inv = np.linalg.inv(xtx + 1e-9 * np.eye(6))
     xth = np.einsum("nki,nk->ni", x, h)
     # the vertex sits at the origin, its design row is (1, 0, ..., 0): the quadric's height there
     # is the first coefficient, its leverage the first diagonal element of (X^T X)^-1
