@@ -16,12 +16,18 @@ from pathlib import Path
 import pytest
 import yaml
 
+from scan2morph.model import load_model
 from scan2morph.store.compare import store_differences
 from tests.slurm_cluster import ClusterUnavailable, SlurmCluster
 from tests.tiny_run import HEADER, SCANNER, TAKES
 from tests.workflow_api import REPO
 
 SUBJECTS = ["synth01", "synth02"]
+# Three takes a subject, the fewest that run every stage: the neutral, one viseme (viseme motion,
+# a one-component PCA and its blends) and one expression (its displacement, modal coordinates).
+# Under SLURM each rule costs a Snakemake start-up (~7 CPU-s: parsing the workflow) on top of its
+# ~2 CPU-s of work, so every take left out saves four rules (ingest, repair, fit, align) a subject.
+COHORT_TAKES = [t for t in TAKES if t["take"] in ("neutral", "car", "smile1")]
 # Every array of the two stores agrees to 1e-12, or to 1e-9 of its value: two local runs do not
 # agree to 1e-12 alone, because the alignment (open3d ICP) is not bit-reproducible (its transform
 # moves by ~5e-13 mm from run to run), which the PCA eigenvalues (~1e5 mm^2) carry as ~2e-10 and
@@ -30,11 +36,15 @@ ATOL, RTOL = 1e-12, 1e-9
 TARGETS = [f"results/{s}/{s}.h5" for s in SUBJECTS]
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 # What the throw-away cluster lacks compared with a site: accounting (so job states come from
-# squeue, kept for MinJobAge=600 s; no account is guessed either) and a quick first status check
-# (default 40 s: a status check is what lets a finished job's dependants be submitted).
+# squeue, kept for MinJobAge=3600 s; no account is guessed either), and quick status checks: a
+# check is what lets a finished job's dependants be submitted. Snakemake waits
+# --seconds-between-status-checks (default 10 s) before the first check; the plugin then adds
+# 10 s after every check that finds no job finished (up to 180 s) and goes back to
+# --slurm-init-seconds-before-status-checks (default 40 s) after one that does.
 CLUSTER_ARGS = [
     "--slurm-status-command=squeue",
-    "--slurm-init-seconds-before-status-checks=2",
+    "--seconds-between-status-checks=1",
+    "--slurm-init-seconds-before-status-checks=1",
     "--slurm-keep-successful-logs",
 ]
 
@@ -64,13 +74,14 @@ def slurm_cluster(tmp_path_factory):
 
 
 def cohort_config(work: Path) -> Path:
-    """tests/tiny_run.py's tiny config with two synthetic subjects; paths relative to ``work``
-    so that the config (and so each store's config hash) is the same in every working directory."""
+    """tests/tiny_run.py's tiny config with two synthetic subjects of three takes; paths relative
+    to ``work`` so that the config (and so each store's config hash) is the same in every working
+    directory."""
     work.mkdir(parents=True, exist_ok=True)
     (work / "subjects.tsv").write_text(HEADER)
     cfg = dict(
         subjects="subjects.tsv",
-        synthetic=dict(subjects=2, takes=TAKES, scanner=SCANNER, stereo=dict(subjects=[])),
+        synthetic=dict(subjects=2, takes=COHORT_TAKES, scanner=SCANNER, stereo=dict(subjects=[])),
         modal=dict(modes=10, reconstruction_k=[1, 2, 5, 10]),
         sweeps="sweeps.tsv",
     )
@@ -161,4 +172,8 @@ def test_tiny_cohort_through_slurm_equals_local_run(slurm_cluster, tmp_path):
     assert all(state.get(i) == "COMPLETED" for i in jobs), (states, jobs)
 
     for target in TARGETS:
+        # the three takes ran every stage (a stage both runs skipped would compare equal)
+        model = load_model(slurm / target)
+        assert model.skipped == {}, (target, model.skipped)
+        assert (set(model.visemes), set(model.coordinates)) == ({"car"}, {"smile1"}), target
         assert store_differences(local / target, slurm / target, atol=ATOL, rtol=RTOL) == []
