@@ -17,6 +17,7 @@ rules and per-subject rules, and the extrapolation to ``--database`` subjects/sc
 from __future__ import annotations
 
 import argparse
+import json
 import resource
 import shutil
 import subprocess
@@ -25,12 +26,14 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
-#: Rules that run once per take; every other rule runs once per subject (template, cohort: once).
+#: Rules that run once per take; every other rule runs once per subject (template, cohort: once;
+#: the synthetic subjects' generators are left out of the extrapolation: real scans are read).
 PER_TAKE = ("ingest", "repair", "fit", "align")
 ONCE = ("template", "cohort")
 
@@ -92,6 +95,8 @@ def run(work: Path, subjects: int, args) -> dict:
         cpu_s=cpu,
         job_s=jobs.s.sum(),
         peak_rss_mb=jobs.max_rss.max(),
+        # the largest process Snakemake waited for so far in this series, Snakemake included (KiB)
+        peak_process_mb=(after.ru_maxrss) / 1024,
         store_mb=sum(f.stat().st_size for f in stores) / 2**20,
         results_mb=results / 2**20,
         rules=jobs,
@@ -119,10 +124,20 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=240)
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--keep", type=Path, help="keep the working directories under DIR")
+    ap.add_argument(
+        "--summarize",
+        type=Path,
+        metavar="DIR",
+        help="run nothing: print the tables of the sizes that finished in DIR (a --keep DIR)",
+    )
     ap.add_argument("--database", type=int, nargs=2, default=[470, 4000], metavar=("SUBJ", "SCANS"))
     ap.add_argument("--extrapolate-cores", type=int, nargs="+", default=[2, 16, 64, 256])
     args = ap.parse_args(argv)
 
+    if args.summarize:
+        runs = finished_runs(args.summarize)
+        summarize(runs, args)
+        return 0
     root = Path(args.keep or tempfile.mkdtemp(prefix="bench_scaling-"))
     runs = []
     for n in args.subjects:
@@ -135,10 +150,40 @@ def main(argv=None) -> int:
             f"{n} subjects: {r['wall_s']:.0f} s wall, {r['cpu_s']:.0f} s CPU, {r['jobs']} jobs",
             flush=True,
         )
+        # each size as it finishes, so that an interrupted series keeps what ran
+        with open(root / "scaling.jsonl", "a") as out:
+            out.write(json.dumps({k: float(v) for k, v in r.items() if k != "rules"}) + "\n")
 
     summarize(runs, args)
     print(f"working directories: {root}")
     return 0
+
+
+def finished_runs(root: Path) -> list[dict]:
+    """The sizes recorded in ``root/scaling.jsonl`` with their jobs' benchmark files."""
+    runs = [json.loads(line) for line in (root / "scaling.jsonl").read_text().splitlines()]
+    for r in runs:
+        r["subjects"], r["takes"], r["jobs"] = int(r["subjects"]), int(r["takes"]), int(r["jobs"])
+        r["rules"] = job_benchmarks(root / f"subjects_{r['subjects']}")
+    return runs
+
+
+def linear_fit(table: pd.DataFrame) -> None:
+    """Least-squares lines ``a + b * subjects`` through the CPU and wall times: ``b`` is the
+    cost of one more subject, ``a`` the fixed cost of a run (DAG, template, cohort summary);
+    the largest residual says how far the sizes are from a line."""
+    if len(table) < 2:
+        return
+    n = table.subjects.to_numpy(float)
+    for col in ("cpu_s", "wall_s", "job_s"):
+        y = table[col].to_numpy(float)
+        b, a = np.polyfit(n, y, 1)
+        resid = y - (a + b * n)
+        print(
+            f"{col}: {a:.0f} s + {b:.0f} s x subjects "
+            f"(largest residual {np.abs(resid).max():.0f} s = "
+            f"{100 * np.abs(resid / y).max():.1f} % of its size)"
+        )
 
 
 def summarize(runs: list[dict], args) -> None:
@@ -148,39 +193,56 @@ def summarize(runs: list[dict], args) -> None:
     for col in ("wall_s", "cpu_s", "job_s", "store_mb"):
         table[f"{col}/subject"] = table[col] / table.subjects
     table["cpu_s/take"] = table.cpu_s / table.takes
+    table["wall_s/take"] = table.wall_s / table.takes
     print(table.round(1).to_string(index=False))
+    linear_fit(table)
 
     # per rule, from the largest run: job seconds per take (per-take rules) or per subject
     big = runs[-1]
     jobs = big["rules"]
     per = jobs.groupby("rule").agg(
-        jobs=("s", "size"), job_s=("s", "sum"), max_s=("s", "max"), max_rss_mb=("max_rss", "max")
+        jobs=("s", "size"),
+        job_s=("s", "sum"),
+        job_cpu_s=("cpu_time", "sum"),
+        max_s=("s", "max"),
+        max_rss_mb=("max_rss", "max"),
     )
     per["per"] = [
-        "take" if r in PER_TAKE else "once" if r in ONCE else "subject" for r in per.index
+        "take"
+        if r in PER_TAKE
+        else "once"
+        if r in ONCE
+        else "synthetic"
+        if r.startswith("synth_")
+        else "subject"
+        for r in per.index
     ]
     per["job_s_each"] = per.job_s / per.jobs
     print(f"\njob time per rule ({big['subjects']} subjects, {big['takes']} takes):")
     print(per.round(1).sort_values(["per", "job_s"]).to_string())
-    take_s = per.job_s[per.per == "take"].sum() / big["takes"]
-    subject_s = per.job_s[per.per == "subject"].sum() / big["subjects"]
-    # job time counts waits for a busy machine; scale it to the measured CPU time
-    cpu_ratio = big["cpu_s"] / big["job_s"]
+    # Each job's CPU time from its benchmark file (user + system of the job's processes, which
+    # Snakemake samples, so short-lived ones are missed), scaled so that all jobs add up to the
+    # measured CPU time of the run: a split of the measured CPU into per-take and per-subject
+    # parts that, unlike the jobs' wall times, does not depend on how busy the machine was.
+    cpu_ratio = big["cpu_s"] / per.job_cpu_s.sum()
+    take_s = per.job_cpu_s[per.per == "take"].sum() / big["takes"] * cpu_ratio
+    subject_s = per.job_cpu_s[per.per == "subject"].sum() / big["subjects"] * cpu_ratio
     n_subj, n_scans = args.database
-    total_cpu = (n_subj * subject_s + n_scans * take_s) * cpu_ratio
+    total_cpu = n_subj * subject_s + n_scans * take_s
     print(
-        f"\nper take {take_s:.1f} job-s, per subject {subject_s:.1f} job-s (+ takes), "
-        f"CPU/job time {cpu_ratio:.2f}"
+        f"\nCPU per take {take_s:.1f} s, per subject {subject_s:.1f} s (+ its takes; "
+        f"measured CPU / sampled job CPU {cpu_ratio:.2f})"
     )
     print(f"{n_subj} subjects / {n_scans} scans: {total_cpu / 3600:.1f} CPU-hours")
     for cores in args.extrapolate_cores:
         print(f"  on {cores:4d} cores: {total_cpu / cores / 3600:8.2f} h (perfect packing)")
-    store_per_subject = big["store_mb"] / big["subjects"]
-    results_per_subject = big["results_mb"] / big["subjects"]
+    # a store holds every take's images and meshes: its size follows the takes
+    store_per_take = big["store_mb"] / big["takes"]
+    results_per_take = big["results_mb"] / big["takes"]
     print(
-        f"stores {store_per_subject:.1f} MB/subject -> {n_subj * store_per_subject / 1024:.1f} GB; "
-        f"all results {results_per_subject:.1f} MB/subject -> "
-        f"{n_subj * results_per_subject / 1024:.1f} GB (at {args.width} x {args.height})"
+        f"stores {store_per_take:.2f} MB/take -> {n_scans * store_per_take / 1024:.1f} GB; "
+        f"all results {results_per_take:.2f} MB/take -> "
+        f"{n_scans * results_per_take / 1024:.1f} GB (at {args.width} x {args.height})"
     )
 
 
