@@ -198,3 +198,25 @@ def test_the_table_states_its_rms_is_over_the_unmasked_vertices(template, takes)
     }
     names = ["take", *motion_noise.COLUMNS.values(), "click_noise_px_used"]
     assert [c.name for c in describe(names, MOTION_NOISE)] == names
+
+
+def test_a_refiner_that_finds_the_skin_whatever_the_clicks_leaves_only_the_neutrals_noise(
+    template, takes
+):
+    """With a refiner the draw's motion is the refined take's: a refiner that recovers the
+    take's true vertices from any clicks (the skin itself says where it went) leaves only the
+    neutral's click noise, sqrt(2) less than both takes' (the oracle of the first test)."""
+    neutral, visemes = takes
+    seen = []
+
+    def exact(take, take_landmarks, neutral_landmarks):
+        seen.append(np.array(take_landmarks))
+        mesh = fit_take(template, neutral.landmarks, neutral.xyz, levels=0)  # the true points
+        return transform_points(visemes[take].transform, mesh["vertices"]), mesh["valid"]
+
+    plain = _run(template, takes, draws=100)["she"]["rms_error_mm"]
+    refined = _run(template, takes, draws=100, refiner=exact)["she"]["rms_error_mm"]
+    assert refined == pytest.approx(plain / np.sqrt(2.0), rel=0.1)
+    # every draw hands the refiner its own perturbed clicks (and the reference the clicked ones)
+    assert_array_equal(seen[0], visemes["she"].landmarks)
+    assert len({s.tobytes() for s in seen}) == len(seen) == 101

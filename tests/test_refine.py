@@ -123,3 +123,66 @@ def test_refine_points_undoes_sliding_on_textured_skin(fine):
     assert np.sqrt(np.mean(before**2)) > 1.0
     assert np.sqrt(np.mean(after**2)) < 0.25 * np.sqrt(np.mean(before**2))
     assert report["confident_share"] > 0.5
+
+
+def _subject_in_memory(skin_texture, takes=("neutral", "she", "smile1")):
+    """Synthetic takes (480 x 360) through repair, fit and align in memory, and their truths."""
+    import yaml
+
+    from scan2morph.evaluate.truth import Truth
+    from scan2morph.stages import align, fit, repair
+    from scan2morph.stages.part import Run, Subject
+    from scan2morph.store import paths
+    from scan2morph.synth import make_take
+    from tests.workflow_api import REPO
+
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    kinds = {"neutral": "neutral", "she": "viseme", "smile1": "expression"}
+    labels = {"neutral": "neutral", "she": "she", "smile1": "smile"}
+    scanner = {"width": 480, "height": 360, "focal_px": 1087.5, "skin_texture": skin_texture}
+    data, truths = {}, {}
+    for take in takes:
+        r = make_take("synth01", labels[take], kinds[take], take, 2009, scanner)
+        data[paths.raw(take, "xyz")], data[paths.raw(take, "color")] = r["xyz"], r["color"]
+        data[paths.landmarks(take)] = r["landmarks"]
+        truths[take] = Truth.from_arrays(r["truth"])
+    subject = Subject("synth01", {t: kinds[t] for t in takes}, {t: labels[t] for t in takes})
+    run = Run(subject, build_template(), config)
+    for stage in (repair, fit, align):
+        data |= stage.apply(data, run)
+    return data, truths, run
+
+
+def _material_errors(data, truths, run):
+    """Material relative error of each take's motion: aligned fit vs refined, mm over mm."""
+    from scan2morph.evaluate.motion import material_accuracy, true_motion
+    from scan2morph.geometry import vertex_normals
+    from scan2morph.stages import refine
+    from scan2morph.store import paths
+
+    refined = refine.apply(data, run)
+    nv = data[paths.mesh("neutral", "vertices")]
+    normals = vertex_normals(nv, subdivide_template(run.template, 1).faces)
+    out = {}
+    for take in [t for t in run.subject.kinds if t != "neutral"]:
+        material = true_motion(nv, truths["neutral"], truths[take])
+        where = data[paths.mesh("neutral", "valid")] & data[paths.mesh(take, "valid")]
+        where &= refined[paths.refine(take, "valid")]
+        out[take] = [
+            material_accuracy(v - nv, material, normals, where)["material_relative_error"]
+            for v in (data[paths.align(take, "vertices")], refined[paths.refine(take, "vertices")])
+        ]
+    return out
+
+
+@pytest.mark.slow
+def test_refinement_follows_the_skin_on_synthetic_takes():
+    """Against the truth's material motion: on textured skin the refinement removes most of the
+    template fit's sliding; on the flat albedo it is no worse than the fit."""
+    textured = _material_errors(*_subject_in_memory(1.0))
+    for take, (fit_err, refined_err) in textured.items():
+        assert refined_err < 0.5 * fit_err, (take, fit_err, refined_err)
+        assert refined_err < 0.35, (take, refined_err)
+    flat = _material_errors(*_subject_in_memory(0.0, ("neutral", "she")))
+    for take, (fit_err, refined_err) in flat.items():
+        assert refined_err <= 1.05 * fit_err, (take, fit_err, refined_err)

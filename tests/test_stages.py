@@ -63,11 +63,12 @@ def test_semantic_takes_first_take_of_each_label():
 
 
 def test_sweep_stage_table_is_derived_from_the_stage_modules():
-    assert STAGES == ("repair", "fit", "align", "motion", "motion_noise")
+    assert STAGES == ("repair", "fit", "align", "refine", "motion", "motion_noise")
     assert SECTION_STAGE == {
         "repair": "repair",
         "template": "fit",
         "align": "align",
+        "refine": "refine",
         "mask": "motion",
         "smoothing": "motion",
         "quality": "motion",
@@ -80,7 +81,8 @@ def test_each_part_holds_the_datasets_its_stage_owns(tmp_path_factory):
     """Every dataset of a stage's part is written by that stage (paths.DATASETS), or passed on
     from an earlier one; and every dataset of the store comes from the part of its stage."""
     takes = [t["take"] for t in TAKES]
-    parts = {f"takes/{t}/{s}.h5": s for t in takes for s in ("ingest", "repair", "fit", "align")}
+    stages = ("ingest", "repair", "fit", "align", "refine")
+    parts = {f"takes/{t}/{s}.h5": s for t in takes for s in stages}
     parts |= {f"{s}.h5": s for s in ("motion", "motion_noise", "morph", "modal")}
     parts[f"{SUBJECT}.h5"] = "store"
     parts["template.h5"] = "fit"

@@ -27,7 +27,7 @@ from jsonschema import Draft202012Validator, validators
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
-from scan2morph.stages import accuracy, align, fit, motion, motion_noise, repair
+from scan2morph.stages import accuracy, align, fit, motion, motion_noise, refine, repair
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
 
@@ -36,6 +36,7 @@ _MODULES = {
     "repair": repair,
     "fit": fit,
     "align": align,
+    "refine": refine,
     "motion": motion,
     "motion_noise": motion_noise,
 }

@@ -121,6 +121,20 @@ def get_neutral_fit(wildcards):
     return f"results/{wildcards.subject}/takes/{take}/fit.h5" if take else []
 
 
+def get_neutral_parts(stages):
+    """An input function: the ``stages`` parts of the subject's neutral take."""
+
+    def parts(wildcards):
+        take = get_neutral_take(wildcards)
+        return (
+            [f"results/{wildcards.subject}/takes/{take}/{s}.h5" for s in stages]
+            if take
+            else []
+        )
+
+    return parts
+
+
 def get_viseme_aligns(wildcards):
     return _take_files(
         "results/{subject}/takes/{take}/align.h5",
@@ -136,7 +150,7 @@ def get_subject_parts(wildcards):
         _take_files(
             f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
         )
-        for stage in ("repair", "fit", "align")
+        for stage in ("repair", "fit", "align", "refine")[: 4 if REFINE else 3]
     ]
     per_subject = [
         f"results/{wildcards.subject}/{stage}.h5"

@@ -7,6 +7,7 @@ rule motion:
     input:
         fits=get_take_parts("fit"),
         aligns=get_take_parts("align"),
+        refines=get_take_parts("refine") if REFINE else [],
         template="resources/template.npz",
     output:
         part="results/{subject}/motion.h5",
@@ -24,6 +25,7 @@ rule motion:
         smoothing=config["smoothing"],
         template=config["template"],
         quality=config["quality"],
+        refine=config["refine"],
     script:
         "../scripts/motion.py"
 
@@ -51,5 +53,6 @@ rule motion_noise:
         noise=config["motion_noise"],
         smoothing=config["smoothing"],
         template=config["template"],
+        refine=config["refine"],
     script:
         "../scripts/motion_noise.py"

@@ -12,7 +12,12 @@ def main(snakemake):
         p, inp, out = snakemake.params, snakemake.input, snakemake.output
         subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
         data = read_parts([*inp.repairs, *inp.aligns]) | read_part(inp.motion)
-        config = {"motion_noise": p.noise, "smoothing": p.smoothing, "template": p.template}
+        config = {
+            "motion_noise": p.noise,
+            "smoothing": p.smoothing,
+            "template": p.template,
+            "refine": p.refine,
+        }
         part = motion_noise.run(load_template(inp.template), subject, data, config)
         write_part(out.part, part.datasets, attrs=part.attrs)
         write_table(out.table, part.files["table"], MOTION_NOISE)

@@ -15,7 +15,7 @@ On the synthetic cohort the estimate is checked against the error that the groun
 from __future__ import annotations
 
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -27,6 +27,10 @@ from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 from scan2morph.template.sample import fit_take
+
+#: ``refiner(take, take_landmarks, neutral_landmarks) -> (vertices, valid)``: a take's refined
+#: correspondence from those clicks, in the neutral frame (mm).
+Refiner = Callable[[str, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
@@ -78,6 +82,7 @@ def click_noise_motion(
     draws: int,
     seed: int,
     source: str = "subject",
+    refiner: Refiner | None = None,
 ) -> dict[str, dict]:
     """Spread of each viseme's final motion under landmark click noise.
 
@@ -111,6 +116,11 @@ def click_noise_motion(
         Seed of the noise generator.
     source : str
         The subject, for messages.
+    refiner : callable, optional
+        ``refiner(take, take_landmarks, neutral_landmarks) -> (vertices, valid)``: the take's
+        correspondence refined against the neutral from those clicks (neutral frame, mm), when
+        the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every draw is then
+        that of the refined meshes, as the pipeline's is.
 
     Returns
     -------
@@ -161,10 +171,19 @@ def click_noise_motion(
         )
     if not visemes:
         return {}
+
+    def corresponded(take, t_fit, t_landmarks, n_landmarks):
+        """The take's vertices and validity compared with the neutral's: its aligned fit, or
+        its refined mesh."""
+        if refiner is None:
+            return t_fit[0], t_fit[1]["valid"]
+        return refiner(take, t_landmarks, n_landmarks)
+
     reference = {}
     for take, data in visemes.items():
-        v, mesh = _fit(template, data, data.landmarks, fit_options, f"{source}/{take}")
-        reference[take] = final(v, mesh["valid"], n_base, n_mesh["valid"], faces, take)
+        t_fit = _fit(template, data, data.landmarks, fit_options, f"{source}/{take}")
+        v, valid = corresponded(take, t_fit, data.landmarks, neutral.landmarks)
+        reference[take] = final(v, valid, n_base, n_mesh["valid"], faces, take)
 
     def perturbed(name, data, stream):
         """The take's ``draws`` fits with perturbed clicks (None where refused)."""
@@ -173,7 +192,7 @@ def click_noise_motion(
         for k in range(draws):
             noisy = data.landmarks + click_noise_px * rng.standard_normal(np.shape(data.landmarks))
             try:
-                fits.append(_fit(template, data, noisy, fit_options, f"{source}/{name}"))
+                fits.append((*_fit(template, data, noisy, fit_options, f"{source}/{name}"), noisy))
             except InputError as err:
                 fits.append(None)
                 first = first or f"draw {k}: {err}"
@@ -197,7 +216,8 @@ def click_noise_motion(
             if n_fit is None or t_fit is None:
                 continue
             where = f"{source}/{take} (click-noise draw)"
-            moved = final(t_fit[0], t_fit[1]["valid"], n_fit[0], n_fit[1]["valid"], faces, where)
+            v, valid = corresponded(take, t_fit, t_fit[2], n_fit[2])
+            moved = final(v, valid, n_fit[0], n_fit[1]["valid"], faces, where)
             d2 = np.sum((moved - reference[take]) ** 2, axis=1)
             have = np.isfinite(d2)  # a vertex the smoothing could not reach has no value
             sq[have] += d2[have]
@@ -230,6 +250,7 @@ def subject_motion_noise(
     fit_options: Mapping[str, object],
     settings: Mapping[str, object],
     source: str = "subject",
+    refiner: Refiner | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, dict], dict]:
     """The motion_noise stage of one subject: click precision, then the error bar.
 
@@ -247,9 +268,12 @@ def subject_motion_noise(
         As :func:`click_noise_motion`.
     settings : mapping
         The config section ``motion_noise``: ``click_noise_px`` (px or ``"auto"``),
-        ``fallback_px``, ``stable_points``, ``draws``, ``seed``.
+        ``fallback_px``, ``stable_points``, ``draws``, ``seed`` (and ``refine_draws``: the draws
+        with a ``refiner``, each of which refines every viseme).
     source : str
         The subject, for messages.
+    refiner : callable, optional
+        As :func:`click_noise_motion`'s.
 
     Returns
     -------
@@ -280,9 +304,10 @@ def subject_motion_noise(
         smoothing,
         fit_options,
         noise["click_noise_px"],
-        settings["draws"],
+        settings["draws"] if refiner is None else settings["refine_draws"],
         settings["seed"],
         source=source,
+        refiner=refiner,
     )
     data = noise_datasets(result)
     data[paths.motion_noise("click_noise_px")] = np.float64(noise["click_noise_px"])

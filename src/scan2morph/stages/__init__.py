@@ -1,7 +1,7 @@
 """The pipeline's stages, each once: the workflow's scripts, the parameter sweeps and the tests
 call the same functions.
 
-One module per stage (:mod:`ingest`, :mod:`repair`, :mod:`fit`, :mod:`align`, :mod:`motion`,
+One module per stage (:mod:`ingest`, :mod:`repair`, :mod:`fit`, :mod:`align`, :mod:`refine`, :mod:`motion`,
 :mod:`motion_noise`, :mod:`morph`, :mod:`modal`, :mod:`accuracy`). Each module
 
 - maps its config sections to its typed parameters (``Params.from_config``),

@@ -12,12 +12,14 @@ import numpy as np
 from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
 from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import aligned_takes
+from scan2morph.stages.refine import enabled as refine_enabled
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.regions import named_indices
 
-#: Config sections this stage reads (``template`` for the subdivision level).
-SECTIONS = ("mask", "smoothing", "template", "quality")
+#: Config sections this stage reads (``template`` for the subdivision level, ``refine`` for which
+#: correspondence it compares).
+SECTIONS = ("mask", "smoothing", "template", "quality", "refine")
 log = logging.getLogger("scan2morph")
 
 
@@ -39,6 +41,9 @@ class Params:
         Smoothing iterations.
     include_failed : bool
         Keep takes whose alignment failed its gate (``quality.include_failed_takes``).
+    refined : bool
+        Compare the refined meshes (``/takes/{take}/refine``) rather than the aligned fits
+        (``refine.method`` other than ``none``).
     """
 
     levels: int
@@ -47,12 +52,19 @@ class Params:
     w: float
     iterations: int
     include_failed: bool = False
+    refined: bool = False
 
     @classmethod
     def from_config(
-        cls, mask: Mapping, smoothing: Mapping, template: Mapping, quality: Mapping
+        cls,
+        mask: Mapping,
+        smoothing: Mapping,
+        template: Mapping,
+        quality: Mapping,
+        refine: Mapping | None = None,
     ) -> Params:
-        """From the config sections ``mask``, ``smoothing``, ``template`` and ``quality``."""
+        """From the config sections ``mask``, ``smoothing``, ``template``, ``quality`` and
+        ``refine``."""
         return cls(
             int(template["subdivision_levels"]),
             list(mask["paths"]),
@@ -60,11 +72,20 @@ class Params:
             smoothing["w"],
             smoothing["iterations"],
             bool(quality["include_failed_takes"]),
+            refine_enabled(refine or {}),
         )
 
 
-def aligned_mesh(data: Mapping[str, np.ndarray], take: str, source: str) -> AlignedMesh:
-    """A take's aligned mesh and validity from its fit and align parts."""
+def aligned_mesh(
+    data: Mapping[str, np.ndarray], take: str, source: str, refined: bool = False
+) -> AlignedMesh:
+    """A take's mesh in the neutral frame and its validity: the refined mesh (refine part) or
+    the aligned fit (fit and align parts)."""
+    if refined:
+        return AlignedMesh(
+            need(data, paths.refine(take, "vertices"), source),
+            need(data, paths.refine(take, "valid"), source),
+        )
     return AlignedMesh(
         need(data, paths.align(take, "vertices"), source),
         need(data, paths.mesh(take, "valid"), source),
@@ -81,7 +102,7 @@ def run(
     template, subject
         The base template and the subject (the contract of :mod:`scan2morph.stages`).
     data : mapping store path -> array
-        The fit and align parts of every take.
+        The fit and align parts of every take (and their refine parts with ``params.refined``).
     params : Params
 
     Returns
@@ -96,10 +117,11 @@ def run(
     others = [t for t in subject.kinds if t != subject.neutral]
     subject = subject.keep(aligned_takes(data, others, params.include_failed))
     name = subject.name
-    neutral = aligned_mesh(data, subject.neutral, name)
+    ref = params.refined
+    neutral = aligned_mesh(data, subject.neutral, name, ref)
     out = viseme_motion(
         neutral,
-        {t: aligned_mesh(data, t, name) for t in subject.visemes},
+        {t: aligned_mesh(data, t, name, ref) for t in subject.visemes},
         fine.faces,
         named_indices(fine, params.mask_paths, "mask.paths"),
         params.radius_mm,
@@ -108,7 +130,10 @@ def run(
         source=name,
     )
     out |= expression_displacements(
-        neutral, {t: aligned_mesh(data, t, name) for t in subject.expressions}, fine.faces, name
+        neutral,
+        {t: aligned_mesh(data, t, name, ref) for t in subject.expressions},
+        fine.faces,
+        name,
     )
     suppressed = out[paths.mask("suppressed")]
     log.info("%s: %d of %d vertices suppressed", name, suppressed.sum(), len(suppressed))
@@ -118,5 +143,5 @@ def run(
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """The stage for a subject held in memory."""
     c = run_.config
-    params = Params.from_config(c["mask"], c["smoothing"], c["template"], c["quality"])
+    params = Params.from_config(c["mask"], c["smoothing"], c["template"], c["quality"], c["refine"])
     return run(run_.template, run_.subject, data, params).datasets

@@ -10,15 +10,17 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
+from scan2morph.align import transform_points
 from scan2morph.motion.uncertainty import subject_motion_noise
+from scan2morph.stages import refine
 from scan2morph.stages.fit import fiducial_set
-from scan2morph.stages.part import Part, Run, Subject
+from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
-from scan2morph.template import Template, fit_options
+from scan2morph.template import Template, fit_options, fit_take
 
-#: Config sections this stage reads.
-SECTIONS = ("motion_noise", "smoothing", "template")
+#: Config sections this stage reads (``refine``: the error bar of the refined correspondence).
+SECTIONS = ("motion_noise", "smoothing", "template", "refine")
 #: Columns of ``tables/motion_noise.tsv``: result key -> column name (the RMS values are over
 #: the vertices outside the mask; dictionary: :data:`scan2morph.tables.MOTION_NOISE`).
 COLUMNS = {
@@ -28,6 +30,39 @@ COLUMNS = {
     "failed_draws": "failed_draws",
 }
 log = logging.getLogger("scan2morph")
+
+
+def _refiner(template, subject, data, fiducials, section, refine_section):
+    """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
+    draw): refit the take from its clicks and refine it against the neutral seen through its
+    clicks."""
+    params = refine.Params.from_config(refine_section, section)
+    options = fit_options(section)
+    neutral = subject.neutral
+
+    def refiner(take, take_landmarks, neutral_landmarks):
+        source = subject.source(take)
+        mesh = fit_take(
+            template,
+            take_landmarks,
+            need(data, paths.range_image(take, "xyz"), source),
+            fiducial_set=fiducials[take],
+            source=source,
+            **options,
+        )
+        transform = need(data, paths.align(take, "transform"), source)
+        draw = dict(data) | {
+            paths.landmarks(take): take_landmarks,
+            paths.landmarks(neutral): neutral_landmarks,
+            paths.mesh(take, "valid"): mesh["valid"],
+            paths.mesh(take, "points2d"): mesh["points2d"],
+            paths.align(take, "vertices"): transform_points(transform, mesh["vertices"]),
+        }
+        part = refine.run(template, take, subject.kinds[take], neutral, draw, params, source)
+        d = part.datasets
+        return d[paths.refine(take, "vertices")], d[paths.refine(take, "valid")]
+
+    return refiner
 
 
 def run(
@@ -43,7 +78,8 @@ def run(
         The repair parts of the neutral and the visemes, their align parts and the motion
         part (the visemes it modelled, ``/mask``).
     config : mapping section -> mapping
-        The sections ``motion_noise``, ``smoothing`` and ``template``.
+        The sections ``motion_noise``, ``smoothing``, ``template`` and ``refine`` (when it
+        refines, each draw refines the visemes too: ``motion_noise.refine_draws`` draws).
 
     Returns
     -------
@@ -56,6 +92,10 @@ def run(
     subject = modelled(subject, data)
     noise_cfg, section = config["motion_noise"], config["template"]
     fiducials = {t: fiducial_set(section, k) for t, k in subject.kinds.items()}
+    refine_section = config.get("refine", {})
+    refiner = None
+    if refine.enabled(refine_section):
+        refiner = _refiner(template, subject, data, fiducials, section, refine_section)
     datasets, result, noise = subject_motion_noise(
         template,
         data,
@@ -66,6 +106,7 @@ def run(
         fit_options(section),
         noise_cfg,
         source=subject.name,
+        refiner=refiner,
     )
     log.info("%s: click noise %s", subject.name, noise["note"])
     for take, name, r in noise["misclicks"]:
@@ -76,7 +117,8 @@ def run(
         log.info("%s: click noise moves the motion by %.1f%%", take, 100 * r["relative"])
     attrs = {
         paths.MOTION_NOISE: {
-            "draws": noise_cfg["draws"],
+            "draws": noise_cfg["refine_draws" if refiner else "draws"],
+            "refined": refiner is not None,
             "seed": noise_cfg["seed"],
             "click_noise_source": noise["source"],
             "click_noise_note": noise["note"],

@@ -16,7 +16,18 @@ import re
 from collections.abc import Iterable
 
 #: Pipeline stages in the order they run (each writes the datasets :data:`DATASETS` gives it).
-STAGES = ("ingest", "repair", "fit", "align", "motion", "motion_noise", "morph", "modal", "store")
+STAGES = (
+    "ingest",
+    "repair",
+    "fit",
+    "align",
+    "refine",
+    "motion",
+    "motion_noise",
+    "morph",
+    "modal",
+    "store",
+)
 
 #: (group pattern, writing stage, dataset names): a group may hold datasets of several stages.
 _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
@@ -27,6 +38,7 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/template", "fit", ("faces", "vertices2d", "fiducials/names", "fiducials/indices")),
     ("/takes/{take}/mesh", "fit", ("vertices", "uv", "valid", "points2d")),
     ("/takes/{take}/align", "align", ("transform", "vertices", "ok")),
+    ("/takes/{take}/refine", "refine", ("vertices", "valid", "points2d", "confidence")),
     ("/mask", "motion", ("suppressed", "seeds")),
     ("/neutral", "motion", ("vertices", "filled")),
     ("/neutral", "morph", ("head_frame",)),
@@ -165,6 +177,17 @@ def align(take_id: str, name: str) -> str:
     """``transform``, ``vertices`` or ``ok`` (passed its quality gate) of a take's rigid
     alignment to the neutral."""
     return _build("/takes/{take}/align", name, take=take_id)
+
+
+def refine_group(take_id: str) -> str:
+    """The refinement group of a take (its attributes hold the correction's statistics)."""
+    return f"{take(take_id)}/refine"
+
+
+def refine(take_id: str, name: str) -> str:
+    """``vertices`` (neutral frame), ``valid``, ``points2d`` or ``confidence`` of a take's
+    correspondence refined by image correlation."""
+    return _build("/takes/{take}/refine", name, take=take_id)
 
 
 def mask(name: str) -> str:

@@ -1,0 +1,147 @@
+"""Correspondence refinement: accuracy against the material motion, click-noise spread, timing.
+
+Run after a pipeline run of synthetic subjects (``make run``, or any work directory):
+``.venv/bin/python benchmarks/bench_refine.py --workdir . --subject synth01 [--draws 4]``.
+
+For every take of the subject it reads the take's repair, fit and align parts, runs the refine
+stage (:mod:`scan2morph.stages.refine`, the config's ``refine`` section with ``method: flow``) and
+prints, for the template fit (the paper's correspondence) and for the refined one:
+
+- the error of the raw motion (aligned take minus neutral, no mask, no smoothing) against the
+  material motion of the skin (where each neutral skin point really went, from the truth), as a
+  share of the material motion's RMS, and its RMS parts along the normal and along the surface
+  (mm), over every vertex valid in both meshes;
+- with ``--draws N``: the click-noise spread: the landmarks of the neutral and of the take are
+  perturbed ``N`` times with the config's ``synthetic.scanner.click_noise_px`` (seeded), both
+  refitted (and refined), and the RMS change of the motion is printed as a share of the material
+  motion's RMS (the pipeline's error bar, measured the same way for both methods);
+- the wall time of the refinement per take (s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from scan2morph.align import transform_points
+from scan2morph.evaluate.motion import material_accuracy, true_motion
+from scan2morph.evaluate.truth import read_truth
+from scan2morph.geometry import vertex_normals
+from scan2morph.stages import refine
+from scan2morph.stages.fit import fiducial_set
+from scan2morph.store import paths, read_parts
+from scan2morph.template import fit_options, fit_take, load_template, subdivide_template
+
+
+def _kind(take: str, config: dict) -> str:
+    kinds = {t["take"]: t["kind"] for t in config["synthetic"]["takes"]}
+    return kinds[take]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workdir", type=Path, default=Path("."))
+    ap.add_argument("--subject", default="synth01")
+    ap.add_argument("--config", type=Path, default=Path("config/config.yaml"))
+    ap.add_argument("--draws", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=2009)
+    a = ap.parse_args()
+    config = yaml.safe_load(a.config.read_text())
+    root = a.workdir / "results" / a.subject / "takes"
+    takes = sorted(p.name for p in root.iterdir() if (p / "align.h5").exists())
+    neutral = next(t for t in takes if _kind(t, config) == "neutral")
+    takes = [neutral] + [t for t in takes if t != neutral]
+    data = read_parts([root / t / f"{s}.h5" for t in takes for s in ("repair", "fit", "align")])
+    template = load_template(a.workdir / "resources" / "template.npz")
+    truth_files = {
+        t: glob.glob(str(a.workdir / "results" / "**" / a.subject / "truth" / f"{t}.npz"))
+        for t in takes
+    }
+    truths = {t: read_truth(f[0]) for t, f in truth_files.items() if f}
+    section = config["template"]
+    fine = subdivide_template(template, int(section["subdivision_levels"]))
+    params = refine.Params.from_config(config["refine"] | {"method": "flow"}, section)
+    options = fit_options(section)
+    nv = np.asarray(data[paths.mesh(neutral, "vertices")])
+    n_valid = np.asarray(data[paths.mesh(neutral, "valid")], dtype=bool)
+    normals = vertex_normals(nv, fine.faces)
+    click = float(config["synthetic"]["scanner"]["click_noise_px"])
+    rng = np.random.default_rng(a.seed)
+
+    def refit(take, landmarks, kind):
+        """The take's fit with other clicks: its fit and its refined mesh (neutral frame)."""
+        mesh = fit_take(
+            template,
+            landmarks,
+            np.asarray(data[paths.range_image(take, "xyz")]),
+            fiducial_set=fiducial_set(section, kind),
+            source=take,
+            **options,
+        )
+        return {
+            paths.mesh(take, "vertices"): mesh["vertices"],
+            paths.mesh(take, "valid"): mesh["valid"],
+            paths.mesh(take, "points2d"): mesh["points2d"],
+            paths.landmarks(take): landmarks,
+            paths.align(take, "vertices"): transform_points(
+                np.asarray(data[paths.align(take, "transform")]), mesh["vertices"]
+            ),
+        }
+
+    header = f"{'take':8s} {'material':>8s} | {'fit: rel':>9s} {'n mm':>5s} {'t mm':>5s}"
+    header += f" | {'refined: rel':>12s} {'n mm':>5s} {'t mm':>5s} | {'time s':>6s}"
+    if a.draws:
+        header += f" | {'click spread fit':>16s} {'refined':>7s}"
+    print(header)
+    for take in takes[1:]:
+        if take not in truths:
+            continue
+        kind = _kind(take, config)
+        material = true_motion(nv, truths[neutral], truths[take])
+        t0 = time.perf_counter()
+        part = refine.run(template, take, kind, neutral, data, params, take)
+        dt = time.perf_counter() - t0
+        fit_m = np.asarray(data[paths.align(take, "vertices")]) - nv
+        ref_m = np.asarray(part.datasets[paths.refine(take, "vertices")]) - nv
+        where = n_valid & np.asarray(part.datasets[paths.refine(take, "valid")])
+        where &= np.asarray(data[paths.mesh(take, "valid")], dtype=bool)
+        f = material_accuracy(fit_m, material, normals, where)
+        r = material_accuracy(ref_m, material, normals, where)
+        line = (
+            f"{take:8s} {f['material_rms_mm']:6.2f}mm | {f['material_relative_error']:9.3f} "
+            f"{f['material_normal_rms_error_mm']:5.2f} {f['material_tangential_rms_error_mm']:5.2f}"
+            f" | {r['material_relative_error']:12.3f} {r['material_normal_rms_error_mm']:5.2f} "
+            f"{r['material_tangential_rms_error_mm']:5.2f} | {dt:6.1f}"
+        )
+        if a.draws:
+            sq_f, sq_r, n = 0.0, 0.0, 0
+            for _ in range(a.draws):
+                noisy = dict(data)
+                for t, k in ((neutral, "neutral"), (take, kind)):
+                    lm = np.asarray(data[paths.landmarks(t)], dtype=np.float64)
+                    noisy |= refit(t, lm + click * rng.standard_normal(lm.shape), k)
+                n_part = refine.run(template, neutral, "neutral", neutral, noisy, params, take)
+                t_part = refine.run(template, take, kind, neutral, noisy, params, take)
+                fit_d = (
+                    noisy[paths.align(take, "vertices")] - noisy[paths.align(neutral, "vertices")]
+                )
+                ref_d = (
+                    t_part.datasets[paths.refine(take, "vertices")]
+                    - n_part.datasets[paths.refine(neutral, "vertices")]
+                )
+                d_f = np.sum((fit_d - fit_m) ** 2, axis=1)[where]
+                d_r = np.sum((ref_d - ref_m) ** 2, axis=1)[where]
+                ok = np.isfinite(d_f) & np.isfinite(d_r)
+                sq_f, sq_r, n = sq_f + d_f[ok].sum(), sq_r + d_r[ok].sum(), n + ok.sum()
+            ref_rms = f["material_rms_mm"]
+            line += f" | {np.sqrt(sq_f / n) / ref_rms:16.3f} {np.sqrt(sq_r / n) / ref_rms:7.3f}"
+        print(line, flush=True)
+
+
+if __name__ == "__main__":
+    main()

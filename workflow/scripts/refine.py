@@ -1,0 +1,22 @@
+"""Refine one take's correspondence to the neutral (the neutral's is its aligned fit)."""
+
+from scan2morph.jobs import run_job
+from scan2morph.stages import refine
+from scan2morph.store import read_parts, write_part
+from scan2morph.template import load_template
+
+
+def main(snakemake):
+    def job():
+        w, p, inp = snakemake.wildcards, snakemake.params, snakemake.input
+        params = refine.Params.from_config(p.refine, p.template)
+        data = read_parts([*inp.take, *inp.neutral])
+        template, source = load_template(inp.template), f"{w.subject}/{w.take}"
+        part = refine.run(template, w.take, p.kind, p.neutral, data, params, source)
+        write_part(snakemake.output.part, part.datasets, attrs=part.attrs or None)
+
+    run_job(snakemake.log[0], job)
+
+
+if __name__ == "__main__":
+    main(snakemake)  # noqa: F821
