@@ -50,7 +50,7 @@ DEFAULT_REPAIR: dict[str, float | int] = {
 #: the same config section).
 DEFAULT_DEPTH_REPAIR: dict[str, float | int] = {
     "depth_edge_jump_mm": 10.0,
-    "depth_edge_trim_px": 2,
+    "depth_edge_trim_px": 16,
     "depth_smooth_sigma_px": 1.5,
 }
 
