@@ -78,7 +78,7 @@ DEFAULT_ICP: dict[str, Any] = {
     "trim_rounds": 6,
     "trim_radius_mm": 8.0,
     "trim_sigma": 3.0,
-    "max_rmse_ratio": 2.0,
+    "max_rmse_ratio": 3.0,
     "max_rmse_mm": None,
     "min_inlier_fraction": 0.3,
 }
