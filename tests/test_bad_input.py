@@ -596,6 +596,16 @@ def test_mesh_landmarks_off_the_mesh_or_in_metres(mesh_files, tmp_path):
         _mesh(mesh_files, landmarks=tmp_path / "short.txt")
 
 
+def test_mesh_landmarks_mirrored(mesh_files, tmp_path):
+    from scan2morph.synth.mesh_scan import write_landmarks3d
+
+    lm = mesh_files["scan"]["landmarks"].copy()
+    lm[[36, 45]] = lm[[45, 36]]  # the outer eye corners exchanged
+    write_landmarks3d(tmp_path / "mirrored.txt", lm)
+    with pytest.raises(InputError, match="landmarks: mirrored left/right"):
+        _mesh(mesh_files, landmarks=tmp_path / "mirrored.txt")
+
+
 def test_mesh_unreadable_file(mesh_files, tmp_path):
     (tmp_path / "junk.glb").write_bytes(b"\x00garbage" * 10)
     with pytest.raises(InputError, match="mesh: cannot read"):

@@ -1,9 +1,10 @@
 """Mesh takes: a textured mesh scan (OBJ + MTL + texture, PLY, glTF/GLB) -> a range take.
 
 The mesh is read with trimesh and rendered headlessly (pyrender, OSMesa) through a virtual
-pinhole camera placed in front of the face: centred on the landmarks' centroid, its image x axis
-along the outer eye corners (iBUG 37 -> 46, so that 37 is on the image's left), its y axis from
-the nose bridge to the chin, ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
+pinhole camera placed in front of the face: looking along the mean surface normal of the rigid
+upper face around the nose bridge (so that every take of a subject, whatever its jaw does, is
+seen from the same direction), centred on the landmarks' centroid, its image x axis along the
+outer eye corners (iBUG 37 -> 46, so that 37 is on the image's left), ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
 pixel at that distance (by default chosen so that the landmarks span ``face_share`` of the
 image). One render gives the colour image (texture or vertex colours, unlit) and
 the depth at every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised
@@ -47,6 +48,8 @@ DEFAULT_MESH_CAMERA = {
     "pixel_mm": None,
     "face_share": 0.6,
 }
+#: Radius around the nose bridge whose surface normals give the view direction, mm.
+VIEW_RADIUS_MM = 25.0
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
 #: Colour of pixels the mesh does not cover (dark blue-grey).
@@ -207,8 +210,8 @@ def read_landmarks3d(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
     return np.array(rows, dtype=np.float64)
 
 
-def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> np.ndarray:
-    """Refuse landmarks off the mesh or of another face; returns the face normal under each."""
+def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> None:
+    """Refuse landmarks off the mesh or of another face."""
     import open3d as o3d
 
     scene = o3d.t.geometry.RaycastingScene()
@@ -227,7 +230,6 @@ def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> np.ndarr
             f"({int(far.sum())} points farther than {MAX_LANDMARK_OFFSET_MM:g} mm): are they of "
             "this mesh, in its frame and units?",
         )
-    return np.asarray(mesh.face_normals)[res["primitive_ids"].numpy().astype(np.int64)]
 
 
 def _check_units(lm3: np.ndarray, mesh_path) -> None:
@@ -243,13 +245,38 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
         )
 
 
-def virtual_camera(lm3: np.ndarray, settings: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The virtual camera in front of a face given by its 3D landmarks (module docstring).
+def view_direction(mesh, lm3: np.ndarray) -> np.ndarray:
+    """The direction a camera looks at the face from, fixed to the rigid upper face.
+
+    The area-weighted mean normal of the mesh's triangles within :data:`VIEW_RADIUS_MM` of the
+    nose bridge (iBUG 28: nose, inner eyes, lower forehead; nothing a viseme moves), each
+    normal turned to agree with the nose tip's side (so the mesh's winding does not matter).
+
+    Returns
+    -------
+    (3,) float64
+        Unit vector from the camera into the face, in the mesh's frame.
+    """
+    bridge, tip = lm3[27], lm3[30]
+    near = np.linalg.norm(mesh.triangles_center - bridge, axis=1) < VIEW_RADIUS_MM
+    normals = np.asarray(mesh.face_normals)[near] * np.asarray(mesh.area_faces)[near, None]
+    out_of_face = tip - bridge  # the nose points out of the face
+    normals *= np.where(normals @ out_of_face < 0, -1.0, 1.0)[:, None]
+    z = -normals.sum(axis=0)
+    return z / np.linalg.norm(z)
+
+
+def virtual_camera(
+    lm3: np.ndarray, forward: np.ndarray, settings: dict
+) -> tuple[np.ndarray, np.ndarray]:
+    """The virtual camera in front of a face (module docstring).
 
     Parameters
     ----------
     lm3 : (68, 3) float
         iBUG-68 landmarks, mm.
+    forward : (3,) float
+        Unit view direction (:func:`view_direction`): the camera's z axis.
     settings : dict
         ``width``, ``height``, ``distance_mm``, ``pixel_mm`` (None: automatic), ``face_share``.
 
@@ -257,14 +284,14 @@ def virtual_camera(lm3: np.ndarray, settings: dict) -> tuple[np.ndarray, np.ndar
     -------
     K : (3, 3) float64, px
     pose : (4, 4) float64
-        Mesh frame -> camera frame (x right, y down, z forward), mm.
+        Mesh frame -> camera frame (x right, y down, z forward), mm; x along the outer eye
+        corners (iBUG 37 -> 46) in the image plane.
     """
+    z = np.asarray(forward, dtype=np.float64)
     x = lm3[45] - lm3[36]
-    down = lm3[8] - lm3[27]
+    x = x - (x @ z) * z
     x /= np.linalg.norm(x)
-    y = down - (down @ x) * x
-    y /= np.linalg.norm(y)
-    z = np.cross(x, y)
+    y = np.cross(z, x)
     R = np.stack([x, y, z])
     centre = lm3.mean(axis=0)
     pose = np.eye(4)
@@ -358,14 +385,14 @@ def read_mesh_take(
     mesh = read_mesh(mesh_path, texture_path)
     lm3 = read_landmarks3d(landmarks_path)
     _check_units(lm3, mesh_path)
-    normals = _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
-    K, pose = virtual_camera(lm3, cfg)
-    facing = -(normals @ pose[2, :3])  # > 0: the surface faces the camera
-    if np.median(facing) < 0:
+    _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
+    K, pose = virtual_camera(lm3, view_direction(mesh, lm3), cfg)
+    eyes_to_chin = pose[1, :3] @ (lm3[8] - (lm3[36] + lm3[45]) / 2)
+    if eyes_to_chin < 0:  # the image is upside down: 37 -> 46 runs right to left on the face
         raise InputError(
             landmarks_path,
-            "landmarks: mirrored left/right (the surface under them faces away from a camera "
-            "that sees iBUG 37 on the image's left); iBUG 37 is the outer corner of the "
+            "landmarks: mirrored left/right (seen from the front of the face, iBUG 37 -> 46 "
+            "runs from the image's right to its left); iBUG 37 is the outer corner of the "
             "subject's right eye",
         )
     size = (int(cfg["width"]), int(cfg["height"]))
@@ -395,5 +422,6 @@ __all__ = [
     "read_mesh",
     "read_mesh_take",
     "render_mesh",
+    "view_direction",
     "virtual_camera",
 ]
