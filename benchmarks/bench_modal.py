@@ -19,6 +19,16 @@ Usage::
     .venv/bin/python benchmarks/bench_modal.py                      # the full table
     .venv/bin/python benchmarks/bench_modal.py --dofs 60000 --ks 100 --methods block arpack
     .venv/bin/python benchmarks/bench_modal.py --blas-threads 2    # BLAS threads per case
+
+``--reconstruction RUN SUBJECT`` measures instead what the basis rebuilds on a finished run
+(``RUN/results/{SUBJECT}/motion.h5``, ``RUN/resources/template.npz``): the modal stage with the
+paper's boundary (``fixed_outline: all``) and with the still outline (``still``), printing each
+expression's reconstruction error (total / normal / tangential, mm) per K, the fewest modes
+reaching the target, and how much of the displacement sits on the outline; for a synthetic
+subject also the same for its true material motion (``results/synthetic/{SUBJECT}/truth``),
+the error a perfect correspondence would leave::
+
+    .venv/bin/python benchmarks/bench_modal.py --reconstruction . synth01 --config config/config.yaml
 """
 
 from __future__ import annotations
@@ -104,6 +114,95 @@ def run_case(dofs: int, k: int, method: str, solve_threads: int, trace: bool) ->
     }
 
 
+def reconstruction(run: str, subject: str, config: str, ks: list[int]) -> None:
+    """Print the reconstruction split of a finished run's expressions for both boundaries."""
+    from pathlib import Path
+
+    import numpy as np
+    import yaml
+
+    from scan2morph.evaluate.motion import true_motion
+    from scan2morph.evaluate.truth import read_truth
+    from scan2morph.modal.subject import rms_length
+    from scan2morph.stages import Subject, modal
+    from scan2morph.store import paths, read_part
+    from scan2morph.template import load_template, subdivide_template
+    from scan2morph.template.regions import upper_face
+
+    root = Path(run)
+    cfg = yaml.safe_load(Path(config).read_text())
+    data = read_part(root / "results" / subject / "motion.h5")
+    template = load_template(root / "resources" / "template.npz")
+    fine = subdivide_template(template, int(cfg["template"]["subdivision_levels"]))
+    takes = {k.split("/")[2] for k in data if k.startswith("/visemes/")}
+    exprs = sorted({k.split("/")[2] for k in data if k.startswith("/expressions/")})
+    kinds = (
+        {"neutral": "neutral"} | dict.fromkeys(takes, "viseme") | dict.fromkeys(exprs, "expression")
+    )
+    labels = {t: t.rstrip("0123456789") or t for t in kinds}
+    neutral = data[paths.neutral("vertices")]
+    truth_dir = root / "results" / "synthetic" / subject / "truth"
+    true = {}
+    if truth_dir.is_dir():
+        rest = read_truth(truth_dir / "neutral.npz")
+        true = {t: true_motion(neutral, rest, read_truth(truth_dir / f"{t}.npz")) for t in exprs}
+    fields = {t: data[paths.expression(t, "displacement")] for t in exprs}
+    for policy in ("all", "still"):
+        section = dict(cfg["modal"], fixed_outline=policy, reconstruction_k=ks)
+        params = modal.Params.from_config(section, cfg["template"], threads=2)
+        subj = Subject(subject, kinds, labels)
+        part = modal.run(template, subj, data, params)
+        d = part.datasets
+        fixed, outline = d[paths.modal("fixed_vertices")], np.zeros(len(neutral), bool)
+        outline[fine.boundary] = True
+        print(
+            f"\n== fixed_outline: {policy}: {int(fixed.sum())} of {int(outline.sum())} "
+            f"outline vertices clamped, f1 {d[paths.modal('frequencies_hz')][0]:.0f} Hz"
+        )
+        print(part.files["reconstruction"].round(2).to_string(index=False))
+        for t in exprs:
+            line = (
+                f"{t}: displacement RMS {rms_length(fields[t], np.ones(len(neutral), bool)):.2f} mm, "
+                f"on the outline {rms_length(fields[t], outline):.2f}, on the clamped part "
+                f"{rms_length(fields[t], fixed):.2f}"
+            )
+            if t in true:
+                line += (
+                    f"; true motion {rms_length(true[t], np.ones(len(neutral), bool)):.2f}, "
+                    f"on the outline {rms_length(true[t], outline):.2f}, clamped "
+                    f"{rms_length(true[t], fixed):.2f}"
+                )
+            print(line)
+        if true:  # what a perfect correspondence would leave: the basis on the true motion
+            choice = modal.outline_choice(fine, subj, data, fields, params)
+            from scan2morph.modal.subject import subject_modal
+
+            _, dt = subject_modal(
+                neutral,
+                fine.faces,
+                upper_face(fine, params.stiff_above),
+                params.modal,
+                true,
+                labels,
+                [],
+                ks,
+                subject,
+                fixed=choice,
+                target_mm=params.target_rms_mm,
+            )
+            print("true material motion:")
+            for t in exprs:
+                parts = [dt[paths.expression(t, k)] for k in modal.RECONSTRUCTION_PARTS.values()]
+                print(
+                    f"  {t}: "
+                    + "  ".join(
+                        f"K={k}: {a:.2f}/{b:.2f}/{c:.2f}"
+                        for k, a, b, c in zip(ks, *parts, strict=True)
+                    )
+                    + f"  modes to target: {dt[paths.expression(t, 'modes_to_target')]}"
+                )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--dofs", type=int, nargs="+", default=[5000, 15000, 30000, 60000])
@@ -115,7 +214,13 @@ def main() -> None:
         "--trace", action="store_true", help="also measure Python peaks with tracemalloc"
     )
     ap.add_argument("--case", nargs=3, metavar=("DOFS", "K", "METHOD"), help=argparse.SUPPRESS)
+    ap.add_argument("--reconstruction", nargs=2, metavar=("RUN", "SUBJECT"))
+    ap.add_argument("--config", default="config/config.yaml")
     args = ap.parse_args()
+    if args.reconstruction:
+        ks = args.ks if args.ks != [20, 50, 100] else [1, 5, 10, 20, 50, 100]
+        reconstruction(*args.reconstruction, args.config, ks)
+        return
     if args.case:
         dofs, k, method = int(args.case[0]), int(args.case[1]), args.case[2]
         out = run_case(dofs, k, method, args.solve_threads, args.trace)

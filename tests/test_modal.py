@@ -24,10 +24,14 @@ from scan2morph.modal import (
     project,
     reconstruct,
     reconstruction_error_curve,
+    reconstruction_split,
     semantic_basis,
     solve_modes,
     thickness_map,
 )
+from scan2morph.modal.boundary import outline_motion, still_outline
+from scan2morph.modal.subject import subject_modal
+from scan2morph.store import paths
 
 E_MPA, NU, RHO, H_MM, A_MM = 210000.0, 0.3, 7.85e-9, 1.0, 100.0
 
@@ -250,6 +254,148 @@ def test_reconstruction_error_decreases_with_the_number_of_modes(cap_basis):
     assert_allclose(err[0], np.sqrt(vec.ravel() @ basis.mass @ vec.ravel() / total), rtol=1e-12)
     plain = reconstruction_error_curve(basis, field, [0], weighting="vertex")
     assert_allclose(plain[0], np.sqrt(np.mean(np.sum(field**2, axis=1))), rtol=1e-12)
+
+
+def _split_by_hand(field, normals):
+    along = np.einsum("vd,vd->v", field, normals)
+    tangent = field - along[:, None] * normals
+    return (
+        np.sqrt(np.mean(np.sum(field**2, axis=1))),
+        np.sqrt(np.mean(along**2)),
+        np.sqrt(np.mean(np.sum(tangent**2, axis=1))),
+    )
+
+
+def test_reconstruction_split_of_a_modal_field_is_exact(cap_basis):
+    """A field that is exactly a combination of the first 4 modes rebuilds to 0 from K = 4 on;
+    below, every part equals the part of the missing modes' field computed by hand."""
+    v, f, basis = cap_basis
+    from scan2morph.geometry import vertex_normals
+
+    normals = vertex_normals(v, f)
+    c = np.array([1.0, -0.5, 0.3, 0.8]) * 1e-3
+    field = (basis.vectors[:, :4] @ c).reshape(len(v), 6)
+    ks = [0, 1, 2, 4, basis.n_modes]
+    split = reconstruction_split(basis, field, normals, ks, target_mm=1e-9)
+    assert_allclose(split.ks, ks)
+    scale = np.sqrt(np.mean(np.sum(field[:, :3] ** 2, axis=1)))
+    for i, kk in enumerate(ks):
+        rest = field[:, :3] - reconstruct(basis, np.r_[c, np.zeros(basis.n_modes - 4)], kk)
+        want = _split_by_hand(rest, normals)
+        got = (split.total_mm[i], split.normal_mm[i], split.tangential_mm[i])
+        assert_allclose(got, want, atol=1e-9 * scale)
+    assert np.all(np.array([split.total_mm[-2], split.total_mm[-1]]) < 1e-10 * scale)
+    assert split.modes_to_target == 4.0
+    # a target no K reaches: NaN
+    far = reconstruction_split(basis, np.ones((len(v), 3)), normals, [1], target_mm=1e-6)
+    assert np.isnan(far.modes_to_target)
+
+
+def test_reconstruction_split_of_an_in_plane_field_on_a_plate_is_all_tangential():
+    """On a flat plate the low modes bend it (w, r_x, r_y) and the consistent mass does not
+    couple them to in-plane motion: an in-plane field has no coordinate on them, and its error
+    stays the field itself, all tangential, at every K."""
+    v, f = plate_mesh(8)
+    basis = modal_basis(v, f, ModalParams(n_modes=8, upper_thickness_factor=1.0))
+    assert np.abs(basis.dof_modes[:, :, :2]).max() < 1e-9 * np.abs(basis.dof_modes).max()
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    rng = np.random.default_rng(3)
+    field = np.c_[rng.standard_normal((len(v), 2)), np.zeros(len(v))]
+    split = reconstruction_split(basis, field, normals, [0, 1, 4, 8])
+    rms = np.sqrt(np.mean(np.sum(field**2, axis=1)))
+    assert_allclose(split.total_mm, rms, rtol=1e-9)
+    assert_allclose(split.tangential_mm, rms, rtol=1e-9)
+    assert np.all(split.normal_mm < 1e-9 * rms)
+    # and a purely normal field keeps no tangential error (the modes are normal too)
+    bulge = np.c_[np.zeros((len(v), 2)), np.sin(np.pi * v[:, 0] / A_MM)]
+    normal = reconstruction_split(basis, bulge, normals, [0, 1, 8])
+    assert np.all(normal.tangential_mm < 1e-9)
+    assert_allclose(normal.normal_mm, normal.total_mm, rtol=1e-12)
+    assert normal.total_mm[-1] < normal.total_mm[0]
+
+
+def _loop(n):
+    """A loop of n vertices (indices 0 .. n-1) and its angles."""
+    return np.arange(n), np.linspace(0, 2 * np.pi, n, endpoint=False)
+
+
+def test_still_outline_clamps_where_the_takes_do_not_move():
+    loop, ang = _loop(40)
+    moving = np.sin(ang) > 0.1  # the lower half of the loop moves (the jaw)
+    fields = []
+    for amp in (2.0, 3.0, 5.0):
+        field = np.zeros((40, 3))
+        field[moving, 1] = amp
+        fields.append(field)
+    fields[0][5] = [0.0, 9.0, 0.0]  # one wild vertex in one take: the median ignores it
+    fields[1][30] = np.nan  # a take without a value there
+    choice = still_outline(loop, fields, 40, "still", still_mm=1.0)
+    np.testing.assert_array_equal(choice.fixed, ~moving)
+    np.testing.assert_array_equal(choice.outline, np.ones(40, dtype=bool))
+    # the median over the takes is 3 mm on the moving part, 0 on the still part
+    assert_allclose(choice.motion_mm[moving][3:-3], 3.0)
+    assert_allclose(choice.motion_mm[~moving], 0.0)
+    # the paper: the whole outline
+    paper = still_outline(loop, fields, 40, "all")
+    assert paper.fixed.all()
+    # too few still vertices: the stillest min_fixed_share of them
+    everything = [np.tile([0.0, 2.0, 0.0], (40, 1)) * (1 + np.cos(ang))[:, None]]
+    few = still_outline(loop, everything, 40, "still", still_mm=0.01, min_fixed_share=0.25)
+    assert few.fixed.sum() == 10
+    assert np.all(np.abs(np.cos(ang[few.fixed])) > 0.7)  # round angle pi, where 1 + cos = 0
+    assert np.all(np.cos(ang[few.fixed]) < 0)
+    # no takes: the whole outline
+    assert still_outline(loop, [], 40, "still").fixed.all()
+    with pytest.raises(InputError, match="fixed_outline"):
+        still_outline(loop, fields, 40, "some")
+    with pytest.raises(InputError, match="min_fixed_share"):
+        still_outline(loop, fields, 40, "still", min_fixed_share=0.0)
+    with pytest.raises(InputError, match="expected shape"):
+        outline_motion(loop, [np.zeros((39, 3))], 40)
+
+
+def test_subject_modal_stores_the_split_and_the_outline(cap_basis):
+    """A field that moves only the free part of the rim: nothing of it sits on the clamped
+    vertices, and the stored split equals reconstruction_split's."""
+    v, f, _ = cap_basis
+    rim = np.flatnonzero(boundary_vertices(f))
+    centre = v[rim, :2].mean(axis=0)
+    order = np.argsort(np.arctan2(v[rim, 1] - centre[1], v[rim, 0] - centre[0]))
+    loop = rim[order]
+    field = np.zeros_like(v)
+    low = v[:, 1] < -10.0
+    field[low, 1] = 0.5
+    choice = still_outline(loop, [field], len(v), "still", still_mm=0.05)
+    assert 0 < choice.fixed.sum() < len(loop)
+    params = ModalParams(n_modes=10, upper_thickness_factor=1.0)
+    basis, data = subject_modal(
+        v,
+        f,
+        np.zeros(len(v), bool),
+        params,
+        {"e1": field},
+        {"e1": "smile"},
+        [],
+        [1, 5],
+        "cap",
+        fixed=choice,
+        target_mm=0.5,
+    )
+    np.testing.assert_array_equal(data[paths.modal("fixed_vertices")], choice.fixed)
+    np.testing.assert_array_equal(data[paths.modal("outline_vertices")], choice.outline)
+    assert data[paths.expression("e1", "clamped_rms_mm")] == 0.0
+    on_rim = np.sqrt(np.mean(np.sum(field[loop] ** 2, axis=1)))
+    assert_allclose(data[paths.expression("e1", "outline_rms_mm")], on_rim, rtol=1e-12)
+    from scan2morph.geometry import vertex_normals
+
+    split = reconstruction_split(basis, field, vertex_normals(v, f), [1, 5, 10], 0.5)
+    assert_allclose(data[paths.expression("e1", "reconstruction_rms_mm")], split.total_mm)
+    assert_allclose(data[paths.expression("e1", "reconstruction_normal_rms_mm")], split.normal_mm)
+    assert_allclose(
+        data[paths.expression("e1", "reconstruction_tangential_rms_mm")], split.tangential_mm
+    )
+    assert data[paths.expression("e1", "modes_to_target")] == 1.0  # 0.5 mm: reached at once
+    assert float(data[paths.modal("reconstruction_target_mm")]) == 0.5
 
 
 def test_semantic_basis_reproduces_inserted_expressions(cap_basis):

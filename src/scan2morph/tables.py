@@ -191,15 +191,31 @@ MODAL_COORDINATES = (
     ),
 )
 
-#: ``results/{subject}/tables/modal_reconstruction.tsv``: one row per expression take.
+#: ``results/{subject}/tables/modal_reconstruction.tsv``: three rows per expression take (the
+#: error's total, its normal and its tangential part).
 MODAL_RECONSTRUCTION = (
     TAKE,
     Column(
+        "part",
+        NO_UNIT,
+        "total: the error vector's length; normal: its component along the neutral's vertex "
+        "normal (a wrong surface, what bending modes rebuild); tangential: its part along the "
+        "surface (sliding); total^2 = normal^2 + tangential^2",
+    ),
+    Column(
         "K={k}",
         "mm",
-        "RMS over all vertices of the length of the error of the expression's displacement "
+        "RMS over all vertices of that part of the error of the expression's displacement "
         "rebuilt from its lowest k modal coordinates; store "
-        "/expressions/{take}/reconstruction_rms_mm",
+        "/expressions/{take}/reconstruction_rms_mm (total), reconstruction_normal_rms_mm, "
+        "reconstruction_tangential_rms_mm",
+    ),
+    Column(
+        "modes_to_target",
+        "count",
+        "fewest lowest modes whose total RMS error is at most modal.target_rms_mm "
+        "(/modal/reconstruction_target_mm); NA when no K of the basis reaches it; store "
+        "/expressions/{take}/modes_to_target",
     ),
 )
 
@@ -243,6 +259,12 @@ ACCURACY = (
         "minus the true material motion, over the RMS of the material motion there",
     ),
     Column(
+        "expression_material_relative_error_max",
+        "fraction",
+        "largest over the expressions of the RMS over all vertices of the displacement field "
+        "minus the true material motion, over the RMS of the material motion",
+    ),
+    Column(
         "masked_true_motion_share_max",
         "fraction",
         "largest over the visemes of the share of the material motion's energy (sum over all "
@@ -284,6 +306,66 @@ COHORT = (
     Column("n_takes", "count", "takes of the subject in its store"),
     Column("n_visemes", "count", "viseme takes"),
     Column("n_expressions", "count", "expression takes"),
+    Column(
+        "material_relative_error_viseme_{label}",
+        "fraction",
+        "error of a viseme's final motion against the material motion of the skin (where each "
+        "skin point really went): RMS over the unmasked vertices of the difference, over the RMS "
+        "of the material motion there; accuracy.json takes.{take}.motion.material_relative_error, "
+        "mean over the label's viseme takes (synthetic subjects)",
+    ),
+    Column(
+        "material_rms_error_mm_viseme_{label}",
+        "mm",
+        "RMS over the unmasked vertices of the length of that error; accuracy.json "
+        "material_rms_error_mm, mean over the label's viseme takes",
+    ),
+    Column(
+        "material_normal_rms_error_mm_viseme_{label}",
+        "mm",
+        "its part along the neutral's vertex normal (a wrong surface): RMS over the unmasked "
+        "vertices; accuracy.json material_normal_rms_error_mm, mean over the label's viseme takes",
+    ),
+    Column(
+        "material_tangential_rms_error_mm_viseme_{label}",
+        "mm",
+        "its part along the surface (skin that slid): RMS over the unmasked vertices of its "
+        "length; accuracy.json material_tangential_rms_error_mm, mean over the label's viseme "
+        "takes",
+    ),
+    Column(
+        "ideal_relative_error_viseme_{label}",
+        "fraction",
+        "the second figure: error against the method-ideal motion (what exact clicks would give, "
+        "through the same mask and smoothing), RMS over the unmasked vertices over the RMS of "
+        "that motion; accuracy.json relative_error, mean over the label's viseme takes",
+    ),
+    Column(
+        "material_relative_error_expression_{label}",
+        "fraction",
+        "error of an expression's displacement field (/expressions/{take}/displacement) against "
+        "the material motion of the skin: RMS over all vertices of the difference, over the RMS "
+        "of the material motion; accuracy.json takes.{take}.expression.material_relative_error, "
+        "mean over the label's expression takes",
+    ),
+    Column(
+        "material_rms_error_mm_expression_{label}",
+        "mm",
+        "RMS over all vertices of the length of that error; accuracy.json material_rms_error_mm, "
+        "mean over the label's expression takes",
+    ),
+    Column(
+        "material_normal_rms_error_mm_expression_{label}",
+        "mm",
+        "its part along the neutral's vertex normal: RMS over all vertices; accuracy.json "
+        "material_normal_rms_error_mm, mean over the label's expression takes",
+    ),
+    Column(
+        "material_tangential_rms_error_mm_expression_{label}",
+        "mm",
+        "its part along the surface (sliding): RMS over all vertices of its length; "
+        "accuracy.json material_tangential_rms_error_mm, mean over the label's expression takes",
+    ),
     Column(
         "motion_rms_all_mm_{label}",
         "mm",

@@ -1,9 +1,11 @@
 """Modal basis of the neutral face and expression coordinates (the modal analysis paper).
 
 The neutral mesh becomes a thin-shell finite element model (:mod:`.fem`, pyfe3d triangles,
-boundary fixed, upper face thickened); its lowest natural modes (:mod:`.eigen`) form a
+outline fixed where the takes show the face
+still, :mod:`.boundary`; upper face thickened); its lowest natural modes (:mod:`.eigen`) form a
 mass-orthonormal basis in which expression displacement fields get their coordinates
-(:mod:`.project`), optionally after inserting identified expressions as "semantic" vectors.
+(:mod:`.project`; their reconstruction error split into normal and tangential parts),
+optionally after inserting identified expressions as "semantic" vectors.
 Units: mm, N, tonne, s (frequencies in Hz).
 """
 
@@ -21,6 +23,7 @@ from scan2morph.modal.project import (
     project,
     reconstruct,
     reconstruction_error_curve,
+    reconstruction_split,
     semantic_basis,
 )
 
@@ -37,6 +40,7 @@ __all__ = [
     "project",
     "reconstruct",
     "reconstruction_error_curve",
+    "reconstruction_split",
     "semantic_basis",
     "solve_modes",
     "thickness_map",

@@ -151,6 +151,96 @@ def reconstruction_error_curve(
     return out
 
 
+@dataclass(frozen=True)
+class ReconstructionSplit:
+    """RMS error of an expression rebuilt from its first K modes, split along the surface.
+
+    Attributes
+    ----------
+    ks : (R,) int
+        Numbers of leading modes.
+    total_mm, normal_mm, tangential_mm : (R,) float
+        RMS over all vertices of the translation error's length, of its component along the
+        neutral's vertex normal, and of its part tangent to the surface (sliding), mm;
+        ``total_mm**2 = normal_mm**2 + tangential_mm**2``.
+    modes_to_target : float
+        Smallest K (1 .. k) whose ``total`` error is at most the target, NaN when no K reaches it.
+    """
+
+    ks: NDArray[np.int64]
+    total_mm: NDArray[np.float64]
+    normal_mm: NDArray[np.float64]
+    tangential_mm: NDArray[np.float64]
+    modes_to_target: float
+
+
+def reconstruction_split(
+    basis: ModalBasis,
+    field: ArrayLike,
+    normals: ArrayLike,
+    ks: Sequence[int],
+    target_mm: float = 0.5,
+    source: str = "expression",
+) -> ReconstructionSplit:
+    """Reconstruction error against the number of modes, in normal and tangential parts.
+
+    A shell's low modes bend it: they move the surface along its normal. A displacement that
+    slides the skin along the surface (tangential) needs the far stiffer membrane modes, so its
+    error falls slowly with K; the split says which of the two a residual is.
+
+    Parameters
+    ----------
+    basis : ModalBasis
+    field : (V, 3) float, mm
+        The displacement field.
+    normals : (V, 3) float
+        Unit vertex normals of the neutral mesh (a vertex without one: NaN row; its error
+        counts as tangential).
+    ks : sequence of int
+        Numbers of leading modes, each in 0..k.
+    target_mm : float
+        RMS error (all vertices, mm) for :attr:`ReconstructionSplit.modes_to_target`.
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    ReconstructionSplit
+    """
+    ks_arr = np.asarray(ks)
+    if ks_arr.ndim != 1 or not np.issubdtype(ks_arr.dtype, np.integer):
+        raise InputError(source, "ks: expected a 1-D sequence of integers")
+    if ks_arr.size and (ks_arr.min() < 0 or ks_arr.max() > basis.n_modes):
+        raise InputError(source, f"ks: expected values in 0..{basis.n_modes}")
+    n = np.asarray(normals, dtype=np.float64)
+    if n.shape != (basis.n_vertices, 3):
+        raise InputError(source, f"normals: expected shape ({basis.n_vertices}, 3), got {n.shape}")
+    n = np.where(np.isfinite(n).all(axis=1, keepdims=True), n, 0.0)
+    v = displacement_dofs(basis, field, source)
+    if v.ndim != 1:
+        raise InputError(source, "displacement: expected one field (V, 3), not a stack")
+    q = basis.vectors.T @ (basis.mass @ v)
+    # error after K modes for every K = 0 .. k, one mode at a time
+    e = v.reshape(-1, fem.DOF)[:, :3].copy()
+    modes = basis.vectors.reshape(basis.n_vertices, fem.DOF, basis.n_modes)[:, :3, :]
+    total, normal, tangential = (np.empty(basis.n_modes + 1) for _ in range(3))
+    for kk in range(basis.n_modes + 1):
+        if kk:
+            e -= modes[:, :, kk - 1] * q[kk - 1]
+        along = np.einsum("vd,vd->v", e, n)
+        total[kk] = np.sqrt(np.mean(np.sum(e**2, axis=1)))
+        normal[kk] = np.sqrt(np.mean(along**2))
+        tangential[kk] = np.sqrt(np.mean(np.sum((e - along[:, None] * n) ** 2, axis=1)))
+    reached = np.flatnonzero(total[1:] <= target_mm)
+    return ReconstructionSplit(
+        ks_arr.astype(np.int64),
+        total[ks_arr],
+        normal[ks_arr],
+        tangential[ks_arr],
+        float(reached[0] + 1) if reached.size else float("nan"),
+    )
+
+
 def semantic_basis(
     basis: ModalBasis,
     expression_fields: Sequence[ArrayLike],

@@ -7,15 +7,25 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import vertex_normals
+from scan2morph.modal.boundary import OutlineChoice
 from scan2morph.modal.eigen import ModalBasis, ModalParams, modal_basis
 from scan2morph.modal.project import (
     coordinate_statistics,
     project,
     reconstruct,
-    reconstruction_error_curve,
+    reconstruction_split,
     semantic_basis,
 )
 from scan2morph.store import paths
+
+
+def rms_length(field: np.ndarray, where: np.ndarray) -> float:
+    """RMS over the vertices in ``where`` (with a finite value) of the length of a (V, 3)
+    field, mm; NaN when there is none."""
+    f = np.asarray(field, dtype=np.float64)[np.asarray(where, dtype=bool)]
+    f = f[np.isfinite(f).all(axis=1)]
+    return float(np.sqrt(np.mean(np.sum(f**2, axis=1)))) if len(f) else float("nan")
 
 
 def subject_modal(
@@ -28,7 +38,9 @@ def subject_modal(
     semantic_takes: Sequence[str],
     ks: Sequence[int],
     source: str,
-    fixed: np.ndarray | None = None,
+    fixed: np.ndarray | OutlineChoice | None = None,
+    normals: np.ndarray | None = None,
+    target_mm: float = 0.5,
 ) -> tuple[ModalBasis, dict[str, np.ndarray]]:
     """Modal basis of the neutral face and everything the store keeps about it.
 
@@ -47,16 +59,27 @@ def subject_modal(
     ks : sequence of int
         Numbers of modes at which the reconstruction error is reported.
     source : str
-    fixed : (V,) bool, optional
-        Vertices held fixed (the outer outline); default every boundary vertex.
+    fixed : (V,) bool or OutlineChoice, optional
+        Vertices held fixed (the outer outline, or the part of it
+        :func:`scan2morph.modal.boundary.still_outline` chose, whose outline and measured
+        outline motion are then stored too); default every boundary vertex.
+    normals : (V, 3) float, optional
+        Unit vertex normals of the neutral (default: computed from ``neutral`` and ``faces``),
+        for the normal / tangential split of the reconstruction error.
+    target_mm : float
+        RMS reconstruction error (mm) whose mode count is reported (``modes_to_target``).
 
     Returns
     -------
     basis : ModalBasis
     datasets : dict of store path -> array
     """
-    basis = modal_basis(neutral, faces, params, upper_face, fixed=fixed, source=source)
+    choice = fixed if isinstance(fixed, OutlineChoice) else None
+    mask = choice.fixed if choice is not None else fixed
+    basis = modal_basis(neutral, faces, params, upper_face, fixed=mask, source=source)
     ks = sorted({int(k) for k in ks if 1 <= int(k) <= basis.n_modes} | {basis.n_modes})
+    if normals is None:
+        normals = vertex_normals(neutral, faces)
     data = {
         paths.modal("frequencies_hz"): basis.frequencies_hz,
         paths.modal("modes"): basis.modes,
@@ -64,14 +87,27 @@ def subject_modal(
         paths.modal("thickness_mm"): basis.thickness_mm,
         paths.modal("fixed_vertices"): basis.fixed_vertices,
         paths.modal("reconstruction_k"): np.asarray(ks),
+        paths.modal("reconstruction_target_mm"): np.float64(target_mm),
     }
+    outline = basis.fixed_vertices if choice is None else choice.outline
+    if choice is not None:
+        data[paths.modal("outline_vertices")] = choice.outline
+        data[paths.modal("outline_motion_mm")] = choice.motion_mm
     coords = {}
     for take, field in displacements.items():
         q = project(basis, field, source=f"{source}/{take}")
         coords[take] = q
         data[paths.expression(take, "coordinates")] = q
-        data[paths.expression(take, "reconstruction_rms_mm")] = reconstruction_error_curve(
-            basis, field, ks, weighting="vertex"
+        split = reconstruction_split(
+            basis, field, normals, ks, target_mm, source=f"{source}/{take}"
+        )
+        data[paths.expression(take, "reconstruction_rms_mm")] = split.total_mm
+        data[paths.expression(take, "reconstruction_normal_rms_mm")] = split.normal_mm
+        data[paths.expression(take, "reconstruction_tangential_rms_mm")] = split.tangential_mm
+        data[paths.expression(take, "modes_to_target")] = np.float64(split.modes_to_target)
+        data[paths.expression(take, "outline_rms_mm")] = np.float64(rms_length(field, outline))
+        data[paths.expression(take, "clamped_rms_mm")] = np.float64(
+            rms_length(field, basis.fixed_vertices)
         )
         data[paths.expression(take, "synthesized")] = reconstruct(basis, q)
     unknown = [t for t in semantic_takes if t not in displacements]

@@ -13,6 +13,7 @@ import pandas as pd
 
 from scan2morph.io import write_obj
 from scan2morph.modal import ModalParams, ShellMaterial
+from scan2morph.modal.boundary import OutlineChoice, still_outline
 from scan2morph.modal.subject import subject_modal
 from scan2morph.stages.part import Part, Subject, need
 from scan2morph.stages.quality import modelled
@@ -24,6 +25,12 @@ from scan2morph.template.regions import upper_face
 SECTIONS = ("modal", "template")
 #: Why a subject without expression takes gets the modal basis only (recorded in the store).
 NO_EXPRESSIONS = "no expression takes: the modal basis only, no modal coordinates"
+#: Rows of the reconstruction table: part of the error -> its dataset per expression.
+RECONSTRUCTION_PARTS = {
+    "total": "reconstruction_rms_mm",
+    "normal": "reconstruction_normal_rms_mm",
+    "tangential": "reconstruction_tangential_rms_mm",
+}
 log = logging.getLogger("scan2morph")
 
 
@@ -43,6 +50,14 @@ class Params:
         Expression labels whose first take becomes a semantic mode.
     reconstruction_k : list of int
         Numbers of modes at which the reconstruction error is reported.
+    fixed_outline : {"still", "all"}
+        Outline vertices clamped: those the takes do not move (``still``) or all (the paper).
+    still_mm : float
+        Median displacement over the takes below which an outline vertex is still, mm.
+    min_fixed_share : float
+        Share of the outline clamped at least.
+    target_rms_mm : float
+        Reconstruction error whose mode count is reported, mm.
     """
 
     levels: int
@@ -50,6 +65,10 @@ class Params:
     stiff_above: str
     semantic_labels: list
     reconstruction_k: list
+    fixed_outline: str = "still"
+    still_mm: float = 1.0
+    min_fixed_share: float = 0.25
+    target_rms_mm: float = 0.5
 
     @classmethod
     def from_config(cls, modal: Mapping, template: Mapping, threads: int = 1) -> Params:
@@ -70,6 +89,10 @@ class Params:
             modal["stiff_above"],
             list(modal["semantic_labels"]),
             list(modal["reconstruction_k"]),
+            str(modal.get("fixed_outline", "still")),
+            float(modal.get("still_mm", 1.0)),
+            float(modal.get("min_fixed_share", 0.25)),
+            float(modal.get("target_rms_mm", 0.5)),
         )
 
 
@@ -83,6 +106,35 @@ def semantic_takes(subject: Subject, labels: list) -> list[str]:
     ]
 
 
+def outline_choice(
+    fine: Template,
+    subject: Subject,
+    data: Mapping[str, np.ndarray],
+    fields: Mapping[str, np.ndarray],
+    params: Params,
+) -> OutlineChoice:
+    """The outline vertices the shell model clamps (:func:`still_outline` on the subdivided
+    template's outer loop, from the visemes' motion and the expressions' ``fields``).
+
+    The paper fixes the face's outline; the mouth loop (the lips) stays free. With
+    ``fixed_outline: still``, only the part of the outline that the takes do not move.
+    """
+    moved = [
+        data[paths.viseme(t, "motion")]
+        for t in subject.visemes
+        if paths.viseme(t, "motion") in data
+    ]
+    return still_outline(
+        fine.boundary,
+        [*moved, *fields.values()],
+        fine.n_vertices,
+        params.fixed_outline,
+        params.still_mm,
+        params.min_fixed_share,
+        source=subject.name,
+    )
+
+
 def run(
     template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
@@ -93,14 +145,17 @@ def run(
     template, subject
         The base template and the subject (the contract of :mod:`scan2morph.stages`).
     data : mapping store path -> array
-        The motion part (``/neutral/vertices``, ``/expressions/{take}/displacement``).
+        The motion part (``/neutral/vertices``, ``/expressions/{take}/displacement``, and
+        ``/visemes/{take}/motion``, which with the expressions tells which outline vertices
+        stay still).
     params : Params
 
     Returns
     -------
     Part
-        ``/modal/*`` and ``/expressions/{take}/coordinates|reconstruction_rms_mm|synthesized|
-        semantic_coordinates``; ``files``: the ``coordinates`` and ``reconstruction`` tables, and
+        ``/modal/*`` and ``/expressions/{take}/coordinates|reconstruction_rms_mm|
+        reconstruction_normal_rms_mm|reconstruction_tangential_rms_mm|modes_to_target|
+        outline_rms_mm|clamped_rms_mm|synthesized|semantic_coordinates``; ``files``: the ``coordinates`` and ``reconstruction`` tables, and
         the measured and synthesised expression ``meshes`` with their ``faces``.
     """
     subject = modelled(subject, data)
@@ -108,9 +163,14 @@ def run(
     name = subject.name
     base = need(data, paths.neutral("vertices"), name)
     fields = {t: need(data, paths.expression(t, "displacement"), name) for t in subject.expressions}
-    # The paper fixes the face's outline; the mouth loop (the lips) stays free.
-    outline = np.zeros(fine.n_vertices, dtype=bool)
-    outline[fine.boundary] = True
+    outline = outline_choice(fine, subject, data, fields, params)
+    log.info(
+        "%s: %d of %d outline vertices clamped (fixed_outline: %s)",
+        name,
+        int(outline.fixed.sum()),
+        int(outline.outline.sum()),
+        params.fixed_outline,
+    )
     basis, datasets = subject_modal(
         base,
         fine.faces,
@@ -122,6 +182,7 @@ def run(
         params.reconstruction_k,
         source=name,
         fixed=outline,
+        target_mm=params.target_rms_mm,
     )
     freq = basis.frequencies_hz
     log.info("%s: %d modes, %.1f to %.1f Hz", name, basis.n_modes, freq[0], freq[-1])
@@ -129,15 +190,22 @@ def run(
     coords = {t: datasets[paths.expression(t, "coordinates")] for t in takes}
     columns = [f"q{i + 1}" for i in range(basis.n_modes)]
     ks = datasets[paths.modal("reconstruction_k")]
-    errors = {t: datasets[paths.expression(t, "reconstruction_rms_mm")] for t in takes}
+    rows = []
+    for t in takes:  # one row per expression and part of the error
+        for part, key in RECONSTRUCTION_PARTS.items():
+            rows.append(
+                {"take": t, "part": part}
+                | dict(zip([f"K={k}" for k in ks], datasets[paths.expression(t, key)], strict=True))
+                | {"modes_to_target": datasets[paths.expression(t, "modes_to_target")]}
+            )
     meshes = {}
     for t in takes:  # each expression as measured and as synthesised from its coordinates
         meshes[f"{t}_measured"] = base + fields[t]
         meshes[f"{t}_synthesized"] = base + datasets[paths.expression(t, "synthesized")]
     files = {
         "coordinates": pd.DataFrame.from_dict(coords, orient="index", columns=columns),
-        "reconstruction": pd.DataFrame.from_dict(
-            errors, orient="index", columns=[f"K={k}" for k in ks]
+        "reconstruction": pd.DataFrame(
+            rows, columns=["take", "part", *[f"K={k}" for k in ks], "modes_to_target"]
         ),
         "faces": fine.faces,
         "meshes": meshes,
@@ -155,8 +223,7 @@ def write_files(part: Part, coordinates: str, reconstruction: str, meshes: str) 
     f = part.files
     coords = f["coordinates"].rename_axis("take").reset_index()
     write_table(coordinates, coords, MODAL_COORDINATES)
-    recon = f["reconstruction"].rename_axis("take").reset_index()
-    write_table(reconstruction, recon, MODAL_RECONSTRUCTION, float_format="%.4f")
+    write_table(reconstruction, f["reconstruction"], MODAL_RECONSTRUCTION, float_format="%.4f")
     folder = Path(meshes)
     folder.mkdir(parents=True, exist_ok=True)
     for name, vertices in f["meshes"].items():

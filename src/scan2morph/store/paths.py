@@ -84,7 +84,10 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
             "dof_modes",
             "thickness_mm",
             "fixed_vertices",
+            "outline_vertices",
+            "outline_motion_mm",
             "reconstruction_k",
+            "reconstruction_target_mm",
             "semantic/names",
             "semantic/modes",
         ),
@@ -92,7 +95,17 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     (
         "/expressions/{take}",
         "modal",
-        ("coordinates", "reconstruction_rms_mm", "synthesized", "semantic_coordinates"),
+        (
+            "coordinates",
+            "reconstruction_rms_mm",
+            "reconstruction_normal_rms_mm",
+            "reconstruction_tangential_rms_mm",
+            "modes_to_target",
+            "outline_rms_mm",
+            "clamped_rms_mm",
+            "synthesized",
+            "semantic_coordinates",
+        ),
     ),
     ("/modal/statistics/{label}", "modal", ("mean", "std", "takes")),
     ("/warnings", "store", ("stage", "take", "message")),
@@ -207,7 +220,9 @@ def viseme(take_id: str, name: str) -> str:
 
 
 def expression(take_id: str, name: str) -> str:
-    """``displacement``, ``coordinates``, ``reconstruction_rms_mm``, ``synthesized`` or
+    """``displacement``, ``coordinates``, ``reconstruction_rms_mm`` (and its
+    ``reconstruction_normal_rms_mm`` / ``reconstruction_tangential_rms_mm`` parts),
+    ``modes_to_target``, ``outline_rms_mm``, ``clamped_rms_mm``, ``synthesized`` or
     ``semantic_coordinates`` of an expression take."""
     return _build("/expressions/{take}", name, take=take_id)
 
