@@ -83,15 +83,62 @@ def stores(tmp_path):
     return alice, bob, bob_car
 
 
+def _motion_entry(material, normal, tangential, ideal):
+    return {
+        "material_relative_error": material,
+        "material_rms_mm": 10.0,
+        "material_rms_error_mm": 10.0 * material,
+        "material_normal_rms_error_mm": normal,
+        "material_tangential_rms_error_mm": tangential,
+        "relative_error": ideal,
+    }
+
+
+#: accuracy.json takes of alice: two "too" takes (the label's columns are their means), one
+#: viseme with a null, the expression's material entry.
+ALICE_TAKES = {
+    "car": {"motion": _motion_entry(0.4, 0.3, 3.9, 0.2)},
+    "too1": {"motion": _motion_entry(0.9, 0.2, 2.0, 0.1)},
+    "too2": {"motion": _motion_entry(0.7, 0.4, 1.0, None)},
+    "smile1": {
+        "expression": {
+            "material_relative_error": 1.5,
+            "material_rms_mm": 2.0,
+            "material_rms_error_mm": 3.0,
+            "material_normal_rms_error_mm": 0.8,
+            "material_tangential_rms_error_mm": 2.9,
+        }
+    },
+    "neutral": {"mesh": {"rms_mm": 0.1}},
+}
+
+
 def test_subject_summary_matches_analytic_values(stores):
     alice, bob, bob_car = stores
-    acc = {"summary": {"mesh_rms_mm_max": 0.5, "align_rotation_deg_max": 0.25, "none": None}}
+    acc = {
+        "summary": {"mesh_rms_mm_max": 0.5, "align_rotation_deg_max": 0.25, "none": None},
+        "takes": ALICE_TAKES,
+    }
     s = subject_summary(alice, acc)
     assert s.row == {
         "subject": "alice",
         "n_takes": 5,
         "n_visemes": 3,
         "n_expressions": 1,
+        "material_relative_error_viseme_car": 0.4,
+        "material_relative_error_viseme_too": pytest.approx(0.8),
+        "material_rms_error_mm_viseme_car": 4.0,
+        "material_rms_error_mm_viseme_too": pytest.approx(8.0),
+        "material_normal_rms_error_mm_viseme_car": 0.3,
+        "material_normal_rms_error_mm_viseme_too": pytest.approx(0.3),
+        "material_tangential_rms_error_mm_viseme_car": 3.9,
+        "material_tangential_rms_error_mm_viseme_too": pytest.approx(1.5),
+        "ideal_relative_error_viseme_car": 0.2,
+        "ideal_relative_error_viseme_too": 0.1,  # the null of too2 is left out
+        "material_relative_error_expression_smile": 1.5,
+        "material_rms_error_mm_expression_smile": 3.0,
+        "material_normal_rms_error_mm_expression_smile": 0.8,
+        "material_tangential_rms_error_mm_expression_smile": 2.9,
         "motion_rms_all_mm_car": 5.0,
         "motion_rms_all_mm_too": 2.0,  # mean of 1 and 3 over the two takes of the label
         "noise_relative_unmasked_car": 0.1,
@@ -170,7 +217,8 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
 
 
 def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
-    """Motion (mm), CCR (%), then the accuracy split by unit: mm, degrees, fraction, px."""
+    """Material error (%) first, motion (mm), CCR (%), then the accuracy split by unit: mm,
+    degrees, fraction, px."""
     alice, bob, _ = stores
     summary = {
         "mesh_rms_mm_max": 0.5,
@@ -178,7 +226,9 @@ def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
         "motion_relative_error_max": 0.1,
         "click_noise_px_used": 0.5,
     }
-    table = cohort_table([subject_summary(alice, {"summary": summary}), subject_summary(bob)])
+    table = cohort_table(
+        [subject_summary(alice, {"summary": summary, "takes": ALICE_TAKES}), subject_summary(bob)]
+    )
     drawn = {}
     real = cohort_module.Figure.savefig
 
@@ -192,6 +242,7 @@ def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
     monkeypatch.setattr(cohort_module.Figure, "savefig", savefig)
     plot_cohort(table, {}, tmp_path / "c.png")
     assert drawn["labels"] == [
+        "error against the material motion (%)",
         "motion RMS over all vertices (mm)",
         "CCR (%)",
         "mm",
@@ -199,8 +250,9 @@ def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
         "fraction",
         "px",
     ]
-    assert drawn["ticks"][0] == ["car", "too"]
-    assert drawn["ticks"][2:] == [
+    assert drawn["ticks"][0] == ["car", "too", "smile (expr.)"]
+    assert drawn["ticks"][1] == ["car", "too"]
+    assert drawn["ticks"][3:] == [
         ["mesh_rms_mm_max"],
         ["align_rotation_deg_max"],
         ["motion_relative_error_max"],
@@ -247,6 +299,28 @@ def test_cohort_rule_summarises_the_tiny_run(tmp_path_factory):
     want[: min(3, len(ccr))] = ccr[:3]  # neutral + two visemes: two components, ccr_3 is NA
     np.testing.assert_allclose([row["ccr_1"], row["ccr_2"], row["ccr_3"]], want, rtol=1e-5)
     assert row["modal_f1_hz"] == pytest.approx(f1, rel=1e-5)
-    summary = json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())["summary"]
-    for key, value in summary.items():
-        assert row[key] == pytest.approx(value, rel=1e-5)
+    accuracy = json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())
+    for key, value in accuracy["summary"].items():
+        if isinstance(value, (int, float)):  # a nested entry (by_modality) is no column
+            assert row[key] == pytest.approx(value, rel=1e-5)
+    # the headline columns: each viseme's and expression's error against the material motion,
+    # as accuracy.json gives it (one take per label in the tiny run)
+    with h5py.File(run.path("results", SUBJECT, f"{SUBJECT}.h5")) as h5:
+        kinds = {t: h5[paths.take(t)].attrs["kind"] for t in h5[paths.TAKES]}
+        labels = {t: h5[paths.take(t)].attrs["label"] for t in h5[paths.TAKES]}
+    seen = 0
+    for take, entry in accuracy["takes"].items():
+        kind = kinds[take].decode() if isinstance(kinds[take], bytes) else str(kinds[take])
+        label = labels[take].decode() if isinstance(labels[take], bytes) else str(labels[take])
+        key = {"viseme": "motion", "expression": "expression"}.get(kind)
+        if key not in entry:
+            continue
+        for name in (
+            "material_relative_error",
+            "material_rms_error_mm",
+            "material_normal_rms_error_mm",
+            "material_tangential_rms_error_mm",
+        ):
+            assert row[f"{name}_{kind}_{label}"] == pytest.approx(entry[key][name], rel=1e-5)
+            seen += 1
+    assert seen >= 8  # two visemes and the expression

@@ -36,6 +36,7 @@ from scan2morph.report import (
     ReportFigure,
     image_uri,
     read_caption,
+    sections,
     software_versions,
     stage_timings,
     subject_report_html,
@@ -848,27 +849,38 @@ def test_modal_tables_match_the_store(report):
     freqs = _table(page, "Natural frequencies")
     with h5py.File(store) as h5:
         q = h5[paths.expression("smile1", "coordinates")][()]
-        rms, ks = (
-            h5[paths.expression("smile1", "reconstruction_rms_mm")][()],
-            h5[paths.modal("reconstruction_k")][()],
-        )
+        ks = h5[paths.modal("reconstruction_k")][()]
         f = h5[paths.modal("frequencies_hz")][()]
     assert coords[0] == ["expression", "q1", "q2", "q3", "q4"]
     assert coords[1][0] == "smile1 (smile)"
     np.testing.assert_allclose(_floats(coords[1][1:]), q[:4], rtol=1e-3)
     np.testing.assert_allclose(_floats(freqs[1][1:]), f[:4], rtol=1e-3)
-    assert recon[0][1:] == [f"K = {k}" for k in ks]
-    np.testing.assert_allclose(_floats(recon[1][1:]), rms, rtol=1e-3)
+    assert recon[0][1 : 2 + len(ks)] == ["part", *[f"K = {k}" for k in ks]]
+    assert [r[:2] for r in recon[1:4]] == [["smile1 (smile)", p] for p in PARTS]
+    with h5py.File(store) as h5:
+        for row, key in zip(recon[1:4], RECONSTRUCTION_KEYS, strict=True):
+            want = h5[paths.expression("smile1", key)][()]
+            np.testing.assert_allclose(_floats(row[2 : 2 + len(ks)]), want, rtol=1e-3)
+        to_target = h5[paths.expression("smile1", "modes_to_target")][()]
+        target = h5[paths.modal("reconstruction_target_mm")][()]
+    assert recon[0][-1] == f"modes for <= {target:g} mm"
+    np.testing.assert_allclose(_floats([recon[1][-1]]), [to_target])
+    total, normal, tangential = (_floats(r[2 : 2 + len(ks)]) for r in recon[1:4])
+    np.testing.assert_allclose(total**2, normal**2 + tangential**2, rtol=2e-3)
 
 
 @pytest.mark.slow
 def test_accuracy_and_provenance_match_their_sources(report, run):
     path, store, _, accuracy = report
     page = _parse(path.read_text())
-    summary = {r[0]: float(r[1]) for r in _table(page, "Summary")[1:]}
-    assert summary.keys() == accuracy["summary"].keys()
-    for key, value in accuracy["summary"].items():
-        assert summary[key] == pytest.approx(value, rel=1e-3)
+    summary = {r[0]: r[1] for r in _table(page, "Summary")[1:]}
+    numbers = {k: v for k, v in accuracy["summary"].items() if isinstance(v, (int, float))}
+    assert numbers.keys() <= summary.keys()
+    for key, value in numbers.items():
+        assert float(summary[key]) == pytest.approx(value, rel=1e-3)
+    _assert_material_tables(page, accuracy)
+    text = path.read_text()
+    assert text.index('id="accuracy"') < text.index('id="inputs"')  # the headline leads
     per_take = _table(page, "Per take")
     assert [r[0] for r in per_take[1:]] == list(accuracy["takes"])
     column = per_take[0].index("mesh rms_mm")
@@ -990,6 +1002,117 @@ def test_each_table_shows_its_column_dictionary():
         assert rows[0] == ["column", "unit", "definition"]
         assert rows[1:] == [[c.name, c.unit, c.definition] for c in dictionary]
     assert text.count("<details") == text.count("</details>") == 5
+
+
+PARTS = ("total", "normal", "tangential")
+RECONSTRUCTION_KEYS = (
+    "reconstruction_rms_mm",
+    "reconstruction_normal_rms_mm",
+    "reconstruction_tangential_rms_mm",
+)
+MATERIAL, IDEAL = sections.MATERIAL_KEYS, sections.IDEAL_KEYS
+
+
+def _assert_material_tables(page, accuracy):
+    """The accuracy section's first tables show accuracy.json's material and method-ideal
+    errors of each viseme and the material errors of each expression (% and mm)."""
+    visemes = _table(page, "Viseme motion: error against the material motion")
+    assert visemes[0] == sections.MATERIAL_COLUMNS
+    assert all(c.endswith(("(mm)", "(% of the motion)")) for c in visemes[0][2:])  # units stated
+    want = [t for t, e in accuracy["takes"].items() if "motion" in e]
+    assert [r[0] for r in visemes[1:]] == [t for t in want for _ in range(2)]
+    for i, take in enumerate(want):
+        entry = accuracy["takes"][take]["motion"]
+        for row, keys, what in (
+            (visemes[1 + 2 * i], MATERIAL, "material motion"),
+            (visemes[2 + 2 * i], IDEAL, "method-ideal motion"),
+        ):
+            assert row[1] == what
+            values = [np.nan if entry[k] is None else entry[k] for k in keys]
+            values[0] *= 100
+            np.testing.assert_allclose(_floats(row[2:]), values, rtol=1e-3)
+    exprs = [t for t, e in accuracy["takes"].items() if "expression" in e]
+    if exprs:
+        table = _table(page, "Expression displacement fields")
+        assert [r[0] for r in table[1:]] == exprs
+        for row, take in zip(table[1:], exprs, strict=True):
+            values = [accuracy["takes"][take]["expression"][k] for k in MATERIAL]
+            values[0] *= 100
+            np.testing.assert_allclose(_floats(row[2:]), values, rtol=1e-3)
+
+
+def test_accuracy_section_leads_with_the_material_error():
+    from scan2morph.report import html as report_html
+
+    def motion(scale):
+        return {k: scale * (i + 1) for i, k in enumerate((*MATERIAL, *IDEAL))} | {
+            "masked_true_motion_share": 0.001
+        }
+
+    accuracy = {
+        "summary": {"motion_material_relative_error_max": 0.5},
+        "takes": {
+            "neutral": {"mesh": {"rms_mm": 0.1}},
+            "car": {"mesh": {"rms_mm": 0.1}, "motion": motion(0.1234567)},
+            "too": {"motion": motion(0.02) | {"material_normal_rms_error_mm": None}},
+            "smile1": {"expression": {k: 0.3 * (i + 2) for i, k in enumerate(MATERIAL)}},
+        },
+    }
+    text = report_html.render_blocks(sections.accuracy(accuracy))
+    page = _parse(text)
+    names = list(page.tables)
+    assert names[0].startswith("Viseme motion: error against the material motion")
+    assert names[1].startswith("Expression displacement fields")
+    _assert_material_tables(page, accuracy)
+    # a value accuracy.json lacks (null) shows as n/a; 4 significant digits, percent
+    too = _table(page, "Viseme motion")[3]
+    assert too[:3] == ["too", "material motion", "2"] and too[4] == "n/a"
+    assert _table(page, "Viseme motion")[1][2] == "12.35"
+    # no material entries (an older accuracy.json): no headline tables, the rest stays
+    old = sections.accuracy({"summary": {"x": 1.0}, "takes": {"car": {"mesh": {"rms_mm": 1}}}})
+    assert [b["table"]["caption"] for b in old if b["kind"] == "table"] == [
+        "Summary (worst take)",
+        "Per take",
+    ]
+
+
+def test_modal_section_splits_the_reconstruction_and_shows_the_outline():
+    from scan2morph.report import html as report_html
+
+    with h5py.File("modal.h5", "w", driver="core", backing_store=False) as h5:
+        h5[paths.modal("frequencies_hz")] = [10.0, 20.0]
+        h5[paths.modal("reconstruction_k")] = [1, 2]
+        h5[paths.modal("reconstruction_target_mm")] = 0.5
+        fixed, outline = np.zeros(8, bool), np.zeros(8, bool)
+        outline[:6], fixed[:4] = True, True
+        h5[paths.modal("fixed_vertices")], h5[paths.modal("outline_vertices")] = fixed, outline
+        parts = {
+            "e1": ([3.0, 0.4], [1.0, 0.3], [2.0, 0.2], 2.0),
+            "e2": ([5.0, 4.0], *[[3, 2.5]] * 2, np.nan),
+        }
+        for take, (total, normal, tangential, reach) in parts.items():
+            h5[paths.expression(take, "coordinates")] = [0.5, 0.25]
+            for key, values in zip(RECONSTRUCTION_KEYS, (total, normal, tangential), strict=True):
+                h5[paths.expression(take, key)] = values
+            h5[paths.expression(take, "modes_to_target")] = reach
+            h5[paths.expression(take, "outline_rms_mm")] = 1.5
+            h5[paths.expression(take, "clamped_rms_mm")] = 0.25
+        h5[paths.take("e1")] = np.zeros(1)
+        h5[paths.take("e1")].attrs["label"] = "smile"
+        page = _parse(report_html.render_blocks(sections.modal(h5, 2)))
+    recon = _table(page, "RMS error")
+    assert recon[0] == ["expression", "part", "K = 1", "K = 2", "modes for <= 0.5 mm"]
+    assert recon[1:] == [
+        ["e1 (smile)", "total", "3", "0.4", "2"],
+        ["e1 (smile)", "normal", "1", "0.3", "n/a"],
+        ["e1 (smile)", "tangential", "2", "0.2", "n/a"],
+        ["e2", "total", "5", "4", "n/a"],  # NaN: no K of the basis reaches the target
+        ["e2", "normal", "3", "2.5", "n/a"],
+        ["e2", "tangential", "3", "2.5", "n/a"],
+    ]
+    rim = _table(page, "Displacement on the face's outline")
+    assert "6 outline vertices, 4 clamped" in next(n for n in page.tables if n.startswith("Disp"))
+    assert rim[1:] == [["e1 (smile)", "1.5", "0.25"], ["e2", "1.5", "0.25"]]
 
 
 def test_viewer_data_decodes_to_the_store_within_half_a_step():

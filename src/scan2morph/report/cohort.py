@@ -1,6 +1,10 @@
 """The cohort summary: one row per subject (``results/cohort/summary.tsv``) and a comparison plot.
 
-Per subject: the number of takes (and of visemes and expressions), the RMS over all template
+Per subject, first (synthetic subjects): the error against the material motion of the skin
+(where each skin point really went, ``accuracy.json``) per viseme label and per expression
+label, in total and in its normal and tangential (sliding) parts, and for the visemes the error
+against the method-ideal motion (what perfect clicks would give) as the second figure. Then the
+number of takes (and of visemes and expressions), the RMS over all template
 vertices of the processed motion's length for each viseme label (mean over repeated takes of a
 label), the click-noise error bar per label, the cumulative contribution rate of the first three
 principal components, the lowest natural frequency of the modal basis, and the accuracy summary
@@ -28,6 +32,20 @@ from scan2morph.tol import VISEMES
 N_CCR = 3
 #: Column prefixes of the per-label families: motion RMS over all vertices, click-noise error bar.
 MOTION_PREFIX, NOISE_PREFIX = "motion_rms_all_mm_", "noise_relative_unmasked_"
+#: Per-label accuracy columns, in table order: (take kind, accuracy.json entry, key, column
+#: prefix). The material error leads; the method-ideal figure (visemes only) follows it.
+_MATERIAL_KEYS = (
+    "material_relative_error",
+    "material_rms_error_mm",
+    "material_normal_rms_error_mm",
+    "material_tangential_rms_error_mm",
+)
+MATERIAL_FAMILIES = (
+    *(("viseme", "motion", key, f"{key}_viseme_") for key in _MATERIAL_KEYS),
+    ("viseme", "motion", "relative_error", "ideal_relative_error_viseme_"),
+    *(("expression", "expression", key, f"{key}_expression_") for key in _MATERIAL_KEYS),
+)
+MATERIAL_PREFIXES = tuple(f[3] for f in MATERIAL_FAMILIES)
 #: Panels of the accuracy part of the plot, one per unit: unit -> axis label.
 UNIT_LABELS = {
     "mm": "mm",
@@ -77,7 +95,8 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     Returns
     -------
     SubjectSummary
-        ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``,
+        ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``, the per-label
+        accuracy columns of :data:`MATERIAL_FAMILIES` (:func:`material_columns`),
         ``motion_rms_all_mm_{label}`` per viseme label (RMS over all vertices),
         ``noise_relative_unmasked_{label}`` (the click-noise error bar, over the vertices outside
         the mask, when the store has ``/motion_noise``), ``ccr_1`` .. ``ccr_3``, ``modal_f1_hz``,
@@ -95,6 +114,7 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
                 raise InputError(store_path, f"{need}: missing (the subject did not finish)")
         takes = h5[paths.TAKES] if paths.TAKES in h5 else {}
         kinds = {t: _attr(takes[t], "kind") for t in takes}
+        labels = {t: _attr(takes[t], "label") or t for t in takes}
         row: dict[str, object] = {
             "subject": _attr(h5, "subject") or Path(store_path).stem,
             "n_takes": len(kinds),
@@ -123,6 +143,7 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
             row[f"ccr_{i + 1}"] = float(ccr[i]) if i < len(ccr) else float("nan")
         freqs = h5[paths.modal("frequencies_hz")][()]
         row["modal_f1_hz"] = float(freqs[0]) if len(freqs) else float("nan")
+    row |= material_columns(accuracy, kinds, labels)
     summary = (accuracy or {}).get("summary", {})
     for key, value in summary.items():
         if isinstance(value, (int, float)) or value is None:
@@ -130,25 +151,73 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     return SubjectSummary(row, ccr)
 
 
+def _label_order(label: str) -> tuple:
+    order = {v: i for i, v in enumerate(VISEMES)}
+    return (order.get(label, len(order)), label)
+
+
+def material_columns(
+    accuracy: Mapping | None, kinds: Mapping[str, str], labels: Mapping[str, str]
+) -> dict[str, float]:
+    """The per-label accuracy columns of one subject: for each family of
+    :data:`MATERIAL_FAMILIES`, the mean over the takes of a label of the take's value in
+    ``accuracy.json`` (a missing or null value is left out; a label with none is NaN).
+
+    Parameters
+    ----------
+    accuracy : mapping or None
+        ``accuracy.json`` content (``takes`` -> take -> ``motion`` / ``expression`` entries).
+    kinds, labels : mapping take -> kind / label
+        From the store.
+
+    Returns
+    -------
+    dict column -> value
+        Families in :data:`MATERIAL_FAMILIES` order, labels in paper order then by name.
+    """
+    takes = (accuracy or {}).get("takes", {}) or {}
+    out: dict[str, float] = {}
+    for kind, entry, key, prefix in MATERIAL_FAMILIES:
+        by_label: dict[str, list[float]] = {}
+        for take, record in takes.items():
+            if kinds.get(take) != kind or not isinstance(record, Mapping):
+                continue
+            values = by_label.setdefault(labels.get(take, take), [])
+            value = (record.get(entry) or {}).get(key)
+            if isinstance(value, (int, float)) and np.isfinite(value):
+                values.append(float(value))
+        for label in sorted(by_label, key=_label_order):
+            values = by_label[label]
+            out[f"{prefix}{label}"] = float(np.mean(values)) if values else float("nan")
+    return out
+
+
 def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     """Rows of several subjects in one table; a column a subject lacks is NaN there.
 
-    Column order: the identification and count columns, motion per label (paper order, then
-    others), click-noise error per label (the same order), CCR, frequency, then accuracy columns
-    in first-seen order.
+    Column order: the identification and count columns, the error against the material motion
+    per viseme and per expression label (:data:`MATERIAL_FAMILIES`: total, normal, tangential,
+    then the visemes' method-ideal figure), motion per label (paper order, then others),
+    click-noise error per label (the same order), CCR, frequency, then accuracy columns in
+    first-seen order.
     """
     columns: list[str] = []
     for s in summaries:
         columns += [c for c in s.row if c not in columns]
     motion = []
-    for prefix in (MOTION_PREFIX, NOISE_PREFIX):
-        order = {f"{prefix}{v}": i for i, v in enumerate(VISEMES)}
-        group = [c for c in columns if c.startswith(prefix)]
-        motion += sorted(group, key=lambda c: (order.get(c, len(order)), c))
+    for prefix in (*MATERIAL_PREFIXES, MOTION_PREFIX, NOISE_PREFIX):
+        group = [c for c in columns if c.startswith(prefix) and _family(c) == prefix]
+        motion += sorted(group, key=lambda c: _label_order(c.removeprefix(prefix)))
     head = ["subject", "n_takes", "n_visemes", "n_expressions"]
     fixed = [f"ccr_{i + 1}" for i in range(N_CCR)] + ["modal_f1_hz"]
     rest = [c for c in columns if c not in head + motion + fixed]
     return pd.DataFrame([s.row for s in summaries], columns=head + motion + fixed + rest)
+
+
+def _family(column: str) -> str | None:
+    """The per-label prefix a column belongs to (the longest that matches), or None."""
+    hits = [p for p in (*MATERIAL_PREFIXES, MOTION_PREFIX, NOISE_PREFIX) if column.startswith(p)]
+    return max(hits, key=len) if hits else None
 
 
 def accuracy_columns(table: pd.DataFrame) -> list[str]:
@@ -157,7 +226,7 @@ def accuracy_columns(table: pd.DataFrame) -> list[str]:
     return [
         c
         for c in table.columns
-        if c not in fixed and not c.startswith((MOTION_PREFIX, NOISE_PREFIX, "ccr_"))
+        if c not in fixed and _family(c) is None and not c.startswith("ccr_")
     ]
 
 
@@ -182,10 +251,46 @@ def _bars(
     ax.grid(axis="y", alpha=0.3)
 
 
+def _material_panel(ax, table: pd.DataFrame, rel: Mapping[str, list[str]], colour) -> None:
+    """The headline: error against the material motion per viseme and expression label (%),
+    bars per subject; the visemes' method-ideal error as a black tick on each bar."""
+    columns = [*rel["viseme"], *rel["expression"]]
+    labels = [
+        f"{c.removeprefix(f'material_relative_error_{kind}_')}"
+        + (" (expr.)" if kind == "expression" else "")
+        for kind in ("viseme", "expression")
+        for c in rel[kind]
+    ]
+    scaled = table.copy()
+    scaled[columns] = 100 * scaled[columns].astype(float)
+    _bars(ax, scaled, columns, labels, colour)
+    x = np.arange(len(columns))
+    width = 0.8 / max(len(table), 1)
+    for i, (_, row) in enumerate(table.iterrows()):
+        for j, c in enumerate(rel["viseme"]):
+            ideal = (
+                f"ideal_relative_error_viseme_{c.removeprefix('material_relative_error_viseme_')}"
+            )
+            if ideal in row and np.isfinite(float(row[ideal])):
+                xi = x[j] + (i - (len(table) - 1) / 2) * width
+                ax.plot(
+                    [xi - width / 2, xi + width / 2],
+                    [100 * float(row[ideal])] * 2,
+                    color="black",
+                    lw=2,
+                    label="method-ideal" if i == 0 and j == 0 else None,
+                )
+    ax.set_ylabel("error against the material motion (%)")
+    ax.set_title("Motion error against where the skin went (%)")
+    ax.legend(fontsize="small")
+
+
 def plot_cohort(
     table: pd.DataFrame, ccr: Mapping[str, np.ndarray], path: str | Path, dpi: int = 110
 ) -> None:
-    """Compare subjects, one panel per unit: motion RMS per viseme label (mm), CCR curves
+    """Compare subjects, one panel per unit: first (subjects with ground truth) the error
+    against the material motion per viseme and expression label (%, the method-ideal error as
+    a black tick on the viseme bars), then motion RMS per viseme label (mm), CCR curves
     (fraction, as %), and the accuracy against ground truth where known, one panel for each of
     its units (mm, degrees, fraction, px: the metric's unit in the column dictionary).
 
@@ -198,6 +303,15 @@ def plot_cohort(
         PNG written.
     """
     motion_cols = [c for c in table.columns if c.startswith(MOTION_PREFIX)]
+    rel = {
+        kind: [
+            c
+            for c in table.columns
+            if _family(c) == f"material_relative_error_{kind}_" and table[c].notna().any()
+        ]
+        for kind in ("viseme", "expression")
+    }
+    material = rel["viseme"] + rel["expression"]
     acc_cols = [c for c in accuracy_columns(table) if table[c].notna().any()]
     known = table[table[acc_cols].notna().any(axis=1)] if acc_cols else table.iloc[:0]
     by_unit: dict[str, list[str]] = {}
@@ -205,7 +319,8 @@ def plot_cohort(
         by_unit.setdefault(accuracy_column(c).unit, []).append(c)
     order = {u: i for i, u in enumerate(UNIT_LABELS)}
     units = sorted(by_unit, key=lambda u: (order.get(u, len(order)), u))
-    n_panels = 2 + len(units)
+    lead = 1 if material else 0
+    n_panels = lead + 2 + len(units)
     n_cols = min(n_panels, 3)
     n_rows = -(-n_panels // n_cols)
     # no pyplot: no global state
@@ -213,6 +328,9 @@ def plot_cohort(
     axes = fig.subplots(n_rows, n_cols, squeeze=False).ravel()
     subjects = list(table["subject"])
     colour = {s: i for i, s in enumerate(subjects)}
+    if material:
+        _material_panel(axes[0], table, rel, colour)
+        axes = axes[1:]
     ax = axes[0]
     _bars(ax, table, motion_cols, [c.removeprefix(MOTION_PREFIX) for c in motion_cols], colour)
     ax.set_ylabel("motion RMS over all vertices (mm)")
@@ -235,7 +353,7 @@ def plot_cohort(
         ax.set_ylabel(UNIT_LABELS.get(unit, unit))
         ax.set_title(f"Accuracy against ground truth ({UNIT_LABELS.get(unit, unit)})")
         ax.legend(fontsize="small")
-    for ax in axes[n_panels:]:
+    for ax in axes[n_panels - lead :]:
         ax.set_visible(False)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=dpi, facecolor="white")

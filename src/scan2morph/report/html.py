@@ -3,12 +3,15 @@
 The page embeds everything it shows (images as base64 ``data:`` URIs, inline CSS, the glTF and
 the one script of the 3D viewer, :mod:`scan2morph.report.viewer`) so it opens from disk with no
 server, and declares a Content-Security-Policy that forbids loading anything else (the viewer's
-script is allowed by its hash). Sections: the subject's inputs (a thumbnail of each take's color
+script is allowed by its hash). Sections: the warnings, the accuracy against ground truth
+(synthetic subjects; it leads with the error of each viseme's motion and each expression's
+displacement against the material motion of the skin, total, normal and tangential, the
+method-ideal error as the second line), the subject's inputs (a thumbnail of each take's color
 image), the 3D viewer of the subject's glTF, every figure with a one-line caption, the PCA
-tables (Yano and Harada, Tables 1 and 2), the modal coordinates of the expressions and their
-reconstruction error against the number of modes, the accuracy against ground truth (synthetic
-subjects), and provenance (store attributes, input checksums, software versions, run time per
-stage).
+tables (Yano and Harada, Tables 1 and 2), the modal coordinates of the expressions, their
+reconstruction error against the number of modes (total, normal and tangential parts, the
+modes that reach the target error) and the displacement on the clamped outline, and
+provenance (store attributes, input checksums, software versions, run time per stage).
 
 The page comes from Jinja2 templates (package data in ``report/templates``: ``subject.html.j2``
 the page, ``macros.html.j2`` its blocks, ``viewer.html.j2`` the 3D viewer, ``report.css``) with
@@ -130,13 +133,13 @@ def subject_report_html(
         view, script = viewer.viewer_context(glb, h5, order, n_coordinates, three_dir)
         parts = [
             ("status", "Warnings and skipped stages", sections.status(h5)),
+            ("accuracy", "Accuracy against ground truth", sections.accuracy(accuracy)),
             ("inputs", "Inputs", sections.inputs(h5, order, thumbnail_px)),
             ("viewer", "3D model (glTF viewer)", [{"kind": "viewer", "viewer": view}]),
             ("figures", "Figures", sections.figures(figures)),
             ("motion-noise", "Viseme motion: click-noise error", sections.motion_noise(h5)),
             ("pca", "PCA (Yano and Harada, Tables 1 and 2)", sections.pca(h5)),
             ("modal", "Modal coordinates", sections.modal(h5, n_coordinates)),
-            ("accuracy", "Accuracy against ground truth", sections.accuracy(accuracy)),
             ("provenance", "Provenance", sections.provenance(attrs, checksums, versions, timings)),
         ]
     lead = (

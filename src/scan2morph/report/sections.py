@@ -339,21 +339,78 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
     )
     out.append(_columns("modal_coordinates"))
     if paths.modal("reconstruction_k") in h5:
-        ks = h5[paths.modal("reconstruction_k")][()]
-        rows = [
-            [t, *map(float, h5[paths.expression(t, "reconstruction_rms_mm")][()])]
-            for t in exprs
-            if paths.expression(t, "reconstruction_rms_mm") in h5
-        ]
-        out.append(
-            _table(
-                ["expression", *[f"K = {int(k)}" for k in ks]],
-                rows,
-                "RMS error (mm) of each expression rebuilt from its first K modes",
-            )
-        )
-        out.append(_columns("modal_reconstruction"))
+        out += _reconstruction(h5, exprs, label)
+    out += _outline(h5, exprs, label)
     return out
+
+
+#: Rows of the reconstruction table: part of the error -> its dataset per expression.
+RECONSTRUCTION_PARTS = {
+    "total": "reconstruction_rms_mm",
+    "normal": "reconstruction_normal_rms_mm",
+    "tangential": "reconstruction_tangential_rms_mm",
+}
+
+
+def _scalar(h5: h5py.File, key: str) -> float | None:
+    return float(h5[key][()]) if key in h5 else None
+
+
+def _reconstruction(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -> list[dict]:
+    """Each expression's reconstruction error against K, total then its normal and tangential
+    parts, and the fewest modes that reach the target error."""
+    ks = h5[paths.modal("reconstruction_k")][()]
+    target = _scalar(h5, paths.modal("reconstruction_target_mm"))
+    rows = []
+    for t in exprs:
+        name = f"{t} ({label[t]})" if label[t] else t
+        to_target = _scalar(h5, paths.expression(t, "modes_to_target"))
+        for part, key in RECONSTRUCTION_PARTS.items():
+            if paths.expression(t, key) not in h5:
+                continue
+            values = list(map(float, h5[paths.expression(t, key)][()]))
+            reach = [] if target is None else [to_target if part == "total" else None]
+            rows.append([name, part, *values, *reach])
+    columns = ["expression", "part", *[f"K = {int(k)}" for k in ks]]
+    caption = (
+        "RMS error (mm, over all vertices) of each expression rebuilt from its first K modes: "
+        "total, and its parts along the neutral's normals (what bending modes rebuild) and "
+        "along the surface (sliding)"
+    )
+    if target is not None:
+        columns.append(f"modes for <= {target:g} mm")
+        caption += (
+            f"; the fewest modes that rebuild it to {target:g} mm RMS (n/a: none of the basis)"
+        )
+    return [_table(columns, rows, caption), _columns("modal_reconstruction")]
+
+
+def _outline(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -> list[dict]:
+    """How much of each expression's displacement sits on the outline and on its clamped part."""
+    key = paths.modal("fixed_vertices")
+    if key not in h5 or not exprs:
+        return []
+    fixed = h5[key][()].astype(bool)
+    outline_key = paths.modal("outline_vertices")
+    outline = h5[outline_key][()].astype(bool) if outline_key in h5 else fixed
+    rows = [
+        [
+            f"{t} ({label[t]})" if label[t] else t,
+            _scalar(h5, paths.expression(t, "outline_rms_mm")),
+            _scalar(h5, paths.expression(t, "clamped_rms_mm")),
+        ]
+        for t in exprs
+        if paths.expression(t, "outline_rms_mm") in h5
+    ]
+    if not rows:
+        return []
+    caption = (
+        f"Displacement on the face's outline (RMS of its length, mm): {int(outline.sum())} outline "
+        f"vertices, {int((fixed & outline).sum())} clamped (config modal.fixed_outline; no mode "
+        "moves a clamped vertex, so what an expression moves there no K rebuilds)"
+    )
+    columns = ["expression", "on the outline (mm)", "on the clamped vertices (mm)"]
+    return [_table(columns, rows, caption)]
 
 
 def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
@@ -369,11 +426,83 @@ def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
     return out
 
 
+#: The headline columns: error against where the skin really went (``accuracy.json`` keys).
+MATERIAL_KEYS = (
+    "material_relative_error",
+    "material_rms_error_mm",
+    "material_normal_rms_error_mm",
+    "material_tangential_rms_error_mm",
+    "material_rms_mm",
+)
+#: The method-ideal figure of a viseme (what exact clicks would give), in the same columns.
+IDEAL_KEYS = (
+    "relative_error",
+    "rms_error_mm",
+    "normal_rms_error_mm",
+    "tangential_rms_error_mm",
+    "ideal_rms_mm",
+)
+MATERIAL_COLUMNS = [
+    "take",
+    "compared with",
+    "error (% of the motion)",
+    "RMS error (mm)",
+    "normal part (mm)",
+    "tangential part (mm)",
+    "motion RMS (mm)",
+]
+
+
+def _error_row(take: str, reference: str, entry: Mapping, keys: Sequence[str]) -> list:
+    values = [entry.get(k) for k in keys]
+    rel = values[0]
+    percent = 100 * rel if isinstance(rel, (int, float)) else None
+    return [take, reference, percent, *values[1:]]
+
+
+def material_tables(takes: Mapping) -> list[dict]:
+    """The headline of the accuracy section: each viseme's motion and each expression's
+    displacement field against the material motion of the skin (where each skin point really
+    went), in % of that motion and in mm, total and split along the normal and the surface;
+    each viseme's error against the method-ideal motion follows as its second line."""
+    if not isinstance(takes, Mapping):
+        return []
+    out = []
+    rows = []
+    for take, entry in takes.items():
+        motion = entry.get("motion") if isinstance(entry, Mapping) else None
+        if isinstance(motion, Mapping):
+            rows.append(_error_row(take, "material motion", motion, MATERIAL_KEYS))
+            rows.append(_error_row(take, "method-ideal motion", motion, IDEAL_KEYS))
+    if rows:
+        caption = (
+            "Viseme motion: error against the material motion of the skin (where each skin "
+            "point really went; over the unmasked vertices), total and its parts along the "
+            "neutral's normal (a wrong surface) and along the surface (skin that slid); second "
+            "line: against the method-ideal motion (what exact clicks would give)"
+        )
+        out.append(_table(MATERIAL_COLUMNS, rows, caption))
+    rows = [
+        _error_row(take, "material motion", entry["expression"], MATERIAL_KEYS)
+        for take, entry in takes.items()
+        if isinstance(entry, Mapping) and isinstance(entry.get("expression"), Mapping)
+    ]
+    if rows:
+        caption = (
+            "Expression displacement fields: error against the material motion of the skin "
+            "(over all vertices), total and its normal and tangential parts"
+        )
+        out.append(_table(MATERIAL_COLUMNS, rows, caption))
+    return out
+
+
 def accuracy(accuracy: Mapping | None) -> list[dict]:
-    """``accuracy.json``: its units, its summary and one row per take (None: no ground truth)."""
+    """``accuracy.json``: first the error against the material motion per viseme and
+    expression (:func:`material_tables`), then its units, its summary and one row per take
+    (None: no ground truth)."""
     if accuracy is None:
         return [_note("No ground truth: accuracy is measured on synthetic subjects only.")]
-    out = []
+    out = material_tables(accuracy.get("takes", {}))
     units = accuracy.get("units")
     if isinstance(units, Mapping):
         out.append(_note("Units: " + ", ".join(f"{k} in {v}" for k, v in units.items()) + "."))
