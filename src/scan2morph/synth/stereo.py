@@ -13,9 +13,10 @@ distorted exactly as the calibration says. Lights are fixed in the rig (a lamp m
 the cameras and a key light from the upper left: :func:`~scan2morph.synth.scanner.shade` in
 the rig frame), so both cameras see the same shading. The skin's albedo is blended with a
 random speckle (the random texture the stereo paper sprays on the face for correlation):
-solid value noise in the head frame with cells of ``speckle_px`` pixels at the head's
-distance, fixed per subject, applied per rendered pixel (the mesh's ~1.3 mm vertex spacing is
-too coarse to carry it per vertex).
+solid value noise over the skin's rest positions (the paint moves with the skin) with cells of
+``speckle_px`` pixels at the head's distance, fixed per subject, and with the skin's own detail
+(:mod:`~scan2morph.synth.texture`), both applied per rendered pixel (the mesh's ~1.3 mm vertex
+spacing is too coarse to carry them per vertex).
 
 The ground truth of every left pixel is the exact hit of its (undistorted) ray with the head
 mesh, ray cast with Open3D, independently of the renderer.
@@ -55,7 +56,12 @@ from scan2morph.synth.scanner import (  # noqa: E402
     render_colors,
     shade,
 )
-from scan2morph.synth.texture import detail_image, texture_seed, value_noise  # noqa: E402
+from scan2morph.synth.texture import (  # noqa: E402
+    rest_positions,
+    skin_detail,
+    texture_seed,
+    value_noise,
+)
 
 #: Rig and image parameters of a synthetic stereo take, with their defaults.
 DEFAULT_RIG: dict[str, float | int] = {
@@ -252,7 +258,6 @@ def _view(
     v_rig: np.ndarray,
     colors: np.ndarray,
     cam: dict,
-    head_from_rig: np.ndarray,
     p: dict,
     seeds: tuple[int, int],
     rng: np.random.Generator,
@@ -264,22 +269,22 @@ def _view(
     K_u, size, map_x, map_y = _remap_tables(cam["K"], cam["D"], p["width"], p["height"], s)
     v_cam = (v_rig - cam["C"]) @ cam["R"]
     color, depth, seg = render_colors(head, v_cam, colors, K_u, size)
+    image = color.astype(np.float32)
     skin = seg == SEG_SKIN
-    detail = detail_image(
-        skin, v_cam, head.faces, head.vertices, K_u, seeds[1], p["skin_texture"], 1
-    )
-    image = (color * detail).astype(np.float32)
-    if p["speckle_contrast"] > 0 and skin.any():
+    if skin.any():
+        # the rest position of the skin point each render pixel sees: the speckle (sprayed
+        # paint) and the skin detail are fixed to the skin and move with it
         rows, cols = np.nonzero(skin)
-        z = depth[rows, cols]
-        p_cam = np.stack(
-            [(cols - K_u[0, 2]) / K_u[0, 0] * z, (rows - K_u[1, 2]) / K_u[1, 1] * z, z], axis=-1
-        )
-        p_rig = p_cam @ cam["R"].T + cam["C"]
-        p_head = p_rig @ head_from_rig[:3, :3].T + head_from_rig[:3, 3]
-        cell_mm = p["speckle_px"] * p["distance_mm"] / p["focal_px"]
-        dots = speckle(p_head, cell_mm, seeds[0])
-        image[rows, cols] *= (1.0 - p["speckle_contrast"] * dots)[:, None].astype(np.float32)
+        rays = np.column_stack([cols, rows, np.ones(len(rows))]) @ np.linalg.inv(K_u).T
+        rest = rest_positions(v_cam, head.faces, head.vertices, rays)
+        hit = np.isfinite(rest).all(axis=1)
+        factor = np.ones((len(rows), 3))
+        factor[hit] = skin_detail(rest[hit], seeds[1], p["skin_texture"])
+        if p["speckle_contrast"] > 0:
+            cell_mm = p["speckle_px"] * p["distance_mm"] / p["focal_px"]
+            dots = speckle(np.where(hit[:, None], rest, 0.0), cell_mm, seeds[0])
+            factor *= np.where(hit, 1.0 - p["speckle_contrast"] * dots, 1.0)[:, None]
+        image[rows, cols] *= factor.astype(np.float32)
     sampled = cv2.remap(
         image,
         map_x,
@@ -358,13 +363,12 @@ def make_stereo_take(
     p = rig_params(params, check_take(subject, label, kind, take, seed))
     head, vertices, rng = articulated_head(subject, label, kind, take, seed)
     rig_from_head = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], AIM)
-    head_from_rig = np.linalg.inv(rig_from_head)
     cams, calib = rig_cameras(p)
     v_rig = vertices @ rig_from_head[:3, :3].T + rig_from_head[:3, 3]
     # lights fixed in the rig: both cameras see the same shading
     colors = shade(head.albedo, v_rig, vertex_normals(v_rig, head.faces, fill=0.0))
     seeds = ((_key(subject) ^ int(seed)) & 0xFFFFFFFFFFFFFFFF, texture_seed(subject, seed))
-    left, right = (_view(head, v_rig, colors, cam, head_from_rig, p, seeds, rng) for cam in cams)
+    left, right = (_view(head, v_rig, colors, cam, p, seeds, rng) for cam in cams)
 
     cam1 = cams[0]
     left_from_rig = np.eye(4)
