@@ -26,7 +26,8 @@ SUBJECTS = ["synth01", "synth02"]
 # Three takes a subject, the fewest that run every stage: the neutral, one viseme (viseme motion,
 # a one-component PCA and its blends) and one expression (its displacement, modal coordinates).
 # Under SLURM each rule costs a Snakemake start-up (~7 CPU-s: parsing the workflow) on top of its
-# ~2 CPU-s of work, so every take left out saves four rules (ingest, repair, fit, align) a subject.
+# ~3 CPU-s of work, so every take left out saves four rules (ingest, repair, fit, align) a subject:
+# the test measured 664 CPU-s with 4 takes, 548-583 with 3 (README "Scaling out").
 COHORT_TAKES = [t for t in TAKES if t["take"] in ("neutral", "car", "smile1")]
 # Every array of the two stores agrees to 1e-12, or to 1e-9 of its value: two local runs do not
 # agree to 1e-12 alone, because the alignment (open3d ICP) is not bit-reproducible (its transform
