@@ -160,6 +160,7 @@ def test_sweep_settings_override_a_copy():
         "repair",
         "template",
         "align",
+        "refine",
         "mask",
         "smoothing",
         "motion_noise",
@@ -397,7 +398,8 @@ def test_rerun_refuses_bad_input(run):
     good = Run(Subject(SUBJECT, *_kinds_labels()), tpl, settings)
     with pytest.raises(
         InputError,
-        match=r"start stage: expected one of \('repair', 'fit', 'align', 'motion', 'motion_noise'\)",
+        match=r"start stage: expected one of \('repair', 'fit', 'align', 'refine', 'motion', "
+        r"'motion_noise'\)",
     ):
         rerun_accuracy(store, good, {}, "morph")
     with pytest.raises(InputError, match="/takes/neutral/raw/xyz: missing"):
