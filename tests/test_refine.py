@@ -189,3 +189,85 @@ def test_refinement_follows_the_skin_on_synthetic_takes():
         assert refined_err < 0.45, (take, refined_err)
     for take, (fit_err, refined_err) in flat.items():
         assert refined_err <= 1.05 * fit_err, (take, fit_err, refined_err)
+
+
+def _plane_take(template, texture_seed, config):
+    """A take of a tilted plane (640 x 480) with a random texture and landmarks on it."""
+    from scan2morph.align import transform_points
+    from scan2morph.stages.fit import fiducial_set
+    from scan2morph.store import paths
+    from scan2morph.template import fit_options, fit_take
+
+    y, x = np.mgrid[0:480, 0:640].astype(np.float64)
+    plane = np.array([[0.7, 0.0, 0.05], [0.0, 0.7, -0.03], [-224.0, -168.0, 1000.0]])
+    xyz = np.stack([x, y, np.ones_like(x)], axis=-1) @ plane
+    landmarks = np.array([320.0, 230.0]) + 70.0 * template.ibug_xy
+    grey = np.clip(_texture((480, 640), texture_seed), 0, 255).astype(np.uint8)
+    mesh = fit_take(
+        template,
+        landmarks,
+        xyz,
+        fiducial_set=fiducial_set(config["template"], "viseme"),
+        **fit_options(config["template"]),
+    )
+    return {
+        paths.range_image("t", "xyz"): xyz,
+        paths.range_image("t", "color"): np.repeat(grey[..., None], 3, axis=-1),
+        paths.landmarks("t"): landmarks,
+        paths.mesh("t", "valid"): mesh["valid"],
+        paths.mesh("t", "points2d"): mesh["points2d"],
+        paths.align("t", "transform"): np.eye(4),
+        paths.align("t", "vertices"): transform_points(np.eye(4), mesh["vertices"]),
+    }
+
+
+@pytest.mark.parametrize("same_skin", [True, False])
+def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(same_skin):
+    """The neutral and the take see the same plane; with the same texture the refinement is used
+    (and moves nothing: the fit is right); with an unrelated texture (another light, paint or
+    modality) the confident share falls below refine.min_confident_share and the take keeps its
+    template fit, with the problem named for the store's warnings."""
+    import yaml
+
+    from scan2morph.stages import refine
+    from scan2morph.store import paths
+    from tests.workflow_api import REPO
+
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    template = build_template()
+    rename = lambda d, t: {k.replace("/takes/t/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: E731
+    data = rename(_plane_take(template, 21, config), "neutral")
+    data |= rename(_plane_take(template, 21 if same_skin else 22, config), "she")
+    params = refine.Params.from_config(config["refine"], config["template"])
+    part = refine.run(template, "she", "viseme", "neutral", data, params, "x/she")
+    attrs = part.attrs[paths.refine_group("she")]
+    fit = data[paths.align("she", "vertices")]
+    refined = part.datasets[paths.refine("she", "vertices")]
+    both = np.isfinite(fit).all(axis=1) & np.isfinite(refined).all(axis=1)
+    moved = np.linalg.norm(refined[both] - fit[both], axis=1)
+    if same_skin:
+        assert attrs["used"] and attrs["problem"] == ""
+        assert attrs["confident_share"] > 0.8
+        assert np.median(moved) < 0.05  # mm: nothing to correct
+    else:
+        assert not attrs["used"] and "correlates" in attrs["problem"]
+        assert attrs["confident_share"] < params.min_confident_share
+        np.testing.assert_allclose(refined[both], fit[both], atol=1e-9)
+
+
+def test_a_refinement_not_used_is_a_warning_of_the_subject(tmp_path):
+    import h5py
+
+    from scan2morph.stages.quality import subject_warnings
+    from scan2morph.store import paths
+
+    with h5py.File(tmp_path / "s.h5", "w") as h5:
+        h5.create_group(paths.refine_group("she")).attrs["problem"] = "only 9% correlates"
+        h5.create_group(paths.refine_group("car")).attrs["problem"] = ""
+        for take in ("she", "car"):
+            h5[paths.align(take, "ok")] = True
+        settings = {"include_failed_takes": False, "min_valid_fraction": 0.5}
+        warnings = subject_warnings(h5, settings | {"max_click_noise_px": 1.5})
+    assert [(w.stage, w.take, w.message) for w in warnings] == [
+        ("refine", "she", "only 9% correlates")
+    ]

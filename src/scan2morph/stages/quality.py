@@ -77,6 +77,11 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
                 else "left out of the models"
             )
             out.append(Warning("align", take, f"{'; '.join(problems)}: {fate}"))
+    for take in takes:
+        group = h5.get(paths.refine_group(take))
+        problem = group.attrs.get("problem", "") if group is not None else ""
+        if problem:
+            out.append(Warning("refine", take, str(problem)))
     out += _motion_noise_warnings(h5, settings)
     return out
 

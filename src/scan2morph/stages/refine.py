@@ -44,6 +44,9 @@ class Params:
         The fit's sampling rules (``template.sample_min_weight``, ``template.max_slope_deg``).
     fiducials : dict
         ``template.fiducials``: the fiducial set of each take kind (the soft constraints).
+    min_confident_share : float
+        A take whose share of confidently measured vertices is below this keeps its template
+        fit (``refine.min_confident_share``), with a warning.
     flow : RefineParams
         Everything else of the section ``refine``.
     """
@@ -53,6 +56,7 @@ class Params:
     min_weight: float
     max_slope_deg: float | None
     fiducials: dict
+    min_confident_share: float
     flow: RefineParams
 
     @classmethod
@@ -65,6 +69,7 @@ class Params:
             template["sample_min_weight"],
             template["max_slope_deg"],
             dict(template["fiducials"]),
+            float(refine.get("min_confident_share", 0.0)),
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
         )
 
@@ -103,8 +108,9 @@ def run(
     Part
         ``refine/vertices`` (V, 3) mm in the neutral frame (NaN where invalid), ``refine/valid``
         (V,), ``refine/points2d`` (V, 2) px in the take's image and ``refine/confidence`` (V,);
-        the ``refine`` group's attributes hold the median correction (px) and the share of
-        vertices with a confident measurement.
+        the ``refine`` group's attributes hold the median correction (px), the share of
+        vertices with a confident measurement, whether the refinement was ``used`` and, when not,
+        the ``problem``.
     """
     aligned = need(data, paths.align(take, "vertices"), source)
     valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
@@ -139,6 +145,17 @@ def run(
         anchors,
         params.flow,
     )
+    problem = ""
+    if report["confident_share"] < params.min_confident_share:
+        # the two images do not share the skin's texture (another light, paint, camera or
+        # modality): the measurement is not to be trusted, so the take keeps its fit
+        problem = (
+            f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
+            f"neutral's texture (refine.min_confident_share "
+            f"{100 * params.min_confident_share:.0f}%): the template fit is kept"
+        )
+        log.warning("%s: refinement not used: %s", source, problem)
+        refined = points
     vertices, ok = sample_mesh(
         need(data, paths.range_image(take, "xyz"), source),
         refined,
@@ -151,6 +168,8 @@ def run(
     transform = need(data, paths.align(take, "transform"), source)
     attrs = {
         "method": params.method,
+        "used": not problem,
+        "problem": problem,
         "median_correction_px": report["median_correction_px"],
         "confident_share": report["confident_share"],
         "valid_share": float(ok.mean()),
