@@ -140,7 +140,7 @@ def refine_points(
             max_fb_px=params.max_fb_px,
             min_zncc=params.min_zncc,
         )
-        f = fuse(flow, w_data * conf, inside, smooth, prior, anchor_rc, anchor_w)
+        f = fuse(flow, w_data * conf, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
         mapped = _compose(mapped, f)
     at = pull_back_field(mapped, g_vertices)
     points = np.where(np.isfinite(at).all(axis=1)[:, None], at, pt)

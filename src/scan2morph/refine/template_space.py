@@ -14,6 +14,9 @@ import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+#: Sub-pixel bits of the triangle rasteriser (OpenCV's fixed-point vertices).
+_SHIFT = 4
+
 
 @dataclass(frozen=True)
 class TemplateGrid:
@@ -104,28 +107,24 @@ def template_grid(
     faces = np.asarray(faces, dtype=np.int64)
     lo, hi = v.min(axis=0) - margin * step, v.max(axis=0) + margin * step
     cols, rows = (np.ceil((hi - lo) / step).astype(int) + 1).tolist()
-    face = np.full((rows, cols), -1, dtype=np.int64)
-    bary = np.zeros((rows, cols, 3))
     g = (v - lo) / step
-    for k, (a, b, c) in enumerate(faces):
-        tri = g[[a, b, c]]
-        x0, y0 = np.floor(tri.min(axis=0)).astype(int)
-        x1, y1 = np.ceil(tri.max(axis=0)).astype(int)
-        xs, ys = np.meshgrid(
-            np.arange(max(x0, 0), min(x1, cols - 1) + 1),
-            np.arange(max(y0, 0), min(y1, rows - 1) + 1),
-        )
-        m = np.array([tri[1] - tri[0], tri[2] - tri[0]]).T
-        det = np.linalg.det(m)
-        if abs(det) < 1e-12:
-            continue
-        d = np.stack([xs.ravel() - tri[0, 0], ys.ravel() - tri[0, 1]])
-        l12 = np.linalg.solve(m, d)
-        l0 = 1.0 - l12.sum(axis=0)
-        ok = (l0 >= -1e-9) & (l12 >= -1e-9).all(axis=0)
-        r, c_ = ys.ravel()[ok], xs.ravel()[ok]
-        face[r, c_] = k
-        bary[r, c_] = np.column_stack([l0[ok], l12[0, ok], l12[1, ok]])
+    tri = g[faces]  # (F, 3, 2) grid coordinates
+    edges = np.stack([tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]], axis=-1)  # (F, 2, 2)
+    det = np.linalg.det(edges)
+    good = np.abs(det) > 1e-12
+    # each triangle's pixels, filled in C (OpenCV) with its index; shared edges go to one side
+    face = np.full((rows, cols), -1, dtype=np.int32)
+    fixed = np.rint(tri * (1 << _SHIFT)).astype(np.int32)
+    for k in np.flatnonzero(good):
+        cv2.fillPoly(face, [fixed[k]], int(k), lineType=cv2.LINE_8, shift=_SHIFT)
+    face = face.astype(np.int64)
+    bary = np.zeros((rows, cols, 3))
+    r, c = np.nonzero(face >= 0)
+    f = face[r, c]
+    inv = np.zeros_like(edges)
+    inv[good] = np.linalg.inv(edges[good])
+    l12 = np.einsum("nij,nj->ni", inv[f], np.column_stack([c, r]) - tri[f, 0])
+    bary[r, c] = np.column_stack([1.0 - l12.sum(axis=1), l12])
     return TemplateGrid(lo, float(step), (rows, cols), face, bary, faces, int(margin))
 
 
