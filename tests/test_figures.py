@@ -21,6 +21,7 @@ from scan2morph.render.fit_figures import fig_model
 from scan2morph.render.modal_figures import fig_expressions
 from scan2morph.render.morph_figures import blend_title, fig_eigen, fig_gradual, pca_alphas
 from scan2morph.render.motion_figures import fig_click_noise, fig_distance, fig_mask
+from scan2morph.render.names import FIGURE_NAMES
 from scan2morph.render.source import (
     StoreMapping,
     example_take,
@@ -593,3 +594,18 @@ def test_base_faces_undo_the_template_subdivision():
     np.testing.assert_array_equal(base_faces(twice[1]), faces)
     assert base_faces(faces) is None  # not a subdivision
     assert base_faces(np.roll(once[1], 1, axis=0)) is None
+
+
+def test_the_workflow_names_figures_without_loading_the_renderer():
+    """render.names (imported while the workflow is parsed) matches the figure functions and
+    loads neither pyrender nor matplotlib (2.5-3 CPU-s of every Snakemake start-up)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from scan2morph.render.names import FIGURE_NAMES; "
+        "print(any(m in sys.modules for m in ('pyrender', 'matplotlib', 'open3d')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+    assert {s: tuple(f) for s, f in STAGE_FIGURES.items()} == FIGURE_NAMES

@@ -1,5 +1,5 @@
 # Outputs: the figure PNGs of each stage's figures rule, and the targets of rule all.
-from scan2morph.render.figures import STAGE_FIGURES, figure_names
+from scan2morph.render.names import FIGURE_NAMES, figure_names
 
 
 def figure_outputs(stage):
@@ -17,7 +17,7 @@ def figure_outputs(stage):
 
 def get_figure_outputs():
     """Every figure of every subject (for rule all)."""
-    stems = [stem for stage in STAGE_FIGURES for stem in figure_names(stage)]
+    stems = [stem for stage in FIGURE_NAMES for stem in figure_names(stage)]
     return expand("results/{subject}/figures/{stem}.png", subject=SUBJECTS, stem=stems)
 
 

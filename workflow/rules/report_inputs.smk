@@ -2,14 +2,14 @@
 from glob import glob
 from pathlib import Path
 
-from scan2morph.render.figures import STAGE_FIGURES, figure_names
+from scan2morph.render.names import FIGURE_NAMES, figure_names
 
 
 def get_subject_figures(wildcards):
     """Every figure of the subject that the figures rules draw (a stage whose rule is not in the
     workflow contributes the PNGs already in the figures folder)."""
     files = []
-    for stage in STAGE_FIGURES:
+    for stage in FIGURE_NAMES:
         if rules.has(f"figures_{stage}"):
             files += expand(
                 "results/{subject}/figures/{stem}.png",

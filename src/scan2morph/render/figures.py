@@ -1,7 +1,7 @@
 """The figures of every stage, drawn from a subject's store, and the files they are saved to.
 
-Each stage has a fixed list of figures (:data:`STAGE_FIGURES`), so the workflow can name its
-outputs before the store exists: ``{out_dir}/{stage}_{name}.png``. Per-take panels are composed
+Each stage has a fixed list of figures (:data:`STAGE_FIGURES`, named in
+:mod:`scan2morph.render.names`), so the workflow can name its outputs before the store exists: ``{out_dir}/{stage}_{name}.png``. Per-take panels are composed
 into one figure per kind, whatever takes a subject has; a figure whose data a subject lacks (no
 expression takes, no blends) says so instead of being left out.
 
@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 
 from scan2morph.errors import InputError
 from scan2morph.render import fit_figures, modal_figures, morph_figures, motion_figures
+from scan2morph.render.names import FIGURE_NAMES, figure_names
 from scan2morph.render.source import StoreMapping
 from scan2morph.render.views import DPI
 
@@ -31,19 +32,8 @@ STAGE_FIGURES: dict[str, dict[str, Callable[[Mapping[str, np.ndarray]], Figure]]
 }
 
 
-def figure_names(stage: str) -> list[str]:
-    """File stems of a stage's figures, ``{stage}_{name}``, in report order.
-
-    Raises
-    ------
-    InputError
-        Unknown stage.
-    """
-    if stage not in STAGE_FIGURES:
-        raise InputError(
-            "figures", f"stage: expected one of {sorted(STAGE_FIGURES)}, got {stage!r}"
-        )
-    return [f"{stage}_{name}" for name in STAGE_FIGURES[stage]]
+if {s: tuple(f) for s, f in STAGE_FIGURES.items()} != FIGURE_NAMES:
+    raise RuntimeError("render.figures: the figure functions do not match render.names")
 
 
 def stage_figures(store: Mapping[str, np.ndarray], stage: str) -> dict[str, Figure]:
