@@ -178,3 +178,23 @@ def test_tiny_cohort_through_slurm_equals_local_run(slurm_cluster, tmp_path):
         assert model.skipped == {}, (target, model.skipped)
         assert (set(model.visemes), set(model.coordinates)) == ({"car"}, {"smile1"}), target
         assert store_differences(local / target, slurm / target, atol=ATOL, rtol=RTOL) == []
+
+
+def test_every_per_subject_rule_is_in_the_subject_group():
+    """profiles/slurm runs a subject's rules as one group job; a per-subject rule left out of it
+    makes Snakemake refuse the DAG (a rule outside the group between two inside it)."""
+    import re
+
+    import yaml
+
+    groups = yaml.safe_load((REPO / "profiles" / "slurm" / "config.yaml").read_text())["groups"]
+    grouped = {g.split("=")[0] for g in groups}
+    text = "\n".join(p.read_text() for p in sorted((REPO / "workflow" / "rules").glob("*.smk")))
+    blocks = re.split(r"^rule (\w+):", text, flags=re.M)[1:]
+    per_subject = {
+        name for name, body in zip(blocks[::2], blocks[1::2], strict=True) if "{subject}" in body
+    }
+    # jobs of their own: the sweeps (on demand) and the cohort summary over every subject
+    own = {"sweep", "sweep_all", "cohort"}
+    assert per_subject - own <= grouped, sorted(per_subject - own - grouped)
+    assert {"refine", "align", "motion", "store"} <= per_subject
