@@ -209,7 +209,7 @@ def test_a_refiner_that_finds_the_skin_whatever_the_clicks_leaves_only_the_neutr
     neutral, visemes = takes
     seen = []
 
-    def exact(take, take_landmarks, neutral_landmarks):
+    def exact(take, fit, take_landmarks, neutral_landmarks):
         seen.append(np.array(take_landmarks))
         mesh = fit_take(template, neutral.landmarks, neutral.xyz, levels=0)  # the true points
         return transform_points(visemes[take].transform, mesh["vertices"]), mesh["valid"]

@@ -28,9 +28,10 @@ from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 from scan2morph.template.sample import fit_take
 
-#: ``refiner(take, take_landmarks, neutral_landmarks) -> (vertices, valid)``: a take's refined
-#: correspondence from those clicks, in the neutral frame (mm).
-Refiner = Callable[[str, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+#: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid)``: a take's
+#: refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them), in the
+#: neutral frame (mm).
+Refiner = Callable[[str, dict, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
@@ -117,8 +118,9 @@ def click_noise_motion(
     source : str
         The subject, for messages.
     refiner : callable, optional
-        ``refiner(take, take_landmarks, neutral_landmarks) -> (vertices, valid)``: the take's
-        correspondence refined against the neutral from those clicks (neutral frame, mm), when
+        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid)``: the
+        take's correspondence refined against the neutral from those clicks and the take's fit
+        to them (:func:`fit_take`'s result, not fitted again; neutral frame, mm), when
         the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every draw is then
         that of the refined meshes, as the pipeline's is.
 
@@ -177,7 +179,7 @@ def click_noise_motion(
         its refined mesh."""
         if refiner is None:
             return t_fit[0], t_fit[1]["valid"]
-        return refiner(take, t_landmarks, n_landmarks)
+        return refiner(take, t_fit[1], t_landmarks, n_landmarks)
 
     reference = {}
     for take, data in visemes.items():

@@ -17,7 +17,7 @@ from scan2morph.stages.fit import fiducial_set
 from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
-from scan2morph.template import Template, fit_options, fit_take
+from scan2morph.template import Template, fit_options
 
 #: Config sections this stage reads (``refine``: the error bar of the refined correspondence).
 SECTIONS = ("motion_noise", "smoothing", "template", "refine")
@@ -32,24 +32,14 @@ COLUMNS = {
 log = logging.getLogger("scan2morph")
 
 
-def _refiner(template, subject, data, fiducials, section, refine_section):
+def _refiner(template, subject, data, section, refine_section):
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
-    draw): refit the take from its clicks and refine it against the neutral seen through its
-    clicks."""
+    draw): the take's fit to its clicks refined against the neutral seen through its clicks."""
     params = refine.Params.from_config(refine_section, section)
-    options = fit_options(section)
     neutral = subject.neutral
 
-    def refiner(take, take_landmarks, neutral_landmarks):
+    def refiner(take, mesh, take_landmarks, neutral_landmarks):
         source = subject.source(take)
-        mesh = fit_take(
-            template,
-            take_landmarks,
-            need(data, paths.range_image(take, "xyz"), source),
-            fiducial_set=fiducials[take],
-            source=source,
-            **options,
-        )
         transform = need(data, paths.align(take, "transform"), source)
         draw = dict(data) | {
             paths.landmarks(take): take_landmarks,
@@ -95,7 +85,7 @@ def run(
     refine_section = config.get("refine", {})
     refiner = None
     if refine.enabled(refine_section):
-        refiner = _refiner(template, subject, data, fiducials, section, refine_section)
+        refiner = _refiner(template, subject, data, section, refine_section)
     datasets, result, noise = subject_motion_noise(
         template,
         data,

@@ -42,8 +42,9 @@ class Params:
         Template subdivisions.
     min_weight, max_slope_deg : float
         The fit's sampling rules (``template.sample_min_weight``, ``template.max_slope_deg``).
-    fiducials : dict
-        ``template.fiducials``: the fiducial set of each take kind (the soft constraints).
+    template : dict
+        The config section ``template`` (its ``fiducials``: each take kind's fiducial set, the
+        soft constraints).
     min_confident_share : float
         A take whose share of confidently measured vertices is below this keeps its template
         fit (``refine.min_confident_share``), with a warning.
@@ -55,7 +56,7 @@ class Params:
     levels: int
     min_weight: float
     max_slope_deg: float | None
-    fiducials: dict
+    template: dict
     min_confident_share: float
     flow: RefineParams
 
@@ -68,7 +69,7 @@ class Params:
             int(template["subdivision_levels"]),
             template["sample_min_weight"],
             template["max_slope_deg"],
-            dict(template["fiducials"]),
+            dict(template),
             float(refine.get("min_confident_share", 0.0)),
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
         )
@@ -124,10 +125,7 @@ def run(
         }
         return Part({paths.refine(take, k): v for k, v in out.items()})
     fine = subdivide_template(template, params.levels)
-    sets = {
-        t: fiducial_set({"fiducials": params.fiducials}, k)
-        for t, k in ((neutral, "neutral"), (take, kind))
-    }
+    sets = {t: fiducial_set(params.template, k) for t, k in ((neutral, "neutral"), (take, kind))}
     maps = [
         fit_map(template, need(data, paths.landmarks(t), source), sets[t], source)
         for t in (neutral, take)
