@@ -293,6 +293,7 @@ DEFAULT_RIG_SCENE = {
     "toe_in_deg": 3.0,
     "k1": -0.05,
     "background": "flat",  # "flat" (untextured plane) or "textured"
+    "ball_radius_mm": None,  # None: BALL_RADIUS_MM; small balls are strongly curved (a nose tip)
 }
 #: Radius of the face-sized ball of :func:`render_rig_scene`, mm.
 BALL_RADIUS_MM = 100.0
@@ -301,7 +302,7 @@ BALL_RADIUS_MM = 100.0
 def render_rig_scene(rig: dict | None = None, seed: int = 7, noise: float = 1.0) -> StereoScene:
     """A face-sized speckled ball before a far plane, seen by a rig at any working distance.
 
-    The ball (radius :data:`BALL_RADIUS_MM`) has its front ``distance_mm`` before the rig
+    The ball (radius ``ball_radius_mm``, by default :data:`BALL_RADIUS_MM`) has its front ``distance_mm`` before the rig
     (its centre 10 mm right of and 5 mm above the rig's axis); the plane stands 0.8
     ``distance_mm`` behind the ball's front, untextured (``background: "flat"``, like a
     backdrop) or speckled. The speckle spacing is 1.6 px at ``distance_mm`` for any focal
@@ -324,15 +325,16 @@ def render_rig_scene(rig: dict | None = None, seed: int = 7, noise: float = 1.0)
     r = {**DEFAULT_RIG_SCENE, **(rig or {})}
     distance, width, height = r["distance_mm"], int(r["width"]), int(r["height"])
     speckle_mm = 1.6 * distance / r["focal_px"]
+    radius = float(r["ball_radius_mm"] or BALL_RADIUS_MM)
     geometry = {
-        "centre": np.array([10.0, -5.0, distance + BALL_RADIUS_MM]),
-        "radius": BALL_RADIUS_MM,
+        "centre": np.array([10.0, -5.0, distance + radius]),
+        "radius": radius,
         "plane_z": 1.8 * distance,
         "speckle_mm": speckle_mm,
         "plane_flat": r["background"] == "flat",
     }
     rng = np.random.default_rng(seed)
-    ball_cells = np.pi * BALL_RADIUS_MM / speckle_mm
+    ball_cells = np.pi * radius / speckle_mm
     tex_ball = _speckle(rng, (int(ball_cells) + 4, int(2 * ball_cells) + 4))
     # the plane's texture covers the field of view at its depth (with a margin)
     plane_cells = 1.5 * geometry["plane_z"] / r["focal_px"] * np.array([height, width])

@@ -300,6 +300,47 @@ def test_refinement_and_wls_measured(scene, result, regions):
     assert report["wls"] is True
 
 
+def _cap_bias(radius_mm: float, curvature: bool) -> float:
+    """Median signed depth error (mm, + farther) over the central cap of a speckled ball.
+
+    The ball (``radius_mm``) has its front 650 mm before the default synthetic rig's cameras
+    (1300 px focal length, 0.5 mm per px): the cap, within half the ball's image radius of its
+    centre, is as curved as a nose tip (radius 10 mm) or a cheek (25 mm).
+    """
+    scene = render_rig_scene(
+        {"distance_mm": 650.0, "focal_px": 1300.0, "ball_radius_mm": radius_mm}, seed=3
+    )
+    params = {"patch_curvature": curvature, "min_coverage": 0.0}  # the ball: 1% of the image
+    xyz, _ = reconstruct_stereo(scene.left, scene.right, scene.calib, params)
+    err = np.linalg.norm(xyz, axis=2) - np.linalg.norm(scene.xyz, axis=2)
+    ball = scene.surface == 0
+    ys, xs = np.nonzero(ball)
+    yy, xx = np.mgrid[: ball.shape[0], : ball.shape[1]]
+    cap = np.hypot(yy - ys.mean(), xx - xs.mean()) < 0.5 * np.sqrt(ball.sum() / np.pi)
+    cap &= np.isfinite(err)
+    assert cap.sum() > 250
+    return float(np.median(err[cap]))
+
+
+def test_curved_windows_do_not_flatten_a_tip():
+    """A window that assumes a plane flattens a convex tip by about sigma^2/2 times the
+    Laplacian of its depth; the window that follows the disparity's curvature does not.
+
+    Oracle: the ray-cast truth of two balls, radius 10 and 25 mm. The plane-window flattening
+    at the cap is 0.056 and 0.022 mm in theory (1.5 px window, 0.5 mm per px), so the
+    10 mm ball comes out 0.034 mm farther than the 25 mm ball; what both share (measured: about
+    0.03 mm nearer than the truth on both, with either window, from the rendering) cancels in
+    the difference. Measured: plane windows +0.022 / -0.016 mm (difference 0.038), curved
+    windows -0.027 / -0.032 mm (difference 0.005).
+    """
+    assert DEFAULT_STEREO["patch_curvature"] is True
+    curved = {r: _cap_bias(r, True) for r in (10.0, 25.0)}
+    planar = {r: _cap_bias(r, False) for r in (10.0, 25.0)}
+    assert planar[10.0] - planar[25.0] > 0.025  # the flattening, as the theory says
+    assert abs(curved[10.0] - curved[25.0]) < 0.015
+    assert all(abs(b) < 0.06 for b in curved.values())
+
+
 def test_grey_input_and_unknown_image_size(scene, result):
     c = scene.calib
     calib = StereoCalibration(c.K1, c.D1, c.K2, c.D2, c.R, c.T)  # no image_size
@@ -553,6 +594,7 @@ def test_image_type_and_params_are_checked(scene):
         ({"min_depth_mm": 500.0}, r"min_depth_mm, max_depth_mm: expected 0 < min < max \(mm\) or"),
         ({"min_depth_mm": 900.0, "max_depth_mm": 500.0}, r"min_depth_mm, max_depth_mm: expected"),
         ({"depth_margin_mm": -1.0}, r"depth_margin_mm: expected >= 0, got -1.0"),
+        ({"patch_curvature": "yes"}, r"patch_curvature: expected true or false, got 'yes'"),
     ],
 )
 def test_validation_params_are_checked(change, match):

@@ -20,8 +20,9 @@ The pipeline (OpenCV throughout):
    them);
 5. **sub-pixel refinement** of SGBM's disparity by windowed Gauss-Newton on locally normalised
    images (removes the pixel-locking bias of SGBM's parabola fit), then **per pixel** with a
-   small slanted window (the window follows the local disparity gradient, so slanted and
-   foreshortened surfaces match too);
+   small slanted window (the window follows the local disparity gradient and curvature, so
+   slanted, foreshortened and curved surfaces match too, and tips and ridges are not
+   flattened);
 6. **growth**: unmatched pixels next to matched ones get the disparity extrapolated from their
    neighbours' planes, a short local search and the per-pixel refinement; they are kept when
    their slanted window matches (SGBM's fronto-parallel windows miss much of the steep skin

@@ -39,6 +39,7 @@ DEFAULT_STEREO: dict[str, Any] = {
     "patch_radius_px": 2,  # half side of the square window, px
     "patch_sigma_px": 1.5,  # Gaussian weight of the window, px
     "patch_iterations": 2,  # per-pixel Gauss-Newton steps; 0 keeps the windowed refinement's
+    "patch_curvature": True,  # bend the window with the disparity's curvature (False: planes)
     "grow_iterations": 4,  # rounds of growth into unmatched neighbours (1 px each); 0: off
     "grow_min_zncc": 0.5,  # least window ZNCC of a grown pixel (validation follows), -1..1
     "grow_max_change_px": 1.0,  # a grown pixel may leave its extrapolated disparity by this, px
@@ -135,6 +136,10 @@ def stereo_params(
     for key in _POSITIVE:
         if not p[key] > 0:
             raise InputError(source, f"{key}: expected > 0, got {p[key]}")
+    if not isinstance(p["patch_curvature"], bool):
+        raise InputError(
+            source, f"patch_curvature: expected true or false, got {p['patch_curvature']!r}"
+        )
     if p["patch_radius_px"] < 1:
         raise InputError(source, f"patch_radius_px: expected >= 1, got {p['patch_radius_px']}")
     for key in ("grow_min_zncc", "min_patch_zncc"):

@@ -410,7 +410,9 @@ def _refine(
         pair.left, pair.right, int(p["patch_radius_px"]), float(p["patch_sigma_px"])
     )
     if p["patch_iterations"] > 0:
-        disparity = _refine_patches(disparity, patches, int(p["patch_iterations"]), sigma)
+        disparity = _refine_patches(
+            disparity, patches, int(p["patch_iterations"]), sigma, bool(p["patch_curvature"])
+        )
     min_segment, segment_step = int(p["min_segment_px"]), float(p["segment_step_px"])
     if min_segment > 0:
         disparity = _remove_small_segments(disparity, min_segment, segment_step)
@@ -451,6 +453,7 @@ def _grow_into_neighbours(
             float(p["grow_max_change_px"]),
             int(p["patch_iterations"]),
             float(p["refine_sigma_px"]),
+            bool(p["patch_curvature"]),
         )
     return disparity, int(np.count_nonzero(np.isfinite(disparity))) - n_matched
 
@@ -502,6 +505,7 @@ def _clean(
         float(p["lr_max_diff_px"]),
         pixel_textured,
         sigma,
+        bool(p["patch_curvature"]),
     )
     if p["edge_trim_px"] > 0:
         disparity = _trim_discontinuities(
