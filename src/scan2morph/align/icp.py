@@ -357,6 +357,81 @@ def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
     return t, float(fitness), float(rmse), it, converged
 
 
+def _initial_pose(
+    src: np.ndarray,
+    sv: np.ndarray,
+    dst: np.ndarray,
+    dv: np.ndarray,
+    pairs: np.ndarray,
+    region: np.ndarray,
+    recovery: list[str],
+    source: str,
+) -> np.ndarray:
+    """The initial pose from the point pairs measured in both meshes.
+
+    A pair vertex that one mesh lacks (a squinting eye corner, a hole at low resolution) is
+    left out when at least 3 non-collinear pairs remain; with fewer, the pose comes from
+    every ICP-region vertex valid in both meshes (the meshes are in template correspondence,
+    so vertex i of one is vertex i of the other). Both are noted in ``recovery``.
+
+    Parameters
+    ----------
+    src, dst : (V, 3) float
+        The take's and the neutral mesh, mm.
+    sv, dv : (V,) bool
+        Their valid vertices.
+    pairs : (n,) int
+        Template vertex indices of the point pairs.
+    region : (V,) bool
+        The ICP region.
+    recovery : list of str
+        Appended to: what was done instead of the configured pairs.
+    source : str
+        ``subject/take`` for errors.
+
+    Returns
+    -------
+    (4, 4) float64
+        Take frame to neutral frame.
+
+    Raises
+    ------
+    InputError
+        Neither 3 usable pairs nor 3 region vertices valid in both meshes.
+    """
+    missing = []
+    for mask, which in ((sv, "the take's mesh"), (dv, "the neutral mesh")):
+        missing += [f"{int(i)} ({which})" for i in pairs[~mask[pairs]]]
+    usable = pairs[sv[pairs] & dv[pairs]]
+    if not missing:
+        return kabsch(src[pairs], dst[pairs], source=source)
+    if usable.size >= 3:
+        try:
+            pose = kabsch(src[usable], dst[usable], source=source)
+        except InputError:
+            pass
+        else:
+            recovery.append(
+                f"initial pose from {usable.size} of {pairs.size} point pairs "
+                f"(pair vertex {', '.join(missing)} invalid)"
+            )
+            return pose
+    both = np.flatnonzero(region & sv & dv)
+    if both.size < 3:
+        raise InputError(
+            source,
+            f"pair_indices: pair vertex {', '.join(missing)} invalid, and only {both.size} "
+            "ICP-region vertices are valid in both meshes; expected 3 pairs or 3 region "
+            "vertices measured in both meshes",
+        )
+    recovery.append(
+        f"initial pose from the {both.size} ICP-region vertices valid in both meshes (only "
+        f"{usable.size} of {pairs.size} point pairs usable: pair vertex {', '.join(missing)} "
+        "invalid)"
+    )
+    return kabsch(src[both], dst[both], source=source)
+
+
 def align_take(
     src_vertices: np.ndarray,
     src_valid: np.ndarray,
@@ -384,7 +459,9 @@ def align_take(
         Template faces (used for the target's vertex normals).
     pair_indices : (n,) int
         Template vertex indices of the point pairs for the initial pose (the paper uses 6;
-        at least 3 non-collinear); each must be valid in both meshes.
+        at least 3 non-collinear). Pairs invalid in either mesh are left out; with fewer
+        than 3 left the ICP region's vertices valid in both meshes give the initial pose
+        (noted in ``recovery``).
     icp_indices : (m,) int
         Template vertex indices of the upper face, which the mouth does not move; the
         refinement uses the valid ones only.
@@ -412,8 +489,7 @@ def align_take(
     Raises
     ------
     InputError
-        Bad shapes, indices or params, a pair vertex invalid in either mesh, too few valid
-        upper-face vertices.
+        Bad shapes, indices or params, too few valid upper-face vertices.
     """
     prm = _params(params, source)
     src, sv = _mesh(src_vertices, src_valid, "src", source)
@@ -427,18 +503,10 @@ def align_take(
     pairs = _indices(pair_indices, n_v, "pair_indices", source)
     if pairs.size < 3:
         raise InputError(source, f"pair_indices: expected at least 3 point pairs, got {pairs.size}")
-    for mask, which in ((sv, "src_valid (the take's mesh)"), (dv, "dst_valid (the neutral mesh)")):
-        bad = pairs[~mask[pairs]]
-        if bad.size:
-            raise InputError(
-                source,
-                f"pair_indices: pair vertex {int(bad[0])} is invalid in {which}; "
-                "expected pair vertices measured in both meshes",
-            )
-    initial = kabsch(src[pairs], dst[pairs], source=source)
-
     upper = np.zeros(n_v, dtype=bool)
     upper[_indices(icp_indices, n_v, "icp_indices", source)] = True
+    recovery: list[str] = []
+    initial = _initial_pose(src, sv, dst, dv, pairs, upper, recovery, source)
     normals = vertex_normals(dst, f)
     if prm["method"] == "icp":
         p_idx = np.flatnonzero(upper & sv)
@@ -466,7 +534,6 @@ def align_take(
 
     keep = np.ones(p_idx.size, dtype=bool)
     t, fitness, rmse, iterations, conv = refine(keep, initial)
-    recovery = []
     keep, t, conv, n_it = _trim(p, keep, t, conv, refine, plane, prm, recovery)
     iterations += n_it
     if not conv:
