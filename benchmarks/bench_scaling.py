@@ -5,7 +5,7 @@ with the number of subjects.
 [--cores 2] [--keep DIR]`` runs the default workflow target (stores, figures, reports, accuracy,
 cohort summary) on a synthetic cohort of each size, locally, each in a fresh working directory,
 with the default config's takes (one neutral, five visemes, four expressions: 10 per subject), all
-range scans (no stereo takes, so that every subject costs the same) at a reduced image size
+range scans (no stereo, mesh or RGB-D takes, so that every subject costs the same) at a reduced image size
 (``--width/--height``, the focal length scaled with them; the default config scans 640 x 480). It
 prints per cohort size the wall time, the CPU time of all jobs (user + system of every process
 Snakemake waited for), the largest job's peak memory, the store sizes, and the per-subject and
@@ -49,7 +49,10 @@ def write_config(work: Path, subjects: int, width: int, height: int) -> Path:
         synthetic=dict(
             subjects=subjects,
             scanner=dict(width=width, height=height, focal_px=base["focal_px"] * scale),
+            # every subject of range scans, so that each costs the same
             stereo=dict(subjects=[]),
+            mesh=dict(subjects=[]),
+            rgbd=dict(subjects=[]),
         ),
         sweeps="sweeps.tsv",
     )
