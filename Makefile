@@ -56,7 +56,7 @@ dry-run: setup
 	$(BIN)/snakemake -n $(if $(CONFIG),--configfile $(CONFIG))
 
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=15
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
