@@ -600,6 +600,7 @@ def test_image_type_and_params_are_checked(scene):
         ({"min_depth_mm": 900.0, "max_depth_mm": 500.0}, r"min_depth_mm, max_depth_mm: expected"),
         ({"depth_margin_mm": -1.0}, r"depth_margin_mm: expected >= 0, got -1.0"),
         ({"patch_curvature": "yes"}, r"patch_curvature: expected true or false, got 'yes'"),
+        ({"rectify_interpolation": "area"}, r"rectify_interpolation: expected one of linear, c"),
     ],
 )
 def test_validation_params_are_checked(change, match):

@@ -8,6 +8,7 @@ from typing import Any
 import cv2
 
 from scan2morph.errors import InputError
+from scan2morph.scan.stereo.rectify import INTERPOLATIONS
 
 #: Default parameters of :func:`~scan2morph.scan.stereo.reconstruct_stereo`. SGBM parameters
 #: carry OpenCV's names (see :func:`cv2.StereoSGBM_create`); ``None`` means "derive it" as
@@ -60,6 +61,7 @@ DEFAULT_STEREO: dict[str, Any] = {
     "max_step_px": 1.0,  # resampling: neighbours farther off the nearest one are completed, px
     # rectification
     "rectify_alpha": 1.0,  # cv2.stereoRectify's alpha: 1 keeps every source pixel
+    "rectify_interpolation": "lanczos4",  # "linear", "cubic" or "lanczos4" (least bias)
     "max_upscale": 1.5,  # the rectified image may grow by this factor to keep resolution
     # sanity
     "min_coverage": 0.05,  # fewest left pixels with a point, as a fraction of the image
@@ -136,6 +138,12 @@ def stereo_params(
     for key in _POSITIVE:
         if not p[key] > 0:
             raise InputError(source, f"{key}: expected > 0, got {p[key]}")
+    if p["rectify_interpolation"] not in INTERPOLATIONS:
+        raise InputError(
+            source,
+            f"rectify_interpolation: expected one of {', '.join(INTERPOLATIONS)}, "
+            f"got {p['rectify_interpolation']!r}",
+        )
     if not isinstance(p["patch_curvature"], bool):
         raise InputError(
             source, f"patch_curvature: expected true or false, got {p['patch_curvature']!r}"

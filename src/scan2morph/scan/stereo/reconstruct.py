@@ -230,7 +230,7 @@ def _rectify_views(
     size : (int, int)
         ``(W, H)`` of the source images, px.
     p : mapping
-        Checked stereo parameters (``blockSize`` px, rectification).
+        Checked stereo parameters (``blockSize`` px, rectification, ``rectify_interpolation``).
     source : str or path-like
         Label named in errors.
 
@@ -241,12 +241,14 @@ def _rectify_views(
     left, right : (Hr, Wr) uint8
         Rectified grey views, 0 outside the images.
     valid_l, valid_r : (Hr, Wr) bool
-        Rectified pixels at least ``(blockSize - 1) / 2`` px inside the source image.
+        Rectified pixels at least ``(blockSize - 1) / 2`` px (and the interpolation's half
+        support) inside the source image.
     """
     rect = _rectify(calib, size, p, source)
     margin = 0.5 * (int(p["blockSize"]) - 1)
-    left_r, valid_l = _remap(grey_l, rect["maps1"], margin)
-    right_r, valid_r = _remap(grey_r, rect["maps2"], margin)
+    how = str(p["rectify_interpolation"])
+    left_r, valid_l = _remap(grey_l, rect["maps1"], margin, how)
+    right_r, valid_r = _remap(grey_r, rect["maps2"], margin, how)
     return rect, left_r, right_r, valid_l, valid_r
 
 

@@ -57,14 +57,37 @@ def _rectify(
     }
 
 
+#: Interpolations of the rectification: OpenCV flag and half support, px (how far inside the
+#: source image a rectified pixel must be for its interpolation to see no black border).
+INTERPOLATIONS = {
+    "linear": (cv2.INTER_LINEAR, 1),
+    "cubic": (cv2.INTER_CUBIC, 2),
+    "lanczos4": (cv2.INTER_LANCZOS4, 4),
+}
+
+
 def _remap(
-    grey: np.ndarray, maps: tuple[np.ndarray, np.ndarray], margin: float
+    grey: np.ndarray,
+    maps: tuple[np.ndarray, np.ndarray],
+    margin: float,
+    interpolation: str = "lanczos4",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rectified image and the mask of rectified pixels at least ``margin`` px inside the source.
 
-    The margin keeps matching windows off the black surround of the rectified image.
+    The margin (at least the interpolation's half support) keeps matching windows off the black
+    surround of the rectified image.
+
+    Why Lanczos: the rectification resamples each view at a sub-pixel phase that changes across
+    the image and differs between the views; bilinear interpolation blurs by an amount that
+    depends on that phase, and the matcher reads the difference as disparity. Measured on the
+    default stereo neutral (synth02, face region): depth RMS 0.454 mm bilinear, 0.401 cubic,
+    0.379 Lanczos (8 x 8); median 0.109, 0.091, 0.074 mm; coverage 0.914, 0.908, 0.904. The
+    smooth part of that error (+0.05 mm on the forehead against the nose with bilinear) tilted
+    the neutral by 0.10 degrees, which every take aligned to it inherited; with Lanczos 0.04.
     """
-    out = cv2.remap(grey, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    flag, support = INTERPOLATIONS[interpolation]
+    margin = max(float(margin), float(support))
+    out = cv2.remap(grey, maps[0], maps[1], flag, borderMode=cv2.BORDER_CONSTANT)
     h, w = grey.shape
     mx, my = maps
     inside = (mx >= margin) & (mx <= w - 1 - margin) & (my >= margin) & (my <= h - 1 - margin)
