@@ -516,8 +516,9 @@ def test_too_few_pairs_fall_back_to_the_region_correspondence():
     assert rot < 0.1 and t < 0.2, (rot, t)
     assert res.ok, res.problems
     assert res.recovery[0].startswith("initial pose from the ")
-    assert "ICP-region vertices valid in both meshes (only 2 of 6 point pairs usable" in (
-        res.recovery[0]
+    assert (
+        "ICP-region vertices valid in both meshes (only 2 of 6 point pairs usable"
+        in (res.recovery[0])
     )
     # nothing left to pose from: one clear error
     take, tv = _invalidate(s["take"], np.concatenate([s["pairs"], s["upper"]]))
