@@ -56,7 +56,11 @@ replaced a 4 px band around every depth edge and a 1 px erosion of every hole) g
 0.80-0.87), median error 0.11 mm (0.15). The rest of the face is mostly hidden from the right
 camera (1.4-2.3 %) or seen by it at a grazing angle (disparity gradient above 0.5 px/px,
 2-4 %), where no window matches; the remaining errors sit within 3 px of occlusions and depth
-steps.
+steps. Since then Lanczos rectification and windows that follow the disparity's curvature
+(``benchmarks/bench_stereo_takes.py``, 8 takes of 2 subjects: neutral, car, smile, sad) took
+the depth RMS from 0.419 to 0.325 mm and the median from 0.107 to 0.076 mm, at 0.873 coverage
+instead of 0.884; the median signed error where the true surface is most convex (range
+Laplacian above 0.1 mm/px^2) from +0.164 to +0.107 mm.
 
 The package holds one module per stage: ``params`` (:data:`DEFAULT_STEREO`, the checks of
 :func:`stereo_params`), ``rectify`` (rectification, remap tables), ``depth_range`` (the depth
