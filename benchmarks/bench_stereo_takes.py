@@ -32,18 +32,11 @@ import yaml  # noqa: E402
 
 from scan2morph.evaluate import face_region, stereo_accuracy  # noqa: E402
 from scan2morph.scan import reconstruct_stereo  # noqa: E402
-from scan2morph.synth import SEG_SKIN, make_stereo_take  # noqa: E402
+from scan2morph.synth import LABEL_KIND, SEG_SKIN, make_stereo_take  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-VISEMES = ("car", "man", "she", "eel", "too")
 #: Bins of the true range image's Laplacian, mm per px squared.
 BINS = (-np.inf, -0.1, -0.03, 0.03, 0.1, np.inf)
-
-
-def _kind(label: str) -> str:
-    if label == "neutral":
-        return "neutral"
-    return "viseme" if label in VISEMES else "expression"
 
 
 def _variant(text: str) -> dict:
@@ -79,7 +72,7 @@ def main() -> None:
     for i in range(1, args.subjects + 1):
         subject = f"{prefix}{i:02d}"
         for label in args.labels:
-            take = make_stereo_take(subject, label, _kind(label), label, seed=seed, params=rig)
+            take = make_stereo_take(subject, label, LABEL_KIND[label], label, seed=seed, params=rig)
             truth = take["truth"]["xyz_true"]
             face = face_region(take["truth"]["segment"] == SEG_SKIN, take["truth"]["landmarks2d"])
             lap = _laplacian(truth)

@@ -364,15 +364,14 @@ def _initial_pose(
     dv: np.ndarray,
     pairs: np.ndarray,
     region: np.ndarray,
-    recovery: list[str],
     source: str,
-) -> np.ndarray:
+) -> tuple[np.ndarray, str | None]:
     """The initial pose from the point pairs measured in both meshes.
 
     A pair vertex that one mesh lacks (a squinting eye corner, a hole at low resolution) is
     left out when at least 3 non-collinear pairs remain; with fewer, the pose comes from
     every ICP-region vertex valid in both meshes (the meshes are in template correspondence,
-    so vertex i of one is vertex i of the other). Both are noted in ``recovery``.
+    so vertex i of one is vertex i of the other). Both come with a note for ``recovery``.
 
     Parameters
     ----------
@@ -384,15 +383,15 @@ def _initial_pose(
         Template vertex indices of the point pairs.
     region : (V,) bool
         The ICP region.
-    recovery : list of str
-        Appended to: what was done instead of the configured pairs.
     source : str
         ``subject/take`` for errors.
 
     Returns
     -------
-    (4, 4) float64
+    pose : (4, 4) float64
         Take frame to neutral frame.
+    note : str or None
+        What was done instead of the configured pairs (None: all of them were used).
 
     Raises
     ------
@@ -404,18 +403,18 @@ def _initial_pose(
         missing += [f"{int(i)} ({which})" for i in pairs[~mask[pairs]]]
     usable = pairs[sv[pairs] & dv[pairs]]
     if not missing:
-        return kabsch(src[pairs], dst[pairs], source=source)
+        return kabsch(src[pairs], dst[pairs], source=source), None
     if usable.size >= 3:
         try:
             pose = kabsch(src[usable], dst[usable], source=source)
         except InputError:
             pass
         else:
-            recovery.append(
+            note = (
                 f"initial pose from {usable.size} of {pairs.size} point pairs "
                 f"(pair vertex {', '.join(missing)} invalid)"
             )
-            return pose
+            return pose, note
     both = np.flatnonzero(region & sv & dv)
     if both.size < 3:
         raise InputError(
@@ -424,12 +423,12 @@ def _initial_pose(
             "ICP-region vertices are valid in both meshes; expected 3 pairs or 3 region "
             "vertices measured in both meshes",
         )
-    recovery.append(
+    note = (
         f"initial pose from the {both.size} ICP-region vertices valid in both meshes (only "
         f"{usable.size} of {pairs.size} point pairs usable: pair vertex {', '.join(missing)} "
         "invalid)"
     )
-    return kabsch(src[both], dst[both], source=source)
+    return kabsch(src[both], dst[both], source=source), note
 
 
 def align_take(
@@ -505,8 +504,8 @@ def align_take(
         raise InputError(source, f"pair_indices: expected at least 3 point pairs, got {pairs.size}")
     upper = np.zeros(n_v, dtype=bool)
     upper[_indices(icp_indices, n_v, "icp_indices", source)] = True
-    recovery: list[str] = []
-    initial = _initial_pose(src, sv, dst, dv, pairs, upper, recovery, source)
+    initial, note = _initial_pose(src, sv, dst, dv, pairs, upper, source)
+    recovery = [note] if note else []
     normals = vertex_normals(dst, f)
     if prm["method"] == "icp":
         p_idx = np.flatnonzero(upper & sv)

@@ -70,12 +70,12 @@ def _remap(
     grey: np.ndarray,
     maps: tuple[np.ndarray, np.ndarray],
     margin: float,
-    interpolation: str = "lanczos4",
+    interpolation: str,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rectified image and the mask of rectified pixels at least ``margin`` px inside the source.
 
-    The margin (at least the interpolation's half support) keeps matching windows off the black
-    surround of the rectified image.
+    The margin (at least the half support of ``interpolation``, a key of :data:`INTERPOLATIONS`)
+    keeps matching windows off the black surround of the rectified image.
 
     Why Lanczos: the rectification resamples each view at a sub-pixel phase that changes across
     the image and differs between the views; bilinear interpolation blurs by an amount that

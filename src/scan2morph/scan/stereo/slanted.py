@@ -241,7 +241,7 @@ def _smoothed(disparity: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarr
 _MAX_CURVATURE = 0.15
 
 
-def _disparity_shape(disparity: np.ndarray, sigma: float, curvature: bool = True) -> np.ndarray:
+def _disparity_shape(disparity: np.ndarray, sigma: float, curvature: bool) -> np.ndarray:
     """Gradient (and second derivatives) of the disparity field, defined next to holes too.
 
     Central differences of the field smoothed by normalised convolution: the gradient with
@@ -290,7 +290,7 @@ def _refine_patches(
     matcher: _PatchMatcher,
     iterations: int,
     slope_sigma: float,
-    curvature: bool = True,
+    curvature: bool,
 ) -> np.ndarray:
     """Refine every valid disparity with its own slanted window; drop those that move > 1 px.
 
@@ -376,7 +376,7 @@ def _grow(
     max_change_px: float,
     iterations: int,
     slope_sigma: float,
-    curvature: bool = True,
+    curvature: bool,
 ) -> np.ndarray:
     """Extend the valid disparity into unmatched neighbours, verified by their own windows.
 
@@ -448,7 +448,7 @@ def _validate(
     lr_max_diff_px: float,
     textured: np.ndarray,
     slope_sigma: float,
-    curvature: bool = True,
+    curvature: bool,
 ) -> np.ndarray:
     """Keep the pixels whose own slanted window matches and that the right view confirms.
 
