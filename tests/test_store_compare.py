@@ -57,3 +57,16 @@ def test_every_kind_of_difference_is_named(tmp_path, capsys):
     ]
     assert main([str(a), str(b), "--atol", "1"]) == 1
     assert "/x/v" in capsys.readouterr().out
+
+
+def test_relative_tolerance_of_each_element_or_of_the_array(tmp_path):
+    # last-bit noise of 3e-12 on an entry near zero (1e-6) of a mode vector whose largest entry
+    # is 0.01: within 1e-9 of the array's scale (1e-11), far beyond 1e-9 of the entry (1e-15)
+    mode = np.array([0.01, -0.006, 1e-6])
+    write_part(tmp_path / "a.h5", {"/m": mode})
+    write_part(tmp_path / "b.h5", {"/m": mode + np.array([0.0, 0.0, 3e-12])})
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    assert store_differences(a, b, atol=0.0, rtol=1e-9) == ["/m: max |difference| 3e-12"]
+    assert store_differences(a, b, atol=0.0, rtol=1e-9, scale="array") == []
+    assert store_differences(a, b, atol=0.0, rtol=1e-10, scale="array") != []
+    assert main([str(a), str(b), "--atol", "0", "--rtol", "1e-9", "--scale", "array"]) == 0
