@@ -6,8 +6,9 @@ config's ``synthetic.scanner``; the stereo takes ``synthetic.stereo`` lists: ``m
 with its rig and ``reconstruct_stereo`` with the config's ``stereo``; then ``repair_range`` and
 ``fit_take`` with the config's template options and fiducial set per kind; subjects of other
 modalities are skipped), aligns every take to its subject's neutral as the align stage does
-(``align.point_pairs`` for the initial pose, ICP on ``align.icp_region``, the rest of ``align``
-as :func:`~scan2morph.align.align_take`'s settings) and prints per take the rotation (deg) and
+(``align.point_pairs`` for the initial pose, ICP on ``align.icp_region`` grown into the still
+skin of ``align.grow_into``, the rest of ``align`` as :func:`~scan2morph.align.align_take`'s
+settings) and prints per take the rotation (deg) and
 translation (mm, at the face centroid) error against the truth (as the accuracy report computes
 them), ICP's fitness, the point-to-plane RMSE of the kept region (mm), the measured noise of the
 take's and the neutral's region (mm), the RMSE limit used (mm; ``*`` absolute), the share of the
@@ -112,13 +113,6 @@ def timing(seed: int = 0, repeats: int = 7) -> None:
         print(f"{len(v):>6} {'laplacian_smooth':>16} {ms:>9.2f}   (w=0.1, 30 iterations)")
 
 
-def _align_settings(config: dict) -> tuple[list, str, dict]:
-    """Point pairs, ICP region and align_take's settings, as the align stage splits them."""
-    align = config["align"]
-    icp = {k: v for k, v in align.items() if k not in ("point_pairs", "icp_region")}
-    return list(align["point_pairs"]), align["icp_region"], icp
-
-
 def _stereo_takes(config: dict, number: int) -> set[str]:
     """The takes of subject ``number`` (1-based) that are stereo pairs."""
     st = config["synthetic"].get("stereo") or {}
@@ -190,16 +184,18 @@ def cohort(config_path: Path, n_subjects: int | None) -> list[dict]:
 
     from scan2morph.errors import InputError
     from scan2morph.evaluate.mesh import alignment_accuracy
+    from scan2morph.stages.align import Params, grow_indices
     from scan2morph.template import build_template, subdivide_template
     from scan2morph.template.regions import icp_region, named_indices
 
     config = yaml.safe_load(config_path.read_text())
     n_subjects = int(config["synthetic"]["subjects"]) if n_subjects is None else n_subjects
     template = build_template()
-    fine = subdivide_template(template, int(config["template"]["subdivision_levels"]))
-    pair_names, region, icp = _align_settings(config)
-    pairs = named_indices(fine, pair_names, "align.point_pairs")
-    stable = np.flatnonzero(icp_region(fine, region))
+    prm = Params.from_config(config["align"], config["template"])  # as the align stage splits it
+    fine = subdivide_template(template, prm.levels)
+    pairs = named_indices(fine, prm.point_pairs, "align.point_pairs")
+    stable = np.flatnonzero(icp_region(fine, prm.icp_region))
+    grow = grow_indices(fine, prm.grow_into)
     takes = _range_takes(config)
     neutral = next(t["take"] for t in takes if t["kind"] == "neutral")
     rows = []
@@ -227,8 +223,9 @@ def cohort(config_path: Path, n_subjects: int | None) -> list[dict]:
                     fine.faces,
                     pairs,
                     stable,
-                    icp,
+                    prm.icp,
                     source=f"{subject}/{t['take']}",
+                    grow_indices=grow,
                 )
             except InputError as exc:
                 rows.append(row | {"error": str(exc)})

@@ -42,7 +42,8 @@ def test_fiducial_set_of_each_kind():
 def test_params_from_config_sections():
     a = align.Params.from_config(CONFIG["align"], CONFIG["template"])
     assert a.point_pairs == CONFIG["align"]["point_pairs"]
-    assert "point_pairs" not in a.icp and "icp_region" not in a.icp
+    assert not set(align.REGION_KEYS) & set(a.icp)
+    assert a.grow_into == CONFIG["align"]["grow_into"]
     assert a.icp["max_iterations"] == CONFIG["align"]["max_iterations"]
     m = motion.Params.from_config(
         CONFIG["mask"], CONFIG["smoothing"], CONFIG["template"], CONFIG["quality"]

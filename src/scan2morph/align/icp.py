@@ -146,6 +146,9 @@ class AlignResult:
     kernel_k : float
         Final scale of the robust kernel used, mm (``kernel_k_mm`` widened to
         ``kernel_noise_sigmas * expected_rmse``).
+    kept_indices : (k,) int64
+        Template vertex indices of the take the final refinement used: the region's kept
+        vertices and the still ones it grew into.
     """
 
     transform: np.ndarray
@@ -167,6 +170,7 @@ class AlignResult:
     rmse_limit: float = float("nan")
     rmse_limit_kind: str = "relative"
     kernel_k: float = float("nan")
+    kept_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def _params(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
@@ -441,6 +445,7 @@ def align_take(
     icp_indices: np.ndarray,
     params: dict[str, Any] | None = None,
     source: str = "subject/take",
+    grow_indices: np.ndarray | None = None,
 ) -> AlignResult:
     """Rigidly align a take's mesh (src) to the neutral mesh (dst).
 
@@ -475,6 +480,14 @@ def align_take(
         quality gate).
     source : str
         ``subject/take`` label for error messages.
+    grow_indices : (k,) int, optional
+        Template vertex indices the region may grow into (for example the upper face): after
+        the first refinement, each trimming round also adds those whose residual, averaged as
+        the trimming averages, is within its threshold (skin that did not move in this take)
+        and drops those beyond it. A face region only around the forehead and the nose ridge
+        constrains the rotation poorly once an expression's moving parts are trimmed; the
+        still skin elsewhere (the nose's sides, the cheeks in a viseme, the brows in a smile)
+        adds both points and leverage. The quality gate still judges the region alone.
 
     Returns
     -------
@@ -504,14 +517,20 @@ def align_take(
         raise InputError(source, f"pair_indices: expected at least 3 point pairs, got {pairs.size}")
     upper = np.zeros(n_v, dtype=bool)
     upper[_indices(icp_indices, n_v, "icp_indices", source)] = True
+    grow = np.zeros(n_v, dtype=bool)
+    if grow_indices is not None:
+        grow[_indices(grow_indices, n_v, "grow_indices", source)] = True
+    grow &= ~upper
     initial, note = _initial_pose(src, sv, dst, dv, pairs, upper, source)
     recovery = [note] if note else []
     normals = vertex_normals(dst, f)
+    cand = upper | grow
     if prm["method"] == "icp":
-        p_idx = np.flatnonzero(upper & sv)
-        q_idx = np.flatnonzero(upper & dv & np.isfinite(normals).all(axis=1))
+        p_idx = np.flatnonzero(cand & sv)
+        q_idx = np.flatnonzero(cand & dv & np.isfinite(normals).all(axis=1))
     else:
-        p_idx = q_idx = np.flatnonzero(upper & sv & dv)
+        p_idx = q_idx = np.flatnonzero(cand & sv & dv)
+    in_region = upper[p_idx]
     if p_idx.size < 3 or q_idx.size < 3:
         raise InputError(
             source,
@@ -519,21 +538,22 @@ def align_take(
             "expected at least 3",
         )
     p, q = src[p_idx], dst[q_idx]
-    noise_take = mesh_noise(src, sv, at=p_idx, source=source).region(p_idx)
-    noise_neutral = mesh_noise(dst, dv, at=q_idx, source=source).region(q_idx)
+    r_p, r_q = p_idx[in_region], q_idx[upper[q_idx]]
+    noise_take = mesh_noise(src, sv, at=r_p, source=source).region(r_p)
+    noise_neutral = mesh_noise(dst, dv, at=r_q, source=source).region(r_q)
     expected = float(np.hypot(noise_take, noise_neutral))
     known = expected if np.isfinite(expected) else 0.0
     prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
-    plane = _PlaneResiduals(dst, normals, upper & dv & np.isfinite(normals).all(axis=1))
+    plane = _PlaneResiduals(dst, normals, cand & dv & np.isfinite(normals).all(axis=1))
 
     def refine(keep, start, prm_=prm, k_start=None):
         if prm["method"] == "icp":
             return _refine_icp(p[keep], q, normals[q_idx], start, prm_, k_start)
         return _refine_correspondence(p[keep], q[keep], start, prm_, source)
 
-    keep = np.ones(p_idx.size, dtype=bool)
+    keep = in_region.copy()
     t, fitness, rmse, iterations, conv = refine(keep, initial)
-    keep, t, conv, n_it = _trim(p, keep, t, conv, refine, plane, prm, recovery)
+    keep, t, conv, n_it = _trim(p, keep, t, conv, refine, plane, prm, recovery, ~in_region)
     iterations += n_it
     if not conv:
         # re-initialise on the kept region from the point pairs, then a convex kernel
@@ -553,11 +573,14 @@ def align_take(
         t = initial
         recovery.append("non-finite pose: fell back to the point-pair pose")
     if prm["method"] == "icp":
-        fitness, rmse = _nearest_stats(p, q, t, prm["max_correspondence_mm"])
+        fitness, rmse = _nearest_stats(p[in_region], q, t, prm["max_correspondence_mm"])
     else:
-        _, fitness, rmse = _residual_stats(p, q, t, prm["max_correspondence_mm"])
-    gate = _rmse_gate(plane(transform_points(t, p[keep])), noise_take, noise_neutral, prm)
-    kept = float(keep.mean())
+        _, fitness, rmse = _residual_stats(
+            p[in_region], q[in_region], t, prm["max_correspondence_mm"]
+        )
+    judged = p[keep & in_region]  # the region's kept vertices (grown ones are still by choice)
+    gate = _rmse_gate(plane(transform_points(t, judged)), noise_take, noise_neutral, prm)
+    kept = float(keep[in_region].mean())
     problems = _verdict(conv, iterations, fitness, kept, recovery, prm)
     problems += [gate.problem] if gate.problem else []
     return AlignResult(
@@ -580,6 +603,7 @@ def align_take(
         rmse_limit=gate.limit,
         rmse_limit_kind=gate.kind,
         kernel_k=prm["kernel_k_mm"],
+        kept_indices=p_idx[keep].astype(np.int64),
     )
 
 
@@ -720,14 +744,17 @@ def _nearest_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) ->
     return float(inl.mean()), float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else 0.0
 
 
-def _trim(p, keep, t, conv, refine, plane, prm, recovery) -> tuple:
+def _trim(p, keep, t, conv, refine, plane, prm, recovery, grow=None) -> tuple:
     """Leave out the parts of the region that moved, refining again after each change.
 
     A vertex's residual averaged over its neighbours within ``trim_radius_mm`` (of the take's
     region vertices) separates a patch of moving skin from noise; the vertices whose average
     exceeds ``trim_sigma`` robust standard deviations of the kept ones' (at least
     :data:`_TRIM_FLOOR_MM`) are left out. Stops when the kept set repeats, after
-    ``trim_rounds`` rounds, or when fewer than 3 vertices would be kept.
+    ``trim_rounds`` rounds, or when fewer than 3 vertices would be kept. Vertices marked
+    ``grow`` (candidates outside the region) join the kept set in a round when their average is
+    within the threshold and leave it when it is not; the region's vertices, once left out,
+    stay out.
 
     Returns
     -------
@@ -746,12 +773,14 @@ def _trim(p, keep, t, conv, refine, plane, prm, recovery) -> tuple:
     cols = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
     adj = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
     mean = sparse.diags(1.0 / np.asarray(adj.sum(axis=1)).ravel()) @ adj
+    grow = np.zeros(n, dtype=bool) if grow is None else grow
+    region = ~grow
     iterations, rounds = 0, 0
     for rounds in range(1, prm["trim_rounds"] + 1):  # noqa: B007 (rounds is reported)
         r = mean @ plane(transform_points(t, p))
         rk = r[keep]
         sigma = 1.4826 * np.median(np.abs(rk - np.median(rk)))
-        new = keep & (np.abs(r) <= max(prm["trim_sigma"] * sigma, _TRIM_FLOOR_MM))
+        new = (keep | grow) & (np.abs(r) <= max(prm["trim_sigma"] * sigma, _TRIM_FLOOR_MM))
         if new.sum() < 3 or np.array_equal(new, keep):
             break
         keep = new
@@ -761,11 +790,13 @@ def _trim(p, keep, t, conv, refine, plane, prm, recovery) -> tuple:
             conv = False
             break
         t = t_new
-    if not keep.all():
+    if not keep[region].all():
         recovery.append(
-            f"left out {int((~keep).sum())} of {n} region vertices that moved "
-            f"({rounds} trimming rounds)"
+            f"left out {int((~keep[region]).sum())} of {int(region.sum())} region vertices that "
+            f"moved ({rounds} trimming rounds)"
         )
+    if grow.any():
+        recovery.append(f"added {int(keep[grow].sum())} of {int(grow.sum())} still vertices")
     return keep, t, conv, iterations
 
 

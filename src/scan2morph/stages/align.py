@@ -17,6 +17,8 @@ from scan2morph.template.regions import icp_region, named_indices
 
 #: Config sections this stage reads (``template`` for the subdivision level).
 SECTIONS = ("align", "template")
+#: Keys of ``align`` that name vertices and regions (the rest are align_take's settings).
+REGION_KEYS = ("point_pairs", "icp_region", "grow_into")
 log = logging.getLogger("scan2morph")
 
 
@@ -32,6 +34,9 @@ class Params:
         Named template points of the initial pose (``align.point_pairs``).
     icp_region : str
         The region ICP refines on (``align.icp_region``).
+    grow_into : str
+        The region whose still skin the ICP region grows into (``align.grow_into``: a region
+        name of :func:`~scan2morph.template.regions.icp_region`, or ``none``).
     icp : dict
         Everything else of ``align``: :func:`scan2morph.align.align_take`'s settings.
     """
@@ -39,18 +44,25 @@ class Params:
     levels: int
     point_pairs: list
     icp_region: str
+    grow_into: str
     icp: dict
 
     @classmethod
     def from_config(cls, align: Mapping, template: Mapping) -> Params:
         """From the config sections ``align`` and ``template``."""
-        icp = {k: v for k, v in align.items() if k not in ("point_pairs", "icp_region")}
+        icp = {k: v for k, v in align.items() if k not in REGION_KEYS}
         return cls(
             int(template["subdivision_levels"]),
             list(align["point_pairs"]),
             align["icp_region"],
+            align["grow_into"],
             icp,
         )
+
+
+def grow_indices(fine: Template, name: str) -> np.ndarray | None:
+    """Vertex indices of the region named by ``align.grow_into``; None for ``none``."""
+    return None if name == "none" else np.flatnonzero(icp_region(fine, name))
 
 
 def run(
@@ -104,6 +116,7 @@ def run(
             np.flatnonzero(icp_region(fine, params.icp_region)),
             params.icp,
             source=source,
+            grow_indices=grow_indices(fine, params.grow_into),
         )
         transform = result.transform
         ok = bool(result.ok)

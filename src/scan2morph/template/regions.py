@@ -37,9 +37,12 @@ def stable_face(template) -> np.ndarray:
     The upper forehead (more than 0.35 template units, about 16 mm, above the inner brow ends:
     brows rise when sad or surprised), the nose ridge between the bridge and the tip, and the
     temples (outside the outer eye corners, above the cheekbones: cheeks rise in a smile).
-    Measured on the synthetic cohort, ICP on this region aligns smiles and sad faces to
-    < 0.15 degrees and < 0.25 mm, where the whole face above the nose tip gives up to 0.6 degrees
-    and 0.9 mm.
+    Measured on the synthetic range subjects, ICP on this region alone aligns smiles and sad
+    faces to < 0.16 degrees and < 0.15 mm, where the whole face above the nose tip gives up to
+    0.6 degrees and 0.9 mm. A smile moves its lower temples by 1-3 mm, though, and once those are
+    trimmed the rest constrains the rotation poorly (mesh and RGB-D takes: up to 0.21 and 0.38
+    degrees); the align stage therefore grows the region into the upper face's still skin
+    (``align.grow_into``, :func:`~scan2morph.align.align_take`'s ``grow_indices``).
 
     Returns
     -------
