@@ -178,17 +178,19 @@ def _material_errors(data, truths, run):
 @pytest.mark.slow
 def test_refinement_follows_the_skin_on_synthetic_takes():
     """Against the truth's material motion: on textured skin the refinement removes most of the
-    template fit's sliding; on the flat albedo it is no worse than the fit."""
+    template fit's sliding; on the flat albedo it is no worse than the fit (with the outline's
+    surroundings correlated, ``refine.margin_px`` 24, it halves it: she 1.05 -> 0.48; with 12 px
+    it was 0.96)."""
     textured = _material_errors(*_subject_in_memory(1.0))
     flat = _material_errors(*_subject_in_memory(0.0, ("neutral", "she")))
     print("material relative error (fit, refined):", textured, "flat:", flat)
     for take, (fit_err, refined_err) in textured.items():
         # at 480 x 360 (0.9 px/mm on the face) the finest freckles are lost: the default 640 x 480
         # does better (README); the fit's error is 0.7-1.1 here
-        assert refined_err < 0.5 * fit_err, (take, fit_err, refined_err)
-        assert refined_err < 0.45, (take, refined_err)
+        assert refined_err < 0.3 * fit_err, (take, fit_err, refined_err)
+        assert refined_err < 0.3, (take, refined_err)  # measured 0.24 (she), 0.22 (smile1)
     for take, (fit_err, refined_err) in flat.items():
-        assert refined_err <= 1.05 * fit_err, (take, fit_err, refined_err)
+        assert refined_err <= 0.7 * fit_err, (take, fit_err, refined_err)
 
 
 def _plane_take(template, texture_seed, config):

@@ -61,10 +61,10 @@ class RefineParams:
     flow_precision_px: float = 0.25
     click_precision_px: float = 0.5
     smooth_px: float = 4.0
-    fade_px: float = 30.0
+    fade_px: float = 90.0
     max_fb_px: float = 0.5
     min_zncc: float = 0.5
-    margin_px: float = 12.0
+    margin_px: float = 24.0
 
 
 def grey(color: np.ndarray) -> np.ndarray:
