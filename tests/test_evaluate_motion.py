@@ -76,3 +76,27 @@ def test_material_accuracy_of_a_field_counts_only_where_asked():
     out = material_accuracy(motion, material, normals, where)
     assert out["material_normal_rms_error_mm"] == pytest.approx(2.0, rel=1e-12)
     assert out["material_tangential_rms_error_mm"] == pytest.approx(3.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("deg", [1e-4, 0.0316, 1.0, 90.0])
+def test_alignment_accuracy_reads_small_angles_exactly(deg):
+    """The rotation error of an alignment against a known pose, to 1e-12 of itself also at
+    0.0001 degrees (arccos of the trace reads 0.0001 as 0.00010000456)."""
+    from scipy.spatial.transform import Rotation
+
+    from scan2morph.evaluate.mesh import alignment_accuracy
+    from scan2morph.evaluate.truth import Truth
+
+    def truth(pose):
+        z = np.zeros((0, 3))
+        return Truth(z, np.zeros((0, 3), int), np.zeros(0, bool), pose, np.eye(3), z, z, z, {})
+
+    neutral, take = np.eye(4), np.eye(4)
+    take[:3, 3] = [5.0, -3.0, 600.0]
+    err = np.eye(4)
+    axis = np.array([0.3, 0.5, 0.81]) / np.linalg.norm([0.3, 0.5, 0.81])
+    err[:3, :3] = Rotation.from_rotvec(np.radians(deg) * axis).as_matrix()
+    estimate = err @ neutral @ np.linalg.inv(take)  # off the true transform by err
+    vertices = np.array([[0.0, 0.0, 600.0], [10.0, 0.0, 600.0], [0.0, 10.0, 610.0]])
+    acc = alignment_accuracy(estimate, vertices, np.ones(3, bool), truth(take), truth(neutral))
+    assert acc["rotation_deg"] == pytest.approx(deg, rel=1e-12)
