@@ -517,14 +517,12 @@ def align_take(
         raise InputError(source, f"pair_indices: expected at least 3 point pairs, got {pairs.size}")
     upper = np.zeros(n_v, dtype=bool)
     upper[_indices(icp_indices, n_v, "icp_indices", source)] = True
-    grow = np.zeros(n_v, dtype=bool)
+    cand = upper.copy()  # the region and what it may grow into
     if grow_indices is not None:
-        grow[_indices(grow_indices, n_v, "grow_indices", source)] = True
-    grow &= ~upper
+        cand[_indices(grow_indices, n_v, "grow_indices", source)] = True
     initial, note = _initial_pose(src, sv, dst, dv, pairs, upper, source)
     recovery = [note] if note else []
     normals = vertex_normals(dst, f)
-    cand = upper | grow
     if prm["method"] == "icp":
         p_idx = np.flatnonzero(cand & sv)
         q_idx = np.flatnonzero(cand & dv & np.isfinite(normals).all(axis=1))
