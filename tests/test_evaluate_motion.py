@@ -100,3 +100,72 @@ def test_alignment_accuracy_reads_small_angles_exactly(deg):
     vertices = np.array([[0.0, 0.0, 600.0], [10.0, 0.0, 600.0], [0.0, 10.0, 610.0]])
     acc = alignment_accuracy(estimate, vertices, np.ones(3, bool), truth(take), truth(neutral))
     assert acc["rotation_deg"] == pytest.approx(deg, rel=1e-12)
+
+
+def _sheet(xs, ys, offset):
+    """A grid sheet of the head frame's z = 0 plane: vertices and triangles (indices + offset)."""
+    x, y = np.meshgrid(xs, ys)
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    i = np.arange(x.size).reshape(x.shape) + offset
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    return v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def test_a_vertex_on_the_closed_mouth_follows_its_own_lip():
+    """Two lips meet along a slit at rest (two copies of its vertices, as the synthetic head has)
+    and part in the take: the lower lip drops 10 mm. A neutral vertex on the slit is as close
+    to either lip; with the template's lip sides it takes its own lip's motion, and vertices off
+    the slit are unaffected."""
+    from scipy.spatial.transform import Rotation
+
+    from scan2morph.evaluate.motion import true_motion
+    from scan2morph.evaluate.truth import Truth
+
+    xs = np.arange(-25.0, 25.1, 5.0)
+    upper, fu = _sheet(xs, np.arange(0.0, 10.1, 2.5), 0)  # head frame: y up
+    lower, fl = _sheet(xs, np.arange(-10.0, 0.1, 2.5), len(upper))
+    rest = np.vstack([upper, lower])
+    faces = np.vstack([fu, fl])
+    moved = rest + np.where(np.arange(len(rest))[:, None] < len(upper), [0, 0.5, 0], [0, -10, 0])
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_euler("xyz", [12, -20, 7], degrees=True).as_matrix()
+    pose[:3, 3] = [3.0, -40.0, 650.0]
+    posed = lambda p: p @ pose[:3, :3].T + pose[:3, 3]  # noqa: E731
+    lm = np.zeros((68, 3))
+    # iBUG 61-68: corner, upper lip left to right, corner, lower lip right to left
+    lm[60:68] = posed(
+        np.array([[-20, 0, 0], [-10, 0, 0], [0, 0, 0], [10, 0, 0], [20, 0, 0]] + [[10, 0, 0]])[
+            [0, 1, 2, 3, 4, 5, 2, 1]
+        ]
+    )
+
+    def truth(v):
+        skin = np.ones(len(faces), dtype=bool)
+        z = np.zeros((68, 2))
+        return Truth(v, faces, skin, pose, np.full((3, 3), np.nan), lm, z, v - rest, {})
+
+    query = posed(np.array([[-5.0, 0, 0], [4.0, 0, 0], [6.0, 0, 0], [0, 4.0, 0], [0, -4.0, 0]]))
+    sides = np.array([1, 1, -1, 0, 0])  # lower, lower, upper lip; two vertices off the slit
+    got = true_motion(query, truth(rest), truth(moved), sides)
+    rot = pose[:3, :3]
+    want = np.array([[0, -10, 0], [0, -10, 0], [0, 0.5, 0], [0, 0.5, 0], [0, -10, 0]]) @ rot.T
+    np.testing.assert_allclose(got, want, atol=1e-4)
+    # without sides a slit vertex takes either lip's motion: the coin the sides decide
+    blind = true_motion(query, truth(rest), truth(moved))
+    assert all(
+        np.allclose(b, w0, atol=1e-4) or np.allclose(b, w1, atol=1e-4)
+        for b, w0, w1 in zip(
+            blind[:3], [[0, -10, 0] @ rot.T] * 3, [[0, 0.5, 0] @ rot.T] * 3, strict=True
+        )
+    )
+
+
+def test_template_lip_sides():
+    """The template's upper inner-lip contour is the upper lip (-1), the lower one the lower
+    lip (+1); the corners, the cheeks and the chin are neither."""
+    from scan2morph.evaluate.motion import template_lip_sides
+    from scan2morph.template.mesh import IBUG_CANONICAL
+
+    lips = IBUG_CANONICAL[60:68]
+    points = np.vstack([lips[1:4], lips[5:8], lips[[0, 4]], [[1.5, 1.7], [0.0, 2.6]]])
+    np.testing.assert_array_equal(template_lip_sides(points), [-1, -1, -1, 1, 1, 1, 0, 0, 0, 0])

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
+from scan2morph.template.mesh import IBUG_CANONICAL
 from scan2morph.template.sample import behind_steps
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
@@ -89,15 +90,89 @@ def ideal_motion(
     return p_t @ true[:3, :3].T + true[:3, 3] - p_n
 
 
-def true_motion(neutral_vertices: np.ndarray, neutral: Truth, take: Truth) -> np.ndarray:
-    """(V, 3) true motion (mm, neutral scanner frame) of each template vertex; NaN where invalid."""
+#: iBUG indices (0-based) of the inner-lip contour: corner, upper 62-64, corner, lower 66-68.
+INNER_LIP = slice(60, 68)
+
+
+def lip_side(points: np.ndarray, inner_lip: np.ndarray, band: float) -> np.ndarray:
+    """Which lip each 2D point belongs to: above or below the mouth slit's midline.
+
+    Parameters
+    ----------
+    points : (n, 2) float
+        Image or template positions (y down).
+    inner_lip : (8, 2) float
+        The inner-lip contour in the same frame, iBUG 61-68 order (corner, upper lip, corner,
+        lower lip); closed or open.
+    band : float
+        Points farther than this from the midline (same units) are on neither lip.
+
+    Returns
+    -------
+    (n,) int8
+        -1 above the midline (upper lip), +1 below (lower lip), 0 beyond the corners or the band.
+    """
+    lip = np.asarray(inner_lip, dtype=np.float64)
+    # the midline through the corners and the mean of each upper/lower pair (62-68, 63-67, 64-66)
+    mid = np.vstack([lip[0], (lip[1:4] + lip[7:4:-1]) / 2.0, lip[4]])
+    mid = mid[np.argsort(mid[:, 0])]
+    p = np.asarray(points, dtype=np.float64)
+    offset = p[:, 1] - np.interp(p[:, 0], mid[:, 0], mid[:, 1])
+    side = np.sign(offset).astype(np.int8)
+    side[(p[:, 0] <= mid[0, 0]) | (p[:, 0] >= mid[-1, 0]) | (np.abs(offset) > band)] = 0
+    return side
+
+
+def template_lip_sides(vertices2d: np.ndarray) -> np.ndarray:
+    """(V,) int8 :func:`lip_side` of template vertices (canonical template coordinates): -1 upper
+    lip, +1 lower lip, within half a mouth width of the slit; 0 elsewhere."""
+    lips = IBUG_CANONICAL[INNER_LIP]
+    return lip_side(vertices2d, lips, float(np.linalg.norm(lips[4] - lips[0])) / 2)
+
+
+def true_motion(
+    neutral_vertices: np.ndarray,
+    neutral: Truth,
+    take: Truth,
+    sides: np.ndarray | None = None,
+) -> np.ndarray:
+    """(V, 3) true motion (mm, neutral scanner frame) of each template vertex; NaN where invalid.
+
+    Parameters
+    ----------
+    neutral_vertices : (V, 3) float, mm
+        The neutral mesh in the neutral's scanner frame.
+    neutral, take : Truth
+    sides : (V,) int, optional
+        The lip each template vertex is on (:func:`lip_side` of the template's own coordinates).
+        At rest the lips meet: a vertex on the slit is as close to the lower lip's skin as to
+        the upper lip's, which part when the mouth opens; a vertex of one lip is matched only to
+        skin that is not on the other. The truth's skin is sided in a frontal view of the head
+        frame (x right, y up) by the neutral's inner-lip landmarks. Without ``sides``, the
+        closest skin point whatever the lip.
+    """
     out = np.full(neutral_vertices.shape, np.nan)
     ok = np.isfinite(neutral_vertices).all(axis=1)
     skin = neutral.faces[neutral.skin_faces]
-    face, bary, _ = closest_points(neutral.posed_vertices(), skin, neutral_vertices[ok])
-    tri = skin[face]
-    delta = np.einsum("qk,qkd->qd", bary, take.vertices[tri] - neutral.vertices[tri])
-    out[ok] = delta @ neutral.pose[:3, :3].T
+    posed = neutral.posed_vertices()
+    groups = [(ok, skin)]
+    if sides is not None:
+        sides = np.asarray(sides)
+        rot, shift = neutral.pose[:3, :3], neutral.pose[:3, 3]
+        lips = (neutral.landmarks3d[INNER_LIP] - shift) @ rot  # scanner -> head frame
+        front = np.array([[1.0, 0.0], [0.0, -1.0], [0.0, 0.0]])  # (x, y, z) -> (x, -y): y down
+        width = float(np.linalg.norm(lips[4] - lips[0]))
+        face_side = lip_side(neutral.vertices[skin].mean(axis=1) @ front, lips @ front, width / 2)
+        groups = [(ok & (sides == 0), skin)] + [
+            (ok & (sides == s), skin[face_side != -s]) for s in (-1, 1)
+        ]
+    for where, faces in groups:
+        if not where.any():
+            continue
+        face, bary, _ = closest_points(posed, faces, neutral_vertices[where])
+        tri = faces[face]
+        delta = np.einsum("qk,qkd->qd", bary, take.vertices[tri] - neutral.vertices[tri])
+        out[where] = delta @ neutral.pose[:3, :3].T
     return out
 
 

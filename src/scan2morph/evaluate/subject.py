@@ -12,6 +12,7 @@ from scan2morph.evaluate.motion import (
     ideal_motion,
     material_accuracy,
     motion_accuracy,
+    template_lip_sides,
     true_motion,
 )
 from scan2morph.evaluate.scan import face_region, stereo_accuracy
@@ -72,6 +73,10 @@ def subject_accuracy(
     n_normals = vertex_normals(n_vertices, store[paths.template("faces")])
     # the pipeline's own error bar (no truth), shown beside the error the truth shows
     bars = noise_by_take(store)
+    # the lip each vertex is on: at rest the lips meet, and a vertex of one is not the other's skin
+    sides = None
+    if paths.template("vertices2d") in store:
+        sides = template_lip_sides(store[paths.template("vertices2d")])
     # each truth seen through the camera of its take's pixel grid (RGB-D: colour camera; mesh:
     # the virtual camera), with the rotation from the take's frame into that camera
     views = {take: grid_view(truth, store, take) for take, truth in truths.items()}
@@ -93,7 +98,7 @@ def subject_accuracy(
                 store[paths.align(take, "transform")], v, valid, truth, truths[neutral]
             )
         if take in visemes:
-            material = true_motion(n_vertices, truths[neutral], truth)
+            material = true_motion(n_vertices, truths[neutral], truth, sides)
             ideal = material
             if template is not None:
                 sets = (fiducial_sets[neutral], fiducial_sets[take])
@@ -123,7 +128,7 @@ def subject_accuracy(
                 rel = bars[take]["relative"]
                 entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
         if take in expressions and paths.expression(take, "displacement") in store:
-            material = true_motion(n_vertices, truths[neutral], truth)
+            material = true_motion(n_vertices, truths[neutral], truth, sides)
             field = np.asarray(store[paths.expression(take, "displacement")], dtype=np.float64)
             entry["expression"] = material_accuracy(
                 field, material, n_normals, np.ones(len(field), dtype=bool)
