@@ -100,7 +100,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
     [
         (
             "smoothing.iteration\n30\n",
-            r"column 'smoothing.iteration': names no config key \(no 'iteration' under smoothing; keys there: iterations, w\)",
+            r"column 'smoothing.iteration': names no config key \(no 'iteration' under smoothing; keys there: iterations, max_stretch, w\)",
         ),
         (
             "smooth.w\n0.1\n",
@@ -113,6 +113,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         ("smoothing.iterations\nmany\n", r"'many' is not of type 'integer'"),
         ("smoothing.iterations\n30.0\n", r"30.0 is not of type 'integer'"),
         ("smoothing.w\n1.5\n", r"1.5 is greater than the maximum of 1"),
+        ("smoothing.max_stretch\n1\n", r"1 is less than or equal to the minimum of 1"),
         ("align.robust_kernel\ncauchy\n", r"'cauchy' is not one of \['tukey', 'huber', 'none'\]"),
         ("mask.radius_mm\n-2\n", r"-2 is less than or equal to the minimum of 0"),
         (
@@ -152,7 +153,7 @@ def test_missing_table_is_named(tmp_path):
 def test_sweep_settings_override_a_copy():
     row = {"smoothing.iterations": np.int64(5), "template.fiducials.viseme": "closed"}
     settings = sweep_settings(CONFIG, row)
-    assert settings["smoothing"] == {"w": CONFIG["smoothing"]["w"], "iterations": 5}
+    assert settings["smoothing"] == CONFIG["smoothing"] | {"iterations": 5}
     assert type(settings["smoothing"]["iterations"]) is int  # numpy scalars become Python's
     assert settings["template"]["fiducials"]["viseme"] == "closed"
     assert CONFIG["template"]["fiducials"]["viseme"] == "open"  # the config is untouched

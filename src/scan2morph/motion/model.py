@@ -88,6 +88,21 @@ def complete_neutral(
     return vertices, filled
 
 
+def _raw_motion(
+    mesh: AlignedMesh, neutral: AlignedMesh, faces: np.ndarray, max_stretch: float, source: str
+) -> np.ndarray:
+    """A take's raw motion: NaN where either mesh is invalid or the take tore off the face."""
+    return motion_vectors(
+        mesh.vertices,
+        neutral.vertices,
+        mesh.valid,
+        neutral.valid,
+        source=source,
+        faces=faces,
+        max_stretch=max_stretch,
+    )
+
+
 def viseme_motion(
     neutral: AlignedMesh,
     visemes: dict[str, AlignedMesh],
@@ -97,6 +112,7 @@ def viseme_motion(
     w: float,
     iterations: int,
     source: str,
+    max_stretch: float = np.inf,
 ) -> dict[str, np.ndarray]:
     """Mask, motion vectors and viseme models.
 
@@ -111,6 +127,9 @@ def viseme_motion(
         Sphere radius (mm) and Laplacian smoothing weight and iteration count.
     source : str
         ``subject`` label for messages.
+    max_stretch : float
+        Take vertices torn off the face beyond this stretch count as invalid
+        (:func:`~scan2morph.motion.vectors.motion_vectors`).
 
     Returns
     -------
@@ -128,9 +147,7 @@ def viseme_motion(
         paths.neutral("filled"): filled,
     }
     for take, mesh in visemes.items():
-        raw = motion_vectors(
-            mesh.vertices, neutral.vertices, mesh.valid, neutral.valid, source=f"{source}/{take}"
-        )
+        raw = _raw_motion(mesh, neutral, faces, max_stretch, f"{source}/{take}")
         missing = ~np.isfinite(raw).all(axis=1)
         smooth = laplacian_smooth(
             raw,
@@ -148,14 +165,17 @@ def viseme_motion(
 
 
 def expression_displacements(
-    neutral: AlignedMesh, expressions: dict[str, AlignedMesh], faces: np.ndarray, source: str
+    neutral: AlignedMesh,
+    expressions: dict[str, AlignedMesh],
+    faces: np.ndarray,
+    source: str,
+    max_stretch: float = np.inf,
 ) -> dict[str, np.ndarray]:
-    """``/expressions/{take}/displacement`` (V, 3): aligned take minus neutral, invalid filled."""
+    """``/expressions/{take}/displacement`` (V, 3): aligned take minus neutral, invalid (and,
+    with a finite ``max_stretch``, torn-off) vertices filled."""
     out = {}
     for take, mesh in expressions.items():
-        raw = motion_vectors(
-            mesh.vertices, neutral.vertices, mesh.valid, neutral.valid, source=f"{source}/{take}"
-        )
+        raw = _raw_motion(mesh, neutral, faces, max_stretch, f"{source}/{take}")
         out[paths.expression(take, "displacement")] = fill_missing(
             raw, faces, source=f"{source}/{take}"
         )

@@ -104,7 +104,7 @@ def click_noise_motion(
     suppressed : (V,) bool
         The stencil mask (``/mask/suppressed``).
     smoothing : mapping
-        ``w`` and ``iterations`` (config ``smoothing``).
+        ``w``, ``iterations`` and optionally ``max_stretch`` (config ``smoothing``).
     fit_options : mapping
         Keyword arguments of :func:`fit_take` besides the take's data and fiducial set
         (``levels``, ``min_valid_fraction``, ``max_fold_fraction``, ``min_weight``,
@@ -152,9 +152,12 @@ def click_noise_motion(
     draws = int(draws)
     suppressed = np.asarray(suppressed, dtype=bool)
     w, iterations = float(smoothing["w"]), int(smoothing["iterations"])
+    max_stretch = float(smoothing.get("max_stretch", np.inf))
 
     def final(aligned, valid, base, base_valid, faces, where):
-        raw = motion_vectors(aligned, base, valid, base_valid, source=where)
+        raw = motion_vectors(
+            aligned, base, valid, base_valid, source=where, faces=faces, max_stretch=max_stretch
+        )
         return laplacian_smooth(
             raw,
             faces,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.motion.tear import torn_off
 
 
 def _mesh(v: np.ndarray, valid: np.ndarray | None, name: str, source: str) -> tuple:
@@ -32,6 +33,9 @@ def motion_vectors(
     aligned_valid: np.ndarray | None = None,
     neutral_valid: np.ndarray | None = None,
     source: str = "motion",
+    *,
+    faces: np.ndarray | None = None,
+    max_stretch: float = np.inf,
 ) -> np.ndarray:
     """Motion of every template vertex from the neutral mesh to the aligned take.
 
@@ -46,11 +50,16 @@ def motion_vectors(
         Valid flags; non-finite rows are invalid in any case.
     source : str
         ``subject/take`` label for error messages.
+    faces : (F, 3) int, optional
+        Template triangles; with a finite ``max_stretch``, the take's vertices torn off the
+        face (:func:`scan2morph.motion.tear.torn_off`) count as invalid.
+    max_stretch : float
+        Stretch beyond which a mesh edge is cut (``smoothing.max_stretch``; ``inf``: none).
 
     Returns
     -------
     d : (V, 3) float64, mm
-        ``aligned - neutral``; NaN rows where either vertex is invalid.
+        ``aligned - neutral``; NaN rows where either vertex is invalid or torn off.
     """
     a, a_ok = _mesh(aligned, aligned_valid, "aligned", source)
     n, n_ok = _mesh(neutral, neutral_valid, "neutral", source)
@@ -58,6 +67,9 @@ def motion_vectors(
         raise InputError(source, f"aligned: expected the neutral's shape {n.shape}, got {a.shape}")
     d = a - n
     d[~(a_ok & n_ok)] = np.nan
+    if faces is not None and np.isfinite(max_stretch):
+        take = np.where(a_ok[:, None], a, np.nan)
+        d[torn_off(take, np.where(n_ok[:, None], n, np.nan), faces, max_stretch, source)] = np.nan
     return d
 
 

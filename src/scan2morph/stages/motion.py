@@ -39,6 +39,9 @@ class Params:
         Laplacian smoothing weight.
     iterations : int
         Smoothing iterations.
+    max_stretch : float
+        Take vertices torn off the face beyond this edge stretch are invalid
+        (``smoothing.max_stretch``; :mod:`scan2morph.motion.tear`).
     include_failed : bool
         Keep takes whose alignment failed its gate (``quality.include_failed_takes``).
     refined : bool
@@ -51,6 +54,7 @@ class Params:
     radius_mm: float
     w: float
     iterations: int
+    max_stretch: float = np.inf
     include_failed: bool = False
     refined: bool = False
 
@@ -71,6 +75,7 @@ class Params:
             mask["radius_mm"],
             smoothing["w"],
             smoothing["iterations"],
+            float(smoothing["max_stretch"]),
             bool(quality["include_failed_takes"]),
             refine_enabled(refine or {}),
         )
@@ -128,12 +133,14 @@ def run(
         params.w,
         params.iterations,
         source=name,
+        max_stretch=params.max_stretch,
     )
     out |= expression_displacements(
         neutral,
         {t: aligned_mesh(data, t, name, ref) for t in subject.expressions},
         fine.faces,
         name,
+        params.max_stretch,
     )
     suppressed = out[paths.mask("suppressed")]
     log.info("%s: %d of %d vertices suppressed", name, suppressed.sum(), len(suppressed))

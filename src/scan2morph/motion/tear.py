@@ -1,0 +1,73 @@
+"""Pieces of a take's mesh torn off the face: vertices sampled on another surface.
+
+Skin stretches, but it does not tear. When a take's fit puts a patch of vertices a few pixels off
+the skin at an occluding contour (onto the nose above the upper lip, into the mouth behind the
+lips), the patch samples another surface: its vertices are valid samples, yet the mesh edges
+that join the patch to the rest of the face are stretched many times their length in the
+neutral. Cutting every edge stretched (or squeezed) beyond ``max_stretch`` splits the take's
+mesh; a piece that is not the face's largest and lost an edge to the cut is torn off, and its
+vertices are no measurement of where the skin went.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from scan2morph.errors import InputError
+from scan2morph.geometry import unique_edges
+
+
+def torn_off(
+    take: np.ndarray,
+    neutral: np.ndarray,
+    faces: np.ndarray,
+    max_stretch: float,
+    source: str = "motion",
+) -> np.ndarray:
+    """The vertices of a take's mesh that tore off the face.
+
+    Parameters
+    ----------
+    take, neutral : (V, 3) float, mm
+        The take's vertices (in any rigid frame) and the neutral's; NaN rows are missing.
+    faces : (F, 3) int
+        Template triangles.
+    max_stretch : float
+        An edge longer than ``max_stretch`` times its length in the neutral, or shorter than
+        its length divided by ``max_stretch``, is cut (> 1; ``inf`` cuts none).
+    source : str
+        ``subject/take`` label for error messages.
+
+    Returns
+    -------
+    (V,) bool
+        Finite take vertices in a piece of the cut mesh that is not its largest and that lost
+        an edge to the cut. Pieces cut off only by missing vertices are kept.
+    """
+    take = np.asarray(take, dtype=np.float64)
+    neutral = np.asarray(neutral, dtype=np.float64)
+    if take.shape != neutral.shape or take.ndim != 2 or take.shape[1] != 3:
+        raise InputError(
+            source, f"take: expected the neutral's (V, 3) shape {neutral.shape}, got {take.shape}"
+        )
+    if not max_stretch > 1.0:
+        raise InputError(source, f"smoothing.max_stretch: expected a number > 1, got {max_stretch}")
+    n = len(take)
+    ok = np.isfinite(take).all(axis=1) & np.isfinite(neutral).all(axis=1)
+    e = unique_edges(np.asarray(faces, dtype=np.int64))
+    e = e[ok[e[:, 0]] & ok[e[:, 1]]]
+    length = lambda v: np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)  # noqa: E731
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = length(take) / length(neutral)
+    cut = ~((ratio <= max_stretch) & (ratio >= 1.0 / max_stretch))
+    kept = e[~cut]
+    graph = sp.coo_matrix((np.ones(len(kept)), (kept[:, 0], kept[:, 1])), shape=(n, n))
+    _, label = csgraph.connected_components(graph, directed=False)
+    if not ok.any():
+        return np.zeros(n, dtype=bool)
+    largest = np.bincount(label[ok]).argmax()
+    touched = np.zeros(label.max() + 1, dtype=bool)
+    touched[label[e[cut].ravel()]] = True
+    return ok & (label != largest) & touched[label]
