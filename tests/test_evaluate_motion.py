@@ -118,6 +118,7 @@ def test_a_vertex_on_the_closed_mouth_follows_its_own_lip():
     the slit are unaffected."""
     from scipy.spatial.transform import Rotation
 
+    from scan2morph.errors import InputError
     from scan2morph.evaluate.motion import true_motion
     from scan2morph.evaluate.truth import Truth
 
@@ -150,6 +151,8 @@ def test_a_vertex_on_the_closed_mouth_follows_its_own_lip():
     rot = pose[:3, :3]
     want = np.array([[0, -10, 0], [0, -10, 0], [0, 0.5, 0], [0, 0.5, 0], [0, -10, 0]]) @ rot.T
     np.testing.assert_allclose(got, want, atol=1e-4)
+    with pytest.raises(InputError, match=r"sides: expected \(5,\) lip sides"):
+        true_motion(query, truth(rest), truth(moved), sides[:4])
     # without sides a slit vertex takes either lip's motion: the coin the sides decide
     blind = true_motion(query, truth(rest), truth(moved))
     assert all(

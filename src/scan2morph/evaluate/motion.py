@@ -18,6 +18,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
 from scan2morph.template.mesh import IBUG_CANONICAL
 from scan2morph.template.sample import behind_steps
@@ -158,6 +159,8 @@ def true_motion(
     groups = [(ok, skin)]
     if sides is not None:
         sides = np.asarray(sides)
+        if sides.shape != ok.shape:
+            raise InputError("truth", f"sides: expected ({len(ok)},) lip sides, got {sides.shape}")
         rot, shift = neutral.pose[:3, :3], neutral.pose[:3, 3]
         lips = (neutral.landmarks3d[INNER_LIP] - shift) @ rot  # scanner -> head frame
         front = np.array([[1.0, 0.0], [0.0, -1.0], [0.0, 0.0]])  # (x, y, z) -> (x, -y): y down
