@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from scan2morph.evaluate.motion import material_accuracy, motion_accuracy
+from tests.meshes import grid_mesh
 
 
 def _case(rng, n=200):
@@ -102,65 +103,69 @@ def test_alignment_accuracy_reads_small_angles_exactly(deg):
     assert acc["rotation_deg"] == pytest.approx(deg, rel=1e-12)
 
 
-def _sheet(xs, ys, offset):
-    """A grid sheet of the head frame's z = 0 plane: vertices and triangles (indices + offset)."""
-    x, y = np.meshgrid(xs, ys)
-    v = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
-    i = np.arange(x.size).reshape(x.shape) + offset
-    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
-    return v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+def _lips(slit, nx=41, rows=9, spacing=1.25):
+    """Two lip sheets of the head frame's z = 0 plane (y up) meeting along the slit
+    ``y = slit(x)``, x in [-25, 25] mm: each lip has its own copy of the slit's vertices, as the
+    synthetic head has. Returns the vertices, the triangles and which vertices are the lower
+    lip's."""
+    flat, tri = grid_mesh(nx, rows, spacing)
+    x = flat[:, 0] - 25.0
+    out, faces = [], []
+    for sign in (1.0, -1.0):  # upper lip, then lower lip
+        out.append(np.column_stack([x, slit(x) + sign * flat[:, 1] / spacing, np.zeros(len(x))]))
+        faces.append(tri + (len(flat) if sign < 0 else 0))
+    lower = np.arange(2 * len(flat)) >= len(flat)
+    return np.vstack(out), np.vstack(faces), lower
 
 
 def test_a_vertex_on_the_closed_mouth_follows_its_own_lip():
-    """Two lips meet along a slit at rest (two copies of its vertices, as the synthetic head has)
-    and part in the take: the lower lip drops 10 mm. A neutral vertex on the slit is as close
-    to either lip; with the template's lip sides it takes its own lip's motion, and vertices off
-    the slit are unaffected."""
+    """Two lips meet along a wavy slit at rest (two copies of its vertices) and part in the take:
+    the lower lip drops 10 mm. A neutral vertex on the slit is as close to either lip; with the
+    template's lip sides it takes its own lip's motion, also where the slit is 1.5 mm off the
+    straight line through the inner-lip landmarks, and vertices off the slit are unaffected."""
     from scipy.spatial.transform import Rotation
 
     from scan2morph.errors import InputError
     from scan2morph.evaluate.motion import true_motion
     from scan2morph.evaluate.truth import Truth
 
-    xs = np.arange(-25.0, 25.1, 5.0)
-    upper, fu = _sheet(xs, np.arange(0.0, 10.1, 2.5), 0)  # head frame: y up
-    lower, fl = _sheet(xs, np.arange(-10.0, 0.1, 2.5), len(upper))
-    rest = np.vstack([upper, lower])
-    faces = np.vstack([fu, fl])
-    moved = rest + np.where(np.arange(len(rest))[:, None] < len(upper), [0, 0.5, 0], [0, -10, 0])
+    def slit(x):  # through the landmarks at x = 0, +-10, +-20 and 1.5 mm off between them
+        return 1.5 * np.sin(np.pi * x / 10.0)
+
+    rest, faces, lower = _lips(slit)
+    moved = rest + np.where(lower[:, None], [0, -10, 0], [0, 0.5, 0])
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_euler("xyz", [12, -20, 7], degrees=True).as_matrix()
     pose[:3, 3] = [3.0, -40.0, 650.0]
     posed = lambda p: p @ pose[:3, :3].T + pose[:3, 3]  # noqa: E731
     lm = np.zeros((68, 3))
     # iBUG 61-68: corner, upper lip left to right, corner, lower lip right to left
-    lm[60:68] = posed(
-        np.array([[-20, 0, 0], [-10, 0, 0], [0, 0, 0], [10, 0, 0], [20, 0, 0]] + [[10, 0, 0]])[
-            [0, 1, 2, 3, 4, 5, 2, 1]
-        ]
-    )
+    xs = np.array([-20, -10, 0, 10, 20, 10, 0, -10], dtype=float)
+    lm[60:68] = posed(np.column_stack([xs, slit(xs), np.zeros(8)]))
 
     def truth(v):
         skin = np.ones(len(faces), dtype=bool)
         z = np.zeros((68, 2))
         return Truth(v, faces, skin, pose, np.full((3, 3), np.nan), lm, z, v - rest, {})
 
-    query = posed(np.array([[-5.0, 0, 0], [4.0, 0, 0], [6.0, 0, 0], [0, 4.0, 0], [0, -4.0, 0]]))
-    sides = np.array([1, 1, -1, 0, 0])  # lower, lower, upper lip; two vertices off the slit
+    # on the slit where it bulges up (x = 5, -15) and down (x = -5, 15), and off it
+    qx = np.array([5.0, -15.0, -5.0, 15.0, 5.0, 0.0, 0.0])
+    qy = slit(qx) + np.array([0, 0, 0, 0, 0, 4.0, -4.0])
+    query = posed(np.column_stack([qx, qy, np.zeros(7)]))
+    # where the slit bulges up, the lower lip's first faces lie above the landmarks' line, and
+    # where it sags, the upper lip's lie below it: an upper vertex at a bulge and a lower one at
+    # a sag are where a side taken from that line matches the other lip
+    sides = np.array([-1, -1, 1, 1, 1, 0, 0])  # the lip each vertex is on; two off the slit
     got = true_motion(query, truth(rest), truth(moved), sides)
     rot = pose[:3, :3]
-    want = np.array([[0, -10, 0], [0, -10, 0], [0, 0.5, 0], [0, 0.5, 0], [0, -10, 0]]) @ rot.T
+    down, still = np.array([0, -10.0, 0]) @ rot.T, np.array([0, 0.5, 0]) @ rot.T
+    want = np.array([still, still, down, down, down, still, down])
     np.testing.assert_allclose(got, want, atol=1e-4)
-    with pytest.raises(InputError, match=r"sides: expected \(5,\) lip sides"):
+    with pytest.raises(InputError, match=r"sides: expected \(7,\) lip sides"):
         true_motion(query, truth(rest), truth(moved), sides[:4])
     # without sides a slit vertex takes either lip's motion: the coin the sides decide
     blind = true_motion(query, truth(rest), truth(moved))
-    assert all(
-        np.allclose(b, w0, atol=1e-4) or np.allclose(b, w1, atol=1e-4)
-        for b, w0, w1 in zip(
-            blind[:3], [[0, -10, 0] @ rot.T] * 3, [[0, 0.5, 0] @ rot.T] * 3, strict=True
-        )
-    )
+    assert all(np.allclose(b, down) or np.allclose(b, still) for b in blind[:5])
 
 
 def test_template_lip_sides():

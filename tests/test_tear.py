@@ -60,6 +60,23 @@ def test_a_piece_cut_off_only_by_missing_vertices_is_kept():
     assert not torn_off(take, neutral, faces, 2.0).any()
 
 
+def test_cuts_inside_a_piece_and_edges_of_no_length_tear_nothing():
+    """A piece ringed by missing vertices keeps an edge squeezed inside it (a cut that joins the
+    piece to itself is no tear), and an edge of no length in the neutral that stays so is no
+    stretch, whatever max_stretch is."""
+    neutral, faces, idx = _grid()
+    take = neutral.copy()
+    take[idx[3:8, 4:9].ravel()] = np.nan
+    take[_patch(idx)] = neutral[_patch(idx)]  # the piece inside the ring
+    inner = idx[5, 6]
+    take[inner] = (neutral[inner] + neutral[idx[5, 7]]) / 2  # its edge to the right: 3 -> 1.5 mm
+    assert not torn_off(take, neutral, faces, 1.8).any()
+    neutral[inner] = neutral[idx[5, 7]]  # now an edge of no length in the neutral, as in the take
+    take[inner] = neutral[inner]
+    assert not torn_off(take, neutral, faces, 1e9).any()
+    assert not torn_off(neutral, neutral, np.zeros((0, 3), dtype=int), 2.0).any()
+
+
 def test_the_threshold_decides_and_inf_cuts_nothing():
     neutral, faces, idx = _grid()
     take = neutral.copy()

@@ -20,7 +20,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
-from scan2morph.template.mesh import IBUG_CANONICAL
+from scan2morph.template.mesh import IBUG_CANONICAL, INNER_LIPS
 from scan2morph.template.sample import behind_steps
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
@@ -91,32 +91,50 @@ def ideal_motion(
     return p_t @ true[:3, :3].T + true[:3, 3] - p_n
 
 
-#: iBUG indices (0-based) of the inner-lip contour: corner, upper 62-64, corner, lower 66-68.
-INNER_LIP = slice(60, 68)
+#: iBUG rows (0-based) of the inner-lip contour: corner, upper lip, corner, lower lip.
+INNER_LIP = np.asarray(INNER_LIPS) - 1
+
+#: The frontal view of the head frame (x right, y up): (x, y, z) -> (x, -y), y down as in images.
+FRONT = np.array([[1.0, 0.0], [0.0, -1.0], [0.0, 0.0]])
 
 
-def lip_side(points: np.ndarray, inner_lip: np.ndarray, band: float) -> np.ndarray:
-    """Which lip each 2D point belongs to: above or below the mouth slit's midline.
+def inner_lip_midline(inner_lip: np.ndarray) -> np.ndarray:
+    """(5, 2) the mouth's midline from the inner-lip contour, left to right.
+
+    Parameters
+    ----------
+    inner_lip : (8, 2) float
+        iBUG 61-68 in order (corner, upper lip, corner, lower lip); closed or open.
+
+    Returns
+    -------
+    (5, 2) float64
+        The corners and the mean of each upper/lower pair (62-68, 63-67, 64-66), sorted by x.
+    """
+    lip = np.asarray(inner_lip, dtype=np.float64)
+    mid = np.vstack([lip[0], (lip[1:4] + lip[7:4:-1]) / 2.0, lip[4]])
+    return mid[np.argsort(mid[:, 0])]
+
+
+def lip_side(points: np.ndarray, midline: np.ndarray, band: float) -> np.ndarray:
+    """Which lip each 2D point belongs to: above or below the mouth's midline.
 
     Parameters
     ----------
     points : (n, 2) float
-        Image or template positions (y down).
-    inner_lip : (8, 2) float
-        The inner-lip contour in the same frame, iBUG 61-68 order (corner, upper lip, corner,
-        lower lip); closed or open.
+        Positions in a frame whose y points down (an image, the template, :data:`FRONT`).
+    midline : (m, 2) float
+        The mouth's midline in the same frame, sorted by x (:func:`inner_lip_midline`, or the
+        slit itself).
     band : float
         Points farther than this from the midline (same units) are on neither lip.
 
     Returns
     -------
     (n,) int8
-        -1 above the midline (upper lip), +1 below (lower lip), 0 beyond the corners or the band.
+        -1 above the midline (upper lip), +1 below (lower lip), 0 beyond its ends or the band.
     """
-    lip = np.asarray(inner_lip, dtype=np.float64)
-    # the midline through the corners and the mean of each upper/lower pair (62-68, 63-67, 64-66)
-    mid = np.vstack([lip[0], (lip[1:4] + lip[7:4:-1]) / 2.0, lip[4]])
-    mid = mid[np.argsort(mid[:, 0])]
+    mid = np.asarray(midline, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64)
     offset = p[:, 1] - np.interp(p[:, 0], mid[:, 0], mid[:, 1])
     side = np.sign(offset).astype(np.int8)
@@ -127,8 +145,35 @@ def lip_side(points: np.ndarray, inner_lip: np.ndarray, band: float) -> np.ndarr
 def template_lip_sides(vertices2d: np.ndarray) -> np.ndarray:
     """(V,) int8 :func:`lip_side` of template vertices (canonical template coordinates): -1 upper
     lip, +1 lower lip, within half a mouth width of the slit; 0 elsewhere."""
-    lips = IBUG_CANONICAL[INNER_LIP]
-    return lip_side(vertices2d, lips, float(np.linalg.norm(lips[4] - lips[0])) / 2)
+    mid = inner_lip_midline(IBUG_CANONICAL[INNER_LIP])
+    return lip_side(vertices2d, mid, float(mid[-1, 0] - mid[0, 0]) / 2)
+
+
+def slit_midline(neutral: Truth) -> np.ndarray:
+    """(m, 2) the closed mouth's slit in the :data:`FRONT` view of the head frame, sorted by x.
+
+    At rest the lips meet along a slit whose skin vertices come in coincident pairs, one for
+    each lip; those pairs between the inner-lip corners and near them are the slit. A truth with
+    fewer than two such pairs (a mouth open at rest) gets the inner-lip landmarks' midline.
+    """
+    from scipy.spatial import cKDTree
+
+    rot, shift = neutral.pose[:3, :3], neutral.pose[:3, 3]
+    landmarks = (neutral.landmarks3d[INNER_LIP] - shift) @ rot @ FRONT  # scanner -> head frame
+    fallback = inner_lip_midline(landmarks)
+    used = np.unique(neutral.faces[neutral.skin_faces])
+    v = neutral.vertices[used] @ FRONT
+    near = (
+        (v[:, 0] > fallback[0, 0])
+        & (v[:, 0] < fallback[-1, 0])
+        & (np.abs(v[:, 1] - np.interp(v[:, 0], fallback[:, 0], fallback[:, 1])) < 10.0)
+    )
+    near_3d = neutral.vertices[used[near]]
+    pairs = cKDTree(near_3d).query_pairs(1e-6, output_type="ndarray")
+    if len(pairs) < 2:
+        return fallback
+    slit = near_3d[pairs[:, 0]] @ FRONT
+    return slit[np.argsort(slit[:, 0])]
 
 
 def true_motion(
@@ -145,12 +190,11 @@ def true_motion(
         The neutral mesh in the neutral's scanner frame.
     neutral, take : Truth
     sides : (V,) int, optional
-        The lip each template vertex is on (:func:`lip_side` of the template's own coordinates).
-        At rest the lips meet: a vertex on the slit is as close to the lower lip's skin as to
-        the upper lip's, which part when the mouth opens; a vertex of one lip is matched only to
-        skin that is not on the other. The truth's skin is sided in a frontal view of the head
-        frame (x right, y up) by the neutral's inner-lip landmarks. Without ``sides``, the
-        closest skin point whatever the lip.
+        The lip each template vertex is on (:func:`template_lip_sides`). At rest the lips meet:
+        a vertex on the slit is as close to the lower lip's skin as to the upper lip's, which
+        part when the mouth opens; a vertex of one lip is matched only to skin that is not on
+        the other. The truth's skin is sided by the slit itself (:func:`slit_midline`), within
+        half a mouth width of it. Without ``sides``, the closest skin point whatever the lip.
     """
     out = np.full(neutral_vertices.shape, np.nan)
     ok = np.isfinite(neutral_vertices).all(axis=1)
@@ -161,11 +205,9 @@ def true_motion(
         sides = np.asarray(sides)
         if sides.shape != ok.shape:
             raise InputError("truth", f"sides: expected ({len(ok)},) lip sides, got {sides.shape}")
-        rot, shift = neutral.pose[:3, :3], neutral.pose[:3, 3]
-        lips = (neutral.landmarks3d[INNER_LIP] - shift) @ rot  # scanner -> head frame
-        front = np.array([[1.0, 0.0], [0.0, -1.0], [0.0, 0.0]])  # (x, y, z) -> (x, -y): y down
-        width = float(np.linalg.norm(lips[4] - lips[0]))
-        face_side = lip_side(neutral.vertices[skin].mean(axis=1) @ front, lips @ front, width / 2)
+        mid = slit_midline(neutral)
+        centre = neutral.vertices[skin].mean(axis=1) @ FRONT
+        face_side = lip_side(centre, mid, float(mid[-1, 0] - mid[0, 0]) / 2)
         groups = [(ok & (sides == 0), skin)] + [
             (ok & (sides == s), skin[face_side != -s]) for s in (-1, 1)
         ]

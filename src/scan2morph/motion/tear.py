@@ -43,8 +43,11 @@ def torn_off(
     Returns
     -------
     (V,) bool
-        Finite take vertices in a piece of the cut mesh that is not its largest and that lost
-        an edge to the cut. Pieces cut off only by missing vertices are kept.
+        Finite take vertices in a piece of the cut mesh that is not its largest and that a cut
+        edge joined to another piece. Pieces cut off only by missing vertices are kept, as are
+        the cut edges within a piece. The largest piece is taken to be the face: a take whose
+        torn-off part is larger than the rest loses the rest instead (the motion stage logs
+        how many vertices each take lost).
     """
     take = np.asarray(take, dtype=np.float64)
     neutral = np.asarray(neutral, dtype=np.float64)
@@ -56,18 +59,24 @@ def torn_off(
         raise InputError(source, f"smoothing.max_stretch: expected a number > 1, got {max_stretch}")
     n = len(take)
     ok = np.isfinite(take).all(axis=1) & np.isfinite(neutral).all(axis=1)
-    e = unique_edges(np.asarray(faces, dtype=np.int64))
+    if not ok.any():
+        return np.zeros(n, dtype=bool)
+    e = unique_edges(np.asarray(faces, dtype=np.int64).reshape(-1, 3))
     e = e[ok[e[:, 0]] & ok[e[:, 1]]]
     length = lambda v: np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)  # noqa: E731
+    before, after = length(neutral), length(take)
+    # an edge of no length in the neutral keeps its ratio 1 while it stays so, infinite otherwise
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = length(take) / length(neutral)
+        ratio = np.where(before > 0, after / before, np.where(after > 0, np.inf, 1.0))
     cut = ~((ratio <= max_stretch) & (ratio >= 1.0 / max_stretch))
     kept = e[~cut]
     graph = sp.coo_matrix((np.ones(len(kept)), (kept[:, 0], kept[:, 1])), shape=(n, n))
     _, label = csgraph.connected_components(graph, directed=False)
-    if not ok.any():
-        return np.zeros(n, dtype=bool)
     largest = np.bincount(label[ok]).argmax()
+    # a piece is torn when a cut edge joins it to another piece (not by a cut inside it)
+    a, b = label[e[cut, 0]], label[e[cut, 1]]
+    apart = a != b
     touched = np.zeros(label.max() + 1, dtype=bool)
-    touched[label[e[cut].ravel()]] = True
+    touched[a[apart]] = True
+    touched[b[apart]] = True
     return ok & (label != largest) & touched[label]

@@ -104,7 +104,7 @@ def click_noise_motion(
     suppressed : (V,) bool
         The stencil mask (``/mask/suppressed``).
     smoothing : mapping
-        ``w``, ``iterations`` and optionally ``max_stretch`` (config ``smoothing``).
+        ``w``, ``iterations`` and ``max_stretch`` (config ``smoothing``; ``inf`` tears nothing).
     fit_options : mapping
         Keyword arguments of :func:`fit_take` besides the take's data and fiducial set
         (``levels``, ``min_valid_fraction``, ``max_fold_fraction``, ``min_weight``,
@@ -152,7 +152,7 @@ def click_noise_motion(
     draws = int(draws)
     suppressed = np.asarray(suppressed, dtype=bool)
     w, iterations = float(smoothing["w"]), int(smoothing["iterations"])
-    max_stretch = float(smoothing.get("max_stretch", np.inf))
+    max_stretch = float(smoothing["max_stretch"])
 
     def final(aligned, valid, base, base_valid, faces, where):
         raw = motion_vectors(

@@ -6,10 +6,14 @@ is a plain difference once the take is in the neutral frame.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.motion.tear import torn_off
+
+log = logging.getLogger("scan2morph")
 
 
 def _mesh(v: np.ndarray, valid: np.ndarray | None, name: str, source: str) -> tuple:
@@ -69,7 +73,10 @@ def motion_vectors(
     d[~(a_ok & n_ok)] = np.nan
     if faces is not None and np.isfinite(max_stretch):
         take = np.where(a_ok[:, None], a, np.nan)
-        d[torn_off(take, np.where(n_ok[:, None], n, np.nan), faces, max_stretch, source)] = np.nan
+        torn = torn_off(take, np.where(n_ok[:, None], n, np.nan), faces, max_stretch, source)
+        if torn.any():
+            log.info("%s: %d vertices torn off the face count as missing", source, torn.sum())
+        d[torn] = np.nan
     return d
 
 
