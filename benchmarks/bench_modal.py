@@ -121,7 +121,7 @@ def reconstruction(run: str, subject: str, config: str, ks: list[int]) -> None:
     import numpy as np
     import yaml
 
-    from scan2morph.evaluate.motion import template_lip_sides, true_motion
+    from scan2morph.evaluate.motion import template_lip_sides, true_motions
     from scan2morph.evaluate.truth import read_truth
     from scan2morph.modal.subject import rms_length
     from scan2morph.stages import Subject, modal
@@ -145,10 +145,8 @@ def reconstruction(run: str, subject: str, config: str, ks: list[int]) -> None:
     true = {}
     if truth_dir.is_dir():
         rest = read_truth(truth_dir / "neutral.npz")
-        sides = template_lip_sides(fine.vertices)
-        true = {
-            t: true_motion(neutral, rest, read_truth(truth_dir / f"{t}.npz"), sides) for t in exprs
-        }
+        takes = {t: read_truth(truth_dir / f"{t}.npz") for t in exprs}
+        true = true_motions(neutral, rest, takes, template_lip_sides(fine.vertices))
     fields = {t: data[paths.expression(t, "displacement")] for t in exprs}
     for policy in ("all", "still"):
         section = dict(cfg["modal"], fixed_outline=policy, reconstruction_k=ks)

@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 
 from scan2morph.align import transform_points
-from scan2morph.evaluate.motion import material_accuracy, template_lip_sides, true_motion
+from scan2morph.evaluate.motion import material_accuracy, template_lip_sides, true_motions
 from scan2morph.evaluate.truth import read_truth
 from scan2morph.geometry import vertex_normals
 from scan2morph.stages import refine
@@ -70,7 +70,8 @@ def main() -> None:
     nv = np.asarray(data[paths.mesh(neutral, "vertices")])
     n_valid = np.asarray(data[paths.mesh(neutral, "valid")], dtype=bool)
     normals = vertex_normals(nv, fine.faces)
-    sides = template_lip_sides(fine.vertices)
+    others = {t: truths[t] for t in takes[1:] if t in truths}
+    materials = true_motions(nv, truths[neutral], others, template_lip_sides(fine.vertices))
     click = float(config["synthetic"]["scanner"]["click_noise_px"])
     rng = np.random.default_rng(a.seed)
 
@@ -103,7 +104,7 @@ def main() -> None:
         if take not in truths:
             continue
         kind = _kind(take, config)
-        material = true_motion(nv, truths[neutral], truths[take], sides)
+        material = materials[take]
         t0 = time.perf_counter()
         part = refine.run(template, take, kind, neutral, data, params, take)
         dt = time.perf_counter() - t0

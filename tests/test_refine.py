@@ -155,7 +155,7 @@ def _subject_in_memory(skin_texture, takes=("neutral", "she", "smile1")):
 
 def _material_errors(data, truths, run):
     """Material relative error of each take's motion: aligned fit vs refined, mm over mm."""
-    from scan2morph.evaluate.motion import material_accuracy, template_lip_sides, true_motion
+    from scan2morph.evaluate.motion import material_accuracy, template_lip_sides, true_motions
     from scan2morph.geometry import vertex_normals
     from scan2morph.stages import refine
     from scan2morph.store import paths
@@ -164,10 +164,11 @@ def _material_errors(data, truths, run):
     nv = data[paths.mesh("neutral", "vertices")]
     fine = subdivide_template(run.template, 1)
     normals = vertex_normals(nv, fine.faces)
-    sides = template_lip_sides(fine.vertices)
+    takes = {t: truths[t] for t in run.subject.kinds if t != "neutral"}
+    materials = true_motions(nv, truths["neutral"], takes, template_lip_sides(fine.vertices))
     out = {}
-    for take in [t for t in run.subject.kinds if t != "neutral"]:
-        material = true_motion(nv, truths["neutral"], truths[take], sides)
+    for take in takes:
+        material = materials[take]
         where = data[paths.mesh("neutral", "valid")] & data[paths.mesh(take, "valid")]
         where &= refined[paths.refine(take, "valid")]
         out[take] = [

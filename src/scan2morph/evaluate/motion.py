@@ -15,8 +15,11 @@ Two references, because template-based correspondence is itself a model:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
@@ -156,8 +159,6 @@ def slit_midline(neutral: Truth) -> np.ndarray:
     each lip; those pairs between the inner-lip corners and near them are the slit. A truth with
     fewer than two such pairs (a mouth open at rest) gets the inner-lip landmarks' midline.
     """
-    from scipy.spatial import cKDTree
-
     rot, shift = neutral.pose[:3, :3], neutral.pose[:3, 3]
     landmarks = (neutral.landmarks3d[INNER_LIP] - shift) @ rot @ FRONT  # scanner -> head frame
     fallback = inner_lip_midline(landmarks)
@@ -174,6 +175,53 @@ def slit_midline(neutral: Truth) -> np.ndarray:
         return fallback
     slit = near_3d[pairs[:, 0]] @ FRONT
     return slit[np.argsort(slit[:, 0])]
+
+
+def true_motions(
+    neutral_vertices: np.ndarray,
+    neutral: Truth,
+    takes: Mapping[str, Truth],
+    sides: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """True motion of each template vertex in each take (see :func:`true_motion`).
+
+    The skin point of each neutral vertex (its closest point on the true neutral skin) is found
+    once and carried into every take.
+
+    Returns
+    -------
+    dict take -> (V, 3) float64
+        mm in the neutral's scanner frame; NaN where the neutral vertex is invalid.
+    """
+    if not takes:
+        return {}
+    ok = np.isfinite(neutral_vertices).all(axis=1)
+    skin = neutral.faces[neutral.skin_faces]
+    groups = [(ok, skin)]
+    if sides is not None:
+        sides = np.asarray(sides)
+        if sides.shape != ok.shape:
+            raise InputError("truth", f"sides: expected ({len(ok)},) lip sides, got {sides.shape}")
+        mid = slit_midline(neutral)
+        centre = neutral.vertices[skin].mean(axis=1) @ FRONT
+        face_side = lip_side(centre, mid, float(mid[-1, 0] - mid[0, 0]) / 2)
+        groups = [(ok & (sides == 0), skin)] + [
+            (ok & (sides == s), skin[face_side != -s]) for s in (-1, 1)
+        ]
+    posed = neutral.posed_vertices()
+    points = []  # (vertices, their skin triangles, barycentric weights)
+    for where, faces in groups:
+        if where.any():
+            face, bary, _ = closest_points(posed, faces, neutral_vertices[where])
+            points.append((where, faces[face], bary))
+    out = {}
+    for name, take in takes.items():
+        motion = np.full(neutral_vertices.shape, np.nan)
+        for where, tri, bary in points:
+            delta = np.einsum("qk,qkd->qd", bary, take.vertices[tri] - neutral.vertices[tri])
+            motion[where] = delta @ neutral.pose[:3, :3].T
+        out[name] = motion
+    return out
 
 
 def true_motion(
@@ -196,29 +244,7 @@ def true_motion(
         the other. The truth's skin is sided by the slit itself (:func:`slit_midline`), within
         half a mouth width of it. Without ``sides``, the closest skin point whatever the lip.
     """
-    out = np.full(neutral_vertices.shape, np.nan)
-    ok = np.isfinite(neutral_vertices).all(axis=1)
-    skin = neutral.faces[neutral.skin_faces]
-    posed = neutral.posed_vertices()
-    groups = [(ok, skin)]
-    if sides is not None:
-        sides = np.asarray(sides)
-        if sides.shape != ok.shape:
-            raise InputError("truth", f"sides: expected ({len(ok)},) lip sides, got {sides.shape}")
-        mid = slit_midline(neutral)
-        centre = neutral.vertices[skin].mean(axis=1) @ FRONT
-        face_side = lip_side(centre, mid, float(mid[-1, 0] - mid[0, 0]) / 2)
-        groups = [(ok & (sides == 0), skin)] + [
-            (ok & (sides == s), skin[face_side != -s]) for s in (-1, 1)
-        ]
-    for where, faces in groups:
-        if not where.any():
-            continue
-        face, bary, _ = closest_points(posed, faces, neutral_vertices[where])
-        tri = faces[face]
-        delta = np.einsum("qk,qkd->qd", bary, take.vertices[tri] - neutral.vertices[tri])
-        out[where] = delta @ neutral.pose[:3, :3].T
-    return out
+    return true_motions(neutral_vertices, neutral, {"take": take}, sides)["take"]
 
 
 def _rel(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> tuple[float, float, float]:

@@ -13,7 +13,7 @@ from scan2morph.evaluate.motion import (
     material_accuracy,
     motion_accuracy,
     template_lip_sides,
-    true_motion,
+    true_motions,
 )
 from scan2morph.evaluate.scan import face_region, stereo_accuracy
 from scan2morph.evaluate.truth import Truth
@@ -77,6 +77,8 @@ def subject_accuracy(
     sides = None
     if paths.template("vertices2d") in store:
         sides = template_lip_sides(store[paths.template("vertices2d")])
+    measured = [t for t in truths if t in visemes or t in expressions]
+    materials = true_motions(n_vertices, truths[neutral], {t: truths[t] for t in measured}, sides)
     # each truth seen through the camera of its take's pixel grid (RGB-D: colour camera; mesh:
     # the virtual camera), with the rotation from the take's frame into that camera
     views = {take: grid_view(truth, store, take) for take, truth in truths.items()}
@@ -98,7 +100,7 @@ def subject_accuracy(
                 store[paths.align(take, "transform")], v, valid, truth, truths[neutral]
             )
         if take in visemes:
-            material = true_motion(n_vertices, truths[neutral], truth, sides)
+            material = materials[take]
             ideal = material
             if template is not None:
                 sets = (fiducial_sets[neutral], fiducial_sets[take])
@@ -128,7 +130,7 @@ def subject_accuracy(
                 rel = bars[take]["relative"]
                 entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
         if take in expressions and paths.expression(take, "displacement") in store:
-            material = true_motion(n_vertices, truths[neutral], truth, sides)
+            material = materials[take]
             field = np.asarray(store[paths.expression(take, "displacement")], dtype=np.float64)
             entry["expression"] = material_accuracy(
                 field, material, n_normals, np.ones(len(field), dtype=bool)
