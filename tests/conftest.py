@@ -1,7 +1,9 @@
-"""Shared fixtures."""
+"""Shared fixtures; tests/slurm_run.py starts the SLURM run when the session starts."""
 
 from __future__ import annotations
 
 import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+
+pytest_plugins = ["tests.slurm_run"]

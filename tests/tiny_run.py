@@ -52,14 +52,18 @@ _RUN: dict[str, TinyRun] = {}
 
 
 def tiny_config(work: Path) -> Path:
-    """Write an empty user sheet and the tiny config into ``work``; returns the config file."""
-    sheet = work / "subjects.tsv"
-    sheet.write_text(HEADER)
+    """Write an empty user sheet and the tiny config into ``work``; returns the config file.
+
+    Its paths are relative to ``work`` (the run's working directory), so that the same config
+    (and so each store's config hash) runs in any working directory (tests/test_slurm.py runs
+    it again under SLURM)."""
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "subjects.tsv").write_text(HEADER)
     cfg = dict(
-        subjects=str(sheet),
+        subjects="subjects.tsv",
         synthetic=dict(subjects=1, takes=TAKES, scanner=SCANNER, stereo=dict(subjects=[])),
         modal=dict(modes=10, reconstruction_k=[1, 2, 5, 10]),
-        sweeps=str(work / "sweeps.tsv"),
+        sweeps="sweeps.tsv",
     )
     path = work / "tiny.yaml"
     path.write_text(yaml.safe_dump(cfg))
