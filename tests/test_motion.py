@@ -297,9 +297,76 @@ def test_missing_component_without_known_vertices_becomes_zero():
     assert (out[16:] == 0).all()
 
 
+def test_confidence_shortens_each_vertex_step():
+    """One step is d_i + w (1 - relief c_i) (mean of the neighbours - d_i), by hand on the torus;
+    relief 0 is the paper's step whatever the confidence; a missing vertex counts as unmeasured."""
+    n, w, relief = 10, 0.3, 0.8
+    f = _torus_faces(n)
+    rng = np.random.default_rng(11)
+    d = rng.normal(size=(n * n, 3))
+    c = rng.random(n * n)
+    out = laplacian_smooth(d, f, w=w, iterations=1, confidence=c, relief=relief)
+    for i in (0, 37, 99):
+        r, col = divmod(i, n)
+        nbrs = [((r + dr) % n) * n + (col + dc) % n for dr, dc in NEIGHBOURS]
+        step = w * (1 - relief * c[i])
+        assert_allclose(out[i], d[i] + step * (d[nbrs].mean(axis=0) - d[i]), rtol=1e-13)
+    plain = laplacian_smooth(d, f, w=w, iterations=7)
+    assert_allclose(laplacian_smooth(d, f, w=w, iterations=7, confidence=c, relief=0.0), plain)
+    # full confidence with full relief: nothing moves
+    ones = np.ones(n * n)
+    assert_allclose(laplacian_smooth(d, f, iterations=30, confidence=ones, relief=1.0), d)
+    # a missing vertex is filled, then smoothed with the full step however confident it was said
+    missing = np.zeros(n * n, dtype=bool)
+    missing[37] = True
+    d_in = d.copy()
+    d_in[37] = np.nan
+    filled = laplacian_smooth(d_in, f, iterations=0, missing=missing)
+    one = laplacian_smooth(d_in, f, w=w, iterations=1, missing=missing, confidence=ones, relief=1)
+    nbrs = [((3 + dr) % n) * n + (7 + dc) % n for dr, dc in NEIGHBOURS]
+    assert_allclose(one[37], filled[37] + w * (filled[nbrs].mean(axis=0) - filled[37]))
+    # NaN confidence counts as 0
+    nan_c = np.where(np.arange(n * n) % 2 == 0, np.nan, 0.0)
+    assert_allclose(
+        laplacian_smooth(d, f, w=w, iterations=3, confidence=nan_c, relief=1),
+        laplacian_smooth(d, f, w=w, iterations=3),
+    )
+
+
+def test_confidence_keeps_a_measured_step_and_smooths_the_noise():
+    """A lip-like step in the motion (10 mm over one ring, measured: confidence 1) next to noisy
+    unmeasured skin (confidence 0): against the true field, relief keeps the step that the
+    paper's uniform step blurs, and removes the noise as much as the uniform step does."""
+    n = 30
+    v, f = _grid(n, n)
+    x, y = v[:, 0], v[:, 1]
+    truth = np.zeros((len(v), 3))
+    truth[:, 1] = np.where(y >= n / 2, -10.0, 0.0)  # the lower half drops 10 mm
+    measured = np.abs(y - (n - 1) / 2) < 4  # the step's rows, measured in the texture
+    rng = np.random.default_rng(12)
+    noisy = truth + np.where(measured[:, None], 0.0, rng.normal(0, 1.0, size=truth.shape))
+    interior = (x > 2) & (x < n - 3) & (y > 2) & (y < n - 3)
+
+    def rms(a, where):
+        return float(np.sqrt(np.mean(np.sum((a[where] - truth[where]) ** 2, axis=1))))
+
+    uniform = laplacian_smooth(noisy, f)
+    relieved = laplacian_smooth(noisy, f, confidence=measured.astype(float), relief=1.0)
+    step = interior & measured
+    assert rms(relieved, step) < 0.5 * rms(uniform, step)
+    assert rms(uniform, step) > 1.0  # mm: the uniform step blurs the drop
+    rest = interior & (np.abs(y - (n - 1) / 2) > 8)
+    assert rms(relieved, rest) < 0.5 * rms(noisy, rest)
+    assert rms(relieved, rest) == pytest.approx(rms(uniform, rest), rel=0.15)
+
+
 @pytest.mark.parametrize(
     ("kw", "match"),
     [
+        ({"relief": 1.5}, r"relief: expected 0 <= relief <= 1"),
+        ({"relief": -0.1}, r"relief: expected 0 <= relief <= 1"),
+        ({"confidence": np.ones(3)}, r"confidence: expected \(16,\) values in \[0, 1\]"),
+        ({"confidence": np.full(16, 1.2)}, r"confidence: expected values in \[0, 1\], got 1.2"),
         ({"w": 1.5}, r"w: expected 0 <= w <= 1"),
         ({"w": -0.1}, r"w: expected 0 <= w <= 1"),
         ({"iterations": -1}, r"iterations: expected an integer >= 0"),

@@ -25,7 +25,7 @@ FIT = {
     "min_weight": 1.0,
     "max_slope_deg": None,
 }
-NO_SMOOTHING = {"w": 0.1, "iterations": 0, "max_stretch": 2.0}
+NO_SMOOTHING = {"w": 0.1, "iterations": 0, "max_stretch": 2.0, "confidence_relief": 0.5}
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +85,10 @@ def test_error_bar_scales_with_the_click_noise(template, takes):
 def test_masked_vertices_carry_no_error_and_smoothing_is_the_pipelines(template, takes):
     mask = template.vertices[:, 1] > np.median(template.vertices[:, 1])
     res = _run(
-        template, takes, suppressed=mask, smoothing={"w": 0.1, "iterations": 30, "max_stretch": 2.0}
+        template,
+        takes,
+        suppressed=mask,
+        smoothing={"w": 0.1, "iterations": 30, "max_stretch": 2.0, "confidence_relief": 0.5},
     )
     assert_array_equal(res["she"]["rms_mm"][mask], 0.0)
     assert (res["she"]["rms_mm"][~mask] > 0).all()
@@ -177,7 +180,7 @@ def test_reference_motion_is_the_pipelines_and_takes_do_not_share_noise(template
         "subj",
         max_stretch=2.0,
     )
-    smoothing = {"w": 0.1, "iterations": 30, "max_stretch": 2.0}
+    smoothing = {"w": 0.1, "iterations": 30, "max_stretch": 2.0, "confidence_relief": 0.5}
     mask = stored["/mask/suppressed"]
     assert 0 < mask.sum() < len(mask)
     alone = _run(template, takes, suppressed=mask, smoothing=smoothing)["she"]
@@ -223,7 +226,9 @@ def test_a_refiner_that_finds_the_skin_whatever_the_clicks_leaves_only_the_neutr
     def exact(take, fit, take_landmarks, neutral_landmarks):
         seen.append(np.array(take_landmarks))
         mesh = fit_take(template, neutral.landmarks, neutral.xyz, levels=0)  # the true points
-        return transform_points(visemes[take].transform, mesh["vertices"]), mesh["valid"]
+        # confidence 0: smoothed as the plain run is, so that its oracle holds
+        zero = np.zeros(len(mesh["valid"]))
+        return transform_points(visemes[take].transform, mesh["vertices"]), mesh["valid"], zero
 
     plain = _run(template, takes, draws=100)["she"]["rms_error_mm"]
     refined = _run(template, takes, draws=100, refiner=exact)["she"]["rms_error_mm"]

@@ -250,14 +250,18 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
     refined = part.datasets[paths.refine("she", "vertices")]
     both = np.isfinite(fit).all(axis=1) & np.isfinite(refined).all(axis=1)
     moved = np.linalg.norm(refined[both] - fit[both], axis=1)
+    confidence = part.datasets[paths.refine("she", "confidence")]
     if same_skin:
         assert attrs["used"] and attrs["problem"] == ""
         assert attrs["confident_share"] > 0.8
         assert np.median(moved) < 0.05  # mm: nothing to correct
+        assert np.mean(confidence > 0.5) == pytest.approx(attrs["confident_share"])
     else:
         assert not attrs["used"] and "correlates" in attrs["problem"]
         assert attrs["confident_share"] < params.min_confident_share
         np.testing.assert_allclose(refined[both], fit[both], atol=1e-9)
+        # the fit's points were measured nowhere: the motion stage smooths them as a fit's
+        np.testing.assert_array_equal(confidence, 0.0)
 
 
 def test_a_refinement_not_used_is_a_warning_of_the_subject(tmp_path):

@@ -25,10 +25,13 @@ from scan2morph.store import paths
 
 @dataclass(frozen=True)
 class AlignedMesh:
-    """A take's mesh in the neutral frame: ``vertices`` (V, 3) mm (NaN = invalid), ``valid`` (V,)."""
+    """A take's mesh in the neutral frame: ``vertices`` (V, 3) mm (NaN = invalid), ``valid`` (V,)
+    and, when the dense refinement measured its correspondence, ``confidence`` (V,) in [0, 1]
+    (:mod:`scan2morph.refine`; None: every vertex placed by the template fit alone)."""
 
     vertices: np.ndarray
     valid: np.ndarray
+    confidence: np.ndarray | None = None
 
 
 def harmonic_fill(values: np.ndarray, faces: np.ndarray, known: np.ndarray) -> np.ndarray:
@@ -113,6 +116,7 @@ def viseme_motion(
     iterations: int,
     source: str,
     max_stretch: float = np.inf,
+    relief: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Mask, motion vectors and viseme models.
 
@@ -130,6 +134,9 @@ def viseme_motion(
     max_stretch : float
         Take vertices torn off the face beyond this stretch count as invalid
         (:func:`~scan2morph.motion.vectors.motion_vectors`).
+    relief : float
+        Share of the smoothing step taken off where a viseme's correspondence was measured with
+        confidence 1 (:func:`~scan2morph.motion.smooth.laplacian_smooth`; 0: the paper's step).
 
     Returns
     -------
@@ -157,6 +164,8 @@ def viseme_motion(
             fixed=suppressed,
             missing=missing,
             source=f"{source}/{take}",
+            confidence=mesh.confidence,
+            relief=relief,
         )
         out[paths.viseme(take, "motion_raw")] = raw
         out[paths.viseme(take, "motion")] = smooth

@@ -7,6 +7,13 @@ The paper's explicit diffusion step on the template's 1-ring ("umbrella") operat
 iterated 30 times with w = 0.1. Suppressed (masked) vertices are held at zero every
 iteration (a Dirichlet boundary); missing (invalid) vertices are first filled from their
 neighbours.
+
+The smoothing removes correspondence noise, and blurs real motion that varies over a few
+vertices (the lips: ~6 mm of diffusion length at the paper's setting). Where the dense
+refinement (:mod:`scan2morph.refine`) measured a vertex's correspondence in the skin's texture,
+the motion is known to a fraction of a pixel: an optional per-vertex ``confidence`` in [0, 1]
+shortens the step there, ``w_i = w * (1 - relief * confidence_i)`` (``relief`` 0: the paper's
+uniform step).
 """
 
 from __future__ import annotations
@@ -33,6 +40,24 @@ def _flags(m: np.ndarray | None, n: int, name: str, source: str) -> np.ndarray:
     if m.shape != (n,) or m.dtype != np.bool_:
         raise InputError(source, f"{name}: expected ({n},) bool, got {m.dtype} {m.shape}")
     return m
+
+
+def _confidence(c: np.ndarray | None, n: int, missing: np.ndarray, source: str) -> np.ndarray:
+    """(n,) per-vertex confidence in [0, 1]; 0 where missing (a filled vertex measured nothing)."""
+    if c is None:
+        return np.zeros(n)
+    c = np.array(c, dtype=np.float64)
+    if c.shape != (n,):
+        raise InputError(source, f"confidence: expected ({n},) values in [0, 1], got {c.shape}")
+    bad = np.isfinite(c) & ((c < 0) | (c > 1))
+    if bad.any():
+        raise InputError(
+            source,
+            f"confidence: expected values in [0, 1], got {float(c[bad][0])} at vertex "
+            f"{int(np.flatnonzero(bad)[0])}",
+        )
+    c[~np.isfinite(c) | missing] = 0.0
+    return c
 
 
 def _adjacency(faces: np.ndarray, n: int) -> sp.csr_array:
@@ -109,6 +134,8 @@ def laplacian_smooth(
     fixed: np.ndarray | None = None,
     missing: np.ndarray | None = None,
     source: str = "motion",
+    confidence: np.ndarray | None = None,
+    relief: float = 0.0,
 ) -> np.ndarray:
     """Smooth per-vertex motion vectors with the 1-ring umbrella Laplacian.
 
@@ -128,6 +155,12 @@ def laplacian_smooth(
         Invalid vertices: first filled from their neighbours (:func:`fill_missing`).
     source : str
         Label for error messages.
+    confidence : (V,) float, optional
+        How well each vertex's correspondence was measured, in [0, 1] (NaN and missing
+        vertices: 0). None: 0 everywhere.
+    relief : float
+        Share of the step taken off at confidence 1, in [0, 1]: vertex ``i`` steps by
+        ``w * (1 - relief * confidence_i)``. 0 (default) is the paper's uniform step.
 
     Returns
     -------
@@ -137,13 +170,17 @@ def laplacian_smooth(
     Raises
     ------
     InputError
-        Bad shapes, ``w`` outside [0, 1] or ``iterations`` < 0.
+        Bad shapes, ``w`` or ``relief`` outside [0, 1], ``iterations`` < 0 or a confidence
+        outside [0, 1].
     """
     w_f = float(w)
     if not 0.0 <= w_f <= 1.0:
         raise InputError(source, f"w: expected 0 <= w <= 1, got {w!r}")
     if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 0:
         raise InputError(source, f"iterations: expected an integer >= 0, got {iterations!r}")
+    relief_f = float(relief)
+    if not 0.0 <= relief_f <= 1.0:
+        raise InputError(source, f"relief: expected 0 <= relief <= 1, got {relief!r}")
     d = _field(d, source)
     n = len(d)
     f = _check_faces(faces, n, source)
@@ -153,11 +190,13 @@ def laplacian_smooth(
     d[fixed] = 0.0
     d = _fill(d, adj, ~missing | fixed)
 
-    # One step is d <- M d with M = (1 - w) I + w D^-1 A on vertices that have neighbours.
+    # One step is d <- M d with M = (1 - W) I + W D^-1 A on vertices that have neighbours,
+    # W = diag(w_i)
+    w_i = w_f * (1.0 - relief_f * _confidence(confidence, n, missing, source))
     deg = adj.sum(axis=1)
     has = deg > 0
     inv_deg = np.divide(1.0, deg, out=np.zeros(n), where=has)
-    step = sp.diags_array(1.0 - w_f * has) + sp.diags_array(w_f * inv_deg) @ adj
+    step = sp.diags_array(1.0 - w_i * has) + sp.diags_array(w_i * inv_deg) @ adj
     step = sp.csr_array(step)
     for _ in range(int(iterations)):
         d = step @ d

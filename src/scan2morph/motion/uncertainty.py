@@ -28,10 +28,10 @@ from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 from scan2morph.template.sample import fit_take
 
-#: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid)``: a take's
-#: refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them), in the
-#: neutral frame (mm).
-Refiner = Callable[[str, dict, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+#: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid, confidence)``: a
+#: take's refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them),
+#: in the neutral frame (mm), with the refinement's per-vertex confidence in [0, 1].
+Refiner = Callable[[str, dict, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 def noise_datasets(result: Mapping[str, dict]) -> dict[str, np.ndarray]:
@@ -104,7 +104,8 @@ def click_noise_motion(
     suppressed : (V,) bool
         The stencil mask (``/mask/suppressed``).
     smoothing : mapping
-        ``w``, ``iterations`` and ``max_stretch`` (config ``smoothing``; ``inf`` tears nothing).
+        ``w``, ``iterations``, ``max_stretch`` and ``confidence_relief`` (config ``smoothing``;
+        ``inf`` tears nothing; the relief applies to a ``refiner``'s confidence).
     fit_options : mapping
         Keyword arguments of :func:`fit_take` besides the take's data and fiducial set
         (``levels``, ``min_valid_fraction``, ``max_fold_fraction``, ``min_weight``,
@@ -118,11 +119,12 @@ def click_noise_motion(
     source : str
         The subject, for messages.
     refiner : callable, optional
-        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid)``: the
-        take's correspondence refined against the neutral from those clicks and the take's fit
-        to them (:func:`fit_take`'s result, not fitted again; neutral frame, mm), when
-        the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every draw is then
-        that of the refined meshes, as the pipeline's is.
+        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid,
+        confidence)``: the take's correspondence refined against the neutral from those clicks
+        and the take's fit to them (:func:`fit_take`'s result, not fitted again; neutral frame,
+        mm), when the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every
+        draw is then that of the refined meshes, smoothed with their confidence, as the
+        pipeline's is.
 
     Returns
     -------
@@ -153,8 +155,9 @@ def click_noise_motion(
     suppressed = np.asarray(suppressed, dtype=bool)
     w, iterations = float(smoothing["w"]), int(smoothing["iterations"])
     max_stretch = float(smoothing["max_stretch"])
+    relief = float(smoothing["confidence_relief"])
 
-    def final(aligned, valid, base, base_valid, faces, where):
+    def final(aligned, valid, confidence, base, base_valid, faces, where):
         raw = motion_vectors(
             aligned, base, valid, base_valid, source=where, faces=faces, max_stretch=max_stretch
         )
@@ -166,6 +169,8 @@ def click_noise_motion(
             fixed=suppressed,
             missing=~np.isfinite(raw).all(axis=1),
             source=where,
+            confidence=confidence,
+            relief=relief,
         )
 
     n_base, n_mesh = _fit(template, neutral, neutral.landmarks, fit_options, f"{source}/neutral")
@@ -178,17 +183,17 @@ def click_noise_motion(
         return {}
 
     def corresponded(take, t_fit, t_landmarks, n_landmarks):
-        """The take's vertices and validity compared with the neutral's: its aligned fit, or
-        its refined mesh."""
+        """The take's vertices, validity and correspondence confidence compared with the
+        neutral's: its aligned fit (no confidence), or its refined mesh."""
         if refiner is None:
-            return t_fit[0], t_fit[1]["valid"]
+            return t_fit[0], t_fit[1]["valid"], None
         return refiner(take, t_fit[1], t_landmarks, n_landmarks)
 
     reference = {}
     for take, data in visemes.items():
         t_fit = _fit(template, data, data.landmarks, fit_options, f"{source}/{take}")
-        v, valid = corresponded(take, t_fit, data.landmarks, neutral.landmarks)
-        reference[take] = final(v, valid, n_base, n_mesh["valid"], faces, take)
+        v, valid, conf = corresponded(take, t_fit, data.landmarks, neutral.landmarks)
+        reference[take] = final(v, valid, conf, n_base, n_mesh["valid"], faces, take)
 
     def perturbed(name, data, stream):
         """The take's ``draws`` fits with perturbed clicks (None where refused)."""
@@ -221,8 +226,8 @@ def click_noise_motion(
             if n_fit is None or t_fit is None:
                 continue
             where = f"{source}/{take} (click-noise draw)"
-            v, valid = corresponded(take, t_fit, t_fit[2], n_fit[2])
-            moved = final(v, valid, n_fit[0], n_fit[1]["valid"], faces, where)
+            v, valid, conf = corresponded(take, t_fit, t_fit[2], n_fit[2])
+            moved = final(v, valid, conf, n_fit[0], n_fit[1]["valid"], faces, where)
             d2 = np.sum((moved - reference[take]) ** 2, axis=1)
             have = np.isfinite(d2)  # a vertex the smoothing could not reach has no value
             sq[have] += d2[have]

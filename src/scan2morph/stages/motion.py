@@ -47,6 +47,9 @@ class Params:
     refined : bool
         Compare the refined meshes (``/takes/{take}/refine``) rather than the aligned fits
         (``refine.method`` other than ``none``).
+    relief : float
+        Share of the smoothing step taken off where the refinement measured a viseme's
+        correspondence with confidence 1 (``smoothing.confidence_relief``; only with ``refined``).
     """
 
     levels: int
@@ -57,6 +60,7 @@ class Params:
     max_stretch: float = np.inf
     include_failed: bool = False
     refined: bool = False
+    relief: float = 0.0
 
     @classmethod
     def from_config(
@@ -78,18 +82,20 @@ class Params:
             float(smoothing["max_stretch"]),
             bool(quality["include_failed_takes"]),
             refine_enabled(refine or {}),
+            float(smoothing["confidence_relief"]),
         )
 
 
 def aligned_mesh(
     data: Mapping[str, np.ndarray], take: str, source: str, refined: bool = False
 ) -> AlignedMesh:
-    """A take's mesh in the neutral frame and its validity: the refined mesh (refine part) or
-    the aligned fit (fit and align parts)."""
+    """A take's mesh in the neutral frame and its validity: the refined mesh (refine part, with
+    the refinement's confidence) or the aligned fit (fit and align parts)."""
     if refined:
         return AlignedMesh(
             need(data, paths.refine(take, "vertices"), source),
             need(data, paths.refine(take, "valid"), source),
+            need(data, paths.refine(take, "confidence"), source),
         )
     return AlignedMesh(
         need(data, paths.align(take, "vertices"), source),
@@ -134,6 +140,7 @@ def run(
         params.iterations,
         source=name,
         max_stretch=params.max_stretch,
+        relief=params.relief,
     )
     out |= expression_displacements(
         neutral,

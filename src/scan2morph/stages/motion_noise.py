@@ -50,7 +50,11 @@ def _refiner(template, subject, data, section, refine_section):
         }
         part = refine.run(template, take, subject.kinds[take], neutral, draw, params, source)
         d = part.datasets
-        return d[paths.refine(take, "vertices")], d[paths.refine(take, "valid")]
+        return (
+            d[paths.refine(take, "vertices")],
+            d[paths.refine(take, "valid")],
+            d[paths.refine(take, "confidence")],
+        )
 
     return refiner
 

@@ -108,7 +108,8 @@ def run(
     -------
     Part
         ``refine/vertices`` (V, 3) mm in the neutral frame (NaN where invalid), ``refine/valid``
-        (V,), ``refine/points2d`` (V, 2) px in the take's image and ``refine/confidence`` (V,);
+        (V,), ``refine/points2d`` (V, 2) px in the take's image and ``refine/confidence`` (V,) (0
+        where the fit was kept);
         the ``refine`` group's attributes hold the median correction (px), the share of
         vertices with a confident measurement, whether the refinement was ``used`` and, when not,
         the ``problem``.
@@ -154,6 +155,9 @@ def run(
         )
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points
+        # the points are the fit's: nothing was measured at them (the motion stage smooths
+        # them as it smooths a fit's)
+        report["confidence"] = np.zeros(len(points))
     vertices, ok = sample_mesh(
         need(data, paths.range_image(take, "xyz"), source),
         refined,
