@@ -15,7 +15,12 @@ prints, for the template fit (the paper's correspondence) and for the refined on
   perturbed ``N`` times with the config's ``synthetic.scanner.click_noise_px`` (seeded), both
   refitted (and refined), and the RMS change of the motion is printed as a share of the material
   motion's RMS (the pipeline's error bar, measured the same way for both methods);
-- the wall time of the refinement per take (s).
+- the wall time of the refinement per take (s);
+- with ``--oracle-mouth U``: the raw motion's error when the refined pixel of every vertex within
+  ``U`` template units of the mouth (the mouth width is 1.12) is replaced by the true projection
+  of its skin point (:func:`~scan2morph.evaluate.motion.true_positions` through the take's
+  camera) and resampled as the refine stage samples: what a perfect correspondence of the mouth
+  would give, the rest unchanged.
 """
 
 from __future__ import annotations
@@ -25,17 +30,26 @@ import glob
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import yaml
+from scipy.spatial import cKDTree
 
 from scan2morph.align import transform_points
-from scan2morph.evaluate.motion import material_accuracy, template_lip_sides, true_motions
+from scan2morph.evaluate.modality import grid_view
+from scan2morph.evaluate.motion import (
+    material_accuracy,
+    template_lip_sides,
+    true_motions,
+    true_positions,
+)
 from scan2morph.evaluate.truth import read_truth
 from scan2morph.geometry import vertex_normals
 from scan2morph.stages import refine
 from scan2morph.stages.fit import fiducial_set
 from scan2morph.store import paths, read_parts
 from scan2morph.template import fit_options, fit_take, load_template, subdivide_template
+from scan2morph.template.sample import sample_mesh
 
 
 def _kind(take: str, config: dict) -> str:
@@ -50,13 +64,15 @@ def main() -> None:
     ap.add_argument("--config", type=Path, default=Path("config/config.yaml"))
     ap.add_argument("--draws", type=int, default=0)
     ap.add_argument("--seed", type=int, default=2009)
+    ap.add_argument("--oracle-mouth", type=float, default=0.0, metavar="U")
     a = ap.parse_args()
     config = yaml.safe_load(a.config.read_text())
     root = a.workdir / "results" / a.subject / "takes"
     takes = sorted(p.name for p in root.iterdir() if (p / "align.h5").exists())
     neutral = next(t for t in takes if _kind(t, config) == "neutral")
     takes = [neutral] + [t for t in takes if t != neutral]
-    data = read_parts([root / t / f"{s}.h5" for t in takes for s in ("repair", "fit", "align")])
+    parts = ("ingest", "repair", "fit", "align")  # ingest: the camera of a stereo/RGB-D grid
+    data = read_parts([root / t / f"{s}.h5" for t in takes for s in parts])
     template = load_template(a.workdir / "resources" / "template.npz")
     truth_files = {
         t: glob.glob(str(a.workdir / "results" / "**" / a.subject / "truth" / f"{t}.npz"))
@@ -71,7 +87,10 @@ def main() -> None:
     n_valid = np.asarray(data[paths.mesh(neutral, "valid")], dtype=bool)
     normals = vertex_normals(nv, fine.faces)
     others = {t: truths[t] for t in takes[1:] if t in truths}
-    materials = true_motions(nv, truths[neutral], others, template_lip_sides(fine.vertices))
+    sides = template_lip_sides(fine.vertices)
+    materials = true_motions(nv, truths[neutral], others, sides)
+    skin_at = true_positions(nv, truths[neutral], others, sides) if a.oracle_mouth else {}
+    mouth = cKDTree(fine.vertices[fine.mouth_boundary]).query(fine.vertices)[0] <= a.oracle_mouth
     click = float(config["synthetic"]["scanner"]["click_noise_px"])
     rng = np.random.default_rng(a.seed)
 
@@ -97,6 +116,8 @@ def main() -> None:
 
     header = f"{'take':8s} {'material':>8s} | {'fit: rel':>9s} {'n mm':>5s} {'t mm':>5s}"
     header += f" | {'refined: rel':>12s} {'n mm':>5s} {'t mm':>5s} | {'time s':>6s}"
+    if a.oracle_mouth:
+        header += f" | {'oracle mouth':>12s}"
     if a.draws:
         header += f" | {'click spread fit':>16s} {'refined':>7s}"
     print(header)
@@ -120,6 +141,33 @@ def main() -> None:
             f" | {r['material_relative_error']:12.3f} {r['material_normal_rms_error_mm']:5.2f} "
             f"{r['material_tangential_rms_error_mm']:5.2f} | {dt:6.1f}"
         )
+        if a.oracle_mouth:
+            view, _ = grid_view(truths[take], data, take)
+            dist = np.asarray(view.extra.get("D", np.zeros(5)), dtype=np.float64)
+            pos = skin_at[take]
+            ok = np.isfinite(pos).all(axis=1)
+            if view is not truths[take]:  # a stereo/RGB-D grid: its camera, not the take's frame
+                cam = view.pose @ np.linalg.inv(truths[take].pose)
+                pos = pos @ cam[:3, :3].T + cam[:3, 3]
+            true_px = np.full((len(pos), 2), np.nan)
+            true_px[ok] = cv2.projectPoints(pos[ok], np.zeros(3), np.zeros(3), view.K, dist)[
+                0
+            ].reshape(-1, 2)
+            px = np.array(part.datasets[paths.refine(take, "points2d")])
+            swap = mouth & ok
+            px[swap] = true_px[swap]
+            v, v_ok = sample_mesh(
+                np.asarray(data[paths.range_image(take, "xyz")]),
+                px,
+                fine.faces,
+                take,
+                params.min_weight,
+                params.max_slope_deg,
+                exclude=np.flatnonzero(~np.asarray(data[paths.mesh(take, "valid")], dtype=bool)),
+            )
+            o_m = transform_points(np.asarray(data[paths.align(take, "transform")]), v) - nv
+            o = material_accuracy(o_m, material, normals, where & v_ok)
+            line += f" | {o['material_relative_error']:12.3f}"
         if a.draws:
             sq_f, sq_r, n = 0.0, 0.0, 0
             for _ in range(a.draws):

@@ -122,11 +122,14 @@ def test_a_vertex_on_the_closed_mouth_follows_its_own_lip():
     """Two lips meet along a wavy slit at rest (two copies of its vertices) and part in the take:
     the lower lip drops 10 mm. A neutral vertex on the slit is as close to either lip; with the
     template's lip sides it takes its own lip's motion, also where the slit is 1.5 mm off the
-    straight line through the inner-lip landmarks, and vertices off the slit are unaffected."""
+    straight line through the inner-lip landmarks, and vertices off the slit are unaffected.
+    ``true_positions`` puts the same skin points in a take of another pose."""
+    from dataclasses import replace
+
     from scipy.spatial.transform import Rotation
 
     from scan2morph.errors import InputError
-    from scan2morph.evaluate.motion import true_motion
+    from scan2morph.evaluate.motion import true_motion, true_positions
     from scan2morph.evaluate.truth import Truth
 
     def slit(x):  # through the landmarks at x = 0, +-10, +-20 and 1.5 mm off between them
@@ -166,6 +169,15 @@ def test_a_vertex_on_the_closed_mouth_follows_its_own_lip():
     # without sides a slit vertex takes either lip's motion: the coin the sides decide
     blind = true_motion(query, truth(rest), truth(moved))
     assert all(np.allclose(b, down) or np.allclose(b, still) for b in blind[:5])
+    # the same skin points in the take, in the take's own frame (another pose): the oracle of a
+    # correspondence
+    other = np.eye(4)
+    other[:3, :3] = Rotation.from_euler("xyz", [-5, 30, 2], degrees=True).as_matrix()
+    other[:3, 3] = [-20.0, 10.0, 700.0]
+    take = replace(truth(moved), pose=other)
+    head = (query - pose[:3, 3]) @ rot + want @ rot  # the skin points in the head frame, moved
+    got = true_positions(query, truth(rest), {"t": take}, sides)["t"]
+    np.testing.assert_allclose(got, head @ other[:3, :3].T + other[:3, 3], atol=1e-4)
 
 
 def test_template_lip_sides():

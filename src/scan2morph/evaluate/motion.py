@@ -177,6 +177,42 @@ def slit_midline(neutral: Truth) -> np.ndarray:
     return slit[np.argsort(slit[:, 0])]
 
 
+def _skin_points(
+    neutral_vertices: np.ndarray, neutral: Truth, sides: np.ndarray | None
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The skin point of each valid neutral vertex: groups of (vertices, their skin triangles
+    (n, 3), barycentric weights (n, 3)), with the lip sides of :func:`true_motion`."""
+    ok = np.isfinite(neutral_vertices).all(axis=1)
+    skin = neutral.faces[neutral.skin_faces]
+    groups = [(ok, skin)]
+    if sides is not None:
+        sides = np.asarray(sides)
+        if sides.shape != ok.shape:
+            raise InputError("truth", f"sides: expected ({len(ok)},) lip sides, got {sides.shape}")
+        mid = slit_midline(neutral)
+        centre = neutral.vertices[skin].mean(axis=1) @ FRONT
+        face_side = lip_side(centre, mid, float(mid[-1, 0] - mid[0, 0]) / 2)
+        groups = [(ok & (sides == 0), skin)] + [
+            (ok & (sides == s), skin[face_side != -s]) for s in (-1, 1)
+        ]
+    posed = neutral.posed_vertices()
+    points = []
+    for where, faces in groups:
+        if where.any():
+            face, bary, _ = closest_points(posed, faces, neutral_vertices[where])
+            points.append((where, faces[face], bary))
+    return points
+
+
+def _at_skin(points: list, shape: tuple, values: np.ndarray) -> np.ndarray:
+    """Per-vertex values (``shape``) of a field given on the truth's vertices, at each template
+    vertex's skin point (:func:`_skin_points`); NaN where there is none."""
+    out = np.full(shape, np.nan)
+    for where, tri, bary in points:
+        out[where] = np.einsum("qk,qkd->qd", bary, values[tri])
+    return out
+
+
 def true_motions(
     neutral_vertices: np.ndarray,
     neutral: Truth,
@@ -193,35 +229,37 @@ def true_motions(
     dict take -> (V, 3) float64
         mm in the neutral's scanner frame; NaN where the neutral vertex is invalid.
     """
-    if not takes:
-        return {}
-    ok = np.isfinite(neutral_vertices).all(axis=1)
-    skin = neutral.faces[neutral.skin_faces]
-    groups = [(ok, skin)]
-    if sides is not None:
-        sides = np.asarray(sides)
-        if sides.shape != ok.shape:
-            raise InputError("truth", f"sides: expected ({len(ok)},) lip sides, got {sides.shape}")
-        mid = slit_midline(neutral)
-        centre = neutral.vertices[skin].mean(axis=1) @ FRONT
-        face_side = lip_side(centre, mid, float(mid[-1, 0] - mid[0, 0]) / 2)
-        groups = [(ok & (sides == 0), skin)] + [
-            (ok & (sides == s), skin[face_side != -s]) for s in (-1, 1)
-        ]
-    posed = neutral.posed_vertices()
-    points = []  # (vertices, their skin triangles, barycentric weights)
-    for where, faces in groups:
-        if where.any():
-            face, bary, _ = closest_points(posed, faces, neutral_vertices[where])
-            points.append((where, faces[face], bary))
-    out = {}
-    for name, take in takes.items():
-        motion = np.full(neutral_vertices.shape, np.nan)
-        for where, tri, bary in points:
-            delta = np.einsum("qk,qkd->qd", bary, take.vertices[tri] - neutral.vertices[tri])
-            motion[where] = delta @ neutral.pose[:3, :3].T
-        out[name] = motion
-    return out
+    points = _skin_points(neutral_vertices, neutral, sides) if takes else []
+    rot = neutral.pose[:3, :3]
+    return {
+        name: _at_skin(points, neutral_vertices.shape, take.vertices - neutral.vertices) @ rot.T
+        for name, take in takes.items()
+    }
+
+
+def true_positions(
+    neutral_vertices: np.ndarray,
+    neutral: Truth,
+    takes: Mapping[str, Truth],
+    sides: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """Where the skin point of each template vertex is in each take (the oracle of a
+    correspondence: project it with the take's camera to get the right pixel).
+
+    Parameters as :func:`true_motions` (the skin point and the lip sides are the same).
+
+    Returns
+    -------
+    dict take -> (V, 3) float64
+        mm in the take's frame (``take.pose`` applied: the frame its scan is in); NaN where the
+        neutral vertex is invalid.
+    """
+    points = _skin_points(neutral_vertices, neutral, sides) if takes else []
+    return {
+        name: _at_skin(points, neutral_vertices.shape, take.vertices) @ take.pose[:3, :3].T
+        + take.pose[:3, 3]
+        for name, take in takes.items()
+    }
 
 
 def true_motion(
