@@ -54,7 +54,7 @@ def test_viseme_motion_masks_smooths_and_builds_models(face):
     assert err < 1.0
 
 
-def test_expression_displacement_is_unsmoothed_and_filled(face):
+def test_expression_displacement_without_smoothing_is_filled(face):
     v, f = face
     neutral = AlignedMesh(v, np.ones(len(v), bool))
     valid = np.ones(len(v), bool)
@@ -65,6 +65,32 @@ def test_expression_displacement_is_unsmoothed_and_filled(face):
     ]
     np.testing.assert_allclose(d[valid], _field(v, 3.0)[valid], atol=1e-12)
     assert np.isfinite(d[40]).all()
+
+
+def test_expression_displacement_smoothing_removes_noise_not_the_expression(face):
+    """A smooth 3 mm expression measured with 0.3 mm of noise a vertex: 10 Laplacian steps
+    bring the field closer to the true one (the config's default); with a relief at full
+    confidence nothing is smoothed."""
+    v, f = face
+    neutral = AlignedMesh(v, np.ones(len(v), bool))
+    noise = np.random.default_rng(8).normal(0.0, 0.3, v.shape)
+    smile = AlignedMesh(v + _field(v, 3.0) + noise, np.ones(len(v), bool))
+    truth = _field(v, 3.0)
+    inner = (v[:, 0] > 5) & (v[:, 0] < 60) & (v[:, 1] > 5) & (v[:, 1] < 50)
+
+    def err(d):
+        return float(np.sqrt(np.mean(np.sum((d[inner] - truth[inner]) ** 2, axis=1))))
+
+    key = "/expressions/smile1/displacement"
+    raw = expression_displacements(neutral, {"smile1": smile}, f, source="s")[key]
+    smooth = expression_displacements(neutral, {"smile1": smile}, f, "s", iterations=10)[key]
+    assert err(raw) == pytest.approx(0.3 * np.sqrt(3), rel=0.15)
+    assert err(smooth) < 0.5 * err(raw)
+    sure = AlignedMesh(smile.vertices, smile.valid, np.ones(len(v)))
+    kept = expression_displacements(neutral, {"smile1": sure}, f, "s", iterations=10, relief=1.0)[
+        key
+    ]
+    np.testing.assert_allclose(kept, raw, atol=1e-12)
 
 
 def test_subject_morph_pca_blends_and_labels(face):

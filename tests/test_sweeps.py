@@ -100,7 +100,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
     [
         (
             "smoothing.iteration\n30\n",
-            r"column 'smoothing.iteration': names no config key \(no 'iteration' under smoothing; keys there: confidence_relief, iterations, max_stretch, w\)",
+            r"column 'smoothing.iteration': names no config key \(no 'iteration' under smoothing; keys there: confidence_relief, expression_iterations, iterations, max_stretch, w\)",
         ),
         (
             "smooth.w\n0.1\n",
@@ -115,6 +115,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         ("smoothing.w\n1.5\n", r"1.5 is greater than the maximum of 1"),
         ("smoothing.max_stretch\n1\n", r"1 is less than or equal to the minimum of 1"),
         ("smoothing.confidence_relief\n1.5\n", r"1.5 is greater than the maximum of 1"),
+        ("smoothing.expression_iterations\n-1\n", r"-1 is less than the minimum of 0"),
         ("align.robust_kernel\ncauchy\n", r"'cauchy' is not one of \['tukey', 'huber', 'none'\]"),
         ("mask.radius_mm\n-2\n", r"-2 is less than or equal to the minimum of 0"),
         (

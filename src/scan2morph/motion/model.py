@@ -18,7 +18,7 @@ from scipy.sparse import csgraph
 from scan2morph.errors import InputError
 from scan2morph.geometry import unique_edges
 from scan2morph.motion.mask import stencil_mask
-from scan2morph.motion.smooth import fill_missing, laplacian_smooth
+from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 
@@ -179,13 +179,26 @@ def expression_displacements(
     faces: np.ndarray,
     source: str,
     max_stretch: float = np.inf,
+    w: float = 0.1,
+    iterations: int = 0,
+    relief: float = 0.0,
 ) -> dict[str, np.ndarray]:
-    """``/expressions/{take}/displacement`` (V, 3): aligned take minus neutral, invalid (and,
-    with a finite ``max_stretch``, torn-off) vertices filled."""
+    """``/expressions/{take}/displacement`` (V, 3) mm: aligned take minus neutral, invalid (and,
+    with a finite ``max_stretch``, torn-off) vertices filled, then smoothed by ``iterations``
+    Laplacian steps of ``w`` (shorter by ``relief`` where the refinement measured the skin, see
+    :func:`~scan2morph.motion.smooth.laplacian_smooth`; 0 steps: filled only). No mask: the
+    modal basis spans the whole face."""
     out = {}
     for take, mesh in expressions.items():
         raw = _raw_motion(mesh, neutral, faces, max_stretch, f"{source}/{take}")
-        out[paths.expression(take, "displacement")] = fill_missing(
-            raw, faces, source=f"{source}/{take}"
+        out[paths.expression(take, "displacement")] = laplacian_smooth(
+            raw,
+            faces,
+            w=w,
+            iterations=iterations,
+            missing=~np.isfinite(raw).all(axis=1),
+            source=f"{source}/{take}",
+            confidence=mesh.confidence,
+            relief=relief,
         )
     return out

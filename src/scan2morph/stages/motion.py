@@ -48,8 +48,11 @@ class Params:
         Compare the refined meshes (``/takes/{take}/refine``) rather than the aligned fits
         (``refine.method`` other than ``none``).
     relief : float
-        Share of the smoothing step taken off where the refinement measured a viseme's
+        Share of the smoothing step taken off where the refinement measured a take's
         correspondence with confidence 1 (``smoothing.confidence_relief``; only with ``refined``).
+    expression_iterations : int
+        Smoothing iterations of the expression displacement fields
+        (``smoothing.expression_iterations``).
     """
 
     levels: int
@@ -61,6 +64,7 @@ class Params:
     include_failed: bool = False
     refined: bool = False
     relief: float = 0.0
+    expression_iterations: int = 0
 
     @classmethod
     def from_config(
@@ -83,6 +87,7 @@ class Params:
             bool(quality["include_failed_takes"]),
             refine_enabled(refine or {}),
             float(smoothing["confidence_relief"]),
+            int(smoothing["expression_iterations"]),
         )
 
 
@@ -148,6 +153,9 @@ def run(
         fine.faces,
         name,
         params.max_stretch,
+        params.w,
+        params.expression_iterations,
+        params.relief,
     )
     suppressed = out[paths.mask("suppressed")]
     log.info("%s: %d of %d vertices suppressed", name, suppressed.sum(), len(suppressed))
