@@ -120,9 +120,9 @@ SchedulerParameters=sched_interval=2
 ReturnToService=2
 SlurmdParameters=config_overrides
 # keep finished jobs in slurmctld for squeue-based status checks (no accounting) and for the
-# test's final check that every job COMPLETED: an hour, longer than a test run on a busy machine
-# (a 22-minute run lost its first job at 600 s)
-MinJobAge=3600
+# test's final check that every job COMPLETED, which comes at the end of the test session: 0
+# never purges them (a 22-minute run lost its first job at the default 600 s)
+MinJobAge=0
 StateSaveLocation={r}/state
 SlurmdSpoolDir={r}/spool
 SlurmctldPidFile={r}/run/slurmctld.pid

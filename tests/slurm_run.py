@@ -22,13 +22,14 @@ from pathlib import Path
 import pytest
 
 from tests.slurm_cluster import ClusterUnavailable, SlurmCluster
-from tests.tiny_run import SUBJECT, tiny_config
-from tests.workflow_api import REPO
 
-TARGET = f"results/{SUBJECT}/{SUBJECT}.h5"
+# tests/tiny_run.py imports Snakemake's API: only the fixtures that run the workflow import it, so
+# that the conftest loading this plugin needs no more than the `test` extra
+REPO = Path(__file__).resolve().parents[1]
+TARGET = "results/synth01/synth01.h5"  # tests/tiny_run.py's SUBJECT
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 # What the throw-away cluster lacks compared with a site: accounting (so job states come from
-# squeue, kept for MinJobAge=3600 s; no account is guessed either), and quick status checks: a
+# squeue, which keeps finished jobs: MinJobAge=0; no account is guessed either), and quick status checks: a
 # check is what lets a finished job's dependants be submitted. Snakemake waits
 # --seconds-between-status-checks (default 10 s) before the first check; the plugin then adds
 # 10 s after every check that finds no job finished (up to 180 s) and goes back to
@@ -98,6 +99,9 @@ class SlurmRun:
 @pytest.fixture(scope="session")
 def slurm_run(slurm_cluster, tmp_path_factory):
     """Start the tiny run under SLURM with ``profiles/slurm`` (in the background)."""
+    from tests.tiny_run import SUBJECT, tiny_config
+
+    assert TARGET == f"results/{SUBJECT}/{SUBJECT}.h5"
     work = tmp_path_factory.mktemp("slurm_run")
     config = tiny_config(work)  # paths relative to ``work``: the config hashes agree
     cmd = [
@@ -132,10 +136,11 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session", autouse=True)
 def _start_slurm_run(request):
-    """Start the SLURM run before the first test when a selected test checks it. A cluster that
-    cannot start is left for that test to report (the fixture's skip or failure is cached)."""
+    """Start the SLURM run before the first test when a selected test checks it. Whatever stops
+    it from starting (a skip, a failure, any error) is left for that test to report: the
+    fixture's outcome is cached, and the other tests must not inherit it."""
     if any(wants_slurm_run(item) for item in request.session.items):
         try:
             request.getfixturevalue("slurm_run")
-        except (pytest.skip.Exception, pytest.fail.Exception):
+        except (pytest.skip.Exception, pytest.fail.Exception, Exception):
             pass

@@ -236,3 +236,26 @@ def test_a_refiner_that_finds_the_skin_whatever_the_clicks_leaves_only_the_neutr
     # every draw hands the refiner its own perturbed clicks (and the reference the clicked ones)
     assert_array_equal(seen[0], visemes["she"].landmarks)
     assert len({s.tobytes() for s in seen}) == len(seen) == 101
+
+
+def test_a_refiners_confidence_shortens_the_smoothing_of_the_draws(template, takes):
+    """The draws are smoothed as the pipeline smooths: with a refiner that measured every vertex
+    (confidence 1) and a relief of 1, 30 smoothing steps leave a bumpy motion unsmoothed; at
+    confidence 0 they smooth it."""
+    neutral, visemes = takes
+
+    def refiner(confidence):
+        def refine(take, fit, take_landmarks, neutral_landmarks):
+            mesh = fit_take(template, neutral.landmarks, neutral.xyz, levels=0)
+            v = transform_points(visemes[take].transform, mesh["vertices"])
+            bumps = np.random.default_rng(3).normal(0.0, 0.5, v.shape)  # what smoothing removes
+            return v + bumps, mesh["valid"], np.full(len(v), confidence)
+
+        return refine
+
+    smooth = {"w": 0.1, "iterations": 30, "max_stretch": 2.0, "confidence_relief": 1.0}
+    unsmoothed = _run(template, takes, draws=2, refiner=refiner(0.0))["she"]["motion"]
+    sure = _run(template, takes, draws=2, refiner=refiner(1.0), smoothing=smooth)["she"]
+    unsure = _run(template, takes, draws=2, refiner=refiner(0.0), smoothing=smooth)["she"]
+    assert_allclose(sure["motion"], unsmoothed, atol=1e-12)
+    assert np.abs(unsure["motion"] - unsmoothed).max() > 0.01  # mm: smoothed

@@ -50,6 +50,17 @@ def test_params_from_config_sections():
     )
     assert (m.radius_mm, m.w, m.iterations) == (20.0, 0.1, 30)  # the paper's values
     assert m.include_failed is False
+    m = motion.Params.from_config(
+        CONFIG["mask"], CONFIG["smoothing"], CONFIG["template"], CONFIG["quality"], CONFIG["refine"]
+    )
+    assert (m.refined, m.relief, m.expression_iterations) == (True, 0.5, 10)
+    data = {
+        paths.refine("t", "vertices"): np.zeros((3, 3)),
+        paths.refine("t", "valid"): np.ones(3, bool),
+        paths.refine("t", "confidence"): np.array([0.2, 0.9, 0.0]),
+    }
+    mesh = motion.aligned_mesh(data, "t", "s", refined=True)
+    np.testing.assert_array_equal(mesh.confidence, [0.2, 0.9, 0.0])
     p = modal.Params.from_config(CONFIG["modal"], CONFIG["template"], threads=2)
     assert p.modal.thickness_mm == 1.0 and p.modal.threads == 2
 

@@ -54,6 +54,25 @@ def test_viseme_motion_masks_smooths_and_builds_models(face):
     assert err < 1.0
 
 
+def test_viseme_motion_keeps_what_the_refinement_measured(face):
+    """A viseme whose refinement measured every vertex (confidence 1) with a relief of 1 keeps
+    its raw motion outside the mask; at confidence 0 the paper's smoothing moves it."""
+    v, f = face
+    neutral = AlignedMesh(v, np.ones(len(v), bool))
+    noise = np.random.default_rng(9).normal(0.0, 0.3, v.shape)
+    top = np.flatnonzero(v[:, 1] == v[:, 1].max())
+    paths = np.array([[top[0], top[-1]]])
+    args = dict(radius_mm=12.0, w=0.1, iterations=30, source="s", relief=1.0)
+    out = {}
+    for c in (0.0, 1.0):
+        car = AlignedMesh(v + _field(v, 8.0) + noise, np.ones(len(v), bool), np.full(len(v), c))
+        out[c] = viseme_motion(neutral, {"car": car}, f, paths, **args)
+    free = ~out[1.0]["/mask/suppressed"]
+    raw = out[1.0]["/visemes/car/motion_raw"]
+    np.testing.assert_allclose(out[1.0]["/visemes/car/motion"][free], raw[free], atol=1e-12)
+    assert np.abs(out[0.0]["/visemes/car/motion"][free] - raw[free]).max() > 0.1
+
+
 def test_expression_displacement_without_smoothing_is_filled(face):
     v, f = face
     neutral = AlignedMesh(v, np.ones(len(v), bool))

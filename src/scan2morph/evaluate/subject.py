@@ -55,7 +55,8 @@ def subject_accuracy(
         The base template; with ``fiducial_sets`` (take -> set) and ``levels`` it gives the ideal
         motion (see ``evaluate.motion``). Without it, motion is compared to material motion only.
     smoothing : mapping, optional
-        ``w`` and ``iterations`` of the pipeline's smoothing, applied with its mask to the ideal
+        ``w``, ``iterations`` and ``confidence_relief`` of the pipeline's smoothing, applied with
+        its mask (and the take's ``refine/confidence``, when the store has it) to the ideal
         motion for the ``relative_error`` reference.
     max_slope_deg : float, optional
         The fit's depth-step rule (``template.max_slope_deg``), applied to the ideal motion too.
@@ -109,6 +110,7 @@ def subject_accuracy(
                 ideal = ideal @ rot_n  # the neutral camera's frame -> the neutral frame
             processed = None
             if smoothing is not None:
+                # the same steps as the take's: shorter where its refinement measured the skin
                 processed = laplacian_smooth(
                     ideal,
                     store[paths.template("faces")],
@@ -116,6 +118,8 @@ def subject_accuracy(
                     iterations=smoothing["iterations"],
                     fixed=store[paths.mask("suppressed")],
                     missing=~np.isfinite(ideal).all(axis=1),
+                    confidence=store.get(paths.refine(take, "confidence")),
+                    relief=smoothing["confidence_relief"],
                 )
             entry["motion"] = motion_accuracy(
                 store[paths.viseme(take, "motion")],

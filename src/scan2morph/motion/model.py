@@ -3,7 +3,7 @@
 Given the template faces, the neutral mesh and every other take's mesh aligned into the neutral
 frame, this computes what the store keeps: the stencil mask, raw and processed motion per viseme,
 the viseme models (neutral + processed motion) and the expression displacement fields (aligned
-take minus neutral, neither masked nor smoothed, invalid vertices filled from neighbours).
+take minus neutral, invalid vertices filled from neighbours, smoothed but not masked).
 """
 
 from __future__ import annotations
