@@ -120,9 +120,10 @@ SchedulerParameters=sched_interval=2
 ReturnToService=2
 SlurmdParameters=config_overrides
 # keep finished jobs in slurmctld for squeue-based status checks (no accounting) and for the
-# test's final check that every job COMPLETED, which comes at the end of the test session: 0
-# never purges them (a 22-minute run lost its first job at the default 600 s)
-MinJobAge=0
+# test's final check that every job COMPLETED, which comes at the end of the test session: a
+# day (a 22-minute run lost its first job at 600 s). Not 0 (never purge): the executor plugin
+# reads 0 as too short for squeue and falls back to sacct, which needs accounting
+MinJobAge=86400
 StateSaveLocation={r}/state
 SlurmdSpoolDir={r}/spool
 SlurmctldPidFile={r}/run/slurmctld.pid

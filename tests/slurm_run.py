@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 TARGET = "results/synth01/synth01.h5"  # tests/tiny_run.py's SUBJECT
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 # What the throw-away cluster lacks compared with a site: accounting (so job states come from
-# squeue, which keeps finished jobs: MinJobAge=0; no account is guessed either), and quick status checks: a
+# squeue, which keeps finished jobs for MinJobAge=86400 s; no account is guessed either), and quick status checks: a
 # check is what lets a finished job's dependants be submitted. Snakemake waits
 # --seconds-between-status-checks (default 10 s) before the first check; the plugin then adds
 # 10 s after every check that finds no job finished (up to 180 s) and goes back to
