@@ -50,7 +50,6 @@ from scan2morph.stages import refine
 from scan2morph.stages.fit import fiducial_set
 from scan2morph.store import paths, read_parts
 from scan2morph.template import fit_options, fit_take, load_template, subdivide_template
-from scan2morph.template.sample import sample_mesh
 
 
 def _kind(take: str, config: dict) -> str:
@@ -160,16 +159,8 @@ def main() -> None:
             px = np.array(part.datasets[paths.refine(take, "points2d")])
             swap = mouth & ok
             px[swap] = true_px[swap]
-            v, v_ok = sample_mesh(
-                np.asarray(data[paths.range_image(take, "xyz")]),
-                px,
-                fine.faces,
-                take,
-                params.min_weight,
-                params.max_slope_deg,
-                exclude=np.flatnonzero(~np.asarray(data[paths.mesh(take, "valid")], dtype=bool)),
-            )
-            o_m = transform_points(np.asarray(data[paths.align(take, "transform")]), v) - nv
+            v, v_ok = refine.sample_points(data, take, px, fine.faces, params, take)
+            o_m = v - nv
             # both over the vertices the oracle's pixels sample too
             both = where & v_ok
             o = material_accuracy(o_m, material, normals, both)["material_relative_error"]

@@ -80,6 +80,51 @@ def enabled(refine: Mapping) -> bool:
     return refine.get("method", "none") != "none"
 
 
+def sample_points(
+    data: Mapping[str, np.ndarray],
+    take: str,
+    points: np.ndarray,
+    faces: np.ndarray,
+    params: Params,
+    source: str,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A take's mesh sampled from its range image at pixel positions, in the neutral frame.
+
+    Parameters
+    ----------
+    data : mapping store path -> array
+        The take's repair, fit and align parts.
+    take : str
+    points : (V, 2) float
+        Pixel positions of the template's vertices in the take's image, px.
+    faces : (F, 3) int
+        The subdivided template's triangles.
+    params : Params
+        The fit's sampling rules (``min_weight``, ``max_slope_deg``).
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        mm in the neutral frame (the take's alignment applied); NaN where invalid.
+    ok : (V,) bool
+        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid.
+    """
+    valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
+    vertices, ok = sample_mesh(
+        need(data, paths.range_image(take, "xyz"), source),
+        points,
+        faces,
+        source,
+        params.min_weight,
+        params.max_slope_deg,
+        exclude=np.flatnonzero(~valid),
+    )
+    transform = need(data, paths.align(take, "transform"), source)
+    return transform_points(transform, vertices), ok
+
+
 def run(
     template: Template,
     take: str,
@@ -158,16 +203,7 @@ def run(
         # the points are the fit's: nothing was measured at them (the motion stage smooths
         # them as it smooths a fit's)
         report["confidence"] = np.zeros(len(points))
-    vertices, ok = sample_mesh(
-        need(data, paths.range_image(take, "xyz"), source),
-        refined,
-        fine.faces,
-        source,
-        params.min_weight,
-        params.max_slope_deg,
-        exclude=np.flatnonzero(~valid),  # the fit's invalid vertices (folds, no data) stay so
-    )
-    transform = need(data, paths.align(take, "transform"), source)
+    vertices, ok = sample_points(data, take, refined, fine.faces, params, source)
     attrs = {
         "method": params.method,
         "used": not problem,
@@ -179,7 +215,7 @@ def run(
     log.info("%s: refined %s", take, attrs)
     return Part(
         {
-            paths.refine(take, "vertices"): transform_points(transform, vertices),
+            paths.refine(take, "vertices"): vertices,
             paths.refine(take, "valid"): ok,
             paths.refine(take, "points2d"): refined,
             paths.refine(take, "confidence"): report["confidence"],
