@@ -81,7 +81,9 @@ def main() -> None:
     truths = {t: read_truth(f[0]) for t, f in truth_files.items() if f}
     section = config["template"]
     fine = subdivide_template(template, int(section["subdivision_levels"]))
-    params = refine.Params.from_config(config["refine"] | {"method": "flow"}, section)
+    params = refine.Params.from_config(
+        config["refine"] | {"method": "flow"}, section, config["align"]
+    )
     options = fit_options(section)
     nv = np.asarray(data[paths.mesh(neutral, "vertices")])
     n_valid = np.asarray(data[paths.mesh(neutral, "valid")], dtype=bool)

@@ -1,4 +1,5 @@
-"""Triangle-mesh primitives shared by every stage: face and vertex normals, unique edges.
+"""Mesh and range-image primitives shared by every stage: face, vertex and range-image normals,
+unique edges.
 
 A base module (like :mod:`scan2morph.tol`): it imports nothing from the stages, so any of them
 may use it. Meshes follow the project convention: ``vertices`` (V, 3) float mm, ``faces``
@@ -75,6 +76,41 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, *, fill: float = np.
     n = n / np.where(bad[:, None], 1.0, length)
     n[bad] = fill
     return n
+
+
+def surface_normals(xyz: np.ndarray) -> np.ndarray:
+    """Unit normals of a range image from central differences of neighbouring pixels.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float
+        NaN where there is no data.
+
+    Returns
+    -------
+    (H, W, 3) float64
+        Unit normals facing the camera (``n . p < 0``); NaN where a pixel has no
+        neighbour with data along a row or a column.
+    """
+
+    def diff(axis: int) -> np.ndarray:
+        fwd = np.roll(xyz, -1, axis=axis) - xyz
+        bwd = xyz - np.roll(xyz, 1, axis=axis)
+        idx = [slice(None)] * 3
+        idx[axis] = -1
+        fwd[tuple(idx)] = np.nan
+        idx[axis] = 0
+        bwd[tuple(idx)] = np.nan
+        central = 0.5 * (fwd + bwd)
+        out = np.where(np.isfinite(central), central, np.where(np.isfinite(fwd), fwd, bwd))
+        return out
+
+    n = np.cross(diff(1), diff(0))
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / norm
+    flip = np.sum(n * xyz, axis=-1, keepdims=True) > 0
+    return np.where(flip, -n, n)
 
 
 def unique_edges(

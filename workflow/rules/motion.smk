@@ -54,5 +54,6 @@ rule motion_noise:
         smoothing=config["smoothing"],
         template=config["template"],
         refine=config["refine"],
+        align=config["align"],
     script:
         "../scripts/motion_noise.py"

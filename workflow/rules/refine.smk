@@ -28,5 +28,6 @@ rule refine:
         kind=get_take_kind,
         refine=config["refine"],
         template=config["template"],
+        align=config["align"],
     script:
         "../scripts/refine.py"

@@ -17,6 +17,7 @@ def main(snakemake):
             "smoothing": p.smoothing,
             "template": p.template,
             "refine": p.refine,
+            "align": p.align,
         }
         part = motion_noise.run(load_template(inp.template), subject, data, config)
         write_part(out.part, part.datasets, attrs=part.attrs)

@@ -9,7 +9,7 @@ from scan2morph.template import load_template
 def main(snakemake):
     def job():
         w, p, inp = snakemake.wildcards, snakemake.params, snakemake.input
-        params = refine.Params.from_config(p.refine, p.template)
+        params = refine.Params.from_config(p.refine, p.template, p.align)
         data = read_parts([*inp.take, *inp.neutral])
         template, source = load_template(inp.template), f"{w.subject}/{w.take}"
         part = refine.run(template, w.take, p.kind, p.neutral, data, params, source)

@@ -49,8 +49,9 @@ from typing import Any
 import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
-from scan2morph.align.noise import mesh_noise
+from scan2morph.align.noise import MIN_NEIGHBOURS, mesh_noise
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
@@ -85,6 +86,13 @@ DEFAULT_ICP: dict[str, Any] = {
 
 #: Averaged residuals below this never count as motion, mm (a floor to the robust threshold).
 _TRIM_FLOOR_MM = 0.05
+
+#: Damping of a region's ICP step (:func:`region_motion`), a share of its normal matrix's mean
+#: diagonal: directions constrained less than this keep the pose they have.
+_DAMPING = 1e-3
+#: A region's ICP has converged when a step moves its points by less than this share of the
+#: expected residual RMS (:func:`_region_icp`).
+_STEP_NOISE_SHARE = 0.25
 
 #: The relative RMSE limit is never below this, mm: on noise-free meshes the expected RMSE is
 #: zero, but the template's vertices of two takes sample the skin at different points and the
@@ -149,6 +157,10 @@ class AlignResult:
     kept_indices : (k,) int64
         Template vertex indices of the take the final refinement used: the region's kept
         vertices and the still ones it grew into.
+    constraint : float
+        :func:`region_motion` only: how well the region's shape pins its motion, the RMS
+        point-to-plane change per mm of the motion it constrains least (0 for a plane, 1 for
+        a motion straight along every normal).
     """
 
     transform: np.ndarray
@@ -171,6 +183,7 @@ class AlignResult:
     rmse_limit_kind: str = "relative"
     kernel_k: float = float("nan")
     kept_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    constraint: float = float("nan")
 
 
 def _params(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
@@ -798,6 +811,219 @@ def _trim(p, keep, t, conv, refine, plane, prm, recovery, grow=None) -> tuple:
     return keep, t, conv, iterations
 
 
+class SampledSurface:
+    """A surface given by samples with normals (a range image's pixels): point-to-plane
+    residuals against the nearest sample, and which points its data covers.
+
+    Parameters
+    ----------
+    points, normals : (m, 3) float
+        Samples, mm, and their unit normals (samples without a finite normal are left out).
+    source : str
+        Label for error messages.
+    edge : (m,) bool, optional
+        Samples on the edge of the data (a pixel next to one without data): a point nearest to
+        one of them may lie beyond the data, and is not counted as covered.
+    """
+
+    def __init__(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        source: str = "surface",
+        edge: np.ndarray | None = None,
+    ):
+        points = np.asarray(points, dtype=np.float64)
+        normals = np.asarray(normals, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or normals.shape != points.shape:
+            raise InputError(
+                source,
+                f"surface: expected (m, 3) points and normals, got {points.shape}, {normals.shape}",
+            )
+        edge = np.zeros(len(points), dtype=bool) if edge is None else np.asarray(edge, bool)
+        if edge.shape != (len(points),):
+            raise InputError(source, f"edge: expected ({len(points)},) bool, got {edge.shape}")
+        ok = np.isfinite(points).all(axis=1) & np.isfinite(normals).all(axis=1)
+        if ok.sum() < MIN_NEIGHBOURS + 1:
+            raise InputError(source, f"surface: only {int(ok.sum())} samples with a normal")
+        self.points, self.normals, self.edge = points[ok], normals[ok], edge[ok]
+        self.tree = cKDTree(self.points)
+
+    def noise(self, x: np.ndarray, source: str = "surface") -> float:
+        """The samples' noise where points ``x`` (n, 3) are (:func:`mesh_noise` of the nearest
+        samples), mm."""
+        near = np.unique(self.tree.query(x)[1])
+        every = np.ones(len(self.points), dtype=bool)
+        return mesh_noise(self.points, every, at=near, source=source).region(near)
+
+    def reach(self, x: np.ndarray, noise: float) -> float:
+        """How far from a sample a point on the surface near ``x`` (n, 3) can be, mm: twice the
+        samples' median spacing there plus three times the ``noise`` (mm). A point whose nearest
+        sample is farther is off the data (skin the scan did not see)."""
+        near = np.unique(self.tree.query(x)[1])
+        spacing = float(np.median(self.tree.query(self.points[near], k=2)[0][:, 1]))
+        return 2.0 * spacing + 3.0 * float(noise)
+
+    def residuals(self, x: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(plane, seen, distance)`` of points ``x`` (n, 3): the signed distance to the nearest
+        sample's tangent plane, whether the surface covers the point (that sample is within
+        ``reach``, mm, and not on the data's edge, beyond which the point may lie), and the
+        distance to that sample."""
+        d, j = self.tree.query(np.asarray(x, dtype=np.float64))
+        plane = np.einsum("ij,ij->i", x - self.points[j], self.normals[j])
+        return plane, (d <= reach) & ~self.edge[j], d
+
+
+def region_motion(
+    region: np.ndarray,
+    initial: np.ndarray,
+    surface: SampledSurface,
+    params: dict[str, Any] | None = None,
+    source: str = "subject/take",
+) -> AlignResult:
+    """The rigid motion of one region of skin onto a surface, with a verdict on its rigidity.
+
+    ICP moves the region's points onto the surface (point-to-plane; each step about the region's
+    centroid and damped, so that a direction the region's shape hardly constrains keeps the
+    initial pose; the kernel annealed as in :func:`align_take` and never narrower than
+    ``kernel_noise_sigmas`` times the RMSE the measured noise explains; points off the surface's
+    data left out). Nothing is trimmed: the verdict says whether the *whole* region moved
+    rigidly.
+
+    Parameters
+    ----------
+    region : (n, 3) float, mm
+        The region's points (finite), n >= 6.
+    initial : (4, 4) float
+        The initial pose (for example the least-squares fit of a template correspondence).
+    surface : SampledSurface
+        The target (a range image's samples, in the region's frame).
+    params : dict, optional
+        Overrides of :data:`DEFAULT_ICP` (the trimming keys are not used); its RMSE gate
+        (``max_rmse_ratio`` times the expected RMSE, or ``max_rmse_mm``) judges rigidity, over
+        the points the surface's data covers; ``min_fitness`` is the least share of those.
+    source : str
+        ``subject/take`` label for error messages.
+
+    Returns
+    -------
+    AlignResult
+        ``transform`` maps the region onto the surface; ``residual_rmse`` is the region's
+        point-to-plane RMSE there; ``fitness`` the share of the region the surface covers;
+        ``noise_take`` and ``noise_neutral`` are the measured noise of the surface and of the
+        region; ``ok`` is False, with the reasons in ``problems``, when ICP did not converge,
+        the fitness is below ``min_fitness`` or the RMSE is above :func:`rmse_limit` (the
+        region did not move rigidly).
+
+    Raises
+    ------
+    InputError
+        Bad shapes or params, fewer than 6 region points.
+    """
+    prm = _params(params, source)
+    p = np.asarray(region, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 6 or not np.isfinite(p).all():
+        raise InputError(source, f"region: expected at least 6 finite (n, 3) points, got {p.shape}")
+    initial = np.asarray(initial, dtype=np.float64)
+    if initial.shape != (4, 4) or not np.isfinite(initial).all():
+        raise InputError(
+            source, f"initial: expected a finite (4, 4) transform, got {initial.shape}"
+        )
+    every = np.ones(len(p), dtype=bool)
+    noise_region = mesh_noise(p, every, source=source).region(every)
+    noise_surface = surface.noise(transform_points(initial, p), source)
+    expected = float(np.hypot(noise_surface, noise_region))
+    known = expected if np.isfinite(expected) else 0.0
+    prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
+    reach = surface.reach(transform_points(initial, p), known)
+    t, iterations, conv, constraint = _region_icp(p, surface, initial, prm, reach, known)
+    if not np.isfinite(t).all():
+        t, conv = initial, False
+    plane, seen, d = surface.residuals(transform_points(t, p), reach)
+    fitness = float(seen.mean())
+    rmse = float(np.sqrt(np.mean(d[seen] ** 2))) if seen.any() else 0.0
+    gate = _rmse_gate(plane[seen], noise_surface, noise_region, prm)
+    problems = _verdict(conv, iterations, fitness, 1.0, [], prm)
+    problems += [gate.problem] if gate.problem else []
+    return AlignResult(
+        transform=t,
+        initial=initial,
+        fitness=fitness,
+        inlier_rmse=rmse,
+        iterations=int(iterations),
+        converged=bool(conv),
+        method="icp",
+        n_points=int(len(p)),
+        residual_rmse=gate.residual_rmse,
+        ok=not problems,
+        problems=problems,
+        noise_take=noise_surface,
+        noise_neutral=noise_region,
+        expected_rmse=expected,
+        rmse_limit=gate.limit,
+        rmse_limit_kind=gate.kind,
+        kernel_k=prm["kernel_k_mm"],
+        constraint=constraint,
+    )
+
+
+def _region_icp(p, surface, initial, prm, reach=0.0, noise=0.0):
+    """Point-to-plane ICP of a small region onto a target: ``(transform, iterations, converged,
+    constraint)``; ``constraint`` is the RMS point-to-plane change per mm of the motion the
+    region's shape constrains least (a rotation counted by how far it moves the points), at
+    the last step: 0 for a plane, which slides freely.
+
+    Each step is the least-squares twist about the weighted centroid of the region (not the
+    frame's origin, a metre away: a rotation of a few degrees about it is a large, badly
+    linearised translation) of least norm, so that a direction the region's shape leaves free
+    (a chin slides along its own curvature) keeps the initial pose instead of taking a large
+    step from noise. The kernel's scale halves from ``max_correspondence_mm`` to
+    ``kernel_k_mm`` as in :func:`_refine_icp`; a correspondence farther than that scale (and
+    than ``reach``, mm) is left out, so that points beyond the surface's data do not pull. It
+    has converged when a step moves the points by less than ``step_mm`` RMS, or by less than
+    :data:`_STEP_NOISE_SHARE` of the expected residual ``noise`` (mm): the nearest samples, and
+    with them the step, jitter by about that much once the pose is found.
+    """
+    q, q_normals = surface.points, surface.normals
+    t = np.array(initial, dtype=np.float64)
+    k_final = prm["kernel_k_mm"]
+    k = max(prm["max_correspondence_mm"], k_final)
+    tolerance = max(prm["step_mm"], _STEP_NOISE_SHARE * noise)
+    it = 0
+    for it in range(1, prm["max_iterations"] + 1):  # noqa: B007 (it is reported)
+        x = transform_points(t, p)
+        d, j = surface.tree.query(x, distance_upper_bound=prm["max_correspondence_mm"])
+        near = d <= max(k, reach)
+        near[near] = ~surface.edge[j[near]]
+        x, n = x[near], q_normals[j[near]]
+        r = np.einsum("ij,ij->i", x - q[j[near]], n)
+        w = _kernel_weights(np.abs(r), prm["robust_kernel"], k)
+        if np.count_nonzero(w) < 6:
+            return t, it, False, 0.0
+        c = (w[:, None] * x).sum(axis=0) / w.sum()
+        a = np.hstack([np.cross(x - c, n), n])
+        ata = a.T @ (w[:, None] * a)
+        # damped: a direction the region's shape hardly constrains keeps the pose it has
+        damp = _DAMPING * np.diag(ata).mean() * np.eye(6)
+        twist = np.linalg.solve(ata + damp, -a.T @ (w * r))
+        step = np.eye(4)
+        step[:3, :3] = Rotation.from_rotvec(twist[:3]).as_matrix()
+        step[:3, 3] = c - step[:3, :3] @ c + twist[3:]
+        t_old, t = t, step @ t
+        radius = np.sqrt((w * np.sum((x - c) ** 2, axis=1)).sum() / w.sum())
+        scale = np.r_[np.full(3, 1.0 / max(radius, 1e-12)), np.ones(3)]
+        weakest = np.linalg.eigvalsh(ata * np.outer(scale, scale) / w.sum())[0]
+        constraint = float(np.sqrt(max(weakest, 0.0)))
+        # the step's size where the region is (a turn about the frame's origin, a metre away,
+        # is no measure of it)
+        moved = np.linalg.norm(transform_points(t, p) - transform_points(t_old, p), axis=1)
+        done = k == k_final and float(np.sqrt(np.mean(moved**2))) < tolerance
+        k = max(k / 2.0, k_final)
+        if done:
+            return t, it, True, constraint
+    return t, it, False, constraint
+
+
 def _verdict(conv, iterations, fitness, kept, recovery, prm) -> list[str]:
     """The problems of an alignment against its quality gate; empty when it passed."""
     problems = []
@@ -842,6 +1068,8 @@ __all__ = [
     "AlignResult",
     "RmseGate",
     "align_take",
+    "region_motion",
+    "SampledSurface",
     "rmse_gate",
     "rmse_limit",
     "vertex_normals",

@@ -19,8 +19,9 @@ from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
 from scan2morph.template import Template, fit_options
 
-#: Config sections this stage reads (``refine``: the error bar of the refined correspondence).
-SECTIONS = ("motion_noise", "smoothing", "template", "refine")
+#: Config sections this stage reads (``refine`` and ``align``: the error bar of the refined
+#: correspondence, whose jaw prior uses the alignment's ICP settings).
+SECTIONS = ("motion_noise", "smoothing", "template", "refine", "align")
 #: Columns of ``tables/motion_noise.tsv``: result key -> column name (the RMS values are over
 #: the vertices outside the mask; dictionary: :data:`scan2morph.tables.MOTION_NOISE`).
 COLUMNS = {
@@ -32,10 +33,10 @@ COLUMNS = {
 log = logging.getLogger("scan2morph")
 
 
-def _refiner(template, subject, data, section, refine_section):
+def _refiner(template, subject, data, section, refine_section, align_section):
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
     draw): the take's fit to its clicks refined against the neutral seen through its clicks."""
-    params = refine.Params.from_config(refine_section, section)
+    params = refine.Params.from_config(refine_section, section, align_section)
     neutral = subject.neutral
 
     def refiner(take, mesh, take_landmarks, neutral_landmarks):
@@ -72,8 +73,9 @@ def run(
         The repair parts of the neutral and the visemes, their align parts and the motion
         part (the visemes it modelled, ``/mask``).
     config : mapping section -> mapping
-        The sections ``motion_noise``, ``smoothing``, ``template`` and ``refine`` (when it
-        refines, each draw refines the visemes too: ``motion_noise.refine_draws`` draws).
+        The sections ``motion_noise``, ``smoothing``, ``template``, ``refine`` and ``align``
+        (when it refines, each draw refines the visemes too: ``motion_noise.refine_draws``
+        draws; ``align`` only then).
 
     Returns
     -------
@@ -89,7 +91,7 @@ def run(
     refine_section = config.get("refine", {})
     refiner = None
     if refine.enabled(refine_section):
-        refiner = _refiner(template, subject, data, section, refine_section)
+        refiner = _refiner(template, subject, data, section, refine_section, config["align"])
     datasets, result, noise = subject_motion_noise(
         template,
         data,

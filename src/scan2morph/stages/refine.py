@@ -13,16 +13,20 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from scan2morph.align import transform_points
+from scan2morph.align import rotation_angle_deg, transform_points
 from scan2morph.refine import RefineParams, grey, refine_points
+from scan2morph.refine.jaw import JawParams, JawPrior, chin_weights, jaw_prior
+from scan2morph.stages import align as align_stage
 from scan2morph.stages.fit import fiducial_set
 from scan2morph.stages.part import Part, Run, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
+from scan2morph.template.regions import icp_region
 from scan2morph.template.sample import fit_map, sample_mesh
 
-#: Config sections this stage reads (``template`` for the subdivision level and sampling rules).
-SECTIONS = ("refine", "template")
+#: Config sections this stage reads (``template`` for the subdivision level and sampling rules,
+#: ``align`` for the ICP settings of the jaw prior).
+SECTIONS = ("refine", "template", "align")
 #: The last iBUG number of the jaw line (1-17: outline points, not skin points).
 JAW_LINE = 17
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
@@ -49,7 +53,13 @@ class Params:
         A take whose share of confidently measured vertices is below this keeps its template
         fit (``refine.min_confident_share``), with a warning.
     flow : RefineParams
-        Everything else of the section ``refine``.
+        The image correlation's settings of the section ``refine``.
+    jaw : JawParams
+        The jaw prior's (``refine.jaw_*``; :mod:`scan2morph.refine.jaw`).
+    icp : dict
+        The ICP settings of the section ``align`` (the jaw prior's registration).
+    still_region : str
+        ``align.icp_region``: the skin the alignment holds still (the jaw prior's reference).
     """
 
     method: str
@@ -59,11 +69,19 @@ class Params:
     template: dict
     min_confident_share: float
     flow: RefineParams
+    jaw: JawParams = JawParams()
+    icp: dict | None = None
+    still_region: str = "stable"
 
     @classmethod
-    def from_config(cls, refine: Mapping, template: Mapping) -> Params:
-        """From the config sections ``refine`` and ``template``."""
+    def from_config(cls, refine: Mapping, template: Mapping, align: Mapping) -> Params:
+        """From the config sections ``refine``, ``template`` and ``align``."""
         names = {f.name for f in fields(RefineParams)}
+        jaw = {
+            f.name: refine[f"jaw_{f.name}"] for f in fields(JawParams) if f"jaw_{f.name}" in refine
+        }
+        if "jaw_prior" in refine:
+            jaw["enabled"] = bool(refine["jaw_prior"])
         return cls(
             str(refine["method"]),
             int(template["subdivision_levels"]),
@@ -72,6 +90,9 @@ class Params:
             dict(template),
             float(refine.get("min_confident_share", 0.0)),
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
+            JawParams(**jaw),
+            align_stage.Params.from_config(align, template).icp,
+            str(align["icp_region"]),
         )
 
 
@@ -203,6 +224,16 @@ def run(
         # the points are the fit's: nothing was measured at them (the motion stage smooths
         # them as it smooths a fit's)
         report["confidence"] = np.zeros(len(points))
+    jaw = _jaw(template, fine, take, neutral, data, maps[0], params, source)
+    if jaw.used:
+        # the geometry's answer where the texture gave none: the flow's confident measurements
+        # stay (a chin that is rigid but not quite, or a pose the ICP slid, must not override
+        # them), and the combined confidence is that of either measurement
+        share = jaw.weight * (1.0 - report["confidence"])
+        refined = jaw.apply(refined, share)
+        report["confidence"] = report["confidence"] + share
+    elif params.jaw.enabled:
+        log.info("%s: jaw prior not used: %s", source, jaw.problem)
     vertices, ok = sample_points(data, take, refined, fine.faces, params, source)
     attrs = {
         "method": params.method,
@@ -211,7 +242,15 @@ def run(
         "median_correction_px": report["median_correction_px"],
         "confident_share": report["confident_share"],
         "valid_share": float(ok.mean()),
+        "jaw_used": jaw.used,
+        "jaw_problem": jaw.problem,
     }
+    if jaw.motion is not None:
+        attrs |= {
+            "jaw_rmse_mm": jaw.motion.residual_rmse,
+            "jaw_rmse_limit_mm": jaw.motion.rmse_limit,
+            "jaw_angle_deg": rotation_angle_deg(jaw.motion.transform),
+        }
     log.info("%s: refined %s", take, attrs)
     return Part(
         {
@@ -224,11 +263,44 @@ def run(
     )
 
 
+def _jaw(template, fine, take, neutral, data, neutral_map, params: Params, source: str):
+    """The jaw prior of a take (:mod:`scan2morph.refine.jaw`), or why there is none.
+
+    The neutral's mesh is sampled here from its range image through ``neutral_map`` (the fit's
+    sampling): a click-noise draw refits the neutral with other clicks."""
+    if not params.jaw.enabled:
+        n = len(fine.vertices)
+        return JawPrior(np.full((n, 2), np.nan), np.zeros(n), None, False, "off")
+    weights = chin_weights(fine.vertices, template.ibug_xy, params.jaw.start, params.jaw.end)
+    neutral_vertices, neutral_valid = sample_mesh(
+        need(data, paths.range_image(neutral, "xyz"), source),
+        neutral_map(fine.vertices),
+        fine.faces,
+        source,
+        params.min_weight,
+        params.max_slope_deg,
+    )
+    return jaw_prior(
+        neutral_vertices,
+        neutral_valid,
+        need(data, paths.align(take, "vertices"), source),
+        np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool),
+        weights,
+        icp_region(fine, params.still_region),
+        need(data, paths.range_image(take, "xyz"), source),
+        need(data, paths.align(take, "transform"), source),
+        params.icp,
+        params.jaw.max_rmse_ratio,
+        source,
+    )
+
+
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """Every take of a subject held in memory (nothing when ``refine.method`` is ``none``)."""
     if not enabled(run_.config["refine"]):
         return {}
-    params = Params.from_config(run_.config["refine"], run_.config["template"])
+    c = run_.config
+    params = Params.from_config(c["refine"], c["template"], c["align"])
     neutral = run_.subject.neutral
     out = {}
     for take, kind in run_.subject.kinds.items():

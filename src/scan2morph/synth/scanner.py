@@ -24,7 +24,7 @@ import pyrender  # noqa: E402
 from scipy import ndimage  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from scan2morph.geometry import vertex_normals  # noqa: E402
+from scan2morph.geometry import surface_normals, vertex_normals  # noqa: E402
 from scan2morph.synth.head import (  # noqa: E402
     SEG_BROW,
     SEG_EYE,
@@ -284,41 +284,6 @@ def render_colors(
     depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
     seg[~np.isfinite(depth)] = -1
     return color, depth, seg
-
-
-def surface_normals(xyz: np.ndarray) -> np.ndarray:
-    """Unit normals of a range image from central differences of neighbouring pixels.
-
-    Parameters
-    ----------
-    xyz : (H, W, 3) float
-        NaN where there is no data.
-
-    Returns
-    -------
-    (H, W, 3) float64
-        Unit normals facing the camera (``n . p < 0``); NaN where a pixel has no
-        neighbour with data along a row or a column.
-    """
-
-    def diff(axis: int) -> np.ndarray:
-        fwd = np.roll(xyz, -1, axis=axis) - xyz
-        bwd = xyz - np.roll(xyz, 1, axis=axis)
-        idx = [slice(None)] * 3
-        idx[axis] = -1
-        fwd[tuple(idx)] = np.nan
-        idx[axis] = 0
-        bwd[tuple(idx)] = np.nan
-        central = 0.5 * (fwd + bwd)
-        out = np.where(np.isfinite(central), central, np.where(np.isfinite(fwd), fwd, bwd))
-        return out
-
-    n = np.cross(diff(1), diff(0))
-    norm = np.linalg.norm(n, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        n = n / norm
-    flip = np.sum(n * xyz, axis=-1, keepdims=True) > 0
-    return np.where(flip, -n, n)
 
 
 def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], cell: float) -> np.ndarray:

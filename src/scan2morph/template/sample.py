@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import rq
+from scipy.spatial import cKDTree
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import unique_edges
@@ -322,6 +323,87 @@ def sample_range(
         valid &= ~_straddles_step(corners, have, np.tan(np.radians(max_slope_deg)), axis)
     out[~valid] = np.nan
     return out, valid
+
+
+def range_pixels(
+    xyz: np.ndarray,
+    points: np.ndarray,
+    start: np.ndarray | None = None,
+    iterations: int = 8,
+    tolerance_mm: float = 0.05,
+    max_distance_mm: float = 2.0,
+    min_weight: float = 0.5,
+    source: str = "range image",
+) -> np.ndarray:
+    """Where in a range image given surface points lie: the inverse of :func:`sample_range`.
+
+    Each point's pixel position is found, from ``start``, by Gauss-Newton steps on the range image's own
+    bilinear interpolation (the step ``(J^T J)^-1 J^T (x - xyz(p))`` with ``J`` the image's
+    derivative at ``p``, at most 2 px a step), so no camera model is needed: a laser scanner's,
+    a stereo rig's distorted camera or an RGB-D colour camera's grid are all inverted alike.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+    points : (n, 3) float, mm
+        Points on (or within the noise of) the range image's surface, in its frame.
+    start : (n, 2) float, optional
+        Pixel positions to start from (within a few pixels of the answer); default: each
+        point's nearest pixel with data (in 3D).
+    iterations : int
+        Gauss-Newton steps.
+    tolerance_mm : float
+        A point is found when the last step moved its sample by at most this (what is left of
+        its distance to the sample is then along the surface's normal: noise).
+    max_distance_mm : float
+        A point farther than this from the sample at its pixel is not on the surface.
+    min_weight : float
+        :func:`sample_range`'s rule at the edge of the data.
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (n, 2) float64
+        Pixel positions; NaN where a point is not found (no data around it, farther than
+        ``max_distance_mm`` from the surface, or not converged).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or xyz.ndim != 3 or xyz.shape[2] != 3:
+        raise InputError(
+            source, f"xyz, points: expected (H, W, 3) and (n, 3), got {xyz.shape} and {pts.shape}"
+        )
+    if start is None:
+        rows, cols = np.nonzero(np.isfinite(xyz).all(axis=2))
+        if not len(rows):
+            return np.full((len(pts), 2), np.nan)
+        nearest = cKDTree(xyz[rows, cols]).query(pts)[1]
+        p = np.column_stack([cols[nearest], rows[nearest]]).astype(np.float64)
+    else:
+        p = np.array(start, dtype=np.float64)
+        if p.shape != (len(pts), 2):
+            raise InputError(source, f"start: expected ({len(pts)}, 2), got {p.shape}")
+    half = np.array([[0.5, 0.0], [0.0, 0.5]])
+    moved = np.full(len(p), np.inf)
+
+    def sample(at):
+        return sample_range(xyz, at, source, min_weight=min_weight)[0]
+
+    for _ in range(int(iterations)):
+        jac = np.stack([sample(p + d) - sample(p - d) for d in half], axis=-1)  # (n, 3, 2) mm/px
+        jtj = np.einsum("nki,nkj->nij", jac, jac)
+        jtr = np.einsum("nki,nk->ni", jac, pts - sample(p))
+        ok = np.isfinite(jtj).all(axis=(1, 2)) & np.isfinite(jtr).all(axis=1)
+        ok[ok] = np.linalg.det(jtj[ok]) > 1e-12
+        step = np.zeros_like(p)
+        step[ok] = np.clip(np.linalg.solve(jtj[ok], jtr[ok][..., None])[..., 0], -2.0, 2.0)
+        p += step
+        # how far the step moved the sample (along the surface), mm
+        moved = np.where(ok, np.linalg.norm(np.einsum("nki,ni->nk", jac, step), axis=1), np.inf)
+    off = np.linalg.norm(sample(p) - pts, axis=1)
+    p[~((moved <= tolerance_mm) & (off <= max_distance_mm))] = np.nan
+    return p
 
 
 def texture_uv(points: np.ndarray, width: int, height: int) -> np.ndarray:
