@@ -77,7 +77,7 @@ def _project(points):
     return p[:, :2] / p[:, 2:]
 
 
-def _scene(angle_deg=12.0, bulge_mm=0.0, flat=False, seed=0):
+def _scene(angle_deg=12.0, bulge_mm=0.0, flat=False, seed=0, noise=NOISE):
     """A neutral and a take whose chin turned with the jaw (and, with ``bulge_mm``, deformed),
     the take scanned from another pose; template-like vertices on the neutral's skin."""
     rng = np.random.default_rng(seed)
@@ -90,8 +90,8 @@ def _scene(angle_deg=12.0, bulge_mm=0.0, flat=False, seed=0):
     pose = np.eye(4)  # the take's scanner: 2 degrees and 5 mm off the neutral's
     pose[:3, :3] = Rotation.from_euler("xyz", [1.0, -2.0, 0.5], degrees=True).as_matrix()
     pose[:3, 3] = [3.0, -4.0, 2.0]
-    neutral_xyz = _render(v, f, rng)
-    take_xyz = _render(moved, f, rng, pose)
+    neutral_xyz = _render(v, f, rng, noise=noise)
+    take_xyz = _render(moved, f, rng, pose, noise=noise)
     # vertices on a 2.5 mm lattice over the lower face, at their neutral pixels
     gx, gy = np.meshgrid(np.arange(-30.0, 30.1, 2.5), np.arange(-20.0, 42.1, 2.5))
     skin = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
@@ -206,8 +206,10 @@ def test_region_motion_names_bad_input():
         region_motion(np.zeros((3, 3)), np.eye(4), surface)
     with pytest.raises(InputError, match="initial"):
         region_motion(np.ones((10, 3)), np.eye(3), surface)
-    with pytest.raises(InputError, match="surface"):
-        SampledSurface(np.zeros((10, 3)), np.zeros((10, 2)))
+    with pytest.raises(InputError, match="surface: expected"):
+        SampledSurface(np.zeros((10, 3)), np.zeros((10, 2)), "test/chin")
+    with pytest.raises(InputError, match="edge"):
+        SampledSurface(np.zeros((10, 3)), np.ones((10, 3)), "test/chin", np.zeros(3, bool))
 
 
 def test_jaw_prior_puts_the_chin_where_its_skin_went():
@@ -265,5 +267,80 @@ def test_chin_weights_rise_from_the_lower_lip_to_the_chin():
 
     with pytest.raises(InputError, match="jaw_start"):
         JawParams(start=0.4, end=0.3)
+    with pytest.raises(InputError, match="jaw_start"):
+        JawParams(start="0")
     with pytest.raises(InputError, match="jaw_max_rmse_ratio"):
         JawParams(max_rmse_ratio=0.0)
+
+
+def test_the_prior_fills_in_where_the_flow_measured_nothing():
+    """A vertex the flow measured with confidence 1 stays; one it did not measure moves to the
+    prior by its weight; the confidence is that of either measurement."""
+    from scan2morph.refine.jaw import JawPrior
+
+    prior = JawPrior(
+        np.array([[10.0, 10.0], [10.0, 10.0], [10.0, 10.0], [np.nan, np.nan]]),
+        np.array([1.0, 1.0, 0.5, 1.0]),
+        None,
+        True,
+        "",
+    )
+    flow = np.zeros((4, 2))
+    points, confidence = prior.fill(flow, np.array([1.0, 0.0, 0.5, 0.0]))
+    np.testing.assert_allclose(points, [[0, 0], [10, 10], [2.5, 2.5], [0, 0]])
+    np.testing.assert_allclose(confidence, [1.0, 1.0, 0.75, 0.0])
+
+
+def test_jaw_prior_on_noise_free_scans_and_without_still_skin():
+    """Noise-free scans: the still skin leaves almost nothing, and the gate's floor
+    (MIN_LIMIT_MM) keeps a rigid chin; no still skin: refused, and said so."""
+    from scan2morph.refine.jaw import MIN_LIMIT_MM
+
+    s = _scene(noise=0.0)
+    prior, _ = _prior(s)
+    assert prior.used, prior.problem
+    assert prior.motion.rmse_limit == pytest.approx(MIN_LIMIT_MM)
+    weights = np.clip((s["y"] - SULCUS_Y) / 10.0, 0.0, 1.0)
+    none = jaw_prior(
+        s["neutral"],
+        s["neutral_valid"],
+        s["take"],
+        s["take_valid"],
+        weights,
+        np.zeros(len(weights), bool),
+        s["take_xyz"],
+        s["transform"],
+        source="test/car",
+    )
+    assert not none.used and "still skin" in none.problem
+
+
+def test_jaw_prior_names_bad_input():
+    s = _scene()
+    weights = np.clip((s["y"] - SULCUS_Y) / 10.0, 0.0, 1.0)
+    still = s["y"] < SULCUS_Y - 14.0
+    args = [s["neutral"], s["neutral_valid"], s["take"], s["take_valid"], weights, still]
+    scan = [s["take_xyz"], s["transform"]]
+    with pytest.raises(InputError, match="take: expected shape"):
+        jaw_prior(*args[:2], s["take"][:-1], *args[3:], *scan, source="test/car")
+    with pytest.raises(InputError, match="take_xyz"):
+        jaw_prior(*args, s["take_xyz"][..., 0], s["transform"], source="test/car")
+    with pytest.raises(InputError, match="take_transform"):
+        jaw_prior(*args, s["take_xyz"], np.eye(3), source="test/car")
+    with pytest.raises(InputError, match="weights"):
+        jaw_prior(*args[:4], np.full(len(weights), np.nan), still, *scan, source="test/car")
+    from scan2morph.refine.jaw import scan_surface
+
+    with pytest.raises(InputError, match="placed"):
+        scan_surface(s["take_xyz"], s["transform"], np.zeros((0, 3)))
+    template = build_template()
+    with pytest.raises(InputError, match="ibug_xy"):
+        chin_weights(template.vertices, template.ibug_xy[:10], 0.0, 0.3)
+    with pytest.raises(InputError, match="start, end"):
+        chin_weights(template.vertices, template.ibug_xy, 0.3, 0.3)
+    # a point that is not finite is not found, the others are
+    xyz = s["take_xyz"]
+    good = xyz[120, 160]
+    found = range_pixels(xyz, np.array([good, [np.nan, 0.0, 0.0]]))
+    np.testing.assert_allclose(found[0], [160, 120], atol=1e-6)
+    assert np.isnan(found[1]).all()

@@ -203,26 +203,30 @@ def test_the_jaw_prior_follows_the_chin_of_an_open_jaw():
     the motion down; without it (refine.jaw_prior false) the flow's answer stays."""
     from dataclasses import replace
 
+    from scan2morph.refine.jaw import chin_weights
     from scan2morph.stages import refine
+    from scan2morph.store import paths
 
     data, truths, run = _subject_in_memory(1.0, ("neutral", "car"))
-    errors = {}
+    errors, parts = {}, {}
     for prior in (False, True):
         config = dict(run.config) | {"refine": run.config["refine"] | {"jaw_prior": prior}}
         errors[prior] = _material_errors(data, truths, replace(run, config=config))["car"][1]
-        if prior:
-            part = refine.run(
-                run.template,
-                "car",
-                "viseme",
-                "neutral",
-                data,
-                refine.Params.from_config(config["refine"], config["template"], config["align"]),
-                "synth01/car",
-            )
-            attrs = next(iter(part.attrs.values()))
-            assert attrs["jaw_used"], attrs["jaw_problem"]
-            assert 12.0 < attrs["jaw_angle_deg"] < 16.0  # the synthetic jaw opens 14 degrees
+        params = refine.Params.from_config(config["refine"], config["template"], config["align"])
+        parts[prior] = refine.run(run.template, "car", "viseme", "neutral", data, params, "s/car")
+    off, on = (next(iter(parts[p].attrs.values())) for p in (False, True))
+    assert on["jaw_used"], on["jaw_problem"]
+    assert 12.0 < on["jaw_angle_deg"] < 16.0  # the synthetic jaw opens 14 degrees
+    assert not off["jaw_used"] and off["jaw_problem"] == "off" and "jaw_rmse_mm" not in off
+    # the prior moves the chin only, and raises the confidence where it did
+    key = paths.refine("car", "points2d")
+    moved = np.linalg.norm(parts[True].datasets[key] - parts[False].datasets[key], axis=1) > 0
+    weights = chin_weights(
+        subdivide_template(run.template, 1).vertices, run.template.ibug_xy, 0, 0.3
+    )
+    assert moved.any() and (weights[moved] > 0).all()
+    key = paths.refine("car", "confidence")
+    assert (parts[True].datasets[key] >= parts[False].datasets[key]).all()
     print("car material relative error, without / with the jaw prior:", errors)
     # measured 0.319 -> 0.269 at this 480 x 360 (the default 640 x 480: 0.170 -> 0.095)
     assert errors[True] < 0.9 * errors[False], errors

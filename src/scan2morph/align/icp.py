@@ -51,7 +51,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from scan2morph.align.noise import MIN_NEIGHBOURS, mesh_noise
+from scan2morph.align.noise import mesh_noise
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
@@ -87,8 +87,9 @@ DEFAULT_ICP: dict[str, Any] = {
 #: Averaged residuals below this never count as motion, mm (a floor to the robust threshold).
 _TRIM_FLOOR_MM = 0.05
 
-#: Damping of a region's ICP step (:func:`region_motion`), a share of its normal matrix's mean
-#: diagonal: directions constrained less than this keep the pose they have.
+#: Damping of a region's ICP step (:func:`region_motion`), a share of the largest eigenvalue of
+#: its normal matrix (rotations in mm at the region's radius): directions constrained less than
+#: this move slowly, and noise does not throw them far.
 _DAMPING = 1e-3
 #: A region's ICP has converged when a step moves its points by less than this share of the
 #: expected residual RMS (:func:`_region_icp`).
@@ -555,7 +556,8 @@ def align_take(
     expected = float(np.hypot(noise_take, noise_neutral))
     known = expected if np.isfinite(expected) else 0.0
     prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
-    plane = _PlaneResiduals(dst, normals, cand & dv & np.isfinite(normals).all(axis=1))
+    plane_region = cand & dv & np.isfinite(normals).all(axis=1)
+    plane = SampledSurface(dst[plane_region], normals[plane_region], source).plane
 
     def refine(keep, start, prm_=prm, k_start=None):
         if prm["method"] == "icp":
@@ -691,7 +693,7 @@ def rmse_gate(
     q_idx = np.flatnonzero(target)
     noise_take = mesh_noise(src, sv, at=p_idx, source=source).region(p_idx)
     noise_neutral = mesh_noise(dst, dv, at=q_idx, source=source).region(q_idx)
-    plane = _PlaneResiduals(dst, normals, target)
+    plane = SampledSurface(dst[target], normals[target], source).plane
     p = src[p_idx]
     t = np.asarray(transform, dtype=np.float64)
 
@@ -733,19 +735,6 @@ def rmse_limit(noise_take: float, noise_neutral: float, params: dict[str, Any]) 
         return float(params["max_rmse_mm"]), "absolute"
     expected = np.hypot(*(x if np.isfinite(x) else 0.0 for x in (noise_take, noise_neutral)))
     return float(max(params["max_rmse_ratio"] * expected, _RMSE_FLOOR_MM)), "relative"
-
-
-class _PlaneResiduals:
-    """Signed point-to-plane distance of points to the nearest vertex of a target region."""
-
-    def __init__(self, vertices: np.ndarray, normals: np.ndarray, region: np.ndarray):
-        idx = np.flatnonzero(region)
-        self.points, self.normals = vertices[idx], normals[idx]
-        self.tree = cKDTree(self.points)
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        _, j = self.tree.query(x)
-        return np.einsum("ij,ij->i", x - self.points[j], self.normals[j])
 
 
 def _nearest_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -> tuple:
@@ -844,8 +833,8 @@ class SampledSurface:
         if edge.shape != (len(points),):
             raise InputError(source, f"edge: expected ({len(points)},) bool, got {edge.shape}")
         ok = np.isfinite(points).all(axis=1) & np.isfinite(normals).all(axis=1)
-        if ok.sum() < MIN_NEIGHBOURS + 1:
-            raise InputError(source, f"surface: only {int(ok.sum())} samples with a normal")
+        if not ok.any():
+            raise InputError(source, "surface: no sample with a finite point and normal")
         self.points, self.normals, self.edge = points[ok], normals[ok], edge[ok]
         self.tree = cKDTree(self.points)
 
@@ -864,12 +853,18 @@ class SampledSurface:
         spacing = float(np.median(self.tree.query(self.points[near], k=2)[0][:, 1]))
         return 2.0 * spacing + 3.0 * float(noise)
 
+    def plane(self, x: np.ndarray) -> np.ndarray:
+        """(n,) signed distance of points ``x`` (n, 3) to their nearest sample's tangent plane,
+        mm."""
+        return self.residuals(x, np.inf)[0]
+
     def residuals(self, x: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(plane, seen, distance)`` of points ``x`` (n, 3): the signed distance to the nearest
         sample's tangent plane, whether the surface covers the point (that sample is within
         ``reach``, mm, and not on the data's edge, beyond which the point may lie), and the
         distance to that sample."""
-        d, j = self.tree.query(np.asarray(x, dtype=np.float64))
+        x = np.asarray(x, dtype=np.float64)
+        d, j = self.tree.query(x)
         plane = np.einsum("ij,ij->i", x - self.points[j], self.normals[j])
         return plane, (d <= reach) & ~self.edge[j], d
 
@@ -899,7 +894,9 @@ def region_motion(
     surface : SampledSurface
         The target (a range image's samples, in the region's frame).
     params : dict, optional
-        Overrides of :data:`DEFAULT_ICP` (the trimming keys are not used); its RMSE gate
+        Overrides of :data:`DEFAULT_ICP` (used: ``max_correspondence_mm``, ``max_iterations``,
+        ``robust_kernel``, ``kernel_k_mm``, ``kernel_noise_sigmas``, ``step_mm``, ``min_fitness``
+        and the RMSE gate's keys); its RMSE gate
         (``max_rmse_ratio`` times the expected RMSE, or ``max_rmse_mm``) judges rigidity, over
         the points the surface's data covers; ``min_fitness`` is the least share of those.
     source : str
@@ -943,8 +940,17 @@ def region_motion(
     fitness = float(seen.mean())
     rmse = float(np.sqrt(np.mean(d[seen] ** 2))) if seen.any() else 0.0
     gate = _rmse_gate(plane[seen], noise_surface, noise_region, prm)
-    problems = _verdict(conv, iterations, fitness, 1.0, [], prm)
-    problems += [gate.problem] if gate.problem else []
+    problems = [] if conv else [f"ICP did not converge ({iterations} iterations)"]
+    if fitness < prm["min_fitness"]:
+        problems.append(
+            f"the surface's data covers only {100 * fitness:.0f}% of the region (min_fitness "
+            f"{prm['min_fitness']:g})"
+        )
+    if gate.problem:
+        problems.append(
+            f"point-to-plane RMSE {gate.residual_rmse:.3f} mm over the region > {gate.limit:.3f}"
+            " mm: it did not move rigidly"
+        )
     return AlignResult(
         transform=t,
         initial=initial,
@@ -1001,19 +1007,20 @@ def _region_icp(p, surface, initial, prm, reach=0.0, noise=0.0):
         if np.count_nonzero(w) < 6:
             return t, it, False, 0.0
         c = (w[:, None] * x).sum(axis=0) / w.sum()
-        a = np.hstack([np.cross(x - c, n), n])
-        ata = a.T @ (w[:, None] * a)
-        # damped: a direction the region's shape hardly constrains keeps the pose it has
-        damp = _DAMPING * np.diag(ata).mean() * np.eye(6)
-        twist = np.linalg.solve(ata + damp, -a.T @ (w * r))
+        # the twist's rotation in mm at the region's radius, so that its six parts weigh alike
+        radius = max(float(np.sqrt((w * np.sum((x - c) ** 2, axis=1)).sum() / w.sum())), 1e-12)
+        a = np.hstack([np.cross(x - c, n) / radius, n])
+        ata = a.T @ (w[:, None] * a) / w.sum()
+        eigen = np.linalg.eigvalsh(ata)
+        constraint = float(np.sqrt(max(eigen[0], 0.0)))
+        # damped by a share of the strongest direction: one the region's shape hardly
+        # constrains moves less per step, and not by a large step out of noise
+        twist = np.linalg.solve(ata + _DAMPING * eigen[-1] * np.eye(6), -a.T @ (w * r) / w.sum())
+        twist[:3] /= radius
         step = np.eye(4)
         step[:3, :3] = Rotation.from_rotvec(twist[:3]).as_matrix()
         step[:3, 3] = c - step[:3, :3] @ c + twist[3:]
         t_old, t = t, step @ t
-        radius = np.sqrt((w * np.sum((x - c) ** 2, axis=1)).sum() / w.sum())
-        scale = np.r_[np.full(3, 1.0 / max(radius, 1e-12)), np.ones(3)]
-        weakest = np.linalg.eigvalsh(ata * np.outer(scale, scale) / w.sum())[0]
-        constraint = float(np.sqrt(max(weakest, 0.0)))
         # the step's size where the region is (a turn about the frame's origin, a metre away,
         # is no measure of it)
         moved = np.linalg.norm(transform_points(t, p) - transform_points(t_old, p), axis=1)

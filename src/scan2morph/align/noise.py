@@ -56,6 +56,13 @@ class MeshNoise:
         return float(np.sqrt(np.median(r) / CHI2_1_MEDIAN)) if r.size else float("nan")
 
 
+def robust_rms(residuals: np.ndarray) -> float:
+    """The standard deviation of Gaussian residuals (n,) from the median of their squares, so
+    that a minority of outliers (skin that moved) does not count; NaN for none."""
+    r = np.asarray(residuals, dtype=np.float64)
+    return float(np.sqrt(np.median(r**2) / CHI2_1_MEDIAN)) if r.size else float("nan")
+
+
 def mesh_noise(
     vertices: np.ndarray,
     valid: np.ndarray,

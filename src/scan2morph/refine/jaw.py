@@ -11,11 +11,14 @@ vertex goes where that rigid motion carries its skin point, found in the take's 
 (:func:`scan2morph.template.sample.range_pixels`).
 
 The prior holds only where the chin did move rigidly. It is used when the registration's
-point-to-plane RMSE is within ``max_rmse_ratio`` times what the two meshes' measured noise
-explains (a chin that the lips' rounding or a pout deforms is not rigid, and keeps the flow's
-answer). Its weight rises from 0 to 1 along the way from the lower lip's outer midpoint
-(iBUG 58) to the chin (iBUG 9), between the shares ``start`` and ``end`` of it: the lower lip
-and the sulcus under it move with the lips as much as with the jaw.
+point-to-plane RMSE is within ``max_rmse_ratio`` times the residual the still skin (the
+alignment's region) leaves on the same scans, the ICP converged and the chin's shape pins every
+direction of its motion (a chin that the lips' rounding or a pout deforms is not rigid, a plane
+slides freely: both keep the flow's answer). Its weight rises from 0 to 1 along the way from the
+lower lip's outer midpoint (iBUG 58) to the chin (iBUG 9), between the shares ``start`` and
+``end`` of it: the lower lip and the sulcus under it move with the lips as much as with the jaw.
+The refine stage moves a chin vertex towards the prior by its weight times one minus the flow's
+confidence there: the prior fills in where the texture measured nothing.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from scan2morph.align import (
     region_motion,
     transform_points,
 )
-from scan2morph.align.noise import CHI2_1_MEDIAN
+from scan2morph.align.noise import robust_rms
 from scan2morph.errors import InputError
 from scan2morph.geometry import surface_normals
 from scan2morph.scan.repair import smooth_depth
@@ -57,6 +60,9 @@ LOWER_LIP = 58
 CHIN = 9
 #: Fewest chin vertices valid in both meshes for a registration.
 MIN_VERTICES = 12
+#: The rigidity gate's least limit, mm: on noise-free scans the still skin leaves almost
+#: nothing, but two samplings of curved skin differ by a few hundredths of a millimetre.
+MIN_LIMIT_MM = 0.05
 #: Smoothing of the take's range before its normals are taken, px; a jump in range beyond
 #: NORMAL_JUMP_MM (mm) is another surface.
 NORMAL_SIGMA_PX = 2.0
@@ -79,7 +85,7 @@ class JawParams:
         Shares of the way from iBUG 58 to iBUG 9 where the prior's weight starts to rise from 0
         and reaches 1; the vertices at weight 1 are the region registered.
     max_rmse_ratio : float
-        The registration's RMSE gate, in units of the RMSE the measured noise explains.
+        The registration's RMSE gate, in units of the residual the still skin leaves.
     """
 
     enabled: bool = True
@@ -88,10 +94,14 @@ class JawParams:
     max_rmse_ratio: float = 1.5
 
     def __post_init__(self):
-        if not 0.0 <= self.start < self.end:
+        for name in ("start", "end", "max_rmse_ratio"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InputError("config", f"refine.jaw_{name}: expected a number, got {value!r}")
+        if not 0.0 <= self.start < self.end <= 1.0:
             raise InputError(
                 "config",
-                f"refine.jaw_start, refine.jaw_end: expected 0 <= start < end, got "
+                f"refine.jaw_start, refine.jaw_end: expected 0 <= start < end <= 1, got "
                 f"{self.start} and {self.end}",
             )
         if not self.max_rmse_ratio > 0:
@@ -124,9 +134,43 @@ class JawPrior:
     used: bool
     problem: str
 
+    def fill(self, points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The prior where the flow measured nothing: each point moves towards it by its weight
+        times one minus the flow's ``confidence`` (a confident flow stays: a chin that is rigid
+        but not quite, or a pose the ICP slid, must not override it).
+
+        Parameters
+        ----------
+        points : (V, 2) float
+            The flow's pixel positions in the take's image, px.
+        confidence : (V,) float
+            The flow's confidence in [0, 1].
+
+        Returns
+        -------
+        points : (V, 2) float64
+        confidence : (V,) float64
+            That of either measurement: ``c + share``, ``share = weight (1 - c)``.
+        """
+        c = np.asarray(confidence, dtype=np.float64)
+        share = np.where(np.isfinite(self.points).all(axis=1), self.weight * (1.0 - c), 0.0)
+        return self.apply(points, share), c + share
+
     def apply(self, points: np.ndarray, share: np.ndarray | None = None) -> np.ndarray:
-        """``points`` (V, 2) moved towards the prior by ``share`` (V,) (default its weight; 0
-        where it has no point)."""
+        """Pixel positions moved towards the prior.
+
+        Parameters
+        ----------
+        points : (V, 2) float
+            Pixel positions in the take's image, px.
+        share : (V,) float, optional
+            How far each moves, in [0, 1] (default the prior's weight); 0 where the prior has
+            no point.
+
+        Returns
+        -------
+        (V, 2) float64
+        """
         w = self.weight if share is None else np.asarray(share, dtype=np.float64)
         w = np.where(np.isfinite(self.points).all(axis=1), w, 0.0)[:, None]
         return np.asarray(points, dtype=np.float64) + w * np.nan_to_num(self.points - points)
@@ -147,9 +191,20 @@ def chin_weights(
         Shares of the way from iBUG 58 to iBUG 9 (projected on that axis) where the weight
         starts to rise from 0 and reaches 1.
     """
-    lip, chin = np.asarray(ibug_xy, dtype=np.float64)[[LOWER_LIP - 1, CHIN - 1]]
+    ibug = np.asarray(ibug_xy, dtype=np.float64)
+    v = np.asarray(vertices2d, dtype=np.float64)
+    if ibug.shape != (68, 2) or v.ndim != 2 or v.shape[1] != 2:
+        raise InputError(
+            "template",
+            f"vertices2d, ibug_xy: expected (V, 2) and (68, 2), got {v.shape} and {ibug.shape}",
+        )
+    if not 0.0 <= start < end:
+        raise InputError("template", f"start, end: expected 0 <= start < end, got {start}, {end}")
+    lip, chin = ibug[[LOWER_LIP - 1, CHIN - 1]]
     axis = chin - lip
-    share = (np.asarray(vertices2d, dtype=np.float64) - lip) @ axis / float(axis @ axis)
+    if not np.isfinite(axis).all() or float(axis @ axis) == 0.0:
+        raise InputError("template", "ibug_xy: the lower lip (iBUG 58) and chin (iBUG 9) coincide")
+    share = (v - lip) @ axis / float(axis @ axis)
     return np.clip((share - start) / (end - start), 0.0, 1.0)
 
 
@@ -199,57 +254,65 @@ def jaw_prior(
     -------
     JawPrior
     """
-    weights = np.asarray(weights, dtype=np.float64)
+    weights, neutral, neutral_valid, take, take_valid, still = _checked(
+        weights, neutral, neutral_valid, take, take_valid, still, source
+    )
+    xyz = _checked_scan(take_xyz, take_transform, source)
     n = len(weights)
     none = np.full((n, 2), np.nan)
-    neutral = np.asarray(neutral, dtype=np.float64)
-    take = np.asarray(take, dtype=np.float64)
-    neutral_valid = np.asarray(neutral_valid, dtype=bool)
+
+    def refused(problem, motion=None):
+        return JawPrior(none, np.zeros(n), motion, False, problem)
+
     core = (weights >= 1.0) & neutral_valid
-    both = core & np.asarray(take_valid, dtype=bool)
+    both = core & take_valid
     if both.sum() < MIN_VERTICES:
-        problem = (
+        return refused(
             f"only {int(both.sum())} chin vertices valid in both meshes "
             f"(at least {MIN_VERTICES} needed)"
         )
-        return JawPrior(none, np.zeros(n), None, False, problem)
+    still &= neutral_valid
+    if still.sum() < MIN_VERTICES:
+        return refused(f"only {int(still.sum())} still skin vertices (align.icp_region) valid")
     start = kabsch(neutral[both], take[both], source=source)  # the fit's correspondence
     near = (weights > 0) & neutral_valid
-    xyz = np.asarray(take_xyz, dtype=np.float64)
     surface, offset, window = scan_surface(
         xyz, take_transform, transform_points(start, neutral[near]), icp, source
     )
+    if surface is None:
+        return refused("the take's scan does not show the chin")
     # what a rigid motion leaves on these scans: the still skin's residual (robust: a smile's
-    # temples move) under the alignment
-    still_points = neutral[np.asarray(still, dtype=bool) & neutral_valid]
+    # temples move) under the alignment, over the points its data covers as the chin's are
+    still_points = neutral[still]
     still_surface = scan_surface(xyz, take_transform, still_points, icp, source)[0]
-    if surface is None or still_surface is None:
-        return JawPrior(none, np.zeros(n), None, False, "the take's scan does not show the chin")
-    plane, seen, _ = still_surface.residuals(still_points, still_surface.reach(still_points, 0.0))
-    reference = float(np.sqrt(np.median(plane[seen] ** 2) / CHI2_1_MEDIAN)) if seen.any() else 0.0
-    limit = max_rmse_ratio * reference
-    motion = region_motion(
-        neutral[core],
-        start,
-        surface,
-        (icp or {}) | {"max_rmse_mm": limit if limit > 0 else None},
-        source,
-    )
-    if motion.ok and not motion.constraint >= MIN_CONSTRAINT:
-        problem = (
-            f"the chin's shape does not pin its motion: a slide of 1 mm changes its fit by "
-            f"{motion.constraint:.3f} mm RMS (at least {MIN_CONSTRAINT:g} needed)"
+    plane = np.zeros(0)
+    if still_surface is not None:
+        plane, seen, _ = still_surface.residuals(
+            still_points, still_surface.reach(still_points, 0.0)
         )
-        return JawPrior(none, np.zeros(n), motion, False, problem)
+        plane = plane[seen]
+    if plane.size < MIN_VERTICES:
+        return refused("the take's scan does not show the still skin (align.icp_region)")
+    reference = robust_rms(plane)
+    limit = max(max_rmse_ratio * reference, MIN_LIMIT_MM)
+    motion = region_motion(
+        neutral[core], start, surface, (icp or {}) | {"max_rmse_mm": limit}, source
+    )
+    if not motion.constraint >= MIN_CONSTRAINT:
+        return refused(
+            f"the chin's shape does not pin its motion: a slide of 1 mm changes its fit by "
+            f"{motion.constraint:.3f} mm RMS (at least {MIN_CONSTRAINT:g} needed)",
+            motion,
+        )
     if not motion.ok:
         problem = "; ".join(motion.problems)
-        if motion.converged and motion.residual_rmse > limit > 0:
+        if motion.converged and motion.residual_rmse > limit:
             problem = (
                 f"the chin did not move rigidly: point-to-plane RMSE {motion.residual_rmse:.3f} "
                 f"mm > {limit:.3f} mm (refine.jaw_max_rmse_ratio {max_rmse_ratio:g} x the "
-                f"{reference:.3f} mm the still skin leaves)"
+                f"{reference:.3f} mm the still skin leaves, at least {MIN_LIMIT_MM:g} mm)"
             )
-        return JawPrior(none, np.zeros(n), motion, False, problem)
+        return refused(problem, motion)
     moved = transform_points(motion.transform, neutral[near])
     points = none.copy()
     points[near] = offset + range_pixels(
@@ -259,22 +322,87 @@ def jaw_prior(
     return JawPrior(points, np.where(found, weights, 0.0), motion, True, "")
 
 
-def scan_surface(xyz, transform, placed, icp=None, source="range image"):
-    """A range image's surface (in the frame ``transform`` maps it to) where points ``placed``
-    (n, 3) can be: ``(SampledSurface, offset, window)``, the window's offset (column, row) in
-    the image, px; three None when the window is empty.
+def _checked(weights, neutral, neutral_valid, take, take_valid, still, source):
+    """The per-vertex inputs of :func:`jaw_prior` as arrays, or a clear error."""
+    weights = np.asarray(weights, dtype=np.float64)
+    n = len(weights)
+    if weights.ndim != 1 or not np.isfinite(weights).all():
+        raise InputError(source, f"weights: expected (V,) finite chin weights, got {weights.shape}")
+    out = [weights]
+    for name, value, width in (
+        ("neutral", neutral, 3),
+        ("neutral_valid", neutral_valid, 0),
+        ("take", take, 3),
+        ("take_valid", take_valid, 0),
+        ("still", still, 0),
+    ):
+        a = np.asarray(value, dtype=np.float64 if width else bool)
+        want = (n, width) if width else (n,)
+        if a.shape != want:
+            raise InputError(source, f"{name}: expected shape {want}, got {a.shape}")
+        out.append(a)
+    return out
+
+
+def _checked_scan(xyz, transform, source):
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 3 or xyz.shape[2] != 3 or min(xyz.shape[:2]) < 2:
+        raise InputError(source, f"take_xyz: expected an (H, W, 3) range image, got {xyz.shape}")
+    t = np.asarray(transform, dtype=np.float64)
+    if t.shape != (4, 4) or not np.isfinite(t).all():
+        raise InputError(
+            source, f"take_transform: expected a finite (4, 4) transform, got {t.shape}"
+        )
+    return xyz
+
+
+def scan_surface(
+    xyz: np.ndarray,
+    transform: np.ndarray,
+    placed: np.ndarray,
+    icp: dict[str, Any] | None = None,
+    source: str = "range image",
+) -> tuple[SampledSurface | None, np.ndarray | None, np.ndarray | None]:
+    """A range image's surface where some points can be.
 
     The window holds the pixels within the ICP's correspondence distance of the points' box;
     their normals are those of the range smoothed over :data:`NORMAL_SIGMA_PX` (a pixel's own
     normal is tilted by its noise: 0.1 mm over 0.7 mm of spacing is 8 degrees, enough to pin a
-    plane); pixels next to one without data are the data's edge.
+    plane). The data's edge: pixels next to one without data (the image's border counts as
+    none; a depth step with data on both sides does not, and its far side's residuals are
+    large, which the robust kernel weighs down).
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm
+        The range image, NaN where there is no data.
+    transform : (4, 4) float
+        The image's frame -> the frame of ``placed`` and of the surface returned.
+    placed : (n, 3) float, mm
+        Where the points to register are (finite).
+    icp : dict, optional
+        ``max_correspondence_mm``, the window's margin (default :data:`DEFAULT_ICP`'s).
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    surface : SampledSurface or None
+        None when the window holds no more than :data:`MIN_VERTICES` pixels with data.
+    offset : (2,) float64 or None
+        The window's (column, row) in the image, px.
+    window : (h, w, 3) float64 or None
+        The window of ``xyz``.
     """
+    xyz = _checked_scan(xyz, transform, source)
+    placed = np.asarray(placed, dtype=np.float64)
+    if placed.ndim != 2 or placed.shape[1] != 3 or not len(placed) or not np.isfinite(placed).all():
+        raise InputError(source, f"placed: expected finite (n, 3) points, got {placed.shape}")
     reach = float((icp or {}).get("max_correspondence_mm", DEFAULT_ICP["max_correspondence_mm"]))
     lo, hi = placed.min(axis=0) - reach, placed.max(axis=0) + reach
+    mapped = transform_points(transform, xyz)
     with np.errstate(invalid="ignore"):
-        inside = (
-            (transform_points(transform, xyz) >= lo) & (transform_points(transform, xyz) <= hi)
-        ).all(axis=2)
+        inside = ((mapped >= lo) & (mapped <= hi)).all(axis=2)
     rows, cols = np.nonzero(inside)
     if not len(rows):
         return None, None, None
@@ -285,7 +413,20 @@ def scan_surface(xyz, transform, placed, icp=None, source="range image"):
     have = np.isfinite(window).all(axis=2) & np.isfinite(normals).all(axis=2)
     if have.sum() <= MIN_VERTICES:
         return None, None, None
-    edge = have & ~binary_erosion(have, np.ones((3, 3), dtype=bool), border_value=1)
+    # the image's own border is the edge of its data; a window's cut is not
+    rows_, cols_ = have.shape
+    padded = np.pad(have, 1, constant_values=False)
+    data = np.isfinite(xyz).all(axis=2)
+    r1, c1 = r0 + rows_, c0 + cols_
+    if r0 > 0:
+        padded[0, 1:-1] = data[r0 - 1, c0:c1]
+    if r1 < xyz.shape[0]:
+        padded[-1, 1:-1] = data[r1, c0:c1]
+    if c0 > 0:
+        padded[1:-1, 0] = data[r0:r1, c0 - 1]
+    if c1 < xyz.shape[1]:
+        padded[1:-1, -1] = data[r0:r1, c1]
+    edge = have & ~binary_erosion(padded, np.ones((3, 3), dtype=bool))[1:-1, 1:-1]
     rotation = np.asarray(transform, dtype=np.float64)[:3, :3]
     surface = SampledSurface(
         transform_points(transform, window[have]), normals[have] @ rotation.T, source, edge[have]

@@ -22,7 +22,7 @@ from scan2morph.stages.part import Part, Run, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.regions import icp_region
-from scan2morph.template.sample import fit_map, sample_mesh
+from scan2morph.template.sample import fit_map, folded_faces, sample_mesh
 
 #: Config sections this stage reads (``template`` for the subdivision level and sampling rules,
 #: ``align`` for the ICP settings of the jaw prior).
@@ -78,7 +78,9 @@ class Params:
         """From the config sections ``refine``, ``template`` and ``align``."""
         names = {f.name for f in fields(RefineParams)}
         jaw = {
-            f.name: refine[f"jaw_{f.name}"] for f in fields(JawParams) if f"jaw_{f.name}" in refine
+            k: refine[f"jaw_{k}"]
+            for k in ("start", "end", "max_rmse_ratio")
+            if f"jaw_{k}" in refine
         }
         if "jaw_prior" in refine:
             jaw["enabled"] = bool(refine["jaw_prior"])
@@ -130,7 +132,8 @@ def sample_points(
     vertices : (V, 3) float64
         mm in the neutral frame (the take's alignment applied); NaN where invalid.
     ok : (V,) bool
-        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid.
+        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid, and the
+        vertices of triangles that ``points`` fold are invalid.
     """
     valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
     vertices, ok = sample_mesh(
@@ -140,7 +143,9 @@ def sample_points(
         source,
         params.min_weight,
         params.max_slope_deg,
-        exclude=np.flatnonzero(~valid),
+        # the fit's invalid vertices, and those of triangles the points fold (a correspondence
+        # that is not one to one: two skin points cannot land on one)
+        exclude=np.union1d(np.flatnonzero(~valid), faces[folded_faces(points, faces)]),
     )
     transform = need(data, paths.align(take, "transform"), source)
     return transform_points(transform, vertices), ok
@@ -174,11 +179,14 @@ def run(
     -------
     Part
         ``refine/vertices`` (V, 3) mm in the neutral frame (NaN where invalid), ``refine/valid``
-        (V,), ``refine/points2d`` (V, 2) px in the take's image and ``refine/confidence`` (V,) (0
-        where the fit was kept);
+        (V,), ``refine/points2d`` (V, 2) px in the take's image and ``refine/confidence`` (V,)
+        (the flow's, 0 where the fit was kept, plus the share the jaw prior moved a chin vertex
+        by);
         the ``refine`` group's attributes hold the median correction (px), the share of
-        vertices with a confident measurement, whether the refinement was ``used`` and, when not,
-        the ``problem``.
+        vertices with a confident measurement, whether the flow was ``used`` and, when not,
+        the ``problem``; whether the jaw prior was used (``jaw_used``), why not
+        (``jaw_problem``, ``"off"`` with ``refine.jaw_prior`` false) and, when the chin was
+        registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``.
     """
     aligned = need(data, paths.align(take, "vertices"), source)
     valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
@@ -218,6 +226,7 @@ def run(
             f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
             f"neutral's texture (refine.min_confident_share "
             f"{100 * params.min_confident_share:.0f}%): the template fit is kept"
+            + (" (the jaw prior may still move the chin)" if params.jaw.enabled else "")
         )
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points
@@ -225,13 +234,8 @@ def run(
         # them as it smooths a fit's)
         report["confidence"] = np.zeros(len(points))
     jaw = _jaw(template, fine, take, neutral, data, maps[0], params, source)
-    if jaw.used:
-        # the geometry's answer where the texture gave none: the flow's confident measurements
-        # stay (a chin that is rigid but not quite, or a pose the ICP slid, must not override
-        # them), and the combined confidence is that of either measurement
-        share = jaw.weight * (1.0 - report["confidence"])
-        refined = jaw.apply(refined, share)
-        report["confidence"] = report["confidence"] + share
+    if jaw.used:  # the geometry's answer where the texture gave none
+        refined, report["confidence"] = jaw.fill(refined, report["confidence"])
     elif params.jaw.enabled:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     vertices, ok = sample_points(data, take, refined, fine.faces, params, source)

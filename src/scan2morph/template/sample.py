@@ -346,7 +346,8 @@ def range_pixels(
     ----------
     xyz : (H, W, 3) float, mm, NaN = no data
     points : (n, 3) float, mm
-        Points on (or within the noise of) the range image's surface, in its frame.
+        Points on (or within the noise of) the range image's surface, in its frame (a
+        non-finite point is not found).
     start : (n, 2) float, optional
         Pixel positions to start from (within a few pixels of the answer); default: each
         point's nearest pixel with data (in 3D).
@@ -374,12 +375,14 @@ def range_pixels(
         raise InputError(
             source, f"xyz, points: expected (H, W, 3) and (n, 3), got {xyz.shape} and {pts.shape}"
         )
+    finite = np.isfinite(pts).all(axis=1)
     if start is None:
         rows, cols = np.nonzero(np.isfinite(xyz).all(axis=2))
+        p = np.full((len(pts), 2), np.nan)
         if not len(rows):
-            return np.full((len(pts), 2), np.nan)
-        nearest = cKDTree(xyz[rows, cols]).query(pts)[1]
-        p = np.column_stack([cols[nearest], rows[nearest]]).astype(np.float64)
+            return p
+        nearest = cKDTree(xyz[rows, cols]).query(pts[finite])[1]
+        p[finite] = np.column_stack([cols[nearest], rows[nearest]])
     else:
         p = np.array(start, dtype=np.float64)
         if p.shape != (len(pts), 2):
@@ -402,7 +405,7 @@ def range_pixels(
         # how far the step moved the sample (along the surface), mm
         moved = np.where(ok, np.linalg.norm(np.einsum("nki,ni->nk", jac, step), axis=1), np.inf)
     off = np.linalg.norm(sample(p) - pts, axis=1)
-    p[~((moved <= tolerance_mm) & (off <= max_distance_mm))] = np.nan
+    p[~((moved <= tolerance_mm) & (off <= max_distance_mm) & finite)] = np.nan
     return p
 
 
