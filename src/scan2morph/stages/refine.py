@@ -22,7 +22,7 @@ from scan2morph.stages.part import Part, Run, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.regions import icp_region
-from scan2morph.template.sample import fit_map, folded_faces, sample_mesh
+from scan2morph.template.sample import fit_map, sample_mesh
 
 #: Config sections this stage reads (``template`` for the subdivision level and sampling rules,
 #: ``align`` for the ICP settings of the jaw prior).
@@ -132,8 +132,7 @@ def sample_points(
     vertices : (V, 3) float64
         mm in the neutral frame (the take's alignment applied); NaN where invalid.
     ok : (V,) bool
-        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid, and the
-        vertices of triangles that ``points`` fold are invalid.
+        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid.
     """
     valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
     vertices, ok = sample_mesh(
@@ -143,9 +142,7 @@ def sample_points(
         source,
         params.min_weight,
         params.max_slope_deg,
-        # the fit's invalid vertices, and those of triangles the points fold (a correspondence
-        # that is not one to one: two skin points cannot land on one)
-        exclude=np.union1d(np.flatnonzero(~valid), faces[folded_faces(points, faces)]),
+        exclude=np.flatnonzero(~valid),
     )
     transform = need(data, paths.align(take, "transform"), source)
     return transform_points(transform, vertices), ok
