@@ -879,8 +879,8 @@ def region_motion(
     """The rigid motion of one region of skin onto a surface, with a verdict on its rigidity.
 
     ICP moves the region's points onto the surface (point-to-plane; each step about the region's
-    centroid and damped, so that a direction the region's shape hardly constrains keeps the
-    initial pose; the kernel annealed as in :func:`align_take` and never narrower than
+    centroid and damped, so that a direction the region's shape hardly constrains moves
+    slowly; the kernel annealed as in :func:`align_take` and never narrower than
     ``kernel_noise_sigmas`` times the RMSE the measured noise explains; points off the surface's
     data left out). Nothing is trimmed: the verdict says whether the *whole* region moved
     rigidly.
@@ -928,11 +928,12 @@ def region_motion(
         )
     every = np.ones(len(p), dtype=bool)
     noise_region = mesh_noise(p, every, source=source).region(every)
-    noise_surface = surface.noise(transform_points(initial, p), source)
+    placed = transform_points(initial, p)
+    noise_surface = surface.noise(placed, source)
     expected = float(np.hypot(noise_surface, noise_region))
     known = expected if np.isfinite(expected) else 0.0
     prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
-    reach = surface.reach(transform_points(initial, p), known)
+    reach = surface.reach(placed, known)
     t, iterations, conv, constraint = _region_icp(p, surface, initial, prm, reach, known)
     if not np.isfinite(t).all():
         t, conv = initial, False
@@ -981,9 +982,9 @@ def _region_icp(p, surface, initial, prm, reach=0.0, noise=0.0):
 
     Each step is the least-squares twist about the weighted centroid of the region (not the
     frame's origin, a metre away: a rotation of a few degrees about it is a large, badly
-    linearised translation) of least norm, so that a direction the region's shape leaves free
-    (a chin slides along its own curvature) keeps the initial pose instead of taking a large
-    step from noise. The kernel's scale halves from ``max_correspondence_mm`` to
+    linearised translation), damped by :data:`_DAMPING` of its strongest direction, so that a
+    direction the region's shape hardly constrains (a chin slides along its own curvature)
+    moves slowly instead of taking a large step from noise. The kernel's scale halves from ``max_correspondence_mm`` to
     ``kernel_k_mm`` as in :func:`_refine_icp`; a correspondence farther than that scale (and
     than ``reach``, mm) is left out, so that points beyond the surface's data do not pull. It
     has converged when a step moves the points by less than ``step_mm`` RMS, or by less than

@@ -271,20 +271,22 @@ def jaw_prior(
             f"only {int(both.sum())} chin vertices valid in both meshes "
             f"(at least {MIN_VERTICES} needed)"
         )
-    still &= neutral_valid
+    still = still & neutral_valid  # not in place: the caller's array stays as it was
     if still.sum() < MIN_VERTICES:
         return refused(f"only {int(still.sum())} still skin vertices (align.icp_region) valid")
     start = kabsch(neutral[both], take[both], source=source)  # the fit's correspondence
     near = (weights > 0) & neutral_valid
-    surface, offset, window = scan_surface(
-        xyz, take_transform, transform_points(start, neutral[near]), icp, source
+    mapped = transform_points(take_transform, xyz)  # the whole image once, for both windows
+    margin = _margin(icp)
+    surface, offset, window = _scan_surface(
+        xyz, mapped, take_transform, transform_points(start, neutral[near]), margin, source
     )
     if surface is None:
         return refused("the take's scan does not show the chin")
     # what a rigid motion leaves on these scans: the still skin's residual (robust: a smile's
     # temples move) under the alignment, over the points its data covers as the chin's are
     still_points = neutral[still]
-    still_surface = scan_surface(xyz, take_transform, still_points, icp, source)[0]
+    still_surface = _scan_surface(xyz, mapped, take_transform, still_points, margin, source)[0]
     plane = np.zeros(0)
     if still_surface is not None:
         plane, seen, _ = still_surface.residuals(
@@ -398,9 +400,18 @@ def scan_surface(
     placed = np.asarray(placed, dtype=np.float64)
     if placed.ndim != 2 or placed.shape[1] != 3 or not len(placed) or not np.isfinite(placed).all():
         raise InputError(source, f"placed: expected finite (n, 3) points, got {placed.shape}")
-    reach = float((icp or {}).get("max_correspondence_mm", DEFAULT_ICP["max_correspondence_mm"]))
-    lo, hi = placed.min(axis=0) - reach, placed.max(axis=0) + reach
     mapped = transform_points(transform, xyz)
+    return _scan_surface(xyz, mapped, transform, placed, _margin(icp), source)
+
+
+def _margin(icp: dict[str, Any] | None) -> float:
+    """The windows' margin around the points, mm: the ICP's correspondence distance."""
+    return float((icp or {}).get("max_correspondence_mm", DEFAULT_ICP["max_correspondence_mm"]))
+
+
+def _scan_surface(xyz, mapped, transform, placed, reach, source):
+    """:func:`scan_surface` on checked inputs, with the image already mapped by ``transform``."""
+    lo, hi = placed.min(axis=0) - reach, placed.max(axis=0) + reach
     with np.errstate(invalid="ignore"):
         inside = ((mapped >= lo) & (mapped <= hi)).all(axis=2)
     rows, cols = np.nonzero(inside)
