@@ -8,11 +8,13 @@ tells the user what to fix without a traceback hunt.
 from __future__ import annotations
 
 import errno
+import numbers
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 
 class InputError(ValueError):
@@ -30,6 +32,22 @@ class InputError(ValueError):
         self.source = str(source)
         self.problem = problem
         super().__init__(f"{self.source}: {problem}")
+
+
+def require_numbers(source: str | PathLike[str], values: Mapping[str, Any]) -> None:
+    """Raise an :class:`InputError` for the first value that is not a real number.
+
+    Parameters
+    ----------
+    source : str or path-like
+        Where the values come from (e.g. ``"config"``).
+    values : mapping field name -> value
+        The field names go into the message (e.g. ``"refine.jaw_start"``); booleans are not
+        numbers here.
+    """
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise InputError(source, f"{name}: expected a number, got {value!r}")
 
 
 #: ``errno`` values of a full disk (or a used-up quota).

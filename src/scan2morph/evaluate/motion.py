@@ -24,6 +24,7 @@ from scipy.spatial import cKDTree
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
 from scan2morph.template.mesh import IBUG_CANONICAL, INNER_LIPS
+from scan2morph.template.regions import inner_lip_midline, lip_side
 from scan2morph.template.sample import behind_steps
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
@@ -99,50 +100,6 @@ INNER_LIP = np.asarray(INNER_LIPS) - 1
 
 #: The frontal view of the head frame (x right, y up): (x, y, z) -> (x, -y), y down as in images.
 FRONT = np.array([[1.0, 0.0], [0.0, -1.0], [0.0, 0.0]])
-
-
-def inner_lip_midline(inner_lip: np.ndarray) -> np.ndarray:
-    """(5, 2) the mouth's midline from the inner-lip contour, left to right.
-
-    Parameters
-    ----------
-    inner_lip : (8, 2) float
-        iBUG 61-68 in order (corner, upper lip, corner, lower lip); closed or open.
-
-    Returns
-    -------
-    (5, 2) float64
-        The corners and the mean of each upper/lower pair (62-68, 63-67, 64-66), sorted by x.
-    """
-    lip = np.asarray(inner_lip, dtype=np.float64)
-    mid = np.vstack([lip[0], (lip[1:4] + lip[7:4:-1]) / 2.0, lip[4]])
-    return mid[np.argsort(mid[:, 0])]
-
-
-def lip_side(points: np.ndarray, midline: np.ndarray, band: float) -> np.ndarray:
-    """Which lip each 2D point belongs to: above or below the mouth's midline.
-
-    Parameters
-    ----------
-    points : (n, 2) float
-        Positions in a frame whose y points down (an image, the template, :data:`FRONT`).
-    midline : (m, 2) float
-        The mouth's midline in the same frame, sorted by x (:func:`inner_lip_midline`, or the
-        slit itself).
-    band : float
-        Points farther than this from the midline (same units) are on neither lip.
-
-    Returns
-    -------
-    (n,) int8
-        -1 above the midline (upper lip), +1 below (lower lip), 0 beyond its ends or the band.
-    """
-    mid = np.asarray(midline, dtype=np.float64)
-    p = np.asarray(points, dtype=np.float64)
-    offset = p[:, 1] - np.interp(p[:, 0], mid[:, 0], mid[:, 1])
-    side = np.sign(offset).astype(np.int8)
-    side[(p[:, 0] <= mid[0, 0]) | (p[:, 0] >= mid[-1, 0]) | (np.abs(offset) > band)] = 0
-    return side
 
 
 def template_lip_sides(vertices2d: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ from scan2morph.align import (
     transform_points,
 )
 from scan2morph.align.noise import robust_rms
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, require_numbers
 from scan2morph.geometry import surface_normals
 from scan2morph.scan.repair import smooth_depth
 from scan2morph.template.sample import range_pixels
@@ -94,10 +94,10 @@ class JawParams:
     max_rmse_ratio: float = 1.5
 
     def __post_init__(self):
-        for name in ("start", "end", "max_rmse_ratio"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise InputError("config", f"refine.jaw_{name}: expected a number, got {value!r}")
+        require_numbers(
+            "config",
+            {f"refine.jaw_{n}": getattr(self, n) for n in ("start", "end", "max_rmse_ratio")},
+        )
         if not 0.0 <= self.start < self.end <= 1.0:
             raise InputError(
                 "config",

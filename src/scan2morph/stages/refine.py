@@ -16,12 +16,13 @@ import numpy as np
 from scan2morph.align import rotation_angle_deg, transform_points
 from scan2morph.refine import RefineParams, grey, refine_points
 from scan2morph.refine.jaw import JawParams, JawPrior, chin_weights, jaw_prior
+from scan2morph.refine.lip import LipParams, LipPrior, lip_prior
 from scan2morph.stages import align as align_stage
 from scan2morph.stages.fit import fiducial_set
 from scan2morph.stages.part import Part, Run, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
-from scan2morph.template.regions import icp_region
+from scan2morph.template.regions import icp_region, lip
 from scan2morph.template.sample import fit_map, sample_mesh
 
 #: Config sections this stage reads (``template`` for the subdivision level and sampling rules,
@@ -56,6 +57,8 @@ class Params:
         The image correlation's settings of the section ``refine``.
     jaw : JawParams
         The jaw prior's (``refine.jaw_*``; :mod:`scan2morph.refine.jaw`).
+    lip : LipParams
+        The upper-lip prior's (``refine.lip_*``; :mod:`scan2morph.refine.lip`).
     icp : dict
         The ICP settings of the section ``align`` (the jaw prior's registration).
     still_region : str
@@ -70,6 +73,7 @@ class Params:
     min_confident_share: float
     flow: RefineParams
     jaw: JawParams = JawParams()
+    lip: LipParams = LipParams()
     icp: dict | None = None
     still_region: str = "stable"
 
@@ -84,6 +88,13 @@ class Params:
         }
         if "jaw_prior" in refine:
             jaw["enabled"] = bool(refine["jaw_prior"])
+        lip = {
+            k: refine[f"lip_{k}"]
+            for k in ("min_contrast", "search", "max_shift", "min_share", "stretch")
+            if f"lip_{k}" in refine
+        }
+        if "lip_prior" in refine:
+            lip["enabled"] = bool(refine["lip_prior"])
         return cls(
             str(refine["method"]),
             int(template["subdivision_levels"]),
@@ -93,6 +104,7 @@ class Params:
             float(refine.get("min_confident_share", 0.0)),
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
             JawParams(**jaw),
+            LipParams(**lip),
             align_stage.Params.from_config(align, template).icp,
             str(align["icp_region"]),
         )
@@ -235,6 +247,11 @@ def run(
         refined, report["confidence"] = jaw.fill(refined, report["confidence"])
     elif params.jaw.enabled:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
+    lip = _lip(fine, take, neutral, data, maps[0](fine.vertices), refined, params, source)
+    if lip.used:  # the upper lip's length where its rolling misleads the flow
+        refined, report["confidence"] = lip.apply(refined, report["confidence"])
+    elif params.lip.enabled:
+        log.info("%s: upper-lip prior not used: %s", source, lip.problem)
     vertices, ok = sample_points(data, take, refined, fine.faces, params, source)
     attrs = {
         "method": params.method,
@@ -245,6 +262,11 @@ def run(
         "valid_share": float(ok.mean()),
         "jaw_used": jaw.used,
         "jaw_problem": jaw.problem,
+        "lip_used": lip.used,
+        "lip_problem": lip.problem,
+        "lip_vertices": lip.vertices,
+        "lip_measured": lip.measured,
+        "lip_contrast": lip.contrast,
     }
     if jaw.motion is not None:
         attrs |= {
@@ -292,6 +314,28 @@ def _jaw(template, fine, take, neutral, data, neutral_map, params: Params, sourc
         need(data, paths.align(take, "transform"), source),
         params.icp,
         params.jaw.max_rmse_ratio,
+        source,
+    )
+
+
+def _lip(fine, take, neutral, data, neutral_points, take_points, params: Params, source: str):
+    """The upper-lip prior of a take (:mod:`scan2morph.refine.lip`), or why there is none."""
+    n = len(fine.vertices)
+    if not params.lip.enabled:
+        return LipPrior(np.full((n, 2), np.nan), np.zeros(n), 0, 0, 0.0, False, "off")
+    return lip_prior(
+        lip(fine, "upper"),
+        fine.vertices,
+        neutral_points,
+        take_points,
+        need(data, paths.range_image(neutral, "color"), source),
+        need(data, paths.range_image(neutral, "xyz"), source),
+        need(data, paths.range_image(take, "color"), source),
+        need(data, paths.range_image(take, "xyz"), source),
+        fine.faces,
+        params.lip,
+        params.min_weight,
+        params.max_slope_deg,
         source,
     )
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from scan2morph.errors import InputError
@@ -96,3 +98,159 @@ def named_indices(template, names, what: str) -> np.ndarray:
             )
         flat.append(template.named[name])
     return np.asarray(flat, dtype=np.int64).reshape(arr.shape)
+
+
+def inner_lip_midline(inner_lip: np.ndarray) -> np.ndarray:
+    """(5, 2) the mouth's midline from the inner-lip contour, left to right.
+
+    Parameters
+    ----------
+    inner_lip : (8, 2) float
+        iBUG 61-68 in order (corner, upper lip, corner, lower lip); closed or open.
+
+    Returns
+    -------
+    (5, 2) float64
+        The corners and the mean of each upper/lower pair (62-68, 63-67, 64-66), sorted by x.
+    """
+    lip = np.asarray(inner_lip, dtype=np.float64)
+    mid = np.vstack([lip[0], (lip[1:4] + lip[7:4:-1]) / 2.0, lip[4]])
+    return mid[np.argsort(mid[:, 0])]
+
+
+def lip_side(points: np.ndarray, midline: np.ndarray, band: float) -> np.ndarray:
+    """Which lip each 2D point belongs to: above or below the mouth's midline.
+
+    Parameters
+    ----------
+    points : (n, 2) float
+        Positions in a frame whose y points down (an image, the template, :data:`FRONT`).
+    midline : (m, 2) float
+        The mouth's midline in the same frame, sorted by x (:func:`inner_lip_midline`, or the
+        slit itself).
+    band : float
+        Points farther than this from the midline (same units) are on neither lip.
+
+    Returns
+    -------
+    (n,) int8
+        -1 above the midline (upper lip), +1 below (lower lip), 0 beyond its ends or the band.
+    """
+    mid = np.asarray(midline, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    offset = p[:, 1] - np.interp(p[:, 0], mid[:, 0], mid[:, 1])
+    side = np.sign(offset).astype(np.int8)
+    side[(p[:, 0] <= mid[0, 0]) | (p[:, 0] >= mid[-1, 0]) | (np.abs(offset) > band)] = 0
+    return side
+
+
+#: iBUG rows (0-based) of each lip's outer contour, corner to corner: the vermilion border
+#: (upper: iBUG 49-55; lower: iBUG 55-60 and 49).
+LIP_BORDERS = {"upper": np.arange(48, 55), "lower": np.array([54, 55, 56, 57, 58, 59, 48])}
+#: iBUG rows (0-based) of the inner-lip contour (iBUG 61-68: corner, upper lip, corner, lower lip).
+INNER_LIP_ROWS = np.arange(60, 68)
+
+
+@dataclass(frozen=True)
+class Lip:
+    """A lip's vertices of a (subdivided) template.
+
+    Attributes
+    ----------
+    inner : (n,) int64
+        Vertices of the mouth's boundary on the lip (the slit), corners excluded, by x.
+    border : (n,) int64
+        For each inner vertex, the vertex on the lip's vermilion border (:data:`LIP_BORDERS`)
+        nearest in x.
+    between : (m,) int64
+        The vertices strictly between the two (the lip's body).
+    margin : (k,) int64
+        The skin's vertices next to the border, outside the lip.
+    """
+
+    inner: np.ndarray
+    border: np.ndarray
+    between: np.ndarray
+    margin: np.ndarray
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n,) int64 the lip's vertices: slit, body and border, each once."""
+        return np.unique(np.concatenate([self.inner, self.between, self.border]))
+
+    def columns(self, vertices2d: np.ndarray) -> np.ndarray:
+        """(n,) int64 for each of :attr:`vertices`, the slit vertex (its index in
+        :attr:`inner`) nearest in x (template coordinates ``vertices2d`` (V, 2)): the profile
+        it lies on."""
+        x = np.asarray(vertices2d, dtype=np.float64)[:, 0]
+        return np.argmin(np.abs(x[self.vertices][:, None] - x[self.inner][None, :]), axis=1)
+
+
+def lip(template, side: str = "upper") -> Lip:
+    """A lip of a template: its slit vertices, their border partners and its body.
+
+    Parameters
+    ----------
+    template : Template
+        Base or subdivided template (canonical frame: y down), with ``ibug_xy`` (68, 2) and
+        ``mouth_boundary``.
+    side : str
+        ``"upper"`` or ``"lower"``.
+
+    Returns
+    -------
+    Lip
+
+    Raises
+    ------
+    InputError
+        ``side`` is unknown, or the template has no vertex on the lip's vermilion border or no
+        slit vertex on it.
+    """
+    if side not in LIP_BORDERS:
+        raise InputError("template", f"lip side {side!r} unknown (expected 'upper' or 'lower')")
+    sign = -1.0 if side == "upper" else 1.0  # y down: the upper lip above the slit
+    v = np.asarray(template.vertices, dtype=np.float64)
+    ibug = np.asarray(template.ibug_xy, dtype=np.float64)
+    mid = inner_lip_midline(ibug[INNER_LIP_ROWS])
+    mouth = np.asarray(template.mouth_boundary, dtype=np.int64)
+    x = v[:, 0]
+    inside = (x > mid[0, 0]) & (x < mid[-1, 0])
+    on_side = sign * (v[:, 1] - np.interp(x, mid[:, 0], mid[:, 1])) > 0
+    inner = mouth[inside[mouth] & on_side[mouth]]
+    inner = inner[np.argsort(x[inner])]
+    border_line = ibug[LIP_BORDERS[side]]
+    f = np.asarray(template.faces, dtype=np.int64)
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    tol = 0.25 * float(np.median(np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)))
+    on_border = np.flatnonzero(_polyline_distance(v, border_line) < tol)
+    if len(inner) == 0 or len(on_border) == 0:
+        raise InputError(
+            "template",
+            f"no {side} lip: {len(inner)} slit vertices on its side of the inner-lip midline, "
+            f"{len(on_border)} vertices on its vermilion border",
+        )
+    border = on_border[np.argmin(np.abs(x[on_border][None, :] - x[inner][:, None]), axis=1)]
+    order = np.argsort(border_line[:, 0])
+    inside_border = (
+        sign * (np.interp(x, border_line[order, 0], border_line[order, 1]) - v[:, 1]) > 0
+    )
+    body = inside & on_side & inside_border
+    body[inner] = False
+    body[on_border] = False
+    lip = np.zeros(len(v), dtype=bool)
+    lip[inner] = lip[border] = lip[body] = True
+    near = np.zeros(len(v), dtype=bool)
+    near[edges[np.isin(edges, border).any(axis=1)].ravel()] = True
+    near &= ~lip & ~np.isin(np.arange(len(v)), mouth)
+    return Lip(inner, border, np.flatnonzero(body), np.flatnonzero(near))
+
+
+def _polyline_distance(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """(n,) distance of 2D points to a polyline (k, 2), same units."""
+    d = np.full(len(points), np.inf)
+    for a, b in zip(line[:-1], line[1:], strict=True):
+        ab = b - a
+        t = np.clip((points - a) @ ab / (ab @ ab), 0.0, 1.0)
+        d = np.minimum(d, np.linalg.norm(points - (a + t[:, None] * ab), axis=1))
+    return d

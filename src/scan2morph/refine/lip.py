@@ -1,0 +1,576 @@
+"""The upper-lip prior: the upper lip keeps its length from the vermilion border to the slit.
+
+Image correlation measures the lips poorly when the mouth rounds or opens: the upper lip rolls
+and foreshortens, its inner part turns away from the camera, and the flow leaves the slit's
+vertices 3.5-8 px from where their skin went (synthetic ``she``, ``too``, ``eel``, ``man``). Its
+material hardly stretches, though: on the synthetic visemes the 3D length from the vermilion
+border to the slit changes by a median of 1-7%. And the border is visible in any light: the
+lips are redder than the skin around them, and redness ``R / (R + G + B)`` does not change with
+the light's brightness.
+
+Each vertex of the upper lip (:func:`scan2morph.template.regions.lip`: the slit, the lip's
+body, the border) lies on a *profile*: the image line of its column, from the column's slit
+vertex through its border vertex and on past the border, moved sideways through the vertex.
+Along it, in each image:
+
+1. the border is the steepest fall of redness going outward (:func:`vermilion_edge`), and the
+   vertex's skin point lies at a signed length from it along the neutral's surface (mm);
+2. the take's border is then registered to the neutral's: the redness around it, as a function
+   of the length along the surface, is matched (the shift of best correlation), so that a
+   border whose fall is broad or uneven (real lips under stubble) is found at the same skin;
+3. in the take the vertex goes to its length from the border, along the take's surface. A flow
+   within ``stretch`` of the lip's length of it stays (the lip may stretch that much); one
+   beyond goes to the nearest length allowed.
+
+The vertices so placed are held; the lip's others and the skin next to its border follow
+harmonically (:func:`harmonic_fill`), and everything else keeps the flow's answer.
+
+The prior needs lips that are redder than the skin, in both images: a grey image, a sprayed
+stereo neutral or a painted face shows no border, and the prior is then not used (its
+``problem`` says why). A vertex whose border is not found or not matched, whose length the
+take's surface cannot carry, or whose correction would exceed ``max_shift`` of the lip's height
+is not placed; with fewer than ``min_share`` of the lip's vertices placed the prior is not used.
+
+The lower lip gets no such prior: it shortens by 16-22% as it rounds (measured: a length prior
+there moves its slit vertices further from their skin points in she and too).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+from scipy.sparse import coo_matrix
+from scipy.sparse.linalg import spsolve
+
+from scan2morph.errors import InputError, require_numbers
+from scan2morph.refine.template_space import pull_back
+from scan2morph.template.regions import Lip
+from scan2morph.template.sample import sample_range, scanner_view
+
+__all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior", "harmonic_fill"]
+
+#: Spacing of a profile's samples, px.
+STEP_PX = 0.2
+#: Smoothing of a profile's redness, and of its surface points before their length is taken
+#: (range noise of 0.1 mm on 0.2 px steps would otherwise add to the length), px.
+RED_SIGMA_PX = 0.5
+XYZ_SIGMA_PX = 1.0
+#: A profile runs past its border vertex by this share of the lip's height (the skin beyond
+#: the border); the take's runs ``max_shift`` further at both ends (the vertex may go there).
+BEYOND = 0.6
+#: The neutral's profile starts this share of the lip's height before its vertex (or its
+#: slit's row), so that the vertex is not at its end (where the smoothing is one-sided).
+PAST = 0.25
+
+
+@dataclass(frozen=True)
+class LipParams:
+    """Parameters of the upper-lip prior (config keys ``refine.lip_*``).
+
+    Attributes
+    ----------
+    enabled : bool
+        Use the prior (``refine.lip_prior``).
+    min_contrast : float
+        Least redness step at the border, lip minus skin (each side's mean along the profile),
+        in both images.
+    search : float
+        The border is looked for within this share of the lip's height of the border vertex,
+        and the take's is matched to the neutral's within this share of the lip's length.
+    max_shift : float
+        Largest correction of a slit vertex, in shares of the lip's height in the take.
+    min_share : float
+        Least share of the upper lip's profiles measured for the prior to be used.
+    stretch : float
+        The lip's length may change by this share: a flow whose lip length is within it is
+        kept, one beyond it is moved to the nearest length it allows.
+    """
+
+    enabled: bool = True
+    min_contrast: float = 0.02
+    search: float = 0.5
+    max_shift: float = 0.6
+    min_share: float = 0.5
+    stretch: float = 0.1
+
+    def __post_init__(self):
+        require_numbers(
+            "config",
+            {
+                f"refine.lip_{n}": getattr(self, n)
+                for n in ("min_contrast", "search", "max_shift", "min_share", "stretch")
+            },
+        )
+        if not 0.0 < self.min_contrast < 1.0:
+            raise InputError(
+                "config",
+                f"refine.lip_min_contrast: expected 0 < contrast < 1, got {self.min_contrast}",
+            )
+        if not 0.0 < self.search < 1.0:
+            raise InputError(
+                "config", f"refine.lip_search: expected 0 < share < 1, got {self.search}"
+            )
+        if not self.max_shift > 0.0:
+            raise InputError(
+                "config", f"refine.lip_max_shift: expected a positive share, got {self.max_shift}"
+            )
+        if not 0.0 <= self.stretch < 1.0:
+            raise InputError(
+                "config", f"refine.lip_stretch: expected 0 <= share < 1, got {self.stretch}"
+            )
+        if not 0.0 < self.min_share <= 1.0:
+            raise InputError(
+                "config", f"refine.lip_min_share: expected 0 < share <= 1, got {self.min_share}"
+            )
+
+
+@dataclass(frozen=True)
+class LipPrior:
+    """Where the upper lip's length puts its vertices in a take.
+
+    Attributes
+    ----------
+    points : (V, 2) float64
+        Pixel positions in the take's image, px; NaN off the upper lip, or when not used.
+    weight : (V,) float64
+        The share of each vertex's correction that comes from a measured profile (the harmonic
+        interpolation of 1 at the measured slit vertices, 0 at the border), in [0, 1].
+    measured : int
+        The lip's vertices placed by their profiles.
+    vertices : int
+        The lip's vertices.
+    contrast : float
+        The median redness step at the border over the measured profiles (both images' lesser).
+    used : bool
+    problem : str
+        Why it is not used ("" when it is).
+    """
+
+    points: np.ndarray
+    weight: np.ndarray
+    measured: int
+    vertices: int
+    contrast: float
+    used: bool
+    problem: str
+
+    def apply(self, points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The upper lip's vertices placed by the prior.
+
+        The flow's own answer on the lip is not kept, however confident: it slides where the lip
+        rolls (its texture there correlates with the wrong skin).
+
+        Parameters
+        ----------
+        points : (V, 2) float
+            The flow's pixel positions in the take's image, px.
+        confidence : (V,) float
+            The flow's confidence in [0, 1].
+
+        Returns
+        -------
+        points : (V, 2) float64
+        confidence : (V,) float64
+            ``c + weight (1 - c)`` on the lip.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        c = np.asarray(confidence, dtype=np.float64)
+        has = np.isfinite(self.points).all(axis=1)
+        w = np.where(has, self.weight, 0.0)
+        return np.where(has[:, None], self.points, p), c + w * (1.0 - c)
+
+
+def redness(color: np.ndarray) -> np.ndarray:
+    """``R / (R + G + B)`` of an (H, W, 3) colour image, float64 (NaN where black).
+
+    Raises
+    ------
+    InputError
+        ``color`` is not (H, W, 3).
+    """
+    c = np.asarray(color, dtype=np.float64)
+    if c.ndim != 3 or c.shape[2] != 3:
+        raise InputError("colour image", f"expected an (H, W, 3) RGB image, got shape {c.shape}")
+    total = c.sum(axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > 0, c[..., 0] / total, np.nan)
+
+
+def vermilion_edge(
+    red: np.ndarray, t: np.ndarray, at: float, window: float
+) -> tuple[float, float] | None:
+    """The vermilion border along a lip profile: the steepest fall of redness going outward.
+
+    Parameters
+    ----------
+    red : (n,) float
+        Redness along the profile, from the slit (first) outward (smoothed).
+    t : (n,) float
+        The samples' position along the profile, increasing (0 at the slit vertex, 1 at the
+        border vertex).
+    at, window : float
+        The border is looked for where ``|t - at| < window``.
+
+    Returns
+    -------
+    (t_edge, contrast) or None
+        The border's position and the redness step there: the mean redness from the profile's
+        start (``t >= 0``) to the edge minus the mean beyond it. None when the window holds no
+        finite sample, or the profile has none on either side.
+    """
+    r = np.asarray(red, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    grad = np.gradient(r, t)
+    look = (np.abs(t - at) < window) & np.isfinite(grad)
+    if not look.any():
+        return None
+    k = np.flatnonzero(look)[np.argmin(grad[look])]
+    lip = r[(t >= 0.0) & (t < t[k])]
+    skin = r[t > t[k]]
+    lip, skin = lip[np.isfinite(lip)], skin[np.isfinite(skin)]
+    if len(lip) == 0 or len(skin) == 0:
+        return None
+    return float(t[k]), float(lip.mean() - skin.mean())
+
+
+def _profile(red, xyz, view, origin, direction, start, end, min_weight, max_slope_deg, source):
+    """Samples along the line ``origin + t direction``, ``t`` in ``[start, end]``:
+    ``t`` (n,), smoothed redness (n,), surface points (n, 3) mm smoothed along it (NaN where
+    the range has none), pixel positions (n, 2). The line is sampled 3 sigma further at both
+    ends and trimmed after smoothing: a one-sided smoothing would pull the ends in."""
+    height = float(np.linalg.norm(direction))
+    pad = 3.0 * max(RED_SIGMA_PX, XYZ_SIGMA_PX) / height
+    span = end - start + 2 * pad
+    n = max(int(np.ceil(span * height / STEP_PX)), 8)
+    t = np.linspace(start - pad, end + pad, n)
+    px = origin + t[:, None] * direction
+    step = span * height / (n - 1)
+    r = pull_back(red, px[None])[0].astype(np.float64)
+    r = _smooth(r, RED_SIGMA_PX / step)
+    points, ok = sample_range(xyz, px, source, min_weight, max_slope_deg, view)
+    points = np.where(ok[:, None], points, np.nan)
+    points = np.stack([_smooth(points[:, k], XYZ_SIGMA_PX / step) for k in range(3)], axis=1)
+    keep = (t >= start - 1e-9) & (t <= end + 1e-9)
+    return t[keep], r[keep], points[keep], px[keep]
+
+
+def _smooth(values: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing along a profile, normalised over its finite samples (so neither a gap
+    nor an end pulls it); NaN stays NaN."""
+    bad = ~np.isfinite(values)
+    v = np.where(bad, 0.0, values)
+    w = gaussian_filter1d((~bad).astype(np.float64), sigma, mode="constant")
+    out = gaussian_filter1d(v, sigma, mode="constant") / np.maximum(w, 1e-12)
+    out[bad] = np.nan
+    return out
+
+
+def lip_prior(
+    lip: Lip,
+    vertices2d: np.ndarray,
+    neutral_points: np.ndarray,
+    take_points: np.ndarray,
+    neutral_color: np.ndarray,
+    neutral_xyz: np.ndarray,
+    take_color: np.ndarray,
+    take_xyz: np.ndarray,
+    faces: np.ndarray,
+    params: LipParams,
+    min_weight: float = 0.5,
+    max_slope_deg: float | None = 80.0,
+    source: str = "take",
+) -> LipPrior:
+    """Where the upper lip's length from the vermilion border puts its vertices in a take.
+
+    Parameters
+    ----------
+    lip : Lip
+        The template's upper lip (:func:`scan2morph.template.regions.lip`).
+    vertices2d : (V, 2) float
+        The template's vertices, template units (the lip's columns).
+    neutral_points, take_points : (V, 2) float
+        The template's vertices in the neutral's image (its fit: they define the skin points)
+        and in the take's (the flow's answer), px.
+    neutral_color, take_color : (H, W, 3)
+        Colour images, pixel to pixel with the range images.
+    neutral_xyz, take_xyz : (H, W, 3) float
+        Range images, mm (any frame: only lengths are used), NaN where there is no data.
+    faces : (F, 3) int
+        The template's triangles (the harmonic interpolation's mesh).
+    params : LipParams
+    min_weight, max_slope_deg : float
+        The range images' sampling rules (:func:`~scan2morph.template.sample.sample_range`).
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    LipPrior
+
+    Raises
+    ------
+    InputError
+        The points are not (V, 2) or do not cover the lip's vertices, or an image has the wrong
+        shape.
+    """
+    pn = _points(neutral_points, "neutral_points", source)
+    pt = _points(take_points, "take_points", source)
+    n = len(pn)
+    if len(pt) != n:
+        raise InputError(
+            source, f"lip prior: {n} neutral and {len(pt)} take points (expected the same count)"
+        )
+    used_idx = np.concatenate([lip.vertices, lip.margin])
+    if len(used_idx) and (used_idx.max() >= n or used_idx.min() < 0):
+        raise InputError(source, f"lip prior: the lip's vertices are not among the {n} points")
+    red_n, red_t = redness(neutral_color), redness(take_color)
+    for what, img, xyz in (("neutral", red_n, neutral_xyz), ("take", red_t, take_xyz)):
+        shape = np.shape(xyz)
+        if len(shape) != 3 or shape[2] != 3 or shape[:2] != img.shape:
+            raise InputError(
+                source,
+                f"lip prior: the {what}'s range image has shape {shape}, expected "
+                f"{(*img.shape, 3)} (pixel to pixel with its colour image)",
+            )
+    xyz_n = np.asarray(neutral_xyz, dtype=np.float64)
+    xyz_t = np.asarray(take_xyz, dtype=np.float64)
+    # the depth-step rule's optical axes, once per image
+    view_n, view_t = (None, None) if max_slope_deg is None else map(scanner_view, (xyz_n, xyz_t))
+    vertices = lip.vertices
+    columns = lip.columns(vertices2d)
+    targets = np.full((len(vertices), 2), np.nan)
+    contrasts = []
+    for k, (v, c) in enumerate(zip(vertices, columns, strict=True)):
+        i, o = lip.inner[c], lip.border[c]
+        found = _place(
+            _Line(pn[i], pn[o], pn[v]), _Line(pt[i], pt[o], pt[v]), red_n, xyz_n, view_n,
+            red_t, xyz_t, view_t, params, min_weight, max_slope_deg, source,
+        )  # fmt: skip
+        if found is not None:
+            targets[k], contrast = found
+            contrasts.append(contrast)
+    ok = np.isfinite(targets).all(axis=1)
+    measured, total = int(ok.sum()), len(vertices)
+    contrast = float(np.median(contrasts)) if contrasts else 0.0
+
+    def result(points, weight, problem):
+        return LipPrior(points, weight, measured, total, contrast, not problem, problem)
+
+    if measured < params.min_share * total:
+        return result(
+            np.full((n, 2), np.nan),
+            np.zeros(n),
+            f"only {measured} of the upper lip's {total} vertices could be placed: the "
+            f"vermilion border shows in both images (a redness step of at least "
+            f"{params.min_contrast}) and the take's surface carries the lip's length there; at "
+            f"least {100 * params.min_share:.0f}% needed",
+        )
+    # measured vertices are held at their places; the others of the lip and the skin next to
+    # its border follow harmonically; everything else keeps the flow's answer
+    fixed = np.ones(n, dtype=bool)
+    fixed[vertices[~ok]] = False
+    fixed[lip.margin] = False
+    values = np.zeros((n, 3))
+    values[vertices[ok], :2] = targets[ok] - pt[vertices[ok]]
+    values[vertices[ok], 2] = 1.0
+    filled = harmonic_fill(faces, values, fixed)
+    region = np.concatenate([vertices, lip.margin])
+    points = np.full((n, 2), np.nan)
+    points[region] = pt[region] + filled[region, :2]
+    weight = np.zeros(n)
+    weight[region] = np.clip(filled[region, 2], 0.0, 1.0)
+    return result(points, weight, "")
+
+
+def _points(points, name, source):
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise InputError(source, f"lip prior: {name} has shape {p.shape}, expected (V, 2) px")
+    return p
+
+
+@dataclass(frozen=True)
+class _Line:
+    """A vertex's profile in one image: the line of its column (slit vertex ``inner`` to border
+    vertex ``border``, px) moved sideways through the vertex ``at``; ``t`` is 0 on the slit's
+    row and 1 on the border's."""
+
+    inner: np.ndarray
+    border: np.ndarray
+    at: np.ndarray
+
+    @property
+    def direction(self) -> np.ndarray:
+        return self.border - self.inner
+
+    @property
+    def t(self) -> float:
+        """The vertex's own position along the line."""
+        d = self.direction
+        return float((self.at - self.inner) @ d / (d @ d))
+
+    @property
+    def origin(self) -> np.ndarray:
+        """The line's point at t = 0."""
+        return self.at - self.t * self.direction
+
+    def ok(self) -> bool:
+        d = self.direction
+        return bool(np.isfinite([*self.inner, *self.border, *self.at]).all() and d @ d > 0)
+
+
+def _place(
+    neutral, take, red_n, xyz_n, view_n, red_t, xyz_t, view_t, params, min_weight, max_slope, source
+):
+    """One lip vertex: its place in the take (2,) px and the border's redness step (the lesser
+    of the two images'), or None.
+
+    The vertex's skin point lies at a signed length from the vermilion border along the
+    neutral's surface. The border is found in each image (:func:`vermilion_edge`), and the
+    take's is then registered to the neutral's: the redness around it, as a function of the
+    length along the surface, is matched (the shift of best correlation), so that a border
+    whose fall is broad or uneven is found at the same skin in both. In the take the vertex
+    goes to its length from the border; a flow within ``stretch`` of the lip's length of it
+    stays (the lip may stretch that much), one beyond goes to the nearest length allowed."""
+    if not (neutral.ok() and take.ok()):
+        return None
+    t, r, xyz, _ = _profile(
+        red_n, xyz_n, view_n, neutral.origin, neutral.direction, min(neutral.t, 0.0) - PAST,
+        1.0 + BEYOND, min_weight, max_slope, source,
+    )  # fmt: skip
+    edge = vermilion_edge(r, t, 1.0, params.search)
+    if edge is None or edge[1] < params.min_contrast:
+        return None
+    arc_n = _arc(t, xyz, edge[0])
+    length = np.interp(neutral.t, t, arc_n)  # the vertex's, from the border (< 0 on the lip)
+    lip_length = -np.interp(0.0, t, arc_n)
+    if not np.isfinite(length):
+        return None
+    if not np.isfinite(lip_length) or lip_length <= 0.0:
+        lip_length = abs(length)
+    # the take's profile reaches max_shift further at both ends
+    t2, r2, xyz2, _ = _profile(
+        red_t, xyz_t, view_t, take.origin, take.direction, min(take.t, 0.0) - params.max_shift,
+        1.0 + BEYOND + params.max_shift, min_weight, max_slope, source,
+    )  # fmt: skip
+    edge_t = vermilion_edge(r2, t2, 1.0, params.search)
+    if edge_t is None or edge_t[1] < params.min_contrast:
+        return None
+    arc_t = _arc(t2, xyz2, edge_t[0])
+    # the border's neighbourhood: the lip's outer half and the skin beyond (the slit's side
+    # may roll out of sight or show the mouth)
+    near = (arc_n >= -NEAR * lip_length) & (t >= min(neutral.t, 0.0))
+    shift = _register(arc_n[near], r[near], arc_t, r2, params.search * lip_length)
+    if shift is None:
+        return None
+    target = length + shift
+    flow = np.interp(take.t, t2, arc_t)
+    tol = params.stretch * lip_length
+    goal = float(np.clip(flow, target - tol, target + tol)) if np.isfinite(flow) else target
+    ok = np.isfinite(arc_t)
+    if not arc_t[ok].min() <= goal <= arc_t[ok].max():
+        return None  # the surface ends (or the profile does) before the length is walked
+    place = float(np.interp(goal, arc_t[ok], t2[ok]))
+    if abs(place - take.t) > params.max_shift:  # the correction, in shares of the lip's height
+        return None
+    return take.origin + place * take.direction, min(edge[1], edge_t[1])
+
+
+#: The share of the lip (from the border) whose redness is registered.
+NEAR = 0.5
+#: Step of the registration's shifts, mm; least correlation of a registration; least share of
+#: the neutral's profile the take's must cover at the best shift.
+SHIFT_STEP_MM = 0.05
+MIN_CORRELATION = 0.8
+MIN_COVER = 0.6
+
+
+def _register(arc_n, red_n, arc_t, red_t, limit):
+    """The shift (mm) that best aligns the take's redness profile to the neutral's: the
+    neutral's redness at length ``a`` from its vertex matches the take's at ``a + shift``
+    (zero-mean normalised correlation over their overlap); None without a clear match."""
+    n_ok = np.isfinite(arc_n) & np.isfinite(red_n)
+    t_ok = np.isfinite(arc_t) & np.isfinite(red_t)
+    if n_ok.sum() < 8 or t_ok.sum() < 8:
+        return None
+    grid, ref = arc_n[n_ok], red_n[n_ok]
+    at, rt = arc_t[t_ok], red_t[t_ok]
+    shifts = np.arange(-limit, limit + SHIFT_STEP_MM / 2, SHIFT_STEP_MM)
+    where = grid[None, :] + shifts[:, None]
+    inside = (where >= at[0]) & (where <= at[-1])
+    moved = np.where(inside, np.interp(where, at, rt), np.nan)
+    cover = inside.mean(axis=1)
+    score = np.full(len(shifts), -np.inf)
+    for k in np.flatnonzero(cover >= MIN_COVER):
+        m = inside[k]
+        a, b = ref[m] - ref[m].mean(), moved[k, m] - moved[k, m].mean()
+        den = np.sqrt((a @ a) * (b @ b))
+        if den > 0:
+            score[k] = (a @ b) / den
+    k = int(np.argmax(score))
+    if not np.isfinite(score[k]) or score[k] < MIN_CORRELATION:
+        return None
+    shift = shifts[k]
+    if 0 < k < len(shifts) - 1 and np.isfinite(score[k - 1]) and np.isfinite(score[k + 1]):
+        c = score[k - 1] - 2 * score[k] + score[k + 1]
+        if c < 0:
+            shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
+    return float(shift)
+
+
+def _arc(t: np.ndarray, xyz: np.ndarray, t0: float) -> np.ndarray:
+    """(n,) signed length along a profile's surface points (n, 3) from its point at ``t0``
+    (positive for ``t > t0``), mm; NaN beyond the first gap on either side."""
+    k = int(np.clip(np.searchsorted(t, t0) - 1, 0, len(t) - 2))
+    p0 = np.array([np.interp(t0, t, xyz[:, j]) for j in range(3)])
+    seg = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+    out = np.full(len(t), np.nan)
+    out[k + 1 :] = np.linalg.norm(xyz[k + 1] - p0) + np.concatenate(
+        [[0.0], np.cumsum(seg[k + 1 :])]
+    )
+    out[: k + 1] = -(
+        np.linalg.norm(p0 - xyz[k]) + np.concatenate([[0.0], np.cumsum(seg[:k][::-1])])
+    )[::-1]
+    return out
+
+
+def harmonic_fill(faces: np.ndarray, values: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """Values on a mesh's free vertices that are harmonic (each the mean of its neighbours),
+    given the values at the fixed vertices.
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+    values : (V, k) float
+        Values at the fixed vertices (others ignored).
+    fixed : (V,) bool
+
+    Returns
+    -------
+    (V, k) float64
+        ``values`` at the fixed vertices, the uniform-Laplacian harmonic interpolation at the
+        free ones (a free vertex with no path to a fixed one gets 0).
+    """
+    vals = np.asarray(values, dtype=np.float64)
+    fixed = np.asarray(fixed, dtype=bool)
+    out = np.where(fixed[:, None], vals, 0.0)
+    free = np.flatnonzero(~fixed)
+    if len(free) == 0:
+        return out
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    v = len(vals)
+    adj = coo_matrix(
+        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(v, v)
+    ).tocsr()
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    lap = (coo_matrix((degree, (np.arange(v), np.arange(v))), shape=(v, v)) - adj).tocsr()
+    a = lap[free][:, free].tocsc()
+    b = -lap[free][:, np.flatnonzero(fixed)] @ out[fixed]
+    # a free part with no fixed neighbour would be singular: a tiny pull to 0 keeps it at 0
+    a = a + coo_matrix((1e-12 * np.ones(len(free)), (np.arange(len(free)),) * 2)).tocsc()
+    out[free] = np.asarray(spsolve(a, b)).reshape(len(free), -1)
+    return out

@@ -1,0 +1,305 @@
+"""The upper-lip prior (scan2morph.refine.lip) and the lip regions of the template
+(template.regions.lip), on an analytic lip rendered by ray casting with a pinhole camera (the
+oracle): a lip that rolls about its vermilion border keeps its length, so where each of its
+skin points went is known."""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+import pytest
+
+from scan2morph.errors import InputError
+from scan2morph.refine.lip import (
+    LipParams,
+    LipPrior,
+    harmonic_fill,
+    lip_prior,
+    redness,
+    vermilion_edge,
+)
+from scan2morph.template import build_template, subdivide_template
+from scan2morph.template.regions import Lip, inner_lip_midline, lip
+
+W, H, F = 240, 200, 1500.0
+K = np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])
+DISTANCE = 600.0  # mm, camera to the skin's plane
+LIP_MM = 8.0  # the lip's length from the border to the slit, along its surface
+SKIN = np.array([0.80, 0.60, 0.50])
+LIP = np.array([0.70, 0.33, 0.32])
+COLUMNS = np.linspace(-8.0, 8.0, 7)  # mm: the template's lip columns
+ROWS = np.array([-2.0, 0.0, 4.0, LIP_MM])  # material length from the border: margin to slit
+
+
+def _material(x, a, angle_deg):
+    """Camera-frame points (n, 3) of the skin at material (x, a), mm: ``a`` is the length from
+    the border along the surface (negative: the skin above it, a plane); the lip below it is a
+    flat strip tilted towards the camera by ``angle_deg`` (it rolls out about the border)."""
+    t = np.radians(angle_deg)
+    lip = np.clip(a, 0.0, None)
+    y = np.minimum(a, 0.0) + lip * np.cos(t)
+    return np.stack([x, y, DISTANCE - lip * np.sin(t)], axis=-1)
+
+
+def _albedo(a):
+    """The skin's colour at material length ``a`` (n, 3): red lips below the border (a 1 mm
+    smooth step)."""
+    s = np.clip((a + 0.5) / 1.0, 0.0, 1.0)
+    s = s * s * (3 - 2 * s)
+    return SKIN + s[:, None] * (LIP - SKIN)
+
+
+def _render(angle_deg, gain=1.0, end_mm=LIP_MM + 2.0, grey=False):
+    """(xyz (H, W, 3) mm, colour (H, W, 3) uint8) of the rolled lip; NaN where rays miss."""
+    xs, as_ = np.meshgrid(np.arange(-20.0, 20.01, 0.25), np.arange(-12.0, end_mm + 1e-6, 0.25))
+    v = _material(xs.ravel(), as_.ravel(), angle_deg)
+    nx = xs.shape[1]
+    i = (np.arange(nx - 1)[None, :] + nx * np.arange(xs.shape[0] - 1)[:, None]).ravel()
+    faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(v.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
+    )
+    ys, xs_ = np.mgrid[0:H, 0:W].astype(np.float64)
+    d = np.stack([(xs_ - K[0, 2]) / F, (ys - K[1, 2]) / F, np.ones_like(xs_)], axis=-1)
+    rays = np.concatenate([np.zeros_like(d), d], axis=-1).reshape(-1, 6).astype(np.float32)
+    hit = scene.cast_rays(o3d.core.Tensor(rays))
+    t = hit["t_hit"].numpy().astype(np.float64)
+    ok = np.isfinite(t)
+    xyz = np.where(ok[:, None], t[:, None] * d.reshape(-1, 3), np.nan).reshape(H, W, 3)
+    f = faces[np.where(ok, hit["primitive_ids"].numpy(), 0)]
+    uv = hit["primitive_uvs"].numpy().astype(np.float64)
+    bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=-1)
+    a = np.einsum("nk,nk->n", as_.ravel()[f], bary)
+    colour = np.where(ok[:, None], gain * 255 * _albedo(a), 0.0)
+    if grey:
+        colour = colour.mean(axis=1, keepdims=True).repeat(3, axis=1)
+    return xyz, np.clip(colour, 0, 255).astype(np.uint8).reshape(H, W, 3)
+
+
+def _project(points):
+    p = points @ K.T
+    return p[:, :2] / p[:, 2:]
+
+
+def _template_lip():
+    """A small template over the lip: rows (margin, border, body, slit) x COLUMNS, its Lip, and
+    the template coordinates (mm / 10)."""
+    xs, as_ = np.meshgrid(COLUMNS, ROWS)
+    nx = len(COLUMNS)
+    i = (np.arange(nx - 1)[None, :] + nx * np.arange(len(ROWS) - 1)[:, None]).ravel()
+    faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
+    rows = np.arange(len(ROWS) * nx).reshape(len(ROWS), nx)
+    region = Lip(inner=rows[3], border=rows[1], between=rows[2], margin=rows[0])
+    return xs.ravel(), as_.ravel(), faces, region, np.c_[xs.ravel(), as_.ravel()] / 10.0
+
+
+def _scene(angle_deg=55.0, slide_px=(0.0, 0.0, 2.0, 4.0), **take_render):
+    """The neutral (lip tilted 15 degrees) and a take (``angle_deg``), the template's points in
+    both, the take's true points and a flow slid along the lip by ``slide_px`` per row."""
+    x, a, faces, region, v2 = _template_lip()
+    neutral = _render(15.0)
+    take = _render(angle_deg, **take_render)
+    pn = _project(_material(x, a, 15.0))
+    true = _project(_material(x, a, angle_deg))
+    slide = np.repeat(np.asarray(slide_px), len(COLUMNS))
+    flow = true + slide[:, None] * np.array([0.0, -1.0])  # towards the border: the lip too short
+    return dict(neutral=neutral, take=take, pn=pn, true=true, flow=flow, faces=faces,
+                region=region, v2=v2)  # fmt: skip
+
+
+def _prior(s, params=None, flow=None):
+    return lip_prior(
+        s["region"], s["v2"], s["pn"], s["flow"] if flow is None else flow,
+        s["neutral"][1], s["neutral"][0], s["take"][1], s["take"][0], s["faces"],
+        LipParams() if params is None else params,
+    )  # fmt: skip
+
+
+def _material_length(points_y, angle_deg):
+    """The material length from the border (mm) of image rows on the middle column."""
+    a = np.linspace(-3.0, 12.0, 150001)
+    rows = _project(_material(np.zeros_like(a), a, angle_deg))[:, 1]
+    return np.interp(points_y, rows, a)
+
+
+def test_the_prior_puts_a_rolled_lip_where_its_skin_went():
+    """A lip that rolls out from 15 to 55 degrees about its border (its image height shrinks
+    by 40%) under a 20% dimmer light; a flow that left its slit 4 px and its body 2 px short:
+    held to the neutral's length (``stretch`` 0), the prior places every lip vertex within a
+    third of a pixel of its skin point."""
+    s = _scene(gain=0.8)
+    prior = _prior(s, LipParams(stretch=0.0))
+    assert prior.used, prior.problem
+    region = s["region"]
+    lip_vertices = region.vertices
+    assert prior.measured == len(lip_vertices) == prior.vertices
+    err = np.linalg.norm(prior.points[lip_vertices] - s["true"][lip_vertices], axis=1)
+    before = np.linalg.norm(s["flow"][lip_vertices] - s["true"][lip_vertices], axis=1)
+    print(f"\nlip prior: {before.max():.2f} px -> {err.max():.3f} px (max over the lip)")
+    assert before.max() > 3.9
+    assert err.max() < 0.33  # measured 0.1-0.2 px: the border's sampling, 0.2 px steps
+    np.testing.assert_allclose(prior.weight[lip_vertices], 1.0)
+    assert np.isfinite(prior.points[region.margin]).all()
+    assert 0.05 < prior.contrast < 0.2  # redness: skin 0.42, lip 0.49 (a 1 mm step)
+    # with the default stretch (10%) the slit, 35% short, goes to 90% of the lip's length
+    nearest = _prior(s)
+    middle = region.inner[len(COLUMNS) // 2]
+    length = _material_length(nearest.points[middle, 1], 55.0)
+    # (less the 0.1 mm by which the border's colour edge sits differently in the two views)
+    assert 0.85 * LIP_MM < length < 0.92 * LIP_MM, length  # measured 7.02 mm
+    # the lip and the skin next to its border have a place, and nothing else
+    placed = np.isfinite(prior.points).all(axis=1)
+    np.testing.assert_array_equal(np.flatnonzero(placed), np.union1d(lip_vertices, region.margin))
+
+
+def test_a_flow_within_the_lips_stretch_is_kept():
+    """The lip's length may change by ``stretch``: a flow that is right (or within it) stays;
+    with ``stretch`` 0 it is held to the neutral's length exactly."""
+    s = _scene(slide_px=(0.0, 0.0, 0.0, 0.0))
+    prior = _prior(s)
+    assert prior.used
+    lip_vertices = s["region"].vertices
+    np.testing.assert_allclose(prior.points[lip_vertices], s["flow"][lip_vertices], atol=1e-6)
+    # a 0.8 px slide of the slit is 0.56 mm (7% of the 8 mm lip) in this view: within 10%
+    small = _scene(slide_px=(0.0, 0.0, 0.4, 0.8))
+    kept = _prior(small)
+    inner = s["region"].inner
+    np.testing.assert_allclose(kept.points[inner], small["flow"][inner], atol=1e-6)
+    held = _prior(small, LipParams(stretch=0.0))
+    # the colour edge sits 0.13 mm apart in the two views (0.2-0.3 px)
+    assert np.linalg.norm(held.points[inner] - small["true"][inner], axis=1).max() < 0.4
+
+
+def test_the_prior_needs_a_red_lip_in_both_images():
+    """Grey images (a sprayed face, a grey camera) show no vermilion border: not used."""
+    s = _scene(grey=True)
+    prior = _prior(s)
+    assert not prior.used and "redness step" in prior.problem
+    assert prior.measured == 0 and np.isnan(prior.points).all() and not prior.weight.any()
+
+
+def test_the_prior_drops_what_the_takes_surface_cannot_carry():
+    """The take's surface ends 5 mm below the border (the lip rolled in): the slit's length
+    cannot be walked there, so the slit vertices are not placed, the body's are, and the slit
+    follows harmonically; with ``min_share`` above the share placed the prior is refused."""
+    s = _scene(end_mm=5.0)
+    prior = _prior(s)
+    region = s["region"]
+    assert prior.used
+    assert prior.measured == len(region.vertices) - len(region.inner)
+    assert (prior.weight[region.inner] < 1.0).all() and (prior.weight[region.inner] > 0).all()
+    refused = _prior(s, LipParams(min_share=0.9))
+    assert not refused.used and "at least 90%" in refused.problem
+
+
+def test_the_prior_moves_no_vertex_by_more_than_max_shift():
+    """A slit vertex 4 px off in a lip 8.5 px high needs a shift of 0.47 lip heights: with
+    ``max_shift`` 0.3 it is not placed."""
+    s = _scene()
+    prior = _prior(s, LipParams(max_shift=0.3, min_share=0.1))
+    inner = s["region"].inner
+    assert prior.used and (prior.weight[inner] < 1.0).all()
+
+
+def test_apply_replaces_the_lip_and_raises_the_confidence():
+    s = _scene()
+    prior = _prior(s)
+    n = len(s["pn"])
+    confidence = np.full(n, 0.5)
+    points, conf = prior.apply(s["flow"], confidence)
+    has = np.isfinite(prior.points).all(axis=1)
+    np.testing.assert_array_equal(points[has], prior.points[has])
+    np.testing.assert_array_equal(points[~has], s["flow"][~has])
+    np.testing.assert_allclose(conf, 0.5 + np.where(has, prior.weight, 0.0) * 0.5)
+    off = LipPrior(np.full((n, 2), np.nan), np.zeros(n), 0, 0, 0.0, False, "off")
+    np.testing.assert_array_equal(off.apply(s["flow"], confidence)[0], s["flow"])
+
+
+def test_vermilion_edge_and_redness():
+    """The steepest fall of a smooth step is its middle; the contrast is the two sides'
+    means' difference."""
+    t = np.linspace(-0.2, 1.6, 181)
+    red = 0.42 + 0.08 / (1 + np.exp((t - 1.1) / 0.05))
+    edge, contrast = vermilion_edge(red, t, 1.0, 0.5)
+    assert abs(edge - 1.1) < 0.011
+    lip, skin = red[(t >= 0) & (t < edge)], red[t > edge]
+    assert contrast == pytest.approx(lip.mean() - skin.mean())
+    assert vermilion_edge(red, t, 3.0, 0.5) is None  # nothing in the window
+    c = np.array([[[200, 100, 100], [0, 0, 0]]], dtype=np.uint8)
+    r = redness(c)
+    assert r[0, 0] == pytest.approx(0.5) and np.isnan(r[0, 1])
+    with pytest.raises(InputError, match=r"\(H, W, 3\)"):
+        redness(np.zeros((4, 4)))
+
+
+def test_harmonic_fill_reproduces_a_linear_field():
+    """On a regular triangulated grid a linear function is harmonic under the uniform
+    Laplacian: given on the boundary it is recovered inside (the oracle)."""
+    nx, ny = 9, 7
+    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(ny, dtype=float))
+    i = (np.arange(nx - 1)[None, :] + nx * np.arange(ny - 1)[:, None]).ravel()
+    faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
+    values = np.c_[2.0 * x.ravel() - 3.0 * y.ravel() + 1.0, 0.5 * y.ravel()]
+    fixed = ((x == 0) | (y == 0) | (x == nx - 1) | (y == ny - 1)).ravel()
+    filled = harmonic_fill(faces, np.where(fixed[:, None], values, 99.0), fixed)
+    np.testing.assert_allclose(filled, values, atol=1e-9)
+    # an island with no fixed neighbour stays at 0
+    assert harmonic_fill(faces, values, np.zeros(nx * ny, bool)) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_the_templates_lips():
+    """The default template's upper and lower lip: slit vertices on the mouth's boundary on
+    their side of the inner-lip midline, border partners on the vermilion border, bodies
+    between, margins outside."""
+    template = build_template()
+    for levels in (0, 1, 2):
+        fine = subdivide_template(template, levels)
+        v = fine.vertices
+        mid = inner_lip_midline(template.ibug_xy[60:68])
+        for side, sign in (("upper", -1), ("lower", 1)):
+            region = lip(fine, side)
+            assert len(region.inner) >= 3 and len(region.inner) == len(region.border)
+            assert np.isin(region.inner, fine.mouth_boundary).all()
+            offset = v[:, 1] - np.interp(v[:, 0], mid[:, 0], mid[:, 1])
+            assert (sign * offset[region.inner] > 0).all()
+            assert (sign * offset[region.between] > 0).all()
+            # the border lies farther from the slit than the body, the body than the slit
+            assert (np.abs(offset[region.border]) > np.abs(offset[region.inner]).min()).all()
+            assert not np.isin(region.margin, region.vertices).any()
+            cols = region.columns(v)
+            assert cols.shape == region.vertices.shape and cols.max() < len(region.inner)
+    with pytest.raises(InputError, match="lip side 'middle'"):
+        lip(template, "middle")
+
+
+def test_lip_params_and_prior_name_bad_input():
+    for bad, match in (
+        ({"min_contrast": 0.0}, "refine.lip_min_contrast"),
+        ({"search": 1.5}, "refine.lip_search"),
+        ({"max_shift": -1}, "refine.lip_max_shift"),
+        ({"min_share": 0}, "refine.lip_min_share"),
+        ({"stretch": 1.0}, "refine.lip_stretch"),
+        ({"stretch": "a"}, "refine.lip_stretch: expected a number"),
+    ):
+        with pytest.raises(InputError, match=match):
+            LipParams(**bad)
+    s = _scene()
+    with pytest.raises(InputError, match=r"take_points has shape \(28, 3\)"):
+        _prior(s, flow=np.zeros((28, 3)))
+    with pytest.raises(InputError, match="12 neutral and 28 take points"):
+        lip_prior(
+            s["region"], s["v2"], s["pn"][:12], s["flow"], s["neutral"][1], s["neutral"][0],
+            s["take"][1], s["take"][0], s["faces"], LipParams(),
+        )  # fmt: skip
+    with pytest.raises(InputError, match="take's range image has shape"):
+        lip_prior(
+            s["region"], s["v2"], s["pn"], s["flow"], s["neutral"][1], s["neutral"][0],
+            s["take"][1], s["take"][0][:, :-1], s["faces"], LipParams(),
+        )  # fmt: skip
+    small = Lip(np.array([40]), np.array([41]), np.array([], int), np.array([], int))
+    with pytest.raises(InputError, match="not among the 28 points"):
+        lip_prior(
+            small, s["v2"], s["pn"], s["flow"], s["neutral"][1], s["neutral"][0],
+            s["take"][1], s["take"][0], s["faces"], LipParams(),
+        )  # fmt: skip
