@@ -8,9 +8,13 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
+from scipy.ndimage import gaussian_filter1d, map_coordinates
 
 from scan2morph.errors import InputError
 from scan2morph.refine.lip import (
+    NO_BORDER,
+    NO_SURFACE,
+    TOO_FAR,
     LipParams,
     LipPrior,
     harmonic_fill,
@@ -41,15 +45,22 @@ def _material(x, a, angle_deg):
     return np.stack([x, y, DISTANCE - lip * np.sin(t)], axis=-1)
 
 
-def _albedo(a):
+def _step(a, centre, width=1.0):
+    s = np.clip((a - centre) / width + 0.5, 0.0, 1.0)
+    return s * s * (3 - 2 * s)
+
+
+def _albedo(a, two_step=False):
     """The skin's colour at material length ``a`` (n, 3): red lips below the border (a 1 mm
-    smooth step)."""
-    s = np.clip((a + 0.5) / 1.0, 0.0, 1.0)
-    s = s * s * (3 - 2 * s)
-    return SKIN + s[:, None] * (LIP - SKIN)
+    smooth step), or with ``two_step`` a border in two steps: a larger one 0.6 mm onto the skin
+    and a smaller one 0.8 mm onto the lip (a border whose steepest fall depends on the view)."""
+    if not two_step:
+        return SKIN + _step(a, 0.0)[:, None] * (LIP - SKIN)
+    share = 0.6 * _step(a, -0.6) + 0.4 * _step(a, 0.8)
+    return SKIN + share[:, None] * (LIP - SKIN)
 
 
-def _render(angle_deg, gain=1.0, end_mm=LIP_MM + 2.0, grey=False):
+def _render(angle_deg, gain=1.0, end_mm=LIP_MM + 2.0, grey=False, two_step=False):
     """(xyz (H, W, 3) mm, colour (H, W, 3) uint8) of the rolled lip; NaN where rays miss."""
     xs, as_ = np.meshgrid(np.arange(-20.0, 20.01, 0.25), np.arange(-12.0, end_mm + 1e-6, 0.25))
     v = _material(xs.ravel(), as_.ravel(), angle_deg)
@@ -71,7 +82,7 @@ def _render(angle_deg, gain=1.0, end_mm=LIP_MM + 2.0, grey=False):
     uv = hit["primitive_uvs"].numpy().astype(np.float64)
     bary = np.stack([1 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=-1)
     a = np.einsum("nk,nk->n", as_.ravel()[f], bary)
-    colour = np.where(ok[:, None], gain * 255 * _albedo(a), 0.0)
+    colour = np.where(ok[:, None], gain * 255 * _albedo(a, two_step), 0.0)
     if grey:
         colour = colour.mean(axis=1, keepdims=True).repeat(3, axis=1)
     return xyz, np.clip(colour, 0, 255).astype(np.uint8).reshape(H, W, 3)
@@ -90,16 +101,16 @@ def _template_lip():
     i = (np.arange(nx - 1)[None, :] + nx * np.arange(len(ROWS) - 1)[:, None]).ravel()
     faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
     rows = np.arange(len(ROWS) * nx).reshape(len(ROWS), nx)
-    region = Lip(inner=rows[3], border=rows[1], between=rows[2], margin=rows[0])
+    region = Lip(inner=rows[3], outline=rows[1], between=rows[2], margin=rows[0])
     return xs.ravel(), as_.ravel(), faces, region, np.c_[xs.ravel(), as_.ravel()] / 10.0
 
 
-def _scene(angle_deg=55.0, slide_px=(0.0, 0.0, 2.0, 4.0), **take_render):
+def _scene(angle_deg=55.0, slide_px=(0.0, 0.0, 2.0, 4.0), two_step=False, **take_render):
     """The neutral (lip tilted 15 degrees) and a take (``angle_deg``), the template's points in
     both, the take's true points and a flow slid along the lip by ``slide_px`` per row."""
     x, a, faces, region, v2 = _template_lip()
-    neutral = _render(15.0)
-    take = _render(angle_deg, **take_render)
+    neutral = _render(15.0, two_step=two_step)
+    take = _render(angle_deg, two_step=two_step, **take_render)
     pn = _project(_material(x, a, 15.0))
     true = _project(_material(x, a, angle_deg))
     slide = np.repeat(np.asarray(slide_px), len(COLUMNS))
@@ -175,7 +186,7 @@ def test_the_prior_needs_a_red_lip_in_both_images():
     """Grey images (a sprayed face, a grey camera) show no vermilion border: not used."""
     s = _scene(grey=True)
     prior = _prior(s)
-    assert not prior.used and "redness step" in prior.problem
+    assert not prior.used and f"{NO_BORDER}: 21" in prior.problem, prior.problem
     assert prior.measured == 0 and np.isnan(prior.points).all() and not prior.weight.any()
 
 
@@ -187,19 +198,26 @@ def test_the_prior_drops_what_the_takes_surface_cannot_carry():
     prior = _prior(s)
     region = s["region"]
     assert prior.used
-    assert prior.measured == len(region.vertices) - len(region.inner)
-    assert (prior.weight[region.inner] < 1.0).all() and (prior.weight[region.inner] > 0).all()
+    placed = np.flatnonzero(prior.weight == 1.0)
+    np.testing.assert_array_equal(placed, np.setdiff1d(region.vertices, region.inner))
+    assert np.isfinite(prior.points[region.inner]).all()  # they follow the body
     refused = _prior(s, LipParams(min_share=0.9))
     assert not refused.used and "at least 90%" in refused.problem
+    assert f"{NO_SURFACE}: 7" in refused.problem, refused.problem
 
 
 def test_the_prior_moves_no_vertex_by_more_than_max_shift():
-    """A slit vertex 4 px off in a lip 8.5 px high needs a shift of 0.47 lip heights: with
-    ``max_shift`` 0.3 it is not placed."""
+    """The body's vertices, 2 px off in a lip 7.6 px high (as the flow has it), need a shift of
+    0.26 lip heights: with ``max_shift`` 0.15 they are not placed (nor the slit's, 4 px off),
+    with 0.3 they are."""
     s = _scene()
-    prior = _prior(s, LipParams(max_shift=0.3, min_share=0.1))
-    inner = s["region"].inner
-    assert prior.used and (prior.weight[inner] < 1.0).all()
+    region = s["region"]
+    tight = _prior(s, LipParams(max_shift=0.15, min_share=0.9))
+    assert not tight.used and tight.measured == len(region.outline)
+    assert f"{TOO_FAR}: " in tight.problem, tight.problem
+    loose = _prior(s, LipParams(max_shift=0.3, min_share=0.1))
+    placed = np.flatnonzero(loose.weight == 1.0)
+    assert np.isin(region.between, placed).all() and not np.isin(region.inner, placed).any()
 
 
 def test_apply_replaces_the_lip_and_raises_the_confidence():
@@ -244,33 +262,95 @@ def test_harmonic_fill_reproduces_a_linear_field():
     fixed = ((x == 0) | (y == 0) | (x == nx - 1) | (y == ny - 1)).ravel()
     filled = harmonic_fill(faces, np.where(fixed[:, None], values, 99.0), fixed)
     np.testing.assert_allclose(filled, values, atol=1e-9)
-    # an island with no fixed neighbour stays at 0
-    assert harmonic_fill(faces, values, np.zeros(nx * ny, bool)) == pytest.approx(0.0, abs=1e-6)
+    # the fixed values are kept exactly; a vertex with no path to a fixed one gets 0
+    np.testing.assert_array_equal(filled[fixed], values[fixed])
+    alone = np.concatenate([faces, [[nx * ny, nx * ny + 1, nx * ny + 2]]])
+    more = np.vstack([np.where(fixed[:, None], values, 0.0), np.ones((3, 2))])
+    out = harmonic_fill(alone, more, np.r_[fixed, False, False, False])
+    np.testing.assert_allclose(out[: nx * ny], values, atol=1e-9)
+    np.testing.assert_allclose(out[nx * ny :], 0.0, atol=1e-9)
 
 
 def test_the_templates_lips():
     """The default template's upper and lower lip: slit vertices on the mouth's boundary on
-    their side of the inner-lip midline, border partners on the vermilion border, bodies
-    between, margins outside."""
+    their side of the inner-lip midline, the border's vertices on the vermilion border, bodies
+    between the two, margins outside; each slit vertex's column runs straight across the lip
+    (its border point at its own template x)."""
     template = build_template()
     for levels in (0, 1, 2):
         fine = subdivide_template(template, levels)
         v = fine.vertices
         mid = inner_lip_midline(template.ibug_xy[60:68])
-        for side, sign in (("upper", -1), ("lower", 1)):
+        offset = v[:, 1] - np.interp(v[:, 0], mid[:, 0], mid[:, 1])
+        for side, sign, rows in (
+            ("upper", -1, slice(48, 55)),
+            ("lower", 1, [54, 55, 56, 57, 58, 59, 48]),
+        ):
             region = lip(fine, side)
-            assert len(region.inner) >= 3 and len(region.inner) == len(region.border)
+            assert len(region.inner) >= 3 and len(region.outline) >= 3
             assert np.isin(region.inner, fine.mouth_boundary).all()
-            offset = v[:, 1] - np.interp(v[:, 0], mid[:, 0], mid[:, 1])
             assert (sign * offset[region.inner] > 0).all()
+            # the body lies between the slit and the border
+            border = template.ibug_xy[rows]
+            order = np.argsort(border[:, 0])
+            line = np.interp(v[:, 0], border[order, 0], border[order, 1])
             assert (sign * offset[region.between] > 0).all()
-            # the border lies farther from the slit than the body, the body than the slit
-            assert (np.abs(offset[region.border]) > np.abs(offset[region.inner]).min()).all()
+            assert (sign * (line[region.between] - v[region.between, 1]) > 0).all()
+            np.testing.assert_allclose(v[region.outline, 1], line[region.outline], atol=0.04)
+            assert np.isin(region.outline, region.vertices).all()
             assert not np.isin(region.margin, region.vertices).any()
             cols = region.columns(v)
             assert cols.shape == region.vertices.shape and cols.max() < len(region.inner)
+            # template coordinates in, the border's point at each slit vertex's x out
+            above = region.border_points(v, v)
+            xo = v[region.outline, 0]
+            within = (v[region.inner, 0] >= xo.min()) & (v[region.inner, 0] <= xo.max())
+            assert within.sum() >= len(within) - 2  # the outermost slit vertices of level 2
+            np.testing.assert_allclose(above[within, 0], v[region.inner[within], 0], atol=1e-9)
+            np.testing.assert_allclose(above[:, 1], line[region.inner], atol=0.04)
     with pytest.raises(InputError, match="lip side 'middle'"):
         lip(template, "middle")
+
+
+def test_register_recovers_a_known_shift():
+    """The redness registration: a smooth border shifted by a known, off-grid length (either
+    sign) is recovered to a thousandth of a millimetre; a best match at the edge of the shifts
+    allowed is no match."""
+    from scan2morph.refine.lip import _register
+
+    arc = np.linspace(-4.0, 4.0, 401)
+    red = 0.42 + 0.09 * (1.0 - _step(arc, 0.0, 1.5))
+    wide = np.linspace(-8.0, 8.0, 801)
+    for true in (0.123, -0.537, 1.01):
+        moved = 0.42 + 0.09 * (1.0 - _step(wide, true, 1.5))
+        assert _register(arc, red, wide, moved, 2.0) == pytest.approx(true, abs=1e-3)
+    moved = 0.42 + 0.09 * (1.0 - _step(wide, 3.0, 1.5))
+    assert _register(arc, red, wide, moved, 2.0) is None  # the best lies beyond 2 mm
+
+
+def test_a_border_whose_steepest_fall_moves_is_registered():
+    """A border in two steps, the larger on the skin, the smaller on the lip: seen from the
+    front its steepest fall is the skin's step, on the rolled lip (foreshortened 43%) the lip's
+    step, 1.4 mm of skin apart. The registration matches the two, and the prior still places
+    every lip vertex within a third of a pixel (held to the neutral's length)."""
+    s = _scene(two_step=True)
+    middle = len(COLUMNS) // 2
+    region = s["region"]
+    edges = []
+    for (_, colour), points, angle in (
+        (s["neutral"], s["pn"], 15.0), (s["take"], s["true"], 55.0)
+    ):  # fmt: skip
+        top, bottom = points[region.outline[middle]], points[region.inner[middle]]
+        t = np.linspace(-0.2, 1.6, 721)
+        line = bottom + t[:, None] * (top - bottom)
+        red = map_coordinates(redness(colour), [line[:, 1], line[:, 0]], order=1)
+        edge, _ = vermilion_edge(gaussian_filter1d(red, 10.0)[40:-40], t[40:-40], 1.0, 0.5)
+        edges.append(_material_length(bottom[1] + edge * (top[1] - bottom[1]), angle))
+    assert abs(edges[0] - edges[1]) > 1.0, edges  # the steepest falls are on other skin
+    prior = _prior(s, LipParams(stretch=0.0))
+    assert prior.used and prior.measured == len(region.vertices), prior.problem
+    err = np.linalg.norm(prior.points[region.vertices] - s["true"][region.vertices], axis=1)
+    assert err.max() < 0.35, err.max()
 
 
 def test_lip_params_and_prior_name_bad_input():
@@ -278,28 +358,56 @@ def test_lip_params_and_prior_name_bad_input():
         ({"min_contrast": 0.0}, "refine.lip_min_contrast"),
         ({"search": 1.5}, "refine.lip_search"),
         ({"max_shift": -1}, "refine.lip_max_shift"),
+        ({"max_shift": float("inf")}, "refine.lip_max_shift"),
         ({"min_share": 0}, "refine.lip_min_share"),
         ({"stretch": 1.0}, "refine.lip_stretch"),
         ({"stretch": "a"}, "refine.lip_stretch: expected a number"),
+        ({"enabled": "no"}, "refine.lip_prior: expected true or false"),
     ):
         with pytest.raises(InputError, match=match):
             LipParams(**bad)
     s = _scene()
-    with pytest.raises(InputError, match=r"take_points has shape \(28, 3\)"):
-        _prior(s, flow=np.zeros((28, 3)))
-    with pytest.raises(InputError, match="12 neutral and 28 take points"):
-        lip_prior(
-            s["region"], s["v2"], s["pn"][:12], s["flow"], s["neutral"][1], s["neutral"][0],
-            s["take"][1], s["take"][0], s["faces"], LipParams(),
-        )  # fmt: skip
-    with pytest.raises(InputError, match="take's range image has shape"):
-        lip_prior(
-            s["region"], s["v2"], s["pn"], s["flow"], s["neutral"][1], s["neutral"][0],
-            s["take"][1], s["take"][0][:, :-1], s["faces"], LipParams(),
-        )  # fmt: skip
-    small = Lip(np.array([40]), np.array([41]), np.array([], int), np.array([], int))
-    with pytest.raises(InputError, match="not among the 28 points"):
-        lip_prior(
-            small, s["v2"], s["pn"], s["flow"], s["neutral"][1], s["neutral"][0],
-            s["take"][1], s["take"][0], s["faces"], LipParams(),
-        )  # fmt: skip
+    args = [
+        s["region"], s["v2"], s["pn"], s["flow"], s["neutral"][1], s["neutral"][0],
+        s["take"][1], s["take"][0], s["faces"], LipParams(),
+    ]  # fmt: skip
+
+    def bad(match, **change):
+        names = ["lip", "v2", "pn", "pt", "cn", "xn", "ct", "xt", "faces", "params"]
+        call = [change.get(k, a) for k, a in zip(names, args, strict=True)]
+        with pytest.raises(InputError, match=match):
+            lip_prior(*call, source="s/she")
+
+    bad(r"s/she: lip prior: take_points has shape \(28, 3\)", pt=np.zeros((28, 3)))
+    bad("12 neutral points, 28 take points and 28 template vertices", pn=s["pn"][:12])
+    bad(
+        r"the lip's inner \(7,\): expected indices below 12",
+        v2=s["v2"][:12],
+        pn=s["pn"][:12],
+        pt=s["flow"][:12],
+    )
+    bad("take's range image has shape", xt=s["take"][0][:, :-1])
+    bad(r"s/she: colour: expected an \(H, W, 3\)", ct=s["take"][1][..., 0])
+    bad("faces", faces=s["faces"] + 30)
+    far = Lip(np.array([40]), np.array([41]), np.array([], int), np.array([], int))
+    bad("the lip's inner", lip=far)
+    empty = Lip(np.array([], int), np.array([7]), np.array([], int), np.array([], int))
+    bad("no slit or no border vertex", lip=empty)
+    for red, t in ((np.zeros(5), np.arange(4.0)), (np.zeros((2, 3)), np.zeros((2, 3)))):
+        with pytest.raises(InputError, match="1-D arrays of one length"):
+            vermilion_edge(red, t, 1.0, 0.5)
+    with pytest.raises(InputError, match="increasing"):
+        vermilion_edge(np.zeros(4), np.array([0.0, 1.0, 1.0, 2.0]), 1.0, 0.5)
+    assert vermilion_edge(np.array([0.5, np.nan]), np.array([0.0, 1.0]), 1.0, 0.5) is None
+    faces = s["faces"]
+    values = np.zeros((28, 2))
+    fixed = np.ones(28, bool)
+    for change, match in (
+        ({"values": np.zeros(28)}, "expected \\(V, k\\)"),
+        ({"fixed": np.ones(27, bool)}, "expected \\(V, k\\)"),
+        ({"faces": faces + 28}, "faces"),
+        ({"values": np.full((28, 2), np.nan)}, "finite"),
+    ):
+        kw = {"faces": faces, "values": values, "fixed": fixed} | change
+        with pytest.raises(InputError, match=match):
+            harmonic_fill(kw["faces"], kw["values"], kw["fixed"])

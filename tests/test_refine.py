@@ -386,6 +386,7 @@ def test_the_lip_prior_follows_a_rounded_upper_lip():
     error of the motion goes down; it moves only the upper lip and the skin next to its border;
     without it (refine.lip_prior false) the flow's answer stays. On grey images (a face whose
     lips are no redder than its skin) it is not used, and says why."""
+    from scan2morph.refine.lip import NO_BORDER
     from scan2morph.stages import refine
     from scan2morph.store import paths
     from scan2morph.template.regions import lip
@@ -414,4 +415,4 @@ def test_the_lip_prior_follows_a_rounded_upper_lip():
     )
     part = refine.run(run.template, "she", "viseme", "neutral", grey, params, "s/she")
     attrs = next(iter(part.attrs.values()))
-    assert not attrs["lip_used"] and "redness step" in attrs["lip_problem"]
+    assert not attrs["lip_used"] and f"not placed: {NO_BORDER}: 25" in attrs["lip_problem"]

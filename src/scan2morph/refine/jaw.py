@@ -94,6 +94,10 @@ class JawParams:
     max_rmse_ratio: float = 1.5
 
     def __post_init__(self):
+        if not isinstance(self.enabled, bool | np.bool_):
+            raise InputError(
+                "config", f"refine.jaw_prior: expected true or false, got {self.enabled!r}"
+            )
         require_numbers(
             "config",
             {f"refine.jaw_{n}": getattr(self, n) for n in ("start", "end", "max_rmse_ratio")},

@@ -63,6 +63,14 @@ BEYOND = 0.6
 #: The neutral's profile starts this share of the lip's height before its vertex (or its
 #: slit's row), so that the vertex is not at its end (where the smoothing is one-sided).
 PAST = 0.25
+#: Least height of a lip in an image (its column's slit to border), px: the border cannot be
+#: found on less.
+MIN_HEIGHT_PX = 2.0
+#: Largest ``max_shift`` (shares of the lip's height).
+MAX_SHIFT = 2.0
+#: The registration's precision, mm: a vertex's length from the border is held to within this
+#: (plus ``stretch`` of itself).
+FLOOR_MM = 0.1
 
 
 @dataclass(frozen=True)
@@ -80,12 +88,14 @@ class LipParams:
         The border is looked for within this share of the lip's height of the border vertex,
         and the take's is matched to the neutral's within this share of the lip's length.
     max_shift : float
-        Largest correction of a slit vertex, in shares of the lip's height in the take.
+        Largest correction of a lip vertex, in shares of the lip's height in the take (at most
+        :data:`MAX_SHIFT`).
     min_share : float
-        Least share of the upper lip's profiles measured for the prior to be used.
+        Least share of the lip's vertices placed for the prior to be used.
     stretch : float
-        The lip's length may change by this share: a flow whose lip length is within it is
-        kept, one beyond it is moved to the nearest length it allows.
+        The strain the lip may take: a vertex's length from the border may change by this share
+        of itself (plus :data:`FLOOR_MM`, the registration's precision) before the prior moves
+        it; a flow within that is kept, one beyond goes to the nearest length allowed.
     """
 
     enabled: bool = True
@@ -96,6 +106,10 @@ class LipParams:
     stretch: float = 0.1
 
     def __post_init__(self):
+        if not isinstance(self.enabled, bool | np.bool_):
+            raise InputError(
+                "config", f"refine.lip_prior: expected true or false, got {self.enabled!r}"
+            )
         require_numbers(
             "config",
             {
@@ -112,9 +126,10 @@ class LipParams:
             raise InputError(
                 "config", f"refine.lip_search: expected 0 < share < 1, got {self.search}"
             )
-        if not self.max_shift > 0.0:
+        if not 0.0 < self.max_shift <= MAX_SHIFT:
             raise InputError(
-                "config", f"refine.lip_max_shift: expected a positive share, got {self.max_shift}"
+                "config",
+                f"refine.lip_max_shift: expected 0 < share <= {MAX_SHIFT}, got {self.max_shift}",
             )
         if not 0.0 <= self.stretch < 1.0:
             raise InputError(
@@ -133,16 +148,18 @@ class LipPrior:
     Attributes
     ----------
     points : (V, 2) float64
-        Pixel positions in the take's image, px; NaN off the upper lip, or when not used.
+        Pixel positions in the take's image, px, on the lip and the skin next to its border
+        (:class:`~scan2morph.template.regions.Lip`); NaN elsewhere, or when not used.
     weight : (V,) float64
-        The share of each vertex's correction that comes from a measured profile (the harmonic
-        interpolation of 1 at the measured slit vertices, 0 at the border), in [0, 1].
+        1 at the lip's vertices placed by their profiles, 0 off the lip and its margin, and in
+        between the harmonic interpolation of the two (the share of a vertex's correction that
+        its placed neighbours decide), in [0, 1].
     measured : int
         The lip's vertices placed by their profiles.
     vertices : int
         The lip's vertices.
     contrast : float
-        The median redness step at the border over the measured profiles (both images' lesser).
+        The median redness step at the border over the placed vertices (both images' lesser).
     used : bool
     problem : str
         Why it is not used ("" when it is).
@@ -157,7 +174,7 @@ class LipPrior:
     problem: str
 
     def apply(self, points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The upper lip's vertices placed by the prior.
+        """The lip's vertices placed by the prior.
 
         The flow's own answer on the lip is not kept, however confident: it slides where the lip
         rolls (its texture there correlates with the wrong skin).
@@ -182,24 +199,24 @@ class LipPrior:
         return np.where(has[:, None], self.points, p), c + w * (1.0 - c)
 
 
-def redness(color: np.ndarray) -> np.ndarray:
+def redness(color: np.ndarray, source: str = "colour image") -> np.ndarray:
     """``R / (R + G + B)`` of an (H, W, 3) colour image, float64 (NaN where black).
 
     Raises
     ------
     InputError
-        ``color`` is not (H, W, 3).
+        ``color`` is not (H, W, 3) (``source`` names it).
     """
     c = np.asarray(color, dtype=np.float64)
     if c.ndim != 3 or c.shape[2] != 3:
-        raise InputError("colour image", f"expected an (H, W, 3) RGB image, got shape {c.shape}")
+        raise InputError(source, f"colour: expected an (H, W, 3) RGB image, got shape {c.shape}")
     total = c.sum(axis=2)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(total > 0, c[..., 0] / total, np.nan)
 
 
 def vermilion_edge(
-    red: np.ndarray, t: np.ndarray, at: float, window: float
+    red: np.ndarray, t: np.ndarray, at: float, window: float, end: float | None = None
 ) -> tuple[float, float] | None:
     """The vermilion border along a lip profile: the steepest fall of redness going outward.
 
@@ -212,23 +229,39 @@ def vermilion_edge(
         border vertex).
     at, window : float
         The border is looked for where ``|t - at| < window``.
+    end : float, optional
+        The skin's side is measured up to here (default: the profile's end), so that two
+        profiles of different lengths compare the same skin.
 
     Returns
     -------
     (t_edge, contrast) or None
-        The border's position and the redness step there: the mean redness from the profile's
-        start (``t >= 0``) to the edge minus the mean beyond it. None when the window holds no
-        finite sample, or the profile has none on either side.
+        The border's position and the redness step there: the mean redness from ``t = 0`` to
+        the edge minus the mean beyond it (to ``end``). None when the profile has fewer than 3
+        finite samples, the window holds none, or either side has none.
+
+    Raises
+    ------
+    InputError
+        ``red`` and ``t`` are not 1-D of the same length, or ``t`` does not increase.
     """
     r = np.asarray(red, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64)
+    if r.ndim != 1 or t.shape != r.shape:
+        raise InputError(
+            "lip profile", f"red {r.shape} and t {t.shape}: expected 1-D arrays of one length"
+        )
+    if len(t) > 1 and not (np.diff(t) > 0).all():
+        raise InputError("lip profile", "t: expected increasing positions along the profile")
+    if np.isfinite(r).sum() < 3:
+        return None
     grad = np.gradient(r, t)
     look = (np.abs(t - at) < window) & np.isfinite(grad)
     if not look.any():
         return None
     k = np.flatnonzero(look)[np.argmin(grad[look])]
     lip = r[(t >= 0.0) & (t < t[k])]
-    skin = r[t > t[k]]
+    skin = r[(t > t[k]) & (t <= (np.inf if end is None else end))]
     lip, skin = lip[np.isfinite(lip)], skin[np.isfinite(skin)]
     if len(lip) == 0 or len(skin) == 0:
         return None
@@ -312,20 +345,25 @@ def lip_prior(
     Raises
     ------
     InputError
-        The points are not (V, 2) or do not cover the lip's vertices, or an image has the wrong
-        shape.
+        The points or template vertices are not (V, 2) of one count, the lip's or the faces'
+        indices are not among them, the lip has no slit or border vertex, or an image has the
+        wrong shape.
     """
     pn = _points(neutral_points, "neutral_points", source)
     pt = _points(take_points, "take_points", source)
+    v2 = _points(vertices2d, "vertices2d", source)
     n = len(pn)
-    if len(pt) != n:
+    if len(pt) != n or len(v2) != n:
         raise InputError(
-            source, f"lip prior: {n} neutral and {len(pt)} take points (expected the same count)"
+            source,
+            f"lip prior: {n} neutral points, {len(pt)} take points and {len(v2)} template "
+            f"vertices (expected one count)",
         )
-    used_idx = np.concatenate([lip.vertices, lip.margin])
-    if len(used_idx) and (used_idx.max() >= n or used_idx.min() < 0):
-        raise InputError(source, f"lip prior: the lip's vertices are not among the {n} points")
-    red_n, red_t = redness(neutral_color), redness(take_color)
+    _check_lip(lip, n, source)
+    f = np.asarray(faces)
+    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= n)):
+        raise InputError(source, f"lip prior: faces {f.shape}: expected (F, 3) indices below {n}")
+    red_n, red_t = redness(neutral_color, source), redness(take_color, source)
     for what, img, xyz in (("neutral", red_n, neutral_xyz), ("take", red_t, take_xyz)):
         shape = np.shape(xyz)
         if len(shape) != 3 or shape[2] != 3 or shape[:2] != img.shape:
@@ -339,16 +377,20 @@ def lip_prior(
     # the depth-step rule's optical axes, once per image
     view_n, view_t = (None, None) if max_slope_deg is None else map(scanner_view, (xyz_n, xyz_t))
     vertices = lip.vertices
-    columns = lip.columns(vertices2d)
+    columns = lip.columns(v2)
+    border_n, border_t = lip.border_points(v2, pn), lip.border_points(v2, pt)
     targets = np.full((len(vertices), 2), np.nan)
     contrasts = []
+    reasons: dict[str, int] = {}
     for k, (v, c) in enumerate(zip(vertices, columns, strict=True)):
-        i, o = lip.inner[c], lip.border[c]
+        i = lip.inner[c]
         found = _place(
-            _Line(pn[i], pn[o], pn[v]), _Line(pt[i], pt[o], pt[v]), red_n, xyz_n, view_n,
-            red_t, xyz_t, view_t, params, min_weight, max_slope_deg, source,
+            _Line(pn[i], border_n[c], pn[v]), _Line(pt[i], border_t[c], pt[v]), red_n, xyz_n,
+            view_n, red_t, xyz_t, view_t, params, min_weight, max_slope_deg, source,
         )  # fmt: skip
-        if found is not None:
+        if isinstance(found, str):
+            reasons[found] = reasons.get(found, 0) + 1
+        else:
             targets[k], contrast = found
             contrasts.append(contrast)
     ok = np.isfinite(targets).all(axis=1)
@@ -358,14 +400,13 @@ def lip_prior(
     def result(points, weight, problem):
         return LipPrior(points, weight, measured, total, contrast, not problem, problem)
 
-    if measured < params.min_share * total:
+    if measured == 0 or measured < params.min_share * total:
+        why = "; ".join(f"{m}: {reasons[m]}" for m in sorted(reasons, key=reasons.get)[::-1])
         return result(
             np.full((n, 2), np.nan),
             np.zeros(n),
-            f"only {measured} of the upper lip's {total} vertices could be placed: the "
-            f"vermilion border shows in both images (a redness step of at least "
-            f"{params.min_contrast}) and the take's surface carries the lip's length there; at "
-            f"least {100 * params.min_share:.0f}% needed",
+            f"only {measured} of the lip's {total} vertices placed (at least "
+            f"{100 * params.min_share:.0f}% needed); not placed: {why}",
         )
     # measured vertices are held at their places; the others of the lip and the skin next to
     # its border follow harmonically; everything else keeps the flow's answer
@@ -375,7 +416,7 @@ def lip_prior(
     values = np.zeros((n, 3))
     values[vertices[ok], :2] = targets[ok] - pt[vertices[ok]]
     values[vertices[ok], 2] = 1.0
-    filled = harmonic_fill(faces, values, fixed)
+    filled = harmonic_fill(f, values, fixed)
     region = np.concatenate([vertices, lip.margin])
     points = np.full((n, 2), np.nan)
     points[region] = pt[region] + filled[region, :2]
@@ -384,18 +425,38 @@ def lip_prior(
     return result(points, weight, "")
 
 
+#: Why a lip vertex was not placed (the prior's ``problem`` counts them).
+NO_BORDER = "no vermilion border (a redness step) within lip_search in both images"
+NOT_MATCHED = "the take's border did not match the neutral's"
+NO_SURFACE = "the take's surface does not carry the vertex's length from the border"
+TOO_FAR = "the correction exceeds lip_max_shift"
+NO_LINE = f"no profile (a point missing, or the lip under {MIN_HEIGHT_PX:g} px high)"
+
+
 def _points(points, name, source):
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 2:
-        raise InputError(source, f"lip prior: {name} has shape {p.shape}, expected (V, 2) px")
+        raise InputError(source, f"lip prior: {name} has shape {p.shape}, expected (V, 2)")
     return p
+
+
+def _check_lip(lip: Lip, n: int, source: str) -> None:
+    """An InputError unless the lip has slit and border vertices, all among ``n``."""
+    parts = {k: np.asarray(getattr(lip, k)) for k in ("inner", "outline", "between", "margin")}
+    for name, idx in parts.items():
+        if idx.ndim != 1 or (idx.size and (idx.min() < 0 or idx.max() >= n)):
+            raise InputError(
+                source, f"lip prior: the lip's {name} {idx.shape}: expected indices below {n}"
+            )
+    if not len(parts["inner"]) or not len(parts["outline"]):
+        raise InputError(source, "lip prior: the lip has no slit or no border vertex")
 
 
 @dataclass(frozen=True)
 class _Line:
-    """A vertex's profile in one image: the line of its column (slit vertex ``inner`` to border
-    vertex ``border``, px) moved sideways through the vertex ``at``; ``t`` is 0 on the slit's
-    row and 1 on the border's."""
+    """A vertex's profile in one image: the line of its column (slit vertex ``inner`` to the
+    border's point ``border`` above it, px) moved sideways through the vertex ``at``; ``t`` is
+    0 on the slit's row and 1 on the border's."""
 
     inner: np.ndarray
     border: np.ndarray
@@ -417,107 +478,64 @@ class _Line:
         return self.at - self.t * self.direction
 
     def ok(self) -> bool:
-        d = self.direction
-        return bool(np.isfinite([*self.inner, *self.border, *self.at]).all() and d @ d > 0)
+        finite = np.isfinite([*self.inner, *self.border, *self.at]).all()
+        return bool(finite and np.linalg.norm(self.direction) >= MIN_HEIGHT_PX)
 
 
 def _place(
     neutral, take, red_n, xyz_n, view_n, red_t, xyz_t, view_t, params, min_weight, max_slope, source
 ):
     """One lip vertex: its place in the take (2,) px and the border's redness step (the lesser
-    of the two images'), or None.
+    of the two images'), or why not (one of the reasons above).
 
     The vertex's skin point lies at a signed length from the vermilion border along the
     neutral's surface. The border is found in each image (:func:`vermilion_edge`), and the
     take's is then registered to the neutral's: the redness around it, as a function of the
     length along the surface, is matched (the shift of best correlation), so that a border
     whose fall is broad or uneven is found at the same skin in both. In the take the vertex
-    goes to its length from the border; a flow within ``stretch`` of the lip's length of it
-    stays (the lip may stretch that much), one beyond goes to the nearest length allowed."""
+    goes to its length from the border; a flow within ``stretch`` of that length (plus
+    :data:`FLOOR_MM`) stays, one beyond goes to the nearest length allowed."""
     if not (neutral.ok() and take.ok()):
-        return None
+        return NO_LINE
+    end = 1.0 + BEYOND
     t, r, xyz, _ = _profile(
         red_n, xyz_n, view_n, neutral.origin, neutral.direction, min(neutral.t, 0.0) - PAST,
-        1.0 + BEYOND, min_weight, max_slope, source,
+        end, min_weight, max_slope, source,
     )  # fmt: skip
-    edge = vermilion_edge(r, t, 1.0, params.search)
+    edge = vermilion_edge(r, t, 1.0, params.search, end)
     if edge is None or edge[1] < params.min_contrast:
-        return None
+        return NO_BORDER
     arc_n = _arc(t, xyz, edge[0])
     length = np.interp(neutral.t, t, arc_n)  # the vertex's, from the border (< 0 on the lip)
     lip_length = -np.interp(0.0, t, arc_n)
-    if not np.isfinite(length):
-        return None
-    if not np.isfinite(lip_length) or lip_length <= 0.0:
-        lip_length = abs(length)
+    if not (np.isfinite(length) and np.isfinite(lip_length) and lip_length > 0.0):
+        return NO_SURFACE
     # the take's profile reaches max_shift further at both ends
     t2, r2, xyz2, _ = _profile(
         red_t, xyz_t, view_t, take.origin, take.direction, min(take.t, 0.0) - params.max_shift,
-        1.0 + BEYOND + params.max_shift, min_weight, max_slope, source,
+        end + params.max_shift, min_weight, max_slope, source,
     )  # fmt: skip
-    edge_t = vermilion_edge(r2, t2, 1.0, params.search)
+    edge_t = vermilion_edge(r2, t2, 1.0, params.search, end)
     if edge_t is None or edge_t[1] < params.min_contrast:
-        return None
+        return NO_BORDER
     arc_t = _arc(t2, xyz2, edge_t[0])
     # the border's neighbourhood: the lip's outer half and the skin beyond (the slit's side
     # may roll out of sight or show the mouth)
     near = (arc_n >= -NEAR * lip_length) & (t >= min(neutral.t, 0.0))
     shift = _register(arc_n[near], r[near], arc_t, r2, params.search * lip_length)
     if shift is None:
-        return None
+        return NOT_MATCHED
     target = length + shift
     flow = np.interp(take.t, t2, arc_t)
-    tol = params.stretch * lip_length
+    tol = params.stretch * abs(length) + FLOOR_MM
     goal = float(np.clip(flow, target - tol, target + tol)) if np.isfinite(flow) else target
     ok = np.isfinite(arc_t)
     if not arc_t[ok].min() <= goal <= arc_t[ok].max():
-        return None  # the surface ends (or the profile does) before the length is walked
+        return NO_SURFACE  # the surface ends (or the profile does) before the length is walked
     place = float(np.interp(goal, arc_t[ok], t2[ok]))
     if abs(place - take.t) > params.max_shift:  # the correction, in shares of the lip's height
-        return None
+        return TOO_FAR
     return take.origin + place * take.direction, min(edge[1], edge_t[1])
-
-
-#: The share of the lip (from the border) whose redness is registered.
-NEAR = 0.5
-#: Step of the registration's shifts, mm; least correlation of a registration; least share of
-#: the neutral's profile the take's must cover at the best shift.
-SHIFT_STEP_MM = 0.05
-MIN_CORRELATION = 0.8
-MIN_COVER = 0.6
-
-
-def _register(arc_n, red_n, arc_t, red_t, limit):
-    """The shift (mm) that best aligns the take's redness profile to the neutral's: the
-    neutral's redness at length ``a`` from its vertex matches the take's at ``a + shift``
-    (zero-mean normalised correlation over their overlap); None without a clear match."""
-    n_ok = np.isfinite(arc_n) & np.isfinite(red_n)
-    t_ok = np.isfinite(arc_t) & np.isfinite(red_t)
-    if n_ok.sum() < 8 or t_ok.sum() < 8:
-        return None
-    grid, ref = arc_n[n_ok], red_n[n_ok]
-    at, rt = arc_t[t_ok], red_t[t_ok]
-    shifts = np.arange(-limit, limit + SHIFT_STEP_MM / 2, SHIFT_STEP_MM)
-    where = grid[None, :] + shifts[:, None]
-    inside = (where >= at[0]) & (where <= at[-1])
-    moved = np.where(inside, np.interp(where, at, rt), np.nan)
-    cover = inside.mean(axis=1)
-    score = np.full(len(shifts), -np.inf)
-    for k in np.flatnonzero(cover >= MIN_COVER):
-        m = inside[k]
-        a, b = ref[m] - ref[m].mean(), moved[k, m] - moved[k, m].mean()
-        den = np.sqrt((a @ a) * (b @ b))
-        if den > 0:
-            score[k] = (a @ b) / den
-    k = int(np.argmax(score))
-    if not np.isfinite(score[k]) or score[k] < MIN_CORRELATION:
-        return None
-    shift = shifts[k]
-    if 0 < k < len(shifts) - 1 and np.isfinite(score[k - 1]) and np.isfinite(score[k + 1]):
-        c = score[k - 1] - 2 * score[k] + score[k + 1]
-        if c < 0:
-            shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
-    return float(shift)
 
 
 def _arc(t: np.ndarray, xyz: np.ndarray, t0: float) -> np.ndarray:
@@ -536,6 +554,54 @@ def _arc(t: np.ndarray, xyz: np.ndarray, t0: float) -> np.ndarray:
     return out
 
 
+#: The share of the lip (from the border) whose redness is registered.
+NEAR = 0.5
+#: Step of the registration's shifts, mm; least correlation of a registration; least share of
+#: the neutral's profile the take's must cover at a shift for it to be scored.
+SHIFT_STEP_MM = 0.05
+MIN_CORRELATION = 0.8
+MIN_COVER = 0.6
+
+
+def _register(arc_n, red_n, arc_t, red_t, limit):
+    """The shift (mm) that best aligns the take's redness profile to the neutral's: the
+    neutral's redness at length ``a`` from its border matches the take's at ``a + shift``
+    (zero-mean normalised correlation over their overlap, shifts within ``limit``); None
+    without a clear match: a best correlation under :data:`MIN_CORRELATION`, or one at the
+    edge of the shifts scored (the best may lie beyond)."""
+    n_ok = np.isfinite(arc_n) & np.isfinite(red_n)
+    t_ok = np.isfinite(arc_t) & np.isfinite(red_t)
+    if n_ok.sum() < 8 or t_ok.sum() < 8:
+        return None
+    grid, ref = arc_n[n_ok], red_n[n_ok]
+    at, rt = arc_t[t_ok], red_t[t_ok]
+    m = int(np.floor(limit / SHIFT_STEP_MM))
+    shifts = SHIFT_STEP_MM * np.arange(-m, m + 1)
+    where = grid[None, :] + shifts[:, None]
+    inside = (where >= at[0]) & (where <= at[-1])
+    moved = np.where(inside, np.interp(where, at, rt), np.nan)
+    cover = inside.mean(axis=1)
+    score = np.full(len(shifts), np.nan)
+    for k in np.flatnonzero(cover >= MIN_COVER):
+        keep = inside[k]
+        a, b = ref[keep] - ref[keep].mean(), moved[k, keep] - moved[k, keep].mean()
+        den = np.sqrt((a @ a) * (b @ b))
+        if den > 0:
+            score[k] = (a @ b) / den
+    if not np.isfinite(score).any():
+        return None
+    k = int(np.nanargmax(score))
+    if not (0 < k < len(shifts) - 1 and np.isfinite(score[[k - 1, k + 1]]).all()):
+        return None  # the best lies at the edge of what was scored
+    if score[k] < MIN_CORRELATION:
+        return None
+    shift = shifts[k]
+    c = score[k - 1] - 2 * score[k] + score[k + 1]
+    if c < 0:
+        shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
+    return float(shift)
+
+
 def harmonic_fill(faces: np.ndarray, values: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     """Values on a mesh's free vertices that are harmonic (each the mean of its neighbours),
     given the values at the fixed vertices.
@@ -552,17 +618,31 @@ def harmonic_fill(faces: np.ndarray, values: np.ndarray, fixed: np.ndarray) -> n
     (V, k) float64
         ``values`` at the fixed vertices, the uniform-Laplacian harmonic interpolation at the
         free ones (a free vertex with no path to a fixed one gets 0).
+
+    Raises
+    ------
+    InputError
+        Shapes that do not match, faces not among the vertices, non-finite fixed values.
     """
     vals = np.asarray(values, dtype=np.float64)
     fixed = np.asarray(fixed, dtype=bool)
+    f = np.asarray(faces)
+    v = len(vals)
+    if vals.ndim != 2 or fixed.shape != (v,):
+        raise InputError(
+            "harmonic fill", f"values {vals.shape}, fixed {fixed.shape}: expected (V, k) and (V,)"
+        )
+    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= v)):
+        raise InputError("harmonic fill", f"faces {f.shape}: expected (F, 3) indices below {v}")
+    if not np.isfinite(vals[fixed]).all():
+        raise InputError("harmonic fill", "values: expected finite values at the fixed vertices")
     out = np.where(fixed[:, None], vals, 0.0)
     free = np.flatnonzero(~fixed)
     if len(free) == 0:
         return out
-    f = np.asarray(faces, dtype=np.int64)
+    f = f.astype(np.int64)
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     e = np.unique(np.sort(e, axis=1), axis=0)
-    v = len(vals)
     adj = coo_matrix(
         (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(v, v)
     ).tocsr()

@@ -87,14 +87,14 @@ class Params:
             if f"jaw_{k}" in refine
         }
         if "jaw_prior" in refine:
-            jaw["enabled"] = bool(refine["jaw_prior"])
+            jaw["enabled"] = refine["jaw_prior"]
         lip = {
             k: refine[f"lip_{k}"]
             for k in ("min_contrast", "search", "max_shift", "min_share", "stretch")
             if f"lip_{k}" in refine
         }
         if "lip_prior" in refine:
-            lip["enabled"] = bool(refine["lip_prior"])
+            lip["enabled"] = refine["lip_prior"]
         return cls(
             str(refine["method"]),
             int(template["subdivision_levels"]),
@@ -190,12 +190,15 @@ def run(
         ``refine/vertices`` (V, 3) mm in the neutral frame (NaN where invalid), ``refine/valid``
         (V,), ``refine/points2d`` (V, 2) px in the take's image and ``refine/confidence`` (V,)
         (the flow's, 0 where the fit was kept, plus the share the jaw prior moved a chin vertex
-        by);
+        by and, on the upper lip, the lip prior's weight times one minus that);
         the ``refine`` group's attributes hold the median correction (px), the share of
         vertices with a confident measurement, whether the flow was ``used`` and, when not,
         the ``problem``; whether the jaw prior was used (``jaw_used``), why not
         (``jaw_problem``, ``"off"`` with ``refine.jaw_prior`` false) and, when the chin was
-        registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``.
+        registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
+        upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
+        and those placed (``lip_vertices``, ``lip_measured``) and the median redness step at
+        its border (``lip_contrast``).
     """
     aligned = need(data, paths.align(take, "vertices"), source)
     valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
@@ -235,7 +238,14 @@ def run(
             f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
             f"neutral's texture (refine.min_confident_share "
             f"{100 * params.min_confident_share:.0f}%): the template fit is kept"
-            + (" (the jaw prior may still move the chin)" if params.jaw.enabled else "")
+            + "".join(
+                f" (the {name} prior may still move the {what})"
+                for name, what, on in (
+                    ("jaw", "chin", params.jaw.enabled),
+                    ("lip", "upper lip", params.lip.enabled),
+                )
+                if on
+            )
         )
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points

@@ -159,35 +159,55 @@ class Lip:
     ----------
     inner : (n,) int64
         Vertices of the mouth's boundary on the lip (the slit), corners excluded, by x.
-    border : (n,) int64
-        For each inner vertex, the vertex on the lip's vermilion border (:data:`LIP_BORDERS`)
-        nearest in x.
+    outline : (k,) int64
+        Vertices on the lip's vermilion border (:data:`LIP_BORDERS`) between the inner-lip
+        corners, by x.
     between : (m,) int64
-        The vertices strictly between the two (the lip's body).
-    margin : (k,) int64
+        The vertices strictly between the slit and the border (the lip's body).
+    margin : (j,) int64
         The skin's vertices next to the border, outside the lip.
     """
 
     inner: np.ndarray
-    border: np.ndarray
+    outline: np.ndarray
     between: np.ndarray
     margin: np.ndarray
 
     @property
     def vertices(self) -> np.ndarray:
         """(n,) int64 the lip's vertices: slit, body and border, each once."""
-        return np.unique(np.concatenate([self.inner, self.between, self.border]))
+        return np.unique(np.concatenate([self.inner, self.between, self.outline]))
 
     def columns(self, vertices2d: np.ndarray) -> np.ndarray:
         """(n,) int64 for each of :attr:`vertices`, the slit vertex (its index in
-        :attr:`inner`) nearest in x (template coordinates ``vertices2d`` (V, 2)): the profile
-        it lies on."""
+        :attr:`inner`) nearest in x (template coordinates ``vertices2d`` (V, 2)): the column
+        whose profile it lies on."""
         x = np.asarray(vertices2d, dtype=np.float64)[:, 0]
         return np.argmin(np.abs(x[self.vertices][:, None] - x[self.inner][None, :]), axis=1)
 
+    def border_points(self, vertices2d: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(n,) the border's point above (or below) each slit vertex: ``points`` (V, d) of the
+        vertices (pixel positions in an image, px) interpolated along the outline at the slit
+        vertices' template x (a column straight across the lip in the template).
+
+        Returns
+        -------
+        (n, d) float64
+            NaN where an outline vertex next to it has a NaN point.
+        """
+        x = np.asarray(vertices2d, dtype=np.float64)[:, 0]
+        p = np.asarray(points, dtype=np.float64)[self.outline]
+        xo, xi = x[self.outline], x[self.inner]
+        k = np.clip(np.searchsorted(xo, xi), 1, max(len(xo) - 1, 1))
+        if len(xo) == 1:
+            return np.repeat(p, len(xi), axis=0)
+        w = np.clip((xi - xo[k - 1]) / (xo[k] - xo[k - 1]), 0.0, 1.0)[:, None]
+        return (1.0 - w) * p[k - 1] + w * p[k]
+
 
 def lip(template, side: str = "upper") -> Lip:
-    """A lip of a template: its slit vertices, their border partners and its body.
+    """A lip of a template: its slit vertices, its vermilion border, its body and the skin
+    next to the border.
 
     Parameters
     ----------
@@ -223,27 +243,27 @@ def lip(template, side: str = "upper") -> Lip:
     f = np.asarray(template.faces, dtype=np.int64)
     edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     tol = 0.25 * float(np.median(np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)))
-    on_border = np.flatnonzero(_polyline_distance(v, border_line) < tol)
-    if len(inner) == 0 or len(on_border) == 0:
+    on_border = _polyline_distance(v, border_line) < tol
+    outline = np.flatnonzero(on_border & inside)
+    outline = outline[np.argsort(x[outline])]
+    if len(inner) == 0 or len(outline) == 0:
         raise InputError(
             "template",
             f"no {side} lip: {len(inner)} slit vertices on its side of the inner-lip midline, "
-            f"{len(on_border)} vertices on its vermilion border",
+            f"{len(outline)} vertices on its vermilion border between the mouth's corners",
         )
-    border = on_border[np.argmin(np.abs(x[on_border][None, :] - x[inner][:, None]), axis=1)]
     order = np.argsort(border_line[:, 0])
     inside_border = (
         sign * (np.interp(x, border_line[order, 0], border_line[order, 1]) - v[:, 1]) > 0
     )
-    body = inside & on_side & inside_border
+    body = inside & on_side & inside_border & ~on_border
     body[inner] = False
-    body[on_border] = False
     lip = np.zeros(len(v), dtype=bool)
-    lip[inner] = lip[border] = lip[body] = True
+    lip[inner] = lip[outline] = lip[body] = True
     near = np.zeros(len(v), dtype=bool)
-    near[edges[np.isin(edges, border).any(axis=1)].ravel()] = True
+    near[edges[np.isin(edges, outline).any(axis=1)].ravel()] = True
     near &= ~lip & ~np.isin(np.arange(len(v)), mouth)
-    return Lip(inner, border, np.flatnonzero(body), np.flatnonzero(near))
+    return Lip(inner, outline, np.flatnonzero(body), np.flatnonzero(near))
 
 
 def _polyline_distance(points: np.ndarray, line: np.ndarray) -> np.ndarray:
