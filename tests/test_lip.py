@@ -32,7 +32,7 @@ LIP_MM = 8.0  # the lip's length from the border to the slit, along its surface
 SKIN = np.array([0.80, 0.60, 0.50])
 LIP = np.array([0.70, 0.33, 0.32])
 COLUMNS = np.linspace(-8.0, 8.0, 7)  # mm: the template's lip columns
-ROWS = np.array([-2.0, 0.0, 4.0, LIP_MM])  # material length from the border: margin to slit
+ROWS = np.array([-2.0, 0.0, 4.0, LIP_MM])  # material length from the border: skin to slit
 
 
 def _material(x, a, angle_deg):
@@ -94,14 +94,14 @@ def _project(points):
 
 
 def _template_lip():
-    """A small template over the lip: rows (margin, border, body, slit) x COLUMNS, its Lip, and
+    """A small template over the lip: rows (skin, border, body, slit) x COLUMNS, its Lip, and
     the template coordinates (mm / 10)."""
     xs, as_ = np.meshgrid(COLUMNS, ROWS)
     nx = len(COLUMNS)
     i = (np.arange(nx - 1)[None, :] + nx * np.arange(len(ROWS) - 1)[:, None]).ravel()
     faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
     rows = np.arange(len(ROWS) * nx).reshape(len(ROWS), nx)
-    region = Lip(inner=rows[3], outline=rows[1], between=rows[2], margin=rows[0])
+    region = Lip(inner=rows[3], outline=rows[1], between=rows[2])
     return xs.ravel(), as_.ravel(), faces, region, np.c_[xs.ravel(), as_.ravel()] / 10.0
 
 
@@ -151,7 +151,6 @@ def test_the_prior_puts_a_rolled_lip_where_its_skin_went():
     assert before.max() > 3.9
     assert err.max() < 0.33  # measured 0.1-0.2 px: the border's sampling, 0.2 px steps
     np.testing.assert_allclose(prior.weight[lip_vertices], 1.0)
-    assert np.isfinite(prior.points[region.margin]).all()
     assert 0.05 < prior.contrast < 0.2  # redness: skin 0.42, lip 0.49 (a 1 mm step)
     # with the default stretch (10%) the slit, 35% short, goes to 90% of the lip's length
     nearest = _prior(s)
@@ -161,7 +160,7 @@ def test_the_prior_puts_a_rolled_lip_where_its_skin_went():
     assert 0.85 * LIP_MM < length < 0.92 * LIP_MM, length  # measured 7.02 mm
     # the lip and the skin next to its border have a place, and nothing else
     placed = np.isfinite(prior.points).all(axis=1)
-    np.testing.assert_array_equal(np.flatnonzero(placed), np.union1d(lip_vertices, region.margin))
+    np.testing.assert_array_equal(np.flatnonzero(placed), lip_vertices)
 
 
 def test_a_flow_within_the_lips_stretch_is_kept():
@@ -274,7 +273,7 @@ def test_harmonic_fill_reproduces_a_linear_field():
 def test_the_templates_lips():
     """The default template's upper and lower lip: slit vertices on the mouth's boundary on
     their side of the inner-lip midline, the border's vertices on the vermilion border, bodies
-    between the two, margins outside; each slit vertex's column runs straight across the lip
+    between the two; each slit vertex's column runs straight across the lip
     (its border point at its own template x)."""
     template = build_template()
     for levels in (0, 1, 2):
@@ -298,7 +297,6 @@ def test_the_templates_lips():
             assert (sign * (line[region.between] - v[region.between, 1]) > 0).all()
             np.testing.assert_allclose(v[region.outline, 1], line[region.outline], atol=0.04)
             assert np.isin(region.outline, region.vertices).all()
-            assert not np.isin(region.margin, region.vertices).any()
             cols = region.columns(v)
             assert cols.shape == region.vertices.shape and cols.max() < len(region.inner)
             # template coordinates in, the border's point at each slit vertex's x out
@@ -389,9 +387,9 @@ def test_lip_params_and_prior_name_bad_input():
     bad("take's range image has shape", xt=s["take"][0][:, :-1])
     bad(r"s/she: colour: expected an \(H, W, 3\)", ct=s["take"][1][..., 0])
     bad("faces", faces=s["faces"] + 30)
-    far = Lip(np.array([40]), np.array([41]), np.array([], int), np.array([], int))
+    far = Lip(np.array([40]), np.array([41]), np.array([], int))
     bad("the lip's inner", lip=far)
-    empty = Lip(np.array([], int), np.array([7]), np.array([], int), np.array([], int))
+    empty = Lip(np.array([], int), np.array([7]), np.array([], int))
     bad("no slit or no border vertex", lip=empty)
     for red, t in ((np.zeros(5), np.arange(4.0)), (np.zeros((2, 3)), np.zeros((2, 3)))):
         with pytest.raises(InputError, match="1-D arrays of one length"):

@@ -929,13 +929,13 @@ def test_upper_lip_prior_on_a_real_face(head):
         inner.append(slit - 3)
         border.append(slit - 20 + int(np.flatnonzero(up)[0]))
     inner, border = np.asarray(inner, float), np.asarray(border, float)
-    rows = [border - 5, border, 0.5 * (inner + border), inner]  # margin, border, body, slit
+    rows = [border - 5, border, 0.5 * (inner + border), inner]  # skin, border, body, slit
     n = len(columns)
     points = np.concatenate([np.c_[columns, r] for r in rows])
     ids = np.arange(4 * n).reshape(4, n)
     i = (np.arange(n - 1)[None, :] + n * np.arange(3)[:, None]).ravel()
     faces = np.concatenate([np.c_[i, i + 1, i + n + 1], np.c_[i, i + n + 1, i + n]])
-    region = Lip(ids[3], ids[1], ids[2], ids[0])
+    region = Lip(ids[3], ids[1], ids[2])
     template = np.c_[np.tile(np.arange(n), 4), np.repeat(np.arange(4), n)] / 10.0
     skin_points, ok = sample_range(xyz0, points, "front", 1.0, None)
     assert ok.all()

@@ -164,14 +164,11 @@ class Lip:
         corners, by x.
     between : (m,) int64
         The vertices strictly between the slit and the border (the lip's body).
-    margin : (j,) int64
-        The skin's vertices next to the border, outside the lip.
     """
 
     inner: np.ndarray
     outline: np.ndarray
     between: np.ndarray
-    margin: np.ndarray
 
     @property
     def vertices(self) -> np.ndarray:
@@ -206,8 +203,7 @@ class Lip:
 
 
 def lip(template, side: str = "upper") -> Lip:
-    """A lip of a template: its slit vertices, its vermilion border, its body and the skin
-    next to the border.
+    """A lip of a template: its slit vertices, its vermilion border and its body.
 
     Parameters
     ----------
@@ -258,12 +254,7 @@ def lip(template, side: str = "upper") -> Lip:
     )
     body = inside & on_side & inside_border & ~on_border
     body[inner] = False
-    lip = np.zeros(len(v), dtype=bool)
-    lip[inner] = lip[outline] = lip[body] = True
-    near = np.zeros(len(v), dtype=bool)
-    near[edges[np.isin(edges, outline).any(axis=1)].ravel()] = True
-    near &= ~lip & ~np.isin(np.arange(len(v)), mouth)
-    return Lip(inner, outline, np.flatnonzero(body), np.flatnonzero(near))
+    return Lip(inner, outline, np.flatnonzero(body))
 
 
 def _polyline_distance(points: np.ndarray, line: np.ndarray) -> np.ndarray:
