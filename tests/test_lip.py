@@ -35,12 +35,13 @@ COLUMNS = np.linspace(-8.0, 8.0, 7)  # mm: the template's lip columns
 ROWS = np.array([-2.0, 0.0, 4.0, LIP_MM])  # material length from the border: skin to slit
 
 
-def _material(x, a, angle_deg):
+def _material(x, a, angle_deg, scale=1.0):
     """Camera-frame points (n, 3) of the skin at material (x, a), mm: ``a`` is the length from
     the border along the surface (negative: the skin above it, a plane); the lip below it is a
-    flat strip tilted towards the camera by ``angle_deg`` (it rolls out about the border)."""
+    flat strip tilted towards the camera by ``angle_deg`` (it rolls out about the border),
+    shortened to ``scale`` of its length."""
     t = np.radians(angle_deg)
-    lip = np.clip(a, 0.0, None)
+    lip = scale * np.clip(a, 0.0, None)
     y = np.minimum(a, 0.0) + lip * np.cos(t)
     return np.stack([x, y, DISTANCE - lip * np.sin(t)], axis=-1)
 
@@ -60,13 +61,20 @@ def _albedo(a, two_step=False):
     return SKIN + share[:, None] * (LIP - SKIN)
 
 
-def _render(angle_deg, gain=1.0, end_mm=LIP_MM + 2.0, grey=False, two_step=False):
-    """(xyz (H, W, 3) mm, colour (H, W, 3) uint8) of the rolled lip; NaN where rays miss."""
+def _render(
+    angle_deg, gain=1.0, end_mm=LIP_MM + 2.0, grey=False, two_step=False, scale=1.0, gap=None
+):
+    """(xyz (H, W, 3) mm, colour (H, W, 3) uint8) of the rolled lip (shortened to ``scale``,
+    the strip's triangles between the material lengths ``gap`` (a, b) left out); NaN where rays
+    miss."""
     xs, as_ = np.meshgrid(np.arange(-20.0, 20.01, 0.25), np.arange(-12.0, end_mm + 1e-6, 0.25))
-    v = _material(xs.ravel(), as_.ravel(), angle_deg)
+    v = _material(xs.ravel(), as_.ravel(), angle_deg, scale)
     nx = xs.shape[1]
     i = (np.arange(nx - 1)[None, :] + nx * np.arange(xs.shape[0] - 1)[:, None]).ravel()
     faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
+    if gap is not None:
+        a = as_.ravel()[faces]
+        faces = faces[(a.max(axis=1) <= gap[0]) | (a.min(axis=1) >= gap[1])]
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
         o3d.core.Tensor(v.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
@@ -105,14 +113,14 @@ def _template_lip():
     return xs.ravel(), as_.ravel(), faces, region, np.c_[xs.ravel(), as_.ravel()] / 10.0
 
 
-def _scene(angle_deg=55.0, slide_px=(0.0, 0.0, 2.0, 4.0), two_step=False, **take_render):
+def _scene(angle_deg=55.0, slide_px=(0.0, 0.0, 2.0, 4.0), two_step=False, scale=1.0, **take_render):
     """The neutral (lip tilted 15 degrees) and a take (``angle_deg``), the template's points in
     both, the take's true points and a flow slid along the lip by ``slide_px`` per row."""
     x, a, faces, region, v2 = _template_lip()
     neutral = _render(15.0, two_step=two_step)
-    take = _render(angle_deg, two_step=two_step, **take_render)
+    take = _render(angle_deg, two_step=two_step, scale=scale, **take_render)
     pn = _project(_material(x, a, 15.0))
-    true = _project(_material(x, a, angle_deg))
+    true = _project(_material(x, a, angle_deg, scale))
     slide = np.repeat(np.asarray(slide_px), len(COLUMNS))
     flow = true + slide[:, None] * np.array([0.0, -1.0])  # towards the border: the lip too short
     return dict(neutral=neutral, take=take, pn=pn, true=true, flow=flow, faces=faces,
@@ -217,6 +225,30 @@ def test_the_prior_moves_no_vertex_by_more_than_max_shift():
     loose = _prior(s, LipParams(max_shift=0.3, min_share=0.1))
     placed = np.flatnonzero(loose.weight == 1.0)
     assert np.isin(region.between, placed).all() and not np.isin(region.inner, placed).any()
+
+
+def test_a_lip_that_shortens_keeps_its_share_of_its_length():
+    """The lower lip's case: the lip rounds and shortens to 80% of its length, and the mouth is
+    open (the take's surface ends at the slit). Held to its length the slit cannot be placed
+    (the surface ends first); with ``shrink`` its vertices keep their share of the length
+    between the border and where the surface ends, within 0.8 px of their skin points (the
+    surface's end is found to about half a pixel: the range is sampled where half of a
+    point's bilinear weight has data). A closed mouth (the surface resumes past a 2 mm crease) keeps the flow's answer."""
+    s = _scene(scale=0.8, end_mm=LIP_MM, slide_px=(0.0, 0.0, 1.0, 2.0))
+    region = s["region"]
+    held = _prior(s, LipParams(stretch=0.0, min_share=0.1))
+    assert not np.isin(region.inner, np.flatnonzero(held.weight == 1.0)).any()
+    shrunk = _prior(s, LipParams(stretch=0.0, shrink=0.4))
+    assert shrunk.used and shrunk.measured == len(region.vertices), shrunk.problem
+    err = np.linalg.norm(shrunk.points[region.vertices] - s["true"][region.vertices], axis=1)
+    before = np.linalg.norm(s["flow"] - s["true"], axis=1)[region.inner]
+    print(f"\nshortened lip: slit {before.max():.2f} px -> {err.max():.3f} px (max over the lip)")
+    assert err.max() < 0.8, err.max()  # measured 0.70 (the slit), 0.64 (the body)
+    # a closed mouth: a crease, then the other lip
+    closed = _scene(gap=(LIP_MM, LIP_MM + 2.0), end_mm=LIP_MM + 5.0)
+    kept = _prior(closed, LipParams(stretch=0.0, shrink=0.4))
+    inner = closed["region"].inner
+    np.testing.assert_allclose(kept.points[inner], closed["flow"][inner], atol=1e-9)
 
 
 def test_apply_replaces_the_lip_and_raises_the_confidence():
@@ -360,6 +392,8 @@ def test_lip_params_and_prior_name_bad_input():
         ({"min_share": 0}, "refine.lip_min_share"),
         ({"stretch": 1.0}, "refine.lip_stretch"),
         ({"stretch": "a"}, "refine.lip_stretch: expected a number"),
+        ({"shrink": 1.0}, "refine.lower_lip_shrink"),
+        ({"shrink": None}, "refine.lower_lip_shrink: expected a number"),
         ({"enabled": "no"}, "refine.lip_prior: expected true or false"),
     ):
         with pytest.raises(InputError, match=match):

@@ -70,6 +70,9 @@ PAST = 0.25
 MIN_HEIGHT_PX = 2.0
 #: Largest ``max_shift`` (shares of the lip's height).
 MAX_SHIFT = 2.0
+#: A gap in the take's surface narrower than this, px, with surface beyond it, is a closed
+#: mouth's crease, not the lip's end (``shrink``).
+CREASE_PX = 8.0
 #: The registration's precision, mm: a vertex's length from the border is held to within this
 #: (plus ``stretch`` of itself).
 FLOOR_MM = 0.1
@@ -98,6 +101,11 @@ class LipParams:
         The strain the lip may take: a vertex's length from the border may change by this share
         of itself (plus :data:`FLOOR_MM`, the registration's precision) before the prior moves
         it; a flow within that is kept, one beyond goes to the nearest length allowed.
+    shrink : float
+        0 for a lip that keeps its length (the upper lip). Above 0, the lip may shorten by up
+        to this share (the lower lip, which rounds): where the take's surface ends towards an
+        open mouth is taken as the slit, and the lip's vertices keep their share of its length
+        (a closed mouth keeps the flow's answer).
     """
 
     enabled: bool = True
@@ -106,6 +114,7 @@ class LipParams:
     max_shift: float = 0.6
     min_share: float = 0.5
     stretch: float = 0.1
+    shrink: float = 0.0
 
     def __post_init__(self):
         if not isinstance(self.enabled, bool | np.bool_):
@@ -117,7 +126,8 @@ class LipParams:
             {
                 f"refine.lip_{n}": getattr(self, n)
                 for n in ("min_contrast", "search", "max_shift", "min_share", "stretch")
-            },
+            }
+            | {"refine.lower_lip_shrink": self.shrink},
         )
         if not 0.0 < self.min_contrast < 1.0:
             raise InputError(
@@ -136,6 +146,10 @@ class LipParams:
         if not 0.0 <= self.stretch < 1.0:
             raise InputError(
                 "config", f"refine.lip_stretch: expected 0 <= share < 1, got {self.stretch}"
+            )
+        if not 0.0 <= self.shrink < 1.0:
+            raise InputError(
+                "config", f"refine.lower_lip_shrink: expected 0 <= share < 1, got {self.shrink}"
             )
         if not 0.0 < self.min_share <= 1.0:
             raise InputError(
@@ -511,10 +525,13 @@ def _place(
     lip_length = -np.interp(0.0, t, arc_n)
     if not (np.isfinite(length) and np.isfinite(lip_length) and lip_length > 0.0):
         return NO_SURFACE
-    # the take's profile reaches max_shift further at both ends
+    # the take's profile reaches max_shift further at both ends (and, for a lip that may
+    # shorten, a crease's width further towards the slit, to tell a crease from an open mouth)
+    past = CREASE_PX / np.linalg.norm(take.direction) if params.shrink > 0.0 else 0.0
     t2, r2, xyz2, _ = _profile(
-        red_t, xyz_t, view_t, take.origin, take.direction, min(take.t, 0.0) - params.max_shift,
-        end + params.max_shift, min_weight, max_slope, source,
+        red_t, xyz_t, view_t, take.origin, take.direction,
+        min(take.t, 0.0) - params.max_shift - past, end + params.max_shift, min_weight,
+        max_slope, source,
     )  # fmt: skip
     edge_t = vermilion_edge(r2, t2, 1.0, params.search, end)
     if edge_t is None or edge_t[1] < params.min_contrast:
@@ -526,6 +543,16 @@ def _place(
     shift = _register(arc_n[near], r[near], arc_t, r2, params.search * lip_length)
     if shift is None:
         return NOT_MATCHED
+    if params.shrink > 0.0 and length < 0.0:
+        # a lip that shortens as it rounds (the lower lip): where the take's surface ends
+        # towards the slit is the slit, and the lip's vertices keep their share of its length;
+        # a closed mouth (the surface resumes past a crease) keeps the flow's answer
+        ends = np.flatnonzero(np.isfinite(arc_t))[0]
+        crease = int(np.ceil(CREASE_PX / (np.linalg.norm(take.direction) * (t2[1] - t2[0]))))
+        if ends == 0 or np.isfinite(xyz2[max(ends - crease, 0) : ends]).all(axis=1).any():
+            return take.at, min(edge[1], edge_t[1])
+        reach = shift - arc_t[ends]
+        length *= float(np.clip(reach / lip_length, 1.0 - params.shrink, 1.0))
     target = length + shift
     flow = np.interp(take.t, t2, arc_t)
     tol = params.stretch * abs(length) + FLOOR_MM

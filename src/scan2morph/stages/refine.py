@@ -59,6 +59,9 @@ class Params:
         The jaw prior's (``refine.jaw_*``; :mod:`scan2morph.refine.jaw`).
     lip : LipParams
         The upper-lip prior's (``refine.lip_*``; :mod:`scan2morph.refine.lip`).
+    lower_lip : LipParams
+        The lower lip's: the same settings, with ``refine.lower_lip_prior`` and
+        ``refine.lower_lip_shrink``.
     icp : dict
         The ICP settings of the section ``align`` (the jaw prior's registration).
     still_region : str
@@ -74,6 +77,7 @@ class Params:
     flow: RefineParams
     jaw: JawParams = JawParams()
     lip: LipParams = LipParams()
+    lower_lip: LipParams = LipParams(enabled=False)
     icp: dict | None = None
     still_region: str = "stable"
 
@@ -95,6 +99,10 @@ class Params:
         }
         if "lip_prior" in refine:
             lip["enabled"] = refine["lip_prior"]
+        lower = lip | {
+            "enabled": refine.get("lower_lip_prior", False),
+            "shrink": refine.get("lower_lip_shrink", 0.4),
+        }
         return cls(
             str(refine["method"]),
             int(template["subdivision_levels"]),
@@ -105,6 +113,7 @@ class Params:
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
             JawParams(**jaw),
             LipParams(**lip),
+            LipParams(**lower),
             align_stage.Params.from_config(align, template).icp,
             str(align["icp_region"]),
         )
@@ -257,11 +266,18 @@ def run(
         refined, report["confidence"] = jaw.fill(refined, report["confidence"])
     elif params.jaw.enabled:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
-    lip = _lip(fine, take, neutral, data, maps[0](fine.vertices), refined, params, source)
-    if lip.used:  # the upper lip's length where its rolling misleads the flow
-        refined, report["confidence"] = lip.apply(refined, report["confidence"])
-    elif params.lip.enabled:
-        log.info("%s: upper-lip prior not used: %s", source, lip.problem)
+    priors = {}
+    for side, settings in (("upper", params.lip), ("lower", params.lower_lip)):
+        # each lip's length (the lower one's share of it) where its rolling misleads the flow
+        prior = _lip(
+            fine, side, take, neutral, data, maps[0](fine.vertices), refined, params, settings,
+            source,
+        )  # fmt: skip
+        if prior.used:
+            refined, report["confidence"] = prior.apply(refined, report["confidence"])
+        elif settings.enabled:
+            log.info("%s: %s-lip prior not used: %s", source, side, prior.problem)
+        priors["lip" if side == "upper" else "lower_lip"] = prior
     vertices, ok = sample_points(data, take, refined, fine.faces, params, source)
     attrs = {
         "method": params.method,
@@ -272,12 +288,15 @@ def run(
         "valid_share": float(ok.mean()),
         "jaw_used": jaw.used,
         "jaw_problem": jaw.problem,
-        "lip_used": lip.used,
-        "lip_problem": lip.problem,
-        "lip_vertices": lip.vertices,
-        "lip_measured": lip.measured,
-        "lip_contrast": lip.contrast,
     }
+    for name, prior in priors.items():
+        attrs |= {
+            f"{name}_used": prior.used,
+            f"{name}_problem": prior.problem,
+            f"{name}_vertices": prior.vertices,
+            f"{name}_measured": prior.measured,
+            f"{name}_contrast": prior.contrast,
+        }
     if jaw.motion is not None:
         attrs |= {
             "jaw_rmse_mm": jaw.motion.residual_rmse,
@@ -328,13 +347,16 @@ def _jaw(template, fine, take, neutral, data, neutral_map, params: Params, sourc
     )
 
 
-def _lip(fine, take, neutral, data, neutral_points, take_points, params: Params, source: str):
-    """The upper-lip prior of a take (:mod:`scan2morph.refine.lip`), or why there is none."""
+def _lip(
+    fine, side, take, neutral, data, neutral_points, take_points, params: Params, settings, source
+):
+    """A lip's prior in a take (:mod:`scan2morph.refine.lip`: ``settings`` are
+    ``params.lip`` or ``params.lower_lip``), or why there is none."""
     n = len(fine.vertices)
-    if not params.lip.enabled:
+    if not settings.enabled:
         return LipPrior(np.full((n, 2), np.nan), np.zeros(n), 0, 0, 0.0, False, "off")
     return lip_prior(
-        lip(fine, "upper"),
+        lip(fine, side),
         fine.vertices,
         neutral_points,
         take_points,
@@ -343,7 +365,7 @@ def _lip(fine, take, neutral, data, neutral_points, take_points, params: Params,
         need(data, paths.range_image(take, "color"), source),
         need(data, paths.range_image(take, "xyz"), source),
         fine.faces,
-        params.lip,
+        settings,
         params.min_weight,
         params.max_slope_deg,
         source,
