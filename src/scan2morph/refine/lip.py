@@ -1,4 +1,5 @@
-"""The upper-lip prior: the upper lip keeps its length from the vermilion border to the slit.
+"""The lip priors: the upper lip keeps its length from the vermilion border to the slit, the
+lower lip its share of it.
 
 Image correlation measures the lips poorly when the mouth rounds or opens: the upper lip rolls
 and foreshortens, its inner part turns away from the camera, and the flow leaves the slit's
@@ -33,8 +34,11 @@ stereo neutral or a painted face shows no border, and the prior is then not used
 take's surface cannot carry, or whose correction would exceed ``max_shift`` of the lip's height
 is not placed; with fewer than ``min_share`` of the lip's vertices placed the prior is not used.
 
-The lower lip gets no such prior: it shortens by 16-22% as it rounds (measured: a length prior
-there moves its slit vertices further from their skin points in she and too).
+The lower lip shortens by 16-22% as it rounds (she, too), so a length prior moves its slit
+vertices further from their skin points. With ``shrink`` (the refine stage's lower lip) the lip
+may shorten instead: where the take's surface ends towards an open mouth is taken as its slit,
+and each vertex keeps its share of the lip's length from the border. A closed mouth, whose
+surface resumes past a crease narrower than :data:`CREASE_PX`, keeps the flow's answer.
 """
 
 from __future__ import annotations
