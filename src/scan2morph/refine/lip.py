@@ -193,6 +193,13 @@ class LipPrior:
     used: bool
     problem: str
 
+    @classmethod
+    def unused(cls, n: int, problem: str, measured: int = 0, vertices: int = 0, contrast=0.0):
+        """A prior that is not used, for ``n`` template vertices, and why."""
+        return cls(
+            np.full((n, 2), np.nan), np.zeros(n), measured, vertices, contrast, False, problem
+        )
+
     def apply(self, points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The lip's vertices placed by the prior.
 
@@ -417,17 +424,13 @@ def lip_prior(
     measured, total = int(ok.sum()), len(vertices)
     contrast = float(np.median(contrasts)) if contrasts else 0.0
 
-    def result(points, weight, problem):
-        return LipPrior(points, weight, measured, total, contrast, not problem, problem)
-
     if measured == 0 or measured < params.min_share * total:
         why = "; ".join(f"{m}: {reasons[m]}" for m in sorted(reasons, key=reasons.get)[::-1])
-        return result(
-            np.full((n, 2), np.nan),
-            np.zeros(n),
+        problem = (
             f"only {measured} of the lip's {total} vertices placed (at least "
-            f"{100 * params.min_share:.0f}% needed); not placed: {why}",
+            f"{100 * params.min_share:.0f}% needed); not placed: {why}"
         )
+        return LipPrior.unused(n, problem, measured, total, contrast)
     # measured vertices are held at their places; the lip's others follow harmonically;
     # everything else keeps the flow's answer
     fixed = np.ones(n, dtype=bool)
@@ -441,7 +444,7 @@ def lip_prior(
     points[region] = pt[region] + filled[region, :2]
     weight = np.zeros(n)
     weight[region] = np.clip(filled[region, 2], 0.0, 1.0)
-    return result(points, weight, "")
+    return LipPrior(points, weight, measured, total, contrast, True, "")
 
 
 #: Why a lip vertex was not placed (the prior's ``problem`` counts them).

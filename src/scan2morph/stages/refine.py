@@ -252,6 +252,7 @@ def run(
                 for name, what, on in (
                     ("jaw", "chin", params.jaw.enabled),
                     ("lip", "upper lip", params.lip.enabled),
+                    ("lower-lip", "lower lip", params.lower_lip.enabled),
                 )
                 if on
             )
@@ -261,7 +262,8 @@ def run(
         # the points are the fit's: nothing was measured at them (the motion stage smooths
         # them as it smooths a fit's)
         report["confidence"] = np.zeros(len(points))
-    jaw = _jaw(template, fine, take, neutral, data, maps[0], params, source)
+    neutral_points = maps[0](fine.vertices)  # the neutral's skin points, px
+    jaw = _jaw(template, fine, take, neutral, data, neutral_points, params, source)
     if jaw.used:  # the geometry's answer where the texture gave none
         refined, report["confidence"] = jaw.fill(refined, report["confidence"])
     elif params.jaw.enabled:
@@ -270,8 +272,7 @@ def run(
     for side, settings in (("upper", params.lip), ("lower", params.lower_lip)):
         # each lip's length (the lower one's share of it) where its rolling misleads the flow
         prior = _lip(
-            fine, side, take, neutral, data, maps[0](fine.vertices), refined, params, settings,
-            source,
+            fine, side, take, neutral, data, neutral_points, refined, params, settings, source,
         )  # fmt: skip
         if prior.used:
             refined, report["confidence"] = prior.apply(refined, report["confidence"])
@@ -315,18 +316,18 @@ def run(
     )
 
 
-def _jaw(template, fine, take, neutral, data, neutral_map, params: Params, source: str):
+def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, source: str):
     """The jaw prior of a take (:mod:`scan2morph.refine.jaw`), or why there is none.
 
-    The neutral's mesh is sampled here from its range image through ``neutral_map`` (the fit's
-    sampling): a click-noise draw refits the neutral with other clicks."""
+    The neutral's mesh is sampled here from its range image at ``neutral_points`` (its fit's
+    pixels, (V, 2)): a click-noise draw refits the neutral with other clicks."""
     if not params.jaw.enabled:
         n = len(fine.vertices)
         return JawPrior(np.full((n, 2), np.nan), np.zeros(n), None, False, "off")
     weights = chin_weights(fine.vertices, template.ibug_xy, params.jaw.start, params.jaw.end)
     neutral_vertices, neutral_valid = sample_mesh(
         need(data, paths.range_image(neutral, "xyz"), source),
-        neutral_map(fine.vertices),
+        neutral_points,
         fine.faces,
         source,
         params.min_weight,
@@ -354,7 +355,7 @@ def _lip(
     ``params.lip`` or ``params.lower_lip``), or why there is none."""
     n = len(fine.vertices)
     if not settings.enabled:
-        return LipPrior(np.full((n, 2), np.nan), np.zeros(n), 0, 0, 0.0, False, "off")
+        return LipPrior.unused(n, "off")
     return lip_prior(
         lip(fine, side),
         fine.vertices,
