@@ -60,6 +60,33 @@ def test_a_piece_cut_off_only_by_missing_vertices_is_kept():
     assert not torn_off(take, neutral, faces, 2.0).any()
 
 
+def test_a_lone_vertex_ringed_by_missing_vertices_is_torn_off():
+    """A vertex whose every neighbour is missing has no edge to check: it is torn off wherever it
+    lies (on the face's own surface too), and its 25 mm of another surface no longer leaks into
+    the filling round it. Two such vertices with their edge between them are a piece and stay;
+    a face of lone vertices keeps its largest piece (one vertex)."""
+    neutral, faces, idx = _grid()
+    take = neutral + [0.0, 0.0, 2.0]
+    hole = idx[3:8, 4:9].ravel()
+    take[hole] = np.nan
+    lone = idx[5, 6]
+    for depth in (0.0, -25.0):
+        take[lone] = neutral[lone] + [0.0, 0.0, 2.0 + depth]
+        expected = np.zeros(len(neutral), dtype=bool)
+        expected[lone] = True
+        assert_array_equal(torn_off(take, neutral, faces, 2.0), expected)
+    raw = motion_vectors(take, neutral, faces=faces, max_stretch=2.0)
+    assert np.isnan(raw[hole]).all() and np.isfinite(np.delete(raw, hole, 0)).all()
+    filled = laplacian_smooth(raw, faces, iterations=5, missing=~np.isfinite(raw).all(axis=1))
+    np.testing.assert_allclose(filled[hole], np.tile([0.0, 0.0, 2.0], (len(hole), 1)), atol=1e-12)
+    pair = idx[5, 6:8]
+    take[pair] = neutral[pair] + [0.0, 0.0, -23.0]
+    assert not torn_off(take, neutral, faces, 2.0).any()
+    scattered = np.full_like(neutral, np.nan)
+    scattered[[idx[0, 0], idx[5, 5], idx[9, 9]]] = neutral[[idx[0, 0], idx[5, 5], idx[9, 9]]]
+    assert torn_off(scattered, neutral, faces, 2.0).sum() == 2
+
+
 def test_cuts_inside_a_piece_and_edges_of_no_length_tear_nothing():
     """A piece ringed by missing vertices keeps an edge squeezed inside it (a cut that joins the
     piece to itself is no tear), and an edge of no length in the neutral that stays so is no
