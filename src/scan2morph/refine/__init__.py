@@ -34,7 +34,9 @@ class RefineParams:
     Attributes
     ----------
     iterations : int
-        Measure-and-fuse rounds (each on the take image pulled back through the last map).
+        Measure-and-fuse rounds (each on the take image pulled back through the last map). Each
+        round's correction is fused (smoothed, faded) on its own, so later rounds take up what
+        the membrane left of the earlier ones.
     high_pass_px : float
         Scale of the high-pass that removes shading, px.
     noise_grey : float
@@ -45,7 +47,7 @@ class RefineParams:
         Precision of a clicked landmark, px (the fiducials' weight: both takes' clicks, so
         ``1 / (2 precision^2)``).
     smooth_px : float
-        Membrane length: corrections vary over no less than about this, px.
+        Membrane length: each round's correction varies over no less than about this, px.
     fade_px : float
         Where nothing is measured, a correction fades back to the fit over about this, px.
     max_fb_px, min_zncc : float
@@ -55,12 +57,12 @@ class RefineParams:
         may have slid in from there).
     """
 
-    iterations: int = 2
-    high_pass_px: float = 4.0
+    iterations: int = 4
+    high_pass_px: float = 3.0
     noise_grey: float = 2.0
     flow_precision_px: float = 0.25
     click_precision_px: float = 0.5
-    smooth_px: float = 4.0
+    smooth_px: float = 3.0
     fade_px: float = 90.0
     max_fb_px: float = 0.5
     min_zncc: float = 0.5
