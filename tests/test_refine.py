@@ -89,6 +89,24 @@ def test_fuse_interpolates_measurements_and_fades_to_zero():
     np.testing.assert_allclose(f[..., 1], 0.0, atol=1e-12)
 
 
+def test_the_flow_defaults_agree_in_config_schema_and_library():
+    """config/config.yaml, the schema's defaults and RefineParams' defaults are one set of flow
+    parameters (a default changed in one place and not the others fails here)."""
+    import dataclasses
+
+    import yaml
+
+    from tests.workflow_api import REPO
+
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["refine"]
+    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
+    spec = schema["properties"]["refine"]["properties"]
+    library = RefineParams()
+    for field in dataclasses.fields(RefineParams):
+        value = getattr(library, field.name)
+        assert config[field.name] == value == spec[field.name]["default"], field.name
+
+
 def test_refine_points_undoes_sliding_on_textured_skin(fine):
     """The take's skin is the neutral's texture displaced by a known smooth field; the fit slid
     by that field (it knows nothing of it). Refinement must find each vertex's skin point."""

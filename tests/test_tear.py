@@ -64,7 +64,8 @@ def test_a_lone_vertex_ringed_by_missing_vertices_is_torn_off():
     """A vertex whose every neighbour is missing has no edge to check: it is torn off wherever it
     lies (on the face's own surface too), and its 25 mm of another surface no longer leaks into
     the filling round it. Two such vertices with their edge between them are a piece and stay;
-    a face of lone vertices keeps its largest piece (one vertex)."""
+    a face of lone vertices keeps its largest piece (one vertex), and a vertex that no face uses
+    is no lone vertex."""
     neutral, faces, idx = _grid()
     take = neutral + [0.0, 0.0, 2.0]
     hole = idx[3:8, 4:9].ravel()
@@ -85,6 +86,9 @@ def test_a_lone_vertex_ringed_by_missing_vertices_is_torn_off():
     scattered = np.full_like(neutral, np.nan)
     scattered[[idx[0, 0], idx[5, 5], idx[9, 9]]] = neutral[[idx[0, 0], idx[5, 5], idx[9, 9]]]
     assert torn_off(scattered, neutral, faces, 2.0).sum() == 2
+    # a vertex no face uses has no neighbours to miss: it is not lone
+    extra = np.vstack([take, [[0.0, 0.0, -25.0]]]), np.vstack([neutral, [[0.0, 0.0, 0.0]]])
+    assert not torn_off(*extra, faces, 2.0).any()
 
 
 def test_cuts_inside_a_piece_and_edges_of_no_length_tear_nothing():

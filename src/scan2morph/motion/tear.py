@@ -8,11 +8,13 @@ neutral. Cutting every edge stretched (or squeezed) beyond ``max_stretch`` split
 mesh; a piece that is not the face's largest and lost an edge to the cut is torn off, and its
 vertices are no measurement of where the skin went.
 
-A vertex whose neighbours are all missing has no edge whose stretch could be checked, so nothing
-tells a sample of the skin from one of another surface: it counts as torn off too. At a mouth
-corner whose patch the scan left out, such a lone vertex sampled the inside of the mouth 25 mm
-deep in one draw of the clicks, and the filling of the patch round it took its motion (synth01
-`too`: the click-noise error bar 0.105 -> 0.061 of the motion without it).
+A vertex whose neighbours are all missing (in the take or the neutral) has no edge whose
+stretch could be checked, so nothing tells a sample of the skin from one of another surface: it
+counts as torn off too. At a mouth corner whose patch the scan left out, such a lone vertex
+sampled the inside of the mouth 25 mm deep in one draw of the clicks, and the filling of the
+patch round it took its motion (synth01 `too`: the click-noise error bar 0.105 -> 0.061 of the
+motion without it). Two or more vertices joined by an edge are a piece whose own edges check
+them against each other: they are kept (a hole may part a patch of skin from the rest).
 """
 
 from __future__ import annotations
