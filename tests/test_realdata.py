@@ -171,6 +171,15 @@ class Head:
         return np.where((face >= 0)[..., None], out, 0.0)
 
 
+def _raycasting_scene(vertices_w: np.ndarray, faces: np.ndarray) -> o3d.t.geometry.RaycastingScene:
+    """An open3d ray-casting scene of a triangle mesh (vertices (V, 3) mm, faces (F, 3))."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(vertices_w.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
+    )
+    return scene
+
+
 @pytest.fixture(scope="module")
 def head() -> Head:
     return load_head()
@@ -201,10 +210,7 @@ def load_head() -> Head:
     R_w = Rotation.random(rng=rng).as_matrix()
     t_w = rng.uniform(-500.0, 500.0, 3)
     v_w = v @ R_w.T + t_w
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(v_w.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
-    )
+    scene = _raycasting_scene(v_w, faces)
     print(
         f"\n[realdata] mesh {len(v)} vertices / {len(faces)} faces, {mm_per_unit:.2f} mm per "
         f"unit; head {np.ptp(v[head_band, 0]):.0f} mm wide, chin to crown "
@@ -800,10 +806,7 @@ def test_alignment_grows_into_the_still_skin_of_a_real_face(head):
 
 def _cast_mesh(vertices_w, faces, origin, dirs):
     """Scanner-frame hits of rays ``origin + t dirs`` (H, W, 3) on a mesh; NaN on a miss."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(vertices_w.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
-    )
+    scene = _raycasting_scene(vertices_w, faces)
     d = dirs.reshape(-1, 3)
     rays = np.concatenate([np.broadcast_to(origin, d.shape), d], axis=1).astype(np.float32)
     t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
@@ -1035,12 +1038,8 @@ def skin_scene(head: Head) -> SkinScene:
     x, y = head.vertices[:, 0] - head.nose[0], head.vertices[:, 1] - head.nose[1]
     smiled = head.vertices + _smile(x, y)
     smiled_w = smiled @ head.R_w.T + head.t_w
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(smiled_w.astype(np.float32)), o3d.core.Tensor(head.faces.astype(np.uint32))
-    )
     take = dataclasses.replace(
-        head, vertices=smiled, vertices_w=smiled_w, scene=scene,
+        head, vertices=smiled, vertices_w=smiled_w, scene=_raycasting_scene(smiled_w, head.faces),
         normals=vertex_normals(smiled, head.faces),
     )  # fmt: skip
     xyz0, c0, K, R0, C0 = _colour_scan(head, 0.0, 0.0, 1.0, 1.0)
