@@ -65,7 +65,27 @@ def test_flow_recovers_a_known_smooth_displacement():
     good = conf[inner] > 0.3
     assert good.mean() > 0.8
     err = np.hypot(flow[inner][..., 0] - dx[inner], flow[inner][..., 1] - dy[inner])[good]
-    assert np.median(err) < 0.15, np.median(err)
+    assert np.median(err) < 0.07, np.median(err)  # measured 0.046
+
+
+@pytest.mark.parametrize(("blob_px", "max_ratio"), [(1.0, 0.6), (1.5, 0.65), (2.5, 0.85)])
+def test_the_flow_searched_at_full_resolution_resolves_fine_texture(blob_px, max_ratio):
+    """Skin texture 1-2.5 px across under a known displacement: searched on the grid itself
+    (``level`` 0, the default) the flow's median error is 0.043-0.048 px; at half the
+    resolution (OpenCV's DIS preset) 0.090, 0.077 and 0.066 px (the finer the texture, the more
+    half the resolution loses)."""
+    ref = _texture((160, 160), 5, blob_px=blob_px)
+    yy, xx = np.mgrid[0:160, 0:160] / 160.0
+    dx = 1.5 * np.cos(np.pi * yy) * np.sin(2 * np.pi * xx)
+    dy = 2.0 * np.sin(np.pi * xx) * np.sin(np.pi * yy)
+    moving = _warp(ref, -dx, -dy)
+    inner = np.s_[20:-20, 20:-20]
+    median = {}
+    for level in (0, 1):
+        flow, conf = measure_flow(ref, moving, noise=1.0, level=level)
+        err = np.hypot(flow[inner][..., 0] - dx[inner], flow[inner][..., 1] - dy[inner])
+        median[level] = float(np.median(err[conf[inner] > 0.3]))
+    assert median[0] < 0.06 and median[0] < max_ratio * median[1], median
 
 
 def test_flat_images_give_no_correction():
@@ -200,16 +220,16 @@ def _material_errors(data, truths, run):
 def test_refinement_follows_the_skin_on_synthetic_takes():
     """Against the truth's material motion: on textured skin the refinement removes most of the
     template fit's sliding; on the flat albedo it is no worse than the fit (with the outline's
-    surroundings correlated, ``refine.margin_px`` 24, it halves it: she 1.05 -> 0.48; with 12 px
-    it was 0.96)."""
+    surroundings correlated, ``refine.margin_px`` 24, it halves it: she 1.03 -> 0.53, 0.48 with
+    the flow searched at half resolution; with 12 px it was 0.96)."""
     textured = _material_errors(*_subject_in_memory(1.0))
     flat = _material_errors(*_subject_in_memory(0.0, ("neutral", "she")))
     print("material relative error (fit, refined):", textured, "flat:", flat)
     for take, (fit_err, refined_err) in textured.items():
         # at 480 x 360 (0.9 px/mm on the face) the finest freckles are lost: the default 640 x 480
         # does better (README); the fit's error is 0.7-1.1 here
-        assert refined_err < 0.3 * fit_err, (take, fit_err, refined_err)
-        assert refined_err < 0.3, (take, refined_err)  # measured 0.24 (she), 0.22 (smile1)
+        assert refined_err < 0.2 * fit_err, (take, fit_err, refined_err)
+        assert refined_err < 0.2, (take, refined_err)  # measured 0.15 (she), 0.13 (smile1)
     for take, (fit_err, refined_err) in flat.items():
         assert refined_err <= 0.7 * fit_err, (take, fit_err, refined_err)
 

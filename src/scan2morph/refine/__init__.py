@@ -52,6 +52,9 @@ class RefineParams:
         Where nothing is measured, a correction fades back to the fit over about this, px.
     max_fb_px, min_zncc : float
         The flow's consistency and correlation tests (:func:`~scan2morph.refine.flow.measure_flow`).
+    flow_level : int
+        Finest pyramid level of the flow's search: 0 the full resolution of the neutral's
+        image, 1 half of it (:func:`~scan2morph.refine.flow.measure_flow`'s ``level``).
     margin_px : float
         Skin around the template's outline taken into the correlation, px (an outline vertex
         may have slid in from there).
@@ -66,6 +69,7 @@ class RefineParams:
     fade_px: float = 90.0
     max_fb_px: float = 0.5
     min_zncc: float = 0.5
+    flow_level: int = 0
     margin_px: float = 24.0
 
 
@@ -141,6 +145,7 @@ def refine_points(
             noise=params.noise_grey,
             max_fb_px=params.max_fb_px,
             min_zncc=params.min_zncc,
+            level=params.flow_level,
         )
         f = fuse(flow, w_data * conf, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
         mapped = _compose(mapped, f)

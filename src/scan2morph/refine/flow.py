@@ -80,6 +80,7 @@ def measure_flow(
     max_fb_px: float = 0.5,
     patch: float = 3.0,
     min_zncc: float = 0.5,
+    level: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Displacement ``m`` with ``moving(x + m(x)) ~ reference(x)``, and its confidence.
 
@@ -97,6 +98,10 @@ def measure_flow(
         Gaussian scale of the ZNCC window, px.
     min_zncc : float
         ZNCC after the displacement below which a vector gets no weight.
+    level : int
+        Finest pyramid level the flow is searched on (0: the grid itself, 1: half its
+        resolution, the preset's default, then upsampled). The skin's texture that carries the
+        displacement (pores, freckles) is 1-3 px across, which half the resolution loses.
 
     Returns
     -------
@@ -108,13 +113,14 @@ def measure_flow(
     hp_r, rms_r = high_pass(reference, sigma)
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
-    level = float(np.median(rms_r[both])) if both.any() else 0.0
-    if level <= 0:
+    contrast = float(np.median(rms_r[both])) if both.any() else 0.0
+    if contrast <= 0:
         shape = reference.shape
         return np.zeros((*shape, 2)), np.zeros(shape)
-    scale = 40.0 / level  # the face's median contrast spans +-40 grey levels
+    scale = 40.0 / contrast  # the face's median contrast spans +-40 grey levels
     r8, m8 = _to_u8(hp_r, scale), _to_u8(hp_m, scale)
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    dis.setFinestScale(int(level))
     fw = dis.calc(r8, m8, None).astype(np.float64)
     bw = dis.calc(m8, r8, None)
     fb = np.linalg.norm(fw + _warp(bw, fw), axis=-1)
