@@ -398,6 +398,8 @@ def test_config_validation_fills_defaults_as_snakemake_does():
             {"template": {"max_slope_deg": 95}},
             r"^config: template\.max_slope_deg: expected a value < 90, got 95$",
         ),
+        ({"refine": {"flow_level": 3}}, r"^config: refine\.flow_level: expected a value <= 2"),
+        ({"refine": {"flow_level": 0.5}}, r"^config: refine\.flow_level: "),
     ],
 )
 def test_config_errors_are_one_short_line(extra, match):

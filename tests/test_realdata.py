@@ -1108,8 +1108,9 @@ def test_refinement_follows_real_skin(head):
     the config's refinement parameters the interior (12 px in from the grid's edge, where the
     flow sees skin on every side) comes from the fit's 1.68 px RMS to 0.24 px, a median of
     0.12 px. With the flow searched at half resolution (``refine.flow_level`` 1, before
-    2026-12-03) it was 0.79 px, median 0.24; with the parameters before 2026-12-02 as well (2
-    rounds, a 4 px high-pass and membrane) 0.84 px, median 0.32. This is the parameters' check
+    commit a9e65cd) it was 0.79 px, median 0.24; with the rounds, high-pass and membrane before
+    commit 889e39b as well (2 rounds, a 4 px high-pass and membrane) 0.84 px, median 0.32. This
+    is the parameters' check
     on real skin: the synthetic albedo is not the measure of them
     (``benchmarks/bench_refine_skin.py`` compares parameters over many draws of the clicks)."""
     import yaml

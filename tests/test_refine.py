@@ -68,6 +68,17 @@ def test_flow_recovers_a_known_smooth_displacement():
     assert np.median(err) < 0.07, np.median(err)  # measured 0.046
 
 
+@pytest.mark.parametrize("level", [-1, 3, 0.5])
+def test_a_flow_level_outside_the_pyramid_is_refused(level):
+    """A negative level made OpenCV try to allocate 1.7e17 bytes; one beyond 2 is quietly
+    searched finer than asked on a face-sized grid."""
+    from scan2morph.errors import InputError
+
+    ref = _texture((40, 40), 1)
+    with pytest.raises(InputError, match=r"refine\.flow_level: expected an integer 0\.\.2"):
+        measure_flow(ref, ref, level=level)
+
+
 @pytest.mark.parametrize(("blob_px", "max_ratio"), [(1.0, 0.6), (1.5, 0.65), (2.5, 0.85)])
 def test_the_flow_searched_at_full_resolution_resolves_fine_texture(blob_px, max_ratio):
     """Skin texture 1-2.5 px across under a known displacement: searched on the grid itself
@@ -220,7 +231,7 @@ def _material_errors(data, truths, run):
 def test_refinement_follows_the_skin_on_synthetic_takes():
     """Against the truth's material motion: on textured skin the refinement removes most of the
     template fit's sliding; on the flat albedo it is no worse than the fit (with the outline's
-    surroundings correlated, ``refine.margin_px`` 24, it halves it: she 1.03 -> 0.53, 0.48 with
+    surroundings correlated, ``refine.margin_px`` 24, it halves it: she 1.03 -> 0.53, 0.49 with
     the flow searched at half resolution; with 12 px it was 0.96)."""
     textured = _material_errors(*_subject_in_memory(1.0))
     flat = _material_errors(*_subject_in_memory(0.0, ("neutral", "she")))
@@ -229,7 +240,8 @@ def test_refinement_follows_the_skin_on_synthetic_takes():
         # at 480 x 360 (0.9 px/mm on the face) the finest freckles are lost: the default 640 x 480
         # does better (README); the fit's error is 0.7-1.1 here
         assert refined_err < 0.2 * fit_err, (take, fit_err, refined_err)
-        assert refined_err < 0.2, (take, refined_err)  # measured 0.15 (she), 0.13 (smile1)
+        # measured 0.15 (she), 0.13 (smile1); 0.18 and 0.17 with the flow at half resolution
+        assert refined_err < 0.16, (take, refined_err)
     for take, (fit_err, refined_err) in flat.items():
         assert refined_err <= 0.7 * fit_err, (take, fit_err, refined_err)
 

@@ -91,6 +91,12 @@ _TRIM_FLOOR_MM = 0.05
 #: its normal matrix (rotations in mm at the region's radius): directions constrained less than
 #: this move slowly, and noise does not throw them far.
 _DAMPING = 1e-3
+#: A region's ICP step that turns back on the last (the cosine of their motions of the points
+#: below this) halves the steps after it, down to :data:`_MIN_STEP_SCALE` of a full step
+#: (:func:`_region_icp`): a swing between two poses settles between them, and a wrong pose is
+#: still left at 1/16 of the full step's pace, so that it is not stopped far from the answer.
+_TURN_BACK_COSINE = -0.5
+_MIN_STEP_SCALE = 1.0 / 16.0
 #: A region's ICP has converged when a step moves its points by less than this share of the
 #: expected residual RMS (:func:`_region_icp`).
 _STEP_NOISE_SHARE = 0.25
@@ -990,8 +996,8 @@ def _region_icp(p, surface, initial, prm, reach=0.0, noise=0.0):
     has converged when a step moves the points by less than ``step_mm`` RMS, or by less than
     :data:`_STEP_NOISE_SHARE` of the expected residual ``noise`` (mm): the nearest samples, and
     with them the step, jitter by about that much once the pose is found. Once the kernel is at
-    its final scale, a step that turns back on the last one (their motions of the points point
-    apart on average) halves every later step: the nearest samples alternate between two sets,
+    its final scale, a step that turns back on the last one (:func:`_turned_back`) halves every
+    later step, down to :data:`_MIN_STEP_SCALE`: the nearest samples alternate between two sets,
     and the pose between them is the answer (without it, a chin's ICP swung between two poses
     0.07-0.16 mm apart until its iterations ran out, in 2 of 16 click-noise draws of a car).
     """
@@ -1032,13 +1038,22 @@ def _region_icp(p, surface, initial, prm, reach=0.0, noise=0.0):
         # is no measure of it)
         motion = transform_points(t, p) - transform_points(t_old, p)
         done = k == k_final and float(np.sqrt(np.mean(np.sum(motion**2, axis=1)))) < tolerance
-        if k == k_final and last is not None and float(np.sum(motion * last)) < 0:
-            scale *= 0.5  # turned back: the samples alternate, the answer lies between
+        if k == k_final and last is not None and _turned_back(motion, last):
+            # the samples alternate, the answer lies between
+            scale = max(scale / 2.0, _MIN_STEP_SCALE)
         last = motion if k == k_final else None
         k = max(k / 2.0, k_final)
         if done:
             return t, it, True, constraint
     return t, it, False, constraint
+
+
+def _turned_back(motion: np.ndarray, last: np.ndarray) -> bool:
+    """Whether a step's motion of the points (n, 3) undoes the last's, mm: their fields point
+    apart (cosine below :data:`_TURN_BACK_COSINE`), as in a swing between two poses, not in
+    the jitter of a converged pose or a slow slide, whose steps point alike or at random."""
+    norms = float(np.linalg.norm(motion) * np.linalg.norm(last))
+    return norms > 0 and float(np.sum(motion * last)) < _TURN_BACK_COSINE * norms
 
 
 def _verdict(conv, iterations, fitness, kept, recovery, prm) -> list[str]:

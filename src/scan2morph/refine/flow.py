@@ -27,6 +27,12 @@ from scipy import sparse
 from scipy.ndimage import gaussian_filter
 from scipy.sparse.linalg import splu
 
+from scan2morph.errors import InputError
+
+#: Coarsest finest-level of the flow's search (:func:`measure_flow`'s ``level``): 2 is a quarter
+#: of the resolution; OpenCV quietly searches a small grid at a finer level than asked.
+MAX_LEVEL = 2
+
 
 def high_pass(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """Local high-pass of an image with missing values, and its local RMS.
@@ -110,6 +116,10 @@ def measure_flow(
     confidence : (rows, columns) float64
         In [0, 1]: texture share times the consistency and correlation tests.
     """
+    if int(level) != level or not 0 <= level <= MAX_LEVEL:
+        raise InputError(
+            "refine", f"refine.flow_level: expected an integer 0..{MAX_LEVEL}, got {level!r}"
+        )
     hp_r, rms_r = high_pass(reference, sigma)
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
