@@ -49,23 +49,36 @@ def test_skin_that_stretches_or_moves_rigidly_is_kept():
     assert not torn_off(take @ rot.T, neutral, faces, 2.0).any()
 
 
-def test_a_piece_cut_off_only_by_missing_vertices_is_kept():
-    """A patch ringed by missing vertices is not torn, however far it moved: nothing shows a
-    tear (no stretched edge joins it to the face)."""
+def test_a_piece_cut_off_by_missing_vertices_is_checked_across_them():
+    """A patch ringed by one row of missing vertices is checked by the chords that join it to
+    the face through them: 20 mm off (another surface) it is torn off, exactly its vertices; on
+    the face, moved with it and stretched 1.4 times, it is kept. Beyond a gap of two rows no
+    chord checks it, and it is kept however far it moved."""
     neutral, faces, idx = _grid()
-    take = neutral.copy()
+    take = neutral + [1.0, -2.0, 0.5]
     ring = idx[3:8, 4:9].ravel()
     take[ring] = np.nan
-    take[_patch(idx)] = neutral[_patch(idx)] + [0.0, 0.0, -20.0]
+    patch = _patch(idx)
+    expected = np.zeros(len(neutral), dtype=bool)
+    expected[patch] = True
+    take[patch] = neutral[patch] + [1.0, -2.0, -19.5]
+    assert_array_equal(torn_off(take, neutral, faces, 2.0), expected)
+    centre = neutral[idx[5, 6]]
+    take[patch] = centre + 1.4 * (neutral[patch] - centre) + [1.0, -2.0, 0.5]
+    assert not torn_off(take, neutral, faces, 2.0).any()
+    wide = idx[2:9, 3:10].ravel()
+    take[wide] = np.nan
+    take[idx[5, 5:8]] = neutral[idx[5, 5:8]] + [0.0, 0.0, -20.0]  # a row of 3, two rows in
     assert not torn_off(take, neutral, faces, 2.0).any()
 
 
 def test_a_lone_vertex_ringed_by_missing_vertices_is_torn_off():
     """A vertex whose every neighbour is missing has no edge to check: it is torn off wherever it
     lies (on the face's own surface too), and its 25 mm of another surface no longer leaks into
-    the filling round it. Two such vertices with their edge between them are a piece and stay;
-    a face of lone vertices keeps its largest piece (one vertex), and a vertex that no face uses
-    is no lone vertex."""
+    the filling round it. Two such vertices with their edge between them are a piece, checked
+    across the missing vertices round them (:func:`test_a_piece_cut_off_by_missing_vertices_is_checked_across_them`):
+    23 mm off they are torn, on the face they stay; a face of lone vertices keeps its largest
+    piece (one vertex), and a vertex that no face uses is no lone vertex."""
     neutral, faces, idx = _grid()
     take = neutral + [0.0, 0.0, 2.0]
     hole = idx[3:8, 4:9].ravel()
@@ -81,7 +94,11 @@ def test_a_lone_vertex_ringed_by_missing_vertices_is_torn_off():
     filled = laplacian_smooth(raw, faces, iterations=5, missing=~np.isfinite(raw).all(axis=1))
     np.testing.assert_allclose(filled[hole], np.tile([0.0, 0.0, 2.0], (len(hole), 1)), atol=1e-12)
     pair = idx[5, 6:8]
-    take[pair] = neutral[pair] + [0.0, 0.0, -23.0]
+    take[pair] = neutral[pair] + [0.0, 0.0, -21.0]
+    expected = np.zeros(len(neutral), dtype=bool)
+    expected[pair] = True
+    assert_array_equal(torn_off(take, neutral, faces, 2.0), expected)
+    take[pair] = neutral[pair] + [0.0, 0.0, 2.0]
     assert not torn_off(take, neutral, faces, 2.0).any()
     scattered = np.full_like(neutral, np.nan)
     scattered[[idx[0, 0], idx[5, 5], idx[9, 9]]] = neutral[[idx[0, 0], idx[5, 5], idx[9, 9]]]
