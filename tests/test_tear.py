@@ -66,6 +66,10 @@ def test_a_piece_cut_off_by_missing_vertices_is_checked_across_them():
     centre = neutral[idx[5, 6]]
     take[patch] = centre + 1.4 * (neutral[patch] - centre) + [1.0, -2.0, 0.5]
     assert not torn_off(take, neutral, faces, 2.0).any()
+    # slid 7 mm along the face: its chords stretch 2.2 times on one side and shrink to 0.2 on
+    # the other; their median keeps it (their largest or smallest ratio would tear it)
+    take[patch] = neutral[patch] + [8.0, -2.0, 0.5]
+    assert not torn_off(take, neutral, faces, 2.0).any()
     wide = idx[2:9, 3:10].ravel()
     take[wide] = np.nan
     take[idx[5, 5:8]] = neutral[idx[5, 5:8]] + [0.0, 0.0, -20.0]  # a row of 3, two rows in
@@ -76,8 +80,8 @@ def test_a_lone_vertex_ringed_by_missing_vertices_is_torn_off():
     """A vertex whose every neighbour is missing has no edge to check: it is torn off wherever it
     lies (on the face's own surface too), and its 25 mm of another surface no longer leaks into
     the filling round it. Two such vertices with their edge between them are a piece, checked
-    across the missing vertices round them (:func:`test_a_piece_cut_off_by_missing_vertices_is_checked_across_them`):
-    23 mm off they are torn, on the face they stay; a face of lone vertices keeps its largest
+    across the missing vertices round them (see the test before): 21 mm off they are torn, on
+    the face they stay; a face of lone vertices keeps its largest
     piece (one vertex), and a vertex that no face uses is no lone vertex."""
     neutral, faces, idx = _grid()
     take = neutral + [0.0, 0.0, 2.0]

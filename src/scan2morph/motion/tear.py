@@ -17,11 +17,14 @@ motion without it). Two or more vertices joined by an edge are a piece whose own
 them against each other, and a hole may part a patch of skin from the rest; such a piece is
 checked across the hole instead: each face vertex joined to it through one missing vertex
 makes a chord, whose length changes from the neutral to the take as an edge's would, and a
-piece whose chords' median ratio lies beyond ``max_stretch`` is torn off. In one draw of
+piece whose chords' median ratio lies beyond ``max_stretch`` (or below its inverse) is torn
+off. In one draw of
 synth01 `too`'s clicks, two vertices by the right mouth corner, in a patch the scan left out,
 sampled 27-29 mm deep, and the filling took their motion: the click-noise error bar of that
 seed's four draws was 0.110 of the motion, 0.037 with the chords. A piece beyond a gap of two
-or more missing vertices has no chord, and is kept.
+or more missing vertices has no chord, and is kept. Its known weakness: where the skin itself
+stretches beyond ``max_stretch`` (by an opening mouth's corners), a real piece's chords stretch
+with it and it is torn (and then filled from the face round it).
 """
 
 from __future__ import annotations
