@@ -9,6 +9,7 @@ may use it. Meshes follow the project convention: ``vertices`` (V, 3) float mm, 
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 #: A vertex whose summed (area-weighted) normal is shorter than this fraction of the longest
 #: face normal has no usable direction (isolated, or its faces are degenerate or cancel out).
@@ -193,4 +194,18 @@ def check_vertex_array(
     return arr
 
 
-__all__ = ["check_vertex_array", "face_normals", "unique_edges", "vertex_normals"]
+def edge_adjacency(edges: np.ndarray, n: int) -> sp.csr_array:
+    """Symmetric 0/1 vertex adjacency (n, n) of undirected edges (E, 2) int (each once, as
+    :func:`unique_edges` gives them)."""
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    rows, cols = np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]]
+    return sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+
+
+__all__ = [
+    "check_vertex_array",
+    "edge_adjacency",
+    "face_normals",
+    "unique_edges",
+    "vertex_normals",
+]

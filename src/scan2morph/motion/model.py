@@ -16,7 +16,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import unique_edges
+from scan2morph.geometry import edge_adjacency, unique_edges
 from scan2morph.motion.mask import stencil_mask
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
@@ -53,9 +53,7 @@ def harmonic_fill(values: np.ndarray, faces: np.ndarray, known: np.ndarray) -> n
     (V, d) float64
     """
     n = len(values)
-    e = unique_edges(faces)
-    rows, cols = np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]]
-    adj = sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    adj = edge_adjacency(unique_edges(faces), n)
     lap = sp.csr_array(sp.diags_array(adj.sum(axis=1)) - adj)
     out = np.array(values, dtype=np.float64, copy=True)
     unknown = ~np.asarray(known, dtype=bool)

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import unique_edges
+from scan2morph.geometry import edge_adjacency, unique_edges
 from scan2morph.motion.mask import _check_faces
 
 
@@ -62,10 +62,7 @@ def _confidence(c: np.ndarray | None, n: int, missing: np.ndarray, source: str) 
 
 def _adjacency(faces: np.ndarray, n: int) -> sp.csr_array:
     """Symmetric 0/1 vertex adjacency (V, V) of the mesh's edges."""
-    e = unique_edges(faces)
-    i = np.concatenate([e[:, 0], e[:, 1]])
-    j = np.concatenate([e[:, 1], e[:, 0]])
-    return sp.csr_array((np.ones(len(i)), (i, j)), shape=(n, n))
+    return edge_adjacency(unique_edges(faces), n)
 
 
 def _fill(d: np.ndarray, adj: sp.csr_array, known: np.ndarray) -> np.ndarray:

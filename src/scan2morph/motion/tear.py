@@ -18,10 +18,9 @@ them against each other, and a hole may part a patch of skin from the rest; such
 checked across the hole instead: each face vertex joined to it through one missing vertex
 makes a chord, whose length changes from the neutral to the take as an edge's would, and a
 piece whose chords' median ratio lies beyond ``max_stretch`` (or below its inverse) is torn
-off. In one draw of
-synth01 `too`'s clicks, two vertices by the right mouth corner, in a patch the scan left out,
-sampled 27-29 mm deep, and the filling took their motion: the click-noise error bar of that
-seed's four draws was 0.110 of the motion, 0.037 with the chords. A piece beyond a gap of two
+off. In one draw of synth01 `too`'s clicks, two vertices by the right mouth corner, in a patch
+the scan left out, sampled 27-29 mm deep, and the filling took their motion: the click-noise
+error bar of that seed's four draws was 0.110 of the motion, 0.037 with the chords. A piece beyond a gap of two
 or more missing vertices has no chord, and is kept. Its known weakness: where the skin itself
 stretches beyond ``max_stretch`` (by an opening mouth's corners), a real piece's chords stretch
 with it and it is torn (and then filled from the face round it).
@@ -34,7 +33,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import unique_edges
+from scan2morph.geometry import edge_adjacency, unique_edges
 
 
 def torn_off(
@@ -66,9 +65,10 @@ def torn_off(
         neighbour missing: no edge to check; a vertex no face uses is not one), and pieces of
         two or more vertices cut off only by missing vertices whose chords to the largest piece
         through one missing vertex have a median ratio beyond ``max_stretch`` (or below its
-        inverse); those without such a chord are kept, as are the cut edges within a piece. The largest piece is taken to be the face: a take whose torn-off part is
-        larger than the rest loses the rest instead (the motion stage logs how many vertices
-        each take lost).
+        inverse); those without such a chord are kept, as are the cut edges within a piece.
+        The largest piece is taken to be the face: a take whose torn-off part is larger than
+        the rest loses the rest instead (the motion stage logs how many vertices each take
+        lost).
     """
     take = np.asarray(take, dtype=np.float64)
     neutral = np.asarray(neutral, dtype=np.float64)
@@ -125,13 +125,11 @@ def _stretched_across_gaps(take, neutral, edges, ok, face, piece, label, max_str
     one missing vertex is a chord whose length changes from the neutral to the take as an
     edge's would; a piece whose chords' median ratio lies beyond ``max_stretch`` (or below its
     inverse) sampled another surface. A piece with no such chord is kept."""
-    n = len(ok)
-    ends = (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])
-    adj = sp.coo_matrix((np.ones(2 * len(edges)), ends), shape=(n, n)).tocsr()
-    p, q = (adj @ sp.diags((~ok).astype(np.float64)) @ adj).nonzero()
+    adj = edge_adjacency(edges, len(ok))
+    p, q = (adj @ sp.diags_array((~ok).astype(np.float64)) @ adj).nonzero()
     chord = piece[p] & face[q]
     p, q = p[chord], q[chord]
-    out = np.zeros(n, dtype=bool)
+    out = np.zeros(len(ok), dtype=bool)
     ratio = _stretch(take, neutral, p, q)
     for lab in np.unique(label[p]):
         if not _within(np.median(ratio[label[p] == lab]), max_stretch):
