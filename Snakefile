@@ -49,3 +49,11 @@ rule all:
     default_target: True
     input:
         get_final_outputs(),
+
+
+onsuccess:
+    report_left_out()
+
+
+onerror:
+    report_left_out()

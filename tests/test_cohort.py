@@ -125,6 +125,7 @@ def test_subject_summary_matches_analytic_values(stores):
         "n_takes": 5,
         "n_visemes": 3,
         "n_expressions": 1,
+        "left_out": pytest.approx(float("nan"), nan_ok=True),
         "material_relative_error_viseme_car": 0.4,
         "material_relative_error_viseme_too": pytest.approx(0.8),
         "material_rms_error_mm_viseme_car": 4.0,
@@ -167,6 +168,7 @@ def test_cohort_table_fills_missing_columns_with_nan(stores):
         "n_takes",
         "n_visemes",
         "n_expressions",
+        "left_out",
         "motion_rms_all_mm_car",
         "motion_rms_all_mm_too",  # paper order of the visemes
         "noise_relative_unmasked_car",
@@ -203,6 +205,7 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
         "n_takes",
         "n_visemes",
         "n_expressions",
+        "left_out",
         "motion_rms_all_mm_{label}",
         "noise_relative_unmasked_{label}",
         "ccr_{k}",

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import yaml
 
-from scan2morph.io import read_glb_targets, write_color
+from scan2morph.io import read_glb_targets, read_range, write_abs, write_color
 from scan2morph.stages.quality import read_warnings, skipped_stages
 from scan2morph.store import load_layout, open_store, paths, validate_store
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
@@ -77,6 +77,77 @@ def _write_user_takes(root, subject, takes):
     return rows
 
 
+def _break_pts(path):
+    """A landmark file of 67 points."""
+    pts = path.read_text().splitlines()
+    path.write_text(
+        "\n".join(pts[:2]).replace("68", "67") + "\n{\n" + "\n".join(pts[3:-2]) + "\n}\n"
+    )
+
+
+#: The viseme takes of subject ``broken``, each alice's car broken one way, and the message each
+#: is left out with (all of them found by one check job, in one run).
+BROKEN = {
+    "trunc": r"trunc.abs.gz: .*truncated",
+    "pts67": re.escape("pts67.pts: n_points: expected 68 (iBUG-68), got 67"),
+    "colorsize": re.escape(
+        "colorsize.png: color: image is 160x110 (WxH) but the range image colorsize.abs.gz is 160x120"
+    ),
+    "missing": "column 'color': file not found",
+    "lidar": "modality 'lidar' unknown",
+    "metres": "metres.abs.gz: face size: .*the coordinates look like metres, not mm",
+    "mirrored": r"mirrored.abs.gz: xyz: a mirrored \(left-handed\) frame",
+    "stereosize": re.escape(
+        "stereosize_right.png: right: image is 160x110 (WxH) but the left image stereosize_left.png "
+        "is 160x120"
+    ),
+}
+
+
+def _broken_takes(scans, rows):
+    """Subject ``broken``: alice's neutral, a grey-scale copy of her car (kept, with a warning)
+    and one copy of the car per kind of bad take file (:data:`BROKEN`), each left out."""
+    import cv2
+
+    d = scans / "broken"
+    d.mkdir()
+    shutil.copy(scans / "alice" / "neutral.abs.gz", d)
+    shutil.copy(scans / "alice" / "neutral.png", d)
+    shutil.copy(scans / "alice" / "neutral.pts", d)
+    out = [[c.replace("alice", "broken") for c in rows[0]]]
+    car = scans / "alice" / "car"
+    xyz_text = gzip.open(car.with_suffix(".abs.gz"), "rt").read()
+    for take in ("grey", *BROKEN):
+        for suffix in (".abs.gz", ".png", ".pts"):
+            shutil.copy(car.with_name("car" + suffix), d / f"{take}{suffix}")
+        out.append(
+            ["broken", take, "viseme", "car", "range"]
+            + [f"broken/{take}.abs.gz", f"broken/{take}.png", "", "", "", f"broken/{take}.pts"]
+        )
+    grey = cv2.cvtColor(cv2.imread(str(d / "grey.png")), cv2.COLOR_BGR2GRAY)
+    cv2.imwrite(str(d / "grey.png"), cv2.merge([grey, grey, grey]))
+    with gzip.open(d / "trunc.abs.gz", "wt") as fh:
+        fh.write(xyz_text[: len(xyz_text) * 2 // 3])
+    _break_pts(d / "pts67.pts")
+    img = cv2.imread(str(d / "colorsize.png"))
+    cv2.imwrite(str(d / "colorsize.png"), img[:-10])
+    out[1 + 1 + list(BROKEN).index("missing")][6] = "broken/nothere.png"
+    out[1 + 1 + list(BROKEN).index("lidar")][4] = "lidar"
+    xyz = read_range(d / "metres.abs.gz")
+    write_abs(d / "metres.abs.gz", xyz / 1000.0)
+    write_abs(d / "mirrored.abs.gz", xyz[..., [1, 0, 2]])  # X and Y swapped: left-handed
+    # a stereo take whose right image is smaller than the left one
+    stereo = make_stereo_take("broken", "car", "viseme", "car", seed=7, params=TINY_RIG)
+    stems = {r: d / f"stereosize{s}" for r, s in STEREO_FILES.items()}
+    write_stereo_take(stereo, *stems.values(), d / "stereosize.truth.npz")
+    write_color(stems["right"], stereo["right"][:110])
+    stereo_row = ["broken", "stereosize", "viseme", "car", "stereo", "", ""]
+    out[1 + 1 + list(BROKEN).index("stereosize")] = stereo_row + [
+        f"broken/{p.name}" for p in stems.values()
+    ]
+    return out
+
+
 @pytest.fixture(scope="module")
 def cohort(tmp_path_factory):
     work = tmp_path_factory.mktemp("wf")
@@ -86,51 +157,15 @@ def cohort(tmp_path_factory):
     partial = {
         subject: _write_user_takes(scans, subject, shape) for subject, shape in PARTIAL.items()
     }
-    bad = {}
-    # one broken subject per kind of bad input; each copies alice's files and breaks one
-    for name in ("truncabs", "pts67", "colorsize", "missing", "modality", "duplicate"):
+    bad, broken = {}, _broken_takes(scans, rows)
+    # a broken sheet or neutral stops only its own subject
+    for name in ("duplicate", "badneutral"):
         shutil.copytree(scans / "alice", scans / name)
-        bad[name] = [
-            [
-                name,
-                *r[1:5],
-                r[5].replace("alice", name),
-                r[6].replace("alice", name),
-                "",
-                "",
-                "",
-                r[10].replace("alice", name),
-            ]
-            for r in rows
-        ]
-    data = gzip.open(scans / "truncabs" / "car.abs.gz", "rt").read()
-    with gzip.open(scans / "truncabs" / "car.abs.gz", "wt") as fh:
-        fh.write(data[: len(data) * 2 // 3])
-    pts = (scans / "pts67" / "car.pts").read_text().splitlines()
-    (scans / "pts67" / "car.pts").write_text(
-        "\n".join(pts[:2]).replace("68", "67") + "\n{\n" + "\n".join(pts[3:-2]) + "\n}\n"
-    )
-    import cv2
-
-    img = cv2.imread(str(scans / "colorsize" / "car.png"))
-    cv2.imwrite(str(scans / "colorsize" / "car.png"), img[:-10])
-    bad["missing"][1][6] = "missing/nothere.png"
-    bad["modality"][1][4] = "lidar"
+        bad[name] = [[c.replace("alice", name) for c in r] for r in rows]
     bad["duplicate"].append(list(bad["duplicate"][1]))
-    # a stereo take whose right image is smaller than the left one
-    stereo = make_stereo_take("stereosize", "car", "viseme", "car", seed=7, params=TINY_RIG)
-    d = scans / "stereosize"
-    shutil.copytree(scans / "alice", d)
-    stems = {r: d / f"car{s}" for r, s in STEREO_FILES.items()}
-    write_stereo_take(stereo, *stems.values(), d / "car.truth.npz")
-    write_color(stems["right"], stereo["right"][:110])
-    rel = {r: f"stereosize/{p.name}" for r, p in stems.items()}
-    bad["stereosize"] = [
-        [c.replace("alice", "stereosize") for c in rows[0]],
-        ["stereosize", "car", "viseme", "car", "stereo", "", "", *rel.values()],
-    ]
+    _break_pts(scans / "badneutral" / "neutral.pts")
     sheet = scans / "subjects.tsv"
-    every = rows + sum(partial.values(), []) + sum(bad.values(), [])
+    every = rows + sum(partial.values(), []) + sum(bad.values(), []) + broken
     sheet.write_text(HEADER + "".join("\t".join(r) + "\n" for r in every))
     synth_takes = [dict(take=t, kind=k, label=lab) for t, k, lab in takes]
     # synth01's car is a stereo pair: ingest reconstructs it, repair and store treat it as a scan
@@ -194,27 +229,51 @@ def test_stereo_take_is_stored_like_a_range_take(cohort):
 @pytest.mark.parametrize(
     "subject, message",
     [
-        ("truncabs", r"car.abs.gz: .*truncated"),
-        ("pts67", "car.pts: n_points: expected 68 (iBUG-68), got 67"),
-        (
-            "colorsize",
-            "car.png: color: image is 160x110 (WxH) but the range image car.abs.gz is 160x120",
-        ),
-        ("missing", "column 'color': file not found"),
-        ("modality", "modality 'lidar' unknown"),
         ("duplicate", "take 'car' appears more than once for subject 'duplicate'"),
         (
-            "stereosize",
-            "car_right.png: right: image is 160x110 (WxH) but the left image car_left.png is 160x120",
+            "badneutral",
+            "neutral.pts: n_points: expected 68 .*its neutral take neutral cannot be read, so the "
+            "subject is not built",
         ),
     ],
 )
-def test_bad_subjects_fail_with_a_clear_message(cohort, subject, message):
+def test_a_broken_sheet_or_neutral_stops_only_its_subject(cohort, subject, message):
     work, _, bad = cohort
     assert subject in bad
     assert not (work / "results" / subject / f"{subject}.h5").exists()
-    logs = "".join(p.read_text() for p in (work / "logs").rglob("*.log") if f"/{subject}" in str(p))
-    assert re.search(message, logs) or message in logs
+    log = (work / "logs" / "check_subject" / f"{subject}.log").read_text()
+    assert re.search(message, log.replace("\n", " ")), log
+    assert "Traceback" not in log
+
+
+def test_broken_takes_are_left_out_and_the_subject_built_from_the_rest(cohort):
+    """Every bad take file of a subject is found by one check job (one run, one line each); each
+    broken take is left out with its reason in the store and at the top of the report; the
+    subject is built from the rest, and a grey-scale take is kept with a warning."""
+    work, _, _ = cohort
+    check = (work / "logs" / "check_subject" / "broken.log").read_text()
+    for take, message in BROKEN.items():
+        assert re.search(f"broken/{take} is left out: .*{message}", check), (take, check)
+    store = work / "results" / "broken" / "broken.h5"
+    assert validate_store(store, load_layout(REPO / "schemas" / "store.layout.yaml")) == []
+    with h5py.File(store) as h5:
+        assert set(h5[paths.TAKES]) == {"neutral", "grey"}
+        assert set(h5[paths.FAILED]) == set(BROKEN)
+        for take, message in BROKEN.items():
+            assert re.search(message, h5[paths.failed(take, "reason")].asstr()[()]), take
+        assert list(h5[paths.pca("takes")].asstr()[()]) == ["neutral", "grey"]
+        warnings = read_warnings(h5)
+    left = [w for w in warnings if w.message.startswith("left out of the subject")]
+    assert sorted(w.take for w in left) == sorted(BROKEN)
+    assert warnings[: len(left)] == left  # first
+    assert any(w.take == "grey" and "grey-scale" in w.message for w in warnings)
+    html = (work / "results" / "broken" / "report.html").read_text()
+    status, after = html.index('id="status"'), html.index('id="accuracy"')
+    assert status < html.index("left out of the subject") < after  # the report's first section
+    # the fit's mesh files of a take left out say why
+    obj = (work / "results" / "broken" / "meshes" / "pts67.obj").read_text()
+    assert obj.startswith("# scan2morph: no mesh, pts67 left out at ingest")
+    logs = "".join(p.read_text() for p in (work / "logs").rglob("*.log") if "/broken" in str(p))
     assert "Traceback" not in logs
 
 

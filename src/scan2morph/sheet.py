@@ -231,17 +231,24 @@ def synthetic_rows(
     return pd.DataFrame(rows, columns=[*COLUMNS, "sheet_row", "sheet", "synthetic"])
 
 
-def subject_problems(
+def sheet_problems(
     table: pd.DataFrame,
     check_files: bool = True,
     schema: str | PathLike[str] | None = None,
-) -> dict[str, list[str]]:
-    """Problems per subject that make that subject's run fail (and only that subject's).
+) -> dict[str, list[tuple[str, str]]]:
+    """The sheet's problems per subject, each with the take it belongs to.
 
     Checks: kind and modality known, the modality's files named (and present when
     ``check_files``, for user rows), take ids unique per subject, exactly one neutral take, and,
     with ``schema`` (``schemas/sheet.schema.yaml``), every user row against it (e.g. an empty
     ``label``). Each problem is one line naming the sheet row and the column.
+
+    Returns
+    -------
+    dict subject -> list of (take, problem)
+        ``take`` is empty for a problem of the whole subject (a repeated take id, no or two
+        neutral takes): that stops the subject. A take's own problem leaves only that take out
+        (unless it is the neutral's).
     """
     problems: dict[str, list[str]] = {}
     table = table.reset_index(drop=True)
@@ -255,12 +262,21 @@ def subject_problems(
                 for key, problem in schema_errors(record, row_schema):
                     empty = problem == "empty"
                     if not (empty and key in FILES.get(rec.modality, ())):  # reported below
-                        out.append(f"{where}: column '{key}': {problem}")
+                        out.append((rec.take, f"{where}: column '{key}': {problem}"))
             if rec.kind not in KINDS:
-                out.append(f"{where}: kind {rec.kind!r} unknown (expected one of {list(KINDS)})")
+                out.append(
+                    (
+                        rec.take,
+                        f"{where}: kind {rec.kind!r} unknown (expected one of {list(KINDS)})",
+                    )
+                )
             if rec.modality not in MODALITIES:
                 out.append(
-                    f"{where}: modality {rec.modality!r} unknown (expected one of {list(MODALITIES)})"
+                    (
+                        rec.take,
+                        f"{where}: modality {rec.modality!r} unknown "
+                        f"(expected one of {list(MODALITIES)})",
+                    )
                 )
                 continue
             for col in FILES[rec.modality] + OPTIONAL_FILES.get(rec.modality, ()):
@@ -268,22 +284,45 @@ def subject_problems(
                 if not value:
                     if col in FILES[rec.modality]:
                         out.append(
-                            f"{where}: column '{col}' is empty (a {rec.modality} take needs it)"
+                            (
+                                rec.take,
+                                f"{where}: column '{col}' is empty (a {rec.modality} take needs it)",
+                            )
                         )
                 elif check_files and not rec.synthetic and not Path(value).is_file():
-                    out.append(f"{where}: column '{col}': file not found: {value}")
+                    out.append((rec.take, f"{where}: column '{col}': file not found: {value}"))
         dup = rows["take"][rows["take"].duplicated()].unique()
         for take in dup:
             out.append(
-                f"{rows['sheet'].iloc[0]}: take {take!r} appears more than once for subject {subject!r}"
+                (
+                    "",
+                    f"{rows['sheet'].iloc[0]}: take {take!r} appears more than once for subject "
+                    f"{subject!r}",
+                )
             )
         n_neutral = int((rows["kind"] == "neutral").sum())
         if n_neutral != 1:
             out.append(
-                f"subject {subject!r}: expected exactly one take of kind 'neutral', found {n_neutral}"
+                (
+                    "",
+                    f"subject {subject!r}: expected exactly one take of kind 'neutral', "
+                    f"found {n_neutral}",
+                )
             )
         problems[subject] = out
     return problems
+
+
+def subject_problems(
+    table: pd.DataFrame,
+    check_files: bool = True,
+    schema: str | PathLike[str] | None = None,
+) -> dict[str, list[str]]:
+    """:func:`sheet_problems` without the takes: every problem of each subject, one line each."""
+    return {
+        subject: [problem for _, problem in problems]
+        for subject, problems in sheet_problems(table, check_files, schema).items()
+    }
 
 
 def load_schema(path: str | PathLike[str]) -> dict:

@@ -307,6 +307,13 @@ COHORT = (
     Column("n_visemes", "count", "viseme takes"),
     Column("n_expressions", "count", "expression takes"),
     Column(
+        "left_out",
+        NO_UNIT,
+        "takes left out of the subject, each as take (stage that refused it), '; '-separated, "
+        "empty when none; the reasons are in the subject's store (/failed) and at the top of "
+        "its report",
+    ),
+    Column(
         "material_relative_error_viseme_{label}",
         "fraction",
         "error of a viseme's final motion against the material motion of the skin (where each "

@@ -1,6 +1,5 @@
 # Shared tables: config validation, the subject sheet, the synthetic cohort and the take table,
 # and lookups over them by subject. Included first; the other helper files and the rules use these.
-import logging
 from pathlib import Path
 
 import sys
@@ -11,7 +10,7 @@ from scan2morph.errors import InputError
 from scan2morph.jobs import config_sha256
 from scan2morph.sheet import (
     read_sheet,
-    subject_problems,
+    sheet_problems,
     synthetic_rows,
     take_table,
     validate_config,
@@ -50,15 +49,11 @@ try:
 except InputError as _exc:
     stop_run(_exc)
 SUBJECTS = list(dict.fromkeys(TAKES["subject"]))
-# a row that breaks the sheet's schema (e.g. an empty label) fails only its subject
-PROBLEMS = subject_problems(
+# a row that breaks the sheet's schema (e.g. an empty label): its take is left out (its subject
+# stops when it is the neutral's); reported with the files' problems by the subject's check job
+PROBLEMS = sheet_problems(
     pd.concat([SHEET, SYNTH]), schema=SCHEMAS / "sheet.schema.yaml"
 )
-for _subject, _problems in PROBLEMS.items():
-    for _problem in _problems:
-        logging.getLogger("snakemake").warning(
-            f"subject {_subject} will fail: {_problem}"
-        )
 CONFIG_SHA256 = config_sha256(config)
 
 
@@ -119,3 +114,17 @@ def synth_files(pattern, takes, modality=None):
         for t in takes
         if modality in (None, t["modality"])
     ]
+
+
+def report_left_out():
+    """The run's last console lines: every take left out of its subject (from the stores made)."""
+    import h5py
+
+    from scan2morph.store.warnings import read_failures
+
+    for subject in SUBJECTS:
+        store = Path(f"results/{subject}/{subject}.h5")
+        if store.is_file():
+            with h5py.File(store, "r") as h5:
+                for failure in read_failures(h5).values():
+                    sys.stderr.write(f"left out: {subject}/{failure}\n")

@@ -4,7 +4,9 @@
 
 
 rule check_subject:
-    """Fail a subject whose sheet rows are broken, e.g. a missing or bad input file, naming file and row."""
+    """Check every sheet row and input file of a subject at once (cheap reads): stop the subject on its own or its neutral's problems, name the takes to leave out."""
+    input:
+        get_subject_files_flat,
     output:
         "results/{subject}/check.json",
     log:
@@ -16,6 +18,8 @@ rule check_subject:
         runtime=1,
     params:
         problems=get_subject_problems,
+        rows=get_subject_rows,
+        files=get_subject_files,
     script:
         "../scripts/check_subject.py"
 
@@ -24,7 +28,8 @@ rule ingest:
     """Read one take's scan files onto the pixel grid with checksums: a stereo pair reconstructed, RGB-D depth resampled onto the colour image, a mesh rendered."""
     input:
         unpack(get_take_inputs),
-        check="results/{subject}/check.json",
+        # ancient: a rewritten check.json (another take's file changed) re-ingests no take
+        check=ancient("results/{subject}/check.json"),
     output:
         part="results/{subject}/takes/{take}/ingest.h5",
     log:

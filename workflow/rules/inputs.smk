@@ -15,7 +15,11 @@ def take_row(wildcards):
 def get_take_inputs(wildcards):
     """The input files of a take that exist or will be generated (a missing one is reported
     by the subject's check job, so that the DAG still builds and other subjects run)."""
-    row = TAKES.loc[(wildcards.subject, wildcards.take)]
+    return take_inputs(wildcards.subject, wildcards.take)
+
+
+def take_inputs(subject, take):
+    row = TAKES.loc[(subject, take)]
     files = {}
     for role in input_roles(row):
         path = row[role]
@@ -62,7 +66,28 @@ def get_take_kind(wildcards):
 
 # --- the takes of a subject ---
 def get_subject_problems(wildcards):
+    """The sheet's problems of the subject, as (take, problem); take empty for the subject's own."""
     return PROBLEMS.get(wildcards.subject, [])
+
+
+def get_subject_rows(wildcards):
+    """take, kind and modality of each of the subject's rows (its check job's params)."""
+    rows = TAKES.loc[wildcards.subject]
+    return rows[["take", "kind", "modality"]].to_dict("records")
+
+
+def get_subject_files(wildcards):
+    """take -> {sheet column: path} of the subject's input files that exist or will be generated."""
+    return {
+        take: take_inputs(wildcards.subject, take)
+        for take in takes_of(wildcards.subject)
+    }
+
+
+def get_subject_files_flat(wildcards):
+    return sorted(
+        {f for files in get_subject_files(wildcards).values() for f in files.values()}
+    )
 
 
 def get_takes(wildcards):

@@ -1,15 +1,15 @@
-"""Fail a subject whose sheet rows are broken (and only that subject), naming file and row."""
+"""Every problem of a subject's sheet rows and files at once: stop the subject (its own or its
+neutral's problem) or name the takes to leave out."""
 
-from scan2morph.errors import InputError
 from scan2morph.jobs import run_job, write_json
+from scan2morph.stages import check
 
 
 def main(snakemake):
     def job():
-        problems = list(snakemake.params.problems)
-        if problems:
-            raise InputError(f"subject {snakemake.wildcards.subject}", "; ".join(problems))
-        write_json(snakemake.output[0], {"subject": snakemake.wildcards.subject, "problems": []})
+        p = snakemake.params
+        report = check.run(snakemake.wildcards.subject, p.rows, p.files, p.problems)
+        write_json(snakemake.output[0], report)
 
     run_job(snakemake.log[0], job)
 

@@ -1,8 +1,9 @@
 """Fit the template to one take: mesh vertices, texture coordinates, validity; OBJ export."""
 
 from scan2morph.io import write_obj
-from scan2morph.jobs import run_job
+from scan2morph.io.obj import write_failed_obj
 from scan2morph.stages import fit
+from scan2morph.stages.failure import run_take_job
 from scan2morph.store import paths, read_attrs, read_part, write_part
 from scan2morph.template import load_template
 
@@ -18,7 +19,16 @@ def main(snakemake):
         mesh = {k: part.datasets[paths.mesh(w.take, k)] for k in ("vertices", "uv", "valid")}
         write_obj(out.obj, faces=part.files["faces"], texture=part.files["texture"], **mesh)
 
-    run_job(snakemake.log[0], job)
+    w, inp, out = snakemake.wildcards, snakemake.input, snakemake.output
+    run_take_job(
+        snakemake.log[0],
+        job,
+        take=w.take,
+        stage="fit",
+        inputs=[inp.part],
+        part=out.part,
+        on_failure=lambda record: write_failed_obj(out.obj, str(record)),
+    )
 
 
 if __name__ == "__main__":

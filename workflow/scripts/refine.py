@@ -1,7 +1,7 @@
 """Refine one take's correspondence to the neutral (the neutral's is its aligned fit)."""
 
-from scan2morph.jobs import run_job
 from scan2morph.stages import refine
+from scan2morph.stages.failure import run_take_job
 from scan2morph.store import read_parts, write_part
 from scan2morph.template import load_template
 
@@ -15,7 +15,9 @@ def main(snakemake):
         part = refine.run(template, w.take, p.kind, p.neutral, data, params, source)
         write_part(snakemake.output.part, part.datasets, attrs=part.attrs or None)
 
-    run_job(snakemake.log[0], job)
+    w, inp = snakemake.wildcards, snakemake.input
+    parts, out = [*inp.take, *inp.neutral], snakemake.output.part
+    run_take_job(snakemake.log[0], job, take=w.take, stage="refine", inputs=parts, part=out)
 
 
 if __name__ == "__main__":

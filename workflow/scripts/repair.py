@@ -1,7 +1,8 @@
 """Repair one take's range image: spikes out, small holes filled."""
 
-from scan2morph.jobs import run_job, write_json
+from scan2morph.jobs import write_json
 from scan2morph.stages import repair
+from scan2morph.stages.failure import run_take_job
 from scan2morph.store import paths, read_attrs, read_part, write_part
 
 
@@ -14,7 +15,16 @@ def main(snakemake):
         write_part(out.part, part.datasets, attrs=part.attrs)
         write_json(out.report, part.files["report"])
 
-    run_job(snakemake.log[0], job)
+    w, inp, out = snakemake.wildcards, snakemake.input, snakemake.output
+    run_take_job(
+        snakemake.log[0],
+        job,
+        take=w.take,
+        stage="repair",
+        inputs=[inp.part],
+        part=out.part,
+        on_failure=lambda record: write_json(out.report, {"failed": str(record)}),
+    )
 
 
 if __name__ == "__main__":

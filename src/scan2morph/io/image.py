@@ -7,7 +7,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from scan2morph.errors import InputError, OutputError, no_space_left, writing
+from scan2morph.errors import InputError, writing
+from scan2morph.jobs import atomic_output
 
 COLOR_SUFFIXES = (".png", ".ppm", ".pnm", ".jpg", ".jpeg")
 
@@ -47,9 +48,15 @@ def write_color(path: str | Path, color: np.ndarray) -> None:
     color = np.asarray(color)
     if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
         raise InputError(path, f"color: expected (H, W, 3) uint8, got {color.shape} {color.dtype}")
-    with writing(path):
-        ok = cv2.imwrite(str(path), np.ascontiguousarray(color[:, :, ::-1]))
+    try:
+        ok, data = cv2.imencode(Path(path).suffix, np.ascontiguousarray(color[:, :, ::-1]))
+    except cv2.error:
+        ok = False
     if not ok:
-        if no_space_left(path, color.nbytes // 8 + 1):
-            raise OutputError(path)
-        raise InputError(path, "color: could not write the image (unknown suffix or bad path)")
+        raise InputError(
+            path,
+            f"color: cannot encode an image as {Path(path).suffix!r} (expected .png, .jpg, ...)",
+        )
+    # OpenCV's own writer cannot tell a full disk from a bad path
+    with atomic_output(path) as tmp, writing(path):
+        tmp.write_bytes(data.tobytes())

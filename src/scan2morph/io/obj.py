@@ -93,6 +93,24 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def write_failed_obj(path, reason: str) -> None:
+    """Write the OBJ, MTL and PNG of a take left out of its subject: no vertices, only why.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.obj`` file; ``.mtl`` and ``.png`` (a blank 1 x 1 texture) take the same stem, so that
+        the files a take's mesh is expected in exist and say, when opened, that it has none.
+    reason : str
+        One line: which stage refused the take and why.
+    """
+    path = Path(path)
+    note = "# scan2morph: no mesh, " + " ".join(str(reason).split())
+    write_color(path.with_suffix(".png"), np.full((1, 1, 3), 128, dtype=np.uint8))
+    path.with_suffix(".mtl").write_text(note + "\n")
+    path.write_text(note + "\n")
+
+
 def read_obj(path) -> dict[str, np.ndarray]:
     """Read an OBJ written by :func:`write_obj` (a minimal reader: ``v``, ``vt``, triangles).
 

@@ -22,6 +22,9 @@ EYE_SPAN_MM = (70.0, 130.0)
 MIN_EYE_SPAN_RATIO = 0.3
 #: Window (radius, px, and share of the image width) searched for range data at a landmark.
 _LIFT_RADIUS = (2, 0.03)
+#: A nose tip this far (mm) behind the plane of the outer eye corners and the mouth, seen from the
+#: scanner, is a mirrored frame; nearer the plane the test does not decide.
+MIRROR_MARGIN_MM = 5.0
 #: Units a face-size error may come from: (name, factor to mm).
 _UNITS = (("metres", 1000.0), ("cm", 10.0), ("inches", 25.4), ("0.1 mm", 0.1), ("µm", 1e-3))
 
@@ -302,3 +305,47 @@ def check_face(
             f"expected {lo:g}-{hi:g} mm ({likely}){unit_hint}",
         )
     return span
+
+
+def check_handedness(xyz: np.ndarray, landmarks: np.ndarray, source: str | Path) -> float:
+    """Refuse a take whose XYZ is in a mirrored (left-handed) frame.
+
+    The pixel grid (x right, y down) and the direction the scanner looks along form a
+    right-handed frame with any right-handed scanner frame. So in the plane of the outer eye
+    corners and the mouth (iBUG 37, 46 and the mean of 49 and 55), oriented by the image's
+    winding of those points, the nose tip (iBUG 31) lies on the scanner's side. In a mirrored
+    frame (two axes swapped, or one negated, as a wrong export gives) it lies behind the face.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+    landmarks : (68, 2) float, 0-based pixel coordinates on the same grid
+    source : str or path-like
+        Named in the error (the take's XYZ file).
+
+    Returns
+    -------
+    float
+        The nose tip's signed distance from that plane, mm (negative: towards the scanner);
+        NaN when a point has no data (the test is skipped).
+
+    Raises
+    ------
+    InputError
+        The nose tip lies more than :data:`MIRROR_MARGIN_MM` behind the plane.
+    """
+    eye_r, eye_l, mouth_r, mouth_l, nose = lift_landmarks(xyz, landmarks, (37, 46, 49, 55, 31))
+    mouth = (mouth_r + mouth_l) / 2
+    normal = np.cross(eye_l - eye_r, mouth - eye_r)
+    length = float(np.linalg.norm(normal))
+    if not length > 0:  # no data at a point (NaN), or the points in a line
+        return float("nan")
+    depth = float(np.dot(nose - eye_r, normal) / length)
+    if np.isfinite(depth) and depth > MIRROR_MARGIN_MM:
+        raise InputError(
+            source,
+            f"xyz: a mirrored (left-handed) frame: the nose tip (iBUG 31) lies {depth:.1f} mm "
+            "behind the plane of the eye corners and the mouth as the scanner sees them; expected "
+            "a right-handed frame (were two axes swapped or one negated on export?)",
+        )
+    return depth

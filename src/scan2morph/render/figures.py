@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.render import fit_figures, modal_figures, morph_figures, motion_figures
 from scan2morph.render.names import FIGURE_NAMES, figure_names
 from scan2morph.render.source import StoreMapping
@@ -89,6 +89,7 @@ def write_stage_figures(
     with StoreMapping(store_path) as store:
         for stem, func in zip(figure_names(stage), STAGE_FIGURES[stage].values(), strict=True):
             path = out_dir / f"{stem}.png"
-            func(store).savefig(path, dpi=DPI, facecolor="white")
+            with writing(path):
+                func(store).savefig(path, dpi=DPI, facecolor="white")
             written.append(path)
     return written

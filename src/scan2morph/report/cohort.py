@@ -14,6 +14,7 @@ against ground truth where there is one. The table's column dictionary is
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,8 +26,11 @@ from matplotlib.ticker import MaxNLocator
 
 from scan2morph.errors import InputError
 from scan2morph.store import open_store, paths
+from scan2morph.store.warnings import read_failures as left_out
 from scan2morph.tables import COHORT, accuracy_column, write_table
 from scan2morph.tol import VISEMES
+
+log = logging.getLogger("scan2morph")
 
 #: Number of leading CCR values in the table.
 N_CCR = 3
@@ -95,7 +99,8 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
     Returns
     -------
     SubjectSummary
-        ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``, the per-label
+        ``row``: ``subject``, ``n_takes``, ``n_visemes``, ``n_expressions``, ``left_out`` (the
+        takes left out of the subject, with the stage that refused each; NaN when none), the per-label
         accuracy columns of :data:`MATERIAL_FAMILIES` (:func:`material_columns`),
         ``motion_rms_all_mm_{label}`` per viseme label (RMS over all vertices),
         ``noise_relative_unmasked_{label}`` (the click-noise error bar, over the vertices outside
@@ -120,6 +125,8 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
             "n_takes": len(kinds),
             "n_visemes": sum(k == "viseme" for k in kinds.values()),
             "n_expressions": sum(k == "expression" for k in kinds.values()),
+            "left_out": "; ".join(f"{t} ({f.stage})" for t, f in left_out(h5).items())
+            or float("nan"),
         }
         by_label: dict[str, list[float]] = {}
         for take in h5[paths.VISEMES] if paths.VISEMES in h5 else []:
@@ -208,7 +215,7 @@ def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     for prefix in (*MATERIAL_PREFIXES, MOTION_PREFIX, NOISE_PREFIX):
         group = [c for c in columns if c.startswith(prefix) and _family(c) == prefix]
         motion += sorted(group, key=lambda c: _label_order(c.removeprefix(prefix)))
-    head = ["subject", "n_takes", "n_visemes", "n_expressions"]
+    head = ["subject", "n_takes", "n_visemes", "n_expressions", "left_out"]
     fixed = [f"ccr_{i + 1}" for i in range(N_CCR)] + ["modal_f1_hz"]
     rest = [c for c in columns if c not in head + motion + fixed]
     return pd.DataFrame([s.row for s in summaries], columns=head + motion + fixed + rest)
@@ -381,6 +388,10 @@ def write_cohort_summary(
     if not stores:
         raise InputError("cohort", "no subjects to summarise")
     summaries = {s: subject_summary(p, accuracies.get(s)) for s, p in stores.items()}
+    for subject, path in stores.items():
+        with open_store(path) as h5:
+            for failure in left_out(h5).values():
+                log.warning("%s/%s", subject, failure)
     table = cohort_table(list(summaries.values()))
     dictionary = [*COHORT, *(accuracy_column(c) for c in accuracy_columns(table))]
     write_table(table_path, table, dictionary)

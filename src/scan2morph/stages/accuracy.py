@@ -8,6 +8,7 @@ import numpy as np
 
 from scan2morph.evaluate.subject import subject_accuracy
 from scan2morph.evaluate.truth import Truth
+from scan2morph.stages.failure import failures, usable
 from scan2morph.stages.fit import fiducial_set
 from scan2morph.stages.part import Subject
 from scan2morph.stages.quality import modelled, read_warnings
@@ -41,9 +42,14 @@ def run(
     -------
     dict
         :func:`scan2morph.evaluate.subject.subject_accuracy`'s report, with the store's
-        ``warnings`` (one line each; a take left out of the models has no motion entry).
+        ``warnings`` (one line each; a take left out of the models has no motion entry) and
+        ``failed_takes`` (take -> ``stage`` and ``reason``: the takes left out of the subject,
+        :mod:`scan2morph.stages.failure`, measured nowhere else).
     """
     section = config["template"]
+    left_out = failures(store)
+    subject = usable(subject, store)
+    truths = {t: truth for t, truth in truths.items() if t in subject.kinds}
     report = subject_accuracy(
         store,
         truths,
@@ -56,4 +62,7 @@ def run(
         max_slope_deg=section["max_slope_deg"],
         expressions=kept.expressions,
     )
-    return report | {"warnings": [str(w) for w in read_warnings(store)]}
+    return report | {
+        "warnings": [str(w) for w in read_warnings(store)],
+        "failed_takes": {t: {"stage": f.stage, "reason": f.reason} for t, f in left_out.items()},
+    }

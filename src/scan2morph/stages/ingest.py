@@ -15,7 +15,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.io import StereoCalibration, check_face, read_range_take, read_stereo_take
+from scan2morph.io import (
+    StereoCalibration,
+    check_face,
+    check_handedness,
+    read_range_take,
+    read_stereo_take,
+)
 from scan2morph.io.mesh_scan import read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
@@ -59,7 +65,13 @@ def run(
     -------
     Part
         ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8, ``landmarks`` (68, 2) px and
-        ``camera/*`` of the take; the take group's attributes hold the row and input checksums.
+        ``camera/*`` of the take; the take group's attributes hold the row, input checksums,
+        ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`) and ``grey_color``.
+
+    Raises
+    ------
+    InputError
+        From the readers; a mirrored (left-handed) frame.
     """
     take, modality = row["take"], row["modality"]
     attrs = {k: row[k] for k in ("kind", "label", "modality")}
@@ -113,6 +125,9 @@ def run(
         attrs["stereo"] = report
     else:
         raise InputError(f"{row['subject']}/{take}", f"modality {modality!r} not supported")
+    first = FILES[modality][0]
+    attrs["nose_depth_mm"] = check_handedness(xyz, landmarks, files.get(first, first))
+    attrs["grey_color"] = bool(_grey(color))
     attrs |= {f"input_sha256_{r}": sha256_file(files[r]) for r in FILES[modality] if r in files}
     provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | camera
     return Part(
@@ -124,6 +139,11 @@ def run(
         },
         attrs={paths.take(take): attrs},
     )
+
+
+def _grey(color: np.ndarray) -> bool:
+    """True for a grey-scale image stored as RGB (every pixel's channels equal)."""
+    return bool((color[..., 0] == color[..., 1]).all() and (color[..., 1] == color[..., 2]).all())
 
 
 def _dataset(value):

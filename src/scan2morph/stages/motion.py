@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
+from scan2morph.stages.failure import usable
 from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import aligned_takes
 from scan2morph.stages.refine import enabled as refine_enabled
@@ -126,10 +127,17 @@ def run(
     Part
         ``/mask/*``, ``/neutral/*``, ``/visemes/{take}/motion_raw|motion|model`` and
         ``/expressions/{take}/displacement`` (mm) of every take whose alignment passed its gate
-        (``/takes/{take}/align/ok``; all with ``include_failed``). The later stages model the
-        takes this stage kept.
+        (``/takes/{take}/align/ok``; all with ``include_failed``) and was not left out of the
+        subject (:mod:`scan2morph.stages.failure`). The later stages model the takes this stage
+        kept.
+
+    Raises
+    ------
+    InputError
+        The neutral was left out (:func:`scan2morph.stages.failure.usable`): no subject.
     """
     fine = subdivide_template(template, params.levels)
+    subject = usable(subject, data)
     others = [t for t in subject.kinds if t != subject.neutral]
     subject = subject.keep(aligned_takes(data, others, params.include_failed))
     name = subject.name

@@ -18,8 +18,19 @@ import h5py
 import numpy as np
 
 from scan2morph.store import paths
-from scan2morph.store.warnings import Warning, read_warnings, skipped_stages, warning_datasets
+from scan2morph.store.warnings import (
+    Warning,
+    read_failures,
+    read_warnings,
+    skipped_stages,
+    warning_datasets,
+)
 
+#: The warning of a take whose colour image is grey-scale.
+GREY = (
+    "the colour image is grey-scale: the lip priors, which find the lips by their redness, are "
+    "not used, and the refinement correlates grey texture only"
+)
 #: Config section this module reads.
 SECTIONS = ("quality",)
 
@@ -52,15 +63,20 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     Returns
     -------
     list of Warning
-        In stage order, then take order.
+        The takes left out of the subject first, then in stage order, then take order.
     """
-    out: list[Warning] = []
+    out: list[Warning] = [
+        Warning(f.stage, t, f"left out of the subject: {f.reason}")
+        for t, f in read_failures(h5).items()
+    ]
     takes = h5.get(paths.TAKES, {})
     for take in takes:
         valid = h5.get(paths.mesh(take, "valid"))
         if valid is not None and valid[()].mean() < settings["min_valid_fraction"]:
             share = 100 * valid[()].mean()
             out.append(Warning("fit", take, f"only {share:.0f}% of the template has data"))
+        if bool(takes[take].attrs.get("grey_color", False)):
+            out.append(Warning("ingest", take, GREY))
         folded = int(takes[take].attrs.get("n_folded", 0))
         if folded:
             out.append(Warning("fit", take, f"{folded} folded triangles in the fitted template"))

@@ -9,8 +9,9 @@ from pathlib import Path
 import h5py
 
 from scan2morph.errors import InputError
+from scan2morph.stages.failure import part_failures
 from scan2morph.stages.quality import subject_warnings, warning_datasets
-from scan2morph.store import describe_store, merge_parts, validate_store
+from scan2morph.store import describe_store, merge_parts, paths, validate_store
 from scan2morph.store.hdf5 import write_datasets
 
 #: Config section this stage reads.
@@ -33,7 +34,8 @@ def run(
     path : str or Path
         The store (replaced).
     parts : iterable of paths
-        Every stage part of the subject.
+        Every stage part of the subject. A take left out of its subject (a failure record in
+        its parts, :mod:`scan2morph.stages.failure`) keeps only that record in the store.
     subject, config_sha256 : str
         Root attributes.
     quality : mapping
@@ -51,7 +53,9 @@ def run(
     InputError
         Two parts writing one dataset, or a store that does not match the layout.
     """
-    merge_parts(path, parts, subject, config_sha256)
+    parts = list(parts)
+    failed = part_failures(parts)
+    merge_parts(path, parts, subject, config_sha256, exclude=[paths.take(t) for t in failed])
     with h5py.File(path, "r") as h5:
         warnings = subject_warnings(h5, quality)
     write_datasets(path, warning_datasets(warnings))

@@ -3,28 +3,57 @@
 Each stage writes a *part*: a small HDF5 file whose datasets already sit at their final paths in
 the subject's store (for example ``/takes/car/mesh/vertices``). The store rule merges the parts of a
 subject into ``results/{subject}/{subject}.h5`` and adds the root attributes of the contract.
-Writing goes to a temporary file that is renamed into place, so a failed job never leaves a
-half-written store behind; the file gets the mode the user's umask gives any new file
-(:func:`scan2morph.jobs.atomic_output`).
+Writing builds the file in memory and writes its bytes to a temporary file that is renamed into
+place (:func:`hdf5_output`), so a failed job never leaves a half-written store behind, the file
+gets the mode the user's umask gives any new file (:func:`scan2morph.jobs.atomic_output`), and
+a full disk is one clear error (:class:`~scan2morph.errors.OutputError`) raised by Python's own
+write: HDF5 never writes to a full disk, whose failures it reports from finalisers, as
+tracebacks on stderr and at worst a crash.
 """
 
 from __future__ import annotations
 
+import io
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from scan2morph import __version__
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.jobs import atomic_output
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
-FORMAT_VERSION = "1.3.0"
+FORMAT_VERSION = "1.4.0"
 #: Datasets at least this large are chunked and gzip-compressed.
 _COMPRESS_BYTES = 1 << 16
+
+
+@contextmanager
+def hdf5_output(path: str | Path, mode: str = "w") -> Iterator[h5py.File]:
+    """An HDF5 file built in memory and written to ``path`` when the block ends without error.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (replaced atomically).
+    mode : ``"w"`` or ``"a"``
+        A new file, or ``path``'s content to add to.
+
+    Raises
+    ------
+    OutputError
+        The disk is full (one line naming ``path``); ``path`` is left as it was.
+    """
+    path = Path(path)
+    buffer = io.BytesIO(path.read_bytes() if mode == "a" else b"")
+    with h5py.File(buffer, mode) as h5:
+        yield h5
+    with atomic_output(path) as tmp, writing(path):
+        tmp.write_bytes(buffer.getbuffer())
 
 
 def _write_dataset(h5: h5py.File, name: str, value) -> None:
@@ -82,7 +111,7 @@ def write_part(
     attrs : mapping of str to mapping, optional
         Group or dataset path to its attributes; ``"/"`` is the root.
     """
-    with atomic_output(path) as tmp, h5py.File(tmp, "w") as h5:
+    with hdf5_output(path) as h5:
         for name, value in datasets.items():
             _write_dataset(h5, name, value)
         for name, group_attrs in (attrs or {}).items():
@@ -118,6 +147,7 @@ def merge_parts(
     parts: Iterable[str | Path],
     subject: str,
     config_sha256: str,
+    exclude: Iterable[str] = (),
 ) -> None:
     """Merge stage parts into the subject's versioned store.
 
@@ -131,6 +161,8 @@ def merge_parts(
         Subject id (root attribute).
     config_sha256 : str
         Hash of the configuration the run used (root attribute).
+    exclude : iterable of str, optional
+        Groups left out of the store (e.g. ``/takes/car`` of a take left out of its subject).
 
     Notes
     -----
@@ -138,10 +170,10 @@ def merge_parts(
     ``input_sha256_<role>``) are gathered into the root attribute ``input_sha256``: a JSON object
     take -> role -> hex digest.
     """
-    with atomic_output(path) as tmp, h5py.File(tmp, "w") as out:
+    with hdf5_output(path) as out:
         for part in parts:
             with h5py.File(part, "r") as src:
-                _merge_group(src, out, Path(part))
+                _merge_group(src, out, Path(part), frozenset(exclude))
         out.attrs["format_version"] = FORMAT_VERSION
         out.attrs["scan2morph_version"] = __version__
         out.attrs["config_sha256"] = config_sha256
@@ -158,18 +190,31 @@ def merge_parts(
         out.attrs["input_sha256"] = json.dumps(checksums, sort_keys=True)
 
 
-def _merge_group(src: h5py.Group, dst: h5py.Group, part: Path) -> None:
+#: Groups that every part of a failed take repeats (its failure record): merged once.
+_REPEATED = "/failed/"
+
+
+def _merge_group(src: h5py.Group, dst: h5py.Group, part: Path, exclude: frozenset) -> None:
     for key, value in src.attrs.items():
         dst.attrs[key] = value
     for name, obj in src.items():
+        if obj.name in exclude:
+            continue
         if isinstance(obj, h5py.Dataset):
             if name in dst:
+                if obj.name.startswith(_REPEATED) and _same(obj, dst[name]):
+                    continue
                 raise InputError(
                     part, f"dataset {obj.name} is already in the store (two parts write it)"
                 )
             src.copy(obj, dst, name=name)
         else:
-            _merge_group(obj, dst.require_group(name), part)
+            _merge_group(obj, dst.require_group(name), part, exclude)
+
+
+def _same(a: h5py.Dataset, b: h5py.Dataset) -> bool:
+    read = (lambda d: d.asstr()[()]) if a.dtype.kind == "O" else (lambda d: d[()])
+    return bool(np.array_equal(read(a), read(b)))
 
 
 def open_store(path: str | Path) -> h5py.File:
@@ -213,6 +258,6 @@ def read_parts(paths: Iterable[str | Path]) -> dict[str, np.ndarray]:
 
 def write_datasets(path: str | Path, datasets: Mapping[str, object]) -> None:
     """Add datasets to an existing part or store (written as :func:`write_part` writes them)."""
-    with h5py.File(path, "a") as h5:
+    with hdf5_output(path, "a") as h5:
         for name, value in datasets.items():
             _write_dataset(h5, name, value)

@@ -16,6 +16,8 @@ from pathlib import Path
 import h5py
 import yaml
 
+from scan2morph.store.hdf5 import hdf5_output
+
 _KINDS = {
     "float": "f",
     "int": "iu",
@@ -118,7 +120,7 @@ def describe_store(path: str | Path, layout: dict) -> int:
     """
     entries = [(_pattern_regex(e["path"]), e) for e in layout["datasets"]]
     found: list[str] = []
-    with h5py.File(path, "a") as h5:
+    with hdf5_output(path, "a") as h5:
         h5.visititems(lambda n, o: found.append("/" + n) if isinstance(o, h5py.Dataset) else None)
         for name in found:
             entry = next((e for rx, e in entries if rx.match(name)), None)

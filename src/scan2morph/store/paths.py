@@ -109,6 +109,7 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ),
     ("/modal/statistics/{label}", "modal", ("mean", "std", "takes")),
     ("/warnings", "store", ("stage", "take", "message")),
+    ("/failed/{take}", "ingest", ("stage", "reason")),
 )
 #: Groups written to parts only (the ingest part's raw images), never merged into the store.
 PART_ONLY = ("/takes/{take}/raw",)
@@ -128,6 +129,7 @@ BLENDS = "/blends"
 PCA_BLENDS = "/pca_blends"
 MODAL_STATISTICS = "/modal/statistics"
 FIDUCIALS = "/template/fiducials"
+FAILED = "/failed"
 #: Group whose attributes name the stages a subject skipped (stage -> why).
 SKIPPED = "/skipped"
 
@@ -261,6 +263,13 @@ def modal_statistics(label: str, name: str) -> str:
 def warnings(name: str) -> str:
     """``stage``, ``take`` or ``message`` of the subject's warnings (one entry per warning)."""
     return _build("/warnings", name)
+
+
+def failed(take_id: str, name: str) -> str:
+    """``stage`` or ``reason`` of a take left out of its subject (the stage that refused it and
+    its message). Written by whichever per-take stage failed; listed here under ``ingest``, the
+    first of them."""
+    return _build("/failed/{take}", name, take=take_id)
 
 
 def _regex(pattern: str) -> str:

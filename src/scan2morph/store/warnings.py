@@ -38,6 +38,54 @@ class Warning:
         return f"[{self.stage}] {where}{self.message}"
 
 
+@dataclass(frozen=True)
+class Failure:
+    """Why a take was left out of its subject (``/failed/{take}``; written by
+    :mod:`scan2morph.stages.failure`).
+
+    Attributes
+    ----------
+    take : str
+        The take id.
+    stage : str
+        The per-take stage that refused it (``ingest``, ``repair``, ``fit``, ``align``, ``refine``).
+    reason : str
+        The stage's one-line message.
+    """
+
+    take: str
+    stage: str
+    reason: str
+
+    def datasets(self) -> dict[str, str]:
+        """The record at its store paths."""
+        return {
+            paths.failed(self.take, "stage"): self.stage,
+            paths.failed(self.take, "reason"): self.reason,
+        }
+
+    def __str__(self) -> str:
+        return f"{self.take} left out at {self.stage}: {self.reason}"
+
+
+def read_failures(data) -> dict[str, Failure]:
+    """The takes left out of a subject (``/failed``), take -> :class:`Failure`.
+
+    Parameters
+    ----------
+    data : h5py.File or mapping store path -> array
+        A store or part opened with h5py, or datasets read from parts or a store.
+    """
+    if isinstance(data, h5py.Group):
+        takes = list(data.get(paths.FAILED, {}))
+    else:
+        takes = paths.ids(data, paths.FAILED, "reason")
+    return {
+        t: Failure(t, *(_one_text(data[paths.failed(t, f)]) for f in ("stage", "reason")))
+        for t in takes
+    }
+
+
 def warning_datasets(warnings: list[Warning]) -> dict[str, np.ndarray]:
     """The ``/warnings`` group of the store: ``stage``, ``take`` and ``message``, one per warning."""
     return {
@@ -59,6 +107,12 @@ def _text(value) -> list[str]:
     if hasattr(value, "asstr"):  # an h5py dataset
         value = value.asstr()[()]
     return [str(v) for v in np.asarray(value, dtype=object).tolist()]
+
+
+def _one_text(value) -> str:
+    if hasattr(value, "asstr"):  # an h5py dataset
+        value = value.asstr()[()]
+    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def skipped_stages(h5: h5py.File) -> dict[str, str]:

@@ -1,0 +1,88 @@
+"""Every problem of a take's files at once, from cheap reads, before any heavy job.
+
+The take readers (:func:`~scan2morph.io.read_range_take`, ...) stop at the first problem. Here
+each file of a take is read on its own by the same reader the ingest uses (so the checks and
+their messages are the readers' own, written once), every problem is collected, and when every
+file reads, the take's files are checked against each other (image sizes, landmarks inside the
+image, the range scan's units and handedness). Nothing heavy runs: no stereo matching, no mesh rendering, no
+depth resampling.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+from scan2morph.errors import InputError
+from scan2morph.io.calibration import read_stereo_calibration
+from scan2morph.io.image import read_color
+from scan2morph.io.landmarks import read_pts
+from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh
+from scan2morph.io.range_image import read_range
+from scan2morph.io.rgbd import read_depth, read_rgbd_intrinsics
+from scan2morph.io.take import check_face, check_handedness, read_range_take, read_stereo_take
+
+#: The reader of each file column, per modality (the ingest's own readers).
+READERS: dict[str, dict[str, Callable]] = {
+    "range": {"xyz": read_range, "color": read_color, "landmarks": read_pts},
+    "stereo": {
+        "left": read_color,
+        "right": read_color,
+        "calibration": read_stereo_calibration,
+        "landmarks": read_pts,
+    },
+    "rgbd": {
+        "depth": read_depth,
+        "color": read_color,
+        "intrinsics": read_rgbd_intrinsics,
+        "landmarks": read_pts,
+    },
+    "mesh": {"mesh": read_mesh, "landmarks": read_landmarks3d},
+}
+
+
+def take_file_problems(modality: str, files: Mapping[str, str | Path]) -> list[str]:
+    """Every problem of one take's files, one line each (empty: the files are fine).
+
+    Parameters
+    ----------
+    modality : str
+        ``range``, ``stereo``, ``rgbd`` or ``mesh``.
+    files : mapping sheet column -> path
+        The take's files (a column left out is reported by the sheet check, not here).
+
+    Returns
+    -------
+    list of str
+        The readers' messages (each names the file, the field and what was expected).
+    """
+    readers = READERS.get(modality, {})
+    problems = []
+    for role, reader in readers.items():
+        if role not in files:
+            continue
+        extra = [files.get("texture")] if role == "mesh" else []  # the sheet's optional texture
+        try:
+            reader(files[role], *extra)
+        except InputError as exc:
+            problems.append(str(exc))
+    if problems or set(readers) - set(files):
+        return problems
+    try:
+        _cross_check(modality, files)
+    except InputError as exc:
+        problems.append(str(exc))
+    return problems
+
+
+def _cross_check(modality: str, files: Mapping[str, str | Path]) -> None:
+    """The checks between a take's files (sizes, landmarks inside the image, units)."""
+    if modality == "range":
+        scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
+        check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
+        check_handedness(scan.xyz, scan.landmarks, files["xyz"])
+    elif modality == "stereo":
+        read_stereo_take(files["left"], files["right"], files["calibration"], files["landmarks"])
+
+
+__all__ = ["READERS", "take_file_problems"]
