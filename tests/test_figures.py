@@ -356,6 +356,12 @@ def test_takes_by_kind(store):
     assert viseme_takes(store) == ["car", "too"]
     assert expression_takes(store) == ["sad1", "smile1", "smile2"]
     assert example_take(store) == "car"  # the jaw drop moves more than the pucker
+    # a take left out of the models by its alignment gate is meshed but not the neutral
+    misaligned = dict(store) | {
+        paths.mesh("sad3", "vertices"): store[paths.mesh("neutral", "vertices")],
+        paths.align("sad3", "ok"): np.bool_(False),
+    }
+    assert neutral_take(misaligned) == "neutral"
 
 
 def test_pca_alphas_recover_the_blend_parameters(store):

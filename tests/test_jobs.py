@@ -62,3 +62,29 @@ def test_a_full_disk_is_one_line(tmp_path):
         .endswith("ERROR no space left on device writing results/alice/alice.h5")
     )
     assert "Traceback" not in res.stderr
+
+
+def test_a_job_profiles_itself_when_asked(tmp_path, monkeypatch):
+    """With SCAN2MORPH_PROFILE set, a job writes its cProfile statistics (the body's functions,
+    not the wrapper's) and the CPU time spent before its body (benchmarks/bench_profile.py)."""
+    import json
+    import pstats
+    import time
+
+    from scan2morph.jobs import PROFILE_ENV, run_job
+
+    def busy_body():
+        t0 = time.process_time()
+        while time.process_time() - t0 < 0.05:
+            pass
+
+    monkeypatch.setenv(PROFILE_ENV, str(tmp_path / "prof"))
+    run_job(tmp_path / "logs" / "align" / "s1" / "car.log", busy_body)
+    stats = pstats.Stats(str(tmp_path / "prof" / "align-s1-car.prof"))
+    own = {key[2]: value[3] for key, value in stats.stats.items()}
+    assert own["busy_body"] >= 0.05
+    record = json.loads((tmp_path / "prof" / "align-s1-car.json").read_text())
+    assert record["startup_cpu_s"] > 0 and record["body_wall_s"] >= 0.05
+    monkeypatch.delenv(PROFILE_ENV)
+    run_job(tmp_path / "logs" / "align" / "s1" / "too.log", busy_body)
+    assert not (tmp_path / "prof" / "align-s1-too.prof").exists()

@@ -44,7 +44,7 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
         force=True,
     )
     try:
-        func()
+        _profiled(func, log_path)
     except InputError as exc:
         log.error("%s", exc if isinstance(exc, OutputError) else f"bad input: {exc}")
         logging.shutdown()
@@ -59,6 +59,36 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
         log.exception("job failed")
         logging.shutdown()
         raise
+
+
+#: Environment variable naming a folder: every job then writes its cProfile statistics there
+#: (``{log name}.prof``) and its start-up (interpreter and imports) CPU time
+#: (``{log name}.json``), for ``benchmarks/bench_profile.py``.
+PROFILE_ENV = "SCAN2MORPH_PROFILE"
+
+
+def _profiled(func: Callable[[], object], log_path: str | Path | None) -> None:
+    """Run ``func``; profile it when :data:`PROFILE_ENV` names a folder."""
+    folder = os.environ.get(PROFILE_ENV)
+    if not folder or not log_path:
+        func()
+        return
+    import cProfile
+    import time
+
+    parts = Path(log_path).with_suffix("").parts
+    name = "-".join(parts[parts.index("logs") + 1 :] if "logs" in parts else parts[-2:])
+    startup = time.process_time()  # CPU so far: the interpreter, Snakemake's wrapper, imports
+    profile = cProfile.Profile()
+    t0 = time.perf_counter()
+    try:
+        profile.runcall(func)
+    finally:
+        wall = time.perf_counter() - t0
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        profile.dump_stats(out / f"{name}.prof")
+        write_json(out / f"{name}.json", {"startup_cpu_s": startup, "body_wall_s": wall})
 
 
 def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:

@@ -116,7 +116,8 @@ def expression_takes(store: Mapping) -> list[str]:
 
 
 def neutral_take(store: Mapping) -> str:
-    """The neutral take: the one meshed take that is neither a viseme nor an expression.
+    """The neutral take: the one meshed take that is neither a viseme nor an expression, nor a
+    take left out of the models for failing its alignment gate (``/takes/{take}/align/ok``).
 
     Raises
     ------
@@ -125,7 +126,11 @@ def neutral_take(store: Mapping) -> str:
     """
     takes = groups(store, paths.TAKES, "mesh/vertices")
     others = set(viseme_takes(store)) | set(expression_takes(store))
-    neutral = [t for t in takes if t not in others]
+    neutral = [
+        t
+        for t in takes
+        if t not in others and bool(np.asarray(store.get(paths.align(t, "ok"), True)))
+    ]
     if len(neutral) != 1:
         raise InputError(
             source_of(store),
