@@ -46,17 +46,27 @@ def test_pca_equals_the_gltf_targets_added(run):
     model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
     base, targets = read_glb_targets(run.path("results", SUBJECT, f"{SUBJECT}.glb"))
     alphas = [1.0, -0.5][: len(model.pca_sigma)]
-    glb = base + (targets["pca_mean"] - base)
-    for k, a in enumerate(alphas):
-        glb = glb + a * (targets[f"pca_{k + 1}"] - base)
+    weights = model.pca_weights(alphas)
+    assert weights["pca_1_pos"] == pytest.approx(1 / 3) and weights["pca_1_neg"] == 0
+    assert len(alphas) < 2 or weights["pca_2_neg"] == pytest.approx(0.5 / 3)
+    glb = base + sum(w * (targets[name] - base) for name, w in weights.items())
     np.testing.assert_allclose(model.pca(alphas), glb, atol=1e-3)  # glTF stores float32 metres
     np.testing.assert_allclose(model.pca([]), model.pca_mean)
+    # each slider's end, weight 1 (Blender's range as imported), is +-3 sigma_k
+    for k in range(len(model.pca_sigma)):
+        for sign in ("pos", "neg"):
+            alpha = np.zeros(k + 1)
+            alpha[k] = 3.0 if sign == "pos" else -3.0
+            shown = targets["pca_mean"] + targets[f"pca_{k + 1}_{sign}"] - base
+            np.testing.assert_allclose(model.pca(alpha), shown, atol=1e-3)
 
 
 def test_bad_arguments_are_refused(run):
     model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
     with pytest.raises(InputError, match=r"pca: expected at most \d+ finite alphas within \+-3"):
         model.pca([5.0])
+    with pytest.raises(InputError, match=r"pca: expected at most \d+ finite alphas within \+-3"):
+        model.pca_weights([-3.5])
     with pytest.raises(InputError, match="expression: expected at most 10 finite coordinates"):
         model.expression(np.zeros(11))
     with pytest.raises(InputError, match="store not found"):
