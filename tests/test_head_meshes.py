@@ -53,3 +53,19 @@ def test_bad_input_is_refused(tmp_path):
         h5.attrs["format_version"] = "1.0"
     with pytest.raises(InputError, match="/neutral/head_frame: missing"):
         write_head_meshes(store, tmp_path / "head")
+
+
+def test_head_obj_opens_in_meshlab_whole(tmp_path):
+    """MeshLab's reader (pymeshlab) gets every vertex in its slot and every face: the filled
+    vertices are part of the surface, not loose points."""
+    import pymeshlab
+
+    v, f = grid_mesh(8, 7, z=lambda x, y: 0.02 * x * y)
+    cut = v + [0.0, 0.0, 2.0]
+    cut[[17, 18, 25]] = np.nan
+    write_head_obj(tmp_path / "h.obj", cut, f, FRAME, reference=v)
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(tmp_path / "h.obj"))
+    mesh = ms.current_mesh()
+    np.testing.assert_array_equal(mesh.face_matrix(), f)
+    assert_allclose(mesh.vertex_matrix(), (v + [0.0, 0.0, 2.0]) * 1e-3, atol=1e-6)
