@@ -163,3 +163,25 @@ def test_file_frame_is_the_stored_head_frame_and_targets_add(subject_glb):
     shown = base + sum(w * (targets[n] - base) for n, w in weights.items())
     assert_allclose(shown, apply_frame(frame, synthesize(model, alpha)), rtol=0, atol=1e-6)
     assert_allclose(model.sigma, np.std(model.coefficients, axis=0, ddof=1), rtol=1e-12)
+
+
+def test_report_viewer_gives_one_slider_in_sigmas_per_component(subject_glb):
+    """The report's viewer pairs pca_k_pos/pca_k_neg into one pca_k slider over -3..3 sigma_k
+    (value a: weight a/3 on pos, -a/3 on neg); a file from before the pair layout keeps its
+    single pca_k target as a -3..3 weight."""
+    from scan2morph.report.viewer import glb_target_names, semantic_sliders
+
+    names, notes, sigmas = glb_target_names(subject_glb[0])
+    sliders = semantic_sliders(names, notes, sigmas)
+    assert [s["name"] for s in sliders] == [*VISEMES, "pca_mean", "pca_1", "pca_2", "pca_3"]
+    for s in sliders[4:]:
+        k = s["name"].split("_")[1]
+        assert (names[s["index"]], names[s["negative"]]) == (f"pca_{k}_pos", f"pca_{k}_neg")
+        assert (s["min"], s["max"], s["per"]) == (-3.0, 3.0, 3.0)
+    assert all((s["min"], s["max"], s["negative"]) == (0.0, 1.0, None) for s in sliders[:4])
+    old = semantic_sliders(["car", "pca_mean", "pca_1"], {}, {})
+    assert [(s["name"], s["min"], s["max"], s["per"]) for s in old] == [
+        ("car", 0.0, 1.0, 1.0),
+        ("pca_mean", 0.0, 1.0, 1.0),
+        ("pca_1", -3.0, 3.0, 1.0),
+    ]

@@ -237,17 +237,9 @@ def glb_target_names(path: str | Path) -> tuple[list[str], dict[str, str], dict[
 
 def _slider(index: int, name: str, note: str, limits: tuple[float, float], **more) -> dict:
     lo, hi = limits
-    kind = "pca" if name.startswith("pca_") else "viseme"
-    step = 0.01 if hi - lo <= 1 else 0.05
-    return (
-        {"index": index, "name": name, "note": note, "min": lo, "max": hi, "step": step}
-        | {
-            "kind": kind,
-            "negative": None,
-            "per": 1.0,
-        }
-        | more
-    )
+    slider = {"index": index, "name": name, "note": note, "min": lo, "max": hi}
+    slider |= {"step": 0.01 if hi - lo <= 1 else 0.05, "negative": None, "per": 1.0}
+    return slider | {"kind": "pca" if name.startswith("pca_") else "viseme"} | more
 
 
 def semantic_sliders(
