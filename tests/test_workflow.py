@@ -283,6 +283,12 @@ def test_neutral_only_subject(cohort):
     eigen = read_table(work / "results" / "solo" / "tables" / "pca_eigenvalues.tsv")
     assert len(eigen) == 0
     assert eigen.columns[:4].tolist() == ["component", "eigenvalue", "cr", "ccr"]
+    # the head-frame meshes: the neutral take and the neutral model, nothing else
+    head = work / "results" / "solo" / "meshes" / "head"
+    assert sorted(p.relative_to(head).as_posix() for p in head.rglob("*.obj")) == [
+        "models/neutral.obj",
+        "neutral.obj",
+    ]
     html = (work / "results" / "solo" / "report.html").read_text()
     assert "no viseme takes: no blend shapes or PCA" in html
     assert "Warnings and skipped stages" in html
