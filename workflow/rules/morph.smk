@@ -49,7 +49,7 @@ rule head_meshes:
     benchmark:
         "benchmarks/rules/head_meshes/{subject}.tsv"
     resources:
-        mem_mb=500,
+        mem_mb=600,
         runtime=1,
     script:
         "../scripts/head_meshes.py"
