@@ -4,8 +4,10 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 CORES ?= 2
-# Debian packages: libusb for open3d, EGL/OSMesa for headless rendering, chromium for the report test.
-DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium slurm-wlm munge
+# Debian packages: libusb for open3d, EGL/OSMesa for headless rendering, chromium for the report test,
+# the X client libraries Blender's bpy module links (tests/test_blender.py).
+DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium slurm-wlm munge \
+  libx11-6 libxext6 libxfixes3 libxi6 libxrender1 libxkbcommon0 libsm6
 STAMP := $(VENV)/.setup-stamp
 # The Khronos glTF validator (npm; tests/test_gltf_viewer.py), installed with `npm ci` from the
 # committed lock. node and npm come from Debian (nodejs npm) only when npm is absent: a NodeSource
@@ -14,11 +16,18 @@ NODE_DEB_PACKAGES := nodejs npm
 VALIDATOR := tools/gltf-validator
 VALIDATOR_STAMP := $(VALIDATOR)/node_modules/.ci-stamp
 DEB_STAMP := $(VENV)/.deb-stamp
+# Blender as a Python module (tests/test_blender.py imports the outputs with Blender's own
+# importers): bpy pins Python 3.11 and numpy < 2, so it has a virtualenv of its own. The stamp
+# names the version, so that changing BPY_VERSION reinstalls.
+BLENDER_PYTHON ?= python3.11
+BLENDER_VENV := .venv-blender
+BPY_VERSION := 5.0.1
+BLENDER_STAMP := $(BLENDER_VENV)/.bpy-$(BPY_VERSION)-stamp
 export PYOPENGL_PLATFORM ?= osmesa
 
 .PHONY: setup run test bench lint dry-run clean
 
-setup: $(STAMP)
+setup: $(STAMP) $(BLENDER_STAMP)
 setup: $(VALIDATOR_STAMP)
 	@[ tools/viewer/node_modules/.package-lock.json -nt tools/viewer/package-lock.json ] || (cd tools/viewer && npm ci --no-audit --no-fund --loglevel=error)
 
@@ -38,6 +47,12 @@ $(STAMP): requirements.lock pyproject.toml | $(DEB_STAMP)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
+	@touch $@
+
+$(BLENDER_STAMP): | $(DEB_STAMP)
+	@test -x $(BLENDER_VENV)/bin/python || $(BLENDER_PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install -q --upgrade pip
+	$(BLENDER_VENV)/bin/python -m pip install -q "bpy==$(BPY_VERSION)"
 	@touch $@
 
 $(VALIDATOR_STAMP): $(VALIDATOR)/package.json $(VALIDATOR)/package-lock.json | $(DEB_STAMP)

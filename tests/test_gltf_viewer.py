@@ -14,6 +14,7 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pygltflib
 import pyrender
 import pytest
 import trimesh
@@ -22,96 +23,18 @@ from numpy.testing import assert_allclose
 from scan2morph.io.gltf import read_glb_frame, read_glb_targets, write_glb
 from scan2morph.morph import synthesize
 from scan2morph.morph.frame import apply_frame
-from scan2morph.stages import Subject, morph
 from scan2morph.store import paths
-from scan2morph.template import build_template, subdivide_template
+from tests.morph_subject import LEFT_EYE, MOUTH, RIGHT_EYE, VISEMES
+from tests.morph_subject import subject_glb as build_subject_glb
 
 REPO = Path(__file__).resolve().parents[1]
 VALIDATOR = REPO / "tools" / "gltf-validator"
-UNIT_MM = 48.0  # canonical template unit (half the outer-eye distance), mm
-TEXTURE = 256
-#: Texture colours painted around the landmarks (RGB): subject's right eye, left eye, mouth.
-RIGHT_EYE, LEFT_EYE, MOUTH = (0, 200, 0), (220, 0, 0), (0, 0, 220)
-SKIN = (200, 170, 150)
-VISEMES = {"car": "car", "too": "too", "eel": "eel"}
-
-
-def _face(template):
-    """The template as a face (mm) in a head-like frame (x subject's left, y up, z out)."""
-    u, v = template.vertices[:, 0], template.vertices[:, 1]
-    z = 25.0 * np.clip(1.0 - (u**2 + (v - 0.9) ** 2) / 0.12, 0, None) ** 2  # the nose
-    z -= 12.0 * u**2 + 4.0 * (v - 0.8) ** 2  # a rounded face
-    return np.column_stack([UNIT_MM * u, -UNIT_MM * v, z])
-
-
-def _visemes(template, face):
-    u, v = template.vertices[:, 0], template.vertices[:, 1]
-    jaw = np.clip((v - 1.5) / 0.8, 0, 1)[:, None]
-    lips = np.exp(-(u**2 + (v - 1.72) ** 2) / 0.15)[:, None]
-    return {
-        "car": face + jaw * [0.0, -9.0, -2.0],
-        "too": face + lips * [0.0, 0.0, 6.0] - lips * np.column_stack([2.5 * u, 0 * u, 0 * u]),
-        "eel": face + lips * np.column_stack([3.0 * u, 0 * u, 0 * u]) + jaw * [0.0, -2.0, 0.0],
-    }
-
-
-def _texture(template, uv):
-    """Skin with coloured discs at the eyes and the mouth (in texture coordinates)."""
-    img = np.empty((TEXTURE, TEXTURE, 3), np.uint8)
-    img[:] = SKIN
-    yy, xx = (np.mgrid[0:TEXTURE, 0:TEXTURE] + 0.5) / TEXTURE
-    spots = {
-        RIGHT_EYE: ("eye_r_outer", "eye_r_inner"),
-        LEFT_EYE: ("eye_l_inner", "eye_l_outer"),
-        MOUTH: ("mouth_r", "mouth_l"),
-    }
-    for colour, names in spots.items():
-        c = uv[[template.named[n] for n in names]].mean(axis=0)
-        img[(xx - c[0]) ** 2 + (yy - c[1]) ** 2 < 0.035**2] = colour
-    return img
 
 
 @pytest.fixture(scope="module")
 def subject_glb(tmp_path_factory):
     """The morph stage's glTF of a face seen from an arbitrary right-handed scanner frame."""
-    template = build_template()
-    sub = subdivide_template(template, 1)
-    face = _face(sub)
-    rng = np.random.default_rng(7)
-    rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    rot *= np.sign(np.linalg.det(rot))
-    shift = np.array([30.0, -80.0, 1000.0])
-    to_scanner = lambda p: p @ rot.T + shift  # noqa: E731
-    xy = sub.vertices
-    uv = (xy - xy.min(axis=0) + 0.05) / (np.ptp(xy, axis=0) + 0.1)
-    data = {
-        paths.neutral("vertices"): to_scanner(face),
-        paths.mesh("neutral", "uv"): uv,
-        paths.range_image("neutral", "color"): _texture(sub, uv),
-    }
-    data |= {paths.viseme(t, "model"): to_scanner(m) for t, m in _visemes(sub, face).items()}
-    subject = Subject(
-        "viewer",
-        {"neutral": "neutral"} | dict.fromkeys(VISEMES, "viseme"),
-        {"neutral": "neutral"} | VISEMES,
-    )
-    config = {
-        "morph": {"blends": {}, "pca_blends": {}, "alpha_limit": 3.0, "sigma": "sample"},
-        "template": {"subdivision_levels": 1},
-    }
-    part = morph.run(template, subject, data, config)
-    f = part.files
-    path = tmp_path_factory.mktemp("viewer") / "viewer.glb"
-    # as stages.morph.write_files writes it
-    write_glb(
-        path,
-        f["shapes"]["neutral"],
-        f["faces"],
-        uv=f["uv"],
-        texture=f["texture"],
-        targets=f["targets"],
-    )
-    return path, part, sub, data
+    return build_subject_glb(tmp_path_factory.mktemp("viewer"))
 
 
 def _validator() -> list[str]:
@@ -216,10 +139,16 @@ def test_file_frame_is_the_stored_head_frame_and_targets_add(subject_glb):
     src_base, src = read_glb_targets(path)
     assert_allclose(src_base, data[paths.neutral("vertices")], atol=1e-4)
     assert_allclose(src["car"], data[paths.viseme("car", "model")], atol=1e-4)
-    # layout: one target per viseme (model - neutral), pca_mean, one per component (sigma_k e_k)
+    # layout: one target per viseme (model - neutral), pca_mean, two per component (+-3 sigma_k
+    # e_k), their signed sigmas in the extras
     k = len(part.datasets[paths.pca("eigenvalues")])
-    assert list(targets) == [*VISEMES, "pca_mean", *(f"pca_{i + 1}" for i in range(k))]
-    # a viewer's weights 1 on pca_mean and alpha_k on pca_k give the PCA synthesis (Eq. 2)
+    pairs = [f"pca_{i + 1}_{s}" for i in range(k) for s in ("pos", "neg")]
+    assert list(targets) == [*VISEMES, "pca_mean", *pairs]
+    extras = pygltflib.GLTF2.load(str(path)).meshes[0].extras
+    assert extras["targetSigmas"] == {n: (3.0 if n.endswith("pos") else -3.0) for n in pairs}
+    assert "-3 sigma_2 e_2" in extras["targetNotes"]["pca_2_neg"]
+    # a viewer's weights 1 on pca_mean and |alpha_k| / 3 on pca_k_pos or pca_k_neg give the PCA
+    # synthesis (Eq. 2)
     from scan2morph.morph.pca import PCAModel
 
     names = ("mean", "components", "eigenvalues", "cr", "ccr", "coefficients")
@@ -230,7 +159,29 @@ def test_file_frame_is_the_stored_head_frame_and_targets_add(subject_glb):
         sigma_convention=str(part.datasets[paths.pca("sigma_convention")]),
     )
     alpha = np.array([1.0, -1.0])
-    weights = {"pca_mean": 1.0, "pca_1": alpha[0], "pca_2": alpha[1]}
+    weights = {"pca_mean": 1.0, "pca_1_pos": alpha[0] / 3, "pca_2_neg": -alpha[1] / 3}
     shown = base + sum(w * (targets[n] - base) for n, w in weights.items())
     assert_allclose(shown, apply_frame(frame, synthesize(model, alpha)), rtol=0, atol=1e-6)
     assert_allclose(model.sigma, np.std(model.coefficients, axis=0, ddof=1), rtol=1e-12)
+
+
+def test_report_viewer_gives_one_slider_in_sigmas_per_component(subject_glb):
+    """The report's viewer pairs pca_k_pos/pca_k_neg into one pca_k slider over -3..3 sigma_k
+    (value a: weight a/3 on pos, -a/3 on neg); a file from before the pair layout keeps its
+    single pca_k target as a -3..3 weight."""
+    from scan2morph.report.viewer import glb_target_names, semantic_sliders
+
+    names, notes, sigmas = glb_target_names(subject_glb[0])
+    sliders = semantic_sliders(names, notes, sigmas)
+    assert [s["name"] for s in sliders] == [*VISEMES, "pca_mean", "pca_1", "pca_2", "pca_3"]
+    for s in sliders[4:]:
+        k = s["name"].split("_")[1]
+        assert (names[s["index"]], names[s["negative"]]) == (f"pca_{k}_pos", f"pca_{k}_neg")
+        assert (s["min"], s["max"], s["per"]) == (-3.0, 3.0, 3.0)
+    assert all((s["min"], s["max"], s["negative"]) == (0.0, 1.0, None) for s in sliders[:4])
+    old = semantic_sliders(["car", "pca_mean", "pca_1"], {}, {})
+    assert [(s["name"], s["min"], s["max"], s["per"]) for s in old] == [
+        ("car", 0.0, 1.0, 1.0),
+        ("pca_mean", 0.0, 1.0, 1.0),
+        ("pca_1", -3.0, 3.0, 1.0),
+    ]

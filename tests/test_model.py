@@ -46,18 +46,68 @@ def test_pca_equals_the_gltf_targets_added(run):
     model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
     base, targets = read_glb_targets(run.path("results", SUBJECT, f"{SUBJECT}.glb"))
     alphas = [1.0, -0.5][: len(model.pca_sigma)]
-    glb = base + (targets["pca_mean"] - base)
-    for k, a in enumerate(alphas):
-        glb = glb + a * (targets[f"pca_{k + 1}"] - base)
+    weights = model.pca_weights(alphas)
+    assert weights["pca_1_pos"] == pytest.approx(1 / 3) and weights["pca_1_neg"] == 0
+    assert len(alphas) < 2 or weights["pca_2_neg"] == pytest.approx(0.5 / 3)
+    glb = base + sum(w * (targets[name] - base) for name, w in weights.items())
     np.testing.assert_allclose(model.pca(alphas), glb, atol=1e-3)  # glTF stores float32 metres
     np.testing.assert_allclose(model.pca([]), model.pca_mean)
+    # each slider's end, weight 1 (Blender's range as imported), is +-3 sigma_k
+    for k in range(len(model.pca_sigma)):
+        for sign in ("pos", "neg"):
+            alpha = np.zeros(k + 1)
+            alpha[k] = 3.0 if sign == "pos" else -3.0
+            shown = targets["pca_mean"] + targets[f"pca_{k + 1}_{sign}"] - base
+            np.testing.assert_allclose(model.pca(alpha), shown, atol=1e-3)
 
 
 def test_bad_arguments_are_refused(run):
     model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
     with pytest.raises(InputError, match=r"pca: expected at most \d+ finite alphas within \+-3"):
         model.pca([5.0])
+    with pytest.raises(InputError, match=r"pca: expected at most \d+ finite alphas within \+-3"):
+        model.pca_weights([-3.5])
     with pytest.raises(InputError, match="expression: expected at most 10 finite coordinates"):
         model.expression(np.zeros(11))
     with pytest.raises(InputError, match="store not found"):
         scan2morph.load_model(run.path("nothing.h5"))
+
+
+def test_head_meshes_of_the_workflow_are_the_store_meshes_in_the_head_frame(run, tmp_path_factory):
+    """results/{subject}/meshes/head: each aligned take, model and expression in metres in the
+    glTF's head frame, every face kept, the vertices without measurement filled and listed."""
+    from scan2morph.io.obj import read_obj
+    from scan2morph.morph.frame import apply_frame
+
+    tiny_run(tmp_path_factory, [f"results/{SUBJECT}/meshes/head"])
+    head = run.path("results", SUBJECT, "meshes", "head")
+    model = scan2morph.load_model(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
+    store = read_part(run.path("results", SUBJECT, f"{SUBJECT}.h5"))
+    frame = model.head_frame
+    names = sorted(p.relative_to(head).as_posix() for p in head.rglob("*.obj"))
+    assert names == sorted(
+        [f"{t}.obj" for t in ("car", "neutral", "smile1", "too")]
+        + [f"models/{n}.obj" for n in ("neutral", "car", "too", "pca_blend1")]
+        + [f"models/{b}.obj" for b in ("car_30", "car_60", "car_90", "too_30", "too_60")]
+        + ["models/too_90.obj", "models/too50_car20.obj"]
+        + ["expressions/smile1_measured.obj", "expressions/smile1_synthesized.obj"]
+    )
+    for take in ("car", "smile1"):
+        mesh = read_obj(head / f"{take}.obj")
+        aligned = store[paths.align(take, "vertices")]
+        measured = np.isfinite(aligned).all(axis=1)
+        assert np.array_equal(mesh["filled"], ~measured) and (~measured).sum() > 50
+        assert mesh["valid"].all() and len(mesh["faces"]) == len(model.faces)
+        want = apply_frame(frame, aligned[measured])
+        np.testing.assert_allclose(mesh["vertices"][measured], want, rtol=0, atol=6e-7)
+        assert (head / f"{take}.png").is_file() and "(m)" in (head / f"{take}.obj").read_text()[:60]
+    pose = read_obj(head / "models" / "pca_blend1.obj")["vertices"]
+    np.testing.assert_allclose(
+        pose, apply_frame(frame, store[paths.pca_blend("pca_blend1")]), rtol=0, atol=6e-7
+    )
+    synth = read_obj(head / "expressions" / "smile1_synthesized.obj")["vertices"]
+    np.testing.assert_allclose(
+        synth, apply_frame(frame, model.expression(model.coordinates["smile1"])), atol=6e-7
+    )
+    neutral = read_obj(head / "models" / "neutral.obj")
+    assert np.array_equal(neutral["filled"], store[paths.neutral("filled")].astype(bool))

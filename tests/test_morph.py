@@ -21,7 +21,12 @@ from scan2morph.morph import (
 )
 from scan2morph.morph.frame import apply_frame, head_frame
 from scan2morph.morph.pca import SIGMA_CONVENTIONS
-from scan2morph.morph.subject import pca_component_targets
+from scan2morph.morph.subject import (
+    parse_pca_target,
+    pca_component_targets,
+    pca_target_sigmas,
+    pca_target_weights,
+)
 from scan2morph.template import build_template
 
 # The paper's Table 1 (eigenvalue, CR, CCR) and Table 2 (coefficients, rows: base, too, man,
@@ -263,15 +268,35 @@ def test_pca_targets_add_up_to_the_synthesis():
     for convention in SIGMA_CONVENTIONS:
         model = pca(shapes, sigma=convention)
         targets = pca_component_targets(model, neutral)
-        assert list(targets) == ["pca_mean", *(f"pca_{k + 1}" for k in range(5))]
+        pairs = [f"pca_{k + 1}_{s}" for k in range(5) for s in ("pos", "neg")]
+        assert list(targets) == ["pca_mean", *pairs]
         assert_allclose(targets["pca_mean"], model.mean, rtol=0)
-        alpha = np.array([1.0, -0.7, 0.0, 2.0])
-        weights = {"pca_mean": 1.0, "pca_1": 1.0, "pca_2": -0.7, "pca_4": 2.0}
+        alpha = np.array([1.0, -0.7, 0.0, 3.0])
+        weights = pca_target_weights(alpha)
+        assert weights == {
+            "pca_mean": 1.0,
+            **{"pca_1_pos": 1 / 3, "pca_1_neg": 0.0, "pca_2_pos": 0.0},
+            **{"pca_2_neg": pytest.approx(0.7 / 3), "pca_3_pos": 0.0, "pca_3_neg": 0.0},
+            **{"pca_4_pos": 1.0, "pca_4_neg": 0.0},
+        }
         morphed = neutral + sum(w * (targets[k] - neutral) for k, w in weights.items())
         assert_allclose(morphed, synthesize(model, alpha), rtol=0, atol=1e-9)
-        # each component target alone moves the neutral by sigma_k along e_k, not by the mean
-        step = targets["pca_2"] - neutral
-        assert_allclose(np.linalg.norm(step), model.sigma[1], rtol=1e-12)
+        # each component target alone moves the neutral by 3 sigma_k along +-e_k, not by the mean
+        for sign, name in ((1, "pca_2_pos"), (-1, "pca_2_neg")):
+            step = targets[name] - neutral
+            assert_allclose(step, sign * 3 * model.sigma[1] * model.components[1], atol=1e-12)
+        assert pca_target_sigmas(2) == {
+            "pca_1_pos": 3.0,
+            "pca_1_neg": -3.0,
+            "pca_2_pos": 3.0,
+            "pca_2_neg": -3.0,
+        }
+        assert [parse_pca_target(n) for n in ("pca_2_neg", "pca_10_pos", "pca_1", "pca_x_pos")] == [
+            (2, -1.0),
+            (10, 1.0),
+            None,
+            None,
+        ]
 
 
 def test_rank_deficient_data_keeps_only_the_nonzero_components():

@@ -137,7 +137,7 @@ def test_subject_morph_pca_blends_and_labels(face):
         - np.sqrt(lam[1]) * model.components[1],
     )
     t = pca_component_targets(model, v)
-    np.testing.assert_allclose(np.linalg.norm(t["pca_1"] - v), model.sigma[0])
+    np.testing.assert_allclose(np.linalg.norm(t["pca_1_neg"] - v), 3 * model.sigma[0])
     np.testing.assert_allclose(model.sigma[0], np.sqrt(lam[0]))  # the paper's convention
     _, b2, p2 = subject_morph(
         v, models, labels, {"eel": {"eel": 0.5}}, {"needs5": [0, 0, 0, 0, 1.0]}, 3.0, "s"

@@ -286,7 +286,7 @@ def test_exports_and_accuracy_of_a_finished_subject(cohort):
     base, targets = read_glb_targets(work / "results" / "alice" / "alice.glb")
     np.testing.assert_allclose(base, store["/neutral/vertices"], atol=1e-4)
     np.testing.assert_allclose(targets["car"], store["/visemes/car/model"], atol=1e-4)
-    assert "pca_1" in targets
+    assert {"pca_1_pos", "pca_1_neg"} <= set(targets)
     acc = json.loads((work / "results" / "synth01" / "accuracy.json").read_text())
     assert acc["takes"]["car"]["align"]["rotation_deg"] < 1.0
     assert acc["takes"]["neutral"]["mesh"]["rms_mm"] < 1.0
@@ -342,6 +342,12 @@ def test_neutral_only_subject(cohort):
     eigen = read_table(work / "results" / "solo" / "tables" / "pca_eigenvalues.tsv")
     assert len(eigen) == 0
     assert eigen.columns[:4].tolist() == ["component", "eigenvalue", "cr", "ccr"]
+    # the head-frame meshes: the neutral take and the neutral model, nothing else
+    head = work / "results" / "solo" / "meshes" / "head"
+    assert sorted(p.relative_to(head).as_posix() for p in head.rglob("*.obj")) == [
+        "models/neutral.obj",
+        "neutral.obj",
+    ]
     html = (work / "results" / "solo" / "report.html").read_text()
     assert "no viseme takes: no blend shapes or PCA" in html
     assert "Warnings and skipped stages" in html

@@ -8,6 +8,11 @@
 
 Everything is in the neutral take's scanner frame, mm, as in the store; ``model.head_frame``
 maps it to the glTF's head frame (metres, +Y up, +Z out of the face).
+
+The glTF (and Blender's shape keys) hold the same PCA as additive morph targets: ``pca_mean`` and,
+per component k, ``pca_k_pos`` and ``pca_k_neg``, each at weight 1 = +-3 sigma_k. A shape-key
+value w on ``pca_k_pos`` is alpha_k = 3 w, on ``pca_k_neg`` alpha_k = -3 w; with ``pca_mean`` at 1
+they give ``model.pca(alphas)``, and ``model.pca_weights(alphas)`` is the set of values to type in.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.morph.blend import blend
 from scan2morph.morph.pca import ALPHA_LIMIT
+from scan2morph.morph.subject import pca_target_weights
 from scan2morph.store import open_store, paths
 from scan2morph.store.hdf5 import attr_value
 from scan2morph.store.warnings import Warning, read_warnings, skipped_stages
@@ -125,6 +131,26 @@ class Model:
             )
         weights = a * self.pca_sigma[: a.size]
         return self.pca_mean + np.tensordot(weights, self.pca_components[: a.size], axes=1)
+
+    def pca_weights(
+        self, alphas: Sequence[float], alpha_limit: float = ALPHA_LIMIT
+    ) -> dict[str, float]:
+        """The glTF morph-target weights (Blender shape-key values) that show ``pca(alphas)``.
+
+        Parameters
+        ----------
+        alphas : sequence of float
+            As for :meth:`pca`, in units of sigma_k.
+
+        Returns
+        -------
+        dict target name -> weight
+            ``pca_mean`` 1; ``pca_k_pos`` ``alpha_k / 3`` when ``alpha_k >= 0``, else
+            ``pca_k_neg`` ``-alpha_k / 3`` (the other 0): every weight within 0..1 for alphas
+            within +-3 (:data:`scan2morph.morph.subject.PCA_TARGET_SIGMAS`).
+        """
+        self.pca(alphas, alpha_limit)  # the same checks
+        return pca_target_weights(alphas)
 
     def expression(self, coordinates: Sequence[float]) -> np.ndarray:
         """The neutral displaced by modal coordinates ``q`` (the first len(q) modes), mm."""

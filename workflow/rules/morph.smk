@@ -36,3 +36,20 @@ rule morph:
         template=config["template"],
     script:
         "../scripts/morph.py"
+
+
+rule head_meshes:
+    """Write every mesh of the subject (aligned takes, models, expressions) in the head frame for DCC tools: metres, +Y up, +Z out of the face, textured, holes filled."""
+    input:
+        store="results/{subject}/{subject}.h5",
+    output:
+        meshes=directory("results/{subject}/meshes/head"),
+    log:
+        "logs/head_meshes/{subject}.log",
+    benchmark:
+        "benchmarks/rules/head_meshes/{subject}.tsv"
+    resources:
+        mem_mb=600,
+        runtime=1,
+    script:
+        "../scripts/head_meshes.py"

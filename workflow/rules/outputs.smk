@@ -24,6 +24,7 @@ def get_figure_outputs():
 def get_final_outputs():
     return (
         expand("results/{subject}/{subject}.h5", subject=SUBJECTS)
+        + expand("results/{subject}/meshes/head", subject=SUBJECTS)
         + expand("results/{subject}/accuracy.json", subject=synthetic_subjects())
         + get_figure_outputs()
         + expand("results/{subject}/report.html", subject=SUBJECTS)

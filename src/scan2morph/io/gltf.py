@@ -29,8 +29,12 @@ Layout of the written file (one scene, one node, one mesh, one triangle primitiv
 - morph targets: ``POSITION`` displacements (target minus base, in the glTF frame, taken from the
   float32-rounded base so that base + displacement rounds once; each accessor with min/max) and,
   with normals, ``NORMAL`` displacements; their names in ``mesh.extras.targetNames`` (the
-  convention three.js and Babylon.js read), what each one is in ``mesh.extras.targetNotes``;
-  default ``mesh.weights`` all zero. A viewer shows ``base + sum_k w_k displacement_k``.
+  convention three.js, Babylon.js and Blender read), what each one is in
+  ``mesh.extras.targetNotes`` and, for PCA component targets, the signed standard deviations
+  sigma_k that weight 1 adds in ``mesh.extras.targetSigmas``; default ``mesh.weights`` all zero.
+  A viewer shows ``base + sum_k w_k displacement_k``. Blender's importer makes each target a
+  shape key of range 0..1 (it widens a key's range only to a non-zero default weight), so a
+  target meant to be used at negative weights is written as a separate target of opposite sign.
 
 Every buffer view starts at a multiple of 4 bytes and every accessor is tightly packed.
 """
@@ -64,8 +68,10 @@ class MorphTargets(dict):
     with the frame they are exported in and a note per target.
 
     A plain dict works as ``targets`` too; this one also carries ``frame`` and ``frame_name``
-    (used when :func:`write_glb` gets no ``frame``) and ``notes`` (name -> what the target is, written to
-    ``mesh.extras.targetNotes``) from the stage that builds the shapes to the writer.
+    (used when :func:`write_glb` gets no ``frame``), ``notes`` (name -> what the target is, written
+    to ``mesh.extras.targetNotes``) and ``sigmas`` (name -> signed standard deviations of a PCA
+    component at weight 1, written to ``mesh.extras.targetSigmas``) from the stage that builds
+    the shapes to the writer.
     """
 
     def __init__(
@@ -75,11 +81,13 @@ class MorphTargets(dict):
         frame=None,
         frame_name: str | None = None,
         notes: Mapping[str, str] | None = None,
+        sigmas: Mapping[str, float] | None = None,
     ):
         super().__init__(targets)
         self.frame = None if frame is None else np.asarray(frame, dtype=np.float64)
         self.frame_name = frame_name
         self.notes = dict(notes or {})
+        self.sigmas = {str(k): float(v) for k, v in (sigmas or {}).items()}
 
 
 class _BufferBuilder:
@@ -253,6 +261,7 @@ def write_glb(
         frame_name = frame_name or ("source frame, metres" if metres else "source frame")
     frame = _check_frame(frame, source)
     notes = dict(getattr(targets, "notes", {}))
+    sigmas = dict(getattr(targets, "sigmas", {}))
     targets = {} if targets is None else dict(targets)
     checked = {
         str(name): _check_vertices(f"targets[{name!r}]", t, source, n_vertices)
@@ -339,6 +348,8 @@ def write_glb(
         mesh.extras = {"targetNames": list(checked)}
         if notes:
             mesh.extras["targetNotes"] = {k: str(notes[k]) for k in checked if k in notes}
+        if sigmas:
+            mesh.extras["targetSigmas"] = {k: sigmas[k] for k in checked if k in sigmas}
     gltf.meshes = [mesh]
     node = pygltflib.Node(
         name=mesh_name,

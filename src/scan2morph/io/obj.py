@@ -6,6 +6,8 @@ vertices are written at the position given (callers pass filled positions when t
 non-finite rows are written at the centroid of the finite ones, which keeps viewers' zoom-to-fit
 on the face) and the faces that touch an invalid vertex are left out, so nothing invalid is drawn.
 A comment line ``# invalid: i j ...`` lists the invalid vertices (1-based, as OBJ indices).
+Meshes for DCC tools (:mod:`scan2morph.io.head`) instead place every vertex on a hole-filled
+surface and keep every face; a comment line ``# filled: i j ...`` lists the filled vertices.
 
 Texture coordinates are given in the image convention (origin at the image's top-left corner, as
 glTF) and written as ``vt u 1-v`` (OBJ's origin is the bottom-left corner), so the texture is
@@ -22,7 +24,9 @@ from scan2morph.errors import InputError
 from scan2morph.io.image import write_color
 
 
-def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
+def write_obj(
+    path, vertices, faces, uv=None, texture=None, valid=None, filled=None, units: str = "mm"
+) -> None:
     """Write a mesh as OBJ, with MTL and PNG texture beside it when ``texture`` is given.
 
     Parameters
@@ -36,6 +40,11 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
     texture : (H, W, 3) uint8, optional
     valid : (V,) bool, optional
         Faces touching an invalid (or non-finite) vertex are not written.
+    filled : (V,) bool, optional
+        Vertices placed by a hole filling rather than measured: their faces are written, and the
+        ``# filled:`` comment line lists them (1-based; :func:`read_obj` returns them).
+    units : str
+        Unit of ``vertices``, named on the header line (``mm``; ``m`` for head-frame meshes).
 
     Notes
     -----
@@ -65,9 +74,14 @@ def write_obj(path, vertices, faces, uv=None, texture=None, valid=None) -> None:
             raise InputError(path, f"valid: expected ({len(vertices)},), got {np.shape(valid)}")
         ok &= np.asarray(valid, dtype=bool)
     keep = ok[faces].all(axis=1)
-    lines = [f"# scan2morph mesh: {len(vertices)} vertices (mm), {int(keep.sum())} faces"]
+    lines = [f"# scan2morph mesh: {len(vertices)} vertices ({units}), {int(keep.sum())} faces"]
     if not ok.all():
         lines.append("# invalid: " + " ".join(str(i) for i in np.flatnonzero(~ok) + 1))
+    if filled is not None:
+        if np.shape(filled) != (len(vertices),):
+            raise InputError(path, f"filled: expected ({len(vertices)},), got {np.shape(filled)}")
+        if np.any(filled):
+            lines.append("# filled: " + " ".join(str(i) for i in np.flatnonzero(filled) + 1))
     if texture is not None:
         if uv is None:
             raise InputError(path, "texture given without uv")
@@ -122,7 +136,8 @@ def read_obj(path) -> dict[str, np.ndarray]:
     -------
     dict
         ``vertices`` (V, 3) float64; ``faces`` (F, 3) int64, 0-based; ``uv`` (V, 2) in the image
-        convention (v flipped back) or None; ``valid`` (V,) bool from the ``# invalid:`` line.
+        convention (v flipped back) or None; ``valid`` (V,) bool from the ``# invalid:`` line;
+        ``filled`` (V,) bool from the ``# filled:`` line.
 
     Raises
     ------
@@ -132,12 +147,14 @@ def read_obj(path) -> dict[str, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found (expected a Wavefront OBJ)")
-    verts, tex, faces, invalid = [], [], [], []
+    verts, tex, faces, invalid, filled = [], [], [], [], []
     for n, line in enumerate(path.read_text().splitlines(), start=1):
         parts = line.split()
         try:
             if line.startswith("# invalid:"):
                 invalid += [int(i) - 1 for i in parts[2:]]
+            elif line.startswith("# filled:"):
+                filled += [int(i) - 1 for i in parts[2:]]
             elif parts and parts[0] == "v":
                 verts.append([float(t) for t in parts[1:4]])
             elif parts and parts[0] == "vt":
@@ -155,6 +172,8 @@ def read_obj(path) -> dict[str, np.ndarray]:
     vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
     valid = np.ones(len(vertices), dtype=bool)
     valid[invalid] = False
+    is_filled = np.zeros(len(vertices), dtype=bool)
+    is_filled[filled] = True
     uv = None
     if tex:
         uv = np.asarray(tex, dtype=np.float64)
@@ -164,4 +183,5 @@ def read_obj(path) -> dict[str, np.ndarray]:
         "faces": np.asarray(faces, dtype=np.int64).reshape(-1, 3),
         "uv": uv,
         "valid": valid,
+        "filled": is_filled,
     }

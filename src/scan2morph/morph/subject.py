@@ -12,7 +12,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.morph.blend import blend
-from scan2morph.morph.pca import PCAModel, pca, synthesize
+from scan2morph.morph.pca import ALPHA_LIMIT, PCAModel, pca, synthesize
 from scan2morph.tol import VISEMES
 
 
@@ -98,29 +98,86 @@ def subject_morph(
 
 #: Name of the morph target that moves the neutral to the PCA mean.
 PCA_MEAN_TARGET = "pca_mean"
+#: Standard deviations sigma_k of a PCA component at weight 1 of its morph target: a 0..1 weight
+#: (the range Blender's importer gives every shape key) reaches the model's alpha limit.
+PCA_TARGET_SIGMAS = ALPHA_LIMIT
+_SIGNS = {"pos": 1.0, "neg": -1.0}
 
 
-def pca_component_targets(model: PCAModel, neutral: np.ndarray) -> dict[str, np.ndarray]:
+def pca_target_name(k: int, sign: float) -> str:
+    """The morph target of component ``k`` (1-based) towards ``sign`` (> 0: ``pca_k_pos``,
+    < 0: ``pca_k_neg``)."""
+    return f"pca_{int(k)}_{'pos' if sign > 0 else 'neg'}"
+
+
+def pca_component_targets(
+    model: PCAModel, neutral: np.ndarray, sigmas: float = PCA_TARGET_SIGMAS
+) -> dict[str, np.ndarray]:
     """The PCA as morph targets that add up (absolute positions, exported as target - neutral).
 
-    ``pca_mean`` is the mean (displacement ``mean - neutral``) and ``pca_{k}`` is
-    ``neutral + sigma_k e_k`` (displacement ``sigma_k e_k``, sigma in the model's convention), so
-    that weights ``1`` on ``pca_mean`` and ``alpha_k`` on ``pca_{k}`` give Eq. 2's
-    ``mean + sum_k alpha_k sigma_k e_k`` exactly, for any number of components at once.
+    ``pca_mean`` is the mean (displacement ``mean - neutral``); each component has two targets,
+    ``pca_{k}_pos`` = ``neutral + sigmas sigma_k e_k`` and ``pca_{k}_neg`` =
+    ``neutral - sigmas sigma_k e_k`` (sigma in the model's convention). Weight 1 on ``pca_mean``
+    and ``max(alpha_k, 0) / sigmas`` on ``pca_k_pos``, ``max(-alpha_k, 0) / sigmas`` on
+    ``pca_k_neg`` (:func:`pca_target_weights`) give Eq. 2's ``mean + sum_k alpha_k sigma_k e_k``
+    for any number of components at once, every weight within 0..1 for ``|alpha_k| <= sigmas``.
 
     Parameters
     ----------
     model : PCAModel
     neutral : (V, 3) float, mm
         The base mesh of the export (the neutral model S_0).
+    sigmas : float
+        Standard deviations at weight 1 (default :data:`PCA_TARGET_SIGMAS`, 3).
 
     Returns
     -------
     dict name -> (V, 3) float64, mm
-        ``pca_mean``, ``pca_1``, ..., ``pca_K`` in that order.
+        ``pca_mean``, ``pca_1_pos``, ``pca_1_neg``, ..., ``pca_K_neg`` in that order.
     """
     base = np.asarray(neutral, dtype=np.float64)
     out = {PCA_MEAN_TARGET: np.array(model.mean)}
     for i in range(model.n_components):
-        out[f"pca_{i + 1}"] = base + model.sigma[i] * model.components[i]
+        step = sigmas * model.sigma[i] * model.components[i]
+        out[pca_target_name(i + 1, 1)] = base + step
+        out[pca_target_name(i + 1, -1)] = base - step
     return out
+
+
+def pca_target_sigmas(n_components: int, sigmas: float = PCA_TARGET_SIGMAS) -> dict[str, float]:
+    """Signed sigma_k per unit weight of each component target (``pca_k_pos``: ``+sigmas``,
+    ``pca_k_neg``: ``-sigmas``), as the glTF's ``mesh.extras.targetSigmas`` states them."""
+    return {pca_target_name(k, s): s * sigmas for k in range(1, n_components + 1) for s in (1, -1)}
+
+
+def pca_target_weights(
+    alphas: Sequence[float], sigmas: float = PCA_TARGET_SIGMAS
+) -> dict[str, float]:
+    """Morph-target weights (Blender shape-key values) that show Eq. 2 with these alphas.
+
+    Parameters
+    ----------
+    alphas : sequence of float
+        alpha_k in units of sigma_k, one per leading component.
+    sigmas : float
+        Standard deviations at weight 1 of the targets (:data:`PCA_TARGET_SIGMAS`).
+
+    Returns
+    -------
+    dict name -> weight
+        ``pca_mean`` 1 and, per component, ``alpha_k / sigmas`` on ``pca_k_pos`` when
+        ``alpha_k >= 0``, else ``-alpha_k / sigmas`` on ``pca_k_neg`` (the other one 0).
+    """
+    out = {PCA_MEAN_TARGET: 1.0}
+    for k, a in enumerate(np.asarray(alphas, dtype=np.float64).ravel(), start=1):
+        out[pca_target_name(k, 1)] = max(float(a), 0.0) / sigmas
+        out[pca_target_name(k, -1)] = max(-float(a), 0.0) / sigmas
+    return out
+
+
+def parse_pca_target(name: str) -> tuple[int, float] | None:
+    """``(k, sign)`` of a component target's name (``pca_2_neg`` -> ``(2, -1.0)``), else None."""
+    parts = name.split("_")
+    if len(parts) == 3 and parts[0] == "pca" and parts[1].isdigit() and parts[2] in _SIGNS:
+        return int(parts[1]), _SIGNS[parts[2]]
+    return None

@@ -18,9 +18,11 @@ The viewer shows the mesh under a camera on +Z looking down -Z (+Y up: the head 
 :mod:`scan2morph.io.gltf`), orbit controls, texture on/off and wireframe, and three groups of
 controls (the section's template is ``templates/viewer.html.j2``):
 
-- semantic modes: one range slider per morph target of the glTF (visemes and ``pca_mean``
-  0..1, ``pca_k`` -3..3: the targets are ``sigma_k e_k``, sigma the sample standard deviation of
-  the PCA coefficients unless the store says otherwise), drawn by three.js's morphing;
+- semantic modes: one range slider per viseme target of the glTF and ``pca_mean`` (0..1), and
+  one ``pca_k`` slider per PCA component in units of sigma_k (-3..3; sigma the sample standard
+  deviation of the PCA coefficients unless the store says otherwise) that sets the weights of
+  the component's two targets ``pca_k_pos`` and ``pca_k_neg`` (each +-3 sigma_k e_k at weight
+  1: :func:`semantic_sliders`), drawn by three.js's morphing;
 - modal modes: one slider per modal coordinate of the first ``n`` modes of the FEM basis, and one
   button per expression take that sets them to its coordinates and adds its remaining modes
   (so the face is the expression synthesised from all its coordinates, ``Model.expression``);
@@ -49,6 +51,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.io.gltf import _read_glb, read_glb_frame
+from scan2morph.morph.subject import parse_pca_target
 from scan2morph.store import paths
 from scan2morph.store.warnings import skipped_stages
 
@@ -222,15 +225,62 @@ def script_hash(script: str) -> str:
     return f"'sha256-{base64.b64encode(digest).decode('ascii')}'"
 
 
-def glb_target_names(path: str | Path) -> tuple[list[str], dict[str, str]]:
-    """The morph target names of a ``.glb`` (``mesh.extras.targetNames``) and their notes."""
+def glb_target_names(path: str | Path) -> tuple[list[str], dict[str, str], dict[str, float]]:
+    """The morph target names of a ``.glb`` (``mesh.extras.targetNames``), their notes
+    (``targetNotes``) and the signed sigmas at weight 1 of the PCA targets (``targetSigmas``)."""
     gltf = _read_glb(Path(path))
     extras = (gltf.meshes[0].extras or {}) if gltf.meshes else {}
-    return [str(n) for n in extras.get("targetNames", [])], dict(extras.get("targetNotes", {}))
+    names = [str(n) for n in extras.get("targetNames", [])]
+    sigmas = {str(k): float(v) for k, v in extras.get("targetSigmas", {}).items()}
+    return names, dict(extras.get("targetNotes", {})), sigmas
 
 
-def _range(name: str) -> tuple[float, float]:
-    return PCA_RANGE if re.fullmatch(r"pca_\d+", name) else WEIGHT_RANGE
+def _slider(index: int, name: str, note: str, limits: tuple[float, float], **more) -> dict:
+    lo, hi = limits
+    slider = {"index": index, "name": name, "note": note, "min": lo, "max": hi}
+    slider |= {"step": 0.01 if hi - lo <= 1 else 0.05, "negative": None, "per": 1.0}
+    return slider | {"kind": "pca" if name.startswith("pca_") else "viseme"} | more
+
+
+def semantic_sliders(
+    names: Sequence[str], notes: dict[str, str], sigmas: dict[str, float]
+) -> list[dict]:
+    """One slider per viseme target and ``pca_mean`` (weight 0..1) and one per PCA component.
+
+    A component written as a pair ``pca_k_pos``/``pca_k_neg`` (with ``targetSigmas`` +-s) gets one
+    slider ``pca_k`` in units of sigma_k from -s to +s: value a sets weight ``max(a, 0) / s`` on
+    the ``pos`` target (``index``) and ``max(-a, 0) / s`` on the ``neg`` one (``negative``;
+    ``per`` = s). A single target ``pca_k`` (files before the pair layout) is its own weight in
+    :data:`PCA_RANGE`.
+
+    Returns
+    -------
+    list of dict
+        ``index``, ``name``, ``note``, ``min``, ``max``, ``step``, ``kind``, ``negative``
+        (target index or None), ``per`` (sigmas per unit weight).
+    """
+    pairs: dict[int, dict[float, int]] = {}
+    for i, name in enumerate(names):
+        parsed = parse_pca_target(name)
+        if parsed is not None and name in sigmas:
+            pairs.setdefault(parsed[0], {})[parsed[1]] = i
+    out = []
+    for i, name in enumerate(names):
+        parsed = parse_pca_target(name)
+        pair = pairs.get(parsed[0], {}) if parsed is not None else {}
+        if len(pair) == 2 and parsed[1] > 0:
+            neg = names[pair[-1.0]]
+            per = sigmas[name]
+            note = f"alpha_{parsed[0]} in sigma_{parsed[0]}: {notes.get(name, name)}"
+            out.append(
+                _slider(
+                    i, f"pca_{parsed[0]}", note, (sigmas[neg], per), negative=pair[-1.0], per=per
+                )
+            )
+        elif len(pair) != 2:
+            limits = PCA_RANGE if re.fullmatch(r"pca_\d+", name) else WEIGHT_RANGE
+            out.append(_slider(i, name, notes.get(name, name), limits))
+    return out
 
 
 def quantize(values: np.ndarray) -> tuple[np.ndarray, float]:
@@ -400,22 +450,8 @@ def viewer_context(
     reason = three_unavailable(three_dir)
     if reason is not None:
         return {"unavailable": reason}, None
-    names, notes = glb_target_names(glb)
-    sliders = []
-    for i, name in enumerate(names):
-        lo, hi = _range(name)
-        kind = "pca" if name.startswith("pca_") else "viseme"
-        sliders.append(
-            {
-                "index": i,
-                "name": name,
-                "note": notes.get(name, name),
-                "min": lo,
-                "max": hi,
-                "step": 0.01 if hi - lo <= 1 else 0.05,
-                "kind": kind,
-            }
-        )
+    names, notes, sigmas = glb_target_names(glb)
+    sliders = semantic_sliders(names, notes, sigmas)
     gltf = _read_glb(glb)
     count = gltf.accessors[gltf.meshes[0].primitives[0].attributes.POSITION].count
     try:

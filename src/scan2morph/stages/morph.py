@@ -14,7 +14,13 @@ from scan2morph.io.gltf import MorphTargets
 from scan2morph.morph import pca_tables
 from scan2morph.morph.frame import HEAD_FRAME_NAME, head_frame
 from scan2morph.morph.pca import SIGMA_CONVENTIONS, PCAModel
-from scan2morph.morph.subject import PCA_MEAN_TARGET, pca_component_targets, subject_morph
+from scan2morph.morph.subject import (
+    PCA_MEAN_TARGET,
+    parse_pca_target,
+    pca_component_targets,
+    pca_target_sigmas,
+    subject_morph,
+)
 from scan2morph.stages.part import Part, Subject, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
@@ -46,10 +52,13 @@ def _target_notes(model: PCAModel | None, visemes) -> dict[str, str]:
     """What each glTF morph target is (``mesh.extras.targetNotes``)."""
     notes = {t: "viseme model - neutral" for t in visemes}
     if model is not None:
-        notes[PCA_MEAN_TARGET] = "PCA mean - neutral (weight 1 with the pca_k for Eq. 2)"
+        notes[PCA_MEAN_TARGET] = "PCA mean - neutral (weight 1 with the pca_k_pos/neg for Eq. 2)"
         convention = SIGMA_CONVENTIONS[model.sigma_convention]
-        for k in range(model.n_components):
-            notes[f"pca_{k + 1}"] = f"sigma_{k + 1} e_{k + 1}; sigma: {convention}"
+        for name, s in pca_target_sigmas(model.n_components).items():
+            k, _ = parse_pca_target(name)
+            notes[name] = (
+                f"{s:+g} sigma_{k} e_{k} (weight w: alpha_{k} = {s:+g} w); sigma: {convention}"
+            )
     return notes
 
 
@@ -76,8 +85,9 @@ def run(
         ``/pca_blends/{name}/vertices`` (mm); ``files``: the PCA tables (``eigen``,
         ``coefficients``), the ``faces``, ``uv`` and ``texture`` of the neutral, the glTF morph
         ``targets`` (a :class:`~scan2morph.io.gltf.MorphTargets` carrying the head frame: one
-        per viseme, ``pca_mean`` and one per PCA component, see
-        :func:`~scan2morph.morph.subject.pca_component_targets`) and the OBJ ``shapes``. A
+        per viseme, ``pca_mean`` and two per PCA component, ``pca_k_pos`` and ``pca_k_neg`` at
+        +-3 sigma_k, see :func:`~scan2morph.morph.subject.pca_component_targets`) and the OBJ
+        ``shapes``. A
         subject without visemes gets the head frame only, empty tables, the neutral alone as its
         shapes and glTF, and the reason under ``/skipped`` (attribute ``morph``).
     """
@@ -121,6 +131,7 @@ def run(
             frame=frame,
             frame_name=HEAD_FRAME_NAME,
             notes=_target_notes(model, models),
+            sigmas=pca_target_sigmas(model.n_components),
         ),
         "shapes": {"neutral": base, **models, **blends, **pca_shapes},
     }
@@ -130,7 +141,8 @@ def run(
 
 def write_files(part: Part, eigen: str, coefficients: str, glb: str, models: str) -> None:
     """Write the PCA tables (TSV with their column dictionaries), the glTF with one morph target
-    per viseme and PCA component, and one OBJ per model and blend into the folder ``models``."""
+    per viseme, ``pca_mean`` and two per PCA component, and one OBJ per model and blend into the
+    folder ``models``."""
     from scan2morph.tables import PCA_COEFFICIENTS, PCA_EIGENVALUES, write_table
 
     f = part.files

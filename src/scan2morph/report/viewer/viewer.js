@@ -130,9 +130,18 @@ function start() {
         normal.needsUpdate = true;
       }
       const w = take === null;
-      weightSliders.forEach((s, i) => {
+      // a slider sets its target's weight (value / per); a PCA component's slider, in sigmas,
+      // sets its pos target for values above 0 and its neg target (data-negative) below
+      const influences = mesh.morphTargetInfluences;
+      weightSliders.forEach((s) => {
         s.disabled = !w;
-        mesh.morphTargetInfluences[Number(s.dataset.target)] = w ? Number(s.value) : 0;
+        const value = w ? Number(s.value) / Number(s.dataset.per || 1) : 0;
+        if (s.dataset.negative === undefined) {
+          influences[Number(s.dataset.target)] = value;
+        } else {
+          influences[Number(s.dataset.target)] = Math.max(value, 0);
+          influences[Number(s.dataset.negative)] = Math.max(-value, 0);
+        }
       });
       modeSliders.forEach((s) => { s.disabled = !w; });
       render();
