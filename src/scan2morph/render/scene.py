@@ -16,6 +16,7 @@ import pyrender  # noqa: E402
 import trimesh  # noqa: E402
 
 from scan2morph.errors import InputError  # noqa: E402
+from scan2morph.offscreen import offscreen_renderer  # noqa: E402
 
 
 def front_direction(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -157,10 +158,6 @@ def render_mesh(
     )
     key = look_at(center + dist * (front + 0.4 * up + 0.3 * np.cross(up, front)), center, up)
     scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=key)
-    renderer = pyrender.OffscreenRenderer(w, h)
-    try:
-        flags = pyrender.RenderFlags.SKIP_CULL_FACES
-        image, _ = renderer.render(scene, flags=flags)
-    finally:
-        renderer.delete()
+    flags = pyrender.RenderFlags.SKIP_CULL_FACES
+    image, _ = offscreen_renderer(w, h).render(scene, flags=flags)
     return np.ascontiguousarray(image[:, :, :3])

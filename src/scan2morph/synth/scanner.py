@@ -25,6 +25,7 @@ from scipy import ndimage  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
 from scan2morph.geometry import surface_normals, vertex_normals  # noqa: E402
+from scan2morph.offscreen import offscreen_renderer  # noqa: E402
 from scan2morph.synth.head import (  # noqa: E402
     SEG_BROW,
     SEG_EYE,
@@ -39,8 +40,6 @@ _MEASURED = (SEG_SKIN, SEG_BROW, SEG_HAIR, SEG_EYE)
 _SEG_STEP = 40  # segmentation colour = _SEG_STEP * (segment + 1) in the red channel
 #: Colour of the background behind the head (dark blue-grey, like a scanning booth).
 BACKGROUND_RGB = (44, 46, 56)
-
-_RENDERERS: dict[tuple[int, int], pyrender.OffscreenRenderer] = {}
 
 
 def camera_matrix(width: int, height: int, focal_px: float) -> np.ndarray:
@@ -136,13 +135,6 @@ def head_pose(
     T[:3, :3] = R
     T[:3, 3] = np.array([0.0, 0.0, distance_mm]) - flip @ np.asarray(aim, float) + t_rand
     return T
-
-
-def _renderer(width: int, height: int) -> pyrender.OffscreenRenderer:
-    key = (int(width), int(height))
-    if key not in _RENDERERS:
-        _RENDERERS[key] = pyrender.OffscreenRenderer(*key)
-    return _RENDERERS[key]
 
 
 def shade(albedo: np.ndarray, vertices_cam: np.ndarray, normals_cam: np.ndarray) -> np.ndarray:
@@ -276,7 +268,7 @@ def render_colors(
         zfar=z_mid + 600.0,
     )
     scene.add(cam, pose=np.diag([1.0, -1.0, -1.0, 1.0]))  # OpenCV camera -> OpenGL camera
-    r = _renderer(*size)
+    r = offscreen_renderer(*size)
     flags = pyrender.RenderFlags.SKIP_CULL_FACES
     color, _ = r.render(scene, flags=flags | pyrender.RenderFlags.FLAT)
     seg_rgb, depth = r.render(scene, flags=flags | pyrender.RenderFlags.SEG, seg_node_map=seg_map)
