@@ -6,13 +6,12 @@ import logging
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-import h5py
-
 from scan2morph.errors import InputError
 from scan2morph.stages.failure import part_failures
 from scan2morph.stages.quality import subject_warnings, warning_datasets
-from scan2morph.store import describe_store, merge_parts, paths, validate_store
-from scan2morph.store.hdf5 import write_datasets
+from scan2morph.store import paths, validate_store
+from scan2morph.store.hdf5 import hdf5_output, merge_into, write_into
+from scan2morph.store.layout import describe
 
 #: Config section this stage reads.
 SECTIONS = ("quality",)
@@ -55,11 +54,11 @@ def run(
     """
     parts = list(parts)
     failed = part_failures(parts)
-    merge_parts(path, parts, subject, config_sha256, exclude=[paths.take(t) for t in failed])
-    with h5py.File(path, "r") as h5:
+    with hdf5_output(path) as h5:  # built in memory, written once
+        merge_into(h5, parts, subject, config_sha256, exclude=[paths.take(t) for t in failed])
         warnings = subject_warnings(h5, quality)
-    write_datasets(path, warning_datasets(warnings))
-    describe_store(path, layout)
+        write_into(h5, warning_datasets(warnings))
+        describe(h5, layout)
     for warning in warnings:
         log.warning("%s: %s", subject, warning)
     problems = validate_store(path, layout)

@@ -171,23 +171,34 @@ def merge_parts(
     take -> role -> hex digest.
     """
     with hdf5_output(path) as out:
-        for part in parts:
-            with h5py.File(part, "r") as src:
-                _merge_group(src, out, Path(part), frozenset(exclude))
-        out.attrs["format_version"] = FORMAT_VERSION
-        out.attrs["scan2morph_version"] = __version__
-        out.attrs["config_sha256"] = config_sha256
-        out.attrs["subject"] = subject
-        out.attrs["units"] = "mm"
-        checksums = {
-            take: {
-                key.removeprefix("input_sha256_"): str(value)
-                for key, value in group.attrs.items()
-                if key.startswith("input_sha256_")
-            }
-            for take, group in out.get("takes", {}).items()
+        merge_into(out, parts, subject, config_sha256, exclude)
+
+
+def merge_into(
+    out: h5py.File,
+    parts: Iterable[str | Path],
+    subject: str,
+    config_sha256: str,
+    exclude: Iterable[str] = (),
+) -> None:
+    """:func:`merge_parts` into an open (e.g. in-memory, :func:`hdf5_output`) file."""
+    for part in parts:
+        with h5py.File(part, "r") as src:
+            _merge_group(src, out, Path(part), frozenset(exclude))
+    out.attrs["format_version"] = FORMAT_VERSION
+    out.attrs["scan2morph_version"] = __version__
+    out.attrs["config_sha256"] = config_sha256
+    out.attrs["subject"] = subject
+    out.attrs["units"] = "mm"
+    checksums = {
+        take: {
+            key.removeprefix("input_sha256_"): str(value)
+            for key, value in group.attrs.items()
+            if key.startswith("input_sha256_")
         }
-        out.attrs["input_sha256"] = json.dumps(checksums, sort_keys=True)
+        for take, group in out.get("takes", {}).items()
+    }
+    out.attrs["input_sha256"] = json.dumps(checksums, sort_keys=True)
 
 
 #: Groups that every part of a failed take repeats (its failure record): merged once.
@@ -259,5 +270,10 @@ def read_parts(paths: Iterable[str | Path]) -> dict[str, np.ndarray]:
 def write_datasets(path: str | Path, datasets: Mapping[str, object]) -> None:
     """Add datasets to an existing part or store (written as :func:`write_part` writes them)."""
     with hdf5_output(path, "a") as h5:
-        for name, value in datasets.items():
-            _write_dataset(h5, name, value)
+        write_into(h5, datasets)
+
+
+def write_into(h5: h5py.File, datasets: Mapping[str, object]) -> None:
+    """Add datasets to an open file (as :func:`write_part` writes them)."""
+    for name, value in datasets.items():
+        _write_dataset(h5, name, value)

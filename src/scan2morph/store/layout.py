@@ -118,14 +118,19 @@ def describe_store(path: str | Path, layout: dict) -> int:
     int
         The number of datasets described.
     """
+    with hdf5_output(path, "a") as h5:
+        return describe(h5, layout)
+
+
+def describe(h5: h5py.File, layout: dict) -> int:
+    """:func:`describe_store` on an open (e.g. in-memory) file."""
     entries = [(_pattern_regex(e["path"]), e) for e in layout["datasets"]]
     found: list[str] = []
-    with hdf5_output(path, "a") as h5:
-        h5.visititems(lambda n, o: found.append("/" + n) if isinstance(o, h5py.Dataset) else None)
-        for name in found:
-            entry = next((e for rx, e in entries if rx.match(name)), None)
-            if entry is None:
-                continue
-            h5[name].attrs["units"] = str(entry.get("units", ""))
-            h5[name].attrs["description"] = " ".join(str(entry.get("description", "")).split())
+    h5.visititems(lambda n, o: found.append("/" + n) if isinstance(o, h5py.Dataset) else None)
+    for name in found:
+        entry = next((e for rx, e in entries if rx.match(name)), None)
+        if entry is None:
+            continue
+        h5[name].attrs["units"] = str(entry.get("units", ""))
+        h5[name].attrs["description"] = " ".join(str(entry.get("description", "")).split())
     return len(found)
