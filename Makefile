@@ -25,7 +25,7 @@ BPY_VERSION := 5.0.1
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-$(BPY_VERSION)-stamp
 export PYOPENGL_PLATFORM ?= osmesa
 
-.PHONY: setup run test bench lint dry-run clean
+.PHONY: setup run test test-fast bench lint dry-run clean
 
 setup: $(STAMP) $(BLENDER_STAMP)
 setup: $(VALIDATOR_STAMP)
@@ -72,6 +72,10 @@ dry-run: setup
 
 test: setup
 	$(BIN)/python -m pytest -q --durations=15
+
+# every test that runs no workflow (no Snakemake DAG, no SLURM): for quick checks while working
+test-fast: setup
+	$(BIN)/python -m pytest -q -m "not slow" --durations=10
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
