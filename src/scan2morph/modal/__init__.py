@@ -9,7 +9,8 @@ optionally after inserting identified expressions as "semantic" vectors.
 Units: mm, N, tonne, s (frequencies in Hz).
 """
 
-from scan2morph.modal.eigen import ModalBasis, ModalParams, modal_basis, solve_modes
+from scan2morph.modal.basis import ModalBasis, ModalParams, modal_basis
+from scan2morph.modal.eigen import solve_modes
 from scan2morph.modal.fem import (
     ShellMaterial,
     assemble,

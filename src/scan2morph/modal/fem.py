@@ -203,6 +203,8 @@ def assemble(
     *,
     element: str = "tria3dsg",
     mass: str = "consistent",
+    membrane_scale: float | ArrayLike = 1.0,
+    rotary_inertia: bool = True,
     source: str = "mesh",
 ) -> tuple[sp.csc_matrix, sp.csc_matrix]:
     """Assemble the shell stiffness and mass matrices of a triangle mesh.
@@ -225,6 +227,17 @@ def assemble(
         the regime of a face mesh (2-5 mm elements, 1 mm shell).
     mass : {"consistent", "lumped"}
         Mass matrix type. The drilling rotation has no inertia in either.
+    membrane_scale : float or (F,) float
+        Factor on the membrane (in-plane) stiffness ``A = E t / (1 - nu^2) ...`` of the
+        isotropic shell, uniform or per element, > 0; bending and transverse shear keep their
+        values. 1 is the plain shell; below 1 a membrane-softened shell, whose in-plane modes
+        (the skin sliding over the face) come earlier relative to its bending modes. The
+        drilling stiffness follows ``A66``.
+    rotary_inertia : bool
+        Keep the rotary inertia ``rho t^3 / 12`` of the rotations (True, the plain shell).
+        False gives the rotations no mass: the mass inner product then weighs translations
+        only, so that ``Q^T M v`` of a field given by its translations is the mass-weighted
+        least squares of those translations.
     source : str
         Label for error messages.
 
@@ -246,7 +259,6 @@ def assemble(
     20,000 faces of a 60,000-DOF model); the sparse assembly itself is vectorised.
     """
     import pyfe3d
-    from pyfe3d.shellprop_utils import isotropic_plate
 
     v, f = check_mesh(vertices, faces, source)
     mat = ShellMaterial() if material is None else material
@@ -267,6 +279,9 @@ def assemble(
         raise InputError(
             source, f"thickness_mm: expected positive values, face {bad[0]} has {t[bad[0]]}"
         )
+    ms = np.broadcast_to(np.asarray(membrane_scale, dtype=np.float64), t.shape)
+    if not np.all(np.isfinite(ms) & (ms > 0)):
+        raise InputError(source, "membrane_scale: expected positive values")
 
     if element == "tria3r":
         data, probe = pyfe3d.Tria3RData(), pyfe3d.Tria3RProbe()
@@ -282,20 +297,12 @@ def assemble(
     mr = np.zeros(n_faces * nm, dtype=pyfe3d.INT)
     mc = np.zeros(n_faces * nm, dtype=pyfe3d.INT)
     mv = np.zeros(n_faces * nm, dtype=np.float64)
-    values, prop_index = np.unique(t, return_inverse=True)
-    props = [
-        isotropic_plate(
-            thickness=float(h),
-            E=mat.youngs_modulus_mpa,
-            nu=mat.poisson_ratio,
-            rho=mat.density_t_per_mm3,
-        )
-        for h in values
-    ]
+    values, prop_index = np.unique(np.c_[t, ms], axis=0, return_inverse=True)
+    props = [_shell_prop(float(h), float(scale), mat, rotary_inertia) for h, scale in values]
     x = v.ravel()
     mtype = _MASS_TYPES[mass]
     cols = (DOF * f).tolist()
-    pidx = prop_index.tolist()
+    pidx = prop_index.ravel().tolist()
     # One element object is reused: its state is fully reset by the attribute writes and the
     # update_* calls below, and pyfe3d writes each element's block at init_k_* offsets.
     for i in range(n_faces):
@@ -313,6 +320,25 @@ def assemble(
     return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
 
 
+def _shell_prop(thickness: float, membrane_scale: float, mat: ShellMaterial, rotary: bool):
+    """pyfe3d's isotropic ShellProp with the membrane stiffness scaled and, if asked, no rotary
+    inertia."""
+    from pyfe3d.shellprop_utils import isotropic_plate
+
+    prop = isotropic_plate(
+        thickness=thickness,
+        E=mat.youngs_modulus_mpa,
+        nu=mat.poisson_ratio,
+        rho=mat.density_t_per_mm3,
+    )
+    if membrane_scale != 1.0:
+        for name in ("A11", "A12", "A16", "A22", "A26", "A66"):
+            setattr(prop, name, getattr(prop, name) * membrane_scale)
+    if not rotary:
+        prop.intrhoz2 = 0.0
+    return prop
+
+
 def _symmetric_csc(rows, cols, vals, n):
     """Sum COO triplets into a CSC matrix, symmetrised (element matrices are symmetric only
     to round-off). int32 indices make scipy's COO-to-CSR summation about twice as fast."""
@@ -321,6 +347,123 @@ def _symmetric_csc(rows, cols, vals, n):
     a = ((a + a.T) * 0.5).tocsc()
     a.sort_indices()
     return a
+
+
+def cotangent_laplacian(
+    vertices: ArrayLike, faces: ArrayLike, source: str = "mesh"
+) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+    """Cotangent Laplace-Beltrami stiffness and lumped (barycentric) vertex areas.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+    faces : (F, 3) int
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    L : (V, V) scipy.sparse.csr_matrix, symmetric positive semi-definite, dimensionless
+        ``f^T L f = integral of |grad f|^2`` for a piecewise linear ``f`` (the Dirichlet energy;
+        its null space on a connected mesh is the constants).
+    area : (V,) float, mm^2
+        A third of the area of each vertex's triangles.
+    """
+    v, f = check_mesh(vertices, faces, source)
+    n = v.shape[0]
+    rows, cols, vals = [], [], []
+    for k in range(3):  # the angle at corner k weighs the opposite edge (i, j)
+        i, j, o = f[:, (k + 1) % 3], f[:, (k + 2) % 3], f[:, k]
+        a, b = v[i] - v[o], v[j] - v[o]
+        cot = np.einsum("ij,ij->i", a, b) / np.linalg.norm(np.cross(a, b), axis=1)
+        rows += [i, j]
+        cols += [j, i]
+        vals += [-0.5 * cot, -0.5 * cot]
+    off = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    ).tocsr()
+    lap = (off - sp.diags(np.asarray(off.sum(axis=1)).ravel())).tocsr()
+    area = np.zeros(n)
+    np.add.at(area, f.ravel(), np.repeat(face_areas(v, f) / 3.0, 3))
+    return lap, area
+
+
+def skin_stiffness(
+    vertices: ArrayLike,
+    faces: ArrayLike,
+    tension_n_per_mm: float = 0.0,
+    foundation_n_per_mm3: float = 0.0,
+    tethered: ArrayLike | None = None,
+    tether_n_per_mm3: float = 0.0,
+    source: str = "mesh",
+) -> sp.csc_matrix:
+    """Stiffness of a pre-tensioned skin on an elastic foundation, on the shell's DOFs.
+
+    Three terms act on the translations ``u`` of each vertex (the rotations get nothing):
+
+    - isotropic skin tension ``T``: the geometric stiffness of a membrane under a uniform
+      in-plane stress resultant ``T``, ``T * integral of sum_a |grad u_a|^2`` over the surface
+      (``T L`` per axis, ``L`` the :func:`cotangent_laplacian`); it resists every component of a
+      short-wave motion alike and none of a rigid translation;
+    - a foundation under the skin resisting motion along the surface normal (the soft tissue
+      pressed against the skull): ``k_n * integral of (u . n)^2``;
+    - a tether of the skin to the bone where it does not slide (``tethered`` vertices):
+      ``k_t * integral of |u - (u . n) n|^2`` there.
+
+    The integrals use each vertex's lumped (barycentric) area and the neutral's vertex normals.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+    faces : (F, 3) int
+    tension_n_per_mm : float
+        ``T`` >= 0, N/mm.
+    foundation_n_per_mm3 : float
+        ``k_n`` >= 0, N/mm^3 (pressure per mm of normal motion).
+    tethered : (V,) bool, optional
+        Vertices tied tangentially; None: none.
+    tether_n_per_mm3 : float
+        ``k_t`` >= 0, N/mm^3.
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (6V, 6V) scipy.sparse.csc_matrix, symmetric positive semi-definite, N/mm
+    """
+    from scan2morph.geometry import vertex_normals
+
+    v, f = check_mesh(vertices, faces, source)
+    values = {"tension_n_per_mm": tension_n_per_mm, "foundation_n_per_mm3": foundation_n_per_mm3}
+    values["tether_n_per_mm3"] = tether_n_per_mm3
+    for name, value in values.items():
+        if not (np.isfinite(value) and value >= 0):
+            raise InputError(source, f"{name}: expected a number >= 0, got {value}")
+    n_v = v.shape[0]
+    lap, area = cotangent_laplacian(v, f, source)
+    lap = lap.tocoo()
+    rows = [DOF * lap.row + a for a in range(3)]
+    cols = [DOF * lap.col + a for a in range(3)]
+    vals = [float(tension_n_per_mm) * lap.data] * 3
+    normals = vertex_normals(v, f, fill=0.0)
+    nn = np.einsum("vi,vj->vij", normals, normals)
+    tie = np.zeros(n_v)
+    if tethered is not None:
+        mask = np.asarray(tethered)
+        if mask.shape != (n_v,) or mask.dtype != np.bool_:
+            raise InputError(source, f"tethered: expected a ({n_v},) bool mask, got {mask.shape}")
+        tie = float(tether_n_per_mm3) * mask
+    blocks = area[:, None, None] * (
+        float(foundation_n_per_mm3) * nn + tie[:, None, None] * (np.eye(3) - nn)
+    )
+    a_idx, b_idx = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    base = DOF * np.arange(n_v)[:, None, None]
+    rows.append((base + a_idx).ravel())
+    cols.append((base + b_idx).ravel())
+    vals.append(blocks.ravel())
+    return _symmetric_csc(
+        np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), DOF * n_v
+    )
 
 
 def fixed_dofs(vertex_mask: ArrayLike, components: str = "all") -> NDArray[np.int64]:
