@@ -163,13 +163,17 @@ def anchor_rows(subject: str, fields, valid, vertices, faces, outline) -> list[d
     return rows
 
 
-def realdata_case():
+def realdata_case(data_dir: str | None = None):
     """The real head's face cut and its test smile (tests/test_realdata.py), with the regions
     the presets need placed by measure from the nose tip as the real-data tests place them."""
     sys.path[:0] = [str(REPO / "tests"), str(REPO)]
+    import test_realdata
     import trimesh
     from test_realdata import _smile, load_head
 
+    if data_dir:  # the scan elsewhere than ../shared/data next to the repository
+        test_realdata.GLB = Path(data_dir) / test_realdata.GLB.name
+        test_realdata.COLOR_MAP = Path(data_dir) / test_realdata.COLOR_MAP.name
     head = load_head()
     pos, inverse = np.unique(head.vertices, axis=0, return_inverse=True)
     faces = inverse.reshape(-1)[head.faces]
@@ -248,6 +252,9 @@ def main() -> None:
     ap.add_argument("--held", nargs="*", default=[], help="held-out subjects")
     ap.add_argument("--configs", nargs="+", default=list(VARIANTS))
     ap.add_argument("--realdata", action="store_true", help="also the real head's test smile")
+    ap.add_argument(
+        "--data", help="folder of LeePerrySmith.glb (default: tests/test_realdata.py's)"
+    )
     ap.add_argument("--config", default=str(REPO / "config" / "config.yaml"))
     ap.add_argument("--tsv", help="write every row here")
     args = ap.parse_args()
@@ -266,7 +273,7 @@ def main() -> None:
         for name in args.configs:
             rows += subject_rows(case, cfg, name, VARIANTS[name])
     if args.realdata:
-        real = realdata_case()
+        real = realdata_case(args.data)
         rim_fields = {"smile": real["smile"]}
         from scan2morph.modal.fem import boundary_vertices
 

@@ -24,8 +24,8 @@ from numpy.typing import ArrayLike, NDArray
 from scan2morph.errors import InputError
 from scan2morph.modal import fem
 
-#: Relative size of a QR pivot below which a basis field adds nothing new to the ones before it.
-RANK_TOL = 1e-10
+#: Share of a basis field's norm below which what it adds to the ones before it counts as nothing.
+RANK_TOL = 1e-8
 
 
 def laplace_beltrami(
@@ -159,9 +159,10 @@ def span_curve(
 ) -> SpanCurve:
     """Least squares of a field on the first K basis fields, for each K, and what it leaves.
 
-    One QR factorisation of the basis (restricted to the vertices ``where``) gives the fits on
-    every leading subset at once. A basis field that adds nothing new to the ones before it
-    (zero on the chosen vertices, or dependent) contributes nothing.
+    One Gram-Schmidt pass over the basis (restricted to the vertices ``where``, each field
+    orthogonalised twice against the kept ones) gives the fits on every leading subset at once.
+    A basis field that adds nothing new to the ones before it (zero on the chosen vertices, or
+    dependent: less than :data:`RANK_TOL` of its norm left) is skipped.
 
     Parameters
     ----------
@@ -196,12 +197,11 @@ def span_curve(
     finite = np.isfinite(v).all(axis=1)
     w = finite if where is None else np.asarray(where, dtype=bool) & finite
     rim = np.zeros(len(v), bool) if outline is None else np.asarray(outline, dtype=bool)
-    a = q[:, w].reshape(q.shape[0], -1).T
+    a = q[:, w].reshape(q.shape[0], 3 * int(w.sum())).T
     b = v[w].ravel()
-    qq, r = np.linalg.qr(a)
-    diag = np.abs(np.diag(r))
-    useful = diag > RANK_TOL * max(float(diag.max(initial=0.0)), np.finfo(float).tiny)
-    c = np.where(useful, qq.T @ b, 0.0)
+    qq, c = _orthonormal_prefix(a), np.zeros(q.shape[0])
+    useful = np.any(qq != 0.0, axis=0)
+    c[useful] = qq[:, useful].T @ b
     out = np.empty((4, ks_arr.size))
     e = np.zeros_like(v)
     for i, kk in enumerate(ks_arr):
@@ -209,3 +209,21 @@ def span_curve(
         out[:, i] = residual_split(e, normals, w, rim)
     field_rms = residual_split(np.where(w[:, None], v, 0.0), normals, w, rim)[0]
     return SpanCurve(ks_arr, *out, field_mm=field_rms)
+
+
+def _orthonormal_prefix(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Columns ``j`` orthonormal and spanning, with the columns before them, ``a[:, :j + 1]``;
+    a column that adds less than :data:`RANK_TOL` of its norm is zero."""
+    out = np.zeros_like(a)
+    kept = []
+    for j in range(a.shape[1]):
+        x = a[:, j].copy()
+        norm0 = float(np.linalg.norm(x))
+        for _ in range(2):
+            if kept:
+                x -= out[:, kept] @ (out[:, kept].T @ x)
+        norm = float(np.linalg.norm(x))
+        if norm0 > 0 and norm > RANK_TOL * norm0:
+            out[:, j] = x / norm
+            kept.append(j)
+    return out
