@@ -31,6 +31,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -61,6 +62,7 @@ VARIANTS: dict[str, dict] = {
     "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0},
     "skin_clamped_still": {"preset": "skin", "fixed_outline": "still"},
     "skin_stiff_upper": {"preset": "skin", "stiff_factor": 3.0, "youngs_modulus_mpa": 1.0},
+    "skin_vertex_mass": {"preset": "skin", "mass": "vertex"},
 }
 
 
@@ -251,6 +253,9 @@ def main() -> None:
     ap.add_argument("--tune", nargs="*", default=[], help="subjects the physics was chosen on")
     ap.add_argument("--held", nargs="*", default=[], help="held-out subjects")
     ap.add_argument("--configs", nargs="+", default=list(VARIANTS))
+    ap.add_argument(
+        "--extra", help='more configurations, JSON: {"name": {"preset": ..., key: value}}'
+    )
     ap.add_argument("--realdata", action="store_true", help="also the real head's test smile")
     ap.add_argument(
         "--data", help="folder of LeePerrySmith.glb (default: tests/test_realdata.py's)"
@@ -259,6 +264,10 @@ def main() -> None:
     ap.add_argument("--tsv", help="write every row here")
     args = ap.parse_args()
     cfg = yaml.safe_load(Path(args.config).read_text())
+    if args.extra:
+        extra = json.loads(args.extra)
+        VARIANTS.update(extra)
+        args.configs = [*args.configs, *extra]
     cfg["modal"].setdefault("semantic_labels", [])
     from scan2morph.store import paths
 

@@ -254,3 +254,53 @@ def test_the_stage_records_its_preset(template, preset):
         np.mean(np.sum(smile**2, axis=1))
     )
     assert left < (0.8 if preset == "skin" else 1.0)
+
+
+def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
+    """mass="vertex": the shell's mass shared equally by the vertices, so q = Q^T M v rebuilds
+    exactly what least squares on the same modes does, at every K (the consistent mass weighs
+    by area and differs on an uneven mesh)."""
+    v, f = plate
+    v = v.copy()
+    v[:, 0] = A_MM * (v[:, 0] / A_MM) ** 1.6  # uneven spacing: dense near x = 0
+    params = ModalParams(**(vars(membrane_params(15)) | {"mass": "vertex"}))
+    basis = modal_basis(v, f, params, fixed=np.zeros(len(v), bool))
+    m_diag = basis.mass.diagonal().reshape(-1, 6)
+    total = RHO * H_MM * cotangent_laplacian(v, f)[1].sum()
+    assert_allclose(m_diag[:, :3], total / len(v), rtol=1e-12) and not m_diag[:, 3:].any()
+    rng = np.random.default_rng(2)
+    field = np.column_stack([np.cos(v[:, 0] / 30.0 + c) for c in rng.normal(size=3)])
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    ks = [1, 4, 9, 15]
+    ls = span_curve(basis.modes, field, ks, normals)
+    q = project(basis, field)
+    everywhere = np.ones(len(v), bool)
+    stored = [
+        residual_split(field - reconstruct(basis, q, k), normals, everywhere, ~everywhere)[0]
+        for k in ks
+    ]
+    assert_allclose(stored, ls.total_mm, rtol=1e-8)
+    consistent = modal_basis(v, f, membrane_params(15), fixed=np.zeros(len(v), bool))
+    qc = project(consistent, field)
+    err = residual_split(field - reconstruct(consistent, qc, 9), normals, everywhere, ~everywhere)
+    lsc = span_curve(consistent.modes, field, [9], normals).total_mm[0]
+    assert err[0] > 1.001 * lsc
+
+
+def test_reconstruction_figure_plots_the_share_left_and_names_the_preset():
+    from scan2morph.render.modal_figures import fig_reconstruction
+
+    d = np.zeros((10, 3))
+    d[:, 0] = 2.0  # RMS 2 mm
+    store = {
+        paths.modal("reconstruction_k"): np.array([1, 10, 100]),
+        paths.modal("preset"): "skin",
+        paths.expression("sm1", "displacement"): d,
+        paths.expression("sm1", "reconstruction_rms_mm"): np.array([1.6, 1.0, 0.4]),
+        paths.expression("sm1", "reconstruction_normal_rms_mm"): np.array([0.6, 0.4, 0.2]),
+    }
+    fig = fig_reconstruction(store)
+    ax = fig.axes[0]
+    assert_allclose(ax.lines[0].get_ydata(), [0.8, 0.5, 0.2])
+    assert_allclose(ax.lines[1].get_ydata(), [0.3, 0.2, 0.1])
+    assert "preset skin" in ax.get_title() and "share" in ax.get_ylabel()

@@ -36,7 +36,8 @@ class ModalParams:
         Fixed vertices held in all six DOFs (paper) or in translation only.
     element : {"tria3dsg", "tria3r"}
         pyfe3d shell triangle; see :func:`fem.assemble`.
-    mass : {"consistent", "lumped"}
+    mass : {"consistent", "lumped", "vertex"}
+        See :func:`fem.assemble`.
     method : {"block", "arpack", "dense"}
         Eigensolver, see :func:`solve_modes`.
     threads : int

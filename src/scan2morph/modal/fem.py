@@ -28,7 +28,7 @@ from scan2morph.errors import InputError
 DOF = 6
 
 _ELEMENTS = ("tria3r", "tria3dsg")
-_MASS_TYPES = {"consistent": 0, "lumped": 1}
+_MASS_TYPES = {"consistent": 0, "lumped": 1, "vertex": 1}
 
 
 @dataclass(frozen=True)
@@ -225,8 +225,12 @@ def assemble(
         modes and converges under refinement, while Tria3R is 3-5 % stiff and gets worse
         from 16 x 16 to 24 x 24: it locks when elements are a few thicknesses long, which is
         the regime of a face mesh (2-5 mm elements, 1 mm shell).
-    mass : {"consistent", "lumped"}
-        Mass matrix type. The drilling rotation has no inertia in either.
+    mass : {"consistent", "lumped", "vertex"}
+        Mass matrix type. The drilling rotation has no inertia in any. ``"vertex"``: the
+        shell's total mass shared equally by the vertices (translations only, no rotary
+        inertia), so that the mass inner product weighs every vertex alike, as the
+        per-vertex RMS of a reconstruction does (the modes then depend on where the mesh is
+        dense).
     membrane_scale : float or (F,) float
         Factor on the membrane (in-plane) stiffness ``A = E t / (1 - nu^2) ...`` of the
         isotropic shell, uniform or per element, > 0; bending and transverse shear keep their
@@ -317,7 +321,20 @@ def assemble(
     if mtype == 1 and element == "tria3r":  # its lumped mass fills 90 entries per element
         used = (np.arange(n_faces * nm) % nm) < 90
         mr, mc, mv = mr[used], mc[used], mv[used]
+    if mass == "vertex":
+        total = mat.density_t_per_mm3 * float(np.sum(t * face_areas(v, f)))
+        return _symmetric_csc(kr, kc, kv, n_dof), _vertex_mass(total, f, v.shape[0])
     return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
+
+
+def _vertex_mass(total: float, faces: NDArray[np.int64], n_vertices: int) -> sp.csc_matrix:
+    """A mass ``total`` (tonne) shared equally by the translations of the vertices faces use."""
+    used = np.zeros(n_vertices, dtype=bool)
+    used[faces.ravel()] = True
+    diag = np.zeros(DOF * n_vertices)
+    for a in range(3):
+        diag[a::DOF] = np.where(used, total / used.sum(), 0.0)
+    return sp.diags(diag).tocsc()
 
 
 def _shell_prop(thickness: float, membrane_scale: float, mat: ShellMaterial, rotary: bool):
