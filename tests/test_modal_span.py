@@ -304,3 +304,16 @@ def test_reconstruction_figure_plots_the_share_left_and_names_the_preset():
     assert_allclose(ax.lines[0].get_ydata(), [0.8, 0.5, 0.2])
     assert_allclose(ax.lines[1].get_ydata(), [0.3, 0.2, 0.1])
     assert "preset skin" in ax.get_title() and "share" in ax.get_ylabel()
+
+
+def test_report_names_the_preset():
+    import h5py
+
+    from scan2morph.report import sections
+
+    with h5py.File("modal.h5", "w", driver="core", backing_store=False) as h5:
+        h5[paths.modal("frequencies_hz")] = [10.0, 20.0]
+        blocks = sections.modal(h5, 2)
+        assert "preset" not in str(blocks[0])
+        h5.create_dataset(paths.modal("preset"), data="paper", dtype=h5py.string_dtype())
+        assert "physics: preset paper" in str(sections.modal(h5, 2)[0])
