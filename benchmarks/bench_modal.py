@@ -71,8 +71,10 @@ def case_model(vertices, faces, physics: str):
         k_mat, m_mat = assemble(vertices, faces, 1.0)
         return k_mat, m_mat, fixed_dofs(boundary_vertices(faces), "all"), 0.0
     p = PRESETS["skin"]
-    mat = ShellMaterial(p["youngs_modulus_mpa"], p["poisson_ratio"], p["density_t_per_mm3"])
-    k_mat, m_mat = assemble(vertices, faces, p["thickness_mm"], mat, rotary_inertia=False)
+    mat = ShellMaterial(
+        p["youngs_modulus_mpa"], p["poisson_ratio"], p["density_t_per_mm3"], rotary_inertia=False
+    )
+    k_mat, m_mat = assemble(vertices, faces, p["thickness_mm"], mat)
     upper = vertices[:, 1] > 0
     k_mat = k_mat + skin_stiffness(
         vertices,

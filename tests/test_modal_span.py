@@ -38,8 +38,7 @@ def membrane_params(n_modes: int, foundation: float = 0.0) -> ModalParams:
         n_modes=n_modes,
         thickness_mm=H_MM,
         upper_thickness_factor=1.0,
-        material=ShellMaterial(1e-4, 0.3, RHO),
-        rotary_inertia=False,
+        material=ShellMaterial(1e-4, 0.3, RHO, rotary_inertia=False),
         tension_n_per_mm=T_N_PER_MM,
         foundation_n_per_mm3=foundation,
         method="dense",
@@ -203,7 +202,7 @@ def test_presets_resolve_and_overrides_win():
     skin = modal.Params.from_config(SECTION, TEMPLATE)  # the default
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
     assert skin.fixed_outline == "none" and skin.tether_region == "stable"
-    assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.rotary_inertia
+    assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
     over = modal.Params.from_config(
         SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None}, TEMPLATE
     )

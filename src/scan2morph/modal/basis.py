@@ -44,11 +44,6 @@ class ModalParams:
         Threads for the eigensolver's triangular solves.
     seed : int
         Seed of the eigensolver's random start block.
-    membrane_scale : float
-        Factor on the shell's membrane (in-plane) stiffness, see :func:`fem.assemble`.
-    rotary_inertia : bool
-        Give the rotations their inertia ``rho t^3 / 12`` (the plain shell); False makes the
-        mass inner product, and so ``q = Q^T M v``, weigh translations only.
     tension_n_per_mm : float
         Isotropic skin tension ``T``, N/mm (:func:`fem.skin_stiffness`); 0: none.
     foundation_n_per_mm3 : float
@@ -67,8 +62,6 @@ class ModalParams:
     method: str = "block"
     threads: int = 2
     seed: int = 0
-    membrane_scale: float = 1.0
-    rotary_inertia: bool = True
     tension_n_per_mm: float = 0.0
     foundation_n_per_mm3: float = 0.0
     tether_n_per_mm3: float = 0.0
@@ -197,30 +190,7 @@ def modal_basis(
     if not free_model:
         _check_every_part_held(f, n_v, boundary, source)
     thickness = fem.thickness_map(f, p.thickness_mm, upper_face, p.upper_thickness_factor, source)
-    k_mat, m_mat = fem.assemble(
-        v,
-        f,
-        thickness,
-        p.material,
-        element=p.element,
-        mass=p.mass,
-        membrane_scale=p.membrane_scale,
-        rotary_inertia=p.rotary_inertia,
-        source=source,
-    )
-    if p.has_skin:
-        k_mat = (
-            k_mat
-            + fem.skin_stiffness(
-                v,
-                f,
-                p.tension_n_per_mm,
-                p.foundation_n_per_mm3,
-                tethered,
-                p.tether_n_per_mm3,
-                source,
-            )
-        ).tocsc()
+    k_mat, m_mat = _matrices(v, f, thickness, p, tethered, source)
     unused = np.ones(n_v, dtype=bool)
     unused[f.ravel()] = False
     fixed = boundary | unused
@@ -243,6 +213,19 @@ def modal_basis(
     )
     names = tuple(f"mode_{i + 1:03d}" for i in range(p.n_modes))
     return ModalBasis(freqs, vecs, m_mat, k_mat, thickness, fixed, names)
+
+
+def _matrices(v, f, thickness, p: ModalParams, tethered, source: str):
+    """Stiffness (shell plus the skin terms, if any) and mass of the model, N/mm and tonne."""
+    k_mat, m_mat = fem.assemble(
+        v, f, thickness, p.material, element=p.element, mass=p.mass, source=source
+    )
+    if p.has_skin:
+        skin = fem.skin_stiffness(
+            v, f, p.tension_n_per_mm, p.foundation_n_per_mm3, tethered, p.tether_n_per_mm3, source
+        )
+        k_mat = (k_mat + skin).tocsc()
+    return k_mat, m_mat
 
 
 def _free_shift(k_mat: sp.spmatrix, m_mat: sp.spmatrix) -> float:

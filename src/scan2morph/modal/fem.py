@@ -43,14 +43,32 @@ class ShellMaterial:
         Poisson's ratio nu, in (-1, 0.5). Default 0.3.
     density_t_per_mm3 : float
         Mass density rho, tonne/mm^3. Default: steel, 7.85e-9.
+    membrane_scale : float
+        Factor on the membrane (in-plane) stiffness ``A = E t / (1 - nu^2) ...`` of the shell,
+        > 0; bending and transverse shear keep their values. 1 (default) is the plain shell;
+        below 1 a membrane-softened shell, whose in-plane modes (the skin sliding over the
+        face) come earlier relative to its bending modes. The drilling stiffness follows
+        ``A66``.
+    rotary_inertia : bool
+        Keep the rotary inertia ``rho t^3 / 12`` of the rotations (True, the plain shell).
+        False gives the rotations no mass: the mass inner product then weighs translations
+        only, so that ``Q^T M v`` of a field given by its translations is the mass-weighted
+        least squares of those translations.
     """
 
     youngs_modulus_mpa: float = 210000.0
     poisson_ratio: float = 0.3
     density_t_per_mm3: float = 7.85e-9
+    membrane_scale: float = 1.0
+    rotary_inertia: bool = True
 
     def check(self, source: str) -> None:
-        """Raise :class:`InputError` unless E > 0, rho > 0 and -1 < nu < 0.5."""
+        """Raise :class:`InputError` unless E > 0, rho > 0, -1 < nu < 0.5 and the membrane
+        scale > 0."""
+        if not (np.isfinite(self.membrane_scale) and self.membrane_scale > 0):
+            raise InputError(
+                source, f"membrane_scale: expected a positive number, got {self.membrane_scale}"
+            )
         e, nu, rho = self.youngs_modulus_mpa, self.poisson_ratio, self.density_t_per_mm3
         if not (np.isfinite(e) and e > 0):
             raise InputError(source, f"youngs_modulus_mpa: expected a positive number, got {e}")
@@ -203,8 +221,6 @@ def assemble(
     *,
     element: str = "tria3dsg",
     mass: str = "consistent",
-    membrane_scale: float | ArrayLike = 1.0,
-    rotary_inertia: bool = True,
     source: str = "mesh",
 ) -> tuple[sp.csc_matrix, sp.csc_matrix]:
     """Assemble the shell stiffness and mass matrices of a triangle mesh.
@@ -216,7 +232,7 @@ def assemble(
     thickness_mm : float or (F,) float, mm
         Shell thickness, uniform or per element.
     material : ShellMaterial, optional
-        Default: steel (E = 210000 MPa, nu = 0.3, rho = 7.85e-9 t/mm^3).
+        Default: steel (E = 210000 MPa, nu = 0.3, rho = 7.85e-9 t/mm^3), plain shell.
     element : {"tria3dsg", "tria3r"}
         pyfe3d triangle: ``Tria3DSG`` (discrete shear gap transverse shear, the default) or
         ``Tria3R`` (one-point transverse shear with a stabilisation factor that depends on
@@ -231,17 +247,6 @@ def assemble(
         inertia), so that the mass inner product weighs every vertex alike, as the
         per-vertex RMS of a reconstruction does (the modes then depend on where the mesh is
         dense).
-    membrane_scale : float or (F,) float
-        Factor on the membrane (in-plane) stiffness ``A = E t / (1 - nu^2) ...`` of the
-        isotropic shell, uniform or per element, > 0; bending and transverse shear keep their
-        values. 1 is the plain shell; below 1 a membrane-softened shell, whose in-plane modes
-        (the skin sliding over the face) come earlier relative to its bending modes. The
-        drilling stiffness follows ``A66``.
-    rotary_inertia : bool
-        Keep the rotary inertia ``rho t^3 / 12`` of the rotations (True, the plain shell).
-        False gives the rotations no mass: the mass inner product then weighs translations
-        only, so that ``Q^T M v`` of a field given by its translations is the mass-weighted
-        least squares of those translations.
     source : str
         Label for error messages.
 
@@ -262,8 +267,6 @@ def assemble(
     Python loop over faces calling compiled methods (about 20 us per face, 0.5 s for the
     20,000 faces of a 60,000-DOF model); the sparse assembly itself is vectorised.
     """
-    import pyfe3d
-
     v, f = check_mesh(vertices, faces, source)
     mat = ShellMaterial() if material is None else material
     mat.check(source)
@@ -271,21 +274,35 @@ def assemble(
         raise InputError(source, f"element: expected one of {_ELEMENTS}, got {element!r}")
     if mass not in _MASS_TYPES:
         raise InputError(source, f"mass: expected one of {tuple(_MASS_TYPES)}, got {mass!r}")
+    t = _thickness(thickness_mm, f.shape[0], source)
+    kr, kc, kv, mr, mc, mv = _element_matrices(v, f, t, mat, element, mass)
+    n_dof = DOF * v.shape[0]
+    if mass == "vertex":
+        total = mat.density_t_per_mm3 * float(np.sum(t * face_areas(v, f)))
+        return _symmetric_csc(kr, kc, kv, n_dof), _vertex_mass(total, f, v.shape[0])
+    return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
+
+
+def _thickness(thickness_mm, n_faces: int, source: str) -> NDArray[np.float64]:
+    """(F,) positive thickness from a float or a per-face array, mm."""
     t = np.asarray(thickness_mm, dtype=np.float64)
     if t.ndim == 0:
-        t = np.full(f.shape[0], float(t))
-    if t.shape != (f.shape[0],):
+        t = np.full(n_faces, float(t))
+    if t.shape != (n_faces,):
         raise InputError(
-            source, f"thickness_mm: expected a float or shape ({f.shape[0]},), got {t.shape}"
+            source, f"thickness_mm: expected a float or shape ({n_faces},), got {t.shape}"
         )
     bad = np.flatnonzero(~(np.isfinite(t) & (t > 0)))
     if bad.size:
         raise InputError(
             source, f"thickness_mm: expected positive values, face {bad[0]} has {t[bad[0]]}"
         )
-    ms = np.broadcast_to(np.asarray(membrane_scale, dtype=np.float64), t.shape)
-    if not np.all(np.isfinite(ms) & (ms > 0)):
-        raise InputError(source, "membrane_scale: expected positive values")
+    return t
+
+
+def _element_matrices(v, f, t, mat: ShellMaterial, element: str, mass: str):
+    """COO triplets of every element's stiffness and mass (pyfe3d, one element at a time)."""
+    import pyfe3d
 
     if element == "tria3r":
         data, probe = pyfe3d.Tria3RData(), pyfe3d.Tria3RProbe()
@@ -294,15 +311,15 @@ def assemble(
         data, probe = pyfe3d.Tria3DSGData(), pyfe3d.Tria3DSGProbe()
         elem = pyfe3d.Tria3DSG(probe)
     nk, nm = data.KC0_SPARSE_SIZE, data.M_SPARSE_SIZE
-    n_faces, n_dof = f.shape[0], DOF * v.shape[0]
+    n_faces = f.shape[0]
     kr = np.zeros(n_faces * nk, dtype=pyfe3d.INT)
     kc = np.zeros(n_faces * nk, dtype=pyfe3d.INT)
     kv = np.zeros(n_faces * nk, dtype=np.float64)
     mr = np.zeros(n_faces * nm, dtype=pyfe3d.INT)
     mc = np.zeros(n_faces * nm, dtype=pyfe3d.INT)
     mv = np.zeros(n_faces * nm, dtype=np.float64)
-    values, prop_index = np.unique(np.c_[t, ms], axis=0, return_inverse=True)
-    props = [_shell_prop(float(h), float(scale), mat, rotary_inertia) for h, scale in values]
+    values, prop_index = np.unique(t, return_inverse=True)
+    props = [_shell_prop(float(h), mat) for h in values]
     x = v.ravel()
     mtype = _MASS_TYPES[mass]
     cols = (DOF * f).tolist()
@@ -321,10 +338,7 @@ def assemble(
     if mtype == 1 and element == "tria3r":  # its lumped mass fills 90 entries per element
         used = (np.arange(n_faces * nm) % nm) < 90
         mr, mc, mv = mr[used], mc[used], mv[used]
-    if mass == "vertex":
-        total = mat.density_t_per_mm3 * float(np.sum(t * face_areas(v, f)))
-        return _symmetric_csc(kr, kc, kv, n_dof), _vertex_mass(total, f, v.shape[0])
-    return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
+    return kr, kc, kv, mr, mc, mv
 
 
 def _vertex_mass(total: float, faces: NDArray[np.int64], n_vertices: int) -> sp.csc_matrix:
@@ -337,9 +351,8 @@ def _vertex_mass(total: float, faces: NDArray[np.int64], n_vertices: int) -> sp.
     return sp.diags(diag).tocsc()
 
 
-def _shell_prop(thickness: float, membrane_scale: float, mat: ShellMaterial, rotary: bool):
-    """pyfe3d's isotropic ShellProp with the membrane stiffness scaled and, if asked, no rotary
-    inertia."""
+def _shell_prop(thickness: float, mat: ShellMaterial):
+    """pyfe3d's isotropic ShellProp with the material's membrane scale and rotary inertia."""
     from pyfe3d.shellprop_utils import isotropic_plate
 
     prop = isotropic_plate(
@@ -348,10 +361,10 @@ def _shell_prop(thickness: float, membrane_scale: float, mat: ShellMaterial, rot
         nu=mat.poisson_ratio,
         rho=mat.density_t_per_mm3,
     )
-    if membrane_scale != 1.0:
+    if mat.membrane_scale != 1.0:
         for name in ("A11", "A12", "A16", "A22", "A26", "A66"):
-            setattr(prop, name, getattr(prop, name) * membrane_scale)
-    if not rotary:
+            setattr(prop, name, getattr(prop, name) * mat.membrane_scale)
+    if not mat.rotary_inertia:
         prop.intrhoz2 = 0.0
     return prop
 
