@@ -129,12 +129,21 @@ def test_skin_membrane_modes_match_membrane_theory(skin_plate):
     assert_allclose(freqs[3:18], exact, rtol=0.02)
 
 
-def test_a_foundation_lifts_only_the_normal_modes(plate):
+@pytest.mark.parametrize("on_bone", [False, True])
+def test_a_foundation_lifts_only_the_normal_modes(plate, on_bone):
     """k_n under the skin: omega^2 rho h = T k^2 + k_n for motion along the plate's normal (z);
-    the in-plane modes keep their frequencies."""
+    the in-plane modes keep their frequencies. On bone (tethered vertices, no tangential tie)
+    half of it given as the bone's normal stiffness lifts them alike."""
     v, f = plate
     kn = T_N_PER_MM * (np.pi / A_MM) ** 2 * 3.0  # between the (1,1) and (2,0) in-plane modes
-    basis = modal_basis(v, f, membrane_params(14, kn), fixed=np.zeros(len(v), bool))
+    params = membrane_params(14, kn)
+    tethered = None
+    if on_bone:
+        params = ModalParams(
+            **(vars(params) | {"foundation_n_per_mm3": kn / 2, "tether_normal_n_per_mm3": kn / 2})
+        )
+        tethered = np.ones(len(v), bool)
+    basis = modal_basis(v, f, params, fixed=np.zeros(len(v), bool), tethered=tethered)
     modes = basis.modes
     along_z = np.sum(modes[:, :, 2] ** 2, axis=1) / np.sum(modes**2, axis=(1, 2))
     normal, plane = basis.frequencies_hz[along_z > 0.99], basis.frequencies_hz[along_z < 0.01]
@@ -184,6 +193,8 @@ def test_skin_stiffness_bad_input(plate):
         skin_stiffness(v, f, 1.0, float("nan"))
     with pytest.raises(InputError, match="tethered"):
         skin_stiffness(v, f, 1.0, 0.0, np.ones(3, bool), 1.0)
+    with pytest.raises(InputError, match="tether_normal_n_per_mm3"):
+        skin_stiffness(v, f, 1.0, 0.0, None, 0.0, -0.5)
 
 
 # --- presets and the store ---------------------------------------------------------------
@@ -203,6 +214,7 @@ def test_presets_resolve_and_overrides_win():
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
     assert skin.fixed_outline == "none" and skin.tether_region == "stable"
     assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
+    assert skin.modal.tether_normal_n_per_mm3 == 0.01
     over = modal.Params.from_config(
         SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None}, TEMPLATE
     )

@@ -50,6 +50,9 @@ class ModalParams:
         Stiffness of the tissue under the skin against normal motion, N/mm^3; 0: none.
     tether_n_per_mm3 : float
         Tangential tie of the skin to the bone on the tethered vertices, N/mm^3; 0: none.
+    tether_normal_n_per_mm3 : float
+        The bone's resistance to normal motion on the tethered vertices, added to the
+        foundation there, N/mm^3; 0: none.
     """
 
     n_modes: int = 100
@@ -65,15 +68,13 @@ class ModalParams:
     tension_n_per_mm: float = 0.0
     foundation_n_per_mm3: float = 0.0
     tether_n_per_mm3: float = 0.0
+    tether_normal_n_per_mm3: float = 0.0
 
     @property
     def has_skin(self) -> bool:
         """Whether any skin term (tension, foundation, tether) adds to the shell stiffness."""
-        return (self.tension_n_per_mm, self.foundation_n_per_mm3, self.tether_n_per_mm3) != (
-            0.0,
-            0.0,
-            0.0,
-        )
+        terms = (self.tension_n_per_mm, self.foundation_n_per_mm3, self.tether_n_per_mm3)
+        return any(terms) or bool(self.tether_normal_n_per_mm3)
 
 
 @dataclass(frozen=True)
@@ -222,7 +223,14 @@ def _matrices(v, f, thickness, p: ModalParams, tethered, source: str):
     )
     if p.has_skin:
         skin = fem.skin_stiffness(
-            v, f, p.tension_n_per_mm, p.foundation_n_per_mm3, tethered, p.tether_n_per_mm3, source
+            v,
+            f,
+            p.tension_n_per_mm,
+            p.foundation_n_per_mm3,
+            tethered,
+            p.tether_n_per_mm3,
+            p.tether_normal_n_per_mm3,
+            source,
         )
         k_mat = (k_mat + skin).tocsc()
     return k_mat, m_mat

@@ -425,6 +425,7 @@ def skin_stiffness(
     foundation_n_per_mm3: float = 0.0,
     tethered: ArrayLike | None = None,
     tether_n_per_mm3: float = 0.0,
+    tether_normal_n_per_mm3: float = 0.0,
     source: str = "mesh",
 ) -> sp.csc_matrix:
     """Stiffness of a pre-tensioned skin on an elastic foundation, on the shell's DOFs.
@@ -438,7 +439,8 @@ def skin_stiffness(
     - a foundation under the skin resisting motion along the surface normal (the soft tissue
       pressed against the skull): ``k_n * integral of (u . n)^2``;
     - a tether of the skin to the bone where it does not slide (``tethered`` vertices):
-      ``k_t * integral of |u - (u . n) n|^2`` there.
+      ``k_t * integral of |u - (u . n) n|^2`` there, and the bone's extra resistance to motion
+      along the normal, ``k_b * integral of (u . n)^2`` there.
 
     The integrals use each vertex's lumped (barycentric) area and the neutral's vertex normals.
 
@@ -454,6 +456,8 @@ def skin_stiffness(
         Vertices tied tangentially; None: none.
     tether_n_per_mm3 : float
         ``k_t`` >= 0, N/mm^3.
+    tether_normal_n_per_mm3 : float
+        ``k_b`` >= 0, N/mm^3, added to ``k_n`` on the tethered vertices.
     source : str
         Label for error messages.
 
@@ -466,6 +470,7 @@ def skin_stiffness(
     v, f = check_mesh(vertices, faces, source)
     values = {"tension_n_per_mm": tension_n_per_mm, "foundation_n_per_mm3": foundation_n_per_mm3}
     values["tether_n_per_mm3"] = tether_n_per_mm3
+    values["tether_normal_n_per_mm3"] = tether_normal_n_per_mm3
     for name, value in values.items():
         if not (np.isfinite(value) and value >= 0):
             raise InputError(source, f"{name}: expected a number >= 0, got {value}")
@@ -477,14 +482,15 @@ def skin_stiffness(
     vals = [float(tension_n_per_mm) * lap.data] * 3
     normals = vertex_normals(v, f, fill=0.0)
     nn = np.einsum("vi,vj->vij", normals, normals)
-    tie = np.zeros(n_v)
+    tie, press = np.zeros(n_v), np.full(n_v, float(foundation_n_per_mm3))
     if tethered is not None:
         mask = np.asarray(tethered)
         if mask.shape != (n_v,) or mask.dtype != np.bool_:
             raise InputError(source, f"tethered: expected a ({n_v},) bool mask, got {mask.shape}")
         tie = float(tether_n_per_mm3) * mask
+        press += float(tether_normal_n_per_mm3) * mask
     blocks = area[:, None, None] * (
-        float(foundation_n_per_mm3) * nn + tie[:, None, None] * (np.eye(3) - nn)
+        press[:, None, None] * nn + tie[:, None, None] * (np.eye(3) - nn)
     )
     a_idx, b_idx = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
     base = DOF * np.arange(n_v)[:, None, None]

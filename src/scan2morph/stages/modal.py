@@ -42,7 +42,8 @@ log = logging.getLogger("scan2morph")
 #: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation, free at its outline: a
 #: soft 1 mm shell (E = 0.01 MPa, no rotary inertia) under an isotropic tension of 1 N/mm, on
 #: tissue that resists normal motion (0.005 N/mm^3) and, where the skin lies on bone (the stable
-#: forehead, nose ridge and temples), also sliding (0.003 N/mm^3). Chosen by
+#: forehead, nose ridge and temples), sliding (0.003 N/mm^3) and normal motion more (another
+#: 0.01 N/mm^3). Chosen by
 #: ``benchmarks/bench_modal_span.py`` (README, "Modal analysis").
 PRESETS: dict[str, dict] = {
     "paper": {
@@ -59,6 +60,7 @@ PRESETS: dict[str, dict] = {
         "tension_n_per_mm": 0.0,
         "foundation_n_per_mm3": 0.0,
         "tether_n_per_mm3": 0.0,
+        "tether_normal_n_per_mm3": 0.0,
         "tether_region": "none",
     },
 }
@@ -72,6 +74,7 @@ PRESETS["skin"] = PRESETS["paper"] | {
     "tension_n_per_mm": 1.0,
     "foundation_n_per_mm3": 0.005,
     "tether_n_per_mm3": 0.003,
+    "tether_normal_n_per_mm3": 0.01,
     "tether_region": "stable",
 }
 #: The preset used when the config names none.
@@ -179,6 +182,7 @@ class Params:
             tension_n_per_mm=float(phys["tension_n_per_mm"]),
             foundation_n_per_mm3=float(phys["foundation_n_per_mm3"]),
             tether_n_per_mm3=float(phys["tether_n_per_mm3"]),
+            tether_normal_n_per_mm3=float(phys["tether_normal_n_per_mm3"]),
         )
         return cls(
             int(template["subdivision_levels"]),
