@@ -19,6 +19,7 @@ Usage::
     .venv/bin/python benchmarks/bench_modal.py                      # the full table
     .venv/bin/python benchmarks/bench_modal.py --dofs 60000 --ks 100 --methods block arpack
     .venv/bin/python benchmarks/bench_modal.py --blas-threads 2    # BLAS threads per case
+    .venv/bin/python benchmarks/bench_modal.py --physics skin      # the default preset's model
 
 ``--reconstruction RUN SUBJECT`` measures instead what the basis rebuilds on a finished run
 (``RUN/results/{SUBJECT}/motion.h5``, ``RUN/resources/template.npz``): the modal stage with the
@@ -56,7 +57,39 @@ def cap_mesh(n: int, radii=(75.0, 95.0, 60.0)):
     return vertices, faces
 
 
-def run_case(dofs: int, k: int, method: str, solve_threads: int, trace: bool) -> dict:
+def case_model(vertices, faces, physics: str):
+    """K, M and the fixed DOFs of the cap: the paper's clamped steel shell, or the ``skin``
+    preset's pre-tensioned skin on its foundation (free rim, tether on the upper half)."""
+    import numpy as np
+
+    from scan2morph.modal import assemble, boundary_vertices, fixed_dofs
+    from scan2morph.modal.basis import _free_shift
+    from scan2morph.modal.fem import ShellMaterial, skin_stiffness
+    from scan2morph.stages.modal import PRESETS
+
+    if physics == "paper":
+        k_mat, m_mat = assemble(vertices, faces, 1.0)
+        return k_mat, m_mat, fixed_dofs(boundary_vertices(faces), "all"), 0.0
+    p = PRESETS["skin"]
+    mat = ShellMaterial(
+        p["youngs_modulus_mpa"], p["poisson_ratio"], p["density_t_per_mm3"], rotary_inertia=False
+    )
+    k_mat, m_mat = assemble(vertices, faces, p["thickness_mm"], mat)
+    upper = vertices[:, 1] > 0
+    k_mat = k_mat + skin_stiffness(
+        vertices,
+        faces,
+        p["tension_n_per_mm"],
+        p["foundation_n_per_mm3"],
+        upper,
+        p["tether_n_per_mm3"],
+    )
+    return k_mat.tocsc(), m_mat, np.zeros(0, np.int64), _free_shift(k_mat, m_mat)
+
+
+def run_case(
+    dofs: int, k: int, method: str, solve_threads: int, trace: bool, physics: str = "paper"
+) -> dict:
     """One measurement, in this process; with ``trace`` the stages are rerun under
     tracemalloc for the peak of Python/NumPy allocations (tracing slows them down, so the
     times come from the untraced run)."""
@@ -66,18 +99,19 @@ def run_case(dofs: int, k: int, method: str, solve_threads: int, trace: bool) ->
 
     import numpy as np
 
-    from scan2morph.modal import assemble, boundary_vertices, fixed_dofs, solve_modes
+    from scan2morph.modal import solve_modes
 
     n = max(2, round(np.sqrt(dofs / 6)) - 1)
     vertices, faces = cap_mesh(n)
-    fixed = fixed_dofs(boundary_vertices(faces), "all")
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.perf_counter()
-    k_mat, m_mat = assemble(vertices, faces, 1.0)
+    k_mat, m_mat, fixed, shift = case_model(vertices, faces, physics)
     t_asm = time.perf_counter() - t0
     rss_asm = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0 = time.perf_counter()
-    freqs, modes = solve_modes(k_mat, m_mat, fixed, k, method=method, threads=solve_threads)
+    freqs, modes = solve_modes(
+        k_mat, m_mat, fixed, k, method=method, threads=solve_threads, shift=shift
+    )
     t_eig = time.perf_counter() - t0
     rss_eig = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     free = np.setdiff1d(np.arange(k_mat.shape[0]), fixed)
@@ -89,10 +123,10 @@ def run_case(dofs: int, k: int, method: str, solve_threads: int, trace: bool) ->
     if trace:
         del modes
         tracemalloc.start()
-        k_mat, m_mat = assemble(vertices, faces, 1.0)
+        k_mat, m_mat, fixed, shift = case_model(vertices, faces, physics)
         py_asm = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.reset_peak()
-        solve_modes(k_mat, m_mat, fixed, k, method=method, threads=solve_threads)
+        solve_modes(k_mat, m_mat, fixed, k, method=method, threads=solve_threads, shift=shift)
         py_eig = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
     return {
@@ -215,6 +249,12 @@ def main() -> None:
         "--trace", action="store_true", help="also measure Python peaks with tracemalloc"
     )
     ap.add_argument("--case", nargs=3, metavar=("DOFS", "K", "METHOD"), help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--physics",
+        choices=["paper", "skin"],
+        default="paper",
+        help="the paper's clamped steel shell or the skin preset (free, tensioned, on a foundation)",
+    )
     ap.add_argument("--reconstruction", nargs=2, metavar=("RUN", "SUBJECT"))
     ap.add_argument("--config", default="config/config.yaml")
     args = ap.parse_args()
@@ -224,7 +264,7 @@ def main() -> None:
         return
     if args.case:
         dofs, k, method = int(args.case[0]), int(args.case[1]), args.case[2]
-        out = run_case(dofs, k, method, args.solve_threads, args.trace)
+        out = run_case(dofs, k, method, args.solve_threads, args.trace, args.physics)
         print(json.dumps(out))
         return
     env = dict(os.environ, OPENBLAS_NUM_THREADS=str(args.blas_threads))
@@ -247,6 +287,7 @@ def main() -> None:
             for method in args.methods:
                 cmd = [sys.executable, __file__, "--case", str(dofs), str(k), method]
                 cmd += ["--solve-threads", str(args.solve_threads)] + ["--trace"] * args.trace
+                cmd += ["--physics", args.physics]
                 proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
                 if proc.returncode:
                     print(f"{dofs:>7} {k:>4} {method:>7} failed: {proc.stderr.strip()[-300:]}")

@@ -1,20 +1,24 @@
 """Modal basis of the neutral face and expression coordinates (the modal analysis paper).
 
-The neutral mesh becomes a thin-shell finite element model (:mod:`.fem`, pyfe3d triangles,
-outline fixed where the takes show the face
-still, :mod:`.boundary`; upper face thickened); its lowest natural modes (:mod:`.eigen`) form a
-mass-orthonormal basis in which expression displacement fields get their coordinates
-(:mod:`.project`; their reconstruction error split into normal and tangential parts),
-optionally after inserting identified expressions as "semantic" vectors.
-Units: mm, N, tonne, s (frequencies in Hz).
+The neutral mesh becomes a finite element model (:mod:`.fem`: pyfe3d shell triangles, and for
+the ``skin`` physics a tension, a foundation and a tether on the translations,
+:func:`.fem.skin_stiffness`), held where :mod:`.boundary` says (the whole outline, its still part,
+or nowhere); its lowest natural modes (:mod:`.eigen`, :mod:`.basis`) form a mass-orthonormal basis
+in which expression displacement fields get their coordinates (:mod:`.project`; their
+reconstruction error split into normal and tangential parts), optionally after inserting
+identified expressions as "semantic" vectors. :mod:`.span` measures what a basis spans (least
+squares on its first K fields) and builds the smooth intrinsic anchor (Laplace-Beltrami
+eigenfunctions per axis). Units: mm, N, tonne, s (frequencies in Hz).
 """
 
-from scan2morph.modal.eigen import ModalBasis, ModalParams, modal_basis, solve_modes
+from scan2morph.modal.basis import ModalBasis, ModalParams, modal_basis
+from scan2morph.modal.eigen import solve_modes
 from scan2morph.modal.fem import (
     ShellMaterial,
     assemble,
     boundary_vertices,
     fixed_dofs,
+    skin_stiffness,
     thickness_map,
 )
 from scan2morph.modal.project import (
@@ -42,6 +46,7 @@ __all__ = [
     "reconstruction_error_curve",
     "reconstruction_split",
     "semantic_basis",
+    "skin_stiffness",
     "solve_modes",
     "thickness_map",
 ]

@@ -22,8 +22,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
 
-#: Boundary policies: clamp every outline vertex (the paper), or only the still ones.
-POLICIES = ("all", "still")
+#: Boundary policies: clamp every outline vertex (the paper), only the still ones, or none (a
+#: free model).
+POLICIES = ("all", "still", "none")
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,7 @@ class OutlineChoice:
         by a running median along the loop, mm; NaN off the outline (and on the outline when
         no take gives it a value).
     policy : str
-        ``"all"`` or ``"still"``.
+        ``"all"``, ``"still"`` or ``"none"``.
     """
 
     fixed: NDArray[np.bool_]
@@ -115,10 +116,10 @@ def still_outline(
         The subject's measured displacement fields (viseme motion, expression displacement).
     n_vertices : int
         V.
-    policy : {"all", "still"}
+    policy : {"all", "still", "none"}
         ``"all"``: the whole outline (the paper). ``"still"``: the outline vertices whose
         :func:`outline_motion` is below ``still_mm``; a vertex without any measurement counts
-        as still.
+        as still. ``"none"``: no vertex (a free model).
     still_mm : float
         Motion below which an outline vertex is still, mm.
     min_fixed_share : float
@@ -147,6 +148,8 @@ def still_outline(
     outline = np.zeros(n_vertices, dtype=bool)
     outline[loop] = True
     motion = outline_motion(loop, fields, n_vertices, window)
+    if policy == "none":
+        return OutlineChoice(np.zeros_like(outline), outline, motion, policy)
     if policy == "all" or not fields:
         return OutlineChoice(outline.copy(), outline, motion, policy)
     on_loop = motion[loop]

@@ -1,4 +1,4 @@
-"""Natural modes of the shell model: the generalised eigenproblem ``K q = omega^2 M q``.
+"""Natural modes of a finite element model: the generalised eigenproblem ``K q = omega^2 M q``.
 
 The lowest ``k`` modes are found by shift-invert at ``sigma = 0`` on the free-DOF submatrices:
 the operator ``T = K^-1 M`` (self-adjoint in the M inner product) has its largest eigenvalues
@@ -27,7 +27,6 @@ which the M inner product is definite.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as la
@@ -57,6 +56,7 @@ def solve_modes(
     max_basis: int | None = None,
     threads: int = 2,
     seed: int = 0,
+    shift: float = 0.0,
     source: str = "modal",
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Lowest natural frequencies and mass-orthonormal mode shapes.
@@ -89,6 +89,10 @@ def solve_modes(
         (``benchmarks/bench_modal.py``).
     seed : int
         Seed of the random start block.
+    shift : float
+        ``s >= 0``: the pencil ``(K + s M, M)`` is solved instead, which has the same modes
+        and eigenvalues ``omega^2 + s``; a free (unsupported) shell, whose K is singular
+        (rigid-body motion), needs ``s > 0``. Units of ``omega^2``, 1/s^2.
     source : str
         Label for error messages.
 
@@ -123,7 +127,10 @@ def solve_modes(
         )
     kf = sp.csc_matrix(K)[free][:, free].tocsc()
     mf = sp.csc_matrix(M)[free][:, free].tocsc()
-    diag = kf.diagonal()
+    if not (np.isfinite(shift) and shift >= 0):
+        raise InputError(source, f"shift: expected a number >= 0, got {shift}")
+    ks = (kf + float(shift) * mf).tocsc() if shift else kf
+    diag = ks.diagonal()
     bad = np.flatnonzero(~(diag > 0))
     if bad.size:
         dof = free[bad[0]]
@@ -133,9 +140,9 @@ def solve_modes(
             "stiffness; fix it or remove the vertex",
         )
     if method == "dense" or (method == "block" and free.size <= _DENSE_MAX_DOF):
-        lam, xf = _dense(kf, mf, k, source)
+        lam, xf = _dense(ks, mf, k, source)
     else:
-        op = _ShiftInvert(kf, mf, source, threads)
+        op = _ShiftInvert(ks, mf, source, threads)
         if method == "arpack":
             lam, xf = _arpack(op, k, tol, seed)
         else:
@@ -341,200 +348,3 @@ def _block_krylov_schur(
             m = p
             local = [(0, p + r)]
     raise InputError(source, f"eigensolver: no convergence of {k} modes to tol {tol:g}")
-
-
-@dataclass(frozen=True)
-class ModalParams:
-    """Parameters of the face's modal model (paper defaults where the paper fixes them).
-
-    Parameters
-    ----------
-    n_modes : int
-        Number of modes k.
-    thickness_mm : float
-        Base shell thickness, mm (paper: 1 mm).
-    upper_thickness_factor : float
-        Thickness multiplier on the upper face. The paper thickens the upper face so that the
-        lowest modes leave it "quite fixed" but gives no value; 3 (the config default) is
-        ours. Bending stiffness grows with its cube, mass and membrane stiffness linearly, so
-        on a curved shell the effect is milder than the cube suggests: on a 80 x 100 x 30 mm
-        cap the upper half's mean share of the six lowest modes' motion is 42 % uniform,
-        25 % at 2, 18 % at 3, 11 % at 5 and 6 % at 10.
-    material : fem.ShellMaterial
-        Steel by default (the paper's choice; it only scales the frequencies).
-    boundary : {"clamped", "pinned"}
-        Boundary vertices fixed in all six DOFs (paper) or in translation only.
-    element : {"tria3dsg", "tria3r"}
-        pyfe3d shell triangle; see :func:`fem.assemble`.
-    mass : {"consistent", "lumped"}
-    method : {"block", "arpack", "dense"}
-        Eigensolver, see :func:`solve_modes`.
-    threads : int
-        Threads for the eigensolver's triangular solves.
-    seed : int
-        Seed of the eigensolver's random start block.
-    """
-
-    n_modes: int = 100
-    thickness_mm: float = 1.0
-    upper_thickness_factor: float = 3.0
-    material: fem.ShellMaterial = field(default_factory=fem.ShellMaterial)
-    boundary: str = "clamped"
-    element: str = "tria3dsg"
-    mass: str = "consistent"
-    method: str = "block"
-    threads: int = 2
-    seed: int = 0
-
-
-@dataclass(frozen=True)
-class ModalBasis:
-    """A mass-orthonormal basis of displacement fields of a mesh.
-
-    Attributes
-    ----------
-    frequencies_hz : (k,) float
-        Natural frequency of each vector, Hz; for vectors that are not natural modes
-        (semantic, natural modified) the Rayleigh-quotient frequency
-        ``sqrt(q^T K q) / (2 pi)``.
-    vectors : (6V, k) float
-        Full DOF vectors (u, v, w, r_x, r_y, r_z per vertex) as columns,
-        ``vectors.T @ mass @ vectors = I``.
-    mass : (6V, 6V) scipy.sparse.csc_matrix, tonne
-    stiffness : (6V, 6V) scipy.sparse.csc_matrix, N/mm
-    thickness_mm : (F,) float
-    fixed_vertices : (V,) bool
-        Vertices held fixed (boundary, and vertices no face uses).
-    names : tuple of str, length k
-        ``"mode_001"`` ... for natural modes; the given names for semantic vectors;
-        ``"modified_007"`` for natural mode 7 re-orthonormalised against them.
-    """
-
-    frequencies_hz: NDArray[np.float64]
-    vectors: NDArray[np.float64]
-    mass: sp.csc_matrix
-    stiffness: sp.csc_matrix
-    thickness_mm: NDArray[np.float64]
-    fixed_vertices: NDArray[np.bool_]
-    names: tuple[str, ...]
-
-    @property
-    def n_modes(self) -> int:
-        """Number of basis vectors k."""
-        return self.vectors.shape[1]
-
-    @property
-    def n_vertices(self) -> int:
-        """Number of mesh vertices V."""
-        return self.vectors.shape[0] // fem.DOF
-
-    @property
-    def modes(self) -> NDArray[np.float64]:
-        """(k, V, 3) float: translational part of each vector (the store's ``/modal/modes``)."""
-        return self.dof_modes[:, :, :3]
-
-    @property
-    def dof_modes(self) -> NDArray[np.float64]:
-        """(k, V, 6) float: each vector per vertex, translations then rotations."""
-        return self.vectors.T.reshape(self.n_modes, self.n_vertices, fem.DOF)
-
-
-def modal_basis(
-    vertices: ArrayLike,
-    faces: ArrayLike,
-    params: ModalParams | None = None,
-    upper_face: ArrayLike | None = None,
-    *,
-    fixed: ArrayLike | None = None,
-    source: str = "neutral",
-) -> ModalBasis:
-    """Natural modal basis of a neutral face mesh (paper Sec. III.B).
-
-    Parameters
-    ----------
-    vertices : (V, 3) float, mm
-    faces : (F, 3) int, counter-clockwise
-    params : ModalParams, optional
-    upper_face : (V,) bool, optional
-        Vertices of the upper face, thickened by ``params.upper_thickness_factor``.
-    fixed : (V,) bool, optional
-        Vertices held fixed; default every boundary vertex. A face template has two boundary
-        loops, the outline and the mouth: the paper fixes the outline, and the lips must stay
-        free (fixing the mouth loop clamps the lips, and no mode can then move them).
-    source : str
-        Label for error messages, e.g. ``"subject/take"``.
-
-    Returns
-    -------
-    ModalBasis
-        ``params.n_modes`` natural modes, ascending in frequency.
-
-    Raises
-    ------
-    InputError
-        A bad mesh, a mesh without boundary, a connected part without boundary vertex,
-        non-positive material or thickness values, or more modes than free DOFs.
-    """
-    p = ModalParams() if params is None else params
-    v, f = fem.check_mesh(vertices, faces, source)
-    if p.boundary not in ("clamped", "pinned"):
-        raise InputError(source, f"boundary: expected 'clamped' or 'pinned', got {p.boundary!r}")
-    n_v = v.shape[0]
-    boundary = fem.boundary_vertices(f, n_v)
-    if fixed is not None:
-        fixed_mask = np.asarray(fixed, dtype=bool)
-        if fixed_mask.shape != (n_v,):
-            raise InputError(
-                source, f"fixed: expected a ({n_v},) bool mask, got shape {fixed_mask.shape}"
-            )
-        boundary = fixed_mask
-    if not boundary.any():
-        raise InputError(
-            source, "faces: the mesh has no boundary edge (closed surface); nothing to fix"
-        )
-    _check_every_part_held(f, n_v, boundary, source)
-    thickness = fem.thickness_map(f, p.thickness_mm, upper_face, p.upper_thickness_factor, source)
-    k_mat, m_mat = fem.assemble(
-        v, f, thickness, p.material, element=p.element, mass=p.mass, source=source
-    )
-    unused = np.ones(n_v, dtype=bool)
-    unused[f.ravel()] = False
-    fixed = boundary | unused
-    dofs = np.concatenate(
-        [
-            fem.fixed_dofs(boundary, "all" if p.boundary == "clamped" else "translations"),
-            fem.fixed_dofs(unused, "all"),
-        ]
-    )
-    freqs, vecs = solve_modes(
-        k_mat,
-        m_mat,
-        dofs,
-        p.n_modes,
-        method=p.method,
-        threads=p.threads,
-        seed=p.seed,
-        source=source,
-    )
-    names = tuple(f"mode_{i + 1:03d}" for i in range(p.n_modes))
-    return ModalBasis(freqs, vecs, m_mat, k_mat, thickness, fixed, names)
-
-
-def _check_every_part_held(faces, n_vertices, boundary, source):
-    """Each connected part of the mesh must contain a boundary vertex, else K is singular."""
-    from scipy.sparse.csgraph import connected_components
-
-    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices))
-    n_comp, label = connected_components(adj, directed=False)
-    used = np.zeros(n_vertices, dtype=bool)
-    used[faces.ravel()] = True
-    held = np.zeros(n_comp, dtype=bool)
-    held[label[boundary]] = True
-    floating = np.flatnonzero(~held[label] & used)
-    if floating.size:
-        raise InputError(
-            source,
-            f"faces: a connected part (containing vertex {floating[0]}) has no boundary "
-            "vertex to fix",
-        )

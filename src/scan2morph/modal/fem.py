@@ -28,7 +28,7 @@ from scan2morph.errors import InputError
 DOF = 6
 
 _ELEMENTS = ("tria3r", "tria3dsg")
-_MASS_TYPES = {"consistent": 0, "lumped": 1}
+_MASS_TYPES = {"consistent": 0, "lumped": 1, "vertex": 1}
 
 
 @dataclass(frozen=True)
@@ -43,14 +43,32 @@ class ShellMaterial:
         Poisson's ratio nu, in (-1, 0.5). Default 0.3.
     density_t_per_mm3 : float
         Mass density rho, tonne/mm^3. Default: steel, 7.85e-9.
+    membrane_scale : float
+        Factor on the membrane (in-plane) stiffness ``A = E t / (1 - nu^2) ...`` of the shell,
+        > 0; bending and transverse shear keep their values. 1 (default) is the plain shell;
+        below 1 a membrane-softened shell, whose in-plane modes (the skin sliding over the
+        face) come earlier relative to its bending modes. The drilling stiffness follows
+        ``A66``.
+    rotary_inertia : bool
+        Keep the rotary inertia ``rho t^3 / 12`` of the rotations (True, the plain shell).
+        False gives the rotations no mass: the mass inner product then weighs translations
+        only, so that ``Q^T M v`` of a field given by its translations is the mass-weighted
+        least squares of those translations.
     """
 
     youngs_modulus_mpa: float = 210000.0
     poisson_ratio: float = 0.3
     density_t_per_mm3: float = 7.85e-9
+    membrane_scale: float = 1.0
+    rotary_inertia: bool = True
 
     def check(self, source: str) -> None:
-        """Raise :class:`InputError` unless E > 0, rho > 0 and -1 < nu < 0.5."""
+        """Raise :class:`InputError` unless E > 0, rho > 0, -1 < nu < 0.5 and the membrane
+        scale > 0."""
+        if not (np.isfinite(self.membrane_scale) and self.membrane_scale > 0):
+            raise InputError(
+                source, f"membrane_scale: expected a positive number, got {self.membrane_scale}"
+            )
         e, nu, rho = self.youngs_modulus_mpa, self.poisson_ratio, self.density_t_per_mm3
         if not (np.isfinite(e) and e > 0):
             raise InputError(source, f"youngs_modulus_mpa: expected a positive number, got {e}")
@@ -214,7 +232,7 @@ def assemble(
     thickness_mm : float or (F,) float, mm
         Shell thickness, uniform or per element.
     material : ShellMaterial, optional
-        Default: steel (E = 210000 MPa, nu = 0.3, rho = 7.85e-9 t/mm^3).
+        Default: steel (E = 210000 MPa, nu = 0.3, rho = 7.85e-9 t/mm^3), plain shell.
     element : {"tria3dsg", "tria3r"}
         pyfe3d triangle: ``Tria3DSG`` (discrete shear gap transverse shear, the default) or
         ``Tria3R`` (one-point transverse shear with a stabilisation factor that depends on
@@ -223,8 +241,12 @@ def assemble(
         modes and converges under refinement, while Tria3R is 3-5 % stiff and gets worse
         from 16 x 16 to 24 x 24: it locks when elements are a few thicknesses long, which is
         the regime of a face mesh (2-5 mm elements, 1 mm shell).
-    mass : {"consistent", "lumped"}
-        Mass matrix type. The drilling rotation has no inertia in either.
+    mass : {"consistent", "lumped", "vertex"}
+        Mass matrix type. The drilling rotation has no inertia in any. ``"vertex"``: the
+        shell's total mass shared equally by the vertices (translations only, no rotary
+        inertia), so that the mass inner product weighs every vertex alike, as the
+        per-vertex RMS of a reconstruction does (the modes then depend on where the mesh is
+        dense).
     source : str
         Label for error messages.
 
@@ -245,9 +267,6 @@ def assemble(
     Python loop over faces calling compiled methods (about 20 us per face, 0.5 s for the
     20,000 faces of a 60,000-DOF model); the sparse assembly itself is vectorised.
     """
-    import pyfe3d
-    from pyfe3d.shellprop_utils import isotropic_plate
-
     v, f = check_mesh(vertices, faces, source)
     mat = ShellMaterial() if material is None else material
     mat.check(source)
@@ -255,18 +274,35 @@ def assemble(
         raise InputError(source, f"element: expected one of {_ELEMENTS}, got {element!r}")
     if mass not in _MASS_TYPES:
         raise InputError(source, f"mass: expected one of {tuple(_MASS_TYPES)}, got {mass!r}")
+    t = _thickness(thickness_mm, f.shape[0], source)
+    kr, kc, kv, mr, mc, mv = _element_matrices(v, f, t, mat, element, mass)
+    n_dof = DOF * v.shape[0]
+    if mass == "vertex":
+        total = mat.density_t_per_mm3 * float(np.sum(t * face_areas(v, f)))
+        return _symmetric_csc(kr, kc, kv, n_dof), _vertex_mass(total, f, v.shape[0])
+    return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
+
+
+def _thickness(thickness_mm, n_faces: int, source: str) -> NDArray[np.float64]:
+    """(F,) positive thickness from a float or a per-face array, mm."""
     t = np.asarray(thickness_mm, dtype=np.float64)
     if t.ndim == 0:
-        t = np.full(f.shape[0], float(t))
-    if t.shape != (f.shape[0],):
+        t = np.full(n_faces, float(t))
+    if t.shape != (n_faces,):
         raise InputError(
-            source, f"thickness_mm: expected a float or shape ({f.shape[0]},), got {t.shape}"
+            source, f"thickness_mm: expected a float or shape ({n_faces},), got {t.shape}"
         )
     bad = np.flatnonzero(~(np.isfinite(t) & (t > 0)))
     if bad.size:
         raise InputError(
             source, f"thickness_mm: expected positive values, face {bad[0]} has {t[bad[0]]}"
         )
+    return t
+
+
+def _element_matrices(v, f, t, mat: ShellMaterial, element: str, mass: str):
+    """COO triplets of every element's stiffness and mass (pyfe3d, one element at a time)."""
+    import pyfe3d
 
     if element == "tria3r":
         data, probe = pyfe3d.Tria3RData(), pyfe3d.Tria3RProbe()
@@ -275,7 +311,7 @@ def assemble(
         data, probe = pyfe3d.Tria3DSGData(), pyfe3d.Tria3DSGProbe()
         elem = pyfe3d.Tria3DSG(probe)
     nk, nm = data.KC0_SPARSE_SIZE, data.M_SPARSE_SIZE
-    n_faces, n_dof = f.shape[0], DOF * v.shape[0]
+    n_faces = f.shape[0]
     kr = np.zeros(n_faces * nk, dtype=pyfe3d.INT)
     kc = np.zeros(n_faces * nk, dtype=pyfe3d.INT)
     kv = np.zeros(n_faces * nk, dtype=np.float64)
@@ -283,19 +319,11 @@ def assemble(
     mc = np.zeros(n_faces * nm, dtype=pyfe3d.INT)
     mv = np.zeros(n_faces * nm, dtype=np.float64)
     values, prop_index = np.unique(t, return_inverse=True)
-    props = [
-        isotropic_plate(
-            thickness=float(h),
-            E=mat.youngs_modulus_mpa,
-            nu=mat.poisson_ratio,
-            rho=mat.density_t_per_mm3,
-        )
-        for h in values
-    ]
+    props = [_shell_prop(float(h), mat) for h in values]
     x = v.ravel()
     mtype = _MASS_TYPES[mass]
     cols = (DOF * f).tolist()
-    pidx = prop_index.tolist()
+    pidx = prop_index.ravel().tolist()
     # One element object is reused: its state is fully reset by the attribute writes and the
     # update_* calls below, and pyfe3d writes each element's block at init_k_* offsets.
     for i in range(n_faces):
@@ -310,7 +338,35 @@ def assemble(
     if mtype == 1 and element == "tria3r":  # its lumped mass fills 90 entries per element
         used = (np.arange(n_faces * nm) % nm) < 90
         mr, mc, mv = mr[used], mc[used], mv[used]
-    return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
+    return kr, kc, kv, mr, mc, mv
+
+
+def _vertex_mass(total: float, faces: NDArray[np.int64], n_vertices: int) -> sp.csc_matrix:
+    """A mass ``total`` (tonne) shared equally by the translations of the vertices faces use."""
+    used = np.zeros(n_vertices, dtype=bool)
+    used[faces.ravel()] = True
+    diag = np.zeros(DOF * n_vertices)
+    for a in range(3):
+        diag[a::DOF] = np.where(used, total / used.sum(), 0.0)
+    return sp.diags(diag).tocsc()
+
+
+def _shell_prop(thickness: float, mat: ShellMaterial):
+    """pyfe3d's isotropic ShellProp with the material's membrane scale and rotary inertia."""
+    from pyfe3d.shellprop_utils import isotropic_plate
+
+    prop = isotropic_plate(
+        thickness=thickness,
+        E=mat.youngs_modulus_mpa,
+        nu=mat.poisson_ratio,
+        rho=mat.density_t_per_mm3,
+    )
+    if mat.membrane_scale != 1.0:
+        for name in ("A11", "A12", "A16", "A22", "A26", "A66"):
+            setattr(prop, name, getattr(prop, name) * mat.membrane_scale)
+    if not mat.rotary_inertia:
+        prop.intrhoz2 = 0.0
+    return prop
 
 
 def _symmetric_csc(rows, cols, vals, n):
@@ -321,6 +377,129 @@ def _symmetric_csc(rows, cols, vals, n):
     a = ((a + a.T) * 0.5).tocsc()
     a.sort_indices()
     return a
+
+
+def cotangent_laplacian(
+    vertices: ArrayLike, faces: ArrayLike, source: str = "mesh"
+) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+    """Cotangent Laplace-Beltrami stiffness and lumped (barycentric) vertex areas.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+    faces : (F, 3) int
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    L : (V, V) scipy.sparse.csr_matrix, symmetric positive semi-definite, dimensionless
+        ``f^T L f = integral of |grad f|^2`` for a piecewise linear ``f`` (the Dirichlet energy;
+        its null space on a connected mesh is the constants).
+    area : (V,) float, mm^2
+        A third of the area of each vertex's triangles.
+    """
+    v, f = check_mesh(vertices, faces, source)
+    n = v.shape[0]
+    rows, cols, vals = [], [], []
+    for k in range(3):  # the angle at corner k weighs the opposite edge (i, j)
+        i, j, o = f[:, (k + 1) % 3], f[:, (k + 2) % 3], f[:, k]
+        a, b = v[i] - v[o], v[j] - v[o]
+        cot = np.einsum("ij,ij->i", a, b) / np.linalg.norm(np.cross(a, b), axis=1)
+        rows += [i, j]
+        cols += [j, i]
+        vals += [-0.5 * cot, -0.5 * cot]
+    off = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    ).tocsr()
+    lap = (off - sp.diags(np.asarray(off.sum(axis=1)).ravel())).tocsr()
+    area = np.zeros(n)
+    np.add.at(area, f.ravel(), np.repeat(face_areas(v, f) / 3.0, 3))
+    return lap, area
+
+
+def skin_stiffness(
+    vertices: ArrayLike,
+    faces: ArrayLike,
+    tension_n_per_mm: float = 0.0,
+    foundation_n_per_mm3: float = 0.0,
+    tethered: ArrayLike | None = None,
+    tether_n_per_mm3: float = 0.0,
+    tether_normal_n_per_mm3: float = 0.0,
+    source: str = "mesh",
+) -> sp.csc_matrix:
+    """Stiffness of a pre-tensioned skin on an elastic foundation, on the shell's DOFs.
+
+    Three terms act on the translations ``u`` of each vertex (the rotations get nothing):
+
+    - isotropic skin tension ``T``: the geometric stiffness of a membrane under a uniform
+      in-plane stress resultant ``T``, ``T * integral of sum_a |grad u_a|^2`` over the surface
+      (``T L`` per axis, ``L`` the :func:`cotangent_laplacian`); it resists every component of a
+      short-wave motion alike and none of a rigid translation;
+    - a foundation under the skin resisting motion along the surface normal (the soft tissue
+      pressed against the skull): ``k_n * integral of (u . n)^2``;
+    - a tether of the skin to the bone where it does not slide (``tethered`` vertices):
+      ``k_t * integral of |u - (u . n) n|^2`` there, and the bone's extra resistance to motion
+      along the normal, ``k_b * integral of (u . n)^2`` there.
+
+    The integrals use each vertex's lumped (barycentric) area and the neutral's vertex normals.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+    faces : (F, 3) int
+    tension_n_per_mm : float
+        ``T`` >= 0, N/mm.
+    foundation_n_per_mm3 : float
+        ``k_n`` >= 0, N/mm^3 (pressure per mm of normal motion).
+    tethered : (V,) bool, optional
+        Vertices tied tangentially; None: none.
+    tether_n_per_mm3 : float
+        ``k_t`` >= 0, N/mm^3.
+    tether_normal_n_per_mm3 : float
+        ``k_b`` >= 0, N/mm^3, added to ``k_n`` on the tethered vertices.
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (6V, 6V) scipy.sparse.csc_matrix, symmetric positive semi-definite, N/mm
+    """
+    from scan2morph.geometry import vertex_normals
+
+    v, f = check_mesh(vertices, faces, source)
+    values = {"tension_n_per_mm": tension_n_per_mm, "foundation_n_per_mm3": foundation_n_per_mm3}
+    values["tether_n_per_mm3"] = tether_n_per_mm3
+    values["tether_normal_n_per_mm3"] = tether_normal_n_per_mm3
+    for name, value in values.items():
+        if not (np.isfinite(value) and value >= 0):
+            raise InputError(source, f"{name}: expected a number >= 0, got {value}")
+    n_v = v.shape[0]
+    lap, area = cotangent_laplacian(v, f, source)
+    lap = lap.tocoo()
+    rows = [DOF * lap.row + a for a in range(3)]
+    cols = [DOF * lap.col + a for a in range(3)]
+    vals = [float(tension_n_per_mm) * lap.data] * 3
+    normals = vertex_normals(v, f, fill=0.0)
+    nn = np.einsum("vi,vj->vij", normals, normals)
+    tie, press = np.zeros(n_v), np.full(n_v, float(foundation_n_per_mm3))
+    if tethered is not None:
+        mask = np.asarray(tethered)
+        if mask.shape != (n_v,) or mask.dtype != np.bool_:
+            raise InputError(source, f"tethered: expected a ({n_v},) bool mask, got {mask.shape}")
+        tie = float(tether_n_per_mm3) * mask
+        press += float(tether_normal_n_per_mm3) * mask
+    blocks = area[:, None, None] * (
+        press[:, None, None] * nn + tie[:, None, None] * (np.eye(3) - nn)
+    )
+    a_idx, b_idx = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    base = DOF * np.arange(n_v)[:, None, None]
+    rows.append((base + a_idx).ravel())
+    cols.append((base + b_idx).ravel())
+    vals.append(blocks.ravel())
+    return _symmetric_csc(
+        np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), DOF * n_v
+    )
 
 
 def fixed_dofs(vertex_mask: ArrayLike, components: str = "all") -> NDArray[np.int64]:

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
 from scan2morph.modal import fem
-from scan2morph.modal.eigen import ModalBasis
+from scan2morph.modal.basis import ModalBasis
 
 #: Relative M-norm below which a vector is numerically dependent on the ones before it.
 DEPENDENCE_TOL = 1e-8

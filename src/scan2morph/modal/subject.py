@@ -8,8 +8,8 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
+from scan2morph.modal.basis import ModalBasis, ModalParams, modal_basis
 from scan2morph.modal.boundary import OutlineChoice
-from scan2morph.modal.eigen import ModalBasis, ModalParams, modal_basis
 from scan2morph.modal.project import (
     coordinate_statistics,
     project,
@@ -41,6 +41,7 @@ def subject_modal(
     fixed: np.ndarray | OutlineChoice | None = None,
     normals: np.ndarray | None = None,
     target_mm: float = 0.5,
+    basis: ModalBasis | None = None,
 ) -> tuple[ModalBasis, dict[str, np.ndarray]]:
     """Modal basis of the neutral face and everything the store keeps about it.
 
@@ -68,6 +69,10 @@ def subject_modal(
         for the normal / tangential split of the reconstruction error.
     target_mm : float
         RMS reconstruction error (mm) whose mode count is reported (``modes_to_target``).
+    basis : ModalBasis, optional
+        The natural basis, when the caller built it (with more of the physics than
+        ``params``, ``upper_face`` and ``fixed`` say); its fixed vertices replace ``fixed``'s
+        mask.
 
     Returns
     -------
@@ -76,7 +81,8 @@ def subject_modal(
     """
     choice = fixed if isinstance(fixed, OutlineChoice) else None
     mask = choice.fixed if choice is not None else fixed
-    basis = modal_basis(neutral, faces, params, upper_face, fixed=mask, source=source)
+    if basis is None:
+        basis = modal_basis(neutral, faces, params, upper_face, fixed=mask, source=source)
     ks = sorted({int(k) for k in ks if 1 <= int(k) <= basis.n_modes} | {basis.n_modes})
     if normals is None:
         normals = vertex_normals(neutral, faces)

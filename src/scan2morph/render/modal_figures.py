@@ -140,26 +140,39 @@ def fig_coordinates(store: Mapping[str, np.ndarray]) -> Figure:
 
 
 def fig_reconstruction(store: Mapping[str, np.ndarray]) -> Figure:
-    """RMS error of each expression rebuilt from its first K modes, against K."""
+    """Each expression rebuilt from its first K modes: the share of its RMS left against K
+    (solid; dashed: the part along the neutral's normals), where the store has the expression's
+    displacement; else the RMS error in mm."""
     what = "the reconstruction chart"
     takes = expression_takes(store)
     if not takes:
         return message_figure("Reconstruction error", "the store has no expression takes")
     ks = need(store, paths.modal("reconstruction_k"), what).astype(int)
     fig, ax = subplots(figsize=(5.0, 3.4))
-    for take in takes:
+    relative = all(paths.expression(t, "displacement") in store for t in takes)
+    for i, take in enumerate(takes):
         key = paths.expression(take, "reconstruction_rms_mm")
         rms = need(store, key, what).astype(float)
         if rms.shape != ks.shape:
             raise InputError(source_of(store), f"{key}: expected shape {ks.shape}, got {rms.shape}")
-        ax.plot(ks, rms, "o-", ms=3, label=take)
+        scale = 1.0
+        if relative:
+            d = np.asarray(store[paths.expression(take, "displacement")], dtype=float)
+            scale = float(np.sqrt(np.nanmean(np.sum(d**2, axis=1))))
+        colour = f"C{i % 10}"
+        ax.plot(ks, rms / scale, "o-", ms=3, color=colour, label=take)
+        normal = paths.expression(take, "reconstruction_normal_rms_mm")
+        if normal in store and np.shape(store[normal]) == ks.shape:
+            ax.plot(ks, np.asarray(store[normal], dtype=float) / scale, "--", lw=0.8, color=colour)
     ax.set_xscale("log")
     ax.set_xlabel("number of modes K")
-    ax.set_ylabel("RMS error (mm)")
+    ax.set_ylabel("share of the expression's RMS left" if relative else "RMS error (mm)")
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
-    ax.set_title("Expressions rebuilt from their first K modes", fontsize=9)
+    preset = paths.modal("preset")
+    physics = f" (preset {store[preset]})" if preset in store else ""
+    ax.set_title(f"Expressions rebuilt from their first K modes{physics}", fontsize=9)
     return fig
 
 

@@ -311,11 +311,17 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
         return [_note("The store holds no modal basis.")]
     freqs = h5[paths.modal("frequencies_hz")][()]
     n = min(int(n_coordinates), len(freqs))
+    preset = paths.modal("preset")
+    physics = ""
+    if preset in h5:
+        physics = (
+            f" (physics: preset {h5[preset].asstr()[()]}, config modal.preset; /modal/physics)"
+        )
     out = [
         _table(
             ["", *[f"mode {i + 1}" for i in range(n)]],
             [["frequency (Hz)", *map(float, freqs[:n])]],
-            f"Natural frequencies of the first {n} of {len(freqs)} modes",
+            f"Natural frequencies of the first {n} of {len(freqs)} modes{physics}",
         )
     ]
     exprs = list(h5[paths.EXPRESSIONS]) if paths.EXPRESSIONS in h5 else []

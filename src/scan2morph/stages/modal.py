@@ -3,23 +3,25 @@ expressions' modal coordinates, reconstruction errors and statistics (modal-anal
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from scan2morph.errors import InputError
 from scan2morph.io import write_obj
-from scan2morph.modal import ModalParams, ShellMaterial
-from scan2morph.modal.boundary import OutlineChoice, still_outline
+from scan2morph.modal import ModalBasis, ModalParams, ShellMaterial
+from scan2morph.modal.boundary import POLICIES, OutlineChoice, still_outline
 from scan2morph.modal.subject import subject_modal
 from scan2morph.stages.part import Part, Subject, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
-from scan2morph.template.regions import upper_face
+from scan2morph.template.regions import stable_face, upper_face
 
 #: Config sections this stage reads (``template`` for the subdivision level).
 SECTIONS = ("modal", "template")
@@ -33,6 +35,86 @@ RECONSTRUCTION_PARTS = {
 }
 log = logging.getLogger("scan2morph")
 
+#: The physics of the natural basis by preset (config ``modal.preset``); a ``modal.*`` key of
+#: the same name overrides one value. ``paper``: the modal-analysis paper's steel shell, 1 mm,
+#: three times thicker above the nose tip, whole outline clamped. ``clamped_still``: the same
+#: shell clamped only where the takes leave the outline still (this pipeline's basis before
+#: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation, free at its outline: a
+#: soft 1 mm shell (E = 0.01 MPa, no rotary inertia) under an isotropic tension of 1 N/mm, on
+#: tissue that resists normal motion (0.005 N/mm^3) and, where the skin lies on bone (the stable
+#: forehead, nose ridge and temples), sliding (0.003 N/mm^3) and normal motion more (another
+#: 0.01 N/mm^3). Chosen by
+#: ``benchmarks/bench_modal_span.py`` (README, "Modal analysis").
+PRESETS: dict[str, dict] = {
+    "paper": {
+        "fixed_outline": "all",
+        "thickness_mm": 1.0,
+        "youngs_modulus_mpa": 210000.0,
+        "poisson_ratio": 0.3,
+        "density_t_per_mm3": 7.85e-9,
+        "stiff_above": "nose_tip",
+        "stiff_factor": 3.0,
+        "membrane_scale": 1.0,
+        "rotary_inertia": True,
+        "mass": "consistent",
+        "tension_n_per_mm": 0.0,
+        "foundation_n_per_mm3": 0.0,
+        "tether_n_per_mm3": 0.0,
+        "tether_normal_n_per_mm3": 0.0,
+        "tether_region": "none",
+    },
+}
+PRESETS["clamped_still"] = PRESETS["paper"] | {"fixed_outline": "still"}
+PRESETS["skin"] = PRESETS["paper"] | {
+    "fixed_outline": "none",
+    "youngs_modulus_mpa": 0.01,
+    "density_t_per_mm3": 1.1e-9,
+    "stiff_factor": 1.0,
+    "rotary_inertia": False,
+    "tension_n_per_mm": 1.0,
+    "foundation_n_per_mm3": 0.005,
+    "tether_n_per_mm3": 0.003,
+    "tether_normal_n_per_mm3": 0.01,
+    "tether_region": "stable",
+}
+#: The preset used when the config names none.
+DEFAULT_PRESET = "skin"
+#: Outline policies: clamp the whole outline, its still part, or nothing (a free model).
+FIXED_OUTLINE = POLICIES
+TETHER_REGIONS = ("stable", "none")
+
+
+def physics(modal: Mapping, source: str = "config modal") -> dict:
+    """The preset's physics with the section's own values of the same keys over it.
+
+    Parameters
+    ----------
+    modal : mapping
+        The config section ``modal`` (``preset`` and any overrides; a None value keeps the
+        preset's).
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    dict
+        One value per key of :data:`PRESETS`, plus ``preset``.
+    """
+    name = modal.get("preset") or DEFAULT_PRESET
+    if name not in PRESETS:
+        raise InputError(source, f"preset: expected one of {sorted(PRESETS)}, got {name!r}")
+    out = dict(PRESETS[name])
+    out.update({k: modal[k] for k in out if modal.get(k) is not None})
+    if out["fixed_outline"] not in FIXED_OUTLINE:
+        raise InputError(
+            source, f"fixed_outline: expected one of {FIXED_OUTLINE}, got {out['fixed_outline']!r}"
+        )
+    if out["tether_region"] not in TETHER_REGIONS:
+        raise InputError(
+            source, f"tether_region: expected one of {TETHER_REGIONS}, got {out['tether_region']!r}"
+        )
+    return {"preset": name} | out
+
 
 @dataclass(frozen=True)
 class Params:
@@ -43,21 +125,27 @@ class Params:
     levels : int
         Template subdivisions.
     modal : ModalParams
-        Modes, shell thickness (mm), stiffening, material, threads, seed.
+        Modes, shell thickness (mm), stiffening, material, skin terms, threads, seed.
     stiff_above : str
         Named point above which the face is stiffened (``modal.stiff_above``).
     semantic_labels : list of str
         Expression labels whose first take becomes a semantic mode.
     reconstruction_k : list of int
         Numbers of modes at which the reconstruction error is reported.
-    fixed_outline : {"still", "all"}
-        Outline vertices clamped: those the takes do not move (``still``) or all (the paper).
+    fixed_outline : {"still", "all", "none"}
+        Outline vertices clamped: those the takes do not move (``still``), all (the paper) or
+        none (a free model).
     still_mm : float
         Median displacement over the takes below which an outline vertex is still, mm.
     min_fixed_share : float
         Share of the outline clamped at least.
     target_rms_mm : float
         Reconstruction error whose mode count is reported, mm.
+    tether_region : {"stable", "none"}
+        Vertices whose skin is tied to the bone: the template's stable face, or none.
+    physics : dict
+        The resolved physics (:func:`physics`: the preset's name and every value), recorded
+        in the store.
     """
 
     levels: int
@@ -69,30 +157,45 @@ class Params:
     still_mm: float = 1.0
     min_fixed_share: float = 0.25
     target_rms_mm: float = 0.5
+    tether_region: str = "none"
+    physics: dict = field(default_factory=dict)
 
     @classmethod
     def from_config(cls, modal: Mapping, template: Mapping, threads: int = 1) -> Params:
-        """From the config sections ``modal`` and ``template`` and the job's threads."""
+        """From the config sections ``modal`` and ``template`` and the job's threads; the
+        physics is the preset's (``modal.preset``) with the section's overrides."""
+        phys = physics(modal)
         params = ModalParams(
             n_modes=modal["modes"],
-            thickness_mm=modal["thickness_mm"],
-            upper_thickness_factor=modal["stiff_factor"],
+            thickness_mm=float(phys["thickness_mm"]),
+            upper_thickness_factor=float(phys["stiff_factor"]),
             material=ShellMaterial(
-                modal["youngs_modulus_mpa"], modal["poisson_ratio"], modal["density_t_per_mm3"]
+                float(phys["youngs_modulus_mpa"]),
+                float(phys["poisson_ratio"]),
+                float(phys["density_t_per_mm3"]),
+                float(phys["membrane_scale"]),
+                bool(phys["rotary_inertia"]),
             ),
             threads=threads,
             seed=modal["seed"],
+            mass=str(phys["mass"]),
+            tension_n_per_mm=float(phys["tension_n_per_mm"]),
+            foundation_n_per_mm3=float(phys["foundation_n_per_mm3"]),
+            tether_n_per_mm3=float(phys["tether_n_per_mm3"]),
+            tether_normal_n_per_mm3=float(phys["tether_normal_n_per_mm3"]),
         )
         return cls(
             int(template["subdivision_levels"]),
             params,
-            modal["stiff_above"],
+            str(phys["stiff_above"]),
             list(modal["semantic_labels"]),
             list(modal["reconstruction_k"]),
-            str(modal.get("fixed_outline", "still")),
+            str(phys["fixed_outline"]),
             float(modal.get("still_mm", 1.0)),
             float(modal.get("min_fixed_share", 0.25)),
             float(modal.get("target_rms_mm", 0.5)),
+            str(phys["tether_region"]),
+            phys,
         )
 
 
@@ -135,6 +238,48 @@ def outline_choice(
     )
 
 
+def natural_basis(
+    fine: Template,
+    subject: Subject,
+    data: Mapping[str, np.ndarray],
+    fields: Mapping[str, np.ndarray],
+    params: Params,
+) -> tuple[ModalBasis, OutlineChoice]:
+    """The subject's natural basis with the configured physics (what :func:`run` stores).
+
+    Parameters
+    ----------
+    fine : Template
+        The subdivided template.
+    subject, data, fields, params
+        As in :func:`outline_choice`.
+
+    Returns
+    -------
+    basis : ModalBasis
+    outline : OutlineChoice
+        The outline and its clamped part.
+    """
+    from scan2morph.modal import modal_basis
+
+    outline = outline_choice(fine, subject, data, fields, params)
+    basis = modal_basis(
+        need(data, paths.neutral("vertices"), subject.name),
+        fine.faces,
+        params.modal,
+        upper_face(fine, params.stiff_above),
+        fixed=outline.fixed,
+        tethered=tethered(fine, params),
+        source=subject.name,
+    )
+    return basis, outline
+
+
+def tethered(fine: Template, params: Params) -> np.ndarray | None:
+    """Vertices whose skin is tied to the bone (``modal.tether_region``), or None."""
+    return stable_face(fine) if params.tether_region == "stable" else None
+
+
 def run(
     template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
@@ -153,7 +298,8 @@ def run(
     Returns
     -------
     Part
-        ``/modal/*`` and ``/expressions/{take}/coordinates|reconstruction_rms_mm|
+        ``/modal/*`` (with ``/modal/preset`` and ``/modal/physics``, the resolved physics as
+        JSON) and ``/expressions/{take}/coordinates|reconstruction_rms_mm|
         reconstruction_normal_rms_mm|reconstruction_tangential_rms_mm|modes_to_target|
         outline_rms_mm|clamped_rms_mm|synthesized|semantic_coordinates``; ``files``: the ``coordinates`` and ``reconstruction`` tables, and
         the measured and synthesised expression ``meshes`` with their ``faces``.
@@ -163,10 +309,11 @@ def run(
     name = subject.name
     base = need(data, paths.neutral("vertices"), name)
     fields = {t: need(data, paths.expression(t, "displacement"), name) for t in subject.expressions}
-    outline = outline_choice(fine, subject, data, fields, params)
+    natural, outline = natural_basis(fine, subject, data, fields, params)
     log.info(
-        "%s: %d of %d outline vertices clamped (fixed_outline: %s)",
+        "%s: preset %s, %d of %d outline vertices clamped (fixed_outline: %s)",
         name,
+        params.physics.get("preset", "?"),
         int(outline.fixed.sum()),
         int(outline.outline.sum()),
         params.fixed_outline,
@@ -183,7 +330,10 @@ def run(
         source=name,
         fixed=outline,
         target_mm=params.target_rms_mm,
+        basis=natural,
     )
+    datasets[paths.modal("preset")] = str(params.physics.get("preset", ""))
+    datasets[paths.modal("physics")] = json.dumps(params.physics, sort_keys=True)
     freq = basis.frequencies_hz
     log.info("%s: %d modes, %.1f to %.1f Hz", name, basis.n_modes, freq[0], freq[-1])
     takes = subject.expressions

@@ -88,6 +88,8 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
             "outline_motion_mm",
             "reconstruction_k",
             "reconstruction_target_mm",
+            "preset",
+            "physics",
             "semantic/names",
             "semantic/modes",
         ),

@@ -1,0 +1,320 @@
+"""How much of each expression the natural basis spans, against K, per basis physics, beside the
+smooth intrinsic anchor.
+
+For every expression of a finished run's subjects (``RUN/results/{subject}/motion.h5``: the
+neutral and each expression's displacement on the subdivided template) and for the real head's
+test smile (``tests/test_realdata.py``: the smile-like field on the Lee Perry-Smith face cut, with
+``--realdata``), and for each basis configuration (the presets of ``modal.preset`` and the variants
+tried on the way, :data:`VARIANTS`), the table gives what is left of the expression after K modes:
+
+- ``ls``: least squares on the first K mode shapes (translations), uniform weight per valid
+  vertex (valid in the neutral's and the take's template fit);
+- ``stored``: what the stored coordinates ``q = Q^T M v`` rebuild (:func:`scan2morph.modal.project`);
+- each as total RMS over the valid vertices (outline included), its normal and tangential parts
+  and the total without the outline, mm, and ``left`` = total / the expression's RMS;
+- the anchor: least squares on round(K/3) eigenfunctions per axis of the neutral's cotangent
+  Laplace-Beltrami operator (free boundary), at K = 25, 50, 100.
+
+Subjects given with ``--tune`` chose the physics; ``--held`` ones are reported as held out.
+A synthetic run to measure on (four subjects, four expressions each, 320 x 240 range scans,
+about 10 minutes on one core)::
+
+    synthetic: {subjects: 4, takes: [neutral, car, too, smile1, smile2, sad1, sad2],
+                scanner: {width: 320, height: 240, focal_px: 725.0}, ...}
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_modal_span.py RUN --tune synth01 synth02 \\
+        --held synth03 synth04 --realdata [--configs skin paper clamped_still] [--tsv out.tsv]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+KS = [1, 5, 10, 25, 50, 100]
+ANCHOR_KS = [25, 50, 100]
+
+#: Basis configurations: a preset and the config keys set over it. The presets are the
+#: candidates for the default; the variants are the other physics measured on the way.
+VARIANTS: dict[str, dict] = {
+    "paper": {"preset": "paper"},
+    "clamped_still": {"preset": "clamped_still"},
+    "skin": {"preset": "skin"},
+    "free_steel": {"preset": "paper", "fixed_outline": "none"},
+    "free_thick_soft_membrane": {
+        "preset": "paper",
+        "fixed_outline": "none",
+        "thickness_mm": 10.0,
+        "stiff_factor": 1.0,
+        "membrane_scale": 0.1,
+        "rotary_inertia": False,
+    },
+    "skin_tension_only": {
+        "preset": "skin",
+        "foundation_n_per_mm3": 0.0,
+        "tether_n_per_mm3": 0.0,
+        "tether_normal_n_per_mm3": 0.0,
+    },
+    "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0, "tether_normal_n_per_mm3": 0.0},
+    "skin_tangential_tether": {"preset": "skin", "tether_normal_n_per_mm3": 0.0},
+    "skin_clamped_still": {"preset": "skin", "fixed_outline": "still"},
+    "skin_stiff_upper": {"preset": "skin", "stiff_factor": 3.0, "youngs_modulus_mpa": 1.0},
+    "skin_vertex_mass": {"preset": "skin", "mass": "vertex"},
+}
+
+
+def subject_case(run: Path, subject: str, cfg: dict) -> dict:
+    """A synthetic subject's neutral, template, expressions and validity masks."""
+    import h5py
+
+    from scan2morph.stages import Subject
+    from scan2morph.store import paths, read_part
+    from scan2morph.template import load_template, subdivide_template
+
+    data = read_part(run / "results" / subject / "motion.h5")
+    template = load_template(run / "resources" / "template.npz")
+    fine = subdivide_template(template, int(cfg["template"]["subdivision_levels"]))
+    visemes = sorted({k.split("/")[2] for k in data if k.startswith("/visemes/")})
+    exprs = sorted({k.split("/")[2] for k in data if k.startswith("/expressions/")})
+    kinds = {"neutral": "neutral"} | dict.fromkeys(visemes, "viseme")
+    kinds |= dict.fromkeys(exprs, "expression")
+    labels = {t: t.rstrip("0123456789") or t for t in kinds}
+    fields = {t: data[paths.expression(t, "displacement")] for t in exprs}
+    filled = data.get(paths.neutral("filled"), np.zeros(len(fields[exprs[0]]), bool))
+    valid = {}
+    for t in exprs:
+        fit = run / "results" / subject / "takes" / t / "fit.h5"
+        ok = np.ones(len(filled), bool)
+        if fit.is_file():
+            with h5py.File(fit) as h5:
+                ok = h5[f"takes/{t}/mesh/valid"][()]
+        valid[t] = ok & ~filled
+    subj = Subject(subject, kinds, labels)
+    return {"fine": fine, "subject": subj, "data": data, "fields": fields, "valid": valid}
+
+
+def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
+    """One row per expression and K for one basis configuration on one subject."""
+    from scan2morph.geometry import vertex_normals
+    from scan2morph.modal import project, reconstruct
+    from scan2morph.modal.span import residual_split, span_curve
+    from scan2morph.stages import modal
+    from scan2morph.store import paths
+
+    section = dict(cfg["modal"]) | variant
+    params = modal.Params.from_config(section, cfg["template"], threads=2)
+    t0 = time.perf_counter()
+    basis, outline = modal.natural_basis(
+        case["fine"], case["subject"], case["data"], case["fields"], params
+    )
+    seconds = time.perf_counter() - t0
+    neutral = case["data"][paths.neutral("vertices")]
+    normals = vertex_normals(neutral, case["fine"].faces)
+    rows = []
+    for take, field in case["fields"].items():
+        where = case["valid"][take]
+        ls = span_curve(basis.modes, field, KS, normals, where, outline.outline)
+        q = project(basis, field)
+        for i, k in enumerate(KS):
+            stored = residual_split(
+                field - reconstruct(basis, q, k), normals, where, outline.outline
+            )
+            rows.append(_row(case["subject"].name, take, name, k, ls, i, stored, seconds))
+    return rows
+
+
+def _row(subject, take, config, k, ls, i, stored, seconds) -> dict:
+    return {
+        "subject": subject,
+        "take": take,
+        "config": config,
+        "K": k,
+        "rms_mm": ls.field_mm,
+        "ls_total": ls.total_mm[i],
+        "ls_normal": ls.normal_mm[i],
+        "ls_tangential": ls.tangential_mm[i],
+        "ls_inner": ls.inner_mm[i],
+        "stored_total": stored[0],
+        "stored_normal": stored[1],
+        "stored_tangential": stored[2],
+        "stored_inner": stored[3],
+        "basis_s": seconds,
+    }
+
+
+def anchor_rows(subject: str, fields, valid, vertices, faces, outline) -> list[dict]:
+    """The anchor's rows (config ``anchor``): round(K/3) Laplace-Beltrami functions per axis."""
+    from scan2morph.geometry import vertex_normals
+    from scan2morph.modal.span import laplace_beltrami, per_axis_fields, span_curve
+
+    n = max(round(k / 3) for k in ANCHOR_KS)
+    _, phi = laplace_beltrami(vertices, faces, n)
+    basis = per_axis_fields(phi)
+    normals = vertex_normals(vertices, faces)
+    rows = []
+    for take, field in fields.items():
+        c = span_curve(
+            basis, field, [3 * round(k / 3) for k in ANCHOR_KS], normals, valid[take], outline
+        )
+        for i, k in enumerate(ANCHOR_KS):
+            stored = (c.total_mm[i], c.normal_mm[i], c.tangential_mm[i], c.inner_mm[i])
+            rows.append(_row(subject, take, "anchor", k, c, i, stored, float("nan")))
+    return rows
+
+
+def realdata_case(data_dir: str | None = None):
+    """The real head's face cut and its test smile (tests/test_realdata.py), with the regions
+    the presets need placed by measure from the nose tip as the real-data tests place them."""
+    sys.path[:0] = [str(REPO / "tests"), str(REPO)]
+    import test_realdata
+    import trimesh
+    from test_realdata import _smile, load_head
+
+    if data_dir:  # the scan elsewhere than ../shared/data next to the repository
+        test_realdata.GLB = Path(data_dir) / test_realdata.GLB.name
+        test_realdata.COLOR_MAP = Path(data_dir) / test_realdata.COLOR_MAP.name
+    head = load_head()
+    pos, inverse = np.unique(head.vertices, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[head.faces]
+    inside = head.is_face(pos)
+    cut = trimesh.Trimesh(pos, faces[inside[faces].all(axis=1)], process=False)
+    part = max(cut.split(only_watertight=False), key=lambda m: len(m.faces))
+    part.update_faces(part.nondegenerate_faces())
+    part.remove_unreferenced_vertices()
+    v = np.asarray(part.vertices, dtype=np.float64)
+    f = np.asarray(part.faces, dtype=np.int64)
+    x, y = v[:, 0] - head.nose[0], v[:, 1] - head.nose[1]
+    stable = (y > 55) | ((np.abs(x) < 8) & (y > 10) & (y < 45)) | ((np.abs(x) > 50) & (y > 10))
+    return {"vertices": v, "faces": f, "smile": _smile(x, y), "upper": y > 0, "stable": stable}
+
+
+def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
+    """Rows of the real head's smile for one configuration: clamped where the preset clamps
+    (its whole boundary: no takes say which part is still), free otherwise."""
+    from scan2morph.geometry import vertex_normals
+    from scan2morph.modal import modal_basis, project, reconstruct
+    from scan2morph.modal.fem import boundary_vertices
+    from scan2morph.modal.span import residual_split, span_curve
+    from scan2morph.stages import modal
+
+    params = modal.Params.from_config(dict(cfg["modal"]) | variant, cfg["template"], threads=2)
+    v, f = real["vertices"], real["faces"]
+    rim = boundary_vertices(f, len(v))
+    fixed = rim if params.fixed_outline != "none" else np.zeros(len(v), bool)
+    tethered = real["stable"] if params.tether_region == "stable" else None
+    t0 = time.perf_counter()
+    basis = modal_basis(v, f, params.modal, real["upper"], fixed=fixed, tethered=tethered)
+    seconds = time.perf_counter() - t0
+    normals = vertex_normals(v, f)
+    where = np.ones(len(v), bool)
+    field = real["smile"]
+    ls = span_curve(basis.modes, field, KS, normals, where, rim)
+    q = project(basis, field)
+    rows = []
+    for i, k in enumerate(KS):
+        stored = residual_split(field - reconstruct(basis, q, k), normals, where, rim)
+        rows.append(_row("lee-perry-smith", "smile", name, k, ls, i, stored, seconds))
+    return rows
+
+
+def summary(table, held: set[str]) -> None:
+    """Per configuration: the worst expression's share left at K = 25, 50, 100 against the
+    anchor's, held-out expressions apart; the stored coordinates against least squares; the
+    normal part at K = 50 against K = 1."""
+    anchor = table[table.config == "anchor"].set_index(["subject", "take", "K"])
+    for name, t in table[table.config != "anchor"].groupby("config", sort=False):
+        t = t.assign(left=t.ls_total / t.rms_mm, stored_left=t.stored_total / t.rms_mm)
+        line = [f"{name:>26}"]
+        for k in ANCHOR_KS:
+            tk = t[t.K == k].set_index(["subject", "take"])
+            a = anchor.xs(k, level="K").reindex(tk.index)
+            margin = (tk.ls_total - a.ls_total) / tk.rms_mm
+            ho = tk[[s in held for s in tk.index.get_level_values(0)]]
+            line.append(
+                f"K={k}: left {tk.left.min():.2f}-{tk.left.max():.2f} (held-out max "
+                f"{ho.left.max() if len(ho) else float('nan'):.2f}), stored max "
+                f"{tk.stored_left.max():.2f}, minus anchor max {margin.max():+.3f}"
+            )
+        t1 = t[t.K == 1].set_index(["subject", "take"]).ls_normal
+        t50 = t[t.K == 50].set_index(["subject", "take"]).ls_normal
+        ratio = (t[t.K == 50].stored_total.values / t[t.K == 50].ls_total.values).max()
+        line.append(f"normal K50/K1 max {(t50 / t1).max():.2f}; stored/LS at K=50 max {ratio:.3f}")
+        print("\n    ".join(line))
+
+
+def main() -> None:
+    import pandas as pd
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("run", help="working directory of a finished run")
+    ap.add_argument("--tune", nargs="*", default=[], help="subjects the physics was chosen on")
+    ap.add_argument("--held", nargs="*", default=[], help="held-out subjects")
+    ap.add_argument("--configs", nargs="+", default=list(VARIANTS))
+    ap.add_argument(
+        "--extra", help='more configurations, JSON: {"name": {"preset": ..., key: value}}'
+    )
+    ap.add_argument("--realdata", action="store_true", help="also the real head's test smile")
+    ap.add_argument(
+        "--data", help="folder of LeePerrySmith.glb (default: tests/test_realdata.py's)"
+    )
+    ap.add_argument("--config", default=str(REPO / "config" / "config.yaml"))
+    ap.add_argument("--tsv", help="write every row here")
+    args = ap.parse_args()
+    cfg = yaml.safe_load(Path(args.config).read_text())
+    if args.extra:
+        extra = json.loads(args.extra)
+        VARIANTS.update(extra)
+        args.configs = [*args.configs, *extra]
+    cfg["modal"].setdefault("semantic_labels", [])
+    from scan2morph.store import paths
+
+    rows = []
+    for subject in [*args.tune, *args.held]:
+        case = subject_case(Path(args.run), subject, cfg)
+        fine = case["fine"]
+        outline = np.zeros(fine.n_vertices, bool)
+        outline[fine.boundary] = True
+        neutral = case["data"][paths.neutral("vertices")]
+        rows += anchor_rows(subject, case["fields"], case["valid"], neutral, fine.faces, outline)
+        for name in args.configs:
+            rows += subject_rows(case, cfg, name, VARIANTS[name])
+    if args.realdata:
+        real = realdata_case(args.data)
+        rim_fields = {"smile": real["smile"]}
+        from scan2morph.modal.fem import boundary_vertices
+
+        rim = boundary_vertices(real["faces"], len(real["vertices"]))
+        valid = {"smile": np.ones(len(real["vertices"]), bool)}
+        rows += anchor_rows(
+            "lee-perry-smith", rim_fields, valid, real["vertices"], real["faces"], rim
+        )
+        for name in args.configs:
+            rows += realdata_rows(real, cfg, name, VARIANTS[name])
+    table = pd.DataFrame(rows)
+    if args.tsv:
+        table.to_csv(args.tsv, sep="\t", index=False, float_format="%.4f")
+    table["left"] = table.ls_total / table.rms_mm
+    table["stored_left"] = table.stored_total / table.rms_mm
+    wide = table.pivot_table(
+        index=["subject", "take"], columns=["config", "K"], values="left", sort=False
+    )
+    pd.set_option("display.width", 250)
+    pd.set_option("display.max_columns", 200)
+    for name in ["anchor", *args.configs]:
+        print(f"\n== {name}: share of each expression's RMS left (least squares)")
+        print(wide[name].round(3).to_string())
+    print("\n== summary (held out: " + ", ".join([*args.held, "lee-perry-smith"]) + ")")
+    summary(table, set(args.held) | {"lee-perry-smith"})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,330 @@
+"""Tests of what the modal bases span (scan2morph.modal.span), the skin physics and the presets.
+
+Analytic oracles: the Neumann spectrum of a rectangle (Laplace-Beltrami anchor); the modes of a
+flat square membrane under isotropic tension with a free edge, in plane and out of plane, with and
+without a foundation under it (the ``skin`` physics); a simply supported steel plate whose first
+mode is the bending mode sin(pi x / a) sin(pi y / a) (the ``paper`` physics spans it and not the
+same shape in plane). Least squares against numpy's.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from scan2morph.errors import InputError
+from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
+from scan2morph.modal.fem import boundary_vertices, cotangent_laplacian, skin_stiffness
+from scan2morph.modal.span import (
+    laplace_beltrami,
+    per_axis_fields,
+    residual_split,
+    span_curve,
+)
+from scan2morph.stages import Subject, modal
+from scan2morph.store import paths
+from tests.test_modal import plate_mesh
+
+A_MM, T_N_PER_MM, RHO, H_MM = 100.0, 1.0, 1.1e-9, 1.0
+
+
+def membrane_params(n_modes: int, foundation: float = 0.0) -> ModalParams:
+    """A skin under tension on a negligible shell (E 1e-4 MPa: its membrane stiffness is
+    1e-4 of the tension, its bending far less), rotations without inertia."""
+    return ModalParams(
+        n_modes=n_modes,
+        thickness_mm=H_MM,
+        upper_thickness_factor=1.0,
+        material=ShellMaterial(1e-4, 0.3, RHO, rotary_inertia=False),
+        tension_n_per_mm=T_N_PER_MM,
+        foundation_n_per_mm3=foundation,
+        method="dense",
+    )
+
+
+def membrane_hz(m: int, n: int, foundation: float = 0.0) -> float:
+    """Free square membrane, mode cos(m pi x / a) cos(n pi y / a): omega^2 rho h = T k^2 (+ k_n
+    for motion along the normal)."""
+    k2 = (np.pi / A_MM) ** 2 * (m * m + n * n)
+    return float(np.sqrt((T_N_PER_MM * k2 + foundation) / (RHO * H_MM)) / (2 * np.pi))
+
+
+@pytest.fixture(scope="module")
+def plate():
+    return plate_mesh(16)
+
+
+@pytest.fixture(scope="module")
+def skin_plate(plate):
+    v, f = plate
+    free = np.zeros(len(v), bool)
+    return modal_basis(v, f, membrane_params(18), fixed=free, source="membrane")
+
+
+def test_cotangent_laplacian_integrates_a_linear_gradient(plate):
+    v, f = plate
+    lap, area = cotangent_laplacian(v, f)
+    assert_allclose(area.sum(), A_MM * A_MM, rtol=1e-12)
+    assert_allclose(lap @ np.ones(len(v)), 0.0, atol=1e-9)
+    g = 0.3 * v[:, 0] - 0.2 * v[:, 1]  # |grad g|^2 = 0.13 everywhere
+    assert_allclose(g @ (lap @ g), 0.13 * A_MM * A_MM, rtol=1e-9)
+
+
+def test_laplace_beltrami_matches_the_neumann_spectrum_of_a_rectangle():
+    v, f = plate_mesh(24)
+    v = v * [1.0, 0.6, 1.0]  # 100 x 60 mm
+    lam, phi = laplace_beltrami(v, f, 6)
+    exact = sorted(
+        (np.pi * m / 100.0) ** 2 + (np.pi * n / 60.0) ** 2 for m in range(4) for n in range(3)
+    )
+    assert abs(lam[0]) < 1e-9
+    assert_allclose(lam[1:], exact[1:6], rtol=0.02)
+    _, area = cotangent_laplacian(v, f)
+    assert_allclose(phi.T @ (area[:, None] * phi), np.eye(6), atol=1e-8)
+    fields = per_axis_fields(phi)
+    assert fields.shape == (18, len(v), 3)
+    assert_allclose(fields[3 * 2 + 1, :, 1], phi[:, 2]) and not fields[3 * 2 + 1, :, [0, 2]].any()
+
+
+def test_span_curve_is_least_squares_with_dependent_fields():
+    rng = np.random.default_rng(4)
+    n_v, k = 40, 9
+    basis = rng.normal(size=(k, n_v, 3))
+    basis[3] = 0.0  # adds nothing
+    basis[6] = 2.0 * basis[1] - basis[2]  # dependent on earlier ones
+    field = rng.normal(size=(n_v, 3))
+    normals = rng.normal(size=(n_v, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    where = rng.random(n_v) > 0.2
+    outline = rng.random(n_v) > 0.7
+    c = span_curve(basis, field, range(k + 1), normals, where, outline)
+    for kk in range(k + 1):
+        a = basis[:kk, where].reshape(kk, 3 * where.sum()).T
+        b = field[where].ravel()
+        fit = np.linalg.lstsq(a, b, rcond=None)[0]
+        e = np.zeros_like(field)
+        e[where] = (b - a @ fit).reshape(-1, 3)
+        assert_allclose(
+            [c.total_mm[kk], c.normal_mm[kk], c.tangential_mm[kk], c.inner_mm[kk]],
+            residual_split(e, normals, where, outline),
+            rtol=1e-9,
+        )
+    assert_allclose(c.total_mm**2, c.normal_mm**2 + c.tangential_mm**2, rtol=1e-9)
+    assert c.total_mm[0] == c.field_mm and c.left[0] == 1.0
+    with pytest.raises(InputError, match="ks"):
+        span_curve(basis, field, [k + 1], normals)
+    with pytest.raises(InputError, match="expected basis"):
+        span_curve(basis[:, :5], field, [1], normals)
+
+
+def test_skin_membrane_modes_match_membrane_theory(skin_plate):
+    """In plane and out of plane alike: three rigid translations, then the (1, 0) and (0, 1)
+    modes along x, y and z (six at one frequency), then (1, 1) three times, (2, 0), (0, 2)."""
+    freqs = skin_plate.frequencies_hz
+    assert np.all(freqs[:3] < 1e-3 * freqs[3])
+    exact = np.repeat([membrane_hz(1, 0), membrane_hz(1, 1), membrane_hz(2, 0)], [6, 3, 6])
+    assert_allclose(freqs[3:18], exact, rtol=0.02)
+
+
+@pytest.mark.parametrize("on_bone", [False, True])
+def test_a_foundation_lifts_only_the_normal_modes(plate, on_bone):
+    """k_n under the skin: omega^2 rho h = T k^2 + k_n for motion along the plate's normal (z);
+    the in-plane modes keep their frequencies. On bone (tethered vertices, no tangential tie)
+    half of it given as the bone's normal stiffness lifts them alike."""
+    v, f = plate
+    kn = T_N_PER_MM * (np.pi / A_MM) ** 2 * 3.0  # between the (1,1) and (2,0) in-plane modes
+    params = membrane_params(14, kn)
+    tethered = None
+    if on_bone:
+        params = ModalParams(
+            **(vars(params) | {"foundation_n_per_mm3": kn / 2, "tether_normal_n_per_mm3": kn / 2})
+        )
+        tethered = np.ones(len(v), bool)
+    basis = modal_basis(v, f, params, fixed=np.zeros(len(v), bool), tethered=tethered)
+    modes = basis.modes
+    along_z = np.sum(modes[:, :, 2] ** 2, axis=1) / np.sum(modes**2, axis=(1, 2))
+    normal, plane = basis.frequencies_hz[along_z > 0.99], basis.frequencies_hz[along_z < 0.01]
+    assert len(normal) + len(plane) == 14
+    assert_allclose(normal[:3], [membrane_hz(0, 0, kn)] + [membrane_hz(1, 0, kn)] * 2, rtol=0.02)
+    in_plane = [0.0, 0.0] + [membrane_hz(1, 0)] * 4 + [membrane_hz(1, 1)] * 2
+    assert_allclose(plane[2:8], in_plane[2:8], rtol=0.02) and np.all(plane[:2] < 1e-2 * plane[2])
+
+
+def test_skin_spans_in_plane_and_normal_shapes_analytically(plate, skin_plate):
+    """cos(pi x / a) along z plus cos(pi y / a) along x lies in the span of the first 9 skin
+    modes (translations and the six (1,0)/(0,1) modes) and of none of the first 3; the stored
+    coordinates (rotations without inertia: q = Q^T M v is mass-weighted least squares) rebuild
+    it as well."""
+    v, f = plate
+    field = np.zeros((len(v), 3))
+    field[:, 2] = 2.0 * np.cos(np.pi * v[:, 0] / A_MM)
+    field[:, 0] = 1.5 * np.cos(np.pi * v[:, 1] / A_MM)
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    rim = boundary_vertices(f, len(v))
+    c = span_curve(skin_plate.modes, field, [3, 9], normals, outline=rim)
+    assert c.left[0] > 0.99 and c.left[1] < 0.02
+    stored = field - reconstruct(skin_plate, project(skin_plate, field), 9)
+    assert residual_split(stored, normals, np.ones(len(v), bool), rim)[0] < 0.02 * c.field_mm
+
+
+def test_steel_plate_bends_first_and_slides_last(plate):
+    """The paper's physics on a simply supported steel plate: its first mode is the bending
+    shape sin(pi x / a) sin(pi y / a) along z (spanned at K = 1); the same shape in plane is
+    not in the span of its first 12 modes, all bending."""
+    v, f = plate
+    params = ModalParams(n_modes=12, upper_thickness_factor=1.0, boundary="pinned", method="dense")
+    basis = modal_basis(v, f, params)
+    shape = np.sin(np.pi * v[:, 0] / A_MM) * np.sin(np.pi * v[:, 1] / A_MM)
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    bend, slide = np.zeros((len(v), 3)), np.zeros((len(v), 3))
+    bend[:, 2], slide[:, 0] = shape, shape
+    assert span_curve(basis.modes, bend, [1], normals).left[0] < 0.02
+    assert span_curve(basis.modes, slide, [12], normals).left[0] > 0.99
+
+
+def test_skin_stiffness_bad_input(plate):
+    v, f = plate
+    with pytest.raises(InputError, match="tension_n_per_mm"):
+        skin_stiffness(v, f, -1.0)
+    with pytest.raises(InputError, match="foundation_n_per_mm3"):
+        skin_stiffness(v, f, 1.0, float("nan"))
+    with pytest.raises(InputError, match="tethered"):
+        skin_stiffness(v, f, 1.0, 0.0, np.ones(3, bool), 1.0)
+    with pytest.raises(InputError, match="tether_normal_n_per_mm3"):
+        skin_stiffness(v, f, 1.0, 0.0, None, 0.0, -0.5)
+
+
+# --- presets and the store ---------------------------------------------------------------
+
+
+SECTION = {"modes": 12, "semantic_labels": [], "reconstruction_k": [1, 5], "seed": 0}
+TEMPLATE = {"subdivision_levels": 1}
+
+
+def test_presets_resolve_and_overrides_win():
+    paper = modal.Params.from_config(SECTION | {"preset": "paper"}, TEMPLATE)
+    assert paper.fixed_outline == "all" and paper.modal.material.youngs_modulus_mpa == 210000.0
+    assert paper.modal.upper_thickness_factor == 3.0 and not paper.modal.has_skin
+    still = modal.Params.from_config(SECTION | {"preset": "clamped_still"}, TEMPLATE)
+    assert still.fixed_outline == "still" and still.modal == paper.modal
+    skin = modal.Params.from_config(SECTION, TEMPLATE)  # the default
+    assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
+    assert skin.fixed_outline == "none" and skin.tether_region == "stable"
+    assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
+    assert skin.modal.tether_normal_n_per_mm3 == 0.01
+    over = modal.Params.from_config(
+        SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None}, TEMPLATE
+    )
+    assert over.fixed_outline == "none" and over.modal.thickness_mm == 1.0
+    assert over.physics == paper.physics | {"fixed_outline": "none"}
+    with pytest.raises(InputError, match="preset: expected one of"):
+        modal.Params.from_config(SECTION | {"preset": "rubber"}, TEMPLATE)
+    with pytest.raises(InputError, match="fixed_outline"):
+        modal.Params.from_config(SECTION | {"fixed_outline": "some"}, TEMPLATE)
+    with pytest.raises(InputError, match="tether_region"):
+        modal.Params.from_config(SECTION | {"tether_region": "chin"}, TEMPLATE)
+
+
+@pytest.fixture(scope="module")
+def template():
+    from scan2morph.template import build_template
+
+    return build_template()
+
+
+def _face(template):
+    """The subdivided template lifted onto a dome (mm) and a smile-like displacement."""
+    from scan2morph.template import subdivide_template
+
+    fine = subdivide_template(template, 1)
+    xy = fine.vertices * 40.0
+    z = 90.0 * np.sqrt(np.clip(1 - (xy[:, 0] / 110) ** 2 - ((xy[:, 1] - 20) / 140) ** 2, 0, None))
+    neutral = np.column_stack([xy[:, 0], -xy[:, 1], z])
+    g = np.exp(-(((np.abs(xy[:, 0]) - 30) / 15) ** 2) - ((xy[:, 1] - 55) / 15) ** 2)
+    smile = np.column_stack([2.0 * np.sign(xy[:, 0]) * g, 3.0 * g, 1.0 * g])
+    return neutral, smile
+
+
+@pytest.mark.parametrize("preset", ["skin", "paper"])
+def test_the_stage_records_its_preset(template, preset):
+    neutral, smile = _face(template)
+    data = {paths.neutral("vertices"): neutral, paths.expression("sm1", "displacement"): smile}
+    subject = Subject("s", {"n": "neutral", "sm1": "expression"}, {"n": "neutral", "sm1": "smile"})
+    params = modal.Params.from_config(SECTION | {"preset": preset}, TEMPLATE)
+    part = modal.run(template, subject, data, params)
+    d = part.datasets
+    assert d[paths.modal("preset")] == preset
+    assert json.loads(d[paths.modal("physics")]) == params.physics
+    fixed = d[paths.modal("fixed_vertices")]
+    n_outline = len(template.boundary) * 2  # one subdivision doubles the loop
+    assert fixed.sum() == (n_outline if preset == "paper" else 0)
+    left = d[paths.expression("sm1", "reconstruction_rms_mm")][-1] / np.sqrt(
+        np.mean(np.sum(smile**2, axis=1))
+    )
+    assert left < (0.8 if preset == "skin" else 1.0)
+
+
+def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
+    """mass="vertex": the shell's mass shared equally by the vertices, so q = Q^T M v rebuilds
+    exactly what least squares on the same modes does, at every K (the consistent mass weighs
+    by area and differs on an uneven mesh)."""
+    v, f = plate
+    v = v.copy()
+    v[:, 0] = A_MM * (v[:, 0] / A_MM) ** 1.6  # uneven spacing: dense near x = 0
+    params = ModalParams(**(vars(membrane_params(15)) | {"mass": "vertex"}))
+    basis = modal_basis(v, f, params, fixed=np.zeros(len(v), bool))
+    m_diag = basis.mass.diagonal().reshape(-1, 6)
+    total = RHO * H_MM * cotangent_laplacian(v, f)[1].sum()
+    assert_allclose(m_diag[:, :3], total / len(v), rtol=1e-12) and not m_diag[:, 3:].any()
+    rng = np.random.default_rng(2)
+    field = np.column_stack([np.cos(v[:, 0] / 30.0 + c) for c in rng.normal(size=3)])
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    ks = [1, 4, 9, 15]
+    ls = span_curve(basis.modes, field, ks, normals)
+    q = project(basis, field)
+    everywhere = np.ones(len(v), bool)
+    stored = [
+        residual_split(field - reconstruct(basis, q, k), normals, everywhere, ~everywhere)[0]
+        for k in ks
+    ]
+    assert_allclose(stored, ls.total_mm, rtol=1e-8)
+    consistent = modal_basis(v, f, membrane_params(15), fixed=np.zeros(len(v), bool))
+    qc = project(consistent, field)
+    err = residual_split(field - reconstruct(consistent, qc, 9), normals, everywhere, ~everywhere)
+    lsc = span_curve(consistent.modes, field, [9], normals).total_mm[0]
+    assert err[0] > 1.001 * lsc
+
+
+def test_reconstruction_figure_plots_the_share_left_and_names_the_preset():
+    from scan2morph.render.modal_figures import fig_reconstruction
+
+    d = np.zeros((10, 3))
+    d[:, 0] = 2.0  # RMS 2 mm
+    store = {
+        paths.modal("reconstruction_k"): np.array([1, 10, 100]),
+        paths.modal("preset"): "skin",
+        paths.expression("sm1", "displacement"): d,
+        paths.expression("sm1", "reconstruction_rms_mm"): np.array([1.6, 1.0, 0.4]),
+        paths.expression("sm1", "reconstruction_normal_rms_mm"): np.array([0.6, 0.4, 0.2]),
+    }
+    fig = fig_reconstruction(store)
+    ax = fig.axes[0]
+    assert_allclose(ax.lines[0].get_ydata(), [0.8, 0.5, 0.2])
+    assert_allclose(ax.lines[1].get_ydata(), [0.3, 0.2, 0.1])
+    assert "preset skin" in ax.get_title() and "share" in ax.get_ylabel()
+
+
+def test_report_names_the_preset():
+    import h5py
+
+    from scan2morph.report import sections
+
+    with h5py.File("modal.h5", "w", driver="core", backing_store=False) as h5:
+        h5[paths.modal("frequencies_hz")] = [10.0, 20.0]
+        blocks = sections.modal(h5, 2)
+        assert "preset" not in str(blocks[0])
+        h5.create_dataset(paths.modal("preset"), data="paper", dtype=h5py.string_dtype())
+        assert "physics: preset paper" in str(sections.modal(h5, 2)[0])
