@@ -253,6 +253,9 @@ def test_accuracy_and_cohort_name_the_takes_left_out(tmp_path_factory, tmp_path,
     with h5py.File(copy, "a") as h5:
         for key, value in record.datasets().items():
             h5.create_dataset(key, data=value, dtype=h5py.string_dtype())
+    from scan2morph import load_model
+
+    assert load_model(copy).failed == {"too": record}  # the model API names it too
     with caplog.at_level("WARNING", logger="scan2morph"):
         table = write_cohort_summary({SUBJECT: copy}, {}, tmp_path / "t.tsv", tmp_path / "t.png")
     assert table["left_out"].tolist() == ["too (fit)"]

@@ -29,6 +29,7 @@ def test_model_reads_the_store(run):
     assert set(model.visemes) == {"car", "too"} and set(model.coordinates) == {"smile1"}
     assert model.sigma_convention == "sample" and model.provenance["format_version"]
     assert model.head_frame.shape == (4, 4) and model.texture.dtype == np.uint8
+    assert model.modal_preset == "skin" and model.failed == {}  # the default physics; no take out
     with h5py.File(store_path) as h5:  # the file explains itself in any HDF5 viewer
         ds = h5[paths.mesh("car", "vertices")]
         assert ds.attrs["units"] == "mm" and "Template vertices" in ds.attrs["description"]

@@ -29,7 +29,13 @@ from scan2morph.morph.pca import ALPHA_LIMIT
 from scan2morph.morph.subject import pca_target_weights
 from scan2morph.store import open_store, paths
 from scan2morph.store.hdf5 import attr_value
-from scan2morph.store.warnings import Warning, read_warnings, skipped_stages
+from scan2morph.store.warnings import (
+    Failure,
+    Warning,
+    read_failures,
+    read_warnings,
+    skipped_stages,
+)
 
 
 @dataclass(frozen=True)
@@ -63,6 +69,12 @@ class Model:
         Modal coordinates of each expression.
     head_frame : (4, 4) float or None
         Neutral frame (mm) -> glTF head frame (m).
+    modal_preset : str or None
+        The physics of the modal basis (``modal.preset``: ``skin``, ``clamped_still``,
+        ``paper``); None in a store written before format 1.4.
+    failed : dict take -> Failure
+        The takes left out of the subject (bad input or a quality gate at a per-take stage), with
+        the stage that refused each and why.
     warnings : list of Warning
         What not to trust (misaligned takes left out, refused refits, ...).
     skipped : dict stage -> why
@@ -85,6 +97,8 @@ class Model:
     modes: np.ndarray
     coordinates: dict[str, np.ndarray]
     head_frame: np.ndarray | None
+    modal_preset: str | None = None
+    failed: dict[str, Failure] = field(default_factory=dict)
     warnings: list[Warning] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)
     provenance: dict[str, object] = field(default_factory=dict)
@@ -198,10 +212,20 @@ def load_model(path: str | Path) -> Model:
             modes=h5[paths.modal("modes")][()],
             coordinates={t: h5[paths.expression(t, "coordinates")][()] for t in expressions},
             head_frame=_get(h5, paths.neutral("head_frame")),
+            modal_preset=_text(h5, paths.modal("preset")),
+            failed=read_failures(h5),
             warnings=read_warnings(h5),
             skipped=skipped_stages(h5),
             provenance={k: attr_value(v) for k, v in attrs.items()},
         )
+
+
+def _text(h5, key: str) -> str | None:
+    """A text dataset, or None when the store has none."""
+    value = _get(h5, key)
+    if value is None:
+        return None
+    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def _keys(h5, root: str) -> list[str]:
