@@ -41,7 +41,7 @@ from scan2morph.align import (
 from scan2morph.align.noise import robust_rms
 from scan2morph.errors import InputError, require_numbers
 from scan2morph.geometry import surface_normals
-from scan2morph.scan.repair import smooth_depth
+from scan2morph.scan.depth_cleanup import smooth_depth
 from scan2morph.template.sample import range_pixels
 
 __all__ = [

@@ -52,8 +52,9 @@ from scipy.sparse.linalg import spsolve
 
 from scan2morph.errors import InputError, require_numbers
 from scan2morph.refine.template_space import pull_back
+from scan2morph.scan.view import scanner_view
 from scan2morph.template.regions import Lip
-from scan2morph.template.sample import sample_range, scanner_view
+from scan2morph.template.sample import sample_range
 
 __all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior", "harmonic_fill"]
 
