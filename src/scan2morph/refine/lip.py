@@ -23,10 +23,11 @@ Along it, in each image:
    within ``stretch`` of the lip's length of it stays (the lip may stretch that much); one
    beyond goes to the nearest length allowed.
 
-The vertices so placed are held; the lip's others follow harmonically (:func:`harmonic_fill`),
-and everything else keeps the flow's answer. (Letting the skin next to the border follow too
-doubled car's click-noise error bar, 0.035 -> 0.065: it flips whether the nasolabial skin next
-to car's torn patch tears, from one draw of the clicks to the next; accuracy the same.)
+The vertices so placed are held; the lip's others follow harmonically
+(:func:`scan2morph.geometry.harmonic_fill`), and everything else keeps the flow's answer.
+(Letting the skin next to the border follow too doubled car's click-noise error bar, 0.035 ->
+0.065: it flips whether the nasolabial skin next to car's torn patch tears, from one draw of the
+clicks to the next; accuracy the same.)
 
 The prior needs lips that are redder than the skin, in both images: a grey image, a sprayed
 stereo neutral or a painted face shows no border, and the prior is then not used (its
@@ -47,17 +48,19 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
-from scipy.sparse import coo_matrix
-from scipy.sparse.linalg import spsolve
 
 from scan2morph.errors import InputError, require_numbers
+from scan2morph.geometry import harmonic_fill
 from scan2morph.refine.template_space import pull_back
 from scan2morph.scan.view import scanner_view
 from scan2morph.template.regions import Lip
 from scan2morph.template.sample import sample_range
 
-__all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior", "harmonic_fill"]
+__all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior"]
 
+#: The harmonic fill's pull of the lip's followers towards 0 (:func:`harmonic_fill`'s ``ridge``):
+#: a follower's weight stays below a placed vertex's 1.
+_FILL_RIDGE = 1e-12
 #: Spacing of a profile's samples, px.
 STEP_PX = 0.2
 #: Smoothing of a profile's redness, and of its surface points before their length is taken
@@ -439,7 +442,7 @@ def lip_prior(
     values = np.zeros((n, 3))
     values[vertices[ok], :2] = targets[ok] - pt[vertices[ok]]
     values[vertices[ok], 2] = 1.0
-    filled = harmonic_fill(f, values, fixed)
+    filled = harmonic_fill(values, f, fixed, unreachable=0.0, ridge=_FILL_RIDGE)
     region = vertices
     points = np.full((n, 2), np.nan)
     points[region] = pt[region] + filled[region, :2]
@@ -636,57 +639,3 @@ def _register(arc_n, red_n, arc_t, red_t, limit):
     if c < 0:
         shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
     return float(shift)
-
-
-def harmonic_fill(faces: np.ndarray, values: np.ndarray, fixed: np.ndarray) -> np.ndarray:
-    """Values on a mesh's free vertices that are harmonic (each the mean of its neighbours),
-    given the values at the fixed vertices.
-
-    Parameters
-    ----------
-    faces : (F, 3) int
-    values : (V, k) float
-        Values at the fixed vertices (others ignored).
-    fixed : (V,) bool
-
-    Returns
-    -------
-    (V, k) float64
-        ``values`` at the fixed vertices, the uniform-Laplacian harmonic interpolation at the
-        free ones (a free vertex with no path to a fixed one gets 0).
-
-    Raises
-    ------
-    InputError
-        Shapes that do not match, faces not among the vertices, non-finite fixed values.
-    """
-    vals = np.asarray(values, dtype=np.float64)
-    fixed = np.asarray(fixed, dtype=bool)
-    f = np.asarray(faces)
-    v = len(vals)
-    if vals.ndim != 2 or fixed.shape != (v,):
-        raise InputError(
-            "harmonic fill", f"values {vals.shape}, fixed {fixed.shape}: expected (V, k) and (V,)"
-        )
-    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= v)):
-        raise InputError("harmonic fill", f"faces {f.shape}: expected (F, 3) indices below {v}")
-    if not np.isfinite(vals[fixed]).all():
-        raise InputError("harmonic fill", "values: expected finite values at the fixed vertices")
-    out = np.where(fixed[:, None], vals, 0.0)
-    free = np.flatnonzero(~fixed)
-    if len(free) == 0:
-        return out
-    f = f.astype(np.int64)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    adj = coo_matrix(
-        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(v, v)
-    ).tocsr()
-    degree = np.asarray(adj.sum(axis=1)).ravel()
-    lap = (coo_matrix((degree, (np.arange(v), np.arange(v))), shape=(v, v)) - adj).tocsr()
-    a = lap[free][:, free].tocsc()
-    b = -lap[free][:, np.flatnonzero(fixed)] @ out[fixed]
-    # a free part with no fixed neighbour would be singular: a tiny pull to 0 keeps it at 0
-    a = a + coo_matrix((1e-12 * np.ones(len(free)), (np.arange(len(free)),) * 2)).tocsc()
-    out[free] = np.asarray(spsolve(a, b)).reshape(len(free), -1)
-    return out
