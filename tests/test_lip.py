@@ -325,7 +325,7 @@ def test_register_recovers_a_known_shift():
     """The redness registration: a smooth border shifted by a known, off-grid length (either
     sign) is recovered to a thousandth of a millimetre; a best match at the edge of the shifts
     allowed is no match."""
-    from scan2morph.refine.lip import _register
+    from scan2morph.refine.lip_profile import register_redness as _register
 
     arc = np.linspace(-4.0, 4.0, 401)
     red = 0.42 + 0.09 * (1.0 - _step(arc, 0.0, 1.5))
