@@ -488,34 +488,9 @@ def fit_take(
         collinear; more than ``max_fold_fraction`` folded triangles; fewer than
         ``min_valid_fraction`` valid vertices.
     """
-    landmarks = np.asarray(landmarks, dtype=np.float64)
-    if landmarks.shape != (N_IBUG, 2):
-        raise InputError(source, f"landmarks: expected ({N_IBUG}, 2), got {landmarks.shape}")
-    if not np.isfinite(landmarks).all():
-        k = int(np.argmax(~np.isfinite(landmarks).all(axis=1)))
-        raise InputError(source, f"landmarks: point {k + 1} (iBUG numbering) is not finite")
-    xyz = np.asarray(xyz, dtype=np.float64)
-    if xyz.ndim != 3 or xyz.shape[2] != 3:
-        raise InputError(source, f"xyz: expected (H, W, 3), got {xyz.shape}")
-    if image_size is None:
-        image_size = (xyz.shape[1], xyz.shape[0])
-    width, height = (int(n) for n in image_size)
-    if (height, width) != xyz.shape[:2]:
-        raise InputError(
-            source,
-            f"image_size: {width}x{height} (WxH) but the range image is "
-            f"{xyz.shape[1]}x{xyz.shape[0]}; landmarks, color and range must be pixel to pixel",
-        )
-    numbers, base_idx = template.fiducial_set(fiducial_set, source=source)
-    dst = landmarks[numbers - 1]
-    out = (dst < -0.5).any(axis=1) | (dst[:, 0] > width - 0.5) | (dst[:, 1] > height - 0.5)
-    if out.any():
-        k = int(np.argmax(out))
-        raise InputError(
-            source,
-            f"fiducials: image point {k} (iBUG {int(numbers[k])}) at {dst[k].round(1).tolist()} "
-            f"is outside the {width}x{height} image ({int(out.sum())} fiducials outside)",
-        )
+    landmarks, xyz, (width, height) = _checked_take(landmarks, xyz, image_size, source)
+    numbers, _ = template.fiducial_set(fiducial_set, source=source)
+    _check_inside(landmarks[numbers - 1], numbers, (width, height), source)
     fine = subdivide_template(template, levels)
     points = fit_map(template, landmarks, fiducial_set, source, image_size)(fine.vertices)
     folded = check_no_folds(points, fine.faces, source, max_fold_fraction)
@@ -538,3 +513,42 @@ def fit_take(
         "faces": np.asarray(fine.faces, dtype=np.int64),
         "n_folded": int(folded.sum()),
     }
+
+
+def _checked_take(landmarks, xyz, image_size, source: str) -> tuple:
+    """``(landmarks (68, 2), xyz (H, W, 3), (width, height))`` as float64 arrays and ints, or
+    an InputError naming ``source``: landmarks not (68, 2) or not finite, ``xyz`` not
+    (H, W, 3), ``image_size`` (default the range image's) other than the range image's."""
+    landmarks = np.asarray(landmarks, dtype=np.float64)
+    if landmarks.shape != (N_IBUG, 2):
+        raise InputError(source, f"landmarks: expected ({N_IBUG}, 2), got {landmarks.shape}")
+    if not np.isfinite(landmarks).all():
+        k = int(np.argmax(~np.isfinite(landmarks).all(axis=1)))
+        raise InputError(source, f"landmarks: point {k + 1} (iBUG numbering) is not finite")
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 3 or xyz.shape[2] != 3:
+        raise InputError(source, f"xyz: expected (H, W, 3), got {xyz.shape}")
+    if image_size is None:
+        image_size = (xyz.shape[1], xyz.shape[0])
+    width, height = (int(n) for n in image_size)
+    if (height, width) != xyz.shape[:2]:
+        raise InputError(
+            source,
+            f"image_size: {width}x{height} (WxH) but the range image is "
+            f"{xyz.shape[1]}x{xyz.shape[0]}; landmarks, color and range must be pixel to pixel",
+        )
+    return landmarks, xyz, (width, height)
+
+
+def _check_inside(dst: np.ndarray, numbers: np.ndarray, size: tuple, source: str) -> None:
+    """An InputError unless every fiducial ``dst`` (n, 2) px (iBUG ``numbers`` (n,)) lies in
+    the image of ``size`` ``(width, height)``."""
+    width, height = size
+    out = (dst < -0.5).any(axis=1) | (dst[:, 0] > width - 0.5) | (dst[:, 1] > height - 0.5)
+    if out.any():
+        k = int(np.argmax(out))
+        raise InputError(
+            source,
+            f"fiducials: image point {k} (iBUG {int(numbers[k])}) at {dst[k].round(1).tolist()} "
+            f"is outside the {width}x{height} image ({int(out.sum())} fiducials outside)",
+        )
