@@ -6,7 +6,13 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import face_normals, harmonic_fill, unique_edges, vertex_normals
+from scan2morph.geometry import (
+    face_normals,
+    face_sides,
+    harmonic_fill,
+    unique_edges,
+    vertex_normals,
+)
 
 
 def _grid(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray]:
@@ -119,6 +125,13 @@ def test_unique_edges_match_an_independent_set_on_a_grid():
     }
     assert [tuple(e) for e in unique_edges(f).tolist()] == sorted(oracle)
     assert len(oracle) == (8 * 6) + (9 * 5) + 8 * 5  # rows + columns + diagonals
+
+
+def test_face_sides_run_round_each_face():
+    faces = np.array([[3, 1, 2], [2, 1, 0]])
+    assert_array_equal(face_sides(faces), [[3, 1], [1, 2], [2, 3], [2, 1], [1, 0], [0, 2]])
+    assert face_sides(np.zeros((0, 3), dtype=np.int32)).shape == (0, 2)
+    assert face_sides(faces.astype(np.int32)).dtype == np.int64
 
 
 def test_unique_edges_of_no_faces():

@@ -116,6 +116,22 @@ def surface_normals(xyz: np.ndarray) -> np.ndarray:
     return np.where(flip, -n, n)
 
 
+def face_sides(faces: np.ndarray) -> np.ndarray:
+    """The sides of every face, in order: ``(a, b)``, ``(b, c)``, ``(c, a)`` of face ``(a, b, c)``.
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+
+    Returns
+    -------
+    (3 F, 2) int64
+        Row ``3 k + s`` is side ``s`` of face ``k``, oriented as the face runs (an edge shared by
+        two faces appears twice, once each way in a consistently oriented mesh).
+    """
+    return np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+
+
 def unique_edges(
     faces: np.ndarray, return_inverse: bool = False
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
@@ -137,8 +153,7 @@ def unique_edges(
         Only with ``return_inverse``: ``edges[inverse[k, s]]`` is side ``s`` (0: ab, 1: bc,
         2: ca) of face ``k``; -1 for a side joining a vertex to itself.
     """
-    f = np.asarray(faces, dtype=np.int64)
-    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    e = np.sort(face_sides(faces), axis=1)
     keep = e[:, 0] != e[:, 1]
     # One int64 key per edge: a 1-D unique is far faster than np.unique(axis=0).
     base = np.int64(e.max()) + 1 if e.size else np.int64(1)
@@ -300,6 +315,7 @@ __all__ = [
     "check_vertex_array",
     "edge_adjacency",
     "face_normals",
+    "face_sides",
     "harmonic_fill",
     "unique_edges",
     "vertex_normals",

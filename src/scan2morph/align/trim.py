@@ -8,6 +8,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from scan2morph.align.rigid import transform_points
+from scan2morph.geometry import edge_adjacency
 
 #: Averaged residuals below this never count as motion, mm (a floor to the robust threshold).
 _TRIM_FLOOR_MM = 0.05
@@ -61,10 +62,8 @@ def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:
         return keep, t, conv, 0, []
     pairs = cKDTree(p).query_pairs(prm["trim_radius_mm"], output_type="ndarray")
     n = len(p)
-    rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(n)])
-    cols = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(n)])
-    adj = sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
-    mean = sparse.diags(1.0 / np.asarray(adj.sum(axis=1)).ravel()) @ adj
+    adj = edge_adjacency(pairs, n) + sparse.eye_array(n, format="csr")  # each with itself
+    mean = sparse.diags_array(1.0 / adj.sum(axis=1)) @ adj
     grow = np.zeros(n, dtype=bool) if grow is None else grow
     region = ~grow
     iterations, rounds = 0, 0
