@@ -84,6 +84,7 @@ lint: setup
 	$(BIN)/ruff check .
 	$(BIN)/snakefmt --check .
 	$(BIN)/snakemake --lint
+	$(BIN)/python tools/check_shape.py
 
 clean:
 	rm -rf results logs .snakemake benchmarks/rules

@@ -666,13 +666,14 @@ def test_a_region_icp_whose_samples_alternate_settles_between_them():
     """Without the halving of a step that turns back, the pose swings between the two planes
     (0.2 mm apart) until its iterations run out and the ICP counts as not converged (a chin's
     registration in 2 of 16 click-noise draws of a car); with it, it converges between them."""
-    from scan2morph.align.icp import _params, _region_icp
+    from scan2morph.align.region import _region_icp
+    from scan2morph.align.settings import icp_settings
 
     g = np.linspace(-20.0, 20.0, 7)
     xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
     delta = 0.2
     region = np.hstack([xy, np.full((len(xy), 1), delta)])  # on the upper plane
-    prm = _params({"max_iterations": 50}, "test")
+    prm = icp_settings({"max_iterations": 50}, "test")
     t, iterations, converged, _ = _region_icp(
         region, _AlternatingSurface(xy, delta), np.eye(4), prm
     )

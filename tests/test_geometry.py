@@ -1,9 +1,18 @@
-"""Tests of scan2morph.geometry: normals and edges against analytic answers."""
+"""Tests of scan2morph.geometry: normals, edges and the harmonic fill against analytic answers
+and independent oracles."""
 
 import numpy as np
+import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from scan2morph.geometry import face_normals, unique_edges, vertex_normals
+from scan2morph.errors import InputError
+from scan2morph.geometry import (
+    face_normals,
+    face_sides,
+    harmonic_fill,
+    unique_edges,
+    vertex_normals,
+)
 
 
 def _grid(nx: int, ny: int) -> tuple[np.ndarray, np.ndarray]:
@@ -118,5 +127,100 @@ def test_unique_edges_match_an_independent_set_on_a_grid():
     assert len(oracle) == (8 * 6) + (9 * 5) + 8 * 5  # rows + columns + diagonals
 
 
+def test_face_sides_run_round_each_face():
+    faces = np.array([[3, 1, 2], [2, 1, 0]])
+    assert_array_equal(face_sides(faces), [[3, 1], [1, 2], [2, 3], [2, 1], [1, 0], [0, 2]])
+    assert face_sides(np.zeros((0, 3), dtype=np.int32)).shape == (0, 2)
+    assert face_sides(faces.astype(np.int32)).dtype == np.int64
+
+
 def test_unique_edges_of_no_faces():
     assert unique_edges(np.zeros((0, 3), dtype=np.int64)).shape == (0, 2)
+
+
+def _grid_faces(nx: int, ny: int) -> np.ndarray:
+    """Faces of an (nx x ny) vertex grid, each cell split along one diagonal (row-major)."""
+    i = (np.arange(nx - 1)[None, :] + nx * np.arange(ny - 1)[:, None]).ravel()
+    return np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
+
+
+def test_harmonic_fill_reproduces_a_linear_field():
+    """On a regular triangulated grid a linear function is harmonic under the uniform
+    Laplacian: given on the boundary it is recovered inside (the oracle)."""
+    nx, ny = 9, 7
+    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(ny, dtype=float))
+    faces = _grid_faces(nx, ny)
+    values = np.c_[2.0 * x.ravel() - 3.0 * y.ravel() + 1.0, 0.5 * y.ravel()]
+    known = ((x == 0) | (y == 0) | (x == nx - 1) | (y == ny - 1)).ravel()
+    filled = harmonic_fill(np.where(known[:, None], values, 99.0), faces, known)
+    assert_allclose(filled, values, atol=1e-9)
+    assert_array_equal(filled[known], values[known])  # the known values are kept exactly
+
+
+def test_harmonic_fill_solves_the_laplace_equation_of_a_dense_oracle():
+    """On an irregular mesh the filled values satisfy the uniform Laplace equation: the oracle
+    builds the graph Laplacian edge by edge from the faces and solves its unknown block densely
+    (numpy), independently of the sparse code."""
+    rng = np.random.default_rng(7)
+    nx, ny = 8, 6
+    faces = _grid_faces(nx, ny)
+    n = nx * ny
+    lap = np.zeros((n, n))
+    for a, b, c in faces:
+        for i, j in ((a, b), (b, c), (c, a)):
+            lap[i, j] = lap[j, i] = -1.0
+    np.fill_diagonal(lap, 0.0)
+    np.fill_diagonal(lap, -lap.sum(axis=1))
+    known = rng.random(n) < 0.35
+    known[0] = True
+    values = rng.normal(size=(n, 3))
+    u, k = ~known, known
+    oracle = values.copy()
+    oracle[u] = np.linalg.solve(lap[np.ix_(u, u)], -lap[np.ix_(u, k)] @ values[k])
+    filled = harmonic_fill(np.where(known[:, None], values, np.nan), faces, known)
+    assert_allclose(filled, oracle, rtol=0, atol=1e-12)
+    assert_allclose((lap @ filled)[u], 0.0, atol=1e-12)  # each unknown is its neighbours' mean
+    # a ridge pulls the unknowns towards `unreachable`: (L_uu + r I) x_u = -L_uk x_k + r c
+    r, c = 0.5, 2.0
+    pulled = values.copy()
+    a = lap[np.ix_(u, u)] + r * np.eye(int(u.sum()))
+    pulled[u] = np.linalg.solve(a, -lap[np.ix_(u, k)] @ values[k] + r * c)
+    got = harmonic_fill(values, faces, known, unreachable=c, ridge=r)
+    assert_allclose(got, pulled, rtol=0, atol=1e-12)
+    assert np.abs(got - filled).max() > 0.01  # the ridge is not ignored
+
+
+def test_harmonic_fill_unreachable_vertices_get_the_given_value():
+    """An unknown vertex in a component without a known vertex has no interpolant: NaN by
+    default, or the value asked for; the component with known vertices is not affected."""
+    nx, ny = 5, 4
+    faces = _grid_faces(nx, ny)
+    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(ny, dtype=float))
+    values = np.c_[x.ravel() + 2.0 * y.ravel()]
+    known = ((x == 0) | (y == 0) | (x == nx - 1) | (y == ny - 1)).ravel()
+    alone = np.concatenate([faces, [[nx * ny, nx * ny + 1, nx * ny + 2]]])
+    more = np.vstack([values, [[5.0], [6.0], [7.0]]])
+    mask = np.r_[known, False, False, False]
+    nan = harmonic_fill(more, alone, mask)
+    zero = harmonic_fill(more, alone, mask, unreachable=0.0)
+    assert_allclose(nan[: nx * ny], values, atol=1e-12)
+    assert np.isnan(nan[nx * ny :]).all()
+    assert_array_equal(zero[nx * ny :], 0.0)
+    assert_array_equal(zero[: nx * ny], nan[: nx * ny])
+    assert_array_equal(harmonic_fill(values, faces, np.ones(nx * ny, bool)), values)
+
+
+def test_harmonic_fill_names_bad_input():
+    faces = _grid_faces(4, 4)
+    values, known = np.zeros((16, 2)), np.ones(16, bool)
+    for change, match in (
+        ({"values": np.zeros(16)}, "expected \\(V, d\\)"),
+        ({"known": np.ones(15, bool)}, "expected \\(V, d\\)"),
+        ({"faces": faces + 16}, "faces"),
+        ({"values": np.full((16, 2), np.nan)}, "finite"),
+        ({"ridge": -1.0}, "ridge >= 0"),
+        ({"ridge": 1e-12}, "finite unreachable"),
+    ):
+        kw = {"faces": faces, "values": values, "known": known, "ridge": 0.0} | change
+        with pytest.raises(InputError, match="s/lip: .*" + match):
+            harmonic_fill(kw["values"], kw["faces"], kw["known"], ridge=kw["ridge"], source="s/lip")

@@ -17,7 +17,6 @@ from scan2morph.refine.lip import (
     TOO_FAR,
     LipParams,
     LipPrior,
-    harmonic_fill,
     lip_prior,
     redness,
     vermilion_edge,
@@ -282,26 +281,6 @@ def test_vermilion_edge_and_redness():
         redness(np.zeros((4, 4)))
 
 
-def test_harmonic_fill_reproduces_a_linear_field():
-    """On a regular triangulated grid a linear function is harmonic under the uniform
-    Laplacian: given on the boundary it is recovered inside (the oracle)."""
-    nx, ny = 9, 7
-    x, y = np.meshgrid(np.arange(nx, dtype=float), np.arange(ny, dtype=float))
-    i = (np.arange(nx - 1)[None, :] + nx * np.arange(ny - 1)[:, None]).ravel()
-    faces = np.concatenate([np.c_[i, i + 1, i + nx + 1], np.c_[i, i + nx + 1, i + nx]])
-    values = np.c_[2.0 * x.ravel() - 3.0 * y.ravel() + 1.0, 0.5 * y.ravel()]
-    fixed = ((x == 0) | (y == 0) | (x == nx - 1) | (y == ny - 1)).ravel()
-    filled = harmonic_fill(faces, np.where(fixed[:, None], values, 99.0), fixed)
-    np.testing.assert_allclose(filled, values, atol=1e-9)
-    # the fixed values are kept exactly; a vertex with no path to a fixed one gets 0
-    np.testing.assert_array_equal(filled[fixed], values[fixed])
-    alone = np.concatenate([faces, [[nx * ny, nx * ny + 1, nx * ny + 2]]])
-    more = np.vstack([np.where(fixed[:, None], values, 0.0), np.ones((3, 2))])
-    out = harmonic_fill(alone, more, np.r_[fixed, False, False, False])
-    np.testing.assert_allclose(out[: nx * ny], values, atol=1e-9)
-    np.testing.assert_allclose(out[nx * ny :], 0.0, atol=1e-9)
-
-
 def test_the_templates_lips():
     """The default template's upper and lower lip: slit vertices on the mouth's boundary on
     their side of the inner-lip midline, the border's vertices on the vermilion border, bodies
@@ -346,7 +325,7 @@ def test_register_recovers_a_known_shift():
     """The redness registration: a smooth border shifted by a known, off-grid length (either
     sign) is recovered to a thousandth of a millimetre; a best match at the edge of the shifts
     allowed is no match."""
-    from scan2morph.refine.lip import _register
+    from scan2morph.refine.lip_profile import register_redness as _register
 
     arc = np.linspace(-4.0, 4.0, 401)
     red = 0.42 + 0.09 * (1.0 - _step(arc, 0.0, 1.5))
@@ -431,15 +410,3 @@ def test_lip_params_and_prior_name_bad_input():
     with pytest.raises(InputError, match="increasing"):
         vermilion_edge(np.zeros(4), np.array([0.0, 1.0, 1.0, 2.0]), 1.0, 0.5)
     assert vermilion_edge(np.array([0.5, np.nan]), np.array([0.0, 1.0]), 1.0, 0.5) is None
-    faces = s["faces"]
-    values = np.zeros((28, 2))
-    fixed = np.ones(28, bool)
-    for change, match in (
-        ({"values": np.zeros(28)}, "expected \\(V, k\\)"),
-        ({"fixed": np.ones(27, bool)}, "expected \\(V, k\\)"),
-        ({"faces": faces + 28}, "faces"),
-        ({"values": np.full((28, 2), np.nan)}, "finite"),
-    ):
-        kw = {"faces": faces, "values": values, "fixed": fixed} | change
-        with pytest.raises(InputError, match=match):
-            harmonic_fill(kw["faces"], kw["values"], kw["fixed"])

@@ -1,5 +1,5 @@
 """Mesh and range-image primitives shared by every stage: face, vertex and range-image normals,
-unique edges.
+unique edges, their adjacency and harmonic interpolation over it.
 
 A base module (like :mod:`scan2morph.tol`): it imports nothing from the stages, so any of them
 may use it. Meshes follow the project convention: ``vertices`` (V, 3) float mm, ``faces``
@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.sparse import csgraph
 
 #: A vertex whose summed (area-weighted) normal is shorter than this fraction of the longest
 #: face normal has no usable direction (isolated, or its faces are degenerate or cancel out).
@@ -114,6 +116,22 @@ def surface_normals(xyz: np.ndarray) -> np.ndarray:
     return np.where(flip, -n, n)
 
 
+def face_sides(faces: np.ndarray) -> np.ndarray:
+    """The sides of every face, in order: ``(a, b)``, ``(b, c)``, ``(c, a)`` of face ``(a, b, c)``.
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+
+    Returns
+    -------
+    (3 F, 2) int64
+        Row ``3 k + s`` is side ``s`` of face ``k``, oriented as the face runs (an edge shared by
+        two faces appears twice, once each way in a consistently oriented mesh).
+    """
+    return np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+
+
 def unique_edges(
     faces: np.ndarray, return_inverse: bool = False
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
@@ -135,8 +153,7 @@ def unique_edges(
         Only with ``return_inverse``: ``edges[inverse[k, s]]`` is side ``s`` (0: ab, 1: bc,
         2: ca) of face ``k``; -1 for a side joining a vertex to itself.
     """
-    f = np.asarray(faces, dtype=np.int64)
-    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    e = np.sort(face_sides(faces), axis=1)
     keep = e[:, 0] != e[:, 1]
     # One int64 key per edge: a 1-D unique is far faster than np.unique(axis=0).
     base = np.int64(e.max()) + 1 if e.size else np.int64(1)
@@ -202,10 +219,104 @@ def edge_adjacency(edges: np.ndarray, n: int) -> sp.csr_array:
     return sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
 
 
+def harmonic_fill(
+    values: np.ndarray,
+    faces: np.ndarray,
+    known: np.ndarray,
+    *,
+    unreachable: float = np.nan,
+    ridge: float = 0.0,
+    source: str = "harmonic fill",
+) -> np.ndarray:
+    """Fill a mesh's unknown vertices with the harmonic interpolant of the known ones.
+
+    Solves the uniform graph Laplace equation on the unknown vertices (each the mean of its edge
+    neighbours) with the known values as boundary conditions, so that filled vertices take
+    distinct, smoothly varying values (a mean of neighbours taken round by round collapses whole
+    patches onto one value, and mesh positions so filled onto zero-area triangles). An unknown
+    vertex in a connected component of the mesh without a known vertex has no such interpolant
+    and gets ``unreachable``.
+
+    With ``ridge`` > 0 every unknown vertex is also pulled towards ``unreachable`` with that
+    weight (against a Laplacian diagonal of its number of neighbours): ``(L_uu + ridge I) x_u =
+    -L_uk x_k + ridge * unreachable``. A tiny ridge changes the interpolant by about ``ridge``
+    relative to it, and keeps a filled value strictly between the known ones it follows (the lip
+    prior's 1e-12: a follower's weight stays below a held vertex's exact 1).
+
+    Parameters
+    ----------
+    values : (V, d) float
+        Values at the vertices (positions in mm, displacements, weights); only the known ones
+        are read, and they must be finite.
+    faces : (F, 3) int
+        Triangles; their edges define the neighbours.
+    known : (V,) bool
+        The vertices whose values are given.
+    unreachable : float
+        The value of an unknown vertex that no path of edges joins to a known one (default NaN).
+    ridge : float
+        Weight of the pull of the unknown vertices towards ``unreachable`` (>= 0; default 0:
+        the exact harmonic interpolant). When > 0, ``unreachable`` must be finite.
+    source : str
+        Names the data in errors.
+
+    Returns
+    -------
+    (V, d) float64
+        ``values`` at the known vertices, the harmonic interpolant at the unknown ones.
+
+    Raises
+    ------
+    InputError
+        Shapes that do not match, faces not among the vertices, non-finite known values, a
+        negative ``ridge`` or one with a non-finite ``unreachable``.
+    """
+    from scan2morph.errors import InputError
+
+    vals = np.asarray(values, dtype=np.float64)
+    known = np.asarray(known, dtype=bool)
+    f = np.asarray(faces)
+    n = len(vals)
+    if vals.ndim != 2 or known.shape != (n,):
+        raise InputError(source, f"values {vals.shape}, known {known.shape}: expected (V, d), (V,)")
+    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= n)):
+        raise InputError(source, f"faces {f.shape}: expected (F, 3) indices below {n}")
+    if not np.isfinite(vals[known]).all():
+        raise InputError(source, "values: expected finite values at the known vertices")
+    if not (ridge >= 0 and (ridge == 0 or np.isfinite(unreachable))):
+        raise InputError(
+            source,
+            f"ridge {ridge!r}, unreachable {unreachable!r}: expected a ridge "
+            ">= 0, and a finite unreachable value with a ridge > 0",
+        )
+    out = vals.copy()
+    unknown = ~known
+    if not unknown.any():
+        return out
+    adj = edge_adjacency(unique_edges(f), n)
+    lap = sp.csr_array(sp.diags_array(adj.sum(axis=1)) - adj)
+    if ridge > 0:  # every unknown vertex is pulled, and the system is regular
+        solve = unknown
+    else:  # a component without a known vertex would make the system singular
+        _, comp = csgraph.connected_components(adj, directed=False)
+        solve = unknown & np.isin(comp, np.unique(comp[known]))
+    if solve.any():
+        l_uu = sp.csc_array(lap[solve][:, solve])
+        rhs = -(lap[solve][:, known] @ out[known])
+        if ridge > 0:
+            l_uu = l_uu + sp.csc_array(sp.diags_array(np.full(int(solve.sum()), ridge)))
+            rhs = rhs + ridge * unreachable
+        out[solve] = spla.spsolve(l_uu, rhs).reshape(int(solve.sum()), -1)
+    out[unknown & ~solve] = unreachable
+    return out
+
+
 __all__ = [
     "check_vertex_array",
     "edge_adjacency",
     "face_normals",
+    "face_sides",
+    "harmonic_fill",
     "unique_edges",
     "vertex_normals",
 ]

@@ -11,12 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
-from scipy.sparse import csgraph
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import edge_adjacency, unique_edges
+from scan2morph.geometry import harmonic_fill
 from scan2morph.motion.mask import stencil_mask
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
@@ -32,42 +29,6 @@ class AlignedMesh:
     vertices: np.ndarray
     valid: np.ndarray
     confidence: np.ndarray | None = None
-
-
-def harmonic_fill(values: np.ndarray, faces: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """Fill unknown vertices with the harmonic interpolant of the known ones.
-
-    Solves the uniform graph Laplace equation on the unknown vertices with the known values as
-    boundary conditions, so filled vertices take distinct, smoothly varying positions (a mean of
-    neighbours taken round by round collapses whole patches onto one point, giving zero-area
-    triangles). Unknown vertices in a component with no known vertex stay NaN.
-
-    Parameters
-    ----------
-    values : (V, d) float
-    faces : (F, 3) int
-    known : (V,) bool
-
-    Returns
-    -------
-    (V, d) float64
-    """
-    n = len(values)
-    adj = edge_adjacency(unique_edges(faces), n)
-    lap = sp.csr_array(sp.diags_array(adj.sum(axis=1)) - adj)
-    out = np.array(values, dtype=np.float64, copy=True)
-    unknown = ~np.asarray(known, dtype=bool)
-    if not unknown.any():
-        return out
-    _, comp = csgraph.connected_components(adj, directed=False)
-    anchored = np.isin(comp, np.unique(comp[~unknown]))
-    solve = unknown & anchored
-    if solve.any():
-        l_uu = sp.csc_array(lap[solve][:, solve])
-        rhs = -(lap[solve][:, ~unknown] @ out[~unknown])
-        out[solve] = spla.spsolve(l_uu, rhs).reshape(int(solve.sum()), -1)
-    out[unknown & ~anchored] = np.nan
-    return out
 
 
 def complete_neutral(

@@ -41,7 +41,7 @@ from scan2morph.align import (
 from scan2morph.align.noise import robust_rms
 from scan2morph.errors import InputError, require_numbers
 from scan2morph.geometry import surface_normals
-from scan2morph.scan.repair import smooth_depth
+from scan2morph.scan.depth_cleanup import smooth_depth
 from scan2morph.template.sample import range_pixels
 
 __all__ = [
@@ -287,37 +287,15 @@ def jaw_prior(
     )
     if surface is None:
         return refused("the take's scan does not show the chin")
-    # what a rigid motion leaves on these scans: the still skin's residual (robust: a smile's
-    # temples move) under the alignment, over the points its data covers as the chin's are
-    still_points = neutral[still]
-    still_surface = _scan_surface(xyz, mapped, take_transform, still_points, margin, source)[0]
-    plane = np.zeros(0)
-    if still_surface is not None:
-        plane, seen, _ = still_surface.residuals(
-            still_points, still_surface.reach(still_points, 0.0)
-        )
-        plane = plane[seen]
-    if plane.size < MIN_VERTICES:
+    reference = _still_residual(xyz, mapped, take_transform, neutral[still], margin, source)
+    if reference is None:
         return refused("the take's scan does not show the still skin (align.icp_region)")
-    reference = robust_rms(plane)
     limit = max(max_rmse_ratio * reference, MIN_LIMIT_MM)
     motion = region_motion(
         neutral[core], start, surface, (icp or {}) | {"max_rmse_mm": limit}, source
     )
-    if not motion.constraint >= MIN_CONSTRAINT:
-        return refused(
-            f"the chin's shape does not pin its motion: a slide of 1 mm changes its fit by "
-            f"{motion.constraint:.3f} mm RMS (at least {MIN_CONSTRAINT:g} needed)",
-            motion,
-        )
-    if not motion.ok:
-        problem = "; ".join(motion.problems)
-        if motion.converged and motion.residual_rmse > limit:
-            problem = (
-                f"the chin did not move rigidly: point-to-plane RMSE {motion.residual_rmse:.3f} "
-                f"mm > {limit:.3f} mm (refine.jaw_max_rmse_ratio {max_rmse_ratio:g} x the "
-                f"{reference:.3f} mm the still skin leaves, at least {MIN_LIMIT_MM:g} mm)"
-            )
+    problem = _motion_problem(motion, limit, reference, max_rmse_ratio)
+    if problem:
         return refused(problem, motion)
     moved = transform_points(motion.transform, neutral[near])
     points = none.copy()
@@ -326,6 +304,42 @@ def jaw_prior(
     )
     found = np.isfinite(points).all(axis=1)
     return JawPrior(points, np.where(found, weights, 0.0), motion, True, "")
+
+
+def _still_residual(xyz, mapped, take_transform, still_points, margin, source) -> float | None:
+    """What a rigid motion leaves on these scans: the robust RMS point-to-plane residual, mm,
+    of the still skin's points (n, 3) (neutral frame) against the take's scan ``xyz`` (its
+    frame; ``mapped`` into the neutral frame by ``take_transform``) under the alignment, over
+    the points its data covers (as the chin's are); robust, since a smile's temples move. None
+    when the scan shows fewer than :data:`MIN_VERTICES` of them."""
+    still_surface = _scan_surface(xyz, mapped, take_transform, still_points, margin, source)[0]
+    plane = np.zeros(0)
+    if still_surface is not None:
+        plane, seen, _ = still_surface.residuals(
+            still_points, still_surface.reach(still_points, 0.0)
+        )
+        plane = plane[seen]
+    return robust_rms(plane) if plane.size >= MIN_VERTICES else None
+
+
+def _motion_problem(motion, limit: float, reference: float, max_rmse_ratio: float) -> str:
+    """Why the chin's registered ``motion`` is not used ("" when it is): its shape does not pin
+    it (:data:`MIN_CONSTRAINT`), or it failed its gate (its RMSE above ``limit``, mm: the still
+    skin's ``reference`` residual times ``max_rmse_ratio``, at least :data:`MIN_LIMIT_MM`)."""
+    if not motion.constraint >= MIN_CONSTRAINT:
+        return (
+            f"the chin's shape does not pin its motion: a slide of 1 mm changes its fit by "
+            f"{motion.constraint:.3f} mm RMS (at least {MIN_CONSTRAINT:g} needed)"
+        )
+    if motion.ok:
+        return ""
+    if motion.converged and motion.residual_rmse > limit:
+        return (
+            f"the chin did not move rigidly: point-to-plane RMSE {motion.residual_rmse:.3f} "
+            f"mm > {limit:.3f} mm (refine.jaw_max_rmse_ratio {max_rmse_ratio:g} x the "
+            f"{reference:.3f} mm the still skin leaves, at least {MIN_LIMIT_MM:g} mm)"
+        )
+    return "; ".join(motion.problems)
 
 
 def _checked(weights, neutral, neutral_valid, take, take_valid, still, source):

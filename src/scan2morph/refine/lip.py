@@ -14,7 +14,7 @@ body, the border) lies on a *profile*: the image line of its column, from the co
 vertex through its border vertex and on past the border, moved sideways through the vertex.
 Along it, in each image:
 
-1. the border is the steepest fall of redness going outward (:func:`vermilion_edge`), and the
+1. the border is the steepest fall of redness going outward (:func:`~scan2morph.refine.lip_profile.vermilion_edge`), and the
    vertex's skin point lies at a signed length from it along the neutral's surface (mm);
 2. the take's border is then registered to the neutral's: the redness around it, as a function
    of the length along the surface, is matched (the shift of best correlation), so that a
@@ -23,10 +23,11 @@ Along it, in each image:
    within ``stretch`` of the lip's length of it stays (the lip may stretch that much); one
    beyond goes to the nearest length allowed.
 
-The vertices so placed are held; the lip's others follow harmonically (:func:`harmonic_fill`),
-and everything else keeps the flow's answer. (Letting the skin next to the border follow too
-doubled car's click-noise error bar, 0.035 -> 0.065: it flips whether the nasolabial skin next
-to car's torn patch tears, from one draw of the clicks to the next; accuracy the same.)
+The vertices so placed are held; the lip's others follow harmonically
+(:func:`scan2morph.geometry.harmonic_fill`), and everything else keeps the flow's answer.
+(Letting the skin next to the border follow too doubled car's click-noise error bar, 0.035 ->
+0.065: it flips whether the nasolabial skin next to car's torn patch tears, from one draw of the
+clicks to the next; accuracy the same.)
 
 The prior needs lips that are redder than the skin, in both images: a grey image, a sprayed
 stereo neutral or a painted face shows no border, and the prior is then not used (its
@@ -46,23 +47,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
-from scipy.sparse import coo_matrix
-from scipy.sparse.linalg import spsolve
 
 from scan2morph.errors import InputError, require_numbers
-from scan2morph.refine.template_space import pull_back
+from scan2morph.geometry import harmonic_fill
+from scan2morph.refine.lip_profile import (
+    LipImage,
+    arc_length,
+    lip_profile,
+    redness,
+    register_redness,
+    vermilion_edge,
+)
+from scan2morph.scan.view import scanner_view
 from scan2morph.template.regions import Lip
-from scan2morph.template.sample import sample_range, scanner_view
 
-__all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior", "harmonic_fill"]
+__all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior"]
 
-#: Spacing of a profile's samples, px.
-STEP_PX = 0.2
-#: Smoothing of a profile's redness, and of its surface points before their length is taken
-#: (range noise of 0.1 mm on 0.2 px steps would otherwise add to the length), px.
-RED_SIGMA_PX = 0.5
-XYZ_SIGMA_PX = 1.0
+#: The harmonic fill's pull of the lip's followers towards 0 (:func:`harmonic_fill`'s ``ridge``):
+#: a follower's weight stays below a placed vertex's 1.
+_FILL_RIDGE = 1e-12
 #: A profile runs past its border vertex by this share of the lip's height (the skin beyond
 #: the border); the take's runs ``max_shift`` further at both ends (the vertex may go there).
 BEYOND = 0.6
@@ -80,6 +83,8 @@ CREASE_PX = 8.0
 #: The registration's precision, mm: a vertex's length from the border is held to within this
 #: (plus ``stretch`` of itself).
 FLOOR_MM = 0.1
+#: The share of the lip (from the border) whose redness is registered.
+NEAR = 0.5
 
 
 @dataclass(frozen=True)
@@ -226,107 +231,6 @@ class LipPrior:
         return np.where(has[:, None], self.points, p), c + w * (1.0 - c)
 
 
-def redness(color: np.ndarray, source: str = "colour image") -> np.ndarray:
-    """``R / (R + G + B)`` of an (H, W, 3) colour image, float64 (NaN where black).
-
-    Raises
-    ------
-    InputError
-        ``color`` is not (H, W, 3) (``source`` names it).
-    """
-    c = np.asarray(color, dtype=np.float64)
-    if c.ndim != 3 or c.shape[2] != 3:
-        raise InputError(source, f"colour: expected an (H, W, 3) RGB image, got shape {c.shape}")
-    total = c.sum(axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(total > 0, c[..., 0] / total, np.nan)
-
-
-def vermilion_edge(
-    red: np.ndarray, t: np.ndarray, at: float, window: float, end: float | None = None
-) -> tuple[float, float] | None:
-    """The vermilion border along a lip profile: the steepest fall of redness going outward.
-
-    Parameters
-    ----------
-    red : (n,) float
-        Redness along the profile, from the slit (first) outward (smoothed).
-    t : (n,) float
-        The samples' position along the profile, increasing (0 at the slit vertex, 1 at the
-        border vertex).
-    at, window : float
-        The border is looked for where ``|t - at| < window``.
-    end : float, optional
-        The skin's side is measured up to here (default: the profile's end), so that two
-        profiles of different lengths compare the same skin.
-
-    Returns
-    -------
-    (t_edge, contrast) or None
-        The border's position and the redness step there: the mean redness from ``t = 0`` to
-        the edge minus the mean beyond it (to ``end``). None when the profile has fewer than 3
-        finite samples, the window holds none, or either side has none.
-
-    Raises
-    ------
-    InputError
-        ``red`` and ``t`` are not 1-D of the same length, or ``t`` does not increase.
-    """
-    r = np.asarray(red, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    if r.ndim != 1 or t.shape != r.shape:
-        raise InputError(
-            "lip profile", f"red {r.shape} and t {t.shape}: expected 1-D arrays of one length"
-        )
-    if len(t) > 1 and not (np.diff(t) > 0).all():
-        raise InputError("lip profile", "t: expected increasing positions along the profile")
-    if np.isfinite(r).sum() < 3:
-        return None
-    grad = np.gradient(r, t)
-    look = (np.abs(t - at) < window) & np.isfinite(grad)
-    if not look.any():
-        return None
-    k = np.flatnonzero(look)[np.argmin(grad[look])]
-    lip = r[(t >= 0.0) & (t < t[k])]
-    skin = r[(t > t[k]) & (t <= (np.inf if end is None else end))]
-    lip, skin = lip[np.isfinite(lip)], skin[np.isfinite(skin)]
-    if len(lip) == 0 or len(skin) == 0:
-        return None
-    return float(t[k]), float(lip.mean() - skin.mean())
-
-
-def _profile(red, xyz, view, origin, direction, start, end, min_weight, max_slope_deg, source):
-    """Samples along the line ``origin + t direction``, ``t`` in ``[start, end]``:
-    ``t`` (n,), smoothed redness (n,), surface points (n, 3) mm smoothed along it (NaN where
-    the range has none), pixel positions (n, 2). The line is sampled 3 sigma further at both
-    ends and trimmed after smoothing: a one-sided smoothing would pull the ends in."""
-    height = float(np.linalg.norm(direction))
-    pad = 3.0 * max(RED_SIGMA_PX, XYZ_SIGMA_PX) / height
-    span = end - start + 2 * pad
-    n = max(int(np.ceil(span * height / STEP_PX)), 8)
-    t = np.linspace(start - pad, end + pad, n)
-    px = origin + t[:, None] * direction
-    step = span * height / (n - 1)
-    r = pull_back(red, px[None])[0].astype(np.float64)
-    r = _smooth(r, RED_SIGMA_PX / step)
-    points, ok = sample_range(xyz, px, source, min_weight, max_slope_deg, view)
-    points = np.where(ok[:, None], points, np.nan)
-    points = np.stack([_smooth(points[:, k], XYZ_SIGMA_PX / step) for k in range(3)], axis=1)
-    keep = (t >= start - 1e-9) & (t <= end + 1e-9)
-    return t[keep], r[keep], points[keep], px[keep]
-
-
-def _smooth(values: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing along a profile, normalised over its finite samples (so neither a gap
-    nor an end pulls it); NaN stays NaN."""
-    bad = ~np.isfinite(values)
-    v = np.where(bad, 0.0, values)
-    w = gaussian_filter1d((~bad).astype(np.float64), sigma, mode="constant")
-    out = gaussian_filter1d(v, sigma, mode="constant") / np.maximum(w, 1e-12)
-    out[bad] = np.nan
-    return out
-
-
 def lip_prior(
     lip: Lip,
     vertices2d: np.ndarray,
@@ -379,6 +283,30 @@ def lip_prior(
     pn = _points(neutral_points, "neutral_points", source)
     pt = _points(take_points, "take_points", source)
     v2 = _points(vertices2d, "vertices2d", source)
+    f = _check_mesh(lip, (pn, pt, v2), faces, source)
+    img_n, img_t = (
+        _lip_image(color, xyz, what, (min_weight, max_slope_deg), source)
+        for what, color, xyz in (("neutral", neutral_color, neutral_xyz), ("take", take_color, take_xyz))
+    )  # fmt: skip
+    targets, contrasts, reasons = _place_all(lip, v2, (pn, pt), (img_n, img_t), params)
+    ok = np.isfinite(targets).all(axis=1)
+    measured, total, n = int(ok.sum()), len(lip.vertices), len(pn)
+    contrast = float(np.median(contrasts)) if contrasts else 0.0
+    if measured == 0 or measured < params.min_share * total:
+        why = "; ".join(f"{m}: {reasons[m]}" for m in sorted(reasons, key=reasons.get)[::-1])
+        problem = (
+            f"only {measured} of the lip's {total} vertices placed (at least "
+            f"{100 * params.min_share:.0f}% needed); not placed: {why}"
+        )
+        return LipPrior.unused(n, problem, measured, total, contrast)
+    points, weight = _held(lip.vertices, targets, pt, f)
+    return LipPrior(points, weight, measured, total, contrast, True, "")
+
+
+def _check_mesh(lip: Lip, points: tuple, faces, source: str) -> np.ndarray:
+    """``faces`` as an (F, 3) array, checked with the lip against the vertex count of
+    ``points`` (the neutral's, the take's and the template's (V, 2) vertices, one count)."""
+    pn, pt, v2 = points
     n = len(pn)
     if len(pt) != n or len(v2) != n:
         raise InputError(
@@ -390,61 +318,70 @@ def lip_prior(
     f = np.asarray(faces)
     if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= n)):
         raise InputError(source, f"lip prior: faces {f.shape}: expected (F, 3) indices below {n}")
-    red_n, red_t = redness(neutral_color, source), redness(take_color, source)
-    for what, img, xyz in (("neutral", red_n, neutral_xyz), ("take", red_t, take_xyz)):
-        shape = np.shape(xyz)
-        if len(shape) != 3 or shape[2] != 3 or shape[:2] != img.shape:
-            raise InputError(
-                source,
-                f"lip prior: the {what}'s range image has shape {shape}, expected "
-                f"{(*img.shape, 3)} (pixel to pixel with its colour image)",
-            )
-    xyz_n = np.asarray(neutral_xyz, dtype=np.float64)
-    xyz_t = np.asarray(take_xyz, dtype=np.float64)
-    # the depth-step rule's optical axes, once per image
-    view_n, view_t = (None, None) if max_slope_deg is None else map(scanner_view, (xyz_n, xyz_t))
-    vertices = lip.vertices
+    return f
+
+
+def _lip_image(color, xyz, what: str, rules: tuple, source: str) -> LipImage:
+    """The neutral's or the take's (``what``) image: the redness of ``color``, the range image
+    ``xyz`` (checked pixel to pixel with it), its scanner's view for the depth-step rule (when
+    ``rules`` = ``(min_weight, max_slope_deg)`` has one)."""
+    red = redness(color, source)
+    shape = np.shape(xyz)
+    if len(shape) != 3 or shape[2] != 3 or shape[:2] != red.shape:
+        raise InputError(
+            source,
+            f"lip prior: the {what}'s range image has shape {shape}, expected "
+            f"{(*red.shape, 3)} (pixel to pixel with its colour image)",
+        )
+    xyz = np.asarray(xyz, dtype=np.float64)
+    min_weight, max_slope_deg = rules
+    view = None if max_slope_deg is None else scanner_view(xyz)
+    return LipImage(red, xyz, view, min_weight, max_slope_deg, source)
+
+
+def _place_all(lip: Lip, v2, points: tuple, images: tuple, params: LipParams) -> tuple:
+    """Each lip vertex placed in the take (:func:`_place`): ``(targets, contrasts, reasons)``,
+    its place (n, 2) px (NaN: not placed), the redness steps of those placed, and how many were
+    not placed for each reason. ``points`` are the template's vertices in the neutral's and the
+    take's image (V, 2) px, ``images`` the two :class:`LipImage`."""
+    (pn, pt), (img_n, img_t) = points, images
     columns = lip.columns(v2)
     border_n, border_t = lip.border_points(v2, pn), lip.border_points(v2, pt)
-    targets = np.full((len(vertices), 2), np.nan)
+    targets = np.full((len(lip.vertices), 2), np.nan)
     contrasts = []
     reasons: dict[str, int] = {}
-    for k, (v, c) in enumerate(zip(vertices, columns, strict=True)):
+    for k, (v, c) in enumerate(zip(lip.vertices, columns, strict=True)):
         i = lip.inner[c]
         found = _place(
-            _Line(pn[i], border_n[c], pn[v]), _Line(pt[i], border_t[c], pt[v]), red_n, xyz_n,
-            view_n, red_t, xyz_t, view_t, params, min_weight, max_slope_deg, source,
+            _Line(pn[i], border_n[c], pn[v]), _Line(pt[i], border_t[c], pt[v]), img_n, img_t,
+            params,
         )  # fmt: skip
         if isinstance(found, str):
             reasons[found] = reasons.get(found, 0) + 1
         else:
             targets[k], contrast = found
             contrasts.append(contrast)
-    ok = np.isfinite(targets).all(axis=1)
-    measured, total = int(ok.sum()), len(vertices)
-    contrast = float(np.median(contrasts)) if contrasts else 0.0
+    return targets, contrasts, reasons
 
-    if measured == 0 or measured < params.min_share * total:
-        why = "; ".join(f"{m}: {reasons[m]}" for m in sorted(reasons, key=reasons.get)[::-1])
-        problem = (
-            f"only {measured} of the lip's {total} vertices placed (at least "
-            f"{100 * params.min_share:.0f}% needed); not placed: {why}"
-        )
-        return LipPrior.unused(n, problem, measured, total, contrast)
-    # measured vertices are held at their places; the lip's others follow harmonically;
-    # everything else keeps the flow's answer
+
+def _held(vertices, targets, pt, faces) -> tuple[np.ndarray, np.ndarray]:
+    """The prior's ``(points (V, 2) px, weight (V,))``: the lip's placed vertices held at their
+    ``targets`` with weight 1, its others following harmonically (moved and weighted by the
+    harmonic fill of the placed ones' corrections from the take's points ``pt``), NaN and 0
+    elsewhere (everything else keeps the flow's answer)."""
+    n = len(pt)
+    ok = np.isfinite(targets).all(axis=1)
     fixed = np.ones(n, dtype=bool)
     fixed[vertices[~ok]] = False
     values = np.zeros((n, 3))
     values[vertices[ok], :2] = targets[ok] - pt[vertices[ok]]
     values[vertices[ok], 2] = 1.0
-    filled = harmonic_fill(f, values, fixed)
-    region = vertices
+    filled = harmonic_fill(values, faces, fixed, unreachable=0.0, ridge=_FILL_RIDGE)
     points = np.full((n, 2), np.nan)
-    points[region] = pt[region] + filled[region, :2]
+    points[vertices] = pt[vertices] + filled[vertices, :2]
     weight = np.zeros(n)
-    weight[region] = np.clip(filled[region, 2], 0.0, 1.0)
-    return LipPrior(points, weight, measured, total, contrast, True, "")
+    weight[vertices] = np.clip(filled[vertices, 2], 0.0, 1.0)
+    return points, weight
 
 
 #: Why a lip vertex was not placed (the prior's ``problem`` counts them).
@@ -504,14 +441,12 @@ class _Line:
         return bool(finite and np.linalg.norm(self.direction) >= MIN_HEIGHT_PX)
 
 
-def _place(
-    neutral, take, red_n, xyz_n, view_n, red_t, xyz_t, view_t, params, min_weight, max_slope, source
-):
+def _place(neutral: _Line, take: _Line, img_n: LipImage, img_t: LipImage, params: LipParams):
     """One lip vertex: its place in the take (2,) px and the border's redness step (the lesser
     of the two images'), or why not (one of the reasons above).
 
     The vertex's skin point lies at a signed length from the vermilion border along the
-    neutral's surface. The border is found in each image (:func:`vermilion_edge`), and the
+    neutral's surface. The border is found in each image (:func:`~scan2morph.refine.lip_profile.vermilion_edge`), and the
     take's is then registered to the neutral's: the redness around it, as a function of the
     length along the surface, is matched (the shift of best correlation), so that a border
     whose fall is broad or uneven is found at the same skin in both. In the take the vertex
@@ -520,14 +455,13 @@ def _place(
     if not (neutral.ok() and take.ok()):
         return NO_LINE
     end = 1.0 + BEYOND
-    t, r, xyz, _ = _profile(
-        red_n, xyz_n, view_n, neutral.origin, neutral.direction, min(neutral.t, 0.0) - PAST,
-        end, min_weight, max_slope, source,
-    )  # fmt: skip
+    t, r, xyz, _ = lip_profile(
+        img_n, neutral.origin, neutral.direction, min(neutral.t, 0.0) - PAST, end
+    )
     edge = vermilion_edge(r, t, 1.0, params.search, end)
     if edge is None or edge[1] < params.min_contrast:
         return NO_BORDER
-    arc_n = _arc(t, xyz, edge[0])
+    arc_n = arc_length(t, xyz, edge[0])
     length = np.interp(neutral.t, t, arc_n)  # the vertex's, from the border (< 0 on the lip)
     lip_length = -np.interp(0.0, t, arc_n)
     if not (np.isfinite(length) and np.isfinite(lip_length) and lip_length > 0.0):
@@ -535,19 +469,18 @@ def _place(
     # the take's profile reaches max_shift further at both ends (and, for a lip that may
     # shorten, a crease's width further towards the slit, to tell a crease from an open mouth)
     past = CREASE_PX / np.linalg.norm(take.direction) if params.shrink > 0.0 else 0.0
-    t2, r2, xyz2, _ = _profile(
-        red_t, xyz_t, view_t, take.origin, take.direction,
-        min(take.t, 0.0) - params.max_shift - past, end + params.max_shift, min_weight,
-        max_slope, source,
+    t2, r2, xyz2, _ = lip_profile(
+        img_t, take.origin, take.direction, min(take.t, 0.0) - params.max_shift - past,
+        end + params.max_shift,
     )  # fmt: skip
     edge_t = vermilion_edge(r2, t2, 1.0, params.search, end)
     if edge_t is None or edge_t[1] < params.min_contrast:
         return NO_BORDER
-    arc_t = _arc(t2, xyz2, edge_t[0])
+    arc_t = arc_length(t2, xyz2, edge_t[0])
     # the border's neighbourhood: the lip's outer half and the skin beyond (the slit's side
     # may roll out of sight or show the mouth)
     near = (arc_n >= -NEAR * lip_length) & (t >= min(neutral.t, 0.0))
-    shift = _register(arc_n[near], r[near], arc_t, r2, params.search * lip_length)
+    shift = register_redness(arc_n[near], r[near], arc_t, r2, params.search * lip_length)
     if shift is None:
         return NOT_MATCHED
     if params.shrink > 0.0 and length < 0.0:
@@ -571,121 +504,3 @@ def _place(
     if abs(place - take.t) > params.max_shift:  # the correction, in shares of the lip's height
         return TOO_FAR
     return take.origin + place * take.direction, min(edge[1], edge_t[1])
-
-
-def _arc(t: np.ndarray, xyz: np.ndarray, t0: float) -> np.ndarray:
-    """(n,) signed length along a profile's surface points (n, 3) from its point at ``t0``
-    (positive for ``t > t0``), mm; NaN beyond the first gap on either side."""
-    k = int(np.clip(np.searchsorted(t, t0) - 1, 0, len(t) - 2))
-    p0 = np.array([np.interp(t0, t, xyz[:, j]) for j in range(3)])
-    seg = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
-    out = np.full(len(t), np.nan)
-    out[k + 1 :] = np.linalg.norm(xyz[k + 1] - p0) + np.concatenate(
-        [[0.0], np.cumsum(seg[k + 1 :])]
-    )
-    out[: k + 1] = -(
-        np.linalg.norm(p0 - xyz[k]) + np.concatenate([[0.0], np.cumsum(seg[:k][::-1])])
-    )[::-1]
-    return out
-
-
-#: The share of the lip (from the border) whose redness is registered.
-NEAR = 0.5
-#: Step of the registration's shifts, mm; least correlation of a registration; least share of
-#: the neutral's profile the take's must cover at a shift for it to be scored.
-SHIFT_STEP_MM = 0.05
-MIN_CORRELATION = 0.8
-MIN_COVER = 0.6
-
-
-def _register(arc_n, red_n, arc_t, red_t, limit):
-    """The shift (mm) that best aligns the take's redness profile to the neutral's: the
-    neutral's redness at length ``a`` from its border matches the take's at ``a + shift``
-    (zero-mean normalised correlation over their overlap, shifts within ``limit``); None
-    without a clear match: a best correlation under :data:`MIN_CORRELATION`, or one at the
-    edge of the shifts scored (the best may lie beyond)."""
-    n_ok = np.isfinite(arc_n) & np.isfinite(red_n)
-    t_ok = np.isfinite(arc_t) & np.isfinite(red_t)
-    if n_ok.sum() < 8 or t_ok.sum() < 8:
-        return None
-    grid, ref = arc_n[n_ok], red_n[n_ok]
-    at, rt = arc_t[t_ok], red_t[t_ok]
-    m = int(np.floor(limit / SHIFT_STEP_MM))
-    shifts = SHIFT_STEP_MM * np.arange(-m, m + 1)
-    where = grid[None, :] + shifts[:, None]
-    inside = (where >= at[0]) & (where <= at[-1])
-    moved = np.where(inside, np.interp(where, at, rt), np.nan)
-    cover = inside.mean(axis=1)
-    score = np.full(len(shifts), np.nan)
-    for k in np.flatnonzero(cover >= MIN_COVER):
-        keep = inside[k]
-        a, b = ref[keep] - ref[keep].mean(), moved[k, keep] - moved[k, keep].mean()
-        den = np.sqrt((a @ a) * (b @ b))
-        if den > 0:
-            score[k] = (a @ b) / den
-    if not np.isfinite(score).any():
-        return None
-    k = int(np.nanargmax(score))
-    if not (0 < k < len(shifts) - 1 and np.isfinite(score[[k - 1, k + 1]]).all()):
-        return None  # the best lies at the edge of what was scored
-    if score[k] < MIN_CORRELATION:
-        return None
-    shift = shifts[k]
-    c = score[k - 1] - 2 * score[k] + score[k + 1]
-    if c < 0:
-        shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
-    return float(shift)
-
-
-def harmonic_fill(faces: np.ndarray, values: np.ndarray, fixed: np.ndarray) -> np.ndarray:
-    """Values on a mesh's free vertices that are harmonic (each the mean of its neighbours),
-    given the values at the fixed vertices.
-
-    Parameters
-    ----------
-    faces : (F, 3) int
-    values : (V, k) float
-        Values at the fixed vertices (others ignored).
-    fixed : (V,) bool
-
-    Returns
-    -------
-    (V, k) float64
-        ``values`` at the fixed vertices, the uniform-Laplacian harmonic interpolation at the
-        free ones (a free vertex with no path to a fixed one gets 0).
-
-    Raises
-    ------
-    InputError
-        Shapes that do not match, faces not among the vertices, non-finite fixed values.
-    """
-    vals = np.asarray(values, dtype=np.float64)
-    fixed = np.asarray(fixed, dtype=bool)
-    f = np.asarray(faces)
-    v = len(vals)
-    if vals.ndim != 2 or fixed.shape != (v,):
-        raise InputError(
-            "harmonic fill", f"values {vals.shape}, fixed {fixed.shape}: expected (V, k) and (V,)"
-        )
-    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= v)):
-        raise InputError("harmonic fill", f"faces {f.shape}: expected (F, 3) indices below {v}")
-    if not np.isfinite(vals[fixed]).all():
-        raise InputError("harmonic fill", "values: expected finite values at the fixed vertices")
-    out = np.where(fixed[:, None], vals, 0.0)
-    free = np.flatnonzero(~fixed)
-    if len(free) == 0:
-        return out
-    f = f.astype(np.int64)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    adj = coo_matrix(
-        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(v, v)
-    ).tocsr()
-    degree = np.asarray(adj.sum(axis=1)).ravel()
-    lap = (coo_matrix((degree, (np.arange(v), np.arange(v))), shape=(v, v)) - adj).tocsr()
-    a = lap[free][:, free].tocsc()
-    b = -lap[free][:, np.flatnonzero(fixed)] @ out[fixed]
-    # a free part with no fixed neighbour would be singular: a tiny pull to 0 keeps it at 0
-    a = a + coo_matrix((1e-12 * np.ones(len(free)), (np.arange(len(free)),) * 2)).tocsc()
-    out[free] = np.asarray(spsolve(a, b)).reshape(len(free), -1)
-    return out

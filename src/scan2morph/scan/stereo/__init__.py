@@ -68,7 +68,8 @@ range of the search, configured or derived by the coarse pass), ``sgbm`` (search
 padding, the semi-global matcher, the left-right check), ``windowed`` (texture measure and
 windowed sub-pixel refinement), ``slanted`` (the per-pixel slanted-window matcher, its
 refinement, growth and validation), ``cleanup`` (edge trim, segments, hole filling),
-``resample`` (disparity to points of the left image grid) and ``reconstruct`` (the driver,
+``resample`` (disparity to points of the left image grid), ``views`` (the pair checked, made
+grey, rectified and padded for matching) and ``reconstruct`` (the driver,
 :func:`reconstruct_stereo`).
 """
 
