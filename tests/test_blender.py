@@ -3,7 +3,7 @@
 settings (tests/blender_probe.py runs there and reports as JSON).
 
 The glTF is the morph stage's (tests/morph_subject.py); the OBJ is a head-frame mesh written by
-:func:`scan2morph.io.head.write_head_obj` from one of its visemes with a hole cut in it. Outside CI
+:func:`scan2morph.morph.head.write_head_obj` from one of its visemes with a hole cut in it. Outside CI
 the test skips, naming why, when the Blender environment is missing; under CI (``CI`` set) it fails.
 """
 
@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from scan2morph.io.head import write_head_obj
 from scan2morph.io.obj import read_obj
 from scan2morph.morph import synthesize
 from scan2morph.morph.frame import apply_frame
+from scan2morph.morph.head import write_head_obj
 from scan2morph.morph.pca import PCAModel
 from scan2morph.morph.subject import pca_target_weights
 from scan2morph.store import paths

@@ -1,4 +1,4 @@
-"""Head-frame meshes for DCC tools (scan2morph.io.head): the hole filling and bad input."""
+"""Head-frame meshes for DCC tools (scan2morph.morph.head): the hole filling and bad input."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 from numpy.testing import assert_allclose
 
 from scan2morph.errors import InputError
-from scan2morph.io.head import fill_from, write_head_meshes, write_head_obj
 from scan2morph.io.obj import read_obj, write_obj
+from scan2morph.morph.head import fill_from, write_head_meshes, write_head_obj
 from tests.meshes import grid_mesh
 
 FRAME = np.diag([1e-3, 1e-3, 1e-3, 1.0])

@@ -31,7 +31,9 @@ as it stands, with these additions and one correction:
   package (``store.paths`` builds every store path; ``hdf5``, ``warnings``, ``layout`` and
   ``compare`` read and write the store) are used by every layer, and themselves import only
   each other: they come before ``io``, not after ``stages``. ``sheet`` (the sample sheet) and
-  ``tables`` (the result tables) import only the base and are placed in it.
+  ``tables`` (the result tables) import only the base and are placed in it, and so is
+  ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
+  mesh-scan reader and the figures).
 - **synth** (the synthetic scanners) writes takes in ``io``'s formats: after ``io``.
 - **refine** (dense correspondence of the aligned fits) uses ``align``'s region motion: between
   ``align`` and ``motion``.
@@ -67,6 +69,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.store",
             "scan2morph.sheet",
             "scan2morph.tables",
+            "scan2morph.offscreen",
         ),
     ),
     ("io", ("scan2morph.io",)),

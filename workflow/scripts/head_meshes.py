@@ -1,7 +1,7 @@
-"""Every mesh of one subject in the head frame, for DCC tools (scan2morph.io.head)."""
+"""Every mesh of one subject in the head frame, for DCC tools (scan2morph.morph.head)."""
 
-from scan2morph.io.head import write_head_meshes
 from scan2morph.jobs import run_job
+from scan2morph.morph.head import write_head_meshes
 
 
 def main(snakemake):

@@ -6,7 +6,7 @@ vertices are written at the position given (callers pass filled positions when t
 non-finite rows are written at the centroid of the finite ones, which keeps viewers' zoom-to-fit
 on the face) and the faces that touch an invalid vertex are left out, so nothing invalid is drawn.
 A comment line ``# invalid: i j ...`` lists the invalid vertices (1-based, as OBJ indices).
-Meshes for DCC tools (:mod:`scan2morph.io.head`) instead place every vertex on a hole-filled
+Meshes for DCC tools (:mod:`scan2morph.morph.head`) instead place every vertex on a hole-filled
 surface and keep every face; a comment line ``# filled: i j ...`` lists the filled vertices.
 
 Texture coordinates are given in the image convention (origin at the image's top-left corner, as
