@@ -17,7 +17,7 @@ glTF's head frame (:func:`scan2morph.morph.frame.head_frame`: metres, +X to the 
 Vertex i is template vertex i in every file, and every face is written: a vertex without a
 measurement (outside the take's valid region) is placed on the hole-filled surface, the
 reference mesh (the neutral) plus the harmonic interpolant of the measured vertices'
-displacements from it (:func:`scan2morph.motion.model.harmonic_fill`), and listed on the OBJ's
+displacements from it (:func:`scan2morph.geometry.harmonic_fill`), and listed on the OBJ's
 ``# filled:`` line; the neutral's own filled vertices (``/neutral/filled``) are listed too.
 """
 
@@ -30,9 +30,9 @@ import h5py
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import harmonic_fill
 from scan2morph.io.obj import write_obj
 from scan2morph.morph.frame import apply_frame
-from scan2morph.motion.model import harmonic_fill
 from scan2morph.store import open_store, paths
 
 #: The folder under ``results/{subject}/meshes`` that holds the head-frame meshes.
