@@ -238,7 +238,7 @@ def test_refinement_follows_the_skin_on_synthetic_takes():
     print("material relative error (fit, refined):", textured, "flat:", flat)
     for take, (fit_err, refined_err) in textured.items():
         # at 480 x 360 (0.9 px/mm on the face) the finest freckles are lost: the default 640 x 480
-        # does better (README); the fit's error is 0.7-1.1 here
+        # does better (docs/methods.md); the fit's error is 0.7-1.1 here
         assert refined_err < 0.2 * fit_err, (take, fit_err, refined_err)
         # measured 0.15 (she), 0.13 (smile1); 0.18 and 0.17 with the flow at half resolution
         assert refined_err < 0.16, (take, refined_err)

@@ -1,4 +1,4 @@
-"""The take sheet: one row per take (README, "Running on your own scans").
+"""The take sheet: one row per take (README, "Running on your own scans"; docs/inputs.md).
 
 The sheet is read one way (pandas, tab-separated, all strings, ``#`` comments), its relative paths
 are resolved against the sheet's folder, and the synthetic cohort's rows are added from the config.

@@ -39,7 +39,7 @@ DEPENDENCIES: dict[str, tuple[str, ...]] = {
     "pandas": ("pandas",),
 }
 
-#: Root attributes of the store shown as provenance (README, "Outputs").
+#: Root attributes of the store shown as provenance (docs/outputs.md).
 STORE_ATTRIBUTES = ("subject", "format_version", "scan2morph_version", "config_sha256", "units")
 
 

@@ -44,7 +44,7 @@ log = logging.getLogger("scan2morph")
 #: tissue that resists normal motion (0.005 N/mm^3) and, where the skin lies on bone (the stable
 #: forehead, nose ridge and temples), sliding (0.003 N/mm^3) and normal motion more (another
 #: 0.01 N/mm^3). Chosen by
-#: ``benchmarks/bench_modal_span.py`` (README, "Modal analysis").
+#: ``benchmarks/bench_modal_span.py`` (docs/outputs.md, "The modal basis's physics").
 PRESETS: dict[str, dict] = {
     "paper": {
         "fixed_outline": "all",
