@@ -160,8 +160,9 @@ def _canonical_ibug() -> np.ndarray:
     upper = np.array([[-0.56, 1.72], [-0.36, 1.6], [-0.14, 1.53], [0.0, 1.56]])
     p[48:52] = upper
     p[52:55] = _mirror(upper[2::-1])
-    lower_r = np.array([[-0.36, 1.86], [-0.16, 1.93]])
-    p[55:57] = _mirror(lower_r[::-1])
+    # Lower lip from the corner 55 back to 49: 56-57 on the image's right, 58 in the middle.
+    lower_r = np.array([[-0.36, 1.86], [-0.16, 1.93]])  # beside 49, then towards the middle
+    p[55:57] = _mirror(lower_r)
     p[57] = (0.0, 1.95)
     p[58:60] = lower_r[::-1]
     # Inner lips 61-68: a thin lens between the corners 61 and 65.
