@@ -1,15 +1,16 @@
 """Mesh takes: a textured mesh scan (OBJ + MTL + texture, PLY, glTF/GLB) -> a range take.
 
 The mesh is read with trimesh and rendered headlessly (pyrender, OSMesa) through a virtual
-pinhole camera placed in front of the face: looking along the mean surface normal of the rigid
-upper face around the nose bridge (so that every take of a subject, whatever its jaw does, is
-seen from the same direction), centred on the landmarks' centroid, its image x axis along the
-outer eye corners (iBUG 37 -> 46, so that 37 is on the image's left), ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
+pinhole camera placed in front of the face. The camera looks along the face's frontal direction,
+found from the surface alone (:mod:`scan2morph.io.mesh_view`: one overall normal sign, the nose
+tip as the most protruding point, the face's symmetry plane and the least-squares plane of the
+face around the tip; the landmarks' nose tip replaces the surface's). It is centred on the
+landmarks' centroid, its image x axis along the outer eye corners (iBUG 37 -> 46, so that 37
+is on the image's left), ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
 pixel at that distance (by default chosen so that the landmarks span ``face_share`` of the
-image). One render gives the colour image (texture or vertex colours, unlit) and
-the depth at every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised
-range image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same
-camera.
+image). One render gives the colour image (texture or vertex colours, unlit) and the depth at
+every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised range
+image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same camera.
 
 Landmark file: 68 lines ``x y z`` (iBUG-68 order, the mesh's frame and units); blank lines and
 lines starting with ``#`` are skipped.
@@ -28,6 +29,7 @@ import numpy as np  # noqa: E402
 
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
+from scan2morph.io.mesh_view import face_view  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
     _UNITS,
@@ -48,8 +50,6 @@ DEFAULT_MESH_CAMERA = {
     "pixel_mm": None,
     "face_share": 0.6,
 }
-#: Radius around the nose bridge whose surface normals give the view direction, mm.
-VIEW_RADIUS_MM = 25.0
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
 #: Colour of pixels the mesh does not cover (dark blue-grey).
@@ -69,7 +69,8 @@ class MeshTake(RangeTake):
     size : (int, int)
         Image (width, height), px.
     report : dict
-        Vertex and face counts, the colour source, the coverage.
+        Vertex and face counts, the colour source, the coverage, the pixel size (mm), the
+        camera's view direction (mesh frame) and the face's symmetry residual (mm).
     """
 
     K: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -245,25 +246,29 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
         )
 
 
-def view_direction(mesh, lm3: np.ndarray) -> np.ndarray:
-    """The direction a camera looks at the face from, fixed to the rigid upper face.
+def view_direction(mesh, lm3: np.ndarray | None = None, source: str = "mesh") -> np.ndarray:
+    """The direction a frontal camera looks at the face from (:func:`~.mesh_view.face_view`).
 
-    The area-weighted mean normal of the mesh's triangles within :data:`VIEW_RADIUS_MM` of the
-    nose bridge (iBUG 28: nose, inner eyes, lower forehead; nothing a viseme moves), each
-    normal turned to agree with the nose tip's side (so the mesh's winding does not matter).
+    Found from the surface: one overall normal sign, the nose tip as the most protruding point,
+    the face's symmetry plane and the least-squares plane of the face around the tip. Given
+    landmarks, their nose tip (iBUG 31) replaces the surface's.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The scan, mm, any frame and winding.
+    lm3 : (68, 3) float, optional
+        iBUG-68 landmarks, mm.
+    source : str
+        The mesh file, for messages.
 
     Returns
     -------
     (3,) float64
         Unit vector from the camera into the face, in the mesh's frame.
     """
-    bridge, tip = lm3[27], lm3[30]
-    near = np.linalg.norm(mesh.triangles_center - bridge, axis=1) < VIEW_RADIUS_MM
-    normals = np.asarray(mesh.face_normals)[near] * np.asarray(mesh.area_faces)[near, None]
-    out_of_face = tip - bridge  # the nose points out of the face
-    normals *= np.where(normals @ out_of_face < 0, -1.0, 1.0)[:, None]
-    z = -normals.sum(axis=0)
-    return z / np.linalg.norm(z)
+    tip = None if lm3 is None else np.asarray(lm3, dtype=np.float64)[30]
+    return face_view(mesh, tip, str(source)).direction
 
 
 def virtual_camera(
@@ -386,7 +391,8 @@ def read_mesh_take(
     lm3 = read_landmarks3d(landmarks_path)
     _check_units(lm3, mesh_path)
     _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
-    K, pose = virtual_camera(lm3, view_direction(mesh, lm3), cfg)
+    view = face_view(mesh, lm3[30], str(mesh_path))
+    K, pose = virtual_camera(lm3, view.direction, cfg)
     eyes_to_chin = pose[1, :3] @ (lm3[8] - (lm3[36] + lm3[45]) / 2)
     if eyes_to_chin < 0:  # the image is upside down: 37 -> 46 runs right to left on the face
         raise InputError(
@@ -409,6 +415,8 @@ def read_mesh_take(
         "colour": "texture" if mesh.visual.kind == "texture" else "vertex colours",
         "coverage": float(np.isfinite(depth).mean()),
         "pixel_mm": float(cfg["distance_mm"] / K[0, 0]),
+        "view_direction": [float(x) for x in view.direction],
+        "symmetry_mm": view.symmetry_mm,
     }
     return MeshTake(
         xyz=xyz, color=color, landmarks=landmarks, K=K, pose=pose, size=size, report=report

@@ -339,8 +339,9 @@ def _outline(n: int, ibug: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(targets, arc, x), np.interp(targets, arc, y)])
 
 
-def _inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd point-in-polygon test, vectorised over points and edges."""
+def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """(n,) bool: which 2D points (n, 2) lie inside a closed polygon (k, 2) (even-odd rule,
+    vectorised over points and edges)."""
     x, y = points[:, 0:1], points[:, 1:2]
     a, b = poly, np.roll(poly, -1, axis=0)
     crosses = (a[:, 1] > y) != (b[:, 1] > y)
@@ -413,7 +414,7 @@ def _triangulate(points: np.ndarray, mouth: np.ndarray, enforce: bool = True) ->
     if enforce:
         tri = _enforce_edges(points, tri, list(zip(loop, np.roll(loop, -1), strict=True)))
     centroids = points[tri].mean(axis=1)
-    return tri[~_inside_polygon(centroids, points[loop])]
+    return tri[~inside_polygon(centroids, points[loop])]
 
 
 def _relax(
@@ -437,7 +438,7 @@ def _relax(
         step = 0.2 * total
         trial = p + step
         free = np.arange(n_fixed, len(p))
-        ok = _inside_polygon(trial[free], outline) & ~_inside_polygon(trial[free], mouth_poly)
+        ok = inside_polygon(trial[free], outline) & ~inside_polygon(trial[free], mouth_poly)
         ok &= _segment_distance(trial[free], outline) > 0.4 * h
         ok &= _segment_distance(trial[free], mouth_poly) > 0.4 * h
         p[free[ok]] = trial[free[ok]]
@@ -487,7 +488,7 @@ def build_template() -> Template:
     g = 0.03
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], g), np.arange(lo[1], hi[1], g))
     cand = np.column_stack([gx.ravel(), gy.ravel()])
-    cand = cand[_inside_polygon(cand, outline) & ~_inside_polygon(cand, mouth_poly)]
+    cand = cand[inside_polygon(cand, outline) & ~inside_polygon(cand, mouth_poly)]
     # Free points start clear of the outline and the mouth (the relaxation keeps them clear): a
     # free point close to a boundary edge would make a sliver triangle with it.
     h = _spacing(outline, N_VERTICES)
