@@ -8,7 +8,8 @@ face around the tip; the landmarks' nose tip replaces the surface's). It is cent
 landmarks' centroid, its image x axis along the outer eye corners (iBUG 37 -> 46, so that 37
 is on the image's left), ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
 pixel at that distance (by default chosen so that the landmarks span ``face_share`` of the
-image). One render gives the colour image (texture or vertex colours, unlit) and the depth at
+image). One render gives the colour image (texture or vertex colours, unlit; a mesh with neither is
+shaded grey, lit from the camera) and the depth at
 every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised range
 image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same camera.
 
@@ -18,6 +19,7 @@ lines starting with ``#`` are skipped.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 from dataclasses import dataclass, field
@@ -40,6 +42,7 @@ from scan2morph.io.take import (  # noqa: E402
 )
 from scan2morph.tol import N_IBUG  # noqa: E402
 
+log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
 #: Default virtual camera (config section ``mesh_camera``).
@@ -52,6 +55,8 @@ DEFAULT_MESH_CAMERA = {
 }
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
+#: Share of full white a geometry-only mesh's surface shows where it faces away from the light.
+SHADE_AMBIENT = 0.15
 #: Colour of pixels the mesh does not cover (dark blue-grey).
 BACKGROUND_RGB = (44, 46, 56)
 
@@ -69,7 +74,8 @@ class MeshTake(RangeTake):
     size : (int, int)
         Image (width, height), px.
     report : dict
-        Vertex and face counts, the colour source, the coverage, the pixel size (mm), the
+        Vertex and face counts, the colour source (``texture``, ``vertex colours`` or
+        ``shading``), the coverage, the pixel size (mm), the
         camera's view direction (mesh frame) and the face's symmetry residual (mm).
     """
 
@@ -107,13 +113,19 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Returns
     -------
     trimesh.Trimesh
-        With ``visual`` holding the texture (and UVs) or vertex colours.
+        With ``visual`` holding the texture (and UVs), vertex colours, or nothing (``kind``
+        None: geometry only).
 
     Raises
     ------
     InputError
         Missing or unreadable file, no faces (a point cloud), a texture the file references
-        but that is missing, a ``texture`` given for a mesh without UVs, no colour at all.
+        but that is missing, a ``texture`` given for a mesh without UVs.
+
+    Notes
+    -----
+    A mesh without texture and vertex colours (geometry only) is returned as it is:
+    :func:`read_mesh_take` renders it with shading.
     """
     import trimesh
 
@@ -148,20 +160,15 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
         if image is not None:
             loaded.visual = _unlit_texture(visual.uv, image)
-        else:
-            names = _referenced_textures(path)
-            named = f"the material names {names[0]!r}, which is missing" if names else "none"
+        elif names := _referenced_textures(path):
             raise InputError(
                 path,
-                f"texture: the mesh has UVs but no texture image ({named}); put the texture "
-                "beside the MTL or name it in the sheet's texture column",
+                f"texture: the mesh has UVs but no texture image (the material names "
+                f"{names[0]!r}, which is missing); put the texture beside the MTL or name it in "
+                "the sheet's texture column",
             )
-    elif visual.kind != "vertex":
-        raise InputError(
-            path,
-            "texture: the mesh has no texture and no vertex colours (expected a textured OBJ / "
-            "glTF, or a PLY with vertex colours)",
-        )
+        else:  # UVs but no texture named: geometry only
+            loaded.visual = trimesh.visual.ColorVisuals(loaded)
     return loaded
 
 
@@ -238,7 +245,12 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
     lo, hi = EYE_SPAN_MM
     if not lo <= span <= hi:
         unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
-        likely = f"the mesh looks like {unit}, not mm" if unit else "not a face in mm"
+        likely = (
+            f"the mesh looks like {unit}, not mm: give its unit in the sheet's units column "
+            "(mm, cm or m)"
+            if unit
+            else "not a face in mm"
+        )
         raise InputError(
             mesh_path,
             f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} units apart, "
@@ -312,6 +324,42 @@ def virtual_camera(
     return K, pose
 
 
+def colour_source(mesh) -> str:
+    """Where a read mesh's rendered colour comes from: ``texture``, ``vertex colours`` or
+    ``shading`` (geometry only: :func:`shade`)."""
+    return {"texture": "texture", "vertex": "vertex colours"}.get(mesh.visual.kind, "shading")
+
+
+def shade(mesh, pose: np.ndarray):
+    """A geometry-only mesh coloured grey by its shading, lit from the camera.
+
+    Lambert's law with the light at the camera: each vertex's grey is
+    ``SHADE_AMBIENT + (1 - SHADE_AMBIENT) * |n . z|`` of full white, ``n`` its unit normal and
+    ``z`` the camera's viewing axis (either winding gives the same picture).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Mesh frame, mm.
+    pose : (4, 4) float
+        Mesh frame -> camera frame (:func:`virtual_camera`).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        A copy with vertex colours (uint8 RGBA).
+    """
+    import trimesh
+
+    normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
+    lit = np.abs(normals @ np.asarray(pose, dtype=np.float64)[2, :3])
+    grey = np.rint(255.0 * (SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * lit)).astype(np.uint8)
+    out = mesh.copy()
+    rgba = np.column_stack([grey, grey, grey, np.full_like(grey, 255)])
+    out.visual = trimesh.visual.ColorVisuals(out, vertex_colors=rgba)
+    return out
+
+
 _RENDERERS: dict = {}
 
 
@@ -357,6 +405,7 @@ def read_mesh_take(
     texture_path: str | Path | None,
     landmarks_path: str | Path,
     settings: dict | None = None,
+    mm_per_unit: float = 1.0,
 ) -> MeshTake:
     """Read a mesh take and render it into a range take (module docstring).
 
@@ -371,12 +420,17 @@ def read_mesh_take(
     settings : dict, optional
         ``width``, ``height`` (px), ``distance_mm``, ``pixel_mm`` (None: automatic) and
         ``face_share`` of the virtual camera (defaults :data:`DEFAULT_MESH_CAMERA`).
+    mm_per_unit : float
+        The mesh's and landmarks' unit in mm (the sheet's ``units`` column: 1 for mm, 10 for
+        cm, 1000 for m); both are scaled to mm as read.
 
     Returns
     -------
     MeshTake
-        ``xyz`` (H, W, 3) mm in the mesh's frame, ``color``, ``landmarks`` (68, 2) px, the
-        camera (``K``, ``pose``, ``size``) and a ``report``.
+        ``xyz`` (H, W, 3) mm in the mesh's frame (scaled to mm), ``color`` (the texture or
+        vertex colours, or for a geometry-only mesh its grey shading lit from the camera:
+        :func:`shade`), ``landmarks`` (68, 2) px, the camera (``K``, ``pose``, ``size``) and a
+        ``report``.
 
     Raises
     ------
@@ -388,7 +442,9 @@ def read_mesh_take(
     """
     cfg = dict(DEFAULT_MESH_CAMERA) | dict(settings or {})
     mesh = read_mesh(mesh_path, texture_path)
-    lm3 = read_landmarks3d(landmarks_path)
+    lm3 = read_landmarks3d(landmarks_path) * mm_per_unit
+    if mm_per_unit != 1.0:
+        mesh.apply_scale(mm_per_unit)
     _check_units(lm3, mesh_path)
     _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
     view = face_view(mesh, lm3[30], str(mesh_path))
@@ -402,6 +458,14 @@ def read_mesh_take(
             "subject's right eye",
         )
     size = (int(cfg["width"]), int(cfg["height"]))
+    source = colour_source(mesh)
+    if source == "shading":
+        log.warning(
+            "%s: no texture and no vertex colours: rendered with shading (grey, lit from the "
+            "camera); texture-driven refinement is not available for this take",
+            mesh_path,
+        )
+        mesh = shade(mesh, pose)
     color, depth = render_mesh(mesh, K, pose, size)
     xyz_cam = depth_points(np.nan_to_num(depth, nan=0.0), PinholeCamera(K, np.zeros(5), size))
     xyz = (xyz_cam - pose[:3, 3]) @ pose[:3, :3]  # camera -> mesh frame
@@ -412,7 +476,7 @@ def read_mesh_take(
     report = {
         "n_vertices": int(len(mesh.vertices)),
         "n_faces": int(len(mesh.faces)),
-        "colour": "texture" if mesh.visual.kind == "texture" else "vertex colours",
+        "colour": source,
         "coverage": float(np.isfinite(depth).mean()),
         "pixel_mm": float(cfg["distance_mm"] / K[0, 0]),
         "view_direction": [float(x) for x in view.direction],

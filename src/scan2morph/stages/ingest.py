@@ -20,7 +20,7 @@ from scan2morph.io.mesh_scan import read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
-from scan2morph.sheet import FILES
+from scan2morph.sheet import FILES, mm_per_unit
 from scan2morph.stages.part import Part
 from scan2morph.store import paths
 
@@ -47,7 +47,8 @@ def run(
     Parameters
     ----------
     row : mapping
-        The take's sheet row (``subject``, ``take``, ``kind``, ``label``, ``modality``).
+        The take's sheet row (``subject``, ``take``, ``kind``, ``label``, ``modality``, and
+        ``units``: a mesh or range take's coordinates are scaled from it to mm).
     files : mapping role -> path
         The input files by sheet column (:data:`scan2morph.sheet.FILES` of the modality).
     stereo : mapping
@@ -63,6 +64,7 @@ def run(
     """
     take, modality = row["take"], row["modality"]
     attrs = {k: row[k] for k in ("kind", "label", "modality")}
+    scale = mm_per_unit(row)
     camera: dict = {}
     if modality == "rgbd":
         scan = read_rgbd_take(
@@ -75,14 +77,24 @@ def run(
         )
     elif modality == "mesh":
         scan = read_mesh_take(
-            files["mesh"], files.get("texture") or None, files["landmarks"], dict(mesh_camera or {})
+            files["mesh"],
+            files.get("texture") or None,
+            files["landmarks"],
+            dict(mesh_camera or {}),
+            scale,
         )
         xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
-        camera = dict(K=scan.K, distortion=np.zeros(5), pose=scan.pose, size=scan.size)
+        camera = dict(
+            color_source=scan.report["colour"],
+            K=scan.K,
+            distortion=np.zeros(5),
+            pose=scan.pose,
+            size=scan.size,
+        )
         attrs["mesh"] = scan.report
     elif modality == "range":
         scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
-        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
+        xyz, color, landmarks = scan.xyz * scale, scan.color, scan.landmarks
         check_face(xyz, landmarks, files["xyz"], files["landmarks"])
     elif modality == "stereo":
         pair = read_stereo_take(
