@@ -146,3 +146,18 @@ def test_a_mesh_without_surface_is_refused():
     flat = trimesh.Trimesh(np.zeros((3, 3)), np.array([[0, 1, 2]]), process=False)
     with pytest.raises(InputError, match="0 triangles of non-zero area"):
         face_view(flat, source="flat.ply")
+
+
+def test_camera_faces_a_face_only_scan(synth03_takes):
+    """Only the front of the head (30 mm in front of the ears, down to the chin), as face
+    scanners give it: an open shell, whose outward side the common sign still finds."""
+    _, r = synth03_takes[0]
+    pose = r["truth"]["pose"]
+    head = (r["vertices"] - pose[:3, 3]) @ pose[:3, :3]
+    corners = head[r["faces"]]
+    keep = np.all((corners[..., 2] > 30.0) & (corners[..., 1] > -120.0), axis=1)
+    shell = trimesh.Trimesh(r["vertices"], r["faces"][keep], process=False)
+    assert not shell.is_watertight
+    view = face_view(shell)
+    assert view.normal_sign == 1
+    assert _angle_deg(view.direction, -pose[:3, 2]) < MAX_ERROR_DEG  # measured 2.0
