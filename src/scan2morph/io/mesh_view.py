@@ -13,16 +13,17 @@ that it holds whatever frame, winding or nose shape the scan comes with:
    on the surface around it.
 3. **A first direction:** the mean normal of the surface within :data:`FACE_RADIUS_MM` of the tip.
 4. **The symmetry plane** through the tip: left-right axes perpendicular to the first direction
-   are tried every 15 degrees (the one whose mirror image of the face lies closest to the
-   surface wins) and refined by pairing each face point with the surface point nearest its
-   mirror image (an ICP of the face with its own mirror image).
+   are tried every 15 degrees; the :data:`SYMMETRY_STARTS` whose mirror images of the face lie
+   closest to the surface are refined (each face point paired with the surface point nearest
+   its mirror image, the next plane the least-squares plane of the pairs' midpoints: an ICP of
+   the face with its own mirror image), and the closest-fitting refined plane is kept.
 5. **The face plane:** the least-squares plane of the surface around the tip (Gaussian weights,
    :data:`FACE_SIGMA_MM`), its normal taken within the symmetry plane. The camera looks along
    that normal, into the face.
 
 Measured on every take of four synthetic subjects within 4.4 degrees of the true frontal
 direction (the cohort's mesh subject synth03: 3.2 from the surface alone, 1.6 with the landmarks'
-nose tip), and 1.7 degrees on a real head scan; noses pointing down as real ones do (60-75
+nose tip), and 1.7 degrees on a real head scan; noses pointing down as real ones do (about 60
 degrees below the horizontal from bridge to tip) do not bias it.
 """
 
