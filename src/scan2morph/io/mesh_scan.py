@@ -55,6 +55,9 @@ DEFAULT_MESH_CAMERA = {
 }
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
+#: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
+#: is the surface's shading, no skin texture.
+SHADED = "shading"
 #: Share of full white a geometry-only mesh's surface shows where it faces away from the light.
 SHADE_AMBIENT = 0.15
 #: Colour of pixels the mesh does not cover (dark blue-grey).
@@ -327,7 +330,7 @@ def virtual_camera(
 def colour_source(mesh) -> str:
     """Where a read mesh's rendered colour comes from: ``texture``, ``vertex colours`` or
     ``shading`` (geometry only: :func:`shade`)."""
-    return {"texture": "texture", "vertex": "vertex colours"}.get(mesh.visual.kind, "shading")
+    return {"texture": "texture", "vertex": "vertex colours"}.get(mesh.visual.kind, SHADED)
 
 
 def shade(mesh, pose: np.ndarray):
@@ -459,7 +462,7 @@ def read_mesh_take(
         )
     size = (int(cfg["width"]), int(cfg["height"]))
     source = colour_source(mesh)
-    if source == "shading":
+    if source == SHADED:
         log.warning(
             "%s: no texture and no vertex colours: rendered with shading (grey, lit from the "
             "camera); texture-driven refinement is not available for this take",

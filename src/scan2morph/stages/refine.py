@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from scan2morph.align import rotation_angle_deg, transform_points
+from scan2morph.io.mesh_scan import SHADED
 from scan2morph.refine import RefineParams, grey, refine_points
 from scan2morph.refine.jaw import JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipParams, LipPrior, lip_prior
@@ -289,10 +290,6 @@ def run(
         },
         attrs={paths.refine_group(take): attrs},
     )
-
-
-#: ``camera/color_source`` of a geometry-only take: its colour image is the surface's shading.
-SHADED = "shading"
 
 
 def _shaded(data: Mapping[str, np.ndarray], takes) -> str:
