@@ -326,7 +326,9 @@ def test_fit_take_bad_input(template, xyz):
     with pytest.raises(InputError, match=r"^s/t: only \d+\.\d% of the template's vertices"):
         fit_take(template, lm, sparse, (W, H), source="s/t")
     mirrored = lm * [-1.0, 1.0] + [640.0, 0.0]
-    with pytest.raises(InputError, match="^s/t: landmarks fold the template: 3200 of 3200"):
+    with pytest.raises(
+        InputError, match=r"^s/t: landmarks fold the template: (\d+) of \1 warped triangles outside"
+    ):
         fit_take(template, mirrored, xyz, (W, H), source="s/t")
 
 

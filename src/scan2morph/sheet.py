@@ -34,6 +34,7 @@ COLUMNS = (
     "depth",
     "intrinsics",
     "landmarks",
+    "units",
 )
 REQUIRED = ("subject", "take", "kind", "label", "modality", "landmarks")
 KINDS = ("neutral", "viseme", "expression")
@@ -49,7 +50,12 @@ FILES = {
 #: does not reference one.
 OPTIONAL_FILES = {"mesh": ("texture",)}
 #: Every column that holds a file path (resolved against the sheet's folder).
-PATH_COLUMNS = tuple(c for c in COLUMNS if c not in REQUIRED or c == "landmarks")
+PATH_COLUMNS = tuple(c for c in COLUMNS if (c not in REQUIRED or c == "landmarks") and c != "units")
+#: The ``units`` column: the unit of a take's coordinates -> mm per unit (empty: mm).
+UNITS = {"": 1.0, "mm": 1.0, "cm": 10.0, "m": 1000.0}
+#: Modalities whose coordinates the ``units`` column scales (the others carry their unit in
+#: their own files: a stereo calibration's T, an RGB-D sensor's depth_scale_mm).
+UNITS_MODALITIES = ("mesh", "range")
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
@@ -101,6 +107,39 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     df["sheet"] = str(path)
     df["synthetic"] = False
     return df
+
+
+def mm_per_unit(row) -> float:
+    """A take's coordinate unit in mm from its sheet row's ``units`` (1 when the column is
+    empty or absent).
+
+    Raises
+    ------
+    InputError
+        Naming the sheet row and the column: a value other than ``mm``, ``cm`` or ``m``, or a
+        unit for a modality the column does not scale (:data:`UNITS_MODALITIES`).
+    """
+    problem = units_problem(row.get("units", ""), row.get("modality", ""))
+    if problem:
+        where = (
+            f"{row.get('sheet', 'sheet')} row {row.get('sheet_row', '?')} "
+            f"({row.get('subject')}/{row.get('take')})"
+        )
+        raise InputError(where, problem)
+    return UNITS[str(row.get("units", "") or "")]
+
+
+def units_problem(value: str, modality: str) -> str:
+    """What is wrong with a ``units`` cell, naming the column; ``""`` when nothing."""
+    value = str(value or "")
+    if value not in UNITS:
+        return f"column 'units': {value!r} unknown (expected mm, cm or m; empty means mm)"
+    if UNITS[value] != 1.0 and modality not in UNITS_MODALITIES:
+        return (
+            f"column 'units': {value!r} is for mesh and range takes (a {modality} take gives its "
+            "unit in its own files: a stereo calibration's T, an RGB-D sensor's depth_scale_mm)"
+        )
+    return ""
 
 
 def input_roles(row) -> list[str]:
@@ -223,6 +262,7 @@ def synthetic_rows(
                     modality=modality,
                     **files,
                     landmarks=pattern.format(stem=stem),
+                    units="",
                     sheet_row=0,
                     sheet="config: synthetic",
                     synthetic=True,
@@ -263,6 +303,8 @@ def sheet_problems(
                     empty = problem == "empty"
                     if not (empty and key in FILES.get(rec.modality, ())):  # reported below
                         out.append((rec.take, f"{where}: column '{key}': {problem}"))
+            if problem := units_problem(rec.units, rec.modality):
+                out.append((rec.take, f"{where}: {problem}"))
             if rec.kind not in KINDS:
                 out.append(
                     (

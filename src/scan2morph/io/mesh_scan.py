@@ -1,15 +1,17 @@
 """Mesh takes: a textured mesh scan (OBJ + MTL + texture, PLY, glTF/GLB) -> a range take.
 
 The mesh is read with trimesh and rendered headlessly (pyrender, OSMesa) through a virtual
-pinhole camera placed in front of the face: looking along the mean surface normal of the rigid
-upper face around the nose bridge (so that every take of a subject, whatever its jaw does, is
-seen from the same direction), centred on the landmarks' centroid, its image x axis along the
-outer eye corners (iBUG 37 -> 46, so that 37 is on the image's left), ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
+pinhole camera placed in front of the face. The camera looks along the face's frontal direction,
+found from the surface alone (:mod:`scan2morph.io.mesh_view`: one overall normal sign, the nose
+tip as the most protruding point, the face's symmetry plane and the least-squares plane of the
+face around the tip; the landmarks' nose tip replaces the surface's). It is centred on the
+landmarks' centroid, its image x axis along the outer eye corners (iBUG 37 -> 46, so that 37
+is on the image's left), ``distance_mm`` away, with a focal length giving ``pixel_mm`` mm per
 pixel at that distance (by default chosen so that the landmarks span ``face_share`` of the
-image). One render gives the colour image (texture or vertex colours, unlit) and
-the depth at every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised
-range image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same
-camera.
+image). One render gives the colour image (texture or vertex colours, unlit; a mesh with neither is
+shaded grey, lit from the camera) and the depth at
+every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised range
+image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same camera.
 
 Landmark file: 68 lines ``x y z`` (iBUG-68 order, the mesh's frame and units); blank lines and
 lines starting with ``#`` are skipped.
@@ -17,6 +19,7 @@ lines starting with ``#`` are skipped.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 from dataclasses import dataclass, field
@@ -28,6 +31,7 @@ import numpy as np  # noqa: E402
 
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
+from scan2morph.io.mesh_view import face_view  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
     _UNITS,
@@ -38,6 +42,7 @@ from scan2morph.io.take import (  # noqa: E402
 )
 from scan2morph.tol import N_IBUG  # noqa: E402
 
+log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
 #: Default virtual camera (config section ``mesh_camera``).
@@ -48,10 +53,13 @@ DEFAULT_MESH_CAMERA = {
     "pixel_mm": None,
     "face_share": 0.6,
 }
-#: Radius around the nose bridge whose surface normals give the view direction, mm.
-VIEW_RADIUS_MM = 25.0
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
+#: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
+#: is the surface's shading, no skin texture.
+SHADED = "shading"
+#: Share of full white a geometry-only mesh's surface shows where it faces away from the light.
+SHADE_AMBIENT = 0.15
 #: Colour of pixels the mesh does not cover (dark blue-grey).
 BACKGROUND_RGB = (44, 46, 56)
 
@@ -69,7 +77,9 @@ class MeshTake(RangeTake):
     size : (int, int)
         Image (width, height), px.
     report : dict
-        Vertex and face counts, the colour source, the coverage.
+        Vertex and face counts, the colour source (``texture``, ``vertex colours`` or
+        ``shading``), the coverage, the pixel size (mm), the
+        camera's view direction (mesh frame) and the face's symmetry residual (mm).
     """
 
     K: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -106,13 +116,19 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Returns
     -------
     trimesh.Trimesh
-        With ``visual`` holding the texture (and UVs) or vertex colours.
+        With ``visual`` holding the texture (and UVs), vertex colours, or nothing (``kind``
+        None: geometry only).
 
     Raises
     ------
     InputError
         Missing or unreadable file, no faces (a point cloud), a texture the file references
-        but that is missing, a ``texture`` given for a mesh without UVs, no colour at all.
+        but that is missing, a ``texture`` given for a mesh without UVs.
+
+    Notes
+    -----
+    A mesh without texture and vertex colours (geometry only) is returned as it is:
+    :func:`read_mesh_take` renders it with shading.
     """
     import trimesh
 
@@ -147,20 +163,15 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
         if image is not None:
             loaded.visual = _unlit_texture(visual.uv, image)
-        else:
-            names = _referenced_textures(path)
-            named = f"the material names {names[0]!r}, which is missing" if names else "none"
+        elif names := _referenced_textures(path):
             raise InputError(
                 path,
-                f"texture: the mesh has UVs but no texture image ({named}); put the texture "
-                "beside the MTL or name it in the sheet's texture column",
+                f"texture: the mesh has UVs but no texture image (the material names "
+                f"{names[0]!r}, which is missing); put the texture beside the MTL or name it in "
+                "the sheet's texture column",
             )
-    elif visual.kind != "vertex":
-        raise InputError(
-            path,
-            "texture: the mesh has no texture and no vertex colours (expected a textured OBJ / "
-            "glTF, or a PLY with vertex colours)",
-        )
+        else:  # UVs but no texture named: geometry only
+            loaded.visual = trimesh.visual.ColorVisuals(loaded)
     return loaded
 
 
@@ -237,7 +248,12 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
     lo, hi = EYE_SPAN_MM
     if not lo <= span <= hi:
         unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
-        likely = f"the mesh looks like {unit}, not mm" if unit else "not a face in mm"
+        likely = (
+            f"the mesh looks like {unit}, not mm: give its unit in the sheet's units column "
+            "(mm, cm or m)"
+            if unit
+            else "not a face in mm"
+        )
         raise InputError(
             mesh_path,
             f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} units apart, "
@@ -245,25 +261,29 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
         )
 
 
-def view_direction(mesh, lm3: np.ndarray) -> np.ndarray:
-    """The direction a camera looks at the face from, fixed to the rigid upper face.
+def view_direction(mesh, lm3: np.ndarray | None = None, source: str = "mesh") -> np.ndarray:
+    """The direction a frontal camera looks at the face from (:func:`~.mesh_view.face_view`).
 
-    The area-weighted mean normal of the mesh's triangles within :data:`VIEW_RADIUS_MM` of the
-    nose bridge (iBUG 28: nose, inner eyes, lower forehead; nothing a viseme moves), each
-    normal turned to agree with the nose tip's side (so the mesh's winding does not matter).
+    Found from the surface: one overall normal sign, the nose tip as the most protruding point,
+    the face's symmetry plane and the least-squares plane of the face around the tip. Given
+    landmarks, their nose tip (iBUG 31) replaces the surface's.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The scan, mm, any frame and winding.
+    lm3 : (68, 3) float, optional
+        iBUG-68 landmarks, mm.
+    source : str
+        The mesh file, for messages.
 
     Returns
     -------
     (3,) float64
         Unit vector from the camera into the face, in the mesh's frame.
     """
-    bridge, tip = lm3[27], lm3[30]
-    near = np.linalg.norm(mesh.triangles_center - bridge, axis=1) < VIEW_RADIUS_MM
-    normals = np.asarray(mesh.face_normals)[near] * np.asarray(mesh.area_faces)[near, None]
-    out_of_face = tip - bridge  # the nose points out of the face
-    normals *= np.where(normals @ out_of_face < 0, -1.0, 1.0)[:, None]
-    z = -normals.sum(axis=0)
-    return z / np.linalg.norm(z)
+    tip = None if lm3 is None else np.asarray(lm3, dtype=np.float64)[30]
+    return face_view(mesh, tip, str(source)).direction
 
 
 def virtual_camera(
@@ -305,6 +325,42 @@ def virtual_camera(
     f = settings["distance_mm"] / pixel_mm
     K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
     return K, pose
+
+
+def colour_source(mesh) -> str:
+    """Where a read mesh's rendered colour comes from: ``texture``, ``vertex colours`` or
+    ``shading`` (geometry only: :func:`shade`)."""
+    return {"texture": "texture", "vertex": "vertex colours"}.get(mesh.visual.kind, SHADED)
+
+
+def shade(mesh, pose: np.ndarray):
+    """A geometry-only mesh coloured grey by its shading, lit from the camera.
+
+    Lambert's law with the light at the camera: each vertex's grey is
+    ``SHADE_AMBIENT + (1 - SHADE_AMBIENT) * |n . z|`` of full white, ``n`` its unit normal and
+    ``z`` the camera's viewing axis (either winding gives the same picture).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Mesh frame, mm.
+    pose : (4, 4) float
+        Mesh frame -> camera frame (:func:`virtual_camera`).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        A copy with vertex colours (uint8 RGBA).
+    """
+    import trimesh
+
+    normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
+    lit = np.abs(normals @ np.asarray(pose, dtype=np.float64)[2, :3])
+    grey = np.rint(255.0 * (SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * lit)).astype(np.uint8)
+    out = mesh.copy()
+    rgba = np.column_stack([grey, grey, grey, np.full_like(grey, 255)])
+    out.visual = trimesh.visual.ColorVisuals(out, vertex_colors=rgba)
+    return out
 
 
 _RENDERERS: dict = {}
@@ -352,6 +408,7 @@ def read_mesh_take(
     texture_path: str | Path | None,
     landmarks_path: str | Path,
     settings: dict | None = None,
+    mm_per_unit: float = 1.0,
 ) -> MeshTake:
     """Read a mesh take and render it into a range take (module docstring).
 
@@ -366,12 +423,17 @@ def read_mesh_take(
     settings : dict, optional
         ``width``, ``height`` (px), ``distance_mm``, ``pixel_mm`` (None: automatic) and
         ``face_share`` of the virtual camera (defaults :data:`DEFAULT_MESH_CAMERA`).
+    mm_per_unit : float
+        The mesh's and landmarks' unit in mm (the sheet's ``units`` column: 1 for mm, 10 for
+        cm, 1000 for m); both are scaled to mm as read.
 
     Returns
     -------
     MeshTake
-        ``xyz`` (H, W, 3) mm in the mesh's frame, ``color``, ``landmarks`` (68, 2) px, the
-        camera (``K``, ``pose``, ``size``) and a ``report``.
+        ``xyz`` (H, W, 3) mm in the mesh's frame (scaled to mm), ``color`` (the texture or
+        vertex colours, or for a geometry-only mesh its grey shading lit from the camera:
+        :func:`shade`), ``landmarks`` (68, 2) px, the camera (``K``, ``pose``, ``size``) and a
+        ``report``.
 
     Raises
     ------
@@ -383,10 +445,13 @@ def read_mesh_take(
     """
     cfg = dict(DEFAULT_MESH_CAMERA) | dict(settings or {})
     mesh = read_mesh(mesh_path, texture_path)
-    lm3 = read_landmarks3d(landmarks_path)
+    lm3 = read_landmarks3d(landmarks_path) * mm_per_unit
+    if mm_per_unit != 1.0:
+        mesh.apply_scale(mm_per_unit)
     _check_units(lm3, mesh_path)
     _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
-    K, pose = virtual_camera(lm3, view_direction(mesh, lm3), cfg)
+    view = face_view(mesh, lm3[30], str(mesh_path))
+    K, pose = virtual_camera(lm3, view.direction, cfg)
     eyes_to_chin = pose[1, :3] @ (lm3[8] - (lm3[36] + lm3[45]) / 2)
     if eyes_to_chin < 0:  # the image is upside down: 37 -> 46 runs right to left on the face
         raise InputError(
@@ -396,6 +461,14 @@ def read_mesh_take(
             "subject's right eye",
         )
     size = (int(cfg["width"]), int(cfg["height"]))
+    source = colour_source(mesh)
+    if source == SHADED:
+        log.warning(
+            "%s: no texture and no vertex colours: rendered with shading (grey, lit from the "
+            "camera); texture-driven refinement is not available for this take",
+            mesh_path,
+        )
+        mesh = shade(mesh, pose)
     color, depth = render_mesh(mesh, K, pose, size)
     xyz_cam = depth_points(np.nan_to_num(depth, nan=0.0), PinholeCamera(K, np.zeros(5), size))
     xyz = (xyz_cam - pose[:3, 3]) @ pose[:3, :3]  # camera -> mesh frame
@@ -406,9 +479,11 @@ def read_mesh_take(
     report = {
         "n_vertices": int(len(mesh.vertices)),
         "n_faces": int(len(mesh.faces)),
-        "colour": "texture" if mesh.visual.kind == "texture" else "vertex colours",
+        "colour": source,
         "coverage": float(np.isfinite(depth).mean()),
         "pixel_mm": float(cfg["distance_mm"] / K[0, 0]),
+        "view_direction": [float(x) for x in view.direction],
+        "symmetry_mm": view.symmetry_mm,
     }
     return MeshTake(
         xyz=xyz, color=color, landmarks=landmarks, K=K, pose=pose, size=size, report=report

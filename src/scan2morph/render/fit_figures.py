@@ -12,6 +12,7 @@ from scan2morph.errors import InputError
 from scan2morph.render.source import (
     example_take,
     fiducials,
+    groups,
     mesh,
     need,
     neutral_take,
@@ -228,5 +229,48 @@ def fig_model(store: Mapping[str, np.ndarray]) -> Figure:
     )
 
 
+def _text(store: Mapping, key: str, default: str) -> str:
+    value = store[key] if key in store else default
+    value = value.item() if isinstance(value, np.ndarray) else value
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
+    """Every take's image with its 68 landmarks, as the fit saw them: a range or RGB-D take's
+    colour image, a stereo take's left image, a mesh take's render through its virtual camera
+    (grey shading for a geometry-only mesh). The neutral first, then the others by name."""
+    neutral = neutral_take(store)
+    takes = [neutral] + [t for t in groups(store, paths.TAKES, "mesh/vertices") if t != neutral]
+    ncols = min(TAKES_PER_ROW, len(takes))
+    nrows = -(-len(takes) // ncols)
+    fig, axes = subplots(nrows, ncols, figsize=(2.3 * ncols, 2.7 * nrows), squeeze=False)
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for ax, take in zip(axes.flat, takes, strict=False):
+        what = f"the takes figure of take {take}"
+        color = need(store, paths.range_image(take, "color"), what)
+        marks = need(store, paths.landmarks(take), what).astype(float)
+        modality = _text(store, paths.camera(take, "modality"), "range")
+        shown = _text(store, paths.camera(take, "color_source"), "")
+        x0, x1, y0, y1 = _crop_box(marks, color.shape)
+        ax.imshow(color, interpolation="bilinear")
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y1, y0)
+        ax.scatter(marks[:, 0], marks[:, 1], s=5, c="red", edgecolors="none")
+        note = f"{modality}, {shown}" if shown else modality
+        ax.set_title(f"{take} ({note})", fontsize=8)
+    fig.suptitle(
+        "Each take's image and landmarks (mesh takes: rendered by the virtual camera)", fontsize=10
+    )
+    return fig
+
+
+#: Panels per row of :func:`fig_takes`.
+TAKES_PER_ROW = 5
 #: Figure name -> function, in the order the report shows them.
-FIGURES = {"template": fig_template, "landmarks": fig_landmarks, "model": fig_model}
+FIGURES = {
+    "template": fig_template,
+    "takes": fig_takes,
+    "landmarks": fig_landmarks,
+    "model": fig_model,
+}

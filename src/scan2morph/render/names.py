@@ -12,7 +12,7 @@ from scan2morph.errors import InputError
 
 #: Stage -> figure names, in report order.
 FIGURE_NAMES: dict[str, tuple[str, ...]] = {
-    "fit": ("template", "landmarks", "model"),
+    "fit": ("template", "takes", "landmarks", "model"),
     "motion": ("point_pairs", "alignment", "mask", "distance", "click_noise", "visemes"),
     "morph": ("gradual", "blends", "mean", "eigen", "pca_blends", "contribution", "coefficients"),
     "modal": ("modes", "expressions", "coordinates", "reconstruction", "statistics", "synthesis"),

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from scan2morph.io.mesh_scan import read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
-from scan2morph.sheet import FILES
+from scan2morph.sheet import FILES, mm_per_unit
 from scan2morph.stages.part import Part
 from scan2morph.store import paths
 
@@ -53,7 +54,8 @@ def run(
     Parameters
     ----------
     row : mapping
-        The take's sheet row (``subject``, ``take``, ``kind``, ``label``, ``modality``).
+        The take's sheet row (``subject``, ``take``, ``kind``, ``label``, ``modality``, and
+        ``units``: a mesh or range take's coordinates are scaled from it to mm).
     files : mapping role -> path
         The input files by sheet column (:data:`scan2morph.sheet.FILES` of the modality).
     stereo : mapping
@@ -74,71 +76,98 @@ def run(
         From the readers; a mirrored (left-handed) frame.
     """
     take, modality = row["take"], row["modality"]
-    attrs = {k: row[k] for k in ("kind", "label", "modality")}
-    camera: dict = {}
-    if modality == "rgbd":
-        scan = read_rgbd_take(
-            files["depth"], files["color"], files["intrinsics"], files["landmarks"]
-        )
-        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
-        cam = scan.intrinsics.color
-        camera = dict(
-            K=cam.K, distortion=cam.D, pose=scan.intrinsics.color_from_depth, size=cam.size
-        )
-    elif modality == "mesh":
-        scan = read_mesh_take(
-            files["mesh"], files.get("texture") or None, files["landmarks"], dict(mesh_camera or {})
-        )
-        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
-        camera = dict(K=scan.K, distortion=np.zeros(5), pose=scan.pose, size=scan.size)
-        attrs["mesh"] = scan.report
-    elif modality == "range":
-        scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
-        xyz, color, landmarks = scan.xyz, scan.color, scan.landmarks
-        check_face(xyz, landmarks, files["xyz"], files["landmarks"])
-    elif modality == "stereo":
-        pair = read_stereo_take(
-            files["left"], files["right"], files["calibration"], files["landmarks"]
-        )
-        source = f"{files['left']}, {files['right']}"
-        try:
-            xyz, report = reconstruct_stereo(
-                pair.left, pair.right, pair.calib, dict(stereo), source=source
-            )
-        except InputError as exc:
-            hint = _stereo_hint(pair.left, pair.right, pair.calib, stereo, files)
-            if hint:
-                raise InputError(exc.source, f"{exc.problem}; {hint}") from None
-            raise
-        log.info("%s: stereo %s", take, report)
-        color, landmarks = pair.left, pair.landmarks
-        check_face(
-            xyz,
-            landmarks,
-            files["calibration"],
-            files["landmarks"],
-            unit_hint=(
-                f"; the stereo reconstruction takes its scale from T (baseline |T| = "
-                f"{pair.calib.baseline_mm:.4g}): is T in mm?"
-            ),
-        )
-        attrs["stereo"] = report
-    else:
+    if modality not in _READERS:
         raise InputError(f"{row['subject']}/{take}", f"modality {modality!r} not supported")
+    scan = _READERS[modality](files, row, stereo, mesh_camera)
+    attrs = {k: row[k] for k in ("kind", "label", "modality")} | scan.attrs
     first = FILES[modality][0]
-    attrs["nose_depth_mm"] = check_handedness(xyz, landmarks, files.get(first, first))
-    attrs["grey_color"] = bool(_grey(color))
+    attrs["nose_depth_mm"] = check_handedness(scan.xyz, scan.landmarks, files.get(first, first))
+    # a geometry-only mesh is shaded grey on purpose (its own warning says so)
+    shaded = scan.camera.get("color_source") == "shading"
+    attrs["grey_color"] = bool(_grey(scan.color)) and not shaded
     attrs |= {f"input_sha256_{r}": sha256_file(files[r]) for r in FILES[modality] if r in files}
-    provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | camera
+    provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | scan.camera
     return Part(
         {
-            paths.raw(take, "xyz"): xyz,
-            paths.raw(take, "color"): color,
-            paths.landmarks(take): landmarks,
+            paths.raw(take, "xyz"): scan.xyz,
+            paths.raw(take, "color"): scan.color,
+            paths.landmarks(take): scan.landmarks,
             **{paths.camera(take, k): _dataset(v) for k, v in provenance.items()},
         },
         attrs={paths.take(take): attrs},
     )
+
+
+class _Scan(NamedTuple):
+    """One take on its pixel grid, as a modality's reader gives it."""
+
+    xyz: np.ndarray
+    color: np.ndarray
+    landmarks: np.ndarray
+    camera: dict = {}
+    attrs: dict = {}
+
+
+def _read_rgbd(files, row, stereo, mesh_camera) -> _Scan:
+    scan = read_rgbd_take(files["depth"], files["color"], files["intrinsics"], files["landmarks"])
+    cam = scan.intrinsics.color
+    camera = dict(K=cam.K, distortion=cam.D, pose=scan.intrinsics.color_from_depth, size=cam.size)
+    return _Scan(scan.xyz, scan.color, scan.landmarks, camera)
+
+
+def _read_mesh(files, row, stereo, mesh_camera) -> _Scan:
+    scan = read_mesh_take(
+        files["mesh"],
+        files.get("texture") or None,
+        files["landmarks"],
+        dict(mesh_camera or {}),
+        mm_per_unit(row),
+    )
+    camera = dict(
+        color_source=scan.report["colour"],
+        K=scan.K,
+        distortion=np.zeros(5),
+        pose=scan.pose,
+        size=scan.size,
+    )
+    return _Scan(scan.xyz, scan.color, scan.landmarks, camera, {"mesh": scan.report})
+
+
+def _read_range(files, row, stereo, mesh_camera) -> _Scan:
+    scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
+    xyz = scan.xyz * mm_per_unit(row)
+    check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"])
+    return _Scan(xyz, scan.color, scan.landmarks)
+
+
+def _read_stereo(files, row, stereo, mesh_camera) -> _Scan:
+    pair = read_stereo_take(files["left"], files["right"], files["calibration"], files["landmarks"])
+    source = f"{files['left']}, {files['right']}"
+    try:
+        xyz, report = reconstruct_stereo(
+            pair.left, pair.right, pair.calib, dict(stereo), source=source
+        )
+    except InputError as exc:
+        hint = _stereo_hint(pair.left, pair.right, pair.calib, stereo, files)
+        if hint:
+            raise InputError(exc.source, f"{exc.problem}; {hint}") from None
+        raise
+    log.info("%s: stereo %s", row["take"], report)
+    check_face(
+        xyz,
+        pair.landmarks,
+        files["calibration"],
+        files["landmarks"],
+        unit_hint=(
+            f"; the stereo reconstruction takes its scale from T (baseline |T| = "
+            f"{pair.calib.baseline_mm:.4g}): is T in mm?"
+        ),
+    )
+    return _Scan(xyz, pair.left, pair.landmarks, {}, {"stereo": report})
+
+
+#: Each modality's reader: (files, row, stereo section, mesh_camera section) -> _Scan.
+_READERS = {"rgbd": _read_rgbd, "mesh": _read_mesh, "range": _read_range, "stereo": _read_stereo}
 
 
 def _grey(color: np.ndarray) -> bool:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from scan2morph.align import rotation_angle_deg, transform_points
+from scan2morph.io.mesh_scan import SHADED
 from scan2morph.refine import RefineParams, grey, refine_points
 from scan2morph.refine.jaw import JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipParams, LipPrior, lip_prior
@@ -226,37 +227,9 @@ def run(
         fit_map(template, need(data, paths.landmarks(t), source), sets[t], source)
         for t in (neutral, take)
     ]
-    numbers, base = template.fiducial_set(sets[take], source)
-    # the jaw-line points (iBUG 1-17) sit on the face's outline, not on fixed skin points: they
-    # are no constraint on where the skin went
-    anchors = base[numbers > JAW_LINE]
-    refined, report = refine_points(
-        fine.vertices,
-        fine.faces,
-        *maps,
-        grey(need(data, paths.range_image(neutral, "color"), source)),
-        grey(need(data, paths.range_image(take, "color"), source)),
-        anchors,
-        params.flow,
-    )
-    problem = ""
-    if report["confident_share"] < params.min_confident_share:
-        # the two images do not share the skin's texture (another light, paint, camera or
-        # modality): the measurement is not to be trusted, so the take keeps its fit
-        problem = (
-            f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
-            f"neutral's texture (refine.min_confident_share "
-            f"{100 * params.min_confident_share:.0f}%): the template fit is kept"
-            + "".join(
-                f" (the {name} prior may still move the {what})"
-                for name, what, on in (
-                    ("jaw", "chin", params.jaw.enabled),
-                    ("lip", "upper lip", params.lip.enabled),
-                    ("lower-lip", "lower lip", params.lower_lip.enabled),
-                )
-                if on
-            )
-        )
+    anchors = _anchors(template, sets[take], source)
+    refined, report, problem = _flow(fine, take, neutral, data, maps, anchors, params, source)
+    if problem:
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points
         # the points are the fit's: nothing was measured at them (the motion stage smooths
@@ -269,10 +242,13 @@ def run(
     elif params.jaw.enabled:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     priors = {}
+    shaded = _shaded(data, (neutral, take))
     for side, settings in (("upper", params.lip), ("lower", params.lower_lip)):
         # each lip's length (the lower one's share of it) where its rolling misleads the flow
         prior = _lip(
             fine, side, take, neutral, data, neutral_points, refined, params, settings, source,
+        ) if not (shaded and settings.enabled) else LipPrior.unused(
+            len(fine.vertices), f"{shaded}: the lip's border is found by its colour"
         )  # fmt: skip
         if prior.used:
             refined, report["confidence"] = prior.apply(refined, report["confidence"])
@@ -314,6 +290,67 @@ def run(
         },
         attrs={paths.refine_group(take): attrs},
     )
+
+
+def _shaded(data: Mapping[str, np.ndarray], takes) -> str:
+    """Which of ``takes`` are geometry-only (``camera/color_source`` is :data:`SHADED`), as
+    the start of a message; ``""`` when none."""
+    names = []
+    for t in dict.fromkeys(takes):
+        value = data.get(paths.camera(t, "color_source"), b"")
+        if (value.decode() if isinstance(value, bytes) else str(value)) == SHADED:
+            names.append(t)
+    if not names:
+        return ""
+    verb = "is a geometry-only scan" if len(names) == 1 else "are geometry-only scans"
+    return f"{' and '.join(names)} {verb} (no texture or colours: rendered with shading)"
+
+
+def _anchors(template, fiducials, source: str) -> np.ndarray:
+    """The take's fiducials that pin skin points: the jaw-line points (iBUG 1-17) sit on the
+    face's outline, not on fixed skin points, and are no constraint on where the skin went."""
+    numbers, base = template.fiducial_set(fiducials, source)
+    return base[numbers > JAW_LINE]
+
+
+def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str):
+    """The image correlation of the take's skin against the neutral's
+    (:func:`~scan2morph.refine.refine_points`): ``(points, report, problem)``, ``problem``
+    saying why the points are not to be used (``""`` when they are)."""
+    shaded = _shaded(data, (neutral, take))
+    if shaded:  # no skin texture to correlate: the shading follows the geometry, not the skin
+        report = {"median_correction_px": 0.0, "confident_share": 0.0}
+        jaw = " (the jaw prior may still move the chin)" if params.jaw.enabled else ""
+        kept = "texture-driven refinement is not available, the template fit is kept"
+        return None, report, f"{shaded}: {kept}{jaw}"
+    refined, report = refine_points(
+        fine.vertices,
+        fine.faces,
+        *maps,
+        grey(need(data, paths.range_image(neutral, "color"), source)),
+        grey(need(data, paths.range_image(take, "color"), source)),
+        anchors,
+        params.flow,
+    )
+    if report["confident_share"] >= params.min_confident_share:
+        return refined, report, ""
+    # the two images do not share the skin's texture (another light, paint, camera or
+    # modality): the measurement is not to be trusted, so the take keeps its fit
+    priors = "".join(
+        f" (the {name} prior may still move the {what})"
+        for name, what, on in (
+            ("jaw", "chin", params.jaw.enabled),
+            ("lip", "upper lip", params.lip.enabled),
+            ("lower-lip", "lower lip", params.lower_lip.enabled),
+        )
+        if on
+    )
+    problem = (
+        f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
+        f"neutral's texture (refine.min_confident_share "
+        f"{100 * params.min_confident_share:.0f}%): the template fit is kept{priors}"
+    )
+    return refined, report, problem
 
 
 def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, source: str):

@@ -74,7 +74,7 @@ def _modality(data: Mapping[str, np.ndarray], attrs: Mapping, take: str) -> str:
 
 def camera_datasets(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:
     """The take's ``camera/*`` provenance datasets that ``data`` holds (ingest writes them)."""
-    names = ("modality", "model", "K", "distortion", "pose", "size")
+    names = ("modality", "model", "color_source", "K", "distortion", "pose", "size")
     return {
         paths.camera(take, n): data[paths.camera(take, n)]
         for n in names

@@ -34,7 +34,11 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/takes/{take}/raw", "ingest", ("xyz", "color")),
     ("/takes/{take}/range", "repair", ("xyz", "color", "spikes", "filled")),
     ("/takes/{take}", "ingest", ("landmarks",)),
-    ("/takes/{take}/camera", "ingest", ("modality", "model", "K", "distortion", "pose", "size")),
+    (
+        "/takes/{take}/camera",
+        "ingest",
+        ("modality", "model", "color_source", "K", "distortion", "pose", "size"),
+    ),
     ("/template", "fit", ("faces", "vertices2d", "fiducials/names", "fiducials/indices")),
     ("/takes/{take}/mesh", "fit", ("vertices", "uv", "valid", "points2d")),
     ("/takes/{take}/align", "align", ("transform", "vertices", "ok")),
@@ -169,7 +173,8 @@ def landmarks(take_id: str) -> str:
 
 def camera(take_id: str, name: str) -> str:
     """Provenance of a take's pixel grid: ``modality`` (``range``, ``stereo``, ``mesh``,
-    ``rgbd``), ``model`` (which camera, real or virtual), and for mesh and RGB-D takes that
+    ``rgbd``), ``model`` (which camera, real or virtual), for mesh takes ``color_source``
+    (``texture``, ``vertex colours`` or ``shading``: geometry only), and for mesh and RGB-D takes that
     camera's ``K`` (3, 3) px, ``distortion`` (5,), ``pose`` (4, 4) take frame -> camera, mm,
     and image ``size`` (width, height) px."""
     return _build("/takes/{take}/camera", name, take=take_id)

@@ -160,8 +160,9 @@ def _canonical_ibug() -> np.ndarray:
     upper = np.array([[-0.56, 1.72], [-0.36, 1.6], [-0.14, 1.53], [0.0, 1.56]])
     p[48:52] = upper
     p[52:55] = _mirror(upper[2::-1])
-    lower_r = np.array([[-0.36, 1.86], [-0.16, 1.93]])
-    p[55:57] = _mirror(lower_r[::-1])
+    # Lower lip from the corner 55 back to 49: 56-57 on the image's right, 58 in the middle.
+    lower_r = np.array([[-0.36, 1.86], [-0.16, 1.93]])  # beside 49, then towards the middle
+    p[55:57] = _mirror(lower_r)
     p[57] = (0.0, 1.95)
     p[58:60] = lower_r[::-1]
     # Inner lips 61-68: a thin lens between the corners 61 and 65.
@@ -338,8 +339,9 @@ def _outline(n: int, ibug: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(targets, arc, x), np.interp(targets, arc, y)])
 
 
-def _inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd point-in-polygon test, vectorised over points and edges."""
+def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """(n,) bool: which 2D points (n, 2) lie inside a closed polygon (k, 2) (even-odd rule,
+    vectorised over points and edges)."""
     x, y = points[:, 0:1], points[:, 1:2]
     a, b = poly, np.roll(poly, -1, axis=0)
     crosses = (a[:, 1] > y) != (b[:, 1] > y)
@@ -412,7 +414,7 @@ def _triangulate(points: np.ndarray, mouth: np.ndarray, enforce: bool = True) ->
     if enforce:
         tri = _enforce_edges(points, tri, list(zip(loop, np.roll(loop, -1), strict=True)))
     centroids = points[tri].mean(axis=1)
-    return tri[~_inside_polygon(centroids, points[loop])]
+    return tri[~inside_polygon(centroids, points[loop])]
 
 
 def _relax(
@@ -436,7 +438,7 @@ def _relax(
         step = 0.2 * total
         trial = p + step
         free = np.arange(n_fixed, len(p))
-        ok = _inside_polygon(trial[free], outline) & ~_inside_polygon(trial[free], mouth_poly)
+        ok = inside_polygon(trial[free], outline) & ~inside_polygon(trial[free], mouth_poly)
         ok &= _segment_distance(trial[free], outline) > 0.4 * h
         ok &= _segment_distance(trial[free], mouth_poly) > 0.4 * h
         p[free[ok]] = trial[free[ok]]
@@ -486,7 +488,7 @@ def build_template() -> Template:
     g = 0.03
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], g), np.arange(lo[1], hi[1], g))
     cand = np.column_stack([gx.ravel(), gy.ravel()])
-    cand = cand[_inside_polygon(cand, outline) & ~_inside_polygon(cand, mouth_poly)]
+    cand = cand[inside_polygon(cand, outline) & ~inside_polygon(cand, mouth_poly)]
     # Free points start clear of the outline and the mouth (the relaxation keeps them clear): a
     # free point close to a boundary edge would make a sliver triangle with it.
     h = _spacing(outline, N_VERTICES)

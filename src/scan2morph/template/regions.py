@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.template.mesh import inside_polygon
 
 
 def upper_face(template, above: str = "nose_tip") -> np.ndarray:
@@ -144,6 +145,26 @@ def lip_side(points: np.ndarray, midline: np.ndarray, band: float) -> np.ndarray
     return side
 
 
+def mouth_faces(template) -> np.ndarray:
+    """(F,) bool: the template's triangles inside the outer-lip contour (iBUG 49-60): the lips.
+
+    Parameters
+    ----------
+    template : Template
+        Base or subdivided template (canonical frame), with ``ibug_xy`` (68, 2).
+
+    Returns
+    -------
+    (F,) bool
+        True for each triangle whose centroid lies inside the outer-lip loop.
+    """
+    loop = np.asarray(template.ibug_xy, dtype=np.float64)[OUTER_LIP_ROWS]
+    centroids = np.asarray(template.vertices, dtype=np.float64)[template.faces].mean(axis=1)
+    return inside_polygon(centroids, loop)
+
+
+#: iBUG rows (0-based) of the outer-lip contour (iBUG 49-60, a loop).
+OUTER_LIP_ROWS = np.arange(48, 60)
 #: iBUG rows (0-based) of each lip's outer contour, corner to corner: the vermilion border
 #: (upper: iBUG 49-55; lower: iBUG 55-60 and 49).
 LIP_BORDERS = {"upper": np.arange(48, 55), "lower": np.array([54, 55, 56, 57, 58, 59, 48])}

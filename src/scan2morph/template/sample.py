@@ -32,6 +32,7 @@ from scan2morph.scan.view import (  # noqa: F401 (FRAME_SNAP_*: re-exported, imp
     scanner_view,
 )
 from scan2morph.template.mesh import signed_area2
+from scan2morph.template.regions import mouth_faces
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
 from scan2morph.tol import N_IBUG
@@ -316,22 +317,51 @@ def folded_faces(points2d: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def check_no_folds(
-    points2d: np.ndarray, faces: np.ndarray, source: str, max_fraction: float = 0.0
+    points2d: np.ndarray,
+    faces: np.ndarray,
+    source: str,
+    max_fraction: float = 0.0,
+    tolerated: np.ndarray | None = None,
 ) -> np.ndarray:
     """Check the warp for folds; returns the folded faces when there are few enough.
 
-    A thin-plate spline is not guaranteed one-to-one: with an open mouth a few small triangles
-    between the nose and the lips may flip. Up to ``max_fraction`` of the faces may fold (their
-    vertices are then marked invalid by the caller); more than that means the landmarks fold the
-    template (wrong order, mirrored, or from another face) and is an error naming the take.
+    A thin-plate spline is not guaranteed one-to-one: with an open or rounded mouth some small
+    triangles of the lips, and a few between the nose and the lips, may flip. Folds of the
+    ``tolerated`` faces (the lips: :func:`~scan2morph.template.regions.mouth_faces`) are never
+    an error; up to ``max_fraction`` of the other faces may fold. The folded faces' vertices are
+    then marked invalid by the caller. More than that means the landmarks fold the face itself
+    (wrong order, mirrored, or from another face) and is an error naming the take.
+
+    Parameters
+    ----------
+    points2d : (V, 2) float
+        Warped template vertices, px.
+    faces : (F, 3) int
+    source : str
+        ``subject/take`` for messages.
+    max_fraction : float
+        Share of the faces outside ``tolerated`` that may fold.
+    tolerated : (F,) bool, optional
+        Faces whose folds are not judged (default none).
+
+    Returns
+    -------
+    (F,) bool
+        The folded faces.
     """
     folded = folded_faces(points2d, faces)
-    if folded.mean() > max_fraction:
+    judged = np.ones(len(faces), bool) if tolerated is None else ~np.asarray(tolerated, bool)
+    n_judged, n_out = int(judged.sum()), int((folded & judged).sum())
+    if n_out > max_fraction * n_judged:
+        inside = int((folded & ~judged).sum())
+        lips = f"; {inside} of {len(faces) - n_judged} in the lips, not judged" if inside else ""
+        where = "" if tolerated is None else " outside the lips"
         raise InputError(
             source,
-            f"landmarks fold the template: {int(folded.sum())} of {len(faces)} warped triangles flip "
-            f"orientation (at most {100 * max_fraction:.1f}% may; check the landmark order: iBUG-68, "
-            "left-right as seen in the image)",
+            f"landmarks fold the template: {n_out} of {n_judged} warped triangles{where} flip "
+            f"orientation ({100 * n_out / max(n_judged, 1):.1f}%, at most "
+            f"{100 * max_fraction:.1f}% may{lips}); check the landmark order: iBUG-68, "
+            "left-right as seen in the image",
         )
     return folded
 
@@ -467,7 +497,8 @@ def fit_take(
     min_valid_fraction : float
         Fewer valid vertices than this share is an error (no range data over the face).
     max_fold_fraction : float
-        Share of warped triangles allowed to fold; their vertices are marked invalid.
+        Share of the warped triangles outside the lips allowed to fold (the lips' may all
+        fold); the folded triangles' vertices are marked invalid.
     min_weight, max_slope_deg : float
         Sampling at the edge of the data and across depth steps (see :func:`sample_range`);
         ``max_slope_deg`` also invalidates vertices behind a depth step of the fitted mesh
@@ -485,7 +516,7 @@ def fit_take(
     InputError
         Naming ``source``: landmarks not (68, 2) or not finite; ``xyz`` not (H, W, 3) or not
         ``image_size``; an unknown fiducial set; fiducials outside the image, coincident or
-        collinear; more than ``max_fold_fraction`` folded triangles; fewer than
+        collinear; more than ``max_fold_fraction`` folded triangles outside the lips; fewer than
         ``min_valid_fraction`` valid vertices.
     """
     landmarks, xyz, (width, height) = _checked_take(landmarks, xyz, image_size, source)
@@ -493,7 +524,7 @@ def fit_take(
     _check_inside(landmarks[numbers - 1], numbers, (width, height), source)
     fine = subdivide_template(template, levels)
     points = fit_map(template, landmarks, fiducial_set, source, image_size)(fine.vertices)
-    folded = check_no_folds(points, fine.faces, source, max_fold_fraction)
+    folded = check_no_folds(points, fine.faces, source, max_fold_fraction, mouth_faces(fine))
     vertices, valid = sample_mesh(
         xyz, points, fine.faces, source, min_weight, max_slope_deg, np.unique(fine.faces[folded])
     )
