@@ -5,18 +5,18 @@ VENV := .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 # Debian packages: libusb for open3d, EGL/OSMesa for headless rendering, chromium for the report test,
-# the X client libraries Blender's bpy module links (tests/test_blender.py).
+# the X client libraries Blender's bpy module links (tests/unit/test_blender.py).
 DEB_PACKAGES := libusb-1.0-0 libegl1 libosmesa6 libgl1 libglib2.0-0 libgomp1 chromium slurm-wlm munge \
   libx11-6 libxext6 libxfixes3 libxi6 libxrender1 libxkbcommon0 libsm6
 STAMP := $(VENV)/.setup-stamp
-# The Khronos glTF validator (npm; tests/test_gltf_viewer.py), installed with `npm ci` from the
+# The Khronos glTF validator (npm; tests/unit/test_gltf_viewer.py), installed with `npm ci` from the
 # committed lock. node and npm come from Debian (nodejs npm) only when npm is absent: a NodeSource
 # nodejs bundles npm and conflicts with Debian's npm package.
 NODE_DEB_PACKAGES := nodejs npm
 VALIDATOR := tools/gltf-validator
 VALIDATOR_STAMP := $(VALIDATOR)/node_modules/.ci-stamp
 DEB_STAMP := $(VENV)/.deb-stamp
-# Blender as a Python module (tests/test_blender.py imports the outputs with Blender's own
+# Blender as a Python module (tests/unit/test_blender.py imports the outputs with Blender's own
 # importers): bpy pins Python 3.11 and numpy < 2, so it has a virtualenv of its own. The stamp
 # names the version, so that changing BPY_VERSION reinstalls.
 BLENDER_PYTHON ?= python3.11

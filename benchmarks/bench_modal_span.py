@@ -3,7 +3,7 @@ smooth intrinsic anchor.
 
 For every expression of a finished run's subjects (``RUN/results/{subject}/motion.h5``: the
 neutral and each expression's displacement on the subdivided template) and for the real head's
-test smile (``tests/test_realdata.py``: the smile-like field on the Lee Perry-Smith face cut, with
+test smile (``tests/unit/test_realdata.py``: the smile-like field on the Lee Perry-Smith face cut, with
 ``--realdata``), and for each basis configuration (the presets of ``modal.preset`` and the variants
 tried on the way, :data:`VARIANTS`), the table gives what is left of the expression after K modes:
 
@@ -172,9 +172,9 @@ def anchor_rows(subject: str, fields, valid, vertices, faces, outline) -> list[d
 
 
 def realdata_case(data_dir: str | None = None):
-    """The real head's face cut and its test smile (tests/test_realdata.py), with the regions
+    """The real head's face cut and its test smile (tests/unit/test_realdata.py), with the regions
     the presets need placed by measure from the nose tip as the real-data tests place them."""
-    sys.path[:0] = [str(REPO / "tests"), str(REPO)]
+    sys.path[:0] = [str(REPO / "tests" / "unit"), str(REPO)]
     import test_realdata
     import trimesh
     from test_realdata import _smile, load_head
@@ -264,7 +264,7 @@ def main() -> None:
     )
     ap.add_argument("--realdata", action="store_true", help="also the real head's test smile")
     ap.add_argument(
-        "--data", help="folder of LeePerrySmith.glb (default: tests/test_realdata.py's)"
+        "--data", help="folder of LeePerrySmith.glb (default: tests/unit/test_realdata.py's)"
     )
     ap.add_argument("--config", default=str(REPO / "config" / "config.yaml"))
     ap.add_argument("--tsv", help="write every row here")

@@ -1,6 +1,6 @@
 """The refinement's parameters on real skin: the real head smiling, over many draws of the clicks.
 
-The scene is ``tests/test_realdata.py``'s :func:`skin_scene`: the real head scan (Lee
+The scene is ``tests/unit/test_realdata.py``'s :func:`skin_scene`: the real head scan (Lee
 Perry-Smith, CC BY 3.0, read from ``../shared/data``) in a front view and smiling (cheeks 5 mm
 up and out, mouth corners 6 mm) seen 4 degrees aside and 2 above in a 15% dimmer light; the
 template is a 3 px grid over the face in the front view, the fit a thin-plate spline through
@@ -26,7 +26,7 @@ import yaml
 from scan2morph.stages import refine as refine_stage
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path[:0] = [str(ROOT / "tests" / "unit"), str(ROOT)]
 from test_realdata import (  # noqa: E402  (the scene lives with the tests)
     _MISSING,
     DATA_DIR,

@@ -21,7 +21,10 @@ import numpy as np
 
 from scan2morph.scan import fill_holes, remove_spikes, repair_range
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path[:0] = [
+    str(Path(__file__).resolve().parents[1] / "tests" / "unit"),
+    str(Path(__file__).resolve().parents[1]),
+]
 from test_repair import (  # noqa: E402  (the scene generator lives with the tests)
     FRAME_SHIFT_MM,
     cv2_inpaint,

@@ -1,6 +1,6 @@
 """Time the stereo reconstruction per stage and measure its accuracy on the synthetic scene.
 
-Renders the ray-cast speckle scene of ``tests/stereo_scene.py`` (a 150 mm sphere at 670-820 mm
+Renders the ray-cast speckle scene of ``tests/support/stereo_scene.py`` (a 150 mm sphere at 670-820 mm
 before a plane at 1150 mm, 120 mm baseline, 3 degree toe-in, mild distortion) and reconstructs
 it with variants of the parameters: the default, WLS on, no sub-pixel refinement, SGBM's 8-path
 mode. Prints the median time per stage over ``--repeats`` runs and the depth errors against
@@ -21,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
 from stereo_scene import (  # noqa: E402  (the scene generator lives with the tests)
     SPHERE_CENTRE_MM,

@@ -1,4 +1,4 @@
-"""Shared fixtures; tests/slurm_run.py starts the SLURM run when the session starts."""
+"""Shared fixtures; tests/support/slurm_run.py starts the SLURM run when the session starts."""
 
 from __future__ import annotations
 
@@ -6,4 +6,4 @@ import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
-pytest_plugins = ["tests.slurm_run"]
+pytest_plugins = ["tests.support.slurm_run"]

@@ -18,7 +18,7 @@ stands for a positive integer, any other placeholder for any non-empty text.
 
 Names say what a number is over (``motion_rms_unmasked_mm``: over the vertices outside the
 stencil mask; ``motion_rms_all_mm_{label}``: over all vertices), and one name means one thing
-in every table (``tests/test_tables.py`` checks the dictionaries against each other).
+in every table (``tests/unit/test_tables.py`` checks the dictionaries against each other).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Written with pygltflib (the JSON document and the GLB container); this module packs the
 binary buffer and checks the input. The Khronos glTF validator reports no error and no warning on
-the written files (``tests/test_gltf_viewer.py``).
+the written files (``tests/unit/test_gltf_viewer.py``).
 
 Frames. The meshes come in a **source frame** (the neutral take's scanner frame, mm). ``frame``
 (a (4, 4) similarity: rotation times a scale, det > 0) maps it to the **glTF frame** in which the

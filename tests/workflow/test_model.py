@@ -10,7 +10,7 @@ import scan2morph
 from scan2morph.errors import InputError
 from scan2morph.io import read_glb_targets
 from scan2morph.store import paths, read_part
-from tests.tiny_run import SUBJECT, tiny_run
+from tests.support.tiny_run import SUBJECT, tiny_run
 
 pytestmark = pytest.mark.slow
 

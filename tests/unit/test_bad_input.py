@@ -36,7 +36,7 @@ from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, wri
 from scan2morph.template import build_template, fit_options, fit_take
 from scan2morph.template.sample import SCANNER_FRAME, scanner_view
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = dict(width=160, height=120, focal_px=362.5, distance_mm=1000.0)
 TINY_RIG = dict(width=160, height=120, focal_px=325.0)
 ROW = dict(subject="s1", take="neutral", kind="neutral", label="neutral", modality="range")

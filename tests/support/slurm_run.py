@@ -1,11 +1,11 @@
 """The tiny run submitted to SLURM, started when the test session starts (a pytest plugin that
-tests/conftest.py loads; tests/test_slurm.py checks the result).
+tests/conftest.py loads; tests/workflow/test_slurm.py checks the result).
 
 The plugin runs a group's rules one after another, each through ``srun`` and a Snakemake of its
 own (~3 s of start-up and ~2 s of work a rule at 160 x 120 px), so the run takes ~4 minutes of
 wall time on one core whatever the machine. Started at the beginning of the session, it runs
 beside the rest of the suite, which leaves the second core idle most of the time, and
-tests/test_slurm.py, which the conftest orders last, waits for it and checks it.
+tests/workflow/test_slurm.py, which the conftest orders last, waits for it and checks it.
 
 Needs ``slurm-wlm`` and ``munge`` (``make setup`` installs them) and the executor plugin
 (requirements.lock); skips naming what is missing, except under CI (``CI`` set), where it fails.
@@ -21,12 +21,12 @@ from pathlib import Path
 
 import pytest
 
-from tests.slurm_cluster import ClusterUnavailable, SlurmCluster
+from tests.support.slurm_cluster import ClusterUnavailable, SlurmCluster
 
-# tests/tiny_run.py imports Snakemake's API: only the fixtures that run the workflow import it, so
+# tests/support/tiny_run.py imports Snakemake's API: only the fixtures that run the workflow import it, so
 # that the conftest loading this plugin needs no more than the `test` extra
-REPO = Path(__file__).resolve().parents[1]
-TARGET = "results/synth01/synth01.h5"  # tests/tiny_run.py's SUBJECT
+REPO = Path(__file__).resolve().parents[2]
+TARGET = "results/synth01/synth01.h5"  # tests/support/tiny_run.py's SUBJECT
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 # What the throw-away cluster lacks compared with a site: accounting (so job states come from
 # squeue, which keeps finished jobs for MinJobAge=86400 s; no account is guessed either), and quick status checks: a
@@ -99,7 +99,7 @@ class SlurmRun:
 @pytest.fixture(scope="session")
 def slurm_run(slurm_cluster, tmp_path_factory):
     """Start the tiny run under SLURM with ``profiles/slurm`` (in the background)."""
-    from tests.tiny_run import SUBJECT, tiny_config
+    from tests.support.tiny_run import SUBJECT, tiny_config
 
     assert TARGET == f"results/{SUBJECT}/{SUBJECT}.h5"
     work = tmp_path_factory.mktemp("slurm_run")

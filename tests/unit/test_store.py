@@ -23,7 +23,7 @@ from scan2morph.store import (
     write_part,
 )
 
-LAYOUT = Path(__file__).resolve().parents[1] / "schemas" / "store.layout.yaml"
+LAYOUT = Path(__file__).resolve().parents[2] / "schemas" / "store.layout.yaml"
 
 
 def _range_layout():

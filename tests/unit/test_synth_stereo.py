@@ -40,7 +40,7 @@ from scan2morph.synth import (
     write_stereo_take,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
 SMALL = dict(width=160, height=120, focal_px=325.0)
 _SUFFIXES = {

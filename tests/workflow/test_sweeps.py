@@ -33,8 +33,8 @@ from scan2morph.store import paths, read_part
 from scan2morph.sweep import first_stage, read_sweep_table, rerun_accuracy, sweep_settings
 from scan2morph.tables import read_dictionary
 from scan2morph.template import load_template
-from tests.tiny_run import SUBJECT, TAKES, tiny_config, tiny_run
-from tests.workflow_api import REPO
+from tests.support.tiny_run import SUBJECT, TAKES, tiny_config, tiny_run
+from tests.support.workflow_api import REPO
 
 SCHEMA = REPO / "schemas" / "config.schema.yaml"
 CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())

@@ -1,8 +1,8 @@
 """The outputs in their real consumer: Blender 5.0.1 as a Python module (``bpy`` in
 ``.venv-blender``, made by ``make setup``), its bundled glTF and OBJ importers at their default
-settings (tests/blender_probe.py runs there and reports as JSON).
+settings (tests/support/blender_probe.py runs there and reports as JSON).
 
-The glTF is the morph stage's (tests/morph_subject.py); the OBJ is a head-frame mesh written by
+The glTF is the morph stage's (tests/support/morph_subject.py); the OBJ is a head-frame mesh written by
 :func:`scan2morph.morph.head.write_head_obj` from one of its visemes with a hole cut in it. Outside CI
 the test skips, naming why, when the Blender environment is missing; under CI (``CI`` set) it fails.
 """
@@ -25,9 +25,9 @@ from scan2morph.morph.head import write_head_obj
 from scan2morph.morph.pca import PCAModel
 from scan2morph.morph.subject import pca_target_weights
 from scan2morph.store import paths
-from tests.morph_subject import VISEMES, subject_glb
+from tests.support.morph_subject import VISEMES, subject_glb
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 BLENDER_PYTHON = REPO / ".venv-blender" / "bin" / "python"
 PROBE = Path(__file__).with_name("blender_probe.py")
 #: glTF's float32 metres and the OBJ's 6 decimals (metres): 1 um is far below a mm.

@@ -1,7 +1,7 @@
-"""The workflow through SLURM: the tiny run (tests/tiny_run.py) submitted with ``profiles/slurm``
-to a single-node cluster that the test session starts itself (tests/slurm_cluster.py), against
+"""The workflow through SLURM: the tiny run (tests/support/tiny_run.py) submitted with ``profiles/slurm``
+to a single-node cluster that the test session starts itself (tests/support/slurm_cluster.py), against
 the session's local tiny run of the same config. The run starts with the session and runs beside
-the other tests (tests/slurm_run.py); the test that checks it runs last.
+the other tests (tests/support/slurm_run.py); the test that checks it runs last.
 """
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ import yaml
 
 from scan2morph.model import load_model
 from scan2morph.store.compare import store_differences
-from tests.slurm_run import TARGET
-from tests.tiny_run import TAKES, tiny_run
-from tests.workflow_api import REPO
+from tests.support.slurm_run import TARGET
+from tests.support.tiny_run import TAKES, tiny_run
+from tests.support.workflow_api import REPO
 
-# The session's tiny run (tests/tiny_run.py: one synthetic subject, the neutral, two visemes and an
+# The session's tiny run (tests/support/tiny_run.py: one synthetic subject, the neutral, two visemes and an
 # expression, so every stage runs) is the local run the SLURM run must equal: the other workflow
 # tests make it anyway.
 # Every array of the two stores agrees to 1e-12, or to 1e-9 of its largest value: two local runs

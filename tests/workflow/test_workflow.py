@@ -26,7 +26,7 @@ from scan2morph.stages.quality import read_warnings, skipped_stages
 from scan2morph.store import load_layout, open_store, paths, validate_store
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from scan2morph.tables import read_table
-from tests.workflow_api import REPO, run_workflow
+from tests.support.workflow_api import REPO, run_workflow
 
 pytestmark = pytest.mark.slow
 

@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 from scan2morph.errors import InputError
 from scan2morph.io.obj import read_obj, write_obj
 from scan2morph.morph.head import fill_from, write_head_meshes, write_head_obj
-from tests.meshes import grid_mesh
+from tests.support.meshes import grid_mesh
 
 FRAME = np.diag([1e-3, 1e-3, 1e-3, 1.0])
 

@@ -13,7 +13,7 @@ from snakemake.settings.types import (
     ResourceSettings,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def run_workflow(

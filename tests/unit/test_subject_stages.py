@@ -10,7 +10,7 @@ from scan2morph.modal import ModalParams
 from scan2morph.modal.subject import subject_modal
 from scan2morph.morph.subject import label_models, pca_component_targets, subject_morph
 from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
-from tests.meshes import grid_mesh
+from tests.support.meshes import grid_mesh
 
 
 @pytest.fixture

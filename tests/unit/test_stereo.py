@@ -1,6 +1,6 @@
 """Stereo calibration I/O and dense stereo reconstruction, against ray-cast scenes.
 
-The scenes (``tests/stereo_scene.py``): two distorted pinhole cameras 120 mm apart, each turned
+The scenes (``tests/support/stereo_scene.py``): two distorted pinhole cameras 120 mm apart, each turned
 3 degrees inwards, see a speckle-textured sphere (r = 150 mm, 670-820 mm away) in front of a
 textured plane (1150 mm); or a textured plate (800 mm) in front of that plane, a clean depth
 step with two untextured discs on the plate; or, for the depth range derived from the pair, a
@@ -16,18 +16,6 @@ import cv2
 import numpy as np
 import pytest
 from scipy import ndimage
-from stereo_scene import (
-    PLATE_CENTRE_MM,
-    PLATE_HALF_MM,
-    PLATE_Z_MM,
-    SPHERE_CENTRE_MM,
-    SPHERE_RADIUS_MM,
-    pixel_rays,
-    render_rig_scene,
-    render_scene,
-    render_step_scene,
-    rig_cameras,
-)
 
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import (
@@ -41,6 +29,18 @@ from scan2morph.scan.stereo.cleanup import _fill_small_holes, _trim_discontinuit
 from scan2morph.scan.stereo.depth_range import _search_depths
 from scan2morph.scan.stereo.rectify import _rectify
 from scan2morph.scan.stereo.resample import _resample_left
+from tests.support.stereo_scene import (
+    PLATE_CENTRE_MM,
+    PLATE_HALF_MM,
+    PLATE_Z_MM,
+    SPHERE_CENTRE_MM,
+    SPHERE_RADIUS_MM,
+    pixel_rays,
+    render_rig_scene,
+    render_scene,
+    render_step_scene,
+    rig_cameras,
+)
 
 # The scene's depths: sphere 670-820 mm, plane 1150-1250 mm.
 DEPTHS = {"min_depth_mm": 600.0, "max_depth_mm": 1300.0}

@@ -14,10 +14,10 @@ from scan2morph.stages import Subject, align, fit, modal, morph, motion
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import SECTION_STAGE, STAGES
 from scan2morph.template import load_template
-from tests.tiny_run import SUBJECT, TAKES, tiny_run
+from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
 
 CONFIG = yaml.safe_load(
-    (Path(__file__).resolve().parents[1] / "config" / "config.yaml").read_text()
+    (Path(__file__).resolve().parents[2] / "config" / "config.yaml").read_text()
 )
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from scan2morph.evaluate.motion import material_accuracy, motion_accuracy
-from tests.meshes import grid_mesh
+from tests.support.meshes import grid_mesh
 
 
 def _case(rng, n=200):

@@ -22,7 +22,7 @@ from scan2morph.report import (
 )
 from scan2morph.store import merge_parts, paths, write_part
 from scan2morph.tables import read_dictionary
-from tests.tiny_run import SUBJECT, tiny_run
+from tests.support.tiny_run import SUBJECT, tiny_run
 
 V = 50
 

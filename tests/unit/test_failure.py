@@ -3,7 +3,7 @@
 A take that fails a per-take stage is left out of its subject with its reason (the failure
 record); its later stages hand the record on; a failed neutral stops the subject; the store keeps
 the record and none of the take's data. The end-to-end case (a subject with one broken take of
-each kind) is in ``tests/test_workflow.py``.
+each kind) is in ``tests/workflow/test_workflow.py``.
 """
 
 from __future__ import annotations
@@ -227,7 +227,7 @@ def test_accuracy_and_cohort_name_the_takes_left_out(tmp_path_factory, tmp_path,
     from scan2morph.report import write_cohort_summary
     from scan2morph.stages import accuracy
     from scan2morph.template import load_template
-    from tests.tiny_run import SUBJECT, TAKES, tiny_run
+    from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
 
     run = tiny_run(tmp_path_factory, [f"results/{SUBJECT}/accuracy.json"])
     store = read_part(run.path("results", SUBJECT, f"{SUBJECT}.h5"))

@@ -24,10 +24,10 @@ from scan2morph.io.gltf import read_glb_frame, read_glb_targets, write_glb
 from scan2morph.morph import synthesize
 from scan2morph.morph.frame import apply_frame
 from scan2morph.store import paths
-from tests.morph_subject import LEFT_EYE, MOUTH, RIGHT_EYE, VISEMES
-from tests.morph_subject import subject_glb as build_subject_glb
+from tests.support.morph_subject import LEFT_EYE, MOUTH, RIGHT_EYE, VISEMES
+from tests.support.morph_subject import subject_glb as build_subject_glb
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 VALIDATOR = REPO / "tools" / "gltf-validator"
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from scan2morph.store import load_layout, paths
 
-LAYOUT = Path(__file__).resolve().parents[1] / "schemas" / "store.layout.yaml"
+LAYOUT = Path(__file__).resolve().parents[2] / "schemas" / "store.layout.yaml"
 
 
 def test_datasets_are_the_layout():

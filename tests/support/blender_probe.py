@@ -1,4 +1,4 @@
-"""Run by tests/test_blender.py in Blender's Python (the bpy module of ``.venv-blender``, made by
+"""Run by tests/unit/test_blender.py in Blender's Python (the bpy module of ``.venv-blender``, made by
 ``make setup``): import a glTF and OBJ files with Blender's bundled importers, default settings,
 and print what a Blender user gets as JSON on the last line of stdout.
 

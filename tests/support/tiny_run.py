@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from tests.workflow_api import REPO, run_workflow
+from tests.support.workflow_api import REPO, run_workflow
 
 SUBJECT = "synth01"
 TAKES = [
@@ -55,7 +55,7 @@ def tiny_config(work: Path) -> Path:
     """Write an empty user sheet and the tiny config into ``work``; returns the config file.
 
     Its paths are relative to ``work`` (the run's working directory), so that the same config
-    (and so each store's config hash) runs in any working directory (tests/test_slurm.py runs
+    (and so each store's config hash) runs in any working directory (tests/workflow/test_slurm.py runs
     it again under SLURM)."""
     work.mkdir(parents=True, exist_ok=True)
     (work / "subjects.tsv").write_text(HEADER)

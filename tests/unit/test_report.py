@@ -1,6 +1,6 @@
 """The per-subject report page (scan2morph.report.html, .provenance) and the Snakemake report.
 
-The page is built from a tiny finished run's store (tests/tiny_run.py) with the fit stage's
+The page is built from a tiny finished run's store (tests/support/tiny_run.py) with the fit stage's
 figures, opened in headless Chromium through the DevTools protocol (no console error, every image
 decoded), and its tables are read back and compared with the store, the accuracy file and the
 benchmark files they come from.
@@ -46,8 +46,8 @@ from scan2morph.report import (
 from scan2morph.report.viewer import bundle, script_hash, three_unavailable
 from scan2morph.store import paths
 from scan2morph.template import build_template, subdivide_template
-from tests.tiny_run import SUBJECT, TAKES, tiny_run
-from tests.workflow_api import REPO
+from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
+from tests.support.workflow_api import REPO
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 needs_chromium = pytest.mark.skipif(

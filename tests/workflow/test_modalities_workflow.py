@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from scan2morph.store import load_layout, paths, validate_store
-from tests.workflow_api import REPO, run_workflow
+from tests.support.workflow_api import REPO, run_workflow
 
 pytestmark = pytest.mark.slow
 

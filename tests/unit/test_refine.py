@@ -127,7 +127,7 @@ def test_the_flow_defaults_agree_in_config_schema_and_library():
 
     import yaml
 
-    from tests.workflow_api import REPO
+    from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["refine"]
     schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
@@ -183,7 +183,7 @@ def _subject_in_memory(skin_texture, takes=("neutral", "she", "smile1")):
     from scan2morph.stages.part import Run, Subject
     from scan2morph.store import paths
     from scan2morph.synth import make_take
-    from tests.workflow_api import REPO
+    from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     kinds = {"neutral": "neutral", "she": "viseme", "car": "viseme", "smile1": "expression"}
@@ -345,7 +345,7 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
 
     from scan2morph.stages import refine
     from scan2morph.store import paths
-    from tests.workflow_api import REPO
+    from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     template = build_template()
@@ -398,7 +398,7 @@ def test_jaw_settings_come_from_the_refine_section():
 
     from scan2morph.errors import InputError
     from scan2morph.stages import refine
-    from tests.workflow_api import REPO
+    from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     section = config["refine"] | {"jaw_prior": False, "jaw_start": 0.05, "jaw_max_rmse_ratio": 2}
@@ -416,7 +416,7 @@ def test_lip_settings_come_from_the_refine_section():
 
     from scan2morph.errors import InputError
     from scan2morph.stages import refine
-    from tests.workflow_api import REPO
+    from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     params = refine.Params.from_config(config["refine"], config["template"], config["align"])

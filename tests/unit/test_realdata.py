@@ -48,15 +48,15 @@ import scipy.sparse.linalg as sla
 import trimesh
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
-from stereo_scene import pixel_rays
 
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import StereoCalibration
 from scan2morph.modal import ModalParams, modal_basis, project, reconstruct
 from scan2morph.modal.fem import DOF, check_mesh
 from scan2morph.scan import DEFAULT_REPAIR, reconstruct_stereo, repair_range
+from tests.support.stereo_scene import pixel_rays
 
-DATA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "lee-perry-smith"
+DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "lee-perry-smith"
 GLB = DATA_DIR / "LeePerrySmith.glb"
 COLOR_MAP = DATA_DIR / "Map-COL.jpg"
 _MISSING = [p.name for p in (GLB, COLOR_MAP) if not p.is_file()]
@@ -1118,7 +1118,7 @@ def test_refinement_follows_real_skin(head):
     from scan2morph.stages import refine as refine_stage
 
     config = yaml.safe_load(
-        (Path(__file__).resolve().parents[1] / "config/config.yaml").read_text()
+        (Path(__file__).resolve().parents[2] / "config/config.yaml").read_text()
     )
     params = refine_stage.Params.from_config(
         config["refine"], config["template"], config["align"]
