@@ -19,3 +19,17 @@ def grid_mesh(nx: int = 12, ny: int = 10, spacing: float = 5.0, z=None):
         [np.column_stack([i, i + 1, i + nx + 1]), np.column_stack([i, i + nx + 1, i + nx])]
     )
     return vertices, faces.astype(np.int64)
+
+
+def plate_mesh(n: int, a: float = 100.0):
+    """Flat square plate a x a (mm) in the z = 0 plane, n x n quads split with alternating
+    diagonals."""
+    xs = np.linspace(0.0, a, n + 1)
+    x, y = np.meshgrid(xs, xs, indexing="xy")
+    vertices = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
+    p = (j * (n + 1) + i).ravel()
+    flip = ((i + j) % 2 == 1).ravel()[:, None]
+    t1 = np.where(flip, np.c_[p, p + 1, p + n + 1], np.c_[p, p + 1, p + n + 2])
+    t2 = np.where(flip, np.c_[p + 1, p + n + 2, p + n + 1], np.c_[p, p + n + 2, p + n + 1])
+    return vertices, np.r_[t1, t2]

@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
-from meshes import grid_mesh
 from scipy.spatial.transform import Rotation
 
 from scan2morph.align import SampledSurface, invert, region_motion, transform_points
@@ -16,6 +15,7 @@ from scan2morph.geometry import surface_normals
 from scan2morph.refine.jaw import MIN_CONSTRAINT, chin_weights, jaw_prior
 from scan2morph.template import build_template
 from scan2morph.template.sample import range_pixels, sample_range
+from tests.support.meshes import grid_mesh
 
 W, H, F = 320, 240, 900.0
 K = np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])

@@ -32,21 +32,9 @@ from scan2morph.modal import (
 from scan2morph.modal.boundary import outline_motion, still_outline
 from scan2morph.modal.subject import subject_modal
 from scan2morph.store import paths
+from tests.support.meshes import plate_mesh
 
 E_MPA, NU, RHO, H_MM, A_MM = 210000.0, 0.3, 7.85e-9, 1.0, 100.0
-
-
-def plate_mesh(n: int, a: float = A_MM):
-    """Flat square plate a x a in the z = 0 plane, n x n quads split with alternating diagonals."""
-    xs = np.linspace(0.0, a, n + 1)
-    x, y = np.meshgrid(xs, xs, indexing="xy")
-    vertices = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
-    p = (j * (n + 1) + i).ravel()
-    flip = ((i + j) % 2 == 1).ravel()[:, None]
-    t1 = np.where(flip, np.c_[p, p + 1, p + n + 1], np.c_[p, p + 1, p + n + 2])
-    t2 = np.where(flip, np.c_[p + 1, p + n + 2, p + n + 1], np.c_[p, p + n + 2, p + n + 1])
-    return vertices, np.r_[t1, t2]
 
 
 def cap_mesh(n: int, radii=(40.0, 50.0, 30.0)):

@@ -14,7 +14,6 @@ import json
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
-from tests.test_modal import plate_mesh
 
 from scan2morph.errors import InputError
 from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
@@ -27,6 +26,7 @@ from scan2morph.modal.span import (
 )
 from scan2morph.stages import Subject, modal
 from scan2morph.store import paths
+from tests.support.meshes import plate_mesh
 
 A_MM, T_N_PER_MM, RHO, H_MM = 100.0, 1.0, 1.1e-9, 1.0
 

@@ -28,7 +28,7 @@ MAX_ERROR_DEG = 5.0
 GLB = next(
     (
         p / "shared" / "data" / "lee-perry-smith" / "LeePerrySmith.glb"
-        for p in Path(__file__).resolve().parents[2:4]
+        for p in Path(__file__).resolve().parents[3:5]
         if (p / "shared" / "data").is_dir()
     ),
     Path("../shared/data/lee-perry-smith/LeePerrySmith.glb"),

@@ -20,7 +20,7 @@ from scan2morph.stages.part import Run, Subject
 from scan2morph.store import paths
 from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d
 from scan2morph.template import build_template
-from tests.workflow_api import REPO
+from tests.support.workflow_api import REPO
 
 CAMERA = {"width": 320, "height": 240}
 KINDS = {"neutral": "neutral", "car": "viseme"}
