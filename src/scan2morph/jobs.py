@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from scan2morph.errors import InputError, OutputError, disk_full
+from scan2morph.errors import InputError, OutputError, disk_full, writing
 
 log = logging.getLogger("scan2morph")
 
@@ -138,7 +138,8 @@ def atomic_output(path: str | Path) -> Iterator[Path]:
 def write_json(path: str | Path, data: dict) -> None:
     """Write a JSON file with sorted keys (stable diffs between runs)."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(json.dumps(data, indent=2, sort_keys=True, default=_jsonable) + "\n")
+    with writing(path):
+        Path(path).write_text(json.dumps(data, indent=2, sort_keys=True, default=_jsonable) + "\n")
 
 
 def _jsonable(value):

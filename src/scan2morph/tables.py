@@ -31,7 +31,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.jobs import atomic_output
 
 #: First comment line of every table: the dictionary's own header.
@@ -489,7 +489,7 @@ def write_table(
     entries = describe(table.columns, dictionary)
     body = io.StringIO()
     table.to_csv(body, sep="\t", index=False, float_format=float_format, na_rep=na_rep)
-    with atomic_output(path) as tmp:
+    with atomic_output(path) as tmp, writing(path):
         tmp.write_text(dictionary_text(entries) + body.getvalue(), encoding="utf-8")
     return entries
 

@@ -193,6 +193,23 @@ def test_a_full_disk_is_one_line_from_every_writer(full_disk):
             full_disk / "big.png",
             (255 * np.random.default_rng(0).random((400, 400, 3))).astype(np.uint8),
         )
+    # the other writers of a job's outputs: meshes, JSON, tables
+    from scan2morph.io import write_obj
+    from scan2morph.jobs import write_json
+    from scan2morph.tables import Column, write_table
+
+    v, f = np.random.default_rng(2).random((20000, 3)), np.zeros((1, 3), dtype=np.int64)
+    with pytest.raises(OutputError, match="no space left on device writing .*m.obj$"):
+        write_obj(full_disk / "m.obj", v, f)
+    with pytest.raises(OutputError, match="no space left on device writing .*a.json$"):
+        write_json(full_disk / "a.json", {"x": list(range(100000))})
+    import pandas as pd
+
+    table = pd.DataFrame({"x": np.arange(50000.0)})
+    with pytest.raises(OutputError, match="no space left on device writing .*t.tsv$"):
+        write_table(full_disk / "t.tsv", table, [Column("x", "mm", "a value")])
+    for name in ("m.obj", "a.json", "t.tsv"):
+        (full_disk / name).unlink(missing_ok=True)
     # a job: one line on stderr, no HDF5 finaliser tracebacks, exit status 1
     script = textwrap.dedent(
         f"""

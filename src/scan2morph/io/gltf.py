@@ -49,7 +49,7 @@ import cv2
 import numpy as np
 import pygltflib
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.geometry import check_vertex_array, face_normals, vertex_normals
 
 _ARRAY_BUFFER = pygltflib.ARRAY_BUFFER
@@ -364,7 +364,8 @@ def write_glb(
     buf.blob.extend(b"\x00" * (-len(buf.blob) % 4))
     gltf.buffers = [pygltflib.Buffer(byteLength=len(buf.blob))]
     gltf.set_binary_blob(bytes(buf.blob))
-    gltf.save_binary(str(path))
+    with writing(path):
+        gltf.save_binary(str(path))
 
 
 def _read_glb(path: Path) -> pygltflib.GLTF2:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.io.image import write_color
 
 
@@ -86,8 +86,9 @@ def write_obj(
         if uv is None:
             raise InputError(path, "texture given without uv")
         write_color(path.with_suffix(".png"), np.asarray(texture, dtype=np.uint8))
-        path.with_suffix(".mtl").write_text(
-            f"newmtl face\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {path.with_suffix('.png').name}\n"
+        _write_text(
+            path.with_suffix(".mtl"),
+            f"newmtl face\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {path.with_suffix('.png').name}\n",
         )
         lines += [f"mtllib {path.with_suffix('.mtl').name}", "usemtl face"]
     centre = vertices[finite].mean(axis=0) if finite.any() else np.zeros(3)
@@ -104,7 +105,13 @@ def write_obj(
     lines += ["f " + " ".join(corner.format(i) for i in tri) for tri in f1]
     if lonely.size:
         lines += [f"f {corner.format(i)} {corner.format(i)} {corner.format(i)}" for i in lonely]
-    path.write_text("\n".join(lines) + "\n")
+    _write_text(path, "\n".join(lines) + "\n")
+
+
+def _write_text(path: Path, text: str) -> None:
+    """Write a text file; a full disk is one line naming it (OutputError)."""
+    with writing(path):
+        path.write_text(text)
 
 
 def write_failed_obj(path, reason: str) -> None:
@@ -121,8 +128,8 @@ def write_failed_obj(path, reason: str) -> None:
     path = Path(path)
     note = "# scan2morph: no mesh, " + " ".join(str(reason).split())
     write_color(path.with_suffix(".png"), np.full((1, 1, 3), 128, dtype=np.uint8))
-    path.with_suffix(".mtl").write_text(note + "\n")
-    path.write_text(note + "\n")
+    _write_text(path.with_suffix(".mtl"), note + "\n")
+    _write_text(path, note + "\n")
 
 
 def read_obj(path) -> dict[str, np.ndarray]:

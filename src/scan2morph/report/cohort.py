@@ -24,7 +24,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.store import open_store, paths
 from scan2morph.store.warnings import read_failures as left_out
 from scan2morph.tables import COHORT, accuracy_column, write_table
@@ -363,7 +363,8 @@ def plot_cohort(
     for ax in axes[n_panels - lead :]:
         ax.set_visible(False)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, facecolor="white")
+    with writing(path):
+        fig.savefig(path, dpi=dpi, facecolor="white")
 
 
 def write_cohort_summary(

@@ -31,7 +31,7 @@ import h5py
 import jinja2
 from markupsafe import Markup
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.report import sections, viewer
 from scan2morph.report.provenance import software_versions, store_provenance
 from scan2morph.report.sections import ReportFigure
@@ -186,7 +186,8 @@ def write_subject_report(path: str | Path, store_path: str | Path, **kwargs) -> 
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(text, encoding="utf-8")
+        with writing(path):
+            tmp.write_text(text, encoding="utf-8")
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

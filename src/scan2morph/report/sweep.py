@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, writing
 from scan2morph.tables import accuracy_column, sweep_dictionary, write_table
 
 #: Panel rows of the plot, one per unit: unit -> axis label (other units follow, by name).
@@ -226,7 +226,8 @@ def plot_sweep(
         fontsize="medium",
     )
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, facecolor="white")
+    with writing(path):
+        fig.savefig(path, dpi=dpi, facecolor="white")
 
 
 def write_sweep_summary(
