@@ -29,7 +29,7 @@ from tests.support.morph_subject import VISEMES, subject_glb
 
 REPO = Path(__file__).resolve().parents[2]
 BLENDER_PYTHON = REPO / ".venv-blender" / "bin" / "python"
-PROBE = Path(__file__).with_name("blender_probe.py")
+PROBE = Path(__file__).parents[1] / "support" / "blender_probe.py"
 #: glTF's float32 metres and the OBJ's 6 decimals (metres): 1 um is far below a mm.
 ATOL_M = 2e-6
 #: Alphas (units of sigma_k) posed through the shape keys, each to its slider's end or between.
