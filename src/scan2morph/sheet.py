@@ -41,14 +41,14 @@ KINDS = ("neutral", "viseme", "expression")
 MODALITIES = ("range", "stereo", "mesh", "rgbd")
 #: The file columns each modality needs.
 FILES = {
-    "range": ("xyz", "color", "landmarks"),
+    "range": ("xyz", "landmarks"),
     "stereo": ("left", "right", "calibration", "landmarks"),
     "mesh": ("mesh", "landmarks"),
     "rgbd": ("depth", "color", "intrinsics", "landmarks"),
 }
 #: File columns a modality may have (used when not empty): a mesh's texture, when the mesh file
-#: does not reference one.
-OPTIONAL_FILES = {"mesh": ("texture",)}
+#: does not reference one; a range scan's colour image (without it the take is geometry only).
+OPTIONAL_FILES = {"mesh": ("texture",), "range": ("color",)}
 #: Every column that holds a file path (resolved against the sheet's folder).
 PATH_COLUMNS = tuple(c for c in COLUMNS if (c not in REQUIRED or c == "landmarks") and c != "units")
 #: The ``units`` column: the unit of a take's coordinates -> mm per unit (empty: mm).

@@ -10,3 +10,6 @@ AREA_EPS = 1e-12
 VISEMES = ("car", "man", "she", "eel", "too")
 #: Number of points in an iBUG 68-point landmark file.
 N_IBUG = 68
+#: Share of full white a geometry-only scan's surface shows where it faces away from the light
+#: (its shading stands in for the colour image: a mesh scan's render, a range scan's grid).
+SHADE_AMBIENT = 0.15

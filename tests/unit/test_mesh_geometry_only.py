@@ -139,3 +139,43 @@ def test_a_bad_unit_is_refused_naming_the_row_and_the_column(tmp_path, scans):
     row = table.iloc[1].to_dict()
     with pytest.raises(InputError, match=r"row 3 \(s1/car\): column 'units': 'inch' unknown"):
         ingest.run(row, {"mesh": row["mesh"], "landmarks": row["landmarks"]}, {}, CAMERA)
+
+
+def test_a_range_scan_without_colour_is_shaded_and_keeps_its_fit_at_refine(tmp_path, caplog):
+    """A range take whose sheet row names no colour image: its grid shows its shading, the
+    sheet and the check accept it, and the refinement keeps the template fit with its reason."""
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.synth import make_take, write_take
+
+    small = dict(width=320, height=240, focal_px=725.0, distance_mm=1000.0)
+    data, files = {}, {}
+    for take in KINDS:
+        res = make_take("s1", take, KINDS[take], take, seed=3, params=dict(small))
+        stem = tmp_path / take
+        write_take(res, f"{stem}.abs.gz", f"{stem}.png", f"{stem}.pts", f"{stem}.npz")
+        files[take] = {"xyz": f"{stem}.abs.gz", "landmarks": f"{stem}.pts"}
+        assert take_file_problems("range", files[take]) == []
+        row = _row(take, modality="range")
+        with caplog.at_level("WARNING", logger="scan2morph"):
+            part = ingest.run(row, files[take], {})
+        assert "no colour image: shown with its shading" in caplog.text
+        data |= part.datasets
+        assert data[paths.camera(take, "color_source")] == "shading"
+        seen = data[paths.raw(take, "color")][np.isfinite(res["xyz"][..., 2])]
+        assert (seen[:, 0] == seen[:, 1]).all() and seen[:, 0].astype(float).std() > 10.0
+        assert not part.attrs[paths.take(take)]["grey_color"]  # said once, as geometry-only
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    run = Run(Subject("s1", KINDS, {t: t for t in KINDS}), build_template(), config)
+    for stage in (repair, fit, align):
+        data |= stage.apply(data, run)
+    params = refine.Params.from_config(config["refine"], config["template"], config["align"])
+    attrs = refine.run(run.template, "car", "viseme", "neutral", data, params, "s1/car").attrs
+    assert "geometry-only" in attrs[paths.refine_group("car")]["problem"]
+    # a sheet row of a range take without its colour column is no problem of the sheet
+    sheet = tmp_path / "s.tsv"
+    sheet.write_text(
+        "subject\ttake\tkind\tlabel\tmodality\txyz\tlandmarks\n"
+        f"s1\tneutral\tneutral\tneutral\trange\t{files['neutral']['xyz']}\t"
+        f"{files['neutral']['landmarks']}\n"
+    )
+    assert subject_problems(read_sheet(sheet)) == {"s1": []}

@@ -78,7 +78,7 @@ def take_file_problems(modality: str, files: Mapping[str, str | Path]) -> list[s
 def _cross_check(modality: str, files: Mapping[str, str | Path]) -> None:
     """The checks between a take's files (sizes, landmarks inside the image, units)."""
     if modality == "range":
-        scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
+        scan = read_range_take(files["xyz"], files.get("color"), files["landmarks"])
         check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
         check_handedness(scan.xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":

@@ -40,7 +40,7 @@ from scan2morph.io.take import (  # noqa: E402
     check_face,
     check_landmarks_inside,
 )
-from scan2morph.tol import N_IBUG  # noqa: E402
+from scan2morph.tol import N_IBUG, SHADE_AMBIENT  # noqa: E402
 
 log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
@@ -58,8 +58,6 @@ MAX_LANDMARK_OFFSET_MM = 5.0
 #: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
 #: is the surface's shading, no skin texture.
 SHADED = "shading"
-#: Share of full white a geometry-only mesh's surface shows where it faces away from the light.
-SHADE_AMBIENT = 0.15
 #: Colour of pixels the mesh does not cover (dark blue-grey).
 BACKGROUND_RGB = (44, 46, 56)
 

@@ -37,21 +37,22 @@ class RangeTake:
     ----------
     xyz : (H, W, 3) float64
         mm, NaN = no data, in the take's scanner frame.
-    color : (H, W, 3) uint8
-        RGB, pixel to pixel with ``xyz``.
+    color : (H, W, 3) uint8 or None
+        RGB, pixel to pixel with ``xyz``; None for a geometry-only scan.
     landmarks : (68, 2) float64
         0-based pixel coordinates.
     """
 
     xyz: np.ndarray
-    color: np.ndarray
+    color: np.ndarray | None
     landmarks: np.ndarray
 
 
 def read_range_take(
-    xyz_path: str | Path, color_path: str | Path, landmarks_path: str | Path
+    xyz_path: str | Path, color_path: str | Path | None, landmarks_path: str | Path
 ) -> RangeTake:
-    """Read a range take and check that its files agree.
+    """Read a range take and check that its files agree (``color_path`` None: a geometry-only
+    scan, no colour image).
 
     Raises
     ------
@@ -61,8 +62,8 @@ def read_range_take(
     """
     xyz = read_range(xyz_path)
     check_image_size(xyz.shape, xyz_path, "xyz")
-    color = read_color(color_path)
-    if color.shape[:2] != xyz.shape[:2]:
+    color = None if color_path is None else read_color(color_path)
+    if color is not None and color.shape[:2] != xyz.shape[:2]:
         raise InputError(
             color_path,
             f"color: image is {color.shape[1]}x{color.shape[0]} (WxH) but the range image "

@@ -13,6 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import rq
 
+from scan2morph.geometry import surface_normals
+from scan2morph.tol import SHADE_AMBIENT
+
 #: A range image's estimated camera within this angle (deg) of the z axis and with its centre
 #: within this share of the data's distance from the origin is taken to be in the conventional
 #: scanner frame (scanner at the origin looking along +-z), exactly as given.
@@ -142,3 +145,26 @@ def _reprojection_px(P: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray
 
 
 __all__ = ["FRAME_SNAP_DEG", "FRAME_SNAP_SHARE", "SCANNER_FRAME", "ScannerView", "scanner_view"]
+
+
+def shaded_image(xyz: np.ndarray) -> np.ndarray:
+    """A geometry-only range image shown by its shading: grey, lit from the scanner.
+
+    Lambert's law with the light at the scanner, as a geometry-only mesh scan is shown
+    (:func:`scan2morph.io.mesh_scan.shade`): each pixel's grey is
+    ``SHADE_AMBIENT + (1 - SHADE_AMBIENT) * |n . a|`` of full white, ``n`` the surface's unit
+    normal there and ``a`` the scanner's optical axis (:func:`scanner_view`); black where there
+    is no data.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float, mm, NaN = no data
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    normals = surface_normals(xyz)
+    lit = np.abs(normals @ scanner_view(xyz).axis)
+    grey = np.where(np.isfinite(lit), SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * lit, 0.0)
+    return np.repeat(np.rint(255.0 * grey).astype(np.uint8)[..., None], 3, axis=2)

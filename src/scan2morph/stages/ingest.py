@@ -23,10 +23,11 @@ from scan2morph.io import (
     read_range_take,
     read_stereo_take,
 )
-from scan2morph.io.mesh_scan import read_mesh_take
+from scan2morph.io.mesh_scan import SHADED, read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
+from scan2morph.scan.view import shaded_image
 from scan2morph.sheet import FILES, mm_per_unit
 from scan2morph.stages.part import Part
 from scan2morph.store import paths
@@ -85,7 +86,7 @@ def run(
     # a geometry-only mesh is shaded grey on purpose (its own warning says so)
     shaded = scan.camera.get("color_source") == "shading"
     attrs["grey_color"] = bool(_grey(scan.color)) and not shaded
-    attrs |= {f"input_sha256_{r}": sha256_file(files[r]) for r in FILES[modality] if r in files}
+    attrs |= {f"input_sha256_{r}": sha256_file(path) for r, path in files.items()}
     provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | scan.camera
     return Part(
         {
@@ -134,10 +135,17 @@ def _read_mesh(files, row, stereo, mesh_camera) -> _Scan:
 
 
 def _read_range(files, row, stereo, mesh_camera) -> _Scan:
-    scan = read_range_take(files["xyz"], files["color"], files["landmarks"])
+    scan = read_range_take(files["xyz"], files.get("color"), files["landmarks"])
     xyz = scan.xyz * mm_per_unit(row)
     check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"])
-    return _Scan(xyz, scan.color, scan.landmarks)
+    if scan.color is not None:
+        return _Scan(xyz, scan.color, scan.landmarks)
+    log.warning(
+        "%s: no colour image: shown with its shading (grey, lit from the scanner); the "
+        "texture-driven refinement keeps the template fit",
+        row["take"],
+    )
+    return _Scan(xyz, shaded_image(xyz), scan.landmarks, {"color_source": SHADED})
 
 
 def _read_stereo(files, row, stereo, mesh_camera) -> _Scan:
