@@ -562,6 +562,10 @@ def test_viewer_sliders_and_takes_draw_the_model_api_shapes(report, browser):
     head = lambda p: p @ frame[:3, :3].T + frame[:3, 3]  # noqa: E731
     neutral = model.neutral
     q = model.coordinates["smile1"]
+    # half of mode 2's slider (its half range moves the mode's largest vertex MODE_PEAK_MM)
+    from scan2morph.report.viewer import MODE_PEAK_MM
+
+    q2 = 0.5 * MODE_PEAK_MM / np.linalg.norm(model.modes[1], axis=1).max()
     with h5py.File(store) as h5:
         takes = [t["take"] for t in TAKES]
         aligned = {t: h5[paths.align(t, "vertices")][()] for t in takes}
@@ -579,7 +583,7 @@ def test_viewer_sliders_and_takes_draw_the_model_api_shapes(report, browser):
         _set(evaluate, "pca_1", 1.5)
         _set(evaluate, "pca_2", -2)
         got["pca 1.5 -2"] = _drawn(evaluate)
-        _set(evaluate, "mode_2", 0.02)
+        _set(evaluate, "mode_2", q2)
         got["pca + mode 2"] = _drawn(evaluate)
         _click(evaluate, 'button[name="reset"]')
         got["reset"] = _drawn(evaluate)
@@ -605,7 +609,7 @@ def test_viewer_sliders_and_takes_draw_the_model_api_shapes(report, browser):
         "car 0.5 too 0.25": model.blend({"car": 0.5, "too": 0.25}),
         "pca 1.5 -2": pca,
         # the modal displacement adds to the semantic shape
-        "pca + mode 2": pca + model.expression([0.0, 0.02]) - neutral,
+        "pca + mode 2": pca + model.expression([0.0, q2]) - neutral,
         "reset": neutral,
         "smile1 preset": model.expression(q),  # all 10 coordinates: 4 sliders + the rest
         "after the takes": neutral,
