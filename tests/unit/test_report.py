@@ -1277,6 +1277,7 @@ def test_snakemake_report_builds(run, tmp_path):
     assert caption[:60] in text
 
 
+@pytest.mark.slow  # the tiny run's finished products
 def test_the_page_links_its_products_and_keeps_the_navigation_in_view(report, run):
     path, _, _, _ = report
     text = path.read_text()
