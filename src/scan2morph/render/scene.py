@@ -99,6 +99,19 @@ def render_mesh(
         raise InputError("render", "nothing to draw: no face has three finite vertices")
     faces = faces[keep]
     safe = np.where(np.isfinite(vertices), vertices, 0.0)
+    center, radius, front, up = _framing(vertices, safe, faces, center, radius, front, up, yaw_deg)
+    scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0], ambient_light=[0.35, 0.35, 0.35])
+    scene.add(_mesh_node(safe, faces, colors, texture, uv, wireframe))
+    w, h = size
+    _add_camera_and_light(scene, center, radius, front, up, w / h)
+    flags = pyrender.RenderFlags.SKIP_CULL_FACES
+    image, _ = offscreen_renderer(w, h).render(scene, flags=flags)
+    return np.ascontiguousarray(image[:, :, :3])
+
+
+def _framing(vertices, safe, faces, center, radius, front, up, yaw_deg):
+    """The view's ``center``, ``radius``, ``front`` and ``up`` (those not given, from the mesh),
+    the camera turned ``yaw_deg`` about ``up``."""
     used = np.unique(faces)
     if center is None:
         center = safe[used].mean(axis=0)
@@ -116,7 +129,11 @@ def render_mesh(
         a = np.radians(yaw_deg)
         side = np.cross(up, front)
         front = np.cos(a) * front + np.sin(a) * side
+    return center, radius, front, up
 
+
+def _mesh_node(safe, faces, colors, texture, uv, wireframe) -> pyrender.Mesh:
+    """The mesh as a pyrender node: textured, coloured per vertex, or a neutral skin tone."""
     mesh = trimesh.Trimesh(safe, faces, process=False)
     if texture is not None and uv is not None:
         uv_gl = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
@@ -134,7 +151,6 @@ def render_mesh(
     elif colors is not None:
         rgba = np.column_stack([np.clip(colors, 0, 1), np.ones(len(colors))])
         mesh.visual = trimesh.visual.ColorVisuals(mesh, vertex_colors=(rgba * 255).astype(np.uint8))
-    scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0], ambient_light=[0.35, 0.35, 0.35])
     material = None
     if colors is None and texture is None:
         material = pyrender.MetallicRoughnessMaterial(
@@ -143,21 +159,20 @@ def render_mesh(
             roughnessFactor=0.8,
             doubleSided=True,
         )
-    scene.add(
-        pyrender.Mesh.from_trimesh(
-            mesh, material=material, wireframe=wireframe, smooth=not wireframe
-        )
+    return pyrender.Mesh.from_trimesh(
+        mesh, material=material, wireframe=wireframe, smooth=not wireframe
     )
+
+
+def _add_camera_and_light(scene, center, radius, front, up, aspect: float) -> None:
+    """A 30 degree camera framing the sphere (``center``, ``radius``) from ``front``, and a key
+    light above and to the side of it."""
     fov = np.radians(30.0)
     dist = radius / np.sin(fov / 2) * 1.05
     pose = look_at(center + front * dist, center, up)
-    w, h = size
     scene.add(
-        pyrender.PerspectiveCamera(yfov=fov, aspectRatio=w / h, znear=dist * 0.2, zfar=dist * 3),
+        pyrender.PerspectiveCamera(yfov=fov, aspectRatio=aspect, znear=dist * 0.2, zfar=dist * 3),
         pose=pose,
     )
     key = look_at(center + dist * (front + 0.4 * up + 0.3 * np.cross(up, front)), center, up)
     scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=key)
-    flags = pyrender.RenderFlags.SKIP_CULL_FACES
-    image, _ = offscreen_renderer(w, h).render(scene, flags=flags)
-    return np.ascontiguousarray(image[:, :, :3])

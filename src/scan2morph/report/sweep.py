@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -142,89 +143,18 @@ def plot_sweep(
     if missing:
         raise InputError("sweep summary", f"no default (config) value for {missing}")
     default, varied = one_at_a_time(table, params, defaults)
-    by_unit: dict[str, list[str]] = {}
-    for m in metrics:
-        if table[m].notna().any():
-            by_unit.setdefault(accuracy_column(m).unit, []).append(m)
-    order = {u: i for i, u in enumerate(UNIT_LABELS)}
-    units = sorted(by_unit, key=lambda u: (order.get(u, len(order)), u))
-    # colours by metric within a unit's row (a row holds a few metrics)
-    colour = {m: f"C{i % 10}" for ms in by_unit.values() for i, m in enumerate(ms)}
+    units, by_unit, colour = _units(table, metrics)
     subjects = list(dict.fromkeys(table["subject"]))
     style = {
         s: (_MARKERS[i % len(_MARKERS)], _LINES[i % len(_LINES)]) for i, s in enumerate(subjects)
     }
+    plot = _SweepPlot(table, defaults, default, varied, units, by_unit, colour, subjects, style)
     # no pyplot: no global state
     fig = Figure(figsize=(3.6 * len(params) + 3.4, 2.9 * len(units) + 0.6), layout="constrained")
     axes = fig.subplots(len(units), len(params), squeeze=False)
     for j, param in enumerate(params):
-        rows = table[default | varied[param]]
-        values = list(dict.fromkeys([*table[param], defaults[param]]))
-        numeric = all(_number(v) for v in values)
-        if numeric:
-            pos = {v: float(v) for v in values}
-        else:
-            cats = list(dict.fromkeys(str(v) for v in values))
-            pos = {v: float(cats.index(str(v))) for v in values}
-        x_default = pos[defaults[param]]
-        for i, unit in enumerate(units):
-            ax = axes[i, j]
-            ax.axvline(x_default, color="0.45", ls="--", lw=1.0, zorder=0)
-            for subject in subjects:
-                mine = rows[rows["subject"] == subject]
-                xs = np.array([pos[v] for v in mine[param]], dtype=float)
-                k = np.argsort(xs, kind="stable")
-                base = table[default & (table["subject"] == subject).to_numpy()]
-                marker, line = style[subject]
-                for metric in by_unit[unit]:
-                    ys = mine[metric].to_numpy(dtype=float)[k]
-                    ax.plot(xs[k], ys, marker=marker, ls=line, color=colour[metric], ms=4)
-                    if len(base):
-                        ref = float(base[metric].iloc[0])
-                        ax.axhline(ref, color=colour[metric], ls=":", lw=0.8, alpha=0.7)
-            if not numeric:
-                ax.set_xticks(range(len(cats)), cats)
-            elif all(float(v).is_integer() for v in values):
-                ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-            if i == 0:
-                n = int(varied[param].sum() // max(len(subjects), 1))
-                other = f"{n} other value{'s' if n != 1 else ''}"
-                ax.set_title(f"{param} varied ({other})", fontsize="medium")
-            if i == len(units) - 1:
-                ax.set_xlabel(f"{param} (dashed: the config's {defaults[param]})")
-            if j == 0:
-                ax.set_ylabel(UNIT_LABELS.get(unit, unit))
-            ax.margins(x=0.08)  # the config's value is often at an end
-            ax.grid(alpha=0.3)
-        for i, unit in enumerate(units):
-            if j == len(params) - 1:
-                handles = [Line2D([], [], color=colour[m], marker="o", ms=4) for m in by_unit[unit]]
-                axes[i, j].legend(
-                    handles,
-                    by_unit[unit],
-                    fontsize="small",
-                    loc="center left",
-                    bbox_to_anchor=(1.02, 0.5),
-                    title=UNIT_LABELS.get(unit, unit),
-                )
-    notes = []
-    if len(subjects) > 1:
-        handles = [
-            Line2D([], [], color="0.3", marker=style[s][0], ls=style[s][1]) for s in subjects
-        ]
-        fig.legend(handles, subjects, loc="outside lower center", ncols=len(subjects))
-    elif subjects:
-        notes.append(f"subject {subjects[0]}")
-    left_out = int(len(table) - default.sum() - sum(v.sum() for v in varied.values()))
-    if left_out:
-        notes.append(f"{left_out} rows differ from the config in two or more keys (not drawn)")
-    if not default.any():
-        notes.append("no row equals the config (no reference lines)")
-    fig.suptitle(
-        "Accuracy against each swept key, one key varied at a time; dotted: the config's row"
-        + ("\n" + "; ".join(notes) if notes else ""),
-        fontsize="medium",
-    )
+        _draw_column(plot, axes[:, j], param, first=j == 0, last=j == len(params) - 1)
+    _finish(fig, plot)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with writing(path):
         fig.savefig(path, dpi=dpi, facecolor="white")
@@ -250,3 +180,113 @@ def write_sweep_summary(
     write_table(table_path, table, sweep_dictionary(params, metrics, defaults))
     plot_sweep(table, params, plot_path, defaults)
     return table
+
+
+@dataclass(frozen=True)
+class _SweepPlot:
+    """What every panel of :func:`plot_sweep` draws from."""
+
+    table: pd.DataFrame
+    defaults: Mapping[str, object]
+    default: np.ndarray
+    varied: Mapping[str, np.ndarray]
+    units: list[str]
+    by_unit: dict[str, list[str]]
+    colour: dict[str, str]
+    subjects: list[str]
+    style: dict[str, tuple[str, str]]
+
+
+def _units(table: pd.DataFrame, metrics) -> tuple[list[str], dict[str, list[str]], dict]:
+    """The units of the metrics with data (one panel row each, in :data:`UNIT_LABELS` order),
+    the metrics of each, and a colour per metric within its row."""
+    by_unit: dict[str, list[str]] = {}
+    for m in metrics:
+        if table[m].notna().any():
+            by_unit.setdefault(accuracy_column(m).unit, []).append(m)
+    order = {u: i for i, u in enumerate(UNIT_LABELS)}
+    units = sorted(by_unit, key=lambda u: (order.get(u, len(order)), u))
+    colour = {m: f"C{i % 10}" for ms in by_unit.values() for i, m in enumerate(ms)}
+    return units, by_unit, colour
+
+
+def _positions(values) -> tuple[dict, bool, list[str]]:
+    """The x position of each swept value: the value itself when all are numbers, else its
+    index among the categories (returned too)."""
+    if all(_number(v) for v in values):
+        return {v: float(v) for v in values}, True, []
+    cats = list(dict.fromkeys(str(v) for v in values))
+    return {v: float(cats.index(str(v))) for v in values}, False, cats
+
+
+def _draw_column(plot: _SweepPlot, axes, param: str, first: bool, last: bool) -> None:
+    """The panels of one swept key, a row per unit (the legends beside the last column)."""
+    table, defaults = plot.table, plot.defaults
+    rows = table[plot.default | plot.varied[param]]
+    values = list(dict.fromkeys([*table[param], defaults[param]]))
+    pos, numeric, cats = _positions(values)
+    for i, unit in enumerate(plot.units):
+        ax = axes[i]
+        ax.axvline(pos[defaults[param]], color="0.45", ls="--", lw=1.0, zorder=0)
+        for subject in plot.subjects:
+            mine = rows[rows["subject"] == subject]
+            xs = np.array([pos[v] for v in mine[param]], dtype=float)
+            k = np.argsort(xs, kind="stable")
+            base = table[plot.default & (table["subject"] == subject).to_numpy()]
+            marker, line = plot.style[subject]
+            for metric in plot.by_unit[unit]:
+                ys = mine[metric].to_numpy(dtype=float)[k]
+                ax.plot(xs[k], ys, marker=marker, ls=line, color=plot.colour[metric], ms=4)
+                if len(base):
+                    ref = float(base[metric].iloc[0])
+                    ax.axhline(ref, color=plot.colour[metric], ls=":", lw=0.8, alpha=0.7)
+        if not numeric:
+            ax.set_xticks(range(len(cats)), cats)
+        elif all(float(v).is_integer() for v in values):
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        if i == 0:
+            n = int(plot.varied[param].sum() // max(len(plot.subjects), 1))
+            other = f"{n} other value{'s' if n != 1 else ''}"
+            ax.set_title(f"{param} varied ({other})", fontsize="medium")
+        if i == len(plot.units) - 1:
+            ax.set_xlabel(f"{param} (dashed: the config's {defaults[param]})")
+        if first:
+            ax.set_ylabel(UNIT_LABELS.get(unit, unit))
+        ax.margins(x=0.08)  # the config's value is often at an end
+        ax.grid(alpha=0.3)
+    if last:
+        for i, unit in enumerate(plot.units):
+            metrics = plot.by_unit[unit]
+            handles = [Line2D([], [], color=plot.colour[m], marker="o", ms=4) for m in metrics]
+            axes[i].legend(
+                handles,
+                metrics,
+                fontsize="small",
+                loc="center left",
+                bbox_to_anchor=(1.02, 0.5),
+                title=UNIT_LABELS.get(unit, unit),
+            )
+
+
+def _finish(fig: Figure, plot: _SweepPlot) -> None:
+    """The subjects' legend, what was left out and the title."""
+    notes = []
+    subjects, style = plot.subjects, plot.style
+    if len(subjects) > 1:
+        handles = [
+            Line2D([], [], color="0.3", marker=style[s][0], ls=style[s][1]) for s in subjects
+        ]
+        fig.legend(handles, subjects, loc="outside lower center", ncols=len(subjects))
+    elif subjects:
+        notes.append(f"subject {subjects[0]}")
+    drawn = plot.default.sum() + sum(v.sum() for v in plot.varied.values())
+    left_out = int(len(plot.table) - drawn)
+    if left_out:
+        notes.append(f"{left_out} rows differ from the config in two or more keys (not drawn)")
+    if not plot.default.any():
+        notes.append("no row equals the config (no reference lines)")
+    fig.suptitle(
+        "Accuracy against each swept key, one key varied at a time; dotted: the config's row"
+        + ("\n" + "; ".join(notes) if notes else ""),
+        fontsize="medium",
+    )
