@@ -21,6 +21,7 @@ from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh
 from scan2morph.io.range_image import read_range
 from scan2morph.io.rgbd import read_depth, read_rgbd_intrinsics
 from scan2morph.io.take import check_face, check_handedness, read_range_take, read_stereo_take
+from scan2morph.sheet import OPTIONAL_FILES
 
 #: The reader of each file column, per modality (the ingest's own readers).
 READERS: dict[str, dict[str, Callable]] = {
@@ -57,28 +58,30 @@ def take_file_problems(modality: str, files: Mapping[str, str | Path]) -> list[s
         The readers' messages (each names the file, the field and what was expected).
     """
     readers = READERS.get(modality, {})
-    problems = []
+    problems, loaded = [], {}
     for role, reader in readers.items():
         if role not in files:
             continue
         extra = [files.get("texture")] if role == "mesh" else []  # the sheet's optional texture
         try:
-            reader(files[role], *extra)
+            loaded[role] = reader(files[role], *extra)
         except InputError as exc:
             problems.append(str(exc))
-    if problems or set(readers) - set(files):
+    required = set(readers) - set(OPTIONAL_FILES.get(modality, ()))
+    if problems or required - set(files):
         return problems
     try:
-        _cross_check(modality, files)
+        _cross_check(modality, files, loaded)
     except InputError as exc:
         problems.append(str(exc))
     return problems
 
 
-def _cross_check(modality: str, files: Mapping[str, str | Path]) -> None:
-    """The checks between a take's files (sizes, landmarks inside the image, units)."""
+def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping) -> None:
+    """The checks between a take's files (sizes, landmarks inside the image, units), on the
+    files as their readers ``loaded`` them (a range scan is parsed once)."""
     if modality == "range":
-        scan = read_range_take(files["xyz"], files.get("color"), files["landmarks"])
+        scan = read_range_take(files["xyz"], files.get("color"), files["landmarks"], loaded)
         check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
         check_handedness(scan.xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":

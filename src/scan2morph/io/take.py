@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,10 +50,16 @@ class RangeTake:
 
 
 def read_range_take(
-    xyz_path: str | Path, color_path: str | Path | None, landmarks_path: str | Path
+    xyz_path: str | Path,
+    color_path: str | Path | None,
+    landmarks_path: str | Path,
+    loaded: Mapping[str, np.ndarray] | None = None,
 ) -> RangeTake:
     """Read a range take and check that its files agree (``color_path`` None: a geometry-only
     scan, no colour image).
+
+    ``loaded`` holds files already read by their readers (sheet column -> array: ``xyz``,
+    ``color``, ``landmarks``), which are then not read again.
 
     Raises
     ------
@@ -60,9 +67,12 @@ def read_range_take(
         From the readers, or when the color image's size differs from the range image's, or when
         the range image holds no data at all.
     """
-    xyz = read_range(xyz_path)
+    loaded = loaded or {}
+    xyz = loaded["xyz"] if "xyz" in loaded else read_range(xyz_path)
     check_image_size(xyz.shape, xyz_path, "xyz")
-    color = None if color_path is None else read_color(color_path)
+    color = None
+    if color_path is not None:
+        color = loaded["color"] if "color" in loaded else read_color(color_path)
     if color is not None and color.shape[:2] != xyz.shape[:2]:
         raise InputError(
             color_path,
@@ -71,7 +81,7 @@ def read_range_take(
         )
     if not np.isfinite(xyz).any():
         raise InputError(xyz_path, "xyz: no valid pixel in the range image")
-    landmarks = read_pts(landmarks_path)
+    landmarks = loaded["landmarks"] if "landmarks" in loaded else read_pts(landmarks_path)
     check_landmarks_inside(landmarks, xyz.shape[1], xyz.shape[0], landmarks_path)
     return RangeTake(xyz=xyz, color=color, landmarks=landmarks)
 
