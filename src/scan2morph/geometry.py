@@ -13,6 +13,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
+from scan2morph.tol import SHADE_AMBIENT
+
 #: A vertex whose summed (area-weighted) normal is shorter than this fraction of the longest
 #: face normal has no usable direction (isolated, or its faces are degenerate or cancel out).
 _NORMAL_RTOL = 1e-12
@@ -320,3 +322,21 @@ __all__ = [
     "unique_edges",
     "vertex_normals",
 ]
+
+
+def lambert_grey(cosine: np.ndarray) -> np.ndarray:
+    """Grey levels of a geometry-only scan lit from its camera (Lambert's law):
+    ``SHADE_AMBIENT + (1 - SHADE_AMBIENT) * |cosine|`` of full white, 0 where ``cosine`` is NaN.
+
+    Parameters
+    ----------
+    cosine : array of float
+        The cosine between each surface normal and the viewing axis (either sign).
+
+    Returns
+    -------
+    uint8 array of the same shape
+    """
+    lit = np.abs(np.asarray(cosine, dtype=np.float64))
+    grey = np.where(np.isfinite(lit), SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * lit, 0.0)
+    return np.rint(255.0 * grey).astype(np.uint8)

@@ -30,6 +30,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 import numpy as np  # noqa: E402
 
 from scan2morph.errors import InputError  # noqa: E402
+from scan2morph.geometry import lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.mesh_view import face_view  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
@@ -40,7 +41,7 @@ from scan2morph.io.take import (  # noqa: E402
     check_face,
     check_landmarks_inside,
 )
-from scan2morph.tol import N_IBUG, SHADE_AMBIENT  # noqa: E402
+from scan2morph.tol import N_IBUG  # noqa: E402
 
 log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
@@ -353,8 +354,7 @@ def shade(mesh, pose: np.ndarray):
     import trimesh
 
     normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
-    lit = np.abs(normals @ np.asarray(pose, dtype=np.float64)[2, :3])
-    grey = np.rint(255.0 * (SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * lit)).astype(np.uint8)
+    grey = lambert_grey(normals @ np.asarray(pose, dtype=np.float64)[2, :3])
     out = mesh.copy()
     rgba = np.column_stack([grey, grey, grey, np.full_like(grey, 255)])
     out.visual = trimesh.visual.ColorVisuals(out, vertex_colors=rgba)

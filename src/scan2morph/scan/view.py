@@ -13,8 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import rq
 
-from scan2morph.geometry import surface_normals
-from scan2morph.tol import SHADE_AMBIENT
+from scan2morph.geometry import lambert_grey, surface_normals
 
 #: A range image's estimated camera within this angle (deg) of the z axis and with its centre
 #: within this share of the data's distance from the origin is taken to be in the conventional
@@ -164,7 +163,5 @@ def shaded_image(xyz: np.ndarray) -> np.ndarray:
     -------
     (H, W, 3) uint8
     """
-    normals = surface_normals(xyz)
-    lit = np.abs(normals @ scanner_view(xyz).axis)
-    grey = np.where(np.isfinite(lit), SHADE_AMBIENT + (1.0 - SHADE_AMBIENT) * lit, 0.0)
-    return np.repeat(np.rint(255.0 * grey).astype(np.uint8)[..., None], 3, axis=2)
+    grey = lambert_grey(surface_normals(xyz) @ scanner_view(xyz).axis)
+    return np.repeat(grey[..., None], 3, axis=2)
