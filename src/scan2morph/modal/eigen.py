@@ -113,6 +113,32 @@ def solve_modes(
     if method not in _METHODS:
         raise InputError(source, f"method: expected one of {_METHODS}, got {method!r}")
     n = K.shape[0]
+    free, kf, mf, ks = _free_system(K, M, fixed_dofs, k, shift, source)
+    if method == "dense" or (method == "block" and free.size <= _DENSE_MAX_DOF):
+        lam, xf = _dense(ks, mf, k, source)
+    else:
+        op = _ShiftInvert(ks, mf, source, threads)
+        if method == "arpack":
+            lam, xf = _arpack(op, k, tol, seed)
+        else:
+            b = int(np.clip(k // 12, 4, 12)) if block_size is None else int(block_size)
+            if b < 1:
+                raise InputError(source, f"block_size: expected a positive integer, got {b}")
+            lam, xf = _block_krylov_schur(op, k, b, tol, seed, source, max_basis)
+    # Rayleigh quotients (more accurate than 1/theta) and exact M-orthonormalisation.
+    xf = _loewdin(xf, mf @ xf)
+    lam = np.einsum("ij,ij->j", xf, kf @ xf)
+    order = np.argsort(lam)
+    lam, xf = lam[order], xf[:, order]
+    modes = np.zeros((n, k))
+    modes[free] = xf
+    return np.sqrt(np.maximum(lam, 0.0)) / (2.0 * np.pi), modes
+
+
+def _free_system(K, M, fixed_dofs, k: int, shift: float, source: str):
+    """The free DOFs, K and M on them and the shifted stiffness ``K + shift M``, checked (the
+    errors :func:`solve_modes` lists)."""
+    n = K.shape[0]
     if K.shape != (n, n) or M.shape != (n, n):
         raise InputError(
             source, f"K, M: expected two square matrices of one size, got {K.shape}, {M.shape}"
@@ -139,25 +165,7 @@ def solve_modes(
             f"K: free DOF {dof} (vertex {dof // fem.DOF}, component {dof % fem.DOF}) has no "
             "stiffness; fix it or remove the vertex",
         )
-    if method == "dense" or (method == "block" and free.size <= _DENSE_MAX_DOF):
-        lam, xf = _dense(ks, mf, k, source)
-    else:
-        op = _ShiftInvert(ks, mf, source, threads)
-        if method == "arpack":
-            lam, xf = _arpack(op, k, tol, seed)
-        else:
-            b = int(np.clip(k // 12, 4, 12)) if block_size is None else int(block_size)
-            if b < 1:
-                raise InputError(source, f"block_size: expected a positive integer, got {b}")
-            lam, xf = _block_krylov_schur(op, k, b, tol, seed, source, max_basis)
-    # Rayleigh quotients (more accurate than 1/theta) and exact M-orthonormalisation.
-    xf = _loewdin(xf, mf @ xf)
-    lam = np.einsum("ij,ij->j", xf, kf @ xf)
-    order = np.argsort(lam)
-    lam, xf = lam[order], xf[:, order]
-    modes = np.zeros((n, k))
-    modes[free] = xf
-    return np.sqrt(np.maximum(lam, 0.0)) / (2.0 * np.pi), modes
+    return free, kf, mf, ks
 
 
 class _ShiftInvert:

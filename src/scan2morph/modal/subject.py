@@ -101,21 +101,11 @@ def subject_modal(
         data[paths.modal("outline_motion_mm")] = choice.motion_mm
     coords = {}
     for take, field in displacements.items():
-        q = project(basis, field, source=f"{source}/{take}")
-        coords[take] = q
-        data[paths.expression(take, "coordinates")] = q
-        split = reconstruction_split(
-            basis, field, normals, ks, target_mm, source=f"{source}/{take}"
+        where = f"{source}/{take}"
+        coords[take] = project(basis, field, source=where)
+        data |= _expression_datasets(
+            basis, take, field, coords[take], (normals, ks, target_mm, outline), where
         )
-        data[paths.expression(take, "reconstruction_rms_mm")] = split.total_mm
-        data[paths.expression(take, "reconstruction_normal_rms_mm")] = split.normal_mm
-        data[paths.expression(take, "reconstruction_tangential_rms_mm")] = split.tangential_mm
-        data[paths.expression(take, "modes_to_target")] = np.float64(split.modes_to_target)
-        data[paths.expression(take, "outline_rms_mm")] = np.float64(rms_length(field, outline))
-        data[paths.expression(take, "clamped_rms_mm")] = np.float64(
-            rms_length(field, basis.fixed_vertices)
-        )
-        data[paths.expression(take, "synthesized")] = reconstruct(basis, q)
     unknown = [t for t in semantic_takes if t not in displacements]
     if unknown:
         raise InputError(
@@ -138,3 +128,23 @@ def subject_modal(
             data[paths.modal_statistics(label, "std")] = stats.std
             data[paths.modal_statistics(label, "takes")] = np.asarray(stats.takes, dtype=object)
     return basis, data
+
+
+def _expression_datasets(basis, take: str, field, q, measure: tuple, source: str) -> dict:
+    """One expression's coordinates ``q``, its reconstruction against K (total, normal and
+    tangential parts, modes to the target), its motion on the outline and on the clamped
+    vertices, and its modal synthesis. ``measure`` is (normals, ks, target_mm, outline)."""
+    normals, ks, target_mm, outline = measure
+    split = reconstruction_split(basis, field, normals, ks, target_mm, source=source)
+    return {
+        paths.expression(take, "coordinates"): q,
+        paths.expression(take, "reconstruction_rms_mm"): split.total_mm,
+        paths.expression(take, "reconstruction_normal_rms_mm"): split.normal_mm,
+        paths.expression(take, "reconstruction_tangential_rms_mm"): split.tangential_mm,
+        paths.expression(take, "modes_to_target"): np.float64(split.modes_to_target),
+        paths.expression(take, "outline_rms_mm"): np.float64(rms_length(field, outline)),
+        paths.expression(take, "clamped_rms_mm"): np.float64(
+            rms_length(field, basis.fixed_vertices)
+        ),
+        paths.expression(take, "synthesized"): reconstruct(basis, q),
+    }
