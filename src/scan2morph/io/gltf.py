@@ -226,6 +226,46 @@ def write_glb(
     n_vertices = base.shape[0]
     if n_vertices == 0:
         raise InputError(source, "vertices: the mesh has no vertices")
+    tri, uv, texture = _check_mesh(faces, uv, texture, n_vertices, source)
+    frame, frame_name = _resolve_frame(frame, frame_name, targets, metres, source)
+    notes = dict(getattr(targets, "notes", {}))
+    sigmas = dict(getattr(targets, "sigmas", {}))
+    targets = {} if targets is None else dict(targets)
+    checked = {
+        str(name): _check_vertices(f"targets[{name!r}]", t, source, n_vertices)
+        for name, t in targets.items()
+    }
+
+    world = _apply(frame, base)
+    centre = _centre(world)
+    local32 = (world - centre).astype(np.float32)
+    local = local32.astype(np.float64)  # what a reader sees; displacements are taken from it
+    buf = _BufferBuilder()
+    attributes, indices, base_normals = _base_attributes(buf, local32, world, tri, uv, normals)
+
+    target_list = [
+        _target(buf, _apply(frame, t), centre, local, tri, base_normals) for t in checked.values()
+    ]
+    frame_rows = [[float(x) for x in row] for row in frame]
+    frame_name = frame_name or "glTF frame: source_to_gltf applied to the source coordinates"
+    gltf = _document(frame_rows, frame_name)
+    _add_material(gltf, buf, texture, mesh_name, source)
+    primitive = pygltflib.Primitive(
+        attributes=attributes,
+        indices=indices,
+        mode=pygltflib.TRIANGLES,
+        material=0,
+        targets=target_list,
+    )
+    mesh = pygltflib.Mesh(name=mesh_name, primitives=[primitive])
+    _name_targets(mesh, list(checked), notes, sigmas)
+    _finish(gltf, buf, mesh, centre, frame_rows, frame_name)
+    with writing(path):
+        gltf.save_binary(str(path))
+
+
+def _check_mesh(faces, uv, texture, n_vertices: int, source: str):
+    """The faces (int64), uv and texture of :func:`write_glb`, checked."""
     tri = np.asarray(faces)
     if tri.ndim != 2 or tri.shape[1] != 3 or tri.shape[0] == 0:
         raise InputError(source, f"faces: expected a non-empty (F, 3) array, got shape {tri.shape}")
@@ -252,6 +292,11 @@ def write_glb(
             )
         if uv is None:
             raise InputError(source, "texture: given without uv (texture coordinates needed)")
+    return tri, uv, texture
+
+
+def _resolve_frame(frame, frame_name, targets, metres: bool, source: str):
+    """The source -> glTF frame and its name: given, the targets' own, or a scale to metres."""
     if frame is None:
         frame = getattr(targets, "frame", None)
         frame_name = frame_name or getattr(targets, "frame_name", None)
@@ -260,62 +305,11 @@ def write_glb(
         frame = np.diag([s, s, s, 1.0])
         frame_name = frame_name or ("source frame, metres" if metres else "source frame")
     frame = _check_frame(frame, source)
-    notes = dict(getattr(targets, "notes", {}))
-    sigmas = dict(getattr(targets, "sigmas", {}))
-    targets = {} if targets is None else dict(targets)
-    checked = {
-        str(name): _check_vertices(f"targets[{name!r}]", t, source, n_vertices)
-        for name, t in targets.items()
-    }
+    return frame, frame_name
 
-    world = _apply(frame, base)
-    lo, hi = world.min(axis=0), world.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    if np.linalg.norm(centre) <= _RECENTRE * max(float(np.max(hi - lo)), 1e-300):
-        centre = np.zeros(3)
-    local32 = (world - centre).astype(np.float32)
-    local = local32.astype(np.float64)  # what a reader sees; displacements are taken from it
-    buf = _BufferBuilder()
-    attributes = pygltflib.Attributes(
-        POSITION=buf.accessor(local32, "VEC3", _ARRAY_BUFFER, minmax=True)
-    )
-    base_normals = None
-    if normals:
-        base_normals = _vertex_normals(world, tri)
-        attributes.NORMAL = buf.accessor(base_normals, "VEC3", _ARRAY_BUFFER, minmax=False)
-    if uv is not None:
-        attributes.TEXCOORD_0 = buf.accessor(uv, "VEC2", _ARRAY_BUFFER, minmax=False)
-    indices = buf.accessor(tri.astype(np.uint32).ravel(), "SCALAR", _ELEMENT_ARRAY_BUFFER, True)
 
-    target_list = []
-    for t in checked.values():
-        moved = _apply(frame, t)
-        entry = pygltflib.Attributes(
-            POSITION=buf.accessor(
-                ((moved - centre) - local).astype(np.float32), "VEC3", _ARRAY_BUFFER, minmax=True
-            )
-        )
-        if normals:
-            delta = _vertex_normals(moved, tri) - base_normals
-            entry.NORMAL = buf.accessor(delta, "VEC3", _ARRAY_BUFFER, minmax=False)
-        target_list.append(entry)
-
-    frame_rows = [[float(x) for x in row] for row in frame]
-    frame_name = frame_name or "glTF frame: source_to_gltf applied to the source coordinates"
-    gltf = pygltflib.GLTF2(
-        asset=pygltflib.Asset(
-            version="2.0",
-            generator="scan2morph (pygltflib)",
-            extras={
-                "mesh_units": "m",
-                "source_units": "mm",
-                "frame": frame_name,
-                "source_to_gltf": frame_rows,
-            },
-        ),
-        scene=0,
-        scenes=[pygltflib.Scene(nodes=[0])],
-    )
+def _add_material(gltf, buf, texture, mesh_name: str, source: str) -> None:
+    """The mesh's one material: unlit-looking PBR, its texture embedded as PNG when given."""
     pbr = pygltflib.PbrMetallicRoughness(metallicFactor=0.0, roughnessFactor=1.0)
     if texture is not None:
         ok, png = cv2.imencode(".png", np.ascontiguousarray(texture[:, :, ::-1]))
@@ -335,21 +329,82 @@ def write_glb(
     gltf.materials = [
         pygltflib.Material(name=f"{mesh_name}_skin", pbrMetallicRoughness=pbr, doubleSided=True)
     ]
-    primitive = pygltflib.Primitive(
-        attributes=attributes,
-        indices=indices,
-        mode=pygltflib.TRIANGLES,
-        material=0,
-        targets=target_list,
+
+
+def _target(buf, moved, centre, local, tri, base_normals):
+    """One morph target's accessors: its displacement from the base (and its normals' change
+    when the base has normals)."""
+    entry = pygltflib.Attributes(
+        POSITION=buf.accessor(
+            ((moved - centre) - local).astype(np.float32), "VEC3", _ARRAY_BUFFER, minmax=True
+        )
     )
-    mesh = pygltflib.Mesh(name=mesh_name, primitives=[primitive])
-    if target_list:
-        mesh.weights = [0.0] * len(target_list)
-        mesh.extras = {"targetNames": list(checked)}
-        if notes:
-            mesh.extras["targetNotes"] = {k: str(notes[k]) for k in checked if k in notes}
-        if sigmas:
-            mesh.extras["targetSigmas"] = {k: sigmas[k] for k in checked if k in sigmas}
+    if base_normals is not None:
+        delta = _vertex_normals(moved, tri) - base_normals
+        entry.NORMAL = buf.accessor(delta, "VEC3", _ARRAY_BUFFER, minmax=False)
+    return entry
+
+
+def _centre(world: np.ndarray) -> np.ndarray:
+    """The node's translation: the bounding box's centre, or zero when the mesh is already
+    about the origin (within :data:`_RECENTRE` of its size)."""
+    lo, hi = world.min(axis=0), world.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    if np.linalg.norm(centre) <= _RECENTRE * max(float(np.max(hi - lo)), 1e-300):
+        centre = np.zeros(3)
+    return centre
+
+
+def _base_attributes(buf, local32, world, tri, uv, normals: bool):
+    """The base mesh's accessors: positions, normals (when asked), uv (when given), indices;
+    and the base normals (None without)."""
+    attributes = pygltflib.Attributes(
+        POSITION=buf.accessor(local32, "VEC3", _ARRAY_BUFFER, minmax=True)
+    )
+    base_normals = None
+    if normals:
+        base_normals = _vertex_normals(world, tri)
+        attributes.NORMAL = buf.accessor(base_normals, "VEC3", _ARRAY_BUFFER, minmax=False)
+    if uv is not None:
+        attributes.TEXCOORD_0 = buf.accessor(uv, "VEC2", _ARRAY_BUFFER, minmax=False)
+    indices = buf.accessor(tri.astype(np.uint32).ravel(), "SCALAR", _ELEMENT_ARRAY_BUFFER, True)
+    return attributes, indices, base_normals
+
+
+def _name_targets(mesh, names: list[str], notes: dict, sigmas: dict) -> None:
+    """The morph targets' zero weights and, in ``mesh.extras``, their names, notes and sigmas."""
+    if not names:
+        return
+    mesh.weights = [0.0] * len(names)
+    mesh.extras = {"targetNames": names}
+    if notes:
+        mesh.extras["targetNotes"] = {k: str(notes[k]) for k in names if k in notes}
+    if sigmas:
+        mesh.extras["targetSigmas"] = {k: sigmas[k] for k in names if k in sigmas}
+
+
+def _document(frame_rows: list, frame_name: str) -> pygltflib.GLTF2:
+    """The glTF document with its asset (units and the source frame) and one scene."""
+    gltf = pygltflib.GLTF2(
+        asset=pygltflib.Asset(
+            version="2.0",
+            generator="scan2morph (pygltflib)",
+            extras={
+                "mesh_units": "m",
+                "source_units": "mm",
+                "frame": frame_name,
+                "source_to_gltf": frame_rows,
+            },
+        ),
+        scene=0,
+        scenes=[pygltflib.Scene(nodes=[0])],
+    )
+    return gltf
+
+
+def _finish(gltf, buf, mesh, centre, frame_rows: list, frame_name: str) -> None:
+    """The mesh's node (translated to ``centre``), the accessors and the one binary buffer."""
+    mesh_name = mesh.name
     gltf.meshes = [mesh]
     node = pygltflib.Node(
         name=mesh_name,
@@ -364,8 +419,6 @@ def write_glb(
     buf.blob.extend(b"\x00" * (-len(buf.blob) % 4))
     gltf.buffers = [pygltflib.Buffer(byteLength=len(buf.blob))]
     gltf.set_binary_blob(bytes(buf.blob))
-    with writing(path):
-        gltf.save_binary(str(path))
 
 
 def _read_glb(path: Path) -> pygltflib.GLTF2:
