@@ -30,6 +30,7 @@ wildcard_constraints:
 include: "workflow/rules/synth.smk"
 include: "workflow/rules/ingest.smk"
 include: "workflow/rules/repair.smk"
+include: "workflow/rules/landmarks.smk"
 include: "workflow/rules/fit.smk"
 include: "workflow/rules/align.smk"
 include: "workflow/rules/refine.smk"

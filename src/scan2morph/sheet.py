@@ -36,21 +36,27 @@ COLUMNS = (
     "landmarks",
     "units",
 )
-REQUIRED = ("subject", "take", "kind", "label", "modality", "landmarks")
+REQUIRED = ("subject", "take", "kind", "label", "modality")
 KINDS = ("neutral", "viseme", "expression")
 MODALITIES = ("range", "stereo", "mesh", "rgbd")
 #: The file columns each modality needs.
 FILES = {
-    "range": ("xyz", "landmarks"),
-    "stereo": ("left", "right", "calibration", "landmarks"),
-    "mesh": ("mesh", "landmarks"),
-    "rgbd": ("depth", "color", "intrinsics", "landmarks"),
+    "range": ("xyz",),
+    "stereo": ("left", "right", "calibration"),
+    "mesh": ("mesh",),
+    "rgbd": ("depth", "color", "intrinsics"),
 }
-#: File columns a modality may have (used when not empty): a mesh's texture, when the mesh file
-#: does not reference one; a range scan's colour image (without it the take is geometry only).
-OPTIONAL_FILES = {"mesh": ("texture",), "range": ("color",)}
+#: File columns a modality may have (used when not empty): the landmarks (without them they are
+#: detected), a mesh's texture, when the mesh file does not reference one; a range scan's colour
+#: image (without it the take is geometry only).
+OPTIONAL_FILES = {
+    "range": ("color", "landmarks"),
+    "stereo": ("landmarks",),
+    "mesh": ("texture", "landmarks"),
+    "rgbd": ("landmarks",),
+}
 #: Every column that holds a file path (resolved against the sheet's folder).
-PATH_COLUMNS = tuple(c for c in COLUMNS if (c not in REQUIRED or c == "landmarks") and c != "units")
+PATH_COLUMNS = tuple(c for c in COLUMNS if c not in REQUIRED and c != "units")
 #: The ``units`` column: the unit of a take's coordinates -> mm per unit (empty: mm).
 UNITS = {"": 1.0, "mm": 1.0, "cm": 10.0, "m": 1000.0}
 #: Modalities whose coordinates the ``units`` column scales (the others carry their unit in
@@ -179,6 +185,7 @@ def synthetic_rows(
     stereo: dict | None = None,
     mesh: dict | None = None,
     rgbd: dict | None = None,
+    landmarks: str = "clicked",
 ) -> pd.DataFrame:
     """Rows of the synthetic cohort, whose files the synthetic rules write under ``root``.
 
@@ -200,6 +207,9 @@ def synthetic_rows(
     mesh, rgbd : dict, optional
         The same for textured mesh scans and RGB-D takes. A take listed for a subject under
         two modalities is an error.
+    landmarks : ``clicked`` or ``detect``
+        ``detect`` leaves the rows' ``landmarks`` empty, as a user's scans without landmark
+        files come (the generator still writes its clicks, which no job then reads).
 
     Returns
     -------
@@ -261,7 +271,7 @@ def synthetic_rows(
                     label=t["label"],
                     modality=modality,
                     **files,
-                    landmarks=pattern.format(stem=stem),
+                    landmarks=pattern.format(stem=stem) if landmarks == "clicked" else "",
                     units="",
                     sheet_row=0,
                     sheet="config: synthetic",

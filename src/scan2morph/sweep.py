@@ -27,13 +27,14 @@ from jsonschema import Draft202012Validator, validators
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
-from scan2morph.stages import accuracy, align, fit, motion, motion_noise, refine, repair
+from scan2morph.stages import accuracy, align, fit, landmarks, motion, motion_noise, refine, repair
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
 
 #: The stages a sweep can re-run, in pipeline order (the accuracy stage always follows).
 _MODULES = {
     "repair": repair,
+    "landmarks": landmarks,
     "fit": fit,
     "align": align,
     "refine": refine,

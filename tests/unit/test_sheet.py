@@ -107,7 +107,7 @@ def test_mesh_and_rgbd_rows(tmp_path):
         f"{path} row 5 (q/neutral): column 'intrinsics' is empty (a rgbd take needs it)"
     ]
     assert input_roles(sheet.loc[0]) == ["mesh", "landmarks"]
-    assert input_roles(sheet.loc[1]) == ["mesh", "landmarks", "texture"]
+    assert input_roles(sheet.loc[1]) == ["mesh", "texture", "landmarks"]
 
 
 def test_synthetic_mesh_and_rgbd_takes():

@@ -90,9 +90,10 @@ def test_semantic_takes_first_take_of_each_label():
 
 
 def test_sweep_stage_table_is_derived_from_the_stage_modules():
-    assert STAGES == ("repair", "fit", "align", "refine", "motion", "motion_noise")
+    assert STAGES == ("repair", "landmarks", "fit", "align", "refine", "motion", "motion_noise")
     assert SECTION_STAGE == {
         "repair": "repair",
+        "landmarks": "landmarks",
         "template": "fit",
         "align": "align",
         "refine": "refine",
@@ -108,7 +109,7 @@ def test_each_part_holds_the_datasets_its_stage_owns(tmp_path_factory):
     """Every dataset of a stage's part is written by that stage (paths.DATASETS), or passed on
     from an earlier one; and every dataset of the store comes from the part of its stage."""
     takes = [t["take"] for t in TAKES]
-    stages = ("ingest", "repair", "fit", "align", "refine")
+    stages = ("ingest", "repair", "landmarks", "fit", "align", "refine")
     parts = {f"takes/{t}/{s}.h5": s for t in takes for s in stages}
     parts |= {f"{s}.h5": s for s in ("motion", "motion_noise", "morph", "modal")}
     parts[f"{SUBJECT}.h5"] = "store"

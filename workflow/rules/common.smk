@@ -44,6 +44,7 @@ try:
         config["synthetic"]["stereo"],
         config["synthetic"]["mesh"],
         config["synthetic"]["rgbd"],
+        config["synthetic"]["landmarks"],
     )
     TAKES = take_table(SHEET, SYNTH)
 except InputError as _exc:

@@ -42,6 +42,7 @@ rule fit:
     """Fit the template mesh to one take's range image by TPS warp to the fiducials and subdivision; export it as OBJ."""
     input:
         part="results/{subject}/takes/{take}/repair.h5",
+        landmarks="results/{subject}/takes/{take}/landmarks.h5",
         template="resources/template.npz",
     output:
         part="results/{subject}/takes/{take}/fit.h5",

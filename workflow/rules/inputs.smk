@@ -129,10 +129,17 @@ def get_take_parts(stage):
 
 
 def get_noise_repairs(wildcards):
-    """The repair parts of the neutral and the visemes (the click-noise refits' data)."""
+    """The repair and landmarks parts of the neutral and the visemes (the click-noise refits'
+    data)."""
     takes = takes_of_kind(wildcards.subject, "neutral") + get_viseme_takes(wildcards)
-    return _take_files(
-        "results/{subject}/takes/{take}/repair.h5", wildcards.subject, takes
+    return sum(
+        (
+            _take_files(
+                f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
+            )
+            for stage in ("repair", "landmarks")
+        ),
+        [],
     )
 
 
@@ -175,7 +182,7 @@ def get_subject_parts(wildcards):
         _take_files(
             f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
         )
-        for stage in ("repair", "fit", "align", "refine")[: 4 if REFINE else 3]
+        for stage in ("repair", "landmarks", "fit", "align", "refine")[: 5 if REFINE else 4]
     ]
     per_subject = [
         f"results/{wildcards.subject}/{stage}.h5"

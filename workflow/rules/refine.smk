@@ -10,9 +10,9 @@ rule refine:
     input:
         take=expand(
             "results/{{subject}}/takes/{{take}}/{stage}.h5",
-            stage=("repair", "fit", "align"),
+            stage=("repair", "landmarks", "fit", "align"),
         ),
-        neutral=get_neutral_parts(("repair", "fit")),
+        neutral=get_neutral_parts(("repair", "landmarks", "fit")),
         template="resources/template.npz",
     output:
         part="results/{subject}/takes/{take}/refine.h5",

@@ -13,7 +13,8 @@ def main(snakemake):
         w, p, inp, out = snakemake.wildcards, snakemake.params, snakemake.input, snakemake.output
         params = fit.Params.from_config(p.template, p.kind)
         attrs = read_attrs(inp.part, paths.take(w.take))
-        template, data = load_template(inp.template), read_part(inp.part)
+        template = load_template(inp.template)
+        data = read_part(inp.part) | read_part(inp.landmarks)
         part = fit.run(template, w.take, data, attrs, params, f"{w.subject}/{w.take}")
         write_part(out.part, part.datasets, attrs=part.attrs)
         mesh = {k: part.datasets[paths.mesh(w.take, k)] for k in ("vertices", "uv", "valid")}
@@ -25,7 +26,7 @@ def main(snakemake):
         job,
         take=w.take,
         stage="fit",
-        inputs=[inp.part],
+        inputs=[inp.part, inp.landmarks],
         part=out.part,
         on_failure=lambda record: write_failed_obj(out.obj, str(record)),
     )

@@ -11,6 +11,10 @@ Format::
 
 iBUG coordinates are **1-based**: (1, 1) is the centre of the top-left pixel. Inside scan2morph
 pixel coordinates are 0-based ((0, 0) is that centre), so reading subtracts 1 and writing adds 1.
+
+A file holds the 68 iBUG points or the 51 inner-face ones (iBUG-68 without the jawline 1-17,
+as many datasets ship them); the readers return 68 rows either way, the jawline's rows NaN for a
+51-point file (the landmarks stage then detects them).
 """
 
 from __future__ import annotations
@@ -22,21 +26,61 @@ import numpy as np
 from scan2morph.errors import InputError, writing
 from scan2morph.tol import N_IBUG
 
+#: iBUG numbers (1-based) of the jawline, which a 51-point file leaves out.
+JAWLINE = tuple(range(1, 18))
+#: Point counts a landmark file may hold: iBUG-68, or its 51 inner-face points.
+ACCEPTED_COUNTS = (N_IBUG, N_IBUG - len(JAWLINE))
 
-def read_pts(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
+
+def count_problem(count: int, unit: str = "points") -> str:
+    """What is wrong with a landmark file of ``count`` points (``""`` when it is accepted)."""
+    if count in ACCEPTED_COUNTS:
+        return ""
+    return (
+        f"{count} {unit}; accepted: {ACCEPTED_COUNTS[0]} (iBUG-68) or {ACCEPTED_COUNTS[1]} "
+        f"(iBUG-68 without the jawline {JAWLINE[0]}-{JAWLINE[-1]})"
+    )
+
+
+def as_ibug68(points: np.ndarray) -> np.ndarray:
+    """68 rows from an accepted point set: a 51-point set gets NaN jawline rows in front.
+
+    Parameters
+    ----------
+    points : (68, d) or (51, d) float
+
+    Returns
+    -------
+    (68, d) float64
+    """
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) == N_IBUG:
+        return points
+    jaw = np.full((len(JAWLINE), points.shape[1]), np.nan)
+    return np.concatenate([jaw, points])
+
+
+def complete(points: np.ndarray) -> bool:
+    """True when every one of the 68 points is given (no NaN row)."""
+    return bool(np.isfinite(points).all())
+
+
+def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
     """Read an iBUG ``.pts`` file.
 
     Parameters
     ----------
     path : str or Path
         The file.
-    n_points : int
-        The number of points expected (68 for iBUG-68).
+    n_points : int, optional
+        The number of points expected; None accepts :data:`ACCEPTED_COUNTS` and returns 68
+        rows (:func:`as_ibug68`).
 
     Returns
     -------
-    points : (n_points, 2) float64
-        0-based pixel coordinates (x = column, y = row).
+    points : (68, 2) or (n_points, 2) float64
+        0-based pixel coordinates (x = column, y = row); NaN rows for the points a 51-point
+        file leaves out.
     """
     path = Path(path)
     if not path.is_file():
@@ -70,8 +114,10 @@ def read_pts(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
     body = lines[i + 1 : end]
     if len(body) != declared:
         raise InputError(path, f"n_points says {declared} but the list has {len(body)} points")
-    if declared != n_points:
-        raise InputError(path, f"n_points: expected {n_points} (iBUG-68), got {declared}")
+    if n_points is not None and declared != n_points:
+        raise InputError(path, f"n_points: expected {n_points}, got {declared}")
+    if n_points is None and (problem := count_problem(declared)):
+        raise InputError(path, f"n_points: {problem}")
     rows = []
     for k, line in enumerate(body):
         parts = line.split()
@@ -87,7 +133,7 @@ def read_pts(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
     if not np.all(np.isfinite(points)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(points), axis=1))[0]) + 1
         raise InputError(path, f"point {bad}: non-finite coordinate")
-    return points - 1.0
+    return points - 1.0 if n_points is not None else as_ibug68(points - 1.0)
 
 
 def write_pts(path: str | Path, points: np.ndarray) -> None:

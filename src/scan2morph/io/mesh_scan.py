@@ -13,8 +13,10 @@ shaded grey, lit from the camera) and the depth at
 every pixel centre, back-projected to XYZ in the **mesh's frame** (mm): an organised range
 image, pixel to pixel with the colour. The 68 3D landmarks are projected with the same camera.
 
-Landmark file: 68 lines ``x y z`` (iBUG-68 order, the mesh's frame and units); blank lines and
-lines starting with ``#`` are skipped.
+Landmark file (optional): 68 lines ``x y z`` (iBUG-68 order, the mesh's frame and units), or
+the 51 without the jawline; blank lines and lines starting with ``#`` are skipped. Without all
+68 the camera is found from the surface alone (:func:`~scan2morph.io.mesh_view.surface_camera`)
+and the landmarks stage detects the missing points on the render.
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ import numpy as np  # noqa: E402
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
-from scan2morph.io.mesh_view import face_view  # noqa: E402
+from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
+from scan2morph.io.mesh_view import face_view, surface_camera  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
     _UNITS,
@@ -41,7 +44,6 @@ from scan2morph.io.take import (  # noqa: E402
     check_face,
     check_landmarks_inside,
 )
-from scan2morph.tol import N_IBUG  # noqa: E402
 
 log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
@@ -185,17 +187,18 @@ def _unlit_texture(uv: np.ndarray, image):
     return trimesh.visual.TextureVisuals(uv=uv, material=material)
 
 
-def read_landmarks3d(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
-    """Read 3D landmarks: ``n_points`` lines ``x y z`` (``#`` comments and blank lines skipped).
+def read_landmarks3d(path: str | Path) -> np.ndarray:
+    """Read 3D landmarks: 68 (iBUG-68) or 51 (without the jawline) lines ``x y z`` (``#``
+    comments and blank lines skipped).
 
     Returns
     -------
-    (n_points, 3) float64
-        In the mesh's frame and units.
+    (68, 3) float64
+        In the mesh's frame and units; NaN rows for the jawline of a 51-point file.
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "file not found (expected 68 lines 'x y z' of 3D landmarks)")
+        raise InputError(path, "file not found (expected 68 or 51 lines 'x y z' of 3D landmarks)")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -215,9 +218,9 @@ def read_landmarks3d(path: str | Path, n_points: int = N_IBUG) -> np.ndarray:
         if len(values) != 3 or not np.isfinite(values).all():
             raise InputError(path, f"line {number}: expected 3 finite numbers, got {line[:40]!r}")
         rows.append(values)
-    if len(rows) != n_points:
-        raise InputError(path, f"expected {n_points} points (lines 'x y z'), got {len(rows)}")
-    return np.array(rows, dtype=np.float64)
+    if problem := count_problem(len(rows), "points (lines 'x y z')"):
+        raise InputError(path, f"got {problem}")
+    return as_ibug68(np.array(rows, dtype=np.float64))
 
 
 def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> None:
@@ -229,8 +232,10 @@ def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> None:
         o3d.core.Tensor(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
         o3d.core.Tensor(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
     )
-    res = scene.compute_closest_points(o3d.core.Tensor(lm3.astype(np.float32)))
-    dist = np.linalg.norm(res["points"].numpy() - lm3, axis=1)
+    given = np.flatnonzero(np.isfinite(lm3).all(axis=1))
+    res = scene.compute_closest_points(o3d.core.Tensor(lm3[given].astype(np.float32)))
+    dist = np.full(len(lm3), 0.0)
+    dist[given] = np.linalg.norm(res["points"].numpy() - lm3[given], axis=1)
     far = dist > MAX_LANDMARK_OFFSET_MM
     if far.any():
         k = int(np.argmax(dist))
@@ -326,6 +331,18 @@ def virtual_camera(
     return K, pose
 
 
+def _check_not_mirrored(lm3: np.ndarray, pose: np.ndarray, landmarks_path) -> None:
+    """Refuse 3D landmarks whose chin lies above the eyes in the landmark camera's image."""
+    eyes_to_chin = pose[1, :3] @ (lm3[8] - (lm3[36] + lm3[45]) / 2)
+    if eyes_to_chin < 0:  # the image is upside down: 37 -> 46 runs right to left on the face
+        raise InputError(
+            landmarks_path,
+            "landmarks: mirrored left/right (seen from the front of the face, iBUG 37 -> 46 "
+            "runs from the image's right to its left); iBUG 37 is the outer corner of the "
+            "subject's right eye",
+        )
+
+
 def colour_source(mesh) -> str:
     """Where a read mesh's rendered colour comes from: ``texture``, ``vertex colours`` or
     ``shading`` (geometry only: :func:`shade`)."""
@@ -404,7 +421,7 @@ def render_mesh(mesh, K: np.ndarray, pose: np.ndarray, size: tuple[int, int]):
 def read_mesh_take(
     mesh_path: str | Path,
     texture_path: str | Path | None,
-    landmarks_path: str | Path,
+    landmarks_path: str | Path | None,
     settings: dict | None = None,
     mm_per_unit: float = 1.0,
 ) -> MeshTake:
@@ -416,8 +433,10 @@ def read_mesh_take(
         OBJ / PLY / glTF / GLB, mm.
     texture_path : str or path-like or None
         A texture image for the mesh's UVs (the sheet's optional ``texture`` column).
-    landmarks_path : str or path-like
-        68 lines ``x y z`` in the mesh's frame and units.
+    landmarks_path : str or path-like or None
+        68 (or 51, without the jawline) lines ``x y z`` in the mesh's frame and units; None:
+        no landmarks (they are detected on the render). Without all 68, the camera is found
+        from the surface alone (:func:`~.mesh_view.surface_camera`).
     settings : dict, optional
         ``width``, ``height`` (px), ``distance_mm``, ``pixel_mm`` (None: automatic) and
         ``face_share`` of the virtual camera (defaults :data:`DEFAULT_MESH_CAMERA`).
@@ -430,7 +449,8 @@ def read_mesh_take(
     MeshTake
         ``xyz`` (H, W, 3) mm in the mesh's frame (scaled to mm), ``color`` (the texture or
         vertex colours, or for a geometry-only mesh its grey shading lit from the camera:
-        :func:`shade`), ``landmarks`` (68, 2) px, the camera (``K``, ``pose``, ``size``) and a
+        :func:`shade`), ``landmarks`` (68, 2) px (None without a landmark file; NaN rows for
+        the points a 51-point file leaves out), the camera (``K``, ``pose``, ``size``) and a
         ``report``.
 
     Raises
@@ -443,21 +463,18 @@ def read_mesh_take(
     """
     cfg = dict(DEFAULT_MESH_CAMERA) | dict(settings or {})
     mesh = read_mesh(mesh_path, texture_path)
-    lm3 = read_landmarks3d(landmarks_path) * mm_per_unit
     if mm_per_unit != 1.0:
         mesh.apply_scale(mm_per_unit)
-    _check_units(lm3, mesh_path)
-    _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
-    view = face_view(mesh, lm3[30], str(mesh_path))
-    K, pose = virtual_camera(lm3, view.direction, cfg)
-    eyes_to_chin = pose[1, :3] @ (lm3[8] - (lm3[36] + lm3[45]) / 2)
-    if eyes_to_chin < 0:  # the image is upside down: 37 -> 46 runs right to left on the face
-        raise InputError(
-            landmarks_path,
-            "landmarks: mirrored left/right (seen from the front of the face, iBUG 37 -> 46 "
-            "runs from the image's right to its left); iBUG 37 is the outer corner of the "
-            "subject's right eye",
-        )
+    lm3 = None if landmarks_path is None else read_landmarks3d(landmarks_path) * mm_per_unit
+    if lm3 is not None:
+        _check_units(lm3, mesh_path)
+        _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
+    view = face_view(mesh, None if lm3 is None else lm3[30], str(mesh_path))
+    if lm3 is not None and complete(lm3):
+        K, pose = virtual_camera(lm3, view.direction, cfg)
+        _check_not_mirrored(lm3, pose, landmarks_path)
+    else:
+        K, pose = surface_camera(np.asarray(mesh.vertices), view, cfg, str(mesh_path))
     size = (int(cfg["width"]), int(cfg["height"]))
     source = colour_source(mesh)
     if source == SHADED:
@@ -470,10 +487,13 @@ def read_mesh_take(
     color, depth = render_mesh(mesh, K, pose, size)
     xyz_cam = depth_points(np.nan_to_num(depth, nan=0.0), PinholeCamera(K, np.zeros(5), size))
     xyz = (xyz_cam - pose[:3, 3]) @ pose[:3, :3]  # camera -> mesh frame
-    lm_cam = lm3 @ pose[:3, :3].T + pose[:3, 3]
-    landmarks = lm_cam[:, :2] / lm_cam[:, 2:3] * np.diag(K)[:2] + K[:2, 2]
-    check_landmarks_inside(landmarks, *size, landmarks_path)
-    check_face(xyz, landmarks, mesh_path, landmarks_path)
+    landmarks = None
+    if lm3 is not None:
+        lm_cam = lm3 @ pose[:3, :3].T + pose[:3, 3]
+        landmarks = lm_cam[:, :2] / lm_cam[:, 2:3] * np.diag(K)[:2] + K[:2, 2]
+        check_landmarks_inside(landmarks, *size, landmarks_path)
+        if complete(landmarks):
+            check_face(xyz, landmarks, mesh_path, landmarks_path)
     report = {
         "n_vertices": int(len(mesh.vertices)),
         "n_faces": int(len(mesh.faces)),

@@ -45,7 +45,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.io.image import read_color
-from scan2morph.io.landmarks import read_pts
+from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.take import RangeTake, check_face, check_image_size, check_landmarks_inside
 
 #: Depth file suffixes.
@@ -350,7 +350,7 @@ def read_rgbd_take(
     depth_path: str | Path,
     color_path: str | Path,
     intrinsics_path: str | Path,
-    landmarks_path: str | Path,
+    landmarks_path: str | Path | None,
 ) -> RGBDTake:
     """Read an RGB-D take into a range take on the colour image's grid.
 
@@ -362,8 +362,8 @@ def read_rgbd_take(
         The colour image.
     intrinsics_path : str or path-like
         The sensor's intrinsics YAML (module docstring).
-    landmarks_path : str or path-like
-        iBUG 68-point ``.pts`` on the colour image.
+    landmarks_path : str or path-like or None
+        iBUG 68- (or 51-) point ``.pts`` on the colour image; None: no landmark file.
 
     Returns
     -------
@@ -399,9 +399,13 @@ def read_rgbd_take(
     valid = np.isfinite(depth) & (depth > 0)
     if not valid.any():
         raise InputError(depth_path, "depth: no pixel with data (all 0 or NaN)")
+    xyz = depth_to_color_grid(depth * intr.depth_scale_mm, intr)
+    if landmarks_path is None:
+        return RGBDTake(xyz=xyz, color=color, landmarks=None, intrinsics=intr)
     landmarks = read_pts(landmarks_path)
     check_landmarks_inside(landmarks, *intr.color.size, landmarks_path)
-    xyz = depth_to_color_grid(depth * intr.depth_scale_mm, intr)
+    if not complete(landmarks):  # the face is checked once the jawline is detected
+        return RGBDTake(xyz=xyz, color=color, landmarks=landmarks, intrinsics=intr)
     hint = f"; check depth_scale_mm = {intr.depth_scale_mm:g} in {Path(intrinsics_path).name}"
     try:
         check_face(xyz, landmarks, depth_path, landmarks_path, unit_hint=hint)

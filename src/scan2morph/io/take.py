@@ -40,23 +40,24 @@ class RangeTake:
         mm, NaN = no data, in the take's scanner frame.
     color : (H, W, 3) uint8 or None
         RGB, pixel to pixel with ``xyz``; None for a geometry-only scan.
-    landmarks : (68, 2) float64
-        0-based pixel coordinates.
+    landmarks : (68, 2) float64 or None
+        0-based pixel coordinates, NaN rows for points the file leaves out (a 51-point file's
+        jawline); None when the take has no landmark file (they are detected).
     """
 
     xyz: np.ndarray
     color: np.ndarray | None
-    landmarks: np.ndarray
+    landmarks: np.ndarray | None
 
 
 def read_range_take(
     xyz_path: str | Path,
     color_path: str | Path | None,
-    landmarks_path: str | Path,
+    landmarks_path: str | Path | None,
     loaded: Mapping[str, np.ndarray] | None = None,
 ) -> RangeTake:
     """Read a range take and check that its files agree (``color_path`` None: a geometry-only
-    scan, no colour image).
+    scan, no colour image; ``landmarks_path`` None: no landmark file).
 
     ``loaded`` holds files already read by their readers (sheet column -> array: ``xyz``,
     ``color``, ``landmarks``), which are then not read again.
@@ -81,9 +82,19 @@ def read_range_take(
         )
     if not np.isfinite(xyz).any():
         raise InputError(xyz_path, "xyz: no valid pixel in the range image")
-    landmarks = loaded["landmarks"] if "landmarks" in loaded else read_pts(landmarks_path)
-    check_landmarks_inside(landmarks, xyz.shape[1], xyz.shape[0], landmarks_path)
+    landmarks = _read_clicks(landmarks_path, loaded, xyz.shape[1], xyz.shape[0])
     return RangeTake(xyz=xyz, color=color, landmarks=landmarks)
+
+
+def _read_clicks(
+    path: str | Path | None, loaded: Mapping[str, np.ndarray], width: int, height: int
+) -> np.ndarray | None:
+    """A take's landmark file on its image (None without one), checked to lie on the image."""
+    if path is None:
+        return None
+    landmarks = loaded["landmarks"] if "landmarks" in loaded else read_pts(path)
+    check_landmarks_inside(landmarks, width, height, path)
+    return landmarks
 
 
 def check_landmarks_inside(
@@ -138,14 +149,14 @@ class StereoTake:
     left: np.ndarray
     right: np.ndarray
     calib: StereoCalibration
-    landmarks: np.ndarray
+    landmarks: np.ndarray | None
 
 
 def read_stereo_take(
     left_path: str | Path,
     right_path: str | Path,
     calibration_path: str | Path,
-    landmarks_path: str | Path,
+    landmarks_path: str | Path | None,
 ) -> StereoTake:
     """Read a stereo take and check that its files agree.
 
@@ -156,8 +167,8 @@ def read_stereo_take(
     calibration_path : str or path-like
         OpenCV FileStorage YAML with ``K1 D1 K2 D2 R T`` (mm), see
         :func:`~scan2morph.io.read_stereo_calibration`.
-    landmarks_path : str or path-like
-        iBUG 68-point ``.pts`` on the raw left image.
+    landmarks_path : str or path-like or None
+        iBUG 68- (or 51-) point ``.pts`` on the raw left image; None: no landmark file.
 
     Returns
     -------
@@ -190,8 +201,7 @@ def read_stereo_take(
             f"image_width/image_height: {calib.image_size[0]}x{calib.image_size[1]} but the "
             f"images are {w}x{h} (WxH); is this the calibration of this camera pair?",
         )
-    landmarks = read_pts(landmarks_path)
-    check_landmarks_inside(landmarks, w, h, landmarks_path)
+    landmarks = _read_clicks(landmarks_path, {}, w, h)
     return StereoTake(left=left, right=right, calib=calib, landmarks=landmarks)
 
 

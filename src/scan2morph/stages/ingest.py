@@ -1,9 +1,11 @@
-"""Ingest: one take's input files -> its range image, colour and landmarks on one pixel grid.
+"""Ingest: one take's input files -> its range image, colour and clicked landmarks on one grid.
 
 A range take is read as it is; a stereo take is reconstructed into the range image of its left
 camera; an RGB-D take's depth is resampled onto its colour camera's grid
 (:mod:`scan2morph.io.rgbd`); a mesh take is rendered through a virtual pinhole camera
-(:mod:`scan2morph.io.mesh_scan`). The part records the sheet row, a checksum of every input file
+(:mod:`scan2morph.io.mesh_scan`). A take's landmark file is optional: its points (``clicks``,
+NaN rows for the points a 51-point file leaves out) are written when given; the landmarks stage
+completes or detects them. The part records the sheet row, a checksum of every input file
 and the camera of the take's pixel grid (``/takes/{take}/camera/*``).
 """
 
@@ -23,6 +25,7 @@ from scan2morph.io import (
     read_range_take,
     read_stereo_take,
 )
+from scan2morph.io.landmarks import complete
 from scan2morph.io.mesh_scan import SHADED, read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
@@ -67,9 +70,10 @@ def run(
     Returns
     -------
     Part
-        ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8, ``landmarks`` (68, 2) px and
-        ``camera/*`` of the take; the take group's attributes hold the row, input checksums,
-        ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`) and ``grey_color``.
+        ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8, ``clicks`` (68, 2) px (when
+        the take has a landmark file) and ``camera/*`` of the take; the take group's attributes
+        hold the row, input checksums, ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`,
+        with all 68 clicked points) and ``grey_color``.
 
     Raises
     ------
@@ -82,7 +86,9 @@ def run(
     scan = _READERS[modality](files, row, stereo, mesh_camera)
     attrs = {k: row[k] for k in ("kind", "label", "modality")} | scan.attrs
     first = FILES[modality][0]
-    attrs["nose_depth_mm"] = check_handedness(scan.xyz, scan.landmarks, files.get(first, first))
+    if scan.landmarks is not None and complete(scan.landmarks):
+        attrs["nose_depth_mm"] = check_handedness(scan.xyz, scan.landmarks, files.get(first, first))
+    clicks = {} if scan.landmarks is None else {paths.clicks(take): scan.landmarks}
     # a geometry-only mesh is shaded grey on purpose (its own warning says so)
     shaded = scan.camera.get("color_source") == "shading"
     attrs["grey_color"] = bool(_grey(scan.color)) and not shaded
@@ -92,7 +98,7 @@ def run(
         {
             paths.raw(take, "xyz"): scan.xyz,
             paths.raw(take, "color"): scan.color,
-            paths.landmarks(take): scan.landmarks,
+            **clicks,
             **{paths.camera(take, k): _dataset(v) for k, v in provenance.items()},
         },
         attrs={paths.take(take): attrs},
@@ -104,13 +110,15 @@ class _Scan(NamedTuple):
 
     xyz: np.ndarray
     color: np.ndarray
-    landmarks: np.ndarray
+    landmarks: np.ndarray | None
     camera: dict = {}
     attrs: dict = {}
 
 
 def _read_rgbd(files, row, stereo, mesh_camera) -> _Scan:
-    scan = read_rgbd_take(files["depth"], files["color"], files["intrinsics"], files["landmarks"])
+    scan = read_rgbd_take(
+        files["depth"], files["color"], files["intrinsics"], files.get("landmarks")
+    )
     cam = scan.intrinsics.color
     camera = dict(K=cam.K, distortion=cam.D, pose=scan.intrinsics.color_from_depth, size=cam.size)
     return _Scan(scan.xyz, scan.color, scan.landmarks, camera)
@@ -120,7 +128,7 @@ def _read_mesh(files, row, stereo, mesh_camera) -> _Scan:
     scan = read_mesh_take(
         files["mesh"],
         files.get("texture") or None,
-        files["landmarks"],
+        files.get("landmarks"),
         dict(mesh_camera or {}),
         mm_per_unit(row),
     )
@@ -135,9 +143,10 @@ def _read_mesh(files, row, stereo, mesh_camera) -> _Scan:
 
 
 def _read_range(files, row, stereo, mesh_camera) -> _Scan:
-    scan = read_range_take(files["xyz"], files.get("color"), files["landmarks"])
+    scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"))
     xyz = scan.xyz * mm_per_unit(row)
-    check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"])
+    if scan.landmarks is not None and complete(scan.landmarks):
+        check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"])
     if scan.color is not None:
         return _Scan(xyz, scan.color, scan.landmarks)
     log.warning(
@@ -149,7 +158,9 @@ def _read_range(files, row, stereo, mesh_camera) -> _Scan:
 
 
 def _read_stereo(files, row, stereo, mesh_camera) -> _Scan:
-    pair = read_stereo_take(files["left"], files["right"], files["calibration"], files["landmarks"])
+    pair = read_stereo_take(
+        files["left"], files["right"], files["calibration"], files.get("landmarks")
+    )
     source = f"{files['left']}, {files['right']}"
     try:
         xyz, report = reconstruct_stereo(
@@ -161,6 +172,8 @@ def _read_stereo(files, row, stereo, mesh_camera) -> _Scan:
             raise InputError(exc.source, f"{exc.problem}; {hint}") from None
         raise
     log.info("%s: stereo %s", row["take"], report)
+    if pair.landmarks is None or not complete(pair.landmarks):
+        return _Scan(xyz, pair.left, pair.landmarks, {}, {"stereo": report})
     check_face(
         xyz,
         pair.landmarks,

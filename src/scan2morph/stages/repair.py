@@ -26,7 +26,7 @@ def run(
     ----------
     take : str
     data : mapping store path -> array
-        The take's ingest part (``raw/xyz``, ``raw/color``, ``landmarks``).
+        The take's ingest part (``raw/xyz``, ``raw/color``, ``clicks`` when given).
     attrs : mapping
         The take group's attributes so far (kept, with the repair report added); ``modality``
         ``rgbd`` marks depth-camera data.
@@ -39,7 +39,7 @@ def run(
     -------
     Part
         ``range/xyz`` (float32, mm), ``range/color``, ``range/spikes``, ``range/filled``,
-        ``landmarks`` and the ``camera/*`` provenance; ``files["report"]`` is the repair report (counts, holes filled and left).
+        ``clicks`` (when given) and the ``camera/*`` provenance; ``files["report"]`` is the repair report (counts, holes filled and left).
     """
     xyz, report = repair_range(
         need(data, paths.raw(take, "xyz"), source),
@@ -56,7 +56,7 @@ def run(
             paths.range_image(take, "color"): need(data, paths.raw(take, "color"), source),
             paths.range_image(take, "spikes"): spikes,
             paths.range_image(take, "filled"): filled,
-            paths.landmarks(take): need(data, paths.landmarks(take), source),
+            **{k: data[k] for k in (paths.clicks(take),) if k in data},
             **camera_datasets(data, take),
         },
         attrs={paths.take(take): dict(attrs) | {"repair": report}},

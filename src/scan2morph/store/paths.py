@@ -19,6 +19,7 @@ from collections.abc import Iterable
 STAGES = (
     "ingest",
     "repair",
+    "landmarks",
     "fit",
     "align",
     "refine",
@@ -33,7 +34,8 @@ STAGES = (
 _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/takes/{take}/raw", "ingest", ("xyz", "color")),
     ("/takes/{take}/range", "repair", ("xyz", "color", "spikes", "filled")),
-    ("/takes/{take}", "ingest", ("landmarks",)),
+    ("/takes/{take}", "ingest", ("clicks",)),
+    ("/takes/{take}", "landmarks", ("landmarks", "landmark_confidence")),
     (
         "/takes/{take}/camera",
         "ingest",
@@ -167,8 +169,20 @@ def range_image(take_id: str, name: str) -> str:
 
 
 def landmarks(take_id: str) -> str:
-    """A take's iBUG-68 landmarks (68, 2), 0-based pixels."""
+    """A take's iBUG-68 landmarks (68, 2), 0-based pixels: the points the fit uses (clicked,
+    detected or both; the dataset's attributes say which)."""
     return _build("/takes/{take}", "landmarks", take=take_id)
+
+
+def landmark_confidence(take_id: str) -> str:
+    """The detector's confidence (68,) in [0, 1] of each detected landmark (NaN: clicked)."""
+    return _build("/takes/{take}", "landmark_confidence", take=take_id)
+
+
+def clicks(take_id: str) -> str:
+    """A take's landmarks as its landmark file gives them (68, 2), 0-based pixels; NaN rows for
+    the points a 51-point file leaves out. Absent for a take without a landmark file."""
+    return _build("/takes/{take}", "clicks", take=take_id)
 
 
 def camera(take_id: str, name: str) -> str:

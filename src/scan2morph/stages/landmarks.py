@@ -1,0 +1,182 @@
+"""Landmarks: the 68 iBUG points a take's template fit uses, clicked or detected.
+
+A take whose landmark file gives all 68 points keeps them (``source`` ``clicked``). A take
+without a landmark file has them detected on its repaired grid (:mod:`scan2morph.landmarks`:
+``detected``); a 51-point file (iBUG-68 without the jawline) keeps its points and gets the
+jawline detected (``clicked+detected jawline``). Detected points carry the detector's per-point
+confidence, its name and version, and are checked as clicked ones are at ingest (a plausible,
+frontal, right-handed face). A detection whose confidence is low is *doubtful*: the take is
+still used, with a warning at the top of the report and in ``accuracy.json``.
+
+Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) that a
+user can correct and give back in the sheet's ``landmarks`` column.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from scan2morph.io import check_face, check_handedness
+from scan2morph.io.landmarks import JAWLINE, complete
+from scan2morph.stages.part import Part, Run, Take, need
+from scan2morph.store import paths
+
+#: Config sections this stage reads.
+SECTIONS = ("landmarks",)
+#: ``source`` of a take's landmarks.
+CLICKED, DETECTED, JAWLINE_DETECTED = "clicked", "detected", "clicked+detected jawline"
+
+
+@dataclass(frozen=True)
+class Params:
+    """The landmarks stage's parameters (config section ``landmarks``).
+
+    Attributes
+    ----------
+    min_confidence : float
+        A detection whose median confidence over the points it placed falls below this is
+        doubtful (a warning), in [0, 1].
+    """
+
+    min_confidence: float = 0.5
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        section = dict(config.get("landmarks") or {})
+        return cls(min_confidence=float(section.get("min_confidence", cls.min_confidence)))
+
+
+@dataclass(frozen=True)
+class Landmarks:
+    """A take's landmarks as the stage settles them.
+
+    Attributes
+    ----------
+    points : (68, 2) float64
+        0-based pixels on the take's grid.
+    source : str
+        :data:`CLICKED`, :data:`DETECTED` or :data:`JAWLINE_DETECTED`.
+    confidence : (68,) float64 or None
+        The detector's confidence per point (NaN for clicked points); None when all are clicked.
+    detector, version : str
+        The detector's name and version (empty when all are clicked).
+    """
+
+    points: np.ndarray
+    source: str
+    confidence: np.ndarray | None = None
+    detector: str = ""
+    version: str = ""
+
+    def doubtful(self, min_confidence: float) -> str:
+        """Why the detection is doubtful (``""`` when it is not or nothing was detected)."""
+        if self.confidence is None:
+            return ""
+        placed = self.confidence[np.isfinite(self.confidence)]
+        median = float(np.median(placed))
+        if median >= min_confidence:
+            return ""
+        return (
+            f"the detected landmarks are doubtful: median confidence {median:.2f} below "
+            f"{min_confidence:g} (landmarks.min_confidence); check them in the report and give "
+            "corrected ones in the sheet's landmarks column"
+        )
+
+
+def settle(clicks: np.ndarray | None, color: np.ndarray, xyz: np.ndarray, source: str) -> Landmarks:
+    """The take's 68 landmarks from its clicks, completed or replaced by detection.
+
+    Parameters
+    ----------
+    clicks : (68, 2) float or None
+        The landmark file's points (NaN rows for a 51-point file's jawline), None without one.
+    color : (H, W, 3) uint8
+        The take's colour image on its grid.
+    xyz : (H, W, 3) float
+        The take's repaired range image, mm, NaN where there is no surface.
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    Landmarks
+
+    Raises
+    ------
+    InputError
+        From the detector (no face, several faces, a face too small, a profile view); detected
+        landmarks that fail the face checks of :func:`~scan2morph.io.check_face`.
+    """
+    if clicks is not None and complete(clicks):
+        return Landmarks(np.asarray(clicks, dtype=np.float64), CLICKED)
+    from scan2morph.landmarks import complete_jawline, detect
+
+    if clicks is None:
+        found = detect(color, xyz, source)
+        out = Landmarks(found.points, DETECTED, found.confidence, found.detector, found.version)
+    else:
+        jaw = np.asarray(JAWLINE) - 1
+        completed = complete_jawline(np.delete(clicks, jaw, axis=0), color, xyz, source)
+        confidence = np.full(len(clicks), np.nan)
+        confidence[jaw] = completed.confidence[jaw]
+        points = np.where(np.isfinite(clicks), clicks, completed.points)
+        out = Landmarks(points, JAWLINE_DETECTED, confidence, completed.detector, completed.version)
+    check_face(xyz, out.points, source, f"{source} (detected landmarks)")
+    return out
+
+
+def run(template, take: Take, params: Params) -> Part:
+    """Settle one take's landmarks.
+
+    Parameters
+    ----------
+    template : Template or None
+        Unused (the per-take stages' one shape).
+    take : Take
+        ``data``: the take's repair part (``range/xyz``, ``range/color``, ``clicks`` when
+        given).
+    params : Params
+
+    Returns
+    -------
+    Part
+        ``landmarks`` (68, 2) px with attributes ``source``, ``detector``,
+        ``detector_version`` and ``doubtful``; ``landmark_confidence`` (68,) when any point
+        was detected; the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
+        ``files["pts"]`` the points for the ``.pts`` file.
+    """
+    t, data = take.take, take.data
+    xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
+    color = need(data, paths.range_image(t, "color"), take.source)
+    found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
+    datasets = {paths.landmarks(t): found.points}
+    if found.confidence is not None:
+        datasets[paths.landmark_confidence(t)] = found.confidence
+    nose_depth = check_handedness(xyz, found.points, take.source)
+    info = {
+        "source": found.source,
+        "detector": found.detector,
+        "detector_version": found.version,
+        "doubtful": found.doubtful(params.min_confidence),
+    }
+    return Part(
+        datasets,
+        attrs={paths.landmarks(t): info, paths.take(t): {"nose_depth_mm": nose_depth}},
+        files={"pts": found.points},
+    )
+
+
+def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
+    """Every take of a subject (:class:`~scan2morph.stages.part.Run`)."""
+    params = Params.from_config(run_.config)
+    out = {}
+    for t in run_.subject.kinds:
+        take = Take.of(run_.subject, t, data=data)
+        out |= run(run_.template, take, params).datasets
+    return out
+
+
+__all__ = ["CLICKED", "DETECTED", "JAWLINE_DETECTED", "Landmarks", "Params", "run", "settle"]
