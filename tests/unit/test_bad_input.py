@@ -416,10 +416,8 @@ def test_an_empty_cell_fails_only_its_subject(tmp_path):
     sheet.write_text(HEADER + "bob\tn\tneutral\t\trange\ta.abs\ta.png\t\t\t\t\n")
     problems = subject_problems(read_sheet(sheet), schema=ROOT / "schemas" / "sheet.schema.yaml")
     assert problems["bob"][:1] == [f"{sheet} row 2 (bob/n): column 'label': empty"]
-    assert (
-        f"{sheet} row 2 (bob/n): column 'landmarks' is empty (a range take needs it)"
-        in problems["bob"]
-    )
+    # an empty landmarks cell is no problem: that take's landmarks are detected
+    assert not [p for p in problems["bob"] if "'landmarks'" in p]
 
 
 def test_a_bad_config_key_stops_snakemake_in_a_few_lines(tmp_path):

@@ -16,7 +16,7 @@ from pathlib import Path
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import read_stereo_calibration
 from scan2morph.io.image import read_color
-from scan2morph.io.landmarks import read_pts
+from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh
 from scan2morph.io.range_image import read_range
 from scan2morph.io.rgbd import read_depth, read_rgbd_intrinsics
@@ -81,11 +81,13 @@ def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping
     """The checks between a take's files (sizes, landmarks inside the image, units), on the
     files as their readers ``loaded`` them (a range scan is parsed once)."""
     if modality == "range":
-        scan = read_range_take(files["xyz"], files.get("color"), files["landmarks"], loaded)
-        check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
-        check_handedness(scan.xyz, scan.landmarks, files["xyz"])
+        scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"), loaded)
+        if scan.landmarks is not None and complete(scan.landmarks):  # else checked once detected
+            check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
+            check_handedness(scan.xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":
-        read_stereo_take(files["left"], files["right"], files["calibration"], files["landmarks"])
+        landmarks = files.get("landmarks")
+        read_stereo_take(files["left"], files["right"], files["calibration"], landmarks)
 
 
 __all__ = ["READERS", "take_file_problems"]

@@ -256,13 +256,34 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         ax.imshow(color, interpolation="bilinear")
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
-        ax.scatter(marks[:, 0], marks[:, 1], s=5, c="red", edgecolors="none")
-        note = f"{modality}, {shown}" if shown else modality
-        ax.set_title(f"{take} ({note})", fontsize=8)
+        _landmark_dots(ax, marks, store.get(paths.landmark_confidence(take)))
+        source = _text(store, paths.landmark_info(take, "source"), "clicked")
+        doubtful = _text(store, paths.landmark_info(take, "doubtful"), "")
+        note = ", ".join(n for n in (modality, shown, source, "DOUBTFUL" if doubtful else "") if n)
+        ax.set_title(f"{take} ({note})", fontsize=8, color="darkred" if doubtful else "black")
     fig.suptitle(
-        "Each take's image and landmarks (mesh takes: rendered by the virtual camera)", fontsize=10
+        "Each take's image and landmarks (mesh takes: rendered by the virtual camera); clicked "
+        "points red, detected ones coloured by confidence (yellow high, purple low)",
+        fontsize=9,
     )
     return fig
+
+
+def _landmark_dots(ax, marks: np.ndarray, confidence: np.ndarray | None) -> None:
+    """Clicked points red; detected ones (finite ``confidence``) coloured by their confidence."""
+    conf = np.full(len(marks), np.nan) if confidence is None else np.asarray(confidence, float)
+    clicked = ~np.isfinite(conf)
+    ax.scatter(*marks[clicked].T, s=5, c="red", edgecolors="none")
+    if (~clicked).any():
+        ax.scatter(
+            *marks[~clicked].T,
+            s=6,
+            c=conf[~clicked],
+            cmap="plasma",
+            vmin=0.0,
+            vmax=1.0,
+            edgecolors="none",
+        )
 
 
 #: Panels per row of :func:`fig_takes`.

@@ -6,12 +6,14 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from scan2morph.evaluate.landmarks import landmark_summary, take_landmarks
 from scan2morph.evaluate.subject import subject_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.stages.failure import failures, usable
 from scan2morph.stages.fit import fiducial_set
 from scan2morph.stages.part import Subject
 from scan2morph.stages.quality import modelled, read_warnings
+from scan2morph.store import paths
 from scan2morph.template import Template
 
 #: Config sections this stage reads (the fit's and the smoothing's, for the ideal motion).
@@ -44,7 +46,8 @@ def run(
         :func:`scan2morph.evaluate.subject.subject_accuracy`'s report, with the store's
         ``warnings`` (one line each; a take left out of the models has no motion entry) and
         ``failed_takes`` (take -> ``stage`` and ``reason``: the takes left out of the subject,
-        :mod:`scan2morph.stages.failure`, measured nowhere else).
+        :mod:`scan2morph.stages.failure`, measured nowhere else); each take's ``landmarks``
+        against the truth (:func:`~scan2morph.evaluate.landmarks.take_landmarks`).
     """
     section = config["template"]
     left_out = failures(store)
@@ -62,7 +65,22 @@ def run(
         max_slope_deg=section["max_slope_deg"],
         expressions=kept.expressions,
     )
+    sources = {
+        t: _text(store[paths.landmark_info(t, "source")])
+        for t in truths
+        if paths.landmark_info(t, "source") in store
+    }
+    errors = take_landmarks(store, truths, sources)
+    for t, entry in errors.items():
+        report["takes"][t]["landmarks"] = entry
+    report["summary"] |= landmark_summary(errors)
     return report | {
         "warnings": [str(w) for w in read_warnings(store)],
         "failed_takes": {t: {"stage": f.stage, "reason": f.reason} for t, f in left_out.items()},
     }
+
+
+def _text(value) -> str:
+    """A string dataset as read from a part or store (bytes or str)."""
+    value = value.item() if hasattr(value, "item") else value
+    return value.decode() if isinstance(value, bytes) else str(value)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.io import check_face, check_handedness
-from scan2morph.io.landmarks import JAWLINE, complete
+from scan2morph.io.landmarks import complete
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 
@@ -60,7 +60,8 @@ class Landmarks:
     source : str
         :data:`CLICKED`, :data:`DETECTED` or :data:`JAWLINE_DETECTED`.
     confidence : (68,) float64 or None
-        The detector's confidence per point (NaN for clicked points); None when all are clicked.
+        The detector's confidence per point; None when no point was detected with one (all
+        clicked, or a 51-point file's jawline, which is placed on the clicked points).
     detector, version : str
         The detector's name and version (empty when all are clicked).
     """
@@ -75,8 +76,7 @@ class Landmarks:
         """Why the detection is doubtful (``""`` when it is not or nothing was detected)."""
         if self.confidence is None:
             return ""
-        placed = self.confidence[np.isfinite(self.confidence)]
-        median = float(np.median(placed))
+        median = float(np.median(self.confidence))
         if median >= min_confidence:
             return ""
         return (
@@ -112,18 +112,16 @@ def settle(clicks: np.ndarray | None, color: np.ndarray, xyz: np.ndarray, source
     """
     if clicks is not None and complete(clicks):
         return Landmarks(np.asarray(clicks, dtype=np.float64), CLICKED)
-    from scan2morph.landmarks import complete_jawline, detect
+    from scan2morph.landmarks import DETECTOR, complete_jawline, detect
 
     if clicks is None:
         found = detect(color, xyz, source)
         out = Landmarks(found.points, DETECTED, found.confidence, found.detector, found.version)
     else:
-        jaw = np.asarray(JAWLINE) - 1
-        completed = complete_jawline(np.delete(clicks, jaw, axis=0), color, xyz, source)
-        confidence = np.full(len(clicks), np.nan)
-        confidence[jaw] = completed.confidence[jaw]
-        points = np.where(np.isfinite(clicks), clicks, completed.points)
-        out = Landmarks(points, JAWLINE_DETECTED, confidence, completed.detector, completed.version)
+        given = np.isfinite(clicks).all(axis=1)
+        points = complete_jawline(clicks[given], color, xyz, source)
+        points = np.where(given[:, None], clicks, points)
+        out = Landmarks(points, JAWLINE_DETECTED, detector=DETECTOR)
     check_face(xyz, out.points, source, f"{source} (detected landmarks)")
     return out
 
@@ -143,28 +141,27 @@ def run(template, take: Take, params: Params) -> Part:
     Returns
     -------
     Part
-        ``landmarks`` (68, 2) px with attributes ``source``, ``detector``,
-        ``detector_version`` and ``doubtful``; ``landmark_confidence`` (68,) when any point
-        was detected; the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
+        ``landmarks`` (68, 2) px, ``landmark_source``, ``landmark_detector`` and
+        ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
+        ``landmark_confidence`` (68,) when any point was detected; the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
         ``files["pts"]`` the points for the ``.pts`` file.
     """
     t, data = take.take, take.data
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
     color = need(data, paths.range_image(t, "color"), take.source)
     found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
-    datasets = {paths.landmarks(t): found.points}
+    datasets = {
+        paths.landmarks(t): found.points,
+        paths.landmark_info(t, "source"): found.source,
+        paths.landmark_info(t, "detector"): f"{found.detector} {found.version}".strip(),
+        paths.landmark_info(t, "doubtful"): found.doubtful(params.min_confidence),
+    }
     if found.confidence is not None:
         datasets[paths.landmark_confidence(t)] = found.confidence
     nose_depth = check_handedness(xyz, found.points, take.source)
-    info = {
-        "source": found.source,
-        "detector": found.detector,
-        "detector_version": found.version,
-        "doubtful": found.doubtful(params.min_confidence),
-    }
     return Part(
         datasets,
-        attrs={paths.landmarks(t): info, paths.take(t): {"nose_depth_mm": nose_depth}},
+        attrs={paths.take(t): {"nose_depth_mm": nose_depth}},
         files={"pts": found.points},
     )
 

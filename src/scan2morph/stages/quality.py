@@ -94,6 +94,10 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             )
             out.append(Warning("align", take, f"{'; '.join(problems)}: {fate}"))
     for take in takes:
+        doubtful = h5.get(paths.landmark_info(take, "doubtful"))
+        if doubtful is not None and doubtful.asstr()[()]:
+            out.append(Warning("landmarks", take, doubtful.asstr()[()]))
+    for take in takes:
         group = h5.get(paths.refine_group(take))
         problem = group.attrs.get("problem", "") if group is not None else ""
         if problem:

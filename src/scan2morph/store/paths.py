@@ -35,7 +35,17 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/takes/{take}/raw", "ingest", ("xyz", "color")),
     ("/takes/{take}/range", "repair", ("xyz", "color", "spikes", "filled")),
     ("/takes/{take}", "ingest", ("clicks",)),
-    ("/takes/{take}", "landmarks", ("landmarks", "landmark_confidence")),
+    (
+        "/takes/{take}",
+        "landmarks",
+        (
+            "landmarks",
+            "landmark_confidence",
+            "landmark_source",
+            "landmark_detector",
+            "landmark_doubtful",
+        ),
+    ),
     (
         "/takes/{take}/camera",
         "ingest",
@@ -177,6 +187,13 @@ def landmarks(take_id: str) -> str:
 def landmark_confidence(take_id: str) -> str:
     """The detector's confidence (68,) in [0, 1] of each detected landmark (NaN: clicked)."""
     return _build("/takes/{take}", "landmark_confidence", take=take_id)
+
+
+def landmark_info(take_id: str, name: str) -> str:
+    """What a take's landmarks are: ``source`` (``clicked``, ``detected`` or ``clicked+detected
+    jawline``), ``detector`` (its name and version; empty when all are clicked) and ``doubtful``
+    (why the detection is doubtful; empty when it is not)."""
+    return _build("/takes/{take}", f"landmark_{name}", take=take_id)
 
 
 def clicks(take_id: str) -> str:

@@ -1,0 +1,169 @@
+"""Optional landmark files: a sheet without them, 51-point files, a mesh take without them
+(its camera found from the surface alone), and the counts that are refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scan2morph.errors import InputError
+from scan2morph.io import read_pts, write_pts
+from scan2morph.io.landmarks import JAWLINE, as_ibug68, complete
+from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh_take
+from scan2morph.sheet import input_roles, read_sheet, subject_problems, synthetic_rows
+from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d, write_mesh_take
+
+TINY_CAMERA = dict(width=320, height=240)
+JAW = np.asarray(JAWLINE) - 1
+
+
+def _points(n: int) -> np.ndarray:
+    rng = np.random.default_rng(n)
+    return rng.uniform(10, 300, size=(n, 2))
+
+
+def test_a_51_point_pts_file_gives_68_rows_with_the_jawline_missing(tmp_path):
+    inner = _points(51)
+    write_pts(tmp_path / "inner.pts", inner)
+    got = read_pts(tmp_path / "inner.pts")
+    assert got.shape == (68, 2)
+    assert np.isnan(got[JAW]).all()
+    np.testing.assert_allclose(got[17:], inner, atol=1e-4)
+    assert not complete(got)
+    write_pts(tmp_path / "all.pts", _points(68))
+    assert complete(read_pts(tmp_path / "all.pts"))
+
+
+@pytest.mark.parametrize("count", [0, 17, 50, 52, 67, 69, 98])
+def test_other_counts_are_refused_naming_the_accepted_ones(tmp_path, count):
+    write_pts(tmp_path / "bad.pts", _points(count)) if count else None
+    if not count:
+        (tmp_path / "bad.pts").write_text("version: 1\nn_points: 0\n{\n}\n")
+    with pytest.raises(InputError, match=r"bad\.pts: n_points: .* accepted: 68 \(iBUG-68\) or 51"):
+        read_pts(tmp_path / "bad.pts")
+    lines = "\n".join(f"{x} {y} 1.0" for x, y in _points(count)) + "\n"
+    (tmp_path / "bad.txt").write_text("# x y z\n" + lines)
+    with pytest.raises(InputError, match=r"bad\.txt: got .* accepted: 68 \(iBUG-68\) or 51"):
+        read_landmarks3d(tmp_path / "bad.txt")
+
+
+def test_as_ibug68_keeps_a_full_set_and_pads_an_inner_one():
+    full = _points(68)
+    assert as_ibug68(full) is not None and np.array_equal(as_ibug68(full), full)
+    padded = as_ibug68(_points(51))
+    assert padded.shape == (68, 2) and np.isnan(padded[:17]).all()
+    assert np.isfinite(padded[17:]).all()
+
+
+def _sheet(tmp_path, header: str, rows: list[str]):
+    for name in ("n.abs", "n.png", "n.pts", "c.abs", "c.png"):
+        (tmp_path / name).write_text("x")
+    path = tmp_path / "sheet.tsv"
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def test_a_sheet_without_a_landmarks_column_reads_and_has_no_problem(tmp_path):
+    path = _sheet(
+        tmp_path,
+        "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor",
+        ["s\tn\tneutral\tneutral\trange\tn.abs\tn.png", "s\tc\tviseme\tcar\trange\tc.abs\tc.png"],
+    )
+    sheet = read_sheet(path)
+    assert list(sheet["landmarks"]) == ["", ""]
+    assert subject_problems(sheet) == {"s": []}
+    assert input_roles(sheet.loc[0]) == ["xyz", "color"]
+
+
+def test_a_mixed_sheet_keeps_its_clicks_where_given(tmp_path):
+    path = _sheet(
+        tmp_path,
+        "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tlandmarks",
+        [
+            "s\tn\tneutral\tneutral\trange\tn.abs\tn.png\tn.pts",
+            "s\tc\tviseme\tcar\trange\tc.abs\tc.png\t",
+        ],
+    )
+    sheet = read_sheet(path)
+    assert subject_problems(sheet) == {"s": []}
+    assert input_roles(sheet.loc[0]) == ["xyz", "color", "landmarks"]
+    assert input_roles(sheet.loc[1]) == ["xyz", "color"]
+    # a landmark file named but absent is still the take's problem, naming the column
+    (tmp_path / "n.pts").unlink()
+    problems = subject_problems(read_sheet(path))["s"]
+    assert len(problems) == 1 and "column 'landmarks': file not found" in problems[0]
+
+
+def test_the_synthetic_cohort_withholds_its_landmarks_on_request():
+    takes = [{"take": "neutral", "kind": "neutral", "label": "neutral"}]
+    clicked = synthetic_rows(1, "s", takes, "root")
+    detect = synthetic_rows(1, "s", takes, "root", landmarks="detect")
+    assert clicked.loc[0, "landmarks"] == "root/s01/neutral.pts"
+    assert detect.loc[0, "landmarks"] == ""
+    assert input_roles(detect.loc[0]) == ["xyz", "color"]
+
+
+@pytest.fixture(scope="module")
+def mesh_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("mesh")
+    scan = make_mesh_take("s1", "she", "viseme", "she", seed=5)
+    files = (d / "s.ply", d / "s.txt", d / "t.npz")
+    write_mesh_take(scan, *files)
+    return scan, files
+
+
+def test_a_mesh_take_without_landmarks_is_rendered_upright_and_frontal(mesh_files):
+    """The surface-only camera against the landmark camera of the same scan: the face upright
+    (eyes above the mouth, the subject's right eye on the image's left), centred, the same size
+    within a few per cent, the view direction the same."""
+    scan, (ply, txt, _) = mesh_files
+    free = read_mesh_take(ply, None, None, TINY_CAMERA)
+    with_lm = read_mesh_take(ply, None, txt, TINY_CAMERA)
+    assert free.landmarks is None
+    lm3 = read_landmarks3d(txt)
+    cam = lm3 @ free.pose[:3, :3].T + free.pose[:3, 3]
+    px = cam[:, :2] / cam[:, 2:] * np.diag(free.K)[:2] + free.K[:2, 2]
+    eyes = px[[36, 45]].mean(axis=0)
+    mouth = px[[48, 54]].mean(axis=0)
+    assert eyes[1] < mouth[1] - 0.1 * TINY_CAMERA["height"]  # eyes above the mouth
+    assert px[36, 0] < px[45, 0]  # iBUG 37 (subject's right eye) on the image's left
+    centre = px.mean(axis=0)
+    size = np.array([TINY_CAMERA["width"], TINY_CAMERA["height"]])
+    assert (np.abs(centre - (size - 1) / 2) < 0.1 * size).all()
+    # the same view direction as the landmark camera, within the surface tip's difference
+    cos = free.pose[2, :3] @ with_lm.pose[2, :3]
+    assert np.degrees(np.arccos(min(cos, 1.0))) < 5.0
+    ratio = free.K[0, 0] / with_lm.K[0, 0]
+    assert 0.85 < ratio < 1.15
+    # the rendered pixels are the same surface (both cameras see the face)
+    assert np.isfinite(free.xyz).all(axis=-1).mean() > 0.3
+
+
+@pytest.mark.parametrize("turn", [0, 1, 2, 3])
+def test_the_surface_camera_finds_up_whatever_the_frame(mesh_files, tmp_path, turn):
+    """The mesh turned about its view axis by 0-270 degrees: the image stays upright."""
+    import trimesh
+
+    scan, _ = mesh_files
+    axis = scan["landmarks"][30] - scan["landmarks"][:, :].mean(axis=0)
+    rot = trimesh.transformations.rotation_matrix(np.pi / 2 * turn, axis / np.linalg.norm(axis))
+    v = scan["vertices"] @ rot[:3, :3].T
+    lm3 = scan["landmarks"] @ rot[:3, :3].T
+    trimesh.Trimesh(v, scan["faces"], process=False).export(tmp_path / "r.ply")
+    take = read_mesh_take(tmp_path / "r.ply", None, None, TINY_CAMERA)
+    cam = lm3 @ take.pose[:3, :3].T + take.pose[:3, 3]
+    px = cam[:, :2] / cam[:, 2:] * np.diag(take.K)[:2] + take.K[:2, 2]
+    assert px[[36, 45], 1].mean() < px[[48, 54], 1].mean() - 20
+    assert px[36, 0] < px[45, 0]
+
+
+def test_a_51_point_mesh_landmark_file_projects_its_points_and_leaves_the_jaw(mesh_files, tmp_path):
+    scan, (ply, _, _) = mesh_files
+    write_landmarks3d(tmp_path / "inner.txt", scan["landmarks"][17:])
+    take = read_mesh_take(ply, None, tmp_path / "inner.txt", TINY_CAMERA)
+    assert take.landmarks.shape == (68, 2)
+    assert np.isnan(take.landmarks[JAW]).all() and np.isfinite(take.landmarks[17:]).all()
+    # the inner points lie on the rendered surface where their 3D points are
+    u, v = np.rint(take.landmarks[[30, 36, 45]]).astype(int).T
+    ref = scan["landmarks"][[30, 36, 45]]
+    assert np.linalg.norm(take.xyz[v, u] - ref, axis=1).max() < 4.0
