@@ -167,6 +167,17 @@ def get_neutral_parts(stages):
     return parts
 
 
+def get_neutral_parts_for_others(stages):
+    """An input function: the ``stages`` parts of the subject's neutral for its other takes,
+    none for the neutral itself."""
+    of_neutral = get_neutral_parts(stages)
+
+    def parts(wildcards):
+        return [] if wildcards.take == get_neutral_take(wildcards) else of_neutral(wildcards)
+
+    return parts
+
+
 def get_viseme_aligns(wildcards):
     return _take_files(
         "results/{subject}/takes/{take}/align.h5",

@@ -5,6 +5,8 @@ rule landmarks:
     """Settle one take's 68 landmarks: its clicks, or detected where its sheet row gives none (or only the 51 inner points); also written as an iBUG .pts file to correct and feed back."""
     input:
         part="results/{subject}/takes/{take}/repair.h5",
+        # another take's detected stable points are carried over from the neutral's
+        neutral=get_neutral_parts_for_others(("repair", "landmarks")),
     output:
         part="results/{subject}/takes/{take}/landmarks.h5",
         pts="results/{subject}/landmarks/{take}.pts",
@@ -18,5 +20,6 @@ rule landmarks:
     params:
         landmarks=config["landmarks"],
         row=take_row,
+        neutral=get_neutral_take,
     script:
         "../scripts/landmarks.py"

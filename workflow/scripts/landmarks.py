@@ -6,22 +6,15 @@ from scan2morph.io import write_pts
 from scan2morph.stages import landmarks
 from scan2morph.stages.failure import run_take_job
 from scan2morph.stages.part import Take
-from scan2morph.store import read_part, write_part
+from scan2morph.store import read_parts, write_part
 
 
 def main(snakemake):
     def job():
         w, p, inp, out = snakemake.wildcards, snakemake.params, snakemake.input, snakemake.output
         params = landmarks.Params.from_config({"landmarks": p.landmarks})
-        take = Take(
-            w.subject,
-            w.take,
-            p.row["kind"],
-            p.row["label"],
-            "",
-            data=read_part(inp.part),
-            row=p.row,
-        )
+        data = read_parts([inp.part, *inp.neutral])
+        take = Take(w.subject, w.take, p.row["kind"], p.row["label"], p.neutral, data, row=p.row)
         part = landmarks.run(None, take, params)
         write_part(out.part, part.datasets, attrs=part.attrs)
         write_pts(out.pts, part.files["pts"])
@@ -32,7 +25,7 @@ def main(snakemake):
         job,
         take=w.take,
         stage="landmarks",
-        inputs=[inp.part],
+        inputs=[inp.part, *inp.neutral],
         part=out.part,
         on_failure=lambda record: Path(out.pts).write_text(f"# no landmarks: {record}\n"),
     )

@@ -5,7 +5,10 @@ without a landmark file has them detected on its repaired grid (:mod:`scan2morph
 ``detected``); a 51-point file (iBUG-68 without the jawline) keeps its points and gets the
 jawline detected (``clicked+detected jawline``). Detected points carry the detector's per-point
 confidence, its name and version, and are checked as clicked ones are at ingest (a plausible,
-frontal, right-handed face). A detection whose confidence is low is *doubtful*: the take is
+frontal, right-handed face). A detected take other than the neutral then takes its stable points
+(nose bridge, eye corners) from the neutral's, carried over by a rigid alignment of the two
+scans (:func:`scan2morph.align.carry.carry_stable`), so that they agree across the subject's
+takes. A detection whose confidence is low is *doubtful*: the take is
 still used, with a warning at the top of the report and in ``accuracy.json``.
 
 Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) that a
@@ -15,10 +18,11 @@ user can correct and give back in the sheet's ``landmarks`` column.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from scan2morph.align.carry import carry_stable
 from scan2morph.io import check_face, check_handedness
 from scan2morph.io.landmarks import complete
 from scan2morph.stages.part import Part, Run, Take, need
@@ -39,14 +43,24 @@ class Params:
     min_confidence : float
         A detection whose median confidence over the points it placed falls below this is
         doubtful (a warning), in [0, 1].
+    carry_stable : bool
+        Whether a detected take's stable points are carried over from its neutral.
+    stable_points : tuple of int
+        iBUG numbers (1-based) of the points that do not move with the mouth.
     """
 
     min_confidence: float = 0.5
+    carry_stable: bool = True
+    stable_points: tuple[int, ...] = (28, 37, 40, 43, 46)
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
         section = dict(config.get("landmarks") or {})
-        return cls(min_confidence=float(section.get("min_confidence", cls.min_confidence)))
+        return cls(
+            min_confidence=float(section.get("min_confidence", cls.min_confidence)),
+            carry_stable=bool(section.get("carry_stable", cls.carry_stable)),
+            stable_points=tuple(int(n) for n in section.get("stable_points", cls.stable_points)),
+        )
 
 
 @dataclass(frozen=True)
@@ -135,7 +149,8 @@ def run(template, take: Take, params: Params) -> Part:
         Unused (the per-take stages' one shape).
     take : Take
         ``data``: the take's repair part (``range/xyz``, ``range/color``, ``clicks`` when
-        given).
+        given) and, for a take other than the neutral, the neutral's repair and landmarks parts
+        (its stable points are carried over when the take's are detected).
     params : Params
 
     Returns
@@ -150,6 +165,15 @@ def run(template, take: Take, params: Params) -> Part:
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
     color = need(data, paths.range_image(t, "color"), take.source)
     found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
+    attrs = {}
+    if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
+        neutral_xyz = need(data, paths.range_image(take.neutral, "xyz"), take.source)
+        neutral_points = need(data, paths.landmarks(take.neutral), take.source)
+        carried = carry_stable(
+            xyz, found.points, neutral_xyz, neutral_points, params.stable_points, take.source
+        )
+        found = replace(found, points=carried.points)
+        attrs["landmarks_carried_px"] = [float(v) for v in carried.shift_px]
     datasets = {
         paths.landmarks(t): found.points,
         paths.landmark_info(t, "source"): found.source,
@@ -161,7 +185,7 @@ def run(template, take: Take, params: Params) -> Part:
     nose_depth = check_handedness(xyz, found.points, take.source)
     return Part(
         datasets,
-        attrs={paths.take(t): {"nose_depth_mm": nose_depth}},
+        attrs={paths.take(t): attrs | {"nose_depth_mm": nose_depth}},
         files={"pts": found.points},
     )
 
@@ -169,9 +193,10 @@ def run(template, take: Take, params: Params) -> Part:
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """Every take of a subject (:class:`~scan2morph.stages.part.Run`)."""
     params = Params.from_config(run_.config)
-    out = {}
-    for t in run_.subject.kinds:
-        take = Take.of(run_.subject, t, data=data)
+    out: dict[str, np.ndarray] = {}
+    neutral = run_.subject.neutral
+    for t in [neutral, *(t for t in run_.subject.kinds if t != neutral)]:
+        take = Take.of(run_.subject, t, data={**data, **out})  # the neutral's settled first
         out |= run(run_.template, take, params).datasets
     return out
 
