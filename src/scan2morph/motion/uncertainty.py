@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -298,9 +299,15 @@ def subject_motion_noise(
     """
     takes = {t: clicked_take(store, t, fiducial_sets[t]) for t in [neutral, *visemes]}
     points = [int(p) for p in settings["stable_points"]]
+    # detected takes' stable points were carried over from the neutral: their precision is
+    # measured on the detector's own points
+    placed = {
+        t: replace(c, landmarks=store.get(paths.landmark_detected(t), c.landmarks))
+        for t, c in takes.items()
+    }
     noise = resolve_click_noise(
         settings["click_noise_px"],
-        takes,
+        placed,
         points,
         settings["fallback_px"],
         fit_options.get("max_slope_deg"),

@@ -158,20 +158,22 @@ def run(template, take: Take, params: Params) -> Part:
     Part
         ``landmarks`` (68, 2) px, ``landmark_source``, ``landmark_detector`` and
         ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
-        ``landmark_confidence`` (68,) when any point was detected; the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
+        ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
+        px, the detector's points before the stable ones were carried over; the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
         ``files["pts"]`` the points for the ``.pts`` file.
     """
     t, data = take.take, take.data
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
     color = need(data, paths.range_image(t, "color"), take.source)
     found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
-    attrs = {}
+    attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
         neutral_xyz = need(data, paths.range_image(take.neutral, "xyz"), take.source)
         neutral_points = need(data, paths.landmarks(take.neutral), take.source)
         carried = carry_stable(
             xyz, found.points, neutral_xyz, neutral_points, params.stable_points, take.source
         )
+        detected = found.points
         found = replace(found, points=carried.points)
         attrs["landmarks_carried_px"] = [float(v) for v in carried.shift_px]
     datasets = {
@@ -182,6 +184,8 @@ def run(template, take: Take, params: Params) -> Part:
     }
     if found.confidence is not None:
         datasets[paths.landmark_confidence(t)] = found.confidence
+    if detected is not None:
+        datasets[paths.landmark_detected(t)] = detected
     nose_depth = check_handedness(xyz, found.points, take.source)
     return Part(
         datasets,

@@ -44,6 +44,7 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
             "landmark_source",
             "landmark_detector",
             "landmark_doubtful",
+            "landmark_detected",
         ),
     ),
     (
@@ -194,6 +195,12 @@ def landmark_info(take_id: str, name: str) -> str:
     jawline``), ``detector`` (its name and version; empty when all are clicked) and ``doubtful``
     (why the detection is doubtful; empty when it is not)."""
     return _build("/takes/{take}", f"landmark_{name}", take=take_id)
+
+
+def landmark_detected(take_id: str) -> str:
+    """A detected take's landmarks as the detector placed them (68, 2) px, before its stable
+    points were carried over from the neutral (what the click precision is measured on)."""
+    return _build("/takes/{take}", "landmark_detected", take=take_id)
 
 
 def clicks(take_id: str) -> str:
