@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from scan2morph.errors import InputError
-from scan2morph.stages import Subject, align, fit, modal, morph, motion
+from scan2morph.stages import Subject, Take, align, fit, modal, morph, motion
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import SECTION_STAGE, STAGES
 from scan2morph.template import load_template
@@ -29,6 +29,21 @@ def test_subject_takes_by_kind_in_sheet_order():
         _ = Subject("s2", {"a": "viseme"}, {}).neutral
     with pytest.raises(InputError, match=r"got \['n', 'm'\]"):
         _ = Subject("s3", {"n": "neutral", "m": "neutral"}, {}).neutral
+
+
+def test_take_of_a_subject_carries_its_ids_and_inputs():
+    s = Subject("s1", {"n": "neutral", "b": "viseme"}, {"n": "neutral", "b": "car"})
+    take = Take.of(s, "b", data={"/x": np.zeros(2)}, row={"modality": "rgbd"})
+    assert (take.subject, take.take, take.kind, take.label, take.neutral) == (
+        "s1",
+        "b",
+        "viseme",
+        "car",
+        "n",
+    )
+    assert take.source == "s1/b" and take.row["modality"] == "rgbd" and dict(take.files) == {}
+    with pytest.raises(InputError, match=r"s1: take q: not one of the subject's takes"):
+        Take.of(s, "q")
 
 
 def test_fiducial_set_of_each_kind():

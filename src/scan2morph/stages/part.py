@@ -78,6 +78,56 @@ class Subject:
 
 
 @dataclass(frozen=True)
+class Take:
+    """One take and what a per-take stage reads for it.
+
+    Attributes
+    ----------
+    subject : str
+        Subject id.
+    take : str
+        Take id.
+    kind : str
+        ``neutral``, ``viseme`` or ``expression``.
+    label : str
+        The take's label (``car``, ``smile``, ...).
+    neutral : str
+        The subject's neutral take id (the take itself for the neutral).
+    data : mapping store path -> array
+        The datasets of the parts the stage reads.
+    attrs : mapping
+        The group attributes the stage reads (e.g. the take group's, with its modality).
+    files : mapping role -> path
+        The take's input files by sheet role (``xyz``, ``color``, ``left``, ...), for ingest.
+    row : mapping
+        The take's sheet row.
+    """
+
+    subject: str
+    take: str
+    kind: str
+    label: str
+    neutral: str
+    data: Mapping[str, np.ndarray] = field(default_factory=dict)
+    attrs: Mapping = field(default_factory=dict)
+    files: Mapping[str, str] = field(default_factory=dict)
+    row: Mapping = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, subject: Subject, take: str, **inputs) -> Take:
+        """``take`` of ``subject``, with ``inputs`` (``data``, ``attrs``, ``files``, ``row``)."""
+        if take not in subject.kinds:
+            raise InputError(subject.name, f"take {take}: not one of the subject's takes")
+        kind, label = subject.kinds[take], subject.labels[take]
+        return cls(subject.name, take, kind, label, subject.neutral, **inputs)
+
+    @property
+    def source(self) -> str:
+        """``subject/take``, for messages."""
+        return f"{self.subject}/{self.take}"
+
+
+@dataclass(frozen=True)
 class Run:
     """A whole subject run in memory (the parameter sweeps).
 
