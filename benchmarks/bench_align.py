@@ -191,7 +191,7 @@ def cohort(config_path: Path, n_subjects: int | None) -> list[dict]:
     config = yaml.safe_load(config_path.read_text())
     n_subjects = int(config["synthetic"]["subjects"]) if n_subjects is None else n_subjects
     template = build_template()
-    prm = Params.from_config(config["align"], config["template"])  # as the align stage splits it
+    prm = Params.from_config(config)  # as the align stage reads it
     fine = subdivide_template(template, prm.levels)
     pairs = named_indices(fine, prm.point_pairs, "align.point_pairs")
     stable = np.flatnonzero(icp_region(fine, prm.icp_region))

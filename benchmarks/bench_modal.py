@@ -184,7 +184,7 @@ def reconstruction(run: str, subject: str, config: str, ks: list[int]) -> None:
     fields = {t: data[paths.expression(t, "displacement")] for t in exprs}
     for policy in ("all", "still"):
         section = dict(cfg["modal"], fixed_outline=policy, reconstruction_k=ks)
-        params = modal.Params.from_config(section, cfg["template"], threads=2)
+        params = modal.Params.from_config(cfg | {"modal": section}).with_threads(2)
         subj = Subject(subject, kinds, labels)
         part = modal.run(template, subj, data, params)
         d = part.datasets

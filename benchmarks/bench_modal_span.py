@@ -111,7 +111,7 @@ def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
     from scan2morph.store import paths
 
     section = dict(cfg["modal"]) | variant
-    params = modal.Params.from_config(section, cfg["template"], threads=2)
+    params = modal.Params.from_config(cfg | {"modal": section}).with_threads(2)
     t0 = time.perf_counter()
     basis, outline = modal.natural_basis(
         case["fine"], case["subject"], case["data"], case["fields"], params
@@ -206,7 +206,7 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     from scan2morph.modal.span import residual_split, span_curve
     from scan2morph.stages import modal
 
-    params = modal.Params.from_config(dict(cfg["modal"]) | variant, cfg["template"], threads=2)
+    params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | variant}).with_threads(2)
     v, f = real["vertices"], real["faces"]
     rim = boundary_vertices(f, len(v))
     fixed = rim if params.fixed_outline != "none" else np.zeros(len(v), bool)

@@ -46,8 +46,7 @@ from scan2morph.evaluate.motion import (
 )
 from scan2morph.evaluate.truth import read_truth
 from scan2morph.geometry import vertex_normals
-from scan2morph.stages import refine
-from scan2morph.stages.fit import fiducial_set
+from scan2morph.stages import Take, refine
 from scan2morph.store import paths, read_parts
 from scan2morph.template import fit_options, fit_take, load_template, subdivide_template
 
@@ -81,9 +80,7 @@ def main() -> None:
     truths = {t: read_truth(f[0]) for t, f in truth_files.items() if f}
     section = config["template"]
     fine = subdivide_template(template, int(section["subdivision_levels"]))
-    params = refine.Params.from_config(
-        config["refine"] | {"method": "flow"}, section, config["align"]
-    )
+    params = refine.Params.from_config(config | {"refine": config["refine"] | {"method": "flow"}})
     options = fit_options(section)
     nv = np.asarray(data[paths.mesh(neutral, "vertices")])
     n_valid = np.asarray(data[paths.mesh(neutral, "valid")], dtype=bool)
@@ -105,7 +102,7 @@ def main() -> None:
             template,
             landmarks,
             np.asarray(data[paths.range_image(take, "xyz")]),
-            fiducial_set=fiducial_set(section, kind),
+            fiducial_set=params.fit.fiducial_set(kind),
             source=take,
             **options,
         )
@@ -132,7 +129,7 @@ def main() -> None:
         kind = _kind(take, config)
         material = materials[take]
         t0 = time.perf_counter()
-        part = refine.run(template, take, kind, neutral, data, params, take)
+        part = refine.run(template, Take(a.subject, take, kind, take, neutral, data=data), params)
         dt = time.perf_counter() - t0
         fit_m = np.asarray(data[paths.align(take, "vertices")]) - nv
         ref_m = np.asarray(part.datasets[paths.refine(take, "vertices")]) - nv
@@ -175,8 +172,11 @@ def main() -> None:
                 for t, k in ((neutral, "neutral"), (take, kind)):
                     lm = np.asarray(data[paths.landmarks(t)], dtype=np.float64)
                     noisy |= refit(t, lm + click * rng.standard_normal(lm.shape), k)
-                n_part = refine.run(template, neutral, "neutral", neutral, noisy, params, take)
-                t_part = refine.run(template, take, kind, neutral, noisy, params, take)
+                n_take = Take(a.subject, neutral, "neutral", neutral, neutral, data=noisy)
+                n_part = refine.run(template, n_take, params)
+                t_part = refine.run(
+                    template, Take(a.subject, take, kind, take, neutral, data=noisy), params
+                )
                 fit_d = (
                     noisy[paths.align(take, "vertices")] - noisy[paths.align(neutral, "vertices")]
                 )

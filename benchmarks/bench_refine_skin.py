@@ -47,9 +47,7 @@ def main() -> None:
         print(f"skipped: the real head scan is absent ({DATA_DIR} lacks {', '.join(_MISSING)})")
         return
     config = yaml.safe_load(args.config.read_text())
-    base = refine_stage.Params.from_config(
-        config["refine"], config["template"], config["align"]
-    ).flow
+    base = refine_stage.Params.from_config(config).flow
     sets = {"config": base}
     for text in args.params:
         change = {k: yaml.safe_load(v) for k, v in (kv.split("=") for kv in text.split(","))}

@@ -316,4 +316,6 @@ def rerun_accuracy(
     data |= dict(raw or {})
     for name in STAGES[STAGES.index(start) :]:
         data |= _MODULES[name].apply(data, run)
-    return accuracy.run(run.template, run.subject, data, truths, run.config)
+    data |= accuracy.truth_datasets(truths)
+    params = accuracy.Params.from_config(run.config)
+    return accuracy.run(run.template, run.subject, data, params).files["accuracy"]

@@ -85,7 +85,7 @@ def subject_glb(folder: Path):
         "morph": {"blends": {}, "pca_blends": {}, "alpha_limit": 3.0, "sigma": "sample"},
         "template": {"subdivision_levels": 1},
     }
-    part = morph.run(template, subject, data, config)
+    part = morph.run(template, subject, data, morph.Params.from_config(config))
     f = part.files
     path = Path(folder) / "viewer.glb"
     # as stages.morph.write_files writes it

@@ -21,7 +21,7 @@ import pytest
 from scan2morph.errors import InputError, OutputError
 from scan2morph.io import check_handedness, write_abs, write_color
 from scan2morph.io.check import take_file_problems
-from scan2morph.stages import Subject, check
+from scan2morph.stages import Subject, Take, check
 from scan2morph.stages.failure import Failure, failures, part_failures, run_take_job, usable
 from scan2morph.store import merge_parts, paths, read_part, write_part
 from scan2morph.synth import make_take, write_take
@@ -126,14 +126,24 @@ def test_check_finds_every_problem_of_every_take_at_once(tmp_path, take):
     assert "image is 160x110 (WxH)" in take_file_problems("range", files["car"])[0]
     (d / "car.pts").write_text("garbage")
     files["car"]["landmarks"] = d / "car.pts"
+    car_bad = take_file_problems("range", files["car"])
     rows = [
         dict(take="n", kind="neutral", modality="range"),
         dict(take="car", kind="viseme", modality="range"),
         dict(take="too", kind="viseme", modality="range"),
         dict(take="lidar", kind="viseme", modality="lidar"),
     ]
+
+    def takes(rows, files):
+        return [
+            Take.from_row(r | dict(subject="s", label=r["take"]), files=files[r["take"]])
+            for r in rows
+        ]
+
+    files["lidar"] = {}
     sheet = [("lidar", "sheet row 5 (s/lidar): modality 'lidar' unknown")]
-    report = check.run("s", rows, files, sheet)
+    assert check.run(None, takes(rows, files)[1], check.Params()).files["problems"] == car_bad
+    report = check.check_subject("s", takes(rows, files), sheet)
     assert set(report["takes"]) == {"car", "too", "lidar"}
     assert "mirrored (left-handed) frame" in report["takes"]["too"][0]
     assert check.take_problem(report, "lidar") == sheet[0][1]
@@ -141,9 +151,10 @@ def test_check_finds_every_problem_of_every_take_at_once(tmp_path, take):
     # the neutral's problem stops the subject, after every problem was logged
     files["n"]["landmarks"] = d / "car.pts"
     with pytest.raises(InputError, match=r"4 problems .*its neutral take n cannot be read"):
-        check.run("s", rows, files, sheet)
+        check.check_subject("s", takes(rows, files), sheet)
     with pytest.raises(InputError, match="1 problem .*sheet rows are inconsistent"):
-        check.run("s", rows[:1], {"n": files["too"] | {"xyz": d / "n.abs.gz"}}, [("", "dup")])
+        one = {"n": files["too"] | {"xyz": d / "n.abs.gz"}}
+        check.check_subject("s", takes(rows[:1], one), [("", "dup")])
 
 
 def test_a_mirrored_frame_is_refused_and_a_rotated_one_kept(take):
@@ -256,9 +267,10 @@ def test_accuracy_and_cohort_name_the_takes_left_out(tmp_path_factory, tmp_path,
     truths = {
         t: read_truth(run.path("results", "synthetic", SUBJECT, "truth", f"{t}.npz")) for t in kinds
     }
-    config = {"template": run_config(run)["template"], "smoothing": run_config(run)["smoothing"]}
+    params = accuracy.Params.from_config(run_config(run))
     template = load_template(run.path("resources", "template.npz"))
-    report = accuracy.run(template, subject, data, truths, config)
+    data |= accuracy.truth_datasets(truths)
+    report = accuracy.run(template, subject, data, params).files["accuracy"]
     assert report["failed_takes"] == {"too": {"stage": "fit", "reason": record.reason}}
     assert "too" not in report["takes"]
     before = json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())

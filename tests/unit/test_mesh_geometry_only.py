@@ -16,7 +16,7 @@ import yaml
 from scan2morph.errors import InputError
 from scan2morph.sheet import read_sheet, subject_problems
 from scan2morph.stages import align, fit, ingest, refine, repair
-from scan2morph.stages.part import Run, Subject
+from scan2morph.stages.part import Run, Subject, Take
 from scan2morph.store import paths
 from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d
 from scan2morph.template import build_template
@@ -24,6 +24,12 @@ from tests.support.workflow_api import REPO
 
 CAMERA = {"width": 320, "height": 240}
 KINDS = {"neutral": "neutral", "car": "viseme"}
+
+
+def _run_ingest(row, files, mesh_camera=None):
+    """The ingest stage on one take's files."""
+    params = ingest.Params(mesh_camera=mesh_camera or {})
+    return ingest.run(None, Take.from_row(row, files=files), params)
 
 
 def _row(take: str, **extra) -> dict:
@@ -52,7 +58,7 @@ def scans(tmp_path_factory):
 
 
 def _ingest(row: dict, mesh, landmarks):
-    return ingest.run(row, {"mesh": str(mesh), "landmarks": str(landmarks)}, {}, CAMERA).datasets
+    return _run_ingest(row, {"mesh": str(mesh), "landmarks": str(landmarks)}, CAMERA).datasets
 
 
 def test_an_untextured_mesh_is_shaded_fitted_and_keeps_its_fit_at_refine(scans, caplog):
@@ -81,8 +87,8 @@ def test_an_untextured_mesh_is_shaded_fitted_and_keeps_its_fit_at_refine(scans, 
     for stage in (repair, fit, align):
         data |= stage.apply(data, run)
     assert data[paths.mesh("car", "valid")].mean() > 0.9
-    params = refine.Params.from_config(config["refine"], config["template"], config["align"])
-    part = refine.run(run.template, "car", "viseme", "neutral", data, params, "s1/car")
+    params = refine.Params.from_config(config)
+    part = refine.run(run.template, Take.of(run.subject, "car", data=data), params)
     attrs = part.attrs[paths.refine_group("car")]
     assert not attrs["used"]
     assert attrs["problem"].startswith(
@@ -138,7 +144,7 @@ def test_a_bad_unit_is_refused_naming_the_row_and_the_column(tmp_path, scans):
     assert not any("row 2 " in p for p in problems)  # empty: mm
     row = table.iloc[1].to_dict()
     with pytest.raises(InputError, match=r"row 3 \(s1/car\): column 'units': 'inch' unknown"):
-        ingest.run(row, {"mesh": row["mesh"], "landmarks": row["landmarks"]}, {}, CAMERA)
+        _run_ingest(row, {"mesh": row["mesh"], "landmarks": row["landmarks"]}, CAMERA)
 
 
 def test_a_range_scan_without_colour_is_shaded_and_keeps_its_fit_at_refine(tmp_path, caplog):
@@ -157,7 +163,7 @@ def test_a_range_scan_without_colour_is_shaded_and_keeps_its_fit_at_refine(tmp_p
         assert take_file_problems("range", files[take]) == []
         row = _row(take, modality="range")
         with caplog.at_level("WARNING", logger="scan2morph"):
-            part = ingest.run(row, files[take], {})
+            part = _run_ingest(row, files[take])
         assert "no colour image: shown with its shading" in caplog.text
         data |= part.datasets
         assert data[paths.camera(take, "color_source")] == "shading"
@@ -168,8 +174,8 @@ def test_a_range_scan_without_colour_is_shaded_and_keeps_its_fit_at_refine(tmp_p
     run = Run(Subject("s1", KINDS, {t: t for t in KINDS}), build_template(), config)
     for stage in (repair, fit, align):
         data |= stage.apply(data, run)
-    params = refine.Params.from_config(config["refine"], config["template"], config["align"])
-    attrs = refine.run(run.template, "car", "viseme", "neutral", data, params, "s1/car").attrs
+    params = refine.Params.from_config(config)
+    attrs = refine.run(run.template, Take.of(run.subject, "car", data=data), params).attrs
     assert "geometry-only" in attrs[paths.refine_group("car")]["problem"]
     # a sheet row of a range take without its colour column is no problem of the sheet
     sheet = tmp_path / "s.tsv"

@@ -204,28 +204,33 @@ SECTION = {"modes": 12, "semantic_labels": [], "reconstruction_k": [1, 5], "seed
 TEMPLATE = {"subdivision_levels": 1}
 
 
+def _config(modal_section):
+    """A config with the modal section ``modal_section``."""
+    return {"modal": modal_section, "template": TEMPLATE}
+
+
 def test_presets_resolve_and_overrides_win():
-    paper = modal.Params.from_config(SECTION | {"preset": "paper"}, TEMPLATE)
+    paper = modal.Params.from_config(_config(SECTION | {"preset": "paper"}))
     assert paper.fixed_outline == "all" and paper.modal.material.youngs_modulus_mpa == 210000.0
     assert paper.modal.upper_thickness_factor == 3.0 and not paper.modal.has_skin
-    still = modal.Params.from_config(SECTION | {"preset": "clamped_still"}, TEMPLATE)
+    still = modal.Params.from_config(_config(SECTION | {"preset": "clamped_still"}))
     assert still.fixed_outline == "still" and still.modal == paper.modal
-    skin = modal.Params.from_config(SECTION, TEMPLATE)  # the default
+    skin = modal.Params.from_config(_config(SECTION))  # the default
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
     assert skin.fixed_outline == "none" and skin.tether_region == "stable"
     assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
     assert skin.modal.tether_normal_n_per_mm3 == 0.01
     over = modal.Params.from_config(
-        SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None}, TEMPLATE
+        _config(SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None})
     )
     assert over.fixed_outline == "none" and over.modal.thickness_mm == 1.0
     assert over.physics == paper.physics | {"fixed_outline": "none"}
     with pytest.raises(InputError, match="preset: expected one of"):
-        modal.Params.from_config(SECTION | {"preset": "rubber"}, TEMPLATE)
+        modal.Params.from_config(_config(SECTION | {"preset": "rubber"}))
     with pytest.raises(InputError, match="fixed_outline"):
-        modal.Params.from_config(SECTION | {"fixed_outline": "some"}, TEMPLATE)
+        modal.Params.from_config(_config(SECTION | {"fixed_outline": "some"}))
     with pytest.raises(InputError, match="tether_region"):
-        modal.Params.from_config(SECTION | {"tether_region": "chin"}, TEMPLATE)
+        modal.Params.from_config(_config(SECTION | {"tether_region": "chin"}))
 
 
 @pytest.fixture(scope="module")
@@ -253,7 +258,7 @@ def test_the_stage_records_its_preset(template, preset):
     neutral, smile = _face(template)
     data = {paths.neutral("vertices"): neutral, paths.expression("sm1", "displacement"): smile}
     subject = Subject("s", {"n": "neutral", "sm1": "expression"}, {"n": "neutral", "sm1": "smile"})
-    params = modal.Params.from_config(SECTION | {"preset": preset}, TEMPLATE)
+    params = modal.Params.from_config(_config(SECTION | {"preset": preset}))
     part = modal.run(template, subject, data, params)
     d = part.datasets
     assert d[paths.modal("preset")] == preset

@@ -1120,9 +1120,7 @@ def test_refinement_follows_real_skin(head):
     config = yaml.safe_load(
         (Path(__file__).resolve().parents[2] / "config/config.yaml").read_text()
     )
-    params = refine_stage.Params.from_config(
-        config["refine"], config["template"], config["align"]
-    ).flow
+    params = refine_stage.Params.from_config(config).flow
     scene = skin_scene(head)
     e = skin_errors(scene, SEED + 7, params)
     print(

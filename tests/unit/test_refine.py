@@ -8,6 +8,7 @@ from scipy.ndimage import gaussian_filter, map_coordinates
 from scan2morph.refine import RefineParams, refine_points
 from scan2morph.refine.flow import fuse, measure_flow
 from scan2morph.refine.template_space import pull_back, template_grid
+from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
 
 
@@ -257,8 +258,8 @@ def _with_and_without(data, truths, run, take, key):
     for prior in (False, True):
         config = dict(run.config) | {"refine": run.config["refine"] | {key: prior}}
         errors[prior] = _material_errors(data, truths, replace(run, config=config))[take][1]
-        params = refine.Params.from_config(config["refine"], config["template"], config["align"])
-        parts[prior] = refine.run(run.template, take, "viseme", "neutral", data, params, take)
+        params = refine.Params.from_config(config)
+        parts[prior] = refine.run(run.template, Take.of(run.subject, take, data=data), params)
     attrs = tuple(next(iter(parts[p].attrs.values())) for p in (False, True))
     return errors, parts, attrs
 
@@ -288,11 +289,10 @@ def test_the_jaw_prior_follows_the_chin_of_an_open_jaw():
     assert (parts[True].datasets[key] >= parts[False].datasets[key]).all()
     # the click-noise draws refine through the same stage: with the take's own clicks and fit a
     # draw is the stage's result (the jaw prior resamples the draw's neutral from its range image)
+    from scan2morph.stages import refine
     from scan2morph.stages.motion_noise import _refiner
 
-    refiner = _refiner(
-        run.template, run.subject, data, config["template"], config["refine"], config["align"]
-    )
+    refiner = _refiner(run.template, run.subject, data, refine.Params.from_config(config))
     mesh = {k: data[paths.mesh("car", k)] for k in ("vertices", "valid", "points2d")}
     clicks = [data[paths.landmarks(t)] for t in ("car", "neutral")]
     vertices, valid, confidence = refiner("car", mesh, *clicks)
@@ -308,7 +308,7 @@ def test_the_jaw_prior_follows_the_chin_of_an_open_jaw():
 def _plane_take(template, texture_seed, config):
     """A take of a tilted plane (640 x 480) with a random texture and landmarks on it."""
     from scan2morph.align import transform_points
-    from scan2morph.stages.fit import fiducial_set
+    from scan2morph.stages import fit
     from scan2morph.store import paths
     from scan2morph.template import fit_options, fit_take
 
@@ -321,7 +321,7 @@ def _plane_take(template, texture_seed, config):
         template,
         landmarks,
         xyz,
-        fiducial_set=fiducial_set(config["template"], "viseme"),
+        fiducial_set=fit.Params.from_config(config).fiducial_set("viseme"),
         **fit_options(config["template"]),
     )
     return {
@@ -352,8 +352,9 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
     rename = lambda d, t: {k.replace("/takes/t/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: E731
     data = rename(_plane_take(template, 21, config), "neutral")
     data |= rename(_plane_take(template, 21 if same_skin else 22, config), "she")
-    params = refine.Params.from_config(config["refine"], config["template"], config["align"])
-    part = refine.run(template, "she", "viseme", "neutral", data, params, "x/she")
+    params = refine.Params.from_config(config)
+    take = Take("x", "she", "viseme", "she", "neutral", data=data)
+    part = refine.run(template, take, params)
     attrs = part.attrs[paths.refine_group("she")]
     fit = data[paths.align("she", "vertices")]
     refined = part.datasets[paths.refine("she", "vertices")]
@@ -402,13 +403,13 @@ def test_jaw_settings_come_from_the_refine_section():
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     section = config["refine"] | {"jaw_prior": False, "jaw_start": 0.05, "jaw_max_rmse_ratio": 2}
-    params = refine.Params.from_config(section, config["template"], config["align"])
+    params = refine.Params.from_config(config | {"refine": section})
     assert not params.jaw.enabled and params.jaw.start == 0.05 and params.jaw.end == 0.3
     assert params.jaw.max_rmse_ratio == 2.0 and params.still_region == "stable"
     assert params.icp["kernel_k_mm"] == config["align"]["kernel_k_mm"]
     bad = config["refine"] | {"jaw_start": 0.3, "jaw_end": 0.3}
     with pytest.raises(InputError, match="refine.jaw_start"):
-        refine.Params.from_config(bad, config["template"], config["align"])
+        refine.Params.from_config(config | {"refine": bad})
 
 
 def test_lip_settings_come_from_the_refine_section():
@@ -419,14 +420,14 @@ def test_lip_settings_come_from_the_refine_section():
     from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    params = refine.Params.from_config(config["refine"], config["template"], config["align"])
+    params = refine.Params.from_config(config)
     assert params.lip.enabled and params.lip.stretch == config["refine"]["lip_stretch"]
     section = config["refine"] | {"lip_prior": False, "lip_stretch": 0.2, "lip_min_share": 0.8}
-    params = refine.Params.from_config(section, config["template"], config["align"])
+    params = refine.Params.from_config(config | {"refine": section})
     assert not params.lip.enabled and params.lip.stretch == 0.2 and params.lip.min_share == 0.8
     bad = config["refine"] | {"lip_search": 0}
     with pytest.raises(InputError, match="refine.lip_search"):
-        refine.Params.from_config(bad, config["template"], config["align"])
+        refine.Params.from_config(config | {"refine": bad})
 
 
 @pytest.mark.slow
@@ -460,9 +461,7 @@ def test_the_lip_prior_follows_a_rounded_upper_lip():
     for take in ("neutral", "she"):
         c = data[paths.range_image(take, "color")].astype(np.float64).mean(axis=2, keepdims=True)
         grey[paths.range_image(take, "color")] = np.repeat(c, 3, axis=2).astype(np.uint8)
-    params = refine.Params.from_config(
-        run.config["refine"], run.config["template"], run.config["align"]
-    )
-    part = refine.run(run.template, "she", "viseme", "neutral", grey, params, "s/she")
+    params = refine.Params.from_config(run.config)
+    part = refine.run(run.template, Take.of(run.subject, "she", data=grey), params)
     attrs = next(iter(part.attrs.values()))
     assert not attrs["lip_used"] and f"not placed: {NO_BORDER}: 25" in attrs["lip_problem"]

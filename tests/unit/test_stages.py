@@ -3,6 +3,10 @@ and the sweep's stage table derived from the stage modules."""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import importlib
+import inspect
 from pathlib import Path
 
 import numpy as np
@@ -10,15 +14,16 @@ import pytest
 import yaml
 
 from scan2morph.errors import InputError
-from scan2morph.stages import Subject, Take, align, fit, modal, morph, motion
+from scan2morph.sheet import validate_config
+from scan2morph.stages import Part, Subject, Take, align, fit, modal, morph, motion
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import SECTION_STAGE, STAGES
 from scan2morph.template import load_template
 from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
 
-CONFIG = yaml.safe_load(
-    (Path(__file__).resolve().parents[2] / "config" / "config.yaml").read_text()
-)
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+VALIDATED = validate_config(copy.deepcopy(CONFIG), REPO / "schemas" / "config.schema.yaml")
 
 
 def test_subject_takes_by_kind_in_sheet_order():
@@ -46,28 +51,53 @@ def test_take_of_a_subject_carries_its_ids_and_inputs():
         Take.of(s, "q")
 
 
+#: Every stage module and its level (the run's shape).
+STAGE_LEVELS = {
+    **dict.fromkeys(
+        ("check", "ingest", "repair", "landmarks", "fit", "align", "refine", "synth"), "take"
+    ),
+    **dict.fromkeys(
+        ("motion", "motion_noise", "morph", "modal", "store", "accuracy", "report"), "subject"
+    ),
+}
+RUN_SHAPES = {
+    "take": ["template", "take", "params"],
+    "subject": ["template", "subject", "data", "params"],
+}
+
+
+@pytest.mark.parametrize("name", sorted(STAGE_LEVELS))
+def test_every_stage_has_the_contract_shape(name):
+    module = importlib.import_module(f"scan2morph.stages.{name}")
+    assert dataclasses.is_dataclass(module.Params) and module.Params.__dataclass_params__.frozen
+    assert list(inspect.signature(module.Params.from_config).parameters) == ["config"]
+    assert list(inspect.signature(module.run).parameters) == RUN_SHAPES[STAGE_LEVELS[name]]
+    assert inspect.signature(module.run).return_annotation in ("Part", Part)
+    # the whole (validated) config is enough, whatever sections the stage reads
+    params = module.Params.from_config(VALIDATED)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        setattr(params, next(iter(vars(params)), "x"), None)
+
+
 def test_fiducial_set_of_each_kind():
     section = CONFIG["template"]
-    assert fit.Params.from_config(section, "viseme").fiducial_set == section["fiducials"]["viseme"]
+    params = fit.Params.from_config(CONFIG)
+    assert params.fiducial_set("viseme") == section["fiducials"]["viseme"]
     # a kind the config does not name gets the closed-mouth set
-    assert fit.fiducial_set({"fiducials": {}}, "expression") == "closed"
-    assert fit.Params.from_config(section, "neutral").options["levels"] == 1
+    assert fit.Params({}, {}).fiducial_set("expression") == "closed"
+    assert params.options["levels"] == 1
 
 
 def test_params_from_config_sections():
-    a = align.Params.from_config(CONFIG["align"], CONFIG["template"])
+    a = align.Params.from_config(CONFIG)
     assert a.point_pairs == CONFIG["align"]["point_pairs"]
     assert not set(align.REGION_KEYS) & set(a.icp)
     assert a.grow_into == CONFIG["align"]["grow_into"]
     assert a.icp["max_iterations"] == CONFIG["align"]["max_iterations"]
-    m = motion.Params.from_config(
-        CONFIG["mask"], CONFIG["smoothing"], CONFIG["template"], CONFIG["quality"]
-    )
+    m = motion.Params.from_config({k: v for k, v in CONFIG.items() if k != "refine"})
     assert (m.radius_mm, m.w, m.iterations) == (20.0, 0.1, 30)  # the paper's values
-    assert m.include_failed is False
-    m = motion.Params.from_config(
-        CONFIG["mask"], CONFIG["smoothing"], CONFIG["template"], CONFIG["quality"], CONFIG["refine"]
-    )
+    assert m.include_failed is False and m.refined is False
+    m = motion.Params.from_config(CONFIG)
     assert (m.refined, m.relief, m.expression_iterations) == (True, 0.5, 10)
     data = {
         paths.refine("t", "vertices"): np.zeros((3, 3)),
@@ -76,8 +106,9 @@ def test_params_from_config_sections():
     }
     mesh = motion.aligned_mesh(data, "t", "s", refined=True)
     np.testing.assert_array_equal(mesh.confidence, [0.2, 0.9, 0.0])
-    p = modal.Params.from_config(CONFIG["modal"], CONFIG["template"], threads=2)
-    assert p.modal.thickness_mm == 1.0 and p.modal.threads == 2
+    p = modal.Params.from_config(CONFIG)
+    assert p.modal.thickness_mm == 1.0 and p.modal.threads == 1
+    assert p.with_threads(2).modal.threads == 2 and p.with_threads(2).levels == p.levels
 
 
 def test_semantic_takes_first_take_of_each_label():
@@ -143,14 +174,12 @@ def test_a_take_that_failed_its_alignment_gate_is_left_out_of_the_models(tmp_pat
         SUBJECT, {t["take"]: t["kind"] for t in TAKES}, {t["take"]: t["label"] for t in TAKES}
     )
     template = load_template(run.path("resources", "template.npz"))
-    c = CONFIG
-    strict = motion.Params.from_config(c["mask"], c["smoothing"], c["template"], c["quality"])
+    c = {k: v for k, v in CONFIG.items() if k != "refine"}
+    strict = motion.Params.from_config(c)
     out = motion.run(template, subject, data, strict).datasets
     assert paths.viseme("car", "model") not in out and paths.viseme("too", "model") in out
     assert paths.expression("smile1", "displacement") in out
-    pca = morph.run(template, subject, data | out, c).datasets
+    pca = morph.run(template, subject, data | out, morph.Params.from_config(c)).datasets
     assert list(pca[paths.pca("takes")]) == ["neutral", "too"]
-    lenient = motion.Params.from_config(
-        c["mask"], c["smoothing"], c["template"], {"include_failed_takes": True}
-    )
+    lenient = motion.Params.from_config(c | {"quality": {"include_failed_takes": True}})
     assert paths.viseme("car", "model") in motion.run(template, subject, data, lenient).datasets

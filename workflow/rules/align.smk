@@ -17,7 +17,7 @@ rule align:
         mem_mb=900,
         runtime=2,
     params:
-        neutral=get_neutral_take,
+        take=get_take_ids,
         align=config["align"],
         template=config["template"],
     script:

@@ -57,7 +57,7 @@ rule fit:
         mem_mb=700,
         runtime=2,
     params:
-        kind=get_take_kind,
+        take=get_take_ids,
         template=config["template"],
     script:
         "../scripts/fit.py"

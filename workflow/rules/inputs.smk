@@ -60,8 +60,14 @@ def synth_landmark_files(takes):
     ]
 
 
-def get_take_kind(wildcards):
-    return TAKES.loc[(wildcards.subject, wildcards.take), "kind"]
+def get_take_ids(wildcards):
+    """kind, label and the subject's neutral take of a take (a per-take stage's Take)."""
+    row = TAKES.loc[(wildcards.subject, wildcards.take)]
+    return {
+        "kind": row["kind"],
+        "label": row["label"],
+        "neutral": get_neutral_take(wildcards),
+    }
 
 
 # --- the takes of a subject ---
@@ -71,9 +77,10 @@ def get_subject_problems(wildcards):
 
 
 def get_subject_rows(wildcards):
-    """take, kind and modality of each of the subject's rows (its check job's params)."""
+    """subject, take, kind, label and modality of each of the subject's rows (its check job's
+    params)."""
     rows = TAKES.loc[wildcards.subject]
-    return rows[["take", "kind", "modality"]].to_dict("records")
+    return rows[["subject", "take", "kind", "label", "modality"]].to_dict("records")
 
 
 def get_subject_files(wildcards):
@@ -88,10 +95,6 @@ def get_subject_files_flat(wildcards):
     return sorted(
         {f for files in get_subject_files(wildcards).values() for f in files.values()}
     )
-
-
-def get_takes(wildcards):
-    return takes_of(wildcards.subject)
 
 
 def get_neutral_take(wildcards):

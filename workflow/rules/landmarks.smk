@@ -18,8 +18,7 @@ rule landmarks:
         mem_mb=800,
         runtime=2,
     params:
+        take=get_take_ids,
         landmarks=config["landmarks"],
-        row=take_row,
-        neutral=get_neutral_take,
     script:
         "../scripts/landmarks.py"

@@ -24,8 +24,7 @@ rule refine:
         mem_mb=900,
         runtime=2,
     params:
-        neutral=get_neutral_take,
-        kind=get_take_kind,
+        take=get_take_ids,
         refine=config["refine"],
         template=config["template"],
         align=config["align"],

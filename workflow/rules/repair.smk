@@ -16,6 +16,7 @@ rule repair:
         mem_mb=800,
         runtime=2,
     params:
+        take=get_take_ids,
         repair=config["repair"],
     script:
         "../scripts/repair.py"

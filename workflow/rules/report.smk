@@ -25,7 +25,8 @@ rule report_subject:
     params:
         benchmarks="benchmarks/rules",
         stage_order=get_rule_order,
-        takes=get_takes,
+        kinds=get_take_kinds,
+        labels=get_take_labels,
         report=config["report"],
     script:
         "../scripts/report_subject.py"

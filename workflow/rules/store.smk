@@ -16,6 +16,8 @@ rule store:
         mem_mb=500,
         runtime=1,
     params:
+        kinds=get_take_kinds,
+        labels=get_take_labels,
         config_sha256=CONFIG_SHA256,
         quality=config["quality"],
     script:

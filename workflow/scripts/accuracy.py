@@ -12,11 +12,10 @@ def main(snakemake):
         p, inp = snakemake.params, snakemake.input
         subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
         truths = {t: read_truth(f) for t, f in zip(p.kinds, inp.truths, strict=True)}
-        config = {"template": p.template, "smoothing": p.smoothing}
-        report = accuracy.run(
-            load_template(inp.template), subject, read_part(inp.store), truths, config
-        )
-        write_json(snakemake.output[0], report)
+        data = read_part(inp.store) | accuracy.truth_datasets(truths)
+        params = accuracy.Params.from_config(snakemake.config)
+        part = accuracy.run(load_template(inp.template), subject, data, params)
+        write_json(snakemake.output[0], part.files["accuracy"])
 
     run_job(snakemake.log[0], job)
 

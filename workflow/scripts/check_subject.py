@@ -2,13 +2,15 @@
 neutral's problem) or name the takes to leave out."""
 
 from scan2morph.jobs import run_job, write_json
-from scan2morph.stages import check
+from scan2morph.stages import Take, check
 
 
 def main(snakemake):
     def job():
         p = snakemake.params
-        report = check.run(snakemake.wildcards.subject, p.rows, p.files, p.problems)
+        subject = snakemake.wildcards.subject
+        takes = [Take.from_row(row, files=p.files.get(row["take"], {})) for row in p.rows]
+        report = check.check_subject(subject, takes, p.problems)
         write_json(snakemake.output[0], report)
 
     run_job(snakemake.log[0], job)

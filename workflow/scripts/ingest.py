@@ -4,7 +4,7 @@ import json
 from pathlib import Path
 
 from scan2morph.errors import InputError
-from scan2morph.stages import check, ingest
+from scan2morph.stages import Take, check, ingest
 from scan2morph.stages.failure import run_take_job
 from scan2morph.store import write_part
 
@@ -17,7 +17,8 @@ def main(snakemake):
         if problem:  # found by the subject's check job: the take is left out
             raise InputError(f"{w.subject}/{w.take}", problem)
         files = {role: snakemake.input[role] for role in p.roles}
-        part = ingest.run(p.row, files, p.stereo, p.mesh_camera)
+        take = Take.from_row(p.row, files=files)
+        part = ingest.run(None, take, ingest.Params.from_config(snakemake.config))
         write_part(out.part, part.datasets, attrs=part.attrs)
 
     run_take_job(snakemake.log[0], job, take=w.take, stage="ingest", inputs=[], part=out.part)

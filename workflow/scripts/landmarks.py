@@ -12,9 +12,8 @@ from scan2morph.store import read_parts, write_part
 def main(snakemake):
     def job():
         w, p, inp, out = snakemake.wildcards, snakemake.params, snakemake.input, snakemake.output
-        params = landmarks.Params.from_config({"landmarks": p.landmarks})
-        data = read_parts([inp.part, *inp.neutral])
-        take = Take(w.subject, w.take, p.row["kind"], p.row["label"], p.neutral, data, row=p.row)
+        params = landmarks.Params.from_config(snakemake.config)
+        take = Take(w.subject, w.take, **p.take, data=read_parts([inp.part, *inp.neutral]))
         part = landmarks.run(None, take, params)
         write_part(out.part, part.datasets, attrs=part.attrs)
         write_pts(out.pts, part.files["pts"])

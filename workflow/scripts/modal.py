@@ -13,7 +13,7 @@ def main(snakemake):
     def job():
         p, inp, out = snakemake.params, snakemake.input, snakemake.output
         subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
-        params = modal.Params.from_config(p.modal, p.template, snakemake.threads)
+        params = modal.Params.from_config(snakemake.config).with_threads(snakemake.threads)
         part = modal.run(load_template(inp.template), subject, read_part(inp.motion), params)
         write_part(out.part, part.datasets, attrs=part.attrs)
         modal.write_files(part, out.coordinates, out.reconstruction, out.meshes)

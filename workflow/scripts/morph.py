@@ -11,8 +11,8 @@ def main(snakemake):
         p, inp, out = snakemake.params, snakemake.input, snakemake.output
         subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
         data = read_parts([inp.motion, inp.neutral_fit, inp.neutral_repair])
-        config = {"morph": p.morph, "template": p.template}
-        part = morph.run(load_template(inp.template), subject, data, config)
+        params = morph.Params.from_config(snakemake.config)
+        part = morph.run(load_template(inp.template), subject, data, params)
         write_part(out.part, part.datasets, attrs=part.attrs)
         morph.write_files(part, out.eigen, out.coefficients, out.glb, out.models)
 

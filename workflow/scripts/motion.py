@@ -10,7 +10,7 @@ def main(snakemake):
     def job():
         p, inp = snakemake.params, snakemake.input
         subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
-        params = motion.Params.from_config(p.mask, p.smoothing, p.template, p.quality, p.refine)
+        params = motion.Params.from_config(snakemake.config)
         data = read_parts([*inp.fits, *inp.aligns, *inp.refines])
         part = motion.run(load_template(inp.template), subject, data, params)
         write_part(snakemake.output.part, part.datasets)

@@ -12,14 +12,8 @@ def main(snakemake):
         p, inp, out = snakemake.params, snakemake.input, snakemake.output
         subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
         data = read_parts([*inp.repairs, *inp.aligns]) | read_part(inp.motion)
-        config = {
-            "motion_noise": p.noise,
-            "smoothing": p.smoothing,
-            "template": p.template,
-            "refine": p.refine,
-            "align": p.align,
-        }
-        part = motion_noise.run(load_template(inp.template), subject, data, config)
+        params = motion_noise.Params.from_config(snakemake.config)
+        part = motion_noise.run(load_template(inp.template), subject, data, params)
         write_part(out.part, part.datasets, attrs=part.attrs)
         write_table(out.table, part.files["table"], MOTION_NOISE)
 

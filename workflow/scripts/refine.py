@@ -1,6 +1,6 @@
 """Refine one take's correspondence to the neutral (the neutral's is its aligned fit)."""
 
-from scan2morph.stages import refine
+from scan2morph.stages import Take, refine
 from scan2morph.stages.failure import run_take_job
 from scan2morph.store import read_parts, write_part
 from scan2morph.template import load_template
@@ -9,10 +9,9 @@ from scan2morph.template import load_template
 def main(snakemake):
     def job():
         w, p, inp = snakemake.wildcards, snakemake.params, snakemake.input
-        params = refine.Params.from_config(p.refine, p.template, p.align)
-        data = read_parts([*inp.take, *inp.neutral])
-        template, source = load_template(inp.template), f"{w.subject}/{w.take}"
-        part = refine.run(template, w.take, p.kind, p.neutral, data, params, source)
+        take = Take(w.subject, w.take, **p.take, data=read_parts([*inp.take, *inp.neutral]))
+        params = refine.Params.from_config(snakemake.config)
+        part = refine.run(load_template(inp.template), take, params)
         write_part(snakemake.output.part, part.datasets, attrs=part.attrs or None)
 
     w, inp = snakemake.wildcards, snakemake.input

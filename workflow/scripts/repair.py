@@ -1,17 +1,17 @@
 """Repair one take's range image: spikes out, small holes filled."""
 
 from scan2morph.jobs import write_json
-from scan2morph.stages import repair
+from scan2morph.stages import Take, repair
 from scan2morph.stages.failure import run_take_job
 from scan2morph.store import paths, read_attrs, read_part, write_part
 
 
 def main(snakemake):
     def job():
-        w, inp, out = snakemake.wildcards, snakemake.input, snakemake.output
+        w, p, inp, out = snakemake.wildcards, snakemake.params, snakemake.input, snakemake.output
         attrs = read_attrs(inp.part, paths.take(w.take))
-        source = f"{w.subject}/{w.take}"
-        part = repair.run(w.take, read_part(inp.part), attrs, snakemake.params.repair, source)
+        take = Take(w.subject, w.take, **p.take, data=read_part(inp.part), attrs=attrs)
+        part = repair.run(None, take, repair.Params.from_config(snakemake.config))
         write_part(out.part, part.datasets, attrs=part.attrs)
         write_json(out.report, part.files["report"])
 

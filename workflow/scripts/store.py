@@ -2,16 +2,18 @@
 against the layout."""
 
 from scan2morph.jobs import run_job
-from scan2morph.stages import store
+from scan2morph.stages import Subject, store
 from scan2morph.store import load_layout
+from scan2morph.store.hdf5 import write_file
 
 
 def main(snakemake):
     def job():
         p, inp = snakemake.params, snakemake.input
-        subject = snakemake.wildcards.subject
-        layout = load_layout(inp.layout)
-        store.run(snakemake.output[0], inp.parts, subject, p.config_sha256, p.quality, layout)
+        subject = Subject(snakemake.wildcards.subject, p.kinds, p.labels)
+        params = store.Params.from_config(snakemake.config).with_layout(load_layout(inp.layout))
+        part = store.run(None, subject, {"parts": list(inp.parts)}, params)
+        write_file(snakemake.output[0], part.files["store"])
 
     run_job(snakemake.log[0], job)
 

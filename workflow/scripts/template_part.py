@@ -8,7 +8,8 @@ from scan2morph.template import load_template
 
 def main(snakemake):
     def job():
-        part = fit.template_part(load_template(snakemake.input.template), snakemake.params.template)
+        params = fit.Params.from_config(snakemake.config)
+        part = fit.template_part(load_template(snakemake.input.template), params)
         write_part(snakemake.output.part, part.datasets)
 
     run_job(snakemake.log[0], job)

@@ -181,7 +181,11 @@ def write_subject_report(path: str | Path, store_path: str | Path, **kwargs) -> 
 
     Keyword arguments are those of :func:`subject_report_html`.
     """
-    text = subject_report_html(store_path, **kwargs)
+    write_html(path, subject_report_html(store_path, **kwargs))
+
+
+def write_html(path: str | Path, text: str) -> None:
+    """Write a report page's text to ``path`` (UTF-8, replaced atomically)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")

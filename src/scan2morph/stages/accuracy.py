@@ -3,30 +3,71 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from scan2morph.evaluate.landmarks import landmark_summary, take_landmarks
 from scan2morph.evaluate.subject import subject_accuracy
 from scan2morph.evaluate.truth import Truth
+from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.failure import failures, usable
-from scan2morph.stages.fit import fiducial_set
-from scan2morph.stages.part import Subject
+from scan2morph.stages.part import Part, Subject
 from scan2morph.stages.quality import modelled, read_warnings
 from scan2morph.store import paths
 from scan2morph.template import Template
 
 #: Config sections this stage reads (the fit's and the smoothing's, for the ideal motion).
 SECTIONS = ("template", "smoothing")
+#: The group of each take's ground truth in the stage's data (:func:`truth_datasets`).
+TRUTH = "/truth"
+
+
+@dataclass(frozen=True)
+class Params:
+    """Accuracy parameters.
+
+    Attributes
+    ----------
+    fit : scan2morph.stages.fit.Params
+        The fit's (fiducial sets, levels, the depth-step rule), for the ideal correspondence.
+    smoothing : mapping
+        The config section ``smoothing``, for the ideal motion.
+    """
+
+    fit: fit_stage.Params
+    smoothing: Mapping
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``template`` and ``smoothing``."""
+        return cls(fit_stage.Params.from_config(config), dict(config["smoothing"]))
+
+
+def truth_datasets(truths: Mapping[str, Truth]) -> dict[str, np.ndarray]:
+    """Each take's ground truth as datasets ``/truth/{take}/{key}`` (the keys of a truth file,
+    :mod:`scan2morph.evaluate.truth`), beside the store's in the stage's data."""
+    out = {}
+    for take, truth in truths.items():
+        arrays = {f.name: getattr(truth, f.name) for f in fields(truth) if f.name != "extra"}
+        out |= {f"{TRUTH}/{take}/{k}": v for k, v in (arrays | truth.extra).items()}
+    return out
+
+
+def _truths(data: Mapping[str, np.ndarray], takes) -> dict[str, Truth]:
+    """The takes' ground truth held in ``data`` (:func:`truth_datasets`)."""
+    out = {}
+    for take in takes:
+        prefix = f"{TRUTH}/{take}/"
+        arrays = {k.removeprefix(prefix): v for k, v in data.items() if k.startswith(prefix)}
+        if arrays:
+            out[take] = Truth.from_arrays(arrays, source=f"{TRUTH}/{take}")
+    return out
 
 
 def run(
-    template: Template,
-    subject: Subject,
-    store: Mapping[str, np.ndarray],
-    truths: Mapping[str, Truth],
-    config: Mapping,
-) -> dict:
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
+) -> Part:
     """``accuracy.json`` of one subject.
 
     Parameters
@@ -34,35 +75,36 @@ def run(
     template : Template
         The base template.
     subject : Subject
-    store : mapping store path -> array
-        The subject's store (or the same datasets held in memory by a sweep).
-    truths : mapping take -> Truth
-    config : mapping section -> mapping
-        The sections ``template`` and ``smoothing``.
+    data : mapping path -> array
+        The subject's store (or the same datasets held in memory by a sweep) and each take's
+        ground truth (:func:`truth_datasets`).
+    params : Params
 
     Returns
     -------
-    dict
+    Part
+        No datasets; ``files["accuracy"]`` is
         :func:`scan2morph.evaluate.subject.subject_accuracy`'s report, with the store's
         ``warnings`` (one line each; a take left out of the models has no motion entry) and
         ``failed_takes`` (take -> ``stage`` and ``reason``: the takes left out of the subject,
         :mod:`scan2morph.stages.failure`, measured nowhere else); each take's ``landmarks``
         against the truth (:func:`~scan2morph.evaluate.landmarks.take_landmarks`).
     """
-    section = config["template"]
+    store = {k: v for k, v in data.items() if not k.startswith(f"{TRUTH}/")}
     left_out = failures(store)
     subject = usable(subject, store)
-    truths = {t: truth for t, truth in truths.items() if t in subject.kinds}
+    truths = _truths(data, subject.kinds)
+    fit = params.fit
     report = subject_accuracy(
         store,
         truths,
         subject.neutral,
         (kept := modelled(subject, store)).visemes,
         template=template,
-        fiducial_sets={t: fiducial_set(section, k) for t, k in subject.kinds.items()},
-        levels=int(section["subdivision_levels"]),
-        smoothing=config["smoothing"],
-        max_slope_deg=section["max_slope_deg"],
+        fiducial_sets={t: fit.fiducial_set(k) for t, k in subject.kinds.items()},
+        levels=int(fit.options["levels"]),
+        smoothing=params.smoothing,
+        max_slope_deg=fit.options["max_slope_deg"],
         expressions=kept.expressions,
     )
     sources = {
@@ -74,10 +116,11 @@ def run(
     for t, entry in errors.items():
         report["takes"][t]["landmarks"] = entry
     report["summary"] |= landmark_summary(errors)
-    return report | {
+    report |= {
         "warnings": [str(w) for w in read_warnings(store)],
         "failed_takes": {t: {"stage": f.stage, "reason": f.reason} for t, f in left_out.items()},
     }
+    return Part(files={"accuracy": report})
 
 
 def _text(value) -> str:

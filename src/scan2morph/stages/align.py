@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.align import align_take, transform_points
-from scan2morph.stages.part import Part, Run, need
+from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.regions import icp_region, named_indices
@@ -48,8 +48,9 @@ class Params:
     icp: dict
 
     @classmethod
-    def from_config(cls, align: Mapping, template: Mapping) -> Params:
-        """From the config sections ``align`` and ``template``."""
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``align`` and ``template``."""
+        align, template = config["align"], config["template"]
         icp = {k: v for k, v in align.items() if k not in REGION_KEYS}
         return cls(
             int(template["subdivision_levels"]),
@@ -65,27 +66,17 @@ def grow_indices(fine: Template, name: str) -> np.ndarray | None:
     return None if name == "none" else np.flatnonzero(icp_region(fine, name))
 
 
-def run(
-    template: Template,
-    take: str,
-    neutral: str,
-    data: Mapping[str, np.ndarray],
-    params: Params,
-    source: str,
-) -> Part:
+def run(template: Template, take: Take, params: Params) -> Part:
     """Align one take to the neutral.
 
     Parameters
     ----------
     template : Template
         The base template.
-    take, neutral : str
-        The take and the subject's neutral take (equal: the identity).
-    data : mapping store path -> array
-        The fit parts of both (``mesh/vertices``, ``mesh/valid``).
+    take : Take
+        Its ``neutral`` (the take itself: the identity) and ``data`` (the fit parts of both:
+        ``mesh/vertices``, ``mesh/valid``).
     params : Params
-    source : str
-        ``subject/take``, for messages.
 
     Returns
     -------
@@ -100,15 +91,16 @@ def run(
         robust kernel's final scale (``kernel_k_mm``), iterations, convergence, method, the
         ``recovery`` tried and the ``problems`` of a failed gate.
     """
-    src = need(data, paths.mesh(take, "vertices"), source)
+    data, source, name, neutral = take.data, take.source, take.take, take.neutral
+    src = need(data, paths.mesh(name, "vertices"), source)
     attrs, ok = {}, True
-    if take == neutral:
+    if name == neutral:
         transform = np.eye(4)
     else:
         fine = subdivide_template(template, params.levels)
         result = align_take(
             src,
-            need(data, paths.mesh(take, "valid"), source),
+            need(data, paths.mesh(name, "valid"), source),
             need(data, paths.mesh(neutral, "vertices"), source),
             need(data, paths.mesh(neutral, "valid"), source),
             fine.faces,
@@ -121,7 +113,7 @@ def run(
         transform = result.transform
         ok = bool(result.ok)
         attrs = {
-            paths.align_group(take): dict(
+            paths.align_group(name): dict(
                 fitness=result.fitness,
                 inlier_rmse_mm=result.inlier_rmse,
                 residual_rmse_mm=result.residual_rmse,
@@ -139,16 +131,16 @@ def run(
                 recovery=list(result.recovery),
             )
         }
-        log.info("%s: %s", take, attrs[paths.align_group(take)])
+        log.info("%s: %s", name, attrs[paths.align_group(name)])
         if not ok:
             log.warning(
-                "%s: alignment failed its quality gate: %s", take, "; ".join(result.problems)
+                "%s: alignment failed its quality gate: %s", name, "; ".join(result.problems)
             )
     return Part(
         {
-            paths.align(take, "transform"): transform,
-            paths.align(take, "vertices"): transform_points(transform, src),
-            paths.align(take, "ok"): np.bool_(ok),
+            paths.align(name, "transform"): transform,
+            paths.align(name, "vertices"): transform_points(transform, src),
+            paths.align(name, "ok"): np.bool_(ok),
         },
         attrs=attrs,
     )
@@ -156,10 +148,8 @@ def run(
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """Every take of a subject held in memory."""
-    params = Params.from_config(run_.config["align"], run_.config["template"])
-    neutral = run_.subject.neutral
+    params = Params.from_config(run_.config)
     out = {}
     for take in run_.subject.kinds:
-        part = run(run_.template, take, neutral, data, params, run_.subject.source(take))
-        out |= part.datasets
+        out |= run(run_.template, Take.of(run_.subject, take, data=data), params).datasets
     return out

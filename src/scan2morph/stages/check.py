@@ -1,6 +1,6 @@
 """Check: every problem of a subject's sheet rows and files at once, before any heavy job.
 
-One job per subject reads each take's files with the ingest's own readers (no stereo matching,
+One job per subject reads each take's files with the ingest's own readers (:func:`run`) (no stereo matching,
 rendering or resampling: :func:`scan2morph.io.check.take_file_problems`) and gathers them with
 the sheet's problems (:func:`scan2morph.sheet.sheet_problems`), so that a scan in metres, a
 landmark file with a wrong count and a missing colour image surface in one run, one line each.
@@ -14,29 +14,55 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 from scan2morph.errors import InputError
 from scan2morph.io.check import take_file_problems
+from scan2morph.stages.part import Part, Take
+from scan2morph.template import Template
 
 log = logging.getLogger("scan2morph")
 
 
-def run(
-    subject: str,
-    rows: Sequence[Mapping[str, str]],
-    files: Mapping[str, Mapping[str, str]],
-    sheet: Sequence[tuple[str, str]],
-) -> dict:
-    """Check one subject.
+@dataclass(frozen=True)
+class Params:
+    """The check has no parameters."""
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """The (empty) parameters, whatever the config."""
+        return cls()
+
+
+def run(template: Template | None, take: Take, params: Params) -> Part:
+    """Check one take's files with the ingest's own readers.
+
+    Parameters
+    ----------
+    template : Template or None
+        Not used (the contract's shape).
+    take : Take
+        Its ``row`` (``modality``) and ``files`` (the input files that exist, by sheet column).
+    params : Params
+
+    Returns
+    -------
+    Part
+        No datasets; ``files["problems"]`` lists the take's problems, one line each.
+    """
+    return Part(files={"problems": take_file_problems(take.row["modality"], take.files)})
+
+
+def check_subject(subject: str, takes: Sequence[Take], sheet: Sequence[tuple[str, str]]) -> dict:
+    """Check one subject: each take that the sheet did not refuse (:func:`run`), then the verdict.
 
     Parameters
     ----------
     subject : str
         The subject id.
-    rows : sequence of mapping
-        The subject's sheet rows (``take``, ``kind``, ``modality``), in sheet order.
-    files : mapping take -> (mapping sheet column -> path)
-        Each take's input files that exist.
+    takes : sequence of Take
+        The subject's takes in sheet order, each with its ``row`` (``take``, ``kind``,
+        ``modality``) and ``files`` (the input files that exist).
     sheet : sequence of (take, problem)
         The sheet's problems (:func:`scan2morph.sheet.sheet_problems`); take empty for the
         subject's own.
@@ -54,26 +80,26 @@ def run(
         line each.
     """
     own = [problem for take, problem in sheet if not take]
-    takes: dict[str, list[str]] = {}
+    found: dict[str, list[str]] = {}
     for take, problem in sheet:
         if take:
-            takes.setdefault(take, []).append(problem)
-    for row in rows:
-        take = row["take"]
-        if take not in takes:  # a row the sheet already refused is not read
-            found = take_file_problems(row["modality"], files.get(take, {}))
-            if found:
-                takes[take] = found
-    neutral = [r["take"] for r in rows if r["kind"] == "neutral"]
+            found.setdefault(take, []).append(problem)
+    params = Params()
+    for take in takes:
+        if take.take not in found:  # a row the sheet already refused is not read
+            problems = run(None, take, params).files["problems"]
+            if problems:
+                found[take.take] = problems
+    neutral = [t.take for t in takes if t.kind == "neutral"]
     for problem in own:
         log.warning("%s: %s", subject, problem)
-    for take, problems in takes.items():
+    for take, problems in found.items():
         fate = "stops the subject" if take in neutral else "is left out"
         for problem in problems:
             log.warning("%s/%s %s: %s", subject, take, fate, problem)
-    stopping = own + [p for t in neutral for p in takes.get(t, [])]
+    stopping = own + [p for t in neutral for p in found.get(t, [])]
     if stopping:
-        n = len(own) + sum(map(len, takes.values()))
+        n = len(own) + sum(map(len, found.values()))
         raise InputError(
             f"subject {subject}",
             f"{n} problem{'s' * (n != 1)} (each above, one line); "
@@ -83,7 +109,7 @@ def run(
                 else f"its neutral take {neutral[0]} cannot be read, so the subject is not built"
             ),
         )
-    return {"subject": subject, "problems": [], "takes": takes}
+    return {"subject": subject, "problems": [], "takes": found}
 
 
 def take_problem(check: Mapping, take: str) -> str:
@@ -91,4 +117,4 @@ def take_problem(check: Mapping, take: str) -> str:
     return "; ".join(check.get("takes", {}).get(take, []))
 
 
-__all__ = ["run", "take_problem"]
+__all__ = ["Params", "check_subject", "run", "take_problem"]

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scan2morph.stages.part import Part, Run, need
+from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import Template, fit_options, fit_take, subdivide_template
 
@@ -20,41 +20,43 @@ DEFAULT_FIDUCIALS = "closed"
 log = logging.getLogger("scan2morph")
 
 
-def fiducial_set(section: Mapping, kind: str) -> str:
-    """The fiducial set of a take of ``kind`` under the config section ``template``."""
-    return section["fiducials"].get(kind, DEFAULT_FIDUCIALS)
-
-
 @dataclass(frozen=True)
 class Params:
-    """Fit parameters of one take.
+    """Fit parameters.
 
     Attributes
     ----------
-    fiducial_set : str
-        ``closed``, ``open`` or ``open_corners`` (``template.mesh.FIDUCIAL_SETS``).
+    fiducials : mapping take kind -> str
+        Each take kind's fiducial set (``template.fiducials``: ``closed``, ``open`` or
+        ``open_corners``, ``template.mesh.FIDUCIAL_SETS``); a kind not named gets
+        :data:`DEFAULT_FIDUCIALS`.
     options : dict
-        :func:`scan2morph.template.fit_options` of the section (levels, validity and fold
-        limits, sampling weight, depth-step rule).
+        :func:`scan2morph.template.fit_options` of the section ``template`` (levels, validity
+        and fold limits, sampling weight, depth-step rule).
     """
 
-    fiducial_set: str
+    fiducials: Mapping[str, str]
     options: dict
 
     @classmethod
-    def from_config(cls, section: Mapping, kind: str) -> Params:
-        """From the config section ``template`` and the take's kind."""
-        return cls(fiducial_set(section, kind), fit_options(section))
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's section ``template``."""
+        section = config["template"]
+        return cls(dict(section["fiducials"]), fit_options(section))
+
+    def fiducial_set(self, kind: str) -> str:
+        """The fiducial set of a take of ``kind``."""
+        return self.fiducials.get(kind, DEFAULT_FIDUCIALS)
 
 
-def template_part(template: Template, section: Mapping) -> Part:
+def template_part(template: Template, params: Params) -> Part:
     """The ``/template`` group: faces, canonical 2D vertices and fiducials of the subdivided
-    template (``template.subdivision_levels``).
+    template (``params.options["levels"]`` subdivisions).
 
     Fiducials are every iBUG point that is a template vertex (named ``ibugNN``, 1-based as in
     iBUG) followed by the named template points (``eye_r_outer``, ``forehead_centre``, ...).
     """
-    fine = subdivide_template(template, int(section["subdivision_levels"]))
+    fine = subdivide_template(template, params.options["levels"])
     numbers = np.flatnonzero(fine.ibug_vertex >= 0) + 1
     names = [f"ibug{n:02d}" for n in numbers] + list(fine.named)
     indices = np.concatenate([fine.ibug_vertex[numbers - 1], list(fine.named.values())])
@@ -68,28 +70,18 @@ def template_part(template: Template, section: Mapping) -> Part:
     )
 
 
-def run(
-    template: Template,
-    take: str,
-    data: Mapping[str, np.ndarray],
-    attrs: Mapping,
-    params: Params,
-    source: str,
-) -> Part:
+def run(template: Template, take: Take, params: Params) -> Part:
     """Fit the template to one take.
 
     Parameters
     ----------
     template : Template
         The base template.
-    take : str
-    data : mapping store path -> array
-        The take's repair part (``range/xyz``, ``range/color``, ``landmarks``).
-    attrs : mapping
-        The take group's attributes so far (kept, with the fit's added).
+    take : Take
+        Its ``kind`` (the fiducial set), ``data`` (the repair part: ``range/xyz``,
+        ``range/color``, ``landmarks``) and ``attrs`` (the take group's attributes so far, kept
+        with the fit's added).
     params : Params
-    source : str
-        ``subject/take``, for messages.
 
     Returns
     -------
@@ -98,36 +90,37 @@ def run(
         ``mesh/points2d`` (V, 2) px; ``files`` holds ``faces`` (F, 3) and ``texture`` (the
         colour image) for the take's OBJ.
     """
+    name, data, source = take.take, take.data, take.source
+    fiducials = params.fiducial_set(take.kind)
     mesh = fit_take(
         template,
-        need(data, paths.landmarks(take), source),
-        need(data, paths.range_image(take, "xyz"), source),
-        fiducial_set=params.fiducial_set,
+        need(data, paths.landmarks(name), source),
+        need(data, paths.range_image(name, "xyz"), source),
+        fiducial_set=fiducials,
         source=source,
         **params.options,
     )
     log.info(
         "%s: %d vertices, %.1f%% valid, %d folded triangles",
-        take,
+        name,
         len(mesh["valid"]),
         100 * mesh["valid"].mean(),
         mesh["n_folded"],
     )
     return Part(
-        {paths.mesh(take, k): mesh[k] for k in ("vertices", "uv", "valid", "points2d")},
+        {paths.mesh(name, k): mesh[k] for k in ("vertices", "uv", "valid", "points2d")},
         attrs={
-            paths.take(take): dict(attrs)
-            | {"fiducial_set": params.fiducial_set, "n_folded": mesh["n_folded"]}
+            paths.take(name): dict(take.attrs)
+            | {"fiducial_set": fiducials, "n_folded": mesh["n_folded"]}
         },
-        files={"faces": mesh["faces"], "texture": data.get(paths.range_image(take, "color"))},
+        files={"faces": mesh["faces"], "texture": data.get(paths.range_image(name, "color"))},
     )
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """The template group and every take's fit, for a subject held in memory."""
-    section = run_.config["template"]
-    out = template_part(run_.template, section).datasets
-    for take, kind in run_.subject.kinds.items():
-        params = Params.from_config(section, kind)
-        out |= run(run_.template, take, data, {}, params, run_.subject.source(take)).datasets
+    params = Params.from_config(run_.config)
+    out = template_part(run_.template, params).datasets
+    for take in run_.subject.kinds:
+        out |= run(run_.template, Take.of(run_.subject, take, data=data), params).datasets
     return out

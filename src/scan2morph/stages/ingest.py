@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -32,8 +33,9 @@ from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
 from scan2morph.scan.view import shaded_image
 from scan2morph.sheet import FILES, mm_per_unit
-from scan2morph.stages.part import Part
+from scan2morph.stages.part import Part, Take
 from scan2morph.store import paths
+from scan2morph.template import Template
 
 #: Config sections this stage reads (stereo takes; mesh takes).
 SECTIONS = ("stereo", "mesh_camera")
@@ -47,25 +49,39 @@ CAMERA_MODELS = {
 log = logging.getLogger("scan2morph")
 
 
-def run(
-    row: Mapping[str, str],
-    files: Mapping[str, str],
-    stereo: Mapping,
-    mesh_camera: Mapping | None = None,
-) -> Part:
+@dataclass(frozen=True)
+class Params:
+    """Ingest parameters.
+
+    Attributes
+    ----------
+    stereo : mapping
+        The config section ``stereo`` (the reconstruction of stereo takes).
+    mesh_camera : mapping
+        The config section ``mesh_camera`` (the virtual camera of mesh takes).
+    """
+
+    stereo: Mapping = field(default_factory=dict)
+    mesh_camera: Mapping = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``stereo`` and ``mesh_camera``."""
+        return cls(dict(config.get("stereo", {})), dict(config.get("mesh_camera", {})))
+
+
+def run(template: Template | None, take: Take, params: Params) -> Part:
     """Read one take.
 
     Parameters
     ----------
-    row : mapping
-        The take's sheet row (``subject``, ``take``, ``kind``, ``label``, ``modality``, and
-        ``units``: a mesh or range take's coordinates are scaled from it to mm).
-    files : mapping role -> path
-        The input files by sheet column (:data:`scan2morph.sheet.FILES` of the modality).
-    stereo : mapping
-        The config section ``stereo`` (used by stereo takes).
-    mesh_camera : mapping, optional
-        The config section ``mesh_camera`` (used by mesh takes).
+    template : Template or None
+        Not used (the contract's shape).
+    take : Take
+        Its ``row`` (the sheet row: ``subject``, ``take``, ``kind``, ``label``, ``modality``, and
+        ``units``: a mesh or range take's coordinates are scaled from it to mm) and ``files``
+        (the input files by sheet column, :data:`scan2morph.sheet.FILES` of the modality).
+    params : Params
 
     Returns
     -------
@@ -80,15 +96,16 @@ def run(
     InputError
         From the readers; a mirrored (left-handed) frame.
     """
-    take, modality = row["take"], row["modality"]
+    row, files = take.row, take.files
+    name, modality = row["take"], row["modality"]
     if modality not in _READERS:
-        raise InputError(f"{row['subject']}/{take}", f"modality {modality!r} not supported")
-    scan = _READERS[modality](files, row, stereo, mesh_camera)
+        raise InputError(f"{row['subject']}/{name}", f"modality {modality!r} not supported")
+    scan = _READERS[modality](files, row, params)
     attrs = {k: row[k] for k in ("kind", "label", "modality")} | scan.attrs
     first = FILES[modality][0]
     if scan.landmarks is not None and complete(scan.landmarks):
         attrs["nose_depth_mm"] = check_handedness(scan.xyz, scan.landmarks, files.get(first, first))
-    clicks = {} if scan.landmarks is None else {paths.clicks(take): scan.landmarks}
+    clicks = {} if scan.landmarks is None else {paths.clicks(name): scan.landmarks}
     # a geometry-only mesh is shaded grey on purpose (its own warning says so)
     shaded = scan.camera.get("color_source") == "shading"
     attrs["grey_color"] = bool(_grey(scan.color)) and not shaded
@@ -96,12 +113,12 @@ def run(
     provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | scan.camera
     return Part(
         {
-            paths.raw(take, "xyz"): scan.xyz,
-            paths.raw(take, "color"): scan.color,
+            paths.raw(name, "xyz"): scan.xyz,
+            paths.raw(name, "color"): scan.color,
             **clicks,
-            **{paths.camera(take, k): _dataset(v) for k, v in provenance.items()},
+            **{paths.camera(name, k): _dataset(v) for k, v in provenance.items()},
         },
-        attrs={paths.take(take): attrs},
+        attrs={paths.take(name): attrs},
     )
 
 
@@ -115,7 +132,7 @@ class _Scan(NamedTuple):
     attrs: dict = {}
 
 
-def _read_rgbd(files, row, stereo, mesh_camera) -> _Scan:
+def _read_rgbd(files, row, params: Params) -> _Scan:
     scan = read_rgbd_take(
         files["depth"], files["color"], files["intrinsics"], files.get("landmarks")
     )
@@ -124,12 +141,12 @@ def _read_rgbd(files, row, stereo, mesh_camera) -> _Scan:
     return _Scan(scan.xyz, scan.color, scan.landmarks, camera)
 
 
-def _read_mesh(files, row, stereo, mesh_camera) -> _Scan:
+def _read_mesh(files, row, params: Params) -> _Scan:
     scan = read_mesh_take(
         files["mesh"],
         files.get("texture") or None,
         files.get("landmarks"),
-        dict(mesh_camera or {}),
+        dict(params.mesh_camera),
         mm_per_unit(row),
     )
     camera = dict(
@@ -142,7 +159,7 @@ def _read_mesh(files, row, stereo, mesh_camera) -> _Scan:
     return _Scan(scan.xyz, scan.color, scan.landmarks, camera, {"mesh": scan.report})
 
 
-def _read_range(files, row, stereo, mesh_camera) -> _Scan:
+def _read_range(files, row, params: Params) -> _Scan:
     scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"))
     xyz = scan.xyz * mm_per_unit(row)
     if scan.landmarks is not None and complete(scan.landmarks):
@@ -157,7 +174,8 @@ def _read_range(files, row, stereo, mesh_camera) -> _Scan:
     return _Scan(xyz, shaded_image(xyz), scan.landmarks, {"color_source": SHADED})
 
 
-def _read_stereo(files, row, stereo, mesh_camera) -> _Scan:
+def _read_stereo(files, row, params: Params) -> _Scan:
+    stereo = params.stereo
     pair = read_stereo_take(
         files["left"], files["right"], files["calibration"], files.get("landmarks")
     )
@@ -187,7 +205,7 @@ def _read_stereo(files, row, stereo, mesh_camera) -> _Scan:
     return _Scan(xyz, pair.left, pair.landmarks, {}, {"stereo": report})
 
 
-#: Each modality's reader: (files, row, stereo section, mesh_camera section) -> _Scan.
+#: Each modality's reader: (files, row, params) -> _Scan.
 _READERS = {"rgbd": _read_rgbd, "mesh": _read_mesh, "range": _read_range, "stereo": _read_stereo}
 
 

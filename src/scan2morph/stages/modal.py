@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -161,9 +161,11 @@ class Params:
     physics: dict = field(default_factory=dict)
 
     @classmethod
-    def from_config(cls, modal: Mapping, template: Mapping, threads: int = 1) -> Params:
-        """From the config sections ``modal`` and ``template`` and the job's threads; the
-        physics is the preset's (``modal.preset``) with the section's overrides."""
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``modal`` and ``template`` (one thread: see
+        :meth:`with_threads`); the physics is the preset's (``modal.preset``) with the section's
+        overrides."""
+        modal, template = config["modal"], config["template"]
         phys = physics(modal)
         params = ModalParams(
             n_modes=modal["modes"],
@@ -176,7 +178,7 @@ class Params:
                 float(phys["membrane_scale"]),
                 bool(phys["rotary_inertia"]),
             ),
-            threads=threads,
+            threads=1,
             seed=modal["seed"],
             mass=str(phys["mass"]),
             tension_n_per_mm=float(phys["tension_n_per_mm"]),
@@ -197,6 +199,10 @@ class Params:
             str(phys["tether_region"]),
             phys,
         )
+
+    def with_threads(self, threads: int) -> Params:
+        """The same parameters, with the eigensolver's threads (the job's)."""
+        return replace(self, modal=replace(self.modal, threads=threads))
 
 
 def semantic_takes(subject: Subject, labels: list) -> list[str]:

@@ -4,6 +4,7 @@ named blend shapes (Eq. 1) and PCA blends (Eq. 2), and their exports (glTF, OBJ)
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,38 @@ from scan2morph.template import Template, subdivide_template
 SECTIONS = ("morph", "template")
 #: Why a subject without viseme takes gets no PCA or blends (recorded in the store).
 NO_VISEMES = "no viseme takes: no blend shapes or PCA (the glTF and OBJ hold the neutral only)"
+
+
+@dataclass(frozen=True)
+class Params:
+    """Morph parameters.
+
+    Attributes
+    ----------
+    levels : int
+        Template subdivisions.
+    blends : mapping
+        Named blend shapes (Eq. 1): name -> weights by viseme label (``morph.blends``).
+    pca_blends : mapping
+        Named PCA blends (Eq. 2): name -> alphas (``morph.pca_blends``).
+    alpha_limit : float
+        Largest PCA alpha allowed, in sigmas (``morph.alpha_limit``).
+    sigma : str
+        The unit of the alphas (a convention of :data:`~scan2morph.morph.pca.SIGMA_CONVENTIONS`).
+    """
+
+    levels: int
+    blends: Mapping
+    pca_blends: Mapping
+    alpha_limit: float
+    sigma: str = "sample"
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``morph`` and ``template``."""
+        m = config["morph"]
+        levels = int(config["template"]["subdivision_levels"])
+        return cls(levels, m["blends"], m["pca_blends"], m["alpha_limit"], m.get("sigma", "sample"))
 
 
 def pca_datasets(model: PCAModel) -> dict[str, np.ndarray]:
@@ -63,7 +96,7 @@ def _target_notes(model: PCAModel | None, visemes) -> dict[str, str]:
 
 
 def run(
-    template: Template, subject: Subject, data: Mapping[str, np.ndarray], config: Mapping
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
     """PCA, blends and export shapes of one subject.
 
@@ -73,9 +106,7 @@ def run(
         The base template and the subject (the contract of :mod:`scan2morph.stages`).
     data : mapping store path -> array
         The motion part, the neutral's fit part (``mesh/uv``) and repair part (``range/color``).
-    config : mapping section -> mapping
-        The sections ``morph`` (``blends``, ``pca_blends``, ``alpha_limit``, ``sigma``) and
-        ``template``.
+    params : Params
 
     Returns
     -------
@@ -92,8 +123,8 @@ def run(
         shapes and glTF, and the reason under ``/skipped`` (attribute ``morph``).
     """
     subject = modelled(subject, data)
-    m, name, neutral = config["morph"], subject.name, subject.neutral
-    faces = subdivide_template(template, int(config["template"]["subdivision_levels"])).faces
+    name, neutral = subject.name, subject.neutral
+    faces = subdivide_template(template, params.levels).faces
     base = need(data, paths.neutral("vertices"), name)
     frame = head_frame(base, template.named, source=f"{name}/head frame")
     frame_data = {paths.neutral("head_frame"): frame}
@@ -113,11 +144,11 @@ def run(
         base,
         models,
         subject.labels,
-        m["blends"],
-        m["pca_blends"],
-        m["alpha_limit"],
+        params.blends,
+        params.pca_blends,
+        params.alpha_limit,
         source=name,
-        sigma=m.get("sigma", "sample"),
+        sigma=params.sigma,
     )
     datasets = frame_data | pca_datasets(model)
     datasets |= {paths.blend(k): v for k, v in blends.items()}

@@ -68,16 +68,11 @@ class Params:
     expression_iterations: int = 0
 
     @classmethod
-    def from_config(
-        cls,
-        mask: Mapping,
-        smoothing: Mapping,
-        template: Mapping,
-        quality: Mapping,
-        refine: Mapping | None = None,
-    ) -> Params:
-        """From the config sections ``mask``, ``smoothing``, ``template``, ``quality`` and
-        ``refine``."""
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``mask``, ``smoothing``, ``template``, ``quality`` and
+        ``refine`` (none: the aligned fits are compared)."""
+        mask, smoothing, template = config["mask"], config["smoothing"], config["template"]
+        quality, refine = config["quality"], config.get("refine", {})
         return cls(
             int(template["subdivision_levels"]),
             list(mask["paths"]),
@@ -86,7 +81,7 @@ class Params:
             smoothing["iterations"],
             float(smoothing["max_stretch"]),
             bool(quality["include_failed_takes"]),
-            refine_enabled(refine or {}),
+            refine_enabled(refine),
             float(smoothing["confidence_relief"]),
             int(smoothing["expression_iterations"]),
         )
@@ -172,6 +167,4 @@ def run(
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """The stage for a subject held in memory."""
-    c = run_.config
-    params = Params.from_config(c["mask"], c["smoothing"], c["template"], c["quality"], c["refine"])
-    return run(run_.template, run_.subject, data, params).datasets
+    return run(run_.template, run_.subject, data, Params.from_config(run_.config)).datasets

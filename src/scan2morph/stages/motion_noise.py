@@ -6,18 +6,19 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
 from scan2morph.align import transform_points
 from scan2morph.motion.uncertainty import subject_motion_noise
-from scan2morph.stages import refine
-from scan2morph.stages.fit import fiducial_set
-from scan2morph.stages.part import Part, Run, Subject, need
+from scan2morph.stages import fit as fit_stage
+from scan2morph.stages import refine as refine_stage
+from scan2morph.stages.part import Part, Run, Subject, Take, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
-from scan2morph.template import Template, fit_options
+from scan2morph.template import Template
 
 #: Config sections this stage reads (``refine`` and ``align``: the error bar of the refined
 #: correspondence, whose jaw prior uses the alignment's ICP settings).
@@ -33,10 +34,42 @@ COLUMNS = {
 log = logging.getLogger("scan2morph")
 
 
-def _refiner(template, subject, data, section, refine_section, align_section):
+@dataclass(frozen=True)
+class Params:
+    """Motion-noise parameters.
+
+    Attributes
+    ----------
+    noise : mapping
+        The config section ``motion_noise`` (draws, seed, click noise).
+    smoothing : mapping
+        The config section ``smoothing`` (each draw's motion is smoothed as the motion stage's).
+    fit : scan2morph.stages.fit.Params
+        The fit's (each draw refits the takes).
+    refine : scan2morph.stages.refine.Params or None
+        The refinement's, when ``refine.method`` asks for it (each draw refines the visemes
+        too); None otherwise.
+    """
+
+    noise: Mapping
+    smoothing: Mapping
+    fit: fit_stage.Params
+    refine: refine_stage.Params | None = None
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``motion_noise``, ``smoothing``, ``template``, and
+        ``refine`` and ``align`` when it refines."""
+        refine = None
+        if refine_stage.enabled(config.get("refine", {})):
+            refine = refine_stage.Params.from_config(config)
+        fit = fit_stage.Params.from_config(config)
+        return cls(dict(config["motion_noise"]), dict(config["smoothing"]), fit, refine)
+
+
+def _refiner(template: Template, subject: Subject, data, params: refine_stage.Params):
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
     draw): the take's fit to its clicks refined against the neutral seen through its clicks."""
-    params = refine.Params.from_config(refine_section, section, align_section)
     neutral = subject.neutral
 
     def refiner(take, mesh, take_landmarks, neutral_landmarks):
@@ -49,7 +82,7 @@ def _refiner(template, subject, data, section, refine_section, align_section):
             paths.mesh(take, "points2d"): mesh["points2d"],
             paths.align(take, "vertices"): transform_points(transform, mesh["vertices"]),
         }
-        part = refine.run(template, take, subject.kinds[take], neutral, draw, params, source)
+        part = refine_stage.run(template, Take.of(subject, take, data=draw), params)
         d = part.datasets
         return (
             d[paths.refine(take, "vertices")],
@@ -61,7 +94,7 @@ def _refiner(template, subject, data, section, refine_section, align_section):
 
 
 def run(
-    template: Template, subject: Subject, data: Mapping[str, np.ndarray], config: Mapping
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
     """The error bar of one subject.
 
@@ -72,10 +105,9 @@ def run(
     data : mapping store path -> array
         The repair parts of the neutral and the visemes, their align parts and the motion
         part (the visemes it modelled, ``/mask``).
-    config : mapping section -> mapping
-        The sections ``motion_noise``, ``smoothing``, ``template``, ``refine`` and ``align``
-        (when it refines, each draw refines the visemes too: ``motion_noise.refine_draws``
-        draws; ``align`` only then).
+    params : Params
+        (With ``params.refine``, each draw refines the visemes too:
+        ``motion_noise.refine_draws`` draws.)
 
     Returns
     -------
@@ -86,20 +118,19 @@ def run(
         :func:`scan2morph.tables.write_table` with :data:`scan2morph.tables.MOTION_NOISE`).
     """
     subject = modelled(subject, data)
-    noise_cfg, section = config["motion_noise"], config["template"]
-    fiducials = {t: fiducial_set(section, k) for t, k in subject.kinds.items()}
-    refine_section = config.get("refine", {})
+    noise_cfg = params.noise
+    fiducials = {t: params.fit.fiducial_set(k) for t, k in subject.kinds.items()}
     refiner = None
-    if refine.enabled(refine_section):
-        refiner = _refiner(template, subject, data, section, refine_section, config["align"])
+    if params.refine is not None:
+        refiner = _refiner(template, subject, data, params.refine)
     datasets, result, noise = subject_motion_noise(
         template,
         data,
         subject.neutral,
         subject.visemes,
         fiducials,
-        config["smoothing"],
-        fit_options(section),
+        params.smoothing,
+        params.fit.options,
         noise_cfg,
         source=subject.name,
         refiner=refiner,
@@ -131,4 +162,4 @@ def run(
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """The stage for a subject held in memory."""
-    return run(run_.template, run_.subject, data, run_.config).datasets
+    return run(run_.template, run_.subject, data, Params.from_config(run_.config)).datasets

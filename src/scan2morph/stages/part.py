@@ -92,7 +92,8 @@ class Take:
     label : str
         The take's label (``car``, ``smile``, ...).
     neutral : str
-        The subject's neutral take id (the take itself for the neutral).
+        The subject's neutral take id (the take itself for the neutral; ``""`` where the stage
+        does not need it: ingest, check, synth).
     data : mapping store path -> array
         The datasets of the parts the stage reads.
     attrs : mapping
@@ -107,7 +108,7 @@ class Take:
     take: str
     kind: str
     label: str
-    neutral: str
+    neutral: str = ""
     data: Mapping[str, np.ndarray] = field(default_factory=dict)
     attrs: Mapping = field(default_factory=dict)
     files: Mapping[str, str] = field(default_factory=dict)
@@ -120,6 +121,13 @@ class Take:
             raise InputError(subject.name, f"take {take}: not one of the subject's takes")
         kind, label = subject.kinds[take], subject.labels[take]
         return cls(subject.name, take, kind, label, subject.neutral, **inputs)
+
+    @classmethod
+    def from_row(cls, row: Mapping, neutral: str = "", **inputs) -> Take:
+        """The take of a sheet row (``subject``, ``take``, ``kind``, ``label``), with ``inputs``
+        (``data``, ``attrs``, ``files``)."""
+        ids = (str(row[k]) for k in ("subject", "take", "kind", "label"))
+        return cls(*ids, neutral, row=row, **inputs)
 
     @property
     def source(self) -> str:

@@ -19,8 +19,8 @@ from scan2morph.refine import RefineParams, grey, refine_points
 from scan2morph.refine.jaw import JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipParams, LipPrior, lip_prior
 from scan2morph.stages import align as align_stage
-from scan2morph.stages.fit import fiducial_set
-from scan2morph.stages.part import Part, Run, need
+from scan2morph.stages import fit as fit_stage
+from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.regions import icp_region, lip
@@ -48,9 +48,8 @@ class Params:
         Template subdivisions.
     min_weight, max_slope_deg : float
         The fit's sampling rules (``template.sample_min_weight``, ``template.max_slope_deg``).
-    template : dict
-        The config section ``template`` (its ``fiducials``: each take kind's fiducial set, the
-        soft constraints).
+    fit : scan2morph.stages.fit.Params
+        The fit's parameters (each take kind's fiducial set: the soft constraints).
     min_confident_share : float
         A take whose share of confidently measured vertices is below this keeps its template
         fit (``refine.min_confident_share``), with a warning.
@@ -73,7 +72,7 @@ class Params:
     levels: int
     min_weight: float
     max_slope_deg: float | None
-    template: dict
+    fit: fit_stage.Params
     min_confident_share: float
     flow: RefineParams
     jaw: JawParams = JawParams()
@@ -83,8 +82,9 @@ class Params:
     still_region: str = "stable"
 
     @classmethod
-    def from_config(cls, refine: Mapping, template: Mapping, align: Mapping) -> Params:
-        """From the config sections ``refine``, ``template`` and ``align``."""
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's sections ``refine``, ``template`` and ``align``."""
+        refine, template, align = config["refine"], config["template"], config["align"]
         names = {f.name for f in fields(RefineParams)}
         jaw = {
             k: refine[f"jaw_{k}"]
@@ -109,13 +109,13 @@ class Params:
             int(template["subdivision_levels"]),
             template["sample_min_weight"],
             template["max_slope_deg"],
-            dict(template),
+            fit_stage.Params.from_config(config),
             float(refine.get("min_confident_share", 0.0)),
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
             JawParams(**jaw),
             LipParams(**lip),
             LipParams(**lower),
-            align_stage.Params.from_config(align, template).icp,
+            align_stage.Params.from_config(config).icp,
             str(align["icp_region"]),
         )
 
@@ -170,29 +170,18 @@ def sample_points(
     return transform_points(transform, vertices), ok
 
 
-def run(
-    template: Template,
-    take: str,
-    kind: str,
-    neutral: str,
-    data: Mapping[str, np.ndarray],
-    params: Params,
-    source: str,
-) -> Part:
+def run(template: Template, take: Take, params: Params) -> Part:
     """Refine one take's correspondence to the neutral.
 
     Parameters
     ----------
     template : Template
         The base template.
-    take, kind, neutral : str
-        The take, its kind and the subject's neutral take (the neutral is its own reference:
-        its refined mesh is its aligned fit).
-    data : mapping store path -> array
-        The repair, fit and align parts of the take and the repair and fit parts of the neutral.
+    take : Take
+        Its ``kind``, ``neutral`` (the neutral is its own reference: its refined mesh is its
+        aligned fit) and ``data`` (the repair, fit and align parts of the take and the repair
+        and fit parts of the neutral).
     params : Params
-    source : str
-        ``subject/take``, for messages.
 
     Returns
     -------
@@ -210,25 +199,26 @@ def run(
         and those placed (``lip_vertices``, ``lip_measured``) and the median redness step at
         its border (``lip_contrast``).
     """
-    aligned = need(data, paths.align(take, "vertices"), source)
-    valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
-    points = np.asarray(need(data, paths.mesh(take, "points2d"), source), dtype=np.float64)
-    if take == neutral:
+    name, kind, neutral, data, source = take.take, take.kind, take.neutral, take.data, take.source
+    aligned = need(data, paths.align(name, "vertices"), source)
+    valid = np.asarray(need(data, paths.mesh(name, "valid"), source), dtype=bool)
+    points = np.asarray(need(data, paths.mesh(name, "points2d"), source), dtype=np.float64)
+    if name == neutral:
         out = {
             "vertices": aligned,
             "valid": valid,
             "points2d": points,
             "confidence": np.ones(len(valid)),
         }
-        return Part({paths.refine(take, k): v for k, v in out.items()})
+        return Part({paths.refine(name, k): v for k, v in out.items()})
     fine = subdivide_template(template, params.levels)
-    sets = {t: fiducial_set(params.template, k) for t, k in ((neutral, "neutral"), (take, kind))}
+    sets = {t: params.fit.fiducial_set(k) for t, k in ((neutral, "neutral"), (name, kind))}
     maps = [
         fit_map(template, need(data, paths.landmarks(t), source), sets[t], source)
-        for t in (neutral, take)
+        for t in (neutral, name)
     ]
-    anchors = _anchors(template, sets[take], source)
-    refined, report, problem = _flow(fine, take, neutral, data, maps, anchors, params, source)
+    anchors = _anchors(template, sets[name], source)
+    refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
     if problem:
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points
@@ -236,17 +226,37 @@ def run(
         # them as it smooths a fit's)
         report["confidence"] = np.zeros(len(points))
     neutral_points = maps[0](fine.vertices)  # the neutral's skin points, px
-    jaw = _jaw(template, fine, take, neutral, data, neutral_points, params, source)
+    jaw = _jaw(template, fine, name, neutral, data, neutral_points, params, source)
     if jaw.used:  # the geometry's answer where the texture gave none
         refined, report["confidence"] = jaw.fill(refined, report["confidence"])
     elif params.jaw.enabled:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
+    refined, priors = _lips(fine, take, neutral_points, refined, report, params)
+    vertices, ok = sample_points(data, name, refined, fine.faces, params, source)
+    attrs = _attrs(params, problem, report, ok, jaw, priors)
+    log.info("%s: refined %s", name, attrs)
+    return Part(
+        {
+            paths.refine(name, "vertices"): vertices,
+            paths.refine(name, "valid"): ok,
+            paths.refine(name, "points2d"): refined,
+            paths.refine(name, "confidence"): report["confidence"],
+        },
+        attrs={paths.refine_group(name): attrs},
+    )
+
+
+def _lips(fine, take: Take, neutral_points, refined, report, params: Params) -> tuple:
+    """Both lips' priors applied to a take's refined points (each lip's length, the lower
+    one's share of it, where its rolling misleads the flow): ``(points, priors)``, with
+    ``report["confidence"]`` updated and ``priors`` ``lip`` and ``lower_lip`` ->
+    :class:`~scan2morph.refine.lip.LipPrior`."""
+    name, neutral, data, source = take.take, take.neutral, take.data, take.source
     priors = {}
-    shaded = _shaded(data, (neutral, take))
+    shaded = _shaded(data, (neutral, name))
     for side, settings in (("upper", params.lip), ("lower", params.lower_lip)):
-        # each lip's length (the lower one's share of it) where its rolling misleads the flow
         prior = _lip(
-            fine, side, take, neutral, data, neutral_points, refined, params, settings, source,
+            fine, side, name, neutral, data, neutral_points, refined, params, settings, source,
         ) if not (shaded and settings.enabled) else LipPrior.unused(
             len(fine.vertices), f"{shaded}: the lip's border is found by its colour"
         )  # fmt: skip
@@ -255,7 +265,11 @@ def run(
         elif settings.enabled:
             log.info("%s: %s-lip prior not used: %s", source, side, prior.problem)
         priors["lip" if side == "upper" else "lower_lip"] = prior
-    vertices, ok = sample_points(data, take, refined, fine.faces, params, source)
+    return refined, priors
+
+
+def _attrs(params: Params, problem: str, report, ok, jaw: JawPrior, priors) -> dict:
+    """The ``refine`` group's attributes (see :func:`run`)."""
     attrs = {
         "method": params.method,
         "used": not problem,
@@ -266,13 +280,13 @@ def run(
         "jaw_used": jaw.used,
         "jaw_problem": jaw.problem,
     }
-    for name, prior in priors.items():
+    for key, prior in priors.items():
         attrs |= {
-            f"{name}_used": prior.used,
-            f"{name}_problem": prior.problem,
-            f"{name}_vertices": prior.vertices,
-            f"{name}_measured": prior.measured,
-            f"{name}_contrast": prior.contrast,
+            f"{key}_used": prior.used,
+            f"{key}_problem": prior.problem,
+            f"{key}_vertices": prior.vertices,
+            f"{key}_measured": prior.measured,
+            f"{key}_contrast": prior.contrast,
         }
     if jaw.motion is not None:
         attrs |= {
@@ -280,16 +294,7 @@ def run(
             "jaw_rmse_limit_mm": jaw.motion.rmse_limit,
             "jaw_angle_deg": rotation_angle_deg(jaw.motion.transform),
         }
-    log.info("%s: refined %s", take, attrs)
-    return Part(
-        {
-            paths.refine(take, "vertices"): vertices,
-            paths.refine(take, "valid"): ok,
-            paths.refine(take, "points2d"): refined,
-            paths.refine(take, "confidence"): report["confidence"],
-        },
-        attrs={paths.refine_group(take): attrs},
-    )
+    return attrs
 
 
 def _shaded(data: Mapping[str, np.ndarray], takes) -> str:
@@ -414,11 +419,8 @@ def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """Every take of a subject held in memory (nothing when ``refine.method`` is ``none``)."""
     if not enabled(run_.config["refine"]):
         return {}
-    c = run_.config
-    params = Params.from_config(c["refine"], c["template"], c["align"])
-    neutral = run_.subject.neutral
+    params = Params.from_config(run_.config)
     out = {}
-    for take, kind in run_.subject.kinds.items():
-        source = run_.subject.source(take)
-        out |= run(run_.template, take, kind, neutral, data, params, source).datasets
+    for take in run_.subject.kinds:
+        out |= run(run_.template, Take.of(run_.subject, take, data=data), params).datasets
     return out

@@ -4,62 +4,79 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
 from scan2morph.scan import repair_range
-from scan2morph.stages.part import Part, Run, need
+from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
+from scan2morph.template import Template
 
 #: Config section this stage reads.
 SECTIONS = ("repair",)
 log = logging.getLogger("scan2morph")
 
 
-def run(
-    take: str, data: Mapping[str, np.ndarray], attrs: Mapping, settings: Mapping, source: str
-) -> Part:
+@dataclass(frozen=True)
+class Params:
+    """Repair parameters.
+
+    Attributes
+    ----------
+    settings : mapping
+        The config section ``repair`` (:func:`scan2morph.scan.repair_range`'s settings).
+    """
+
+    settings: Mapping
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's section ``repair``."""
+        return cls(dict(config["repair"]))
+
+
+def run(template: Template | None, take: Take, params: Params) -> Part:
     """Repair one take's range image (an RGB-D take's as depth-camera data: flying pixels at
     depth edges dropped, depth noise smoothed).
 
     Parameters
     ----------
-    take : str
-    data : mapping store path -> array
-        The take's ingest part (``raw/xyz``, ``raw/color``, ``clicks`` when given).
-    attrs : mapping
-        The take group's attributes so far (kept, with the repair report added); ``modality``
-        ``rgbd`` marks depth-camera data.
-    settings : mapping
-        The config section ``repair``.
-    source : str
-        ``subject/take``, for messages.
+    template : Template or None
+        Not used (the contract's shape).
+    take : Take
+        Its ``data`` (the ingest part: ``raw/xyz``, ``raw/color``, ``clicks`` when given) and ``attrs``
+        (the take group's attributes so far, kept with the repair report added; ``modality``
+        ``rgbd`` marks depth-camera data).
+    params : Params
 
     Returns
     -------
     Part
         ``range/xyz`` (float32, mm), ``range/color``, ``range/spikes``, ``range/filled``,
-        ``clicks`` (when given) and the ``camera/*`` provenance; ``files["report"]`` is the repair report (counts, holes filled and left).
+        ``clicks`` (when given) and the ``camera/*`` provenance; ``files["report"]`` is the repair report
+        (counts, holes filled and left).
     """
+    name, data, source = take.take, take.data, take.source
     xyz, report = repair_range(
-        need(data, paths.raw(take, "xyz"), source),
-        dict(settings),
+        need(data, paths.raw(name, "xyz"), source),
+        dict(params.settings),
         source=source,
-        depth_camera=_modality(data, attrs, take) == "rgbd",
+        depth_camera=_modality(data, take.attrs, name) == "rgbd",
     )
     filled, spikes = report.pop("filled"), report.pop("spikes")
     report.pop("flying", None)
-    log.info("%s: %s", take, report)
+    log.info("%s: %s", name, report)
     return Part(
         {
-            paths.range_image(take, "xyz"): xyz.astype(np.float32),
-            paths.range_image(take, "color"): need(data, paths.raw(take, "color"), source),
-            paths.range_image(take, "spikes"): spikes,
-            paths.range_image(take, "filled"): filled,
-            **{k: data[k] for k in (paths.clicks(take),) if k in data},
-            **camera_datasets(data, take),
+            paths.range_image(name, "xyz"): xyz.astype(np.float32),
+            paths.range_image(name, "color"): need(data, paths.raw(name, "color"), source),
+            paths.range_image(name, "spikes"): spikes,
+            paths.range_image(name, "filled"): filled,
+            **{k: data[k] for k in (paths.clicks(name),) if k in data},
+            **camera_datasets(data, name),
         },
-        attrs={paths.take(take): dict(attrs) | {"repair": report}},
+        attrs={paths.take(name): dict(take.attrs) | {"repair": report}},
         files={"report": report},
     )
 
@@ -84,7 +101,8 @@ def camera_datasets(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.n
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """Every take of a subject (:class:`~scan2morph.stages.part.Run`)."""
+    params = Params.from_config(run_.config)
     out = {}
     for take in run_.subject.kinds:
-        out |= run(take, data, {}, run_.config["repair"], run_.subject.source(take)).datasets
+        out |= run(run_.template, Take.of(run_.subject, take, data=data), params).datasets
     return out

@@ -2,56 +2,71 @@
 
 from __future__ import annotations
 
-import json
-from collections.abc import Mapping, Sequence
-from pathlib import Path
+from collections.abc import Mapping
+from dataclasses import dataclass
 
-from scan2morph.report import report_figures, stage_timings, write_subject_report
+from scan2morph.report import report_figures, subject_report_html
+from scan2morph.stages.part import Part, Subject
+from scan2morph.template import Template
 
 #: Config section this stage reads.
 SECTIONS = ("report",)
 
 
-def run(
-    out: str | Path,
-    store: str | Path,
-    figures: Sequence[str],
-    captions: Sequence[str],
-    accuracy: Sequence[str],
-    timings: Mapping,
-    takes: Sequence[str],
-    settings: Mapping,
-    glb: str | Path | None = None,
-) -> None:
-    """Write a subject's report.
+@dataclass(frozen=True)
+class Params:
+    """Report parameters.
+
+    Attributes
+    ----------
+    coordinates : int
+        Modal coordinates (and frequencies) shown per expression (``report.coordinates``).
+    thumbnail_px : int
+        Width of the input thumbnails, px (``report.thumbnail_px``).
+    """
+
+    coordinates: int
+    thumbnail_px: int
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's section ``report``."""
+        section = config["report"]
+        return cls(int(section["coordinates"]), int(section["thumbnail_px"]))
+
+
+def run(template: Template | None, subject: Subject, data: Mapping, params: Params) -> Part:
+    """A subject's report page.
 
     Parameters
     ----------
-    out, store : str or Path
-        ``results/{subject}/report.html`` and the subject's store.
-    figures, captions : sequence of str
-        The figure PNGs and the caption files (matched by stem).
-    accuracy : sequence of str
-        ``accuracy.json`` of a synthetic subject, or nothing.
-    timings : mapping
-        ``benchmarks`` (folder of Snakemake's benchmark files), ``subject`` and ``order`` (rule
-        names in workflow order) for :func:`scan2morph.report.stage_timings`.
-    takes : sequence of str
-        The subject's takes in sheet order.
-    settings : mapping
-        The config section ``report``: ``coordinates`` (modal coordinates shown) and
-        ``thumbnail_px``.
-    glb : str or Path, optional
-        ``results/{subject}/{subject}.glb``, shown in the page's 3D viewer.
+    template : Template or None
+        Not used (the contract's shape).
+    subject : Subject
+        Its takes, in sheet order (the inputs section's order).
+    data : mapping
+        What the page shows, as the job read it: ``store`` (the path of
+        ``results/{subject}/{subject}.h5``, read by the page itself), ``figures`` and
+        ``captions`` (the figure PNGs and caption files, matched by stem), ``accuracy``
+        (``accuracy.json``'s content, or None without ground truth), ``timings`` (rows of
+        :func:`scan2morph.report.stage_timings`) and ``glb`` (``results/{subject}/{subject}.glb``
+        for the 3D viewer, or None).
+    params : Params
+
+    Returns
+    -------
+    Part
+        No datasets; ``files["html"]`` is the page's text (for
+        :func:`scan2morph.report.html.write_html`).
     """
-    write_subject_report(
-        out,
-        store,
-        figures=report_figures(figures, captions),
-        accuracy=json.loads(Path(accuracy[0]).read_text()) if accuracy else None,
-        timings=stage_timings(timings["benchmarks"], timings["subject"], timings["order"]),
-        takes=takes,
-        n_coordinates=settings["coordinates"],
-        thumbnail_px=settings["thumbnail_px"],
-        glb=glb,
+    html = subject_report_html(
+        data["store"],
+        figures=report_figures(data.get("figures", ()), data.get("captions", ())),
+        accuracy=data.get("accuracy"),
+        timings=data.get("timings", ()),
+        takes=list(subject.kinds),
+        n_coordinates=params.coordinates,
+        thumbnail_px=params.thumbnail_px,
+        glb=data.get("glb"),
     )
+    return Part(files={"html": html})

@@ -2,66 +2,102 @@
 
 from __future__ import annotations
 
+import io
 import logging
-from collections.abc import Iterable, Mapping
-from pathlib import Path
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import h5py
 
 from scan2morph.errors import InputError
+from scan2morph.jobs import config_sha256
 from scan2morph.stages.failure import part_failures
+from scan2morph.stages.part import Part, Subject
 from scan2morph.stages.quality import subject_warnings, warning_datasets
 from scan2morph.store import paths, validate_store
-from scan2morph.store.hdf5 import hdf5_output, merge_into, write_into
+from scan2morph.store.hdf5 import merge_into, write_into
 from scan2morph.store.layout import describe
+from scan2morph.template import Template
 
 #: Config section this stage reads.
 SECTIONS = ("quality",)
 log = logging.getLogger("scan2morph")
 
 
+@dataclass(frozen=True)
+class Params:
+    """Store parameters.
+
+    Attributes
+    ----------
+    quality : mapping
+        The config section ``quality`` (:func:`scan2morph.stages.quality.subject_warnings`).
+    config_sha256 : str
+        The run's config hash (:func:`scan2morph.jobs.config_sha256`), a root attribute.
+    layout : mapping
+        ``schemas/store.layout.yaml``, loaded (:meth:`with_layout`): the store is described and
+        checked by it.
+    """
+
+    quality: Mapping
+    config_sha256: str
+    layout: Mapping = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's section ``quality`` and the whole config's hash (no layout yet)."""
+        return cls(dict(config["quality"]), config_sha256(config))
+
+    def with_layout(self, layout: Mapping) -> Params:
+        """The same parameters with the store layout."""
+        return replace(self, layout=layout)
+
+
 def run(
-    path: str | Path,
-    parts: Iterable[str | Path],
-    subject: str,
-    config_sha256: str,
-    quality: Mapping,
-    layout: dict,
-) -> list:
-    """Write ``results/{subject}/{subject}.h5``.
+    template: Template | None, subject: Subject, data: Mapping[str, Sequence], params: Params
+) -> Part:
+    """``results/{subject}/{subject}.h5``, built in memory.
 
     Parameters
     ----------
-    path : str or Path
-        The store (replaced).
-    parts : iterable of paths
-        Every stage part of the subject. A take left out of its subject (a failure record in
-        its parts, :mod:`scan2morph.stages.failure`) keeps only that record in the store.
-    subject, config_sha256 : str
-        Root attributes.
-    quality : mapping
-        The config section ``quality`` (:func:`scan2morph.stages.quality.subject_warnings`).
-    layout : dict
-        ``schemas/store.layout.yaml``, loaded.
+    template : Template or None
+        Not used (the contract's shape).
+    subject : Subject
+        Its ``name`` (a root attribute).
+    data : mapping
+        ``parts``: the paths of every stage part of the subject (the store merges their files,
+        attributes and failure records, not only their datasets). A take left out of its
+        subject (a failure record in its parts, :mod:`scan2morph.stages.failure`) keeps only
+        that record in the store.
+    params : Params
 
     Returns
     -------
-    list of Warning
-        The subject's warnings, also written to ``/warnings`` and logged.
+    Part
+        No datasets; ``files["store"]`` is the store's bytes (for
+        :func:`scan2morph.store.hdf5.write_file`) and ``files["warnings"]`` the subject's
+        warnings (also written to ``/warnings`` and logged).
 
     Raises
     ------
     InputError
         Two parts writing one dataset, or a store that does not match the layout.
     """
-    parts = list(parts)
+    parts = list(data["parts"])
     failed = part_failures(parts)
-    with hdf5_output(path) as h5:  # built in memory, written once
-        merge_into(h5, parts, subject, config_sha256, exclude=[paths.take(t) for t in failed])
-        warnings = subject_warnings(h5, quality)
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h5:
+        exclude = [paths.take(t) for t in failed]
+        merge_into(h5, parts, subject.name, params.config_sha256, exclude=exclude)
+        warnings = subject_warnings(h5, params.quality)
         write_into(h5, warning_datasets(warnings))
-        describe(h5, layout)
+        describe(h5, dict(params.layout))
     for warning in warnings:
-        log.warning("%s: %s", subject, warning)
-    problems = validate_store(path, layout)
+        log.warning("%s: %s", subject.name, warning)
+    problems = validate_store(io.BytesIO(buffer.getvalue()), dict(params.layout))
     if problems:
-        raise InputError(path, "does not match schemas/store.layout.yaml: " + "; ".join(problems))
-    return warnings
+        raise InputError(
+            f"{subject.name} store",
+            "does not match schemas/store.layout.yaml: " + "; ".join(problems),
+        )
+    return Part(files={"store": buffer.getvalue(), "warnings": warnings})

@@ -6,11 +6,14 @@ landmarks), with landmark clicks and the exact ground truth (``truth/{take}.npz`
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
+from scan2morph.stages.part import Part, Take
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from scan2morph.synth.mesh_scan import make_mesh_take, write_mesh_take
 from scan2morph.synth.rgbd import make_rgbd_take, write_rgbd_take
+from scan2morph.template import Template
 
 #: The files a take of each modality is written to (roles of ``files``, besides the landmarks
 #: and the truth), in the writer's order.
@@ -32,45 +35,72 @@ SECTIONS = ("synthetic",)
 log = logging.getLogger("scan2morph")
 
 
-def run(
-    subject: str,
-    takes: Sequence[Mapping[str, str]],
-    seed: int,
-    scanner: Mapping,
-    rig: Mapping,
-    files: Mapping[str, Sequence[str]],
-    sensors: Mapping[str, Mapping] | None = None,
-) -> None:
-    """Generate and write the takes of one synthetic subject.
+@dataclass(frozen=True)
+class Params:
+    """Synthetic-take parameters.
+
+    Attributes
+    ----------
+    seed : int
+        The cohort seed (``synthetic.seed``; with the subject id it fixes the identity).
+    sensors : mapping modality -> mapping
+        Each modality's simulated sensor: ``range`` (``synthetic.scanner``), ``stereo``
+        (``synthetic.stereo.rig``), ``rgbd`` (``synthetic.rgbd.sensor``) and ``mesh``
+        (``synthetic.mesh.scanner``).
+    """
+
+    seed: int
+    sensors: Mapping[str, Mapping] = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, config: Mapping) -> Params:
+        """From the config's section ``synthetic``."""
+        s = config["synthetic"]
+        sensors = {
+            "range": s["scanner"],
+            "stereo": s["stereo"]["rig"],
+            "rgbd": s["rgbd"]["sensor"],
+            "mesh": s["mesh"]["scanner"],
+        }
+        return cls(int(s["seed"]), {k: dict(v) for k, v in sensors.items()})
+
+
+def run(template: Template | None, take: Take, params: Params) -> Part:
+    """Generate one take of a synthetic subject.
 
     Parameters
     ----------
-    subject : str
-        Subject id (with ``seed`` it fixes the identity).
-    takes : sequence of mapping
-        ``take``, ``kind``, ``label``, ``modality`` (``range``, ``stereo``, ``rgbd`` or
-        ``mesh``) of each take.
-    seed : int
-        The cohort seed (``synthetic.seed``).
-    scanner, rig : mapping
-        ``synthetic.scanner`` and ``synthetic.stereo.rig``.
-    files : mapping role -> sequence of paths
-        ``landmarks`` and ``truth`` per take; the roles of :data:`ROLES` per take of that
-        modality (in take order).
-    sensors : mapping, optional
-        ``rgbd`` (``synthetic.rgbd.sensor``) and ``mesh`` (``synthetic.mesh.scanner``).
+    template : Template or None
+        Not used (the contract's shape).
+    take : Take
+        Its ids (``subject`` with the seed fixes the identity; ``kind``, ``label``) and its
+        ``row``'s ``modality`` (``range``, ``stereo``, ``rgbd`` or ``mesh``).
+    params : Params
+
+    Returns
+    -------
+    Part
+        No datasets; ``files["modality"]`` and ``files["take"]``, the simulator's result (the
+        scan, the clicks and the ground truth) for :func:`write_files`.
     """
-    params = {"range": scanner, "stereo": rig, **(sensors or {})}
-    counts = dict.fromkeys(ROLES, 0)
-    for i, t in enumerate(takes):
-        args = (subject, t["label"], t["kind"], t["take"])
-        modality = t["modality"]
-        k = counts[modality]
-        counts[modality] += 1
-        make, write = _MAKERS[modality]
-        result = make(*args, seed=seed, params=dict(params.get(modality, {})))
-        own = [files[role][k] for role in ROLES[modality]]
-        write(result, *own, files["landmarks"][i], files["truth"][i])
-        log.info(
-            "%s/%s: %s %s %s written", subject, t["take"], t["modality"], t["kind"], t["label"]
-        )
+    modality = take.row["modality"]
+    make, _ = _MAKERS[modality]
+    args = (take.subject, take.label, take.kind, take.take)
+    result = make(*args, seed=params.seed, params=dict(params.sensors.get(modality, {})))
+    return Part(files={"modality": modality, "take": result})
+
+
+def write_files(part: Part, files: Mapping[str, str]) -> None:
+    """Write a synthetic take (:func:`run`) in its modality's formats.
+
+    Parameters
+    ----------
+    part : Part
+        :func:`run`'s.
+    files : mapping role -> path
+        The roles of :data:`ROLES` of the take's modality, ``landmarks`` and ``truth``.
+    """
+    modality = part.files["modality"]
+    _, write = _MAKERS[modality]
+    own = [files[role] for role in ROLES[modality]]
+    write(part.files["take"], *own, files["landmarks"], files["truth"])

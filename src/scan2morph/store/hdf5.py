@@ -52,8 +52,20 @@ def hdf5_output(path: str | Path, mode: str = "w") -> Iterator[h5py.File]:
     buffer = io.BytesIO(path.read_bytes() if mode == "a" else b"")
     with h5py.File(buffer, mode) as h5:
         yield h5
+    write_file(path, buffer.getbuffer())
+
+
+def write_file(path: str | Path, content: bytes | memoryview) -> None:
+    """Write an HDF5 file's bytes (built in memory) to ``path``, replaced atomically.
+
+    Raises
+    ------
+    OutputError
+        The disk is full (one line naming ``path``); ``path`` is left as it was.
+    """
+    path = Path(path)
     with atomic_output(path) as tmp, writing(path):
-        tmp.write_bytes(buffer.getbuffer())
+        tmp.write_bytes(content)
 
 
 def _write_dataset(h5: h5py.File, name: str, value) -> None:
