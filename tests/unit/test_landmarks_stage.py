@@ -1,0 +1,65 @@
+"""The landmarks stage: clicked takes pass through, doubtful detections warn."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+
+from scan2morph.stages import landmarks
+from scan2morph.stages.part import Take
+from scan2morph.stages.quality import subject_warnings
+from scan2morph.store import paths, write_part
+from scan2morph.synth.cohort import make_take
+
+SETTINGS = {"min_valid_fraction": 0.0, "include_failed_takes": False, "max_click_noise_px": 1.0}
+
+
+def test_a_clicked_take_keeps_its_clicks():
+    r = make_take("s1", "car", "viseme", "car", 3, {"width": 320, "height": 240, "focal_px": 725.0})
+    data = {
+        paths.range_image("car", "xyz"): r["xyz"],
+        paths.range_image("car", "color"): r["color"],
+        paths.clicks("car"): r["landmarks"],
+    }
+    take = Take("s1", "car", "viseme", "car", "neutral", data)
+    part = landmarks.run(None, take, landmarks.Params())
+    np.testing.assert_array_equal(part.datasets[paths.landmarks("car")], r["landmarks"])
+    assert part.datasets[paths.landmark_info("car", "source")] == "clicked"
+    assert part.datasets[paths.landmark_info("car", "detector")] == ""
+    assert part.datasets[paths.landmark_info("car", "doubtful")] == ""
+    assert paths.landmark_confidence("car") not in part.datasets
+    np.testing.assert_array_equal(part.files["pts"], r["landmarks"])
+    # the handedness check ran on them: the nose tip stands out towards the scanner
+    assert part.attrs[paths.take("car")]["nose_depth_mm"] < -5.0
+
+
+def test_low_confidence_is_doubtful_and_a_warning(tmp_path):
+    points = np.zeros((68, 2))
+    sure = landmarks.Landmarks(points, landmarks.DETECTED, np.full(68, 0.9), "d", "1")
+    unsure = landmarks.Landmarks(points, landmarks.DETECTED, np.full(68, 0.2), "d", "1")
+    assert sure.doubtful(0.5) == ""
+    message = unsure.doubtful(0.5)
+    assert "median confidence 0.20 below 0.5" in message
+    assert landmarks.Landmarks(points, landmarks.CLICKED).doubtful(0.5) == ""
+    path = tmp_path / "store.h5"
+    write_part(
+        path,
+        {
+            paths.landmark_info("a", "doubtful"): message,
+            paths.landmark_info("b", "doubtful"): "",
+            paths.align("a", "ok"): True,
+            paths.align("b", "ok"): True,
+        },
+    )
+    with h5py.File(path) as h5:
+        warnings = subject_warnings(h5, SETTINGS)
+    assert [(w.stage, w.take) for w in warnings] == [("landmarks", "a")]
+    assert "doubtful" in warnings[0].message
+
+
+def test_params_from_the_whole_config():
+    params = landmarks.Params.from_config(
+        {"landmarks": {"min_confidence": 0.3, "carry_stable": False, "stable_points": [28, 40]}}
+    )
+    assert params == landmarks.Params(0.3, False, (28, 40))
+    assert landmarks.Params.from_config({}) == landmarks.Params()
