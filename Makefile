@@ -30,6 +30,7 @@ export PYOPENGL_PLATFORM ?= osmesa
 setup: $(STAMP) $(BLENDER_STAMP)
 setup: $(VALIDATOR_STAMP)
 	@[ tools/viewer/node_modules/.package-lock.json -nt tools/viewer/package-lock.json ] || (cd tools/viewer && npm ci --no-audit --no-fund --loglevel=error)
+	@[ tools/viewer/dist/viewer.js -nt src/scan2morph/report/viewer/viewer.js ] && [ tools/viewer/dist/viewer.js -nt tools/viewer/node_modules/.package-lock.json ] || (cd tools/viewer && npm run --silent build)
 
 $(DEB_STAMP):
 	@missing=""; for p in $(DEB_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \

@@ -1,18 +1,12 @@
 """The report's interactive 3D viewer: the subject's glTF in three.js, inside the one-file page.
 
 The page must open from disk with no network, so everything is inline: the ``.glb`` as base64 in
-a ``data-glb`` attribute, and one ``<script type="module">`` that bundles three.js (the npm package
-``three``, pinned in ``tools/viewer/package-lock.json`` and installed by ``make setup`` with
-``npm ci``: its prebuilt ``build/three.module.min.js`` and the ``GLTFLoader`` and
-``OrbitControls`` add-ons) with our own ``viewer/viewer.js``. The page's Content-Security-Policy
-allows exactly that script, by its SHA-256 hash (:func:`script_hash`).
-
-Bundling (:func:`bundle`) rewrites ES modules into one: every imported module becomes an arrow
-function run once, in dependency order, whose ``export`` list becomes its return value
-(``const __s2m_1 = (() => { ...; return {GLTFLoader}; })();``), and each
-``import {a, b as c} from 'x'`` becomes ``const {a, b: c} = __s2m_k;``. Each module keeps its own
-scope, so the minified names of three.js cannot collide with the add-ons'. Only the static import
-and export forms these files use are supported; anything else raises.
+a ``data-glb`` attribute, and one ``<script type="module">``: our own ``viewer/viewer.js`` with
+three.js (the npm package ``three``, pinned in ``tools/viewer/package-lock.json``) and its
+``GLTFLoader`` and ``OrbitControls`` add-ons, bundled into one module by esbuild (``make setup``
+runs ``npm ci`` and ``npm run build`` in ``tools/viewer``, writing ``tools/viewer/dist/viewer.js``,
+three.js's licence comment kept). Python only inlines that file; the page's
+Content-Security-Policy allows exactly that script, by its SHA-256 hash (:func:`script_hash`).
 
 The viewer shows the mesh under a camera on +Z looking down -Z (+Y up: the head frame of
 :mod:`scan2morph.io.gltf`), orbit controls, texture on/off and wireframe, and three groups of
@@ -39,7 +33,6 @@ which the page's script adds to the glTF's base positions on the CPU.
 from __future__ import annotations
 
 import base64
-import functools
 import hashlib
 import json
 import re
@@ -76,29 +69,29 @@ INVALID = -32768
 #: the browser as a ``blob:`` URL, which it fetches.
 CSP_SOURCES = "img-src data: blob:; connect-src data: blob:"
 
-_IMPORT = re.compile(
-    r"^[ \t]*import\s*(?:\{(?P<names>[^}]*)\}|\*\s*as\s+(?P<star>[\w$]+))\s*"
-    r"from\s*(?P<q>['\"])(?P<spec>[^'\"]+)(?P=q)\s*;?",
-    re.M,
-)
-_EXPORT_LIST = re.compile(r"(?:^|(?<=[;}\n]))[ \t]*export\s*\{(?P<names>[^}]*)\}\s*;?", re.M)
-_EXPORT_DECL = re.compile(
-    r"^[ \t]*export\s+(?=(?:async\s+)?(?:function\*?|class|const|let|var)\s)"
-    r"(?P<decl>(?:async\s+)?(?:function\*?|class|const|let|var)\s+(?P<name>[\w$]+))",
-    re.M,
-)
+#: The viewer bundled by esbuild (``make setup``): viewer.js with three.js, one ES module.
+VIEWER_BUNDLE = VIEWER_PACKAGE / "dist" / "viewer.js"
 
 
-def three_unavailable(three_dir: str | Path = THREE_DIR) -> str | None:
-    """Why the viewer cannot be built (three.js not installed), or None when it can."""
-    three_dir = Path(three_dir)
-    needed = [_resolve("three", None, three_dir)]
-    needed += [_resolve(s, None, three_dir) for s in _ADDONS]
-    missing = [p for p in needed if not p.is_file()]
-    if missing:
+def three_unavailable(
+    three_dir: str | Path = THREE_DIR, bundle: str | Path = VIEWER_BUNDLE
+) -> str | None:
+    """Why the viewer cannot be shown (three.js or its bundle missing, or the bundle older than
+    ``viewer.js``), or None when it can."""
+    three_dir, bundle = Path(three_dir), Path(bundle)
+    if not (three_dir / "package.json").is_file():
         return (
-            f"three.js is not installed ({missing[0]} is missing): run `make setup` "
+            f"three.js is not installed ({three_dir / 'package.json'} is missing): run `make setup` "
             "(npm ci in tools/viewer) and rebuild the report"
+        )
+    if not bundle.is_file():
+        return (
+            f"the viewer bundle {bundle} is missing: run `make setup` (esbuild bundles viewer.js "
+            "with three.js) and rebuild the report"
+        )
+    if bundle.stat().st_mtime_ns < VIEWER_JS.stat().st_mtime_ns:
+        return (
+            f"the viewer bundle {bundle} is older than {VIEWER_JS}: run `make setup` to rebuild it"
         )
     return None
 
@@ -108,115 +101,19 @@ def three_version(three_dir: str | Path = THREE_DIR) -> str:
     return json.loads((Path(three_dir) / "package.json").read_text())["version"]
 
 
-_ADDONS = ("three/addons/loaders/GLTFLoader.js", "three/addons/controls/OrbitControls.js")
-
-
-def _resolve(spec: str, importer: Path | None, three_dir: Path) -> Path:
-    if spec == "three":
-        return three_dir / "build" / "three.module.min.js"
-    if spec.startswith("three/addons/"):
-        return three_dir / "examples" / "jsm" / spec.removeprefix("three/addons/")
-    if spec.startswith(".") and importer is not None:
-        return (importer.parent / spec).resolve()
-    raise InputError(str(importer), f"bundle: cannot resolve import {spec!r}")
-
-
-def _pairs(names: str, sep: str) -> list[tuple[str, str]]:
-    """``a, b as c`` -> [(a, a), (b, c)] (local name, exported or imported name per ``sep``)."""
-    out = []
-    for item in names.split(","):
-        item = item.strip()
-        if item:
-            left, _, right = item.partition(" as ")
-            out.append((left.strip(), (right or left).strip()))
-    return out
-
-
-def _rewrite(path: Path, code: str, ids: dict[Path, str], three_dir: Path) -> tuple[str, list]:
-    """A module's code with its imports bound from the bundled modules and its exports removed;
-    the export list as (local, exported) pairs."""
-
-    def imports(m: re.Match) -> str:
-        source = ids[_resolve(m["spec"], path, three_dir)]
-        if m["star"]:
-            return f"const {m['star']} = {source};"
-        bound = ", ".join(f"{a}: {b}" for a, b in _pairs(m["names"], " as "))
-        return f"const {{ {bound} }} = {source};"
-
-    code = _IMPORT.sub(imports, code)
-    exports: list[tuple[str, str]] = []
-
-    def export_list(m: re.Match) -> str:
-        exports.extend(_pairs(m["names"], " as "))
-        return ""
-
-    def export_decl(m: re.Match) -> str:
-        exports.append((m["name"], m["name"]))
-        return m.group(0).replace("export", "", 1).lstrip()
-
-    code = _EXPORT_LIST.sub(export_list, code)
-    code = _EXPORT_DECL.sub(export_decl, code)
-    left = re.search(r"^[ \t]*(?:import|export)\b(?!\s*\()", code, re.M)
-    if left or "import.meta" in code:
-        where = left.group(0).strip() if left else "import.meta"
-        raise InputError(path, f"bundle: unsupported module syntax ({where!r})")
-    return code, exports
-
-
-def _imports_of(path: Path, three_dir: Path) -> list[Path]:
-    return [_resolve(m["spec"], path, three_dir) for m in _IMPORT.finditer(path.read_text())]
-
-
-def bundle(entry: str | Path, three_dir: str | Path = THREE_DIR) -> str:
-    """One module script of ``entry`` and every module it imports (see the module docstring).
+def viewer_script(bundle: str | Path = VIEWER_BUNDLE) -> str:
+    """The viewer's one module script, as esbuild bundled it.
 
     Raises
     ------
     InputError
-        A module is missing, imports something other than ``three``, ``three/addons/...`` or a
-        relative path, uses module syntax the rewrite does not handle, or contains text that
-        would end an inline ``<script>`` early.
+        The bundle contains text that would end an inline ``<script>`` early (``</script`` or
+        ``<!--``).
     """
-    entry, three_dir = Path(entry).resolve(), Path(three_dir).resolve()
-    order: list[Path] = []
-
-    def visit(path: Path, stack: tuple[Path, ...]) -> None:
-        if path in order:
-            return
-        if path in stack:
-            raise InputError(path, "bundle: circular import")
-        if not path.is_file():
-            raise InputError(path, "bundle: module not found (make setup installs three.js)")
-        for dep in _imports_of(path, three_dir):
-            visit(dep, (*stack, path))
-        order.append(path)
-
-    visit(entry, ())
-    ids = {p: f"__s2m_{i}" for i, p in enumerate(order)}
-    parts = []
-    for path in order:
-        code, exports = _rewrite(path, path.read_text(), ids, three_dir)
-        if path == entry:
-            parts.append(code)
-            continue
-        values = ", ".join(f"{b}: {a}" for a, b in exports)
-        parts.append(f"const {ids[path]} = (() => {{\n{code}\nreturn {{ {values} }};\n}})();\n")
-    script = "\n".join(parts)
+    script = Path(bundle).read_text(encoding="utf-8")
     if re.search(r"</script|<!--", script, re.I):
-        raise InputError(entry, "bundle: the code contains '</script' or '<!--'")
+        raise InputError(bundle, "bundle: the code contains '</script' or '<!--'")
     return script
-
-
-@functools.lru_cache(maxsize=4)
-def _viewer_script(entry: str, three_dir: str, stamp: tuple) -> str:
-    return bundle(entry, three_dir)
-
-
-def viewer_script(three_dir: str | Path = THREE_DIR) -> str:
-    """The viewer's bundled module script (cached while the files are unchanged)."""
-    files = [VIEWER_JS, _resolve("three", None, Path(three_dir))]
-    stamp = tuple(f.stat().st_mtime_ns for f in files if f.is_file())
-    return _viewer_script(str(VIEWER_JS), str(three_dir), stamp)
 
 
 def script_hash(script: str) -> str:
@@ -486,4 +383,4 @@ def viewer_context(
         "missing": [old, *_missing(h5, None, names)] if old else _missing(h5, layout, names),
         "sigma": SIGMA_WORDS.get(_sigma_convention(h5), "sigma_k of the store's /pca/sigma"),
     }
-    return context, viewer_script(three_dir)
+    return context, viewer_script()
