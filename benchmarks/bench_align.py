@@ -33,7 +33,14 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from scan2morph.align import align_take, invert, rotation_angle_deg, transform_points
+from scan2morph.align import (
+    AlignMeshes,
+    IcpParams,
+    align_take,
+    invert,
+    rotation_angle_deg,
+    transform_points,
+)
 from scan2morph.motion import laplacian_smooth
 
 
@@ -97,7 +104,7 @@ def timing(seed: int = 0, repeats: int = 7) -> None:
         valid = np.ones(len(v), dtype=bool)
         centre = v[upper].mean(axis=0)
         for method in ("icp", "correspondence"):
-            args = (take, valid, v, valid, f, pairs, upper, {"method": method})
+            args = (AlignMeshes(take, valid, v, valid, f), pairs, upper, IcpParams(method=method))
             run = partial(align_take, *args, source="bench/take")
             run()  # warm-up (open3d import)
             ms = _median_ms(run, repeats)
@@ -216,11 +223,7 @@ def cohort(config_path: Path, n_subjects: int | None) -> list[dict]:
             row["modality"] = "stereo" if t["take"] in stereo else "range"
             try:
                 res = align_take(
-                    m["vertices"],
-                    m["valid"],
-                    n["vertices"],
-                    n["valid"],
-                    fine.faces,
+                    AlignMeshes(m["vertices"], m["valid"], n["vertices"], n["valid"], fine.faces),
                     pairs,
                     stable,
                     prm.icp,

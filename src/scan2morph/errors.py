@@ -42,7 +42,7 @@ def require_numbers(source: str | PathLike[str], values: Mapping[str, Any]) -> N
     source : str or path-like
         Where the values come from (e.g. ``"config"``).
     values : mapping field name -> value
-        The field names go into the message (e.g. ``"refine.jaw_start"``); booleans are not
+        The field names go into the message (e.g. ``"start"``); booleans are not
         numbers here.
     """
     for name, value in values.items():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import re
+from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
 
@@ -410,6 +411,44 @@ def schema_errors(data: object, schema: dict) -> list[tuple[str, str]]:
     return out
 
 
+#: The ICP settings of ``align.icp`` (before, keys of ``align`` itself).
+_ICP_KEYS = (
+    "method",
+    "max_correspondence_mm",
+    "max_iterations",
+    "robust_kernel",
+    "kernel_k_mm",
+    "kernel_noise_sigmas",
+    "trim_rounds",
+    "trim_radius_mm",
+    "trim_sigma",
+    "min_fitness",
+    "max_rmse_ratio",
+    "max_rmse_mm",
+    "min_inlier_fraction",
+)
+_LIP_KEYS = ("prior", "stretch", "min_contrast", "search", "max_shift", "min_share")
+#: Config keys that moved (old dotted path -> new): a config or sweep table still naming one
+#: is refused with one line naming the new key.
+RENAMED_KEYS = {
+    **{f"refine.jaw_{k}": f"refine.jaw.{k}" for k in ("prior", "start", "end", "max_rmse_ratio")},
+    **{f"refine.lip_{k}": f"refine.lip.{k}" for k in _LIP_KEYS},
+    **{f"refine.lower_lip_{k}": f"refine.lower_lip.{k}" for k in ("prior", "shrink")},
+    **{f"align.{k}": f"align.icp.{k}" for k in _ICP_KEYS},
+}
+
+
+def renamed_keys(config: Mapping) -> list[str]:
+    """The old keys of :data:`RENAMED_KEYS` that ``config`` still uses, each as
+    ``"{old}: renamed to {new}"``."""
+    found = []
+    for old, new in RENAMED_KEYS.items():
+        section, key = old.split(".")
+        if isinstance(config.get(section), Mapping) and key in config[section]:
+            found.append(f"{old}: renamed to {new}")
+    return found
+
+
 def validate_config(config: dict, schema: str | PathLike[str], source: str = "config") -> dict:
     """Check a config against its schema and fill in the schema's defaults, in place.
 
@@ -421,10 +460,14 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
     ------
     InputError
         Naming ``source``, the first problem's key path and what is wrong (one line; the number
-        of further problems is appended).
+        of further problems is appended); a key that moved (:data:`RENAMED_KEYS`) is named with
+        its new path.
     """
     from jsonschema import Draft202012Validator, validators
 
+    moved = renamed_keys(config)
+    if moved:
+        raise InputError(source, "; ".join(moved))
     schema_doc = load_schema(schema)
     properties = Draft202012Validator.VALIDATORS["properties"]
 

@@ -27,6 +27,7 @@ from jsonschema import Draft202012Validator, validators
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
+from scan2morph.sheet import RENAMED_KEYS
 from scan2morph.stages import accuracy, align, fit, landmarks, motion, motion_noise, refine, repair
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
@@ -142,6 +143,29 @@ def _parse_value(text: str):
     return text
 
 
+def _column_check(schema: Mapping, column: str, source: str):
+    """The validator of a sweep table's column (a dotted config path), or a clear error: a key
+    that moved, names nothing, sits outside the sweepable sections or is not a scalar."""
+    section = column.split(".")[0]
+    if column in RENAMED_KEYS:
+        raise InputError(source, f"column {column!r}: renamed to {RENAMED_KEYS[column]}")
+    sub = _subschema(dict(schema), column, source)
+    if section not in SECTION_STAGE:
+        raise InputError(
+            source,
+            f"column {column!r}: a sweep re-runs the stages from repair to accuracy, so it "
+            f"can vary keys of {sorted(SECTION_STAGE)}, not of {section!r}",
+        )
+    types = sub.get("type")
+    types = {types} if isinstance(types, str) else set(types or ())
+    if not types or not types <= _SCALAR_TYPES:
+        raise InputError(
+            source,
+            f"column {column!r}: a swept key must hold a scalar, this one is {sorted(types) or 'untyped'}",
+        )
+    return _strict_validator(sub)
+
+
 def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTable:
     """Read and check a sweep table.
 
@@ -190,24 +214,7 @@ def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTab
         raise InputError(
             source, f"header: columns {list(columns)} give the same folder names {folders}"
         )
-    checks = {}
-    for column in columns:
-        section = column.split(".")[0]
-        sub = _subschema(dict(schema), column, source)
-        if section not in SECTION_STAGE:
-            raise InputError(
-                source,
-                f"column {column!r}: a sweep re-runs the stages from repair to accuracy, so it "
-                f"can vary keys of {sorted(SECTION_STAGE)}, not of {section!r}",
-            )
-        types = sub.get("type")
-        types = {types} if isinstance(types, str) else set(types or ())
-        if not types or not types <= _SCALAR_TYPES:
-            raise InputError(
-                source,
-                f"column {column!r}: a swept key must hold a scalar, this one is {sorted(types) or 'untyped'}",
-            )
-        checks[column] = _strict_validator(sub)
+    checks = {column: _column_check(schema, column, source) for column in columns}
     rows: list[dict[str, object]] = []
     seen: dict[tuple, int] = {}
     for n, line in lines[1:]:

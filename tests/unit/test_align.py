@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
 from scan2morph.align import (
-    DEFAULT_ICP,
+    AlignMeshes,
+    IcpParams,
     align_take,
     invert,
     kabsch,
@@ -227,14 +230,10 @@ def test_align_take_recovers_known_rigid_motion(method):
     s = _scene(seed=0)
     valid = np.ones(len(s["take"]), dtype=bool)
     res = align_take(
-        s["take"],
-        valid,
-        s["neutral"],
-        valid,
-        s["faces"],
+        AlignMeshes(s["take"], valid, s["neutral"], valid, s["faces"]),
         s["pairs"],
         s["upper"],
-        {"method": method},
+        IcpParams(method=method),
         source="s01/car",
     )
     rot_err, t_err = _errors(res.transform, s["truth"], s["centre"])
@@ -262,14 +261,10 @@ def test_align_take_icp_and_correspondence_accuracy_compared():
         valid = np.ones(len(s["take"]), dtype=bool)
         for method, out in errs.items():
             res = align_take(
-                s["take"],
-                valid,
-                s["neutral"],
-                valid,
-                s["faces"],
+                AlignMeshes(s["take"], valid, s["neutral"], valid, s["faces"]),
                 s["pairs"],
                 s["upper"],
-                {"method": method},
+                IcpParams(method=method),
                 source="s01/car",
             )
             out.append(_errors(res.transform, s["truth"], s["centre"]))
@@ -292,14 +287,10 @@ def test_align_take_with_invalid_vertices_and_holes():
     neutral[~dst_valid] = np.nan
     for method in ("icp", "correspondence"):
         res = align_take(
-            take,
-            src_valid,
-            neutral,
-            dst_valid,
-            s["faces"],
+            AlignMeshes(take, src_valid, neutral, dst_valid, s["faces"]),
             s["pairs"],
             s["upper"],
-            {"method": method},
+            IcpParams(method=method),
             source="s01/car",
         )
         rot_err, t_err = _errors(res.transform, s["truth"], s["centre"])
@@ -308,17 +299,12 @@ def test_align_take_with_invalid_vertices_and_holes():
 
 def _align(s: dict, take=None, neutral=None, params=None, source="s01/man"):
     valid = np.ones(len(s["take"]), dtype=bool)
-    return align_take(
-        s["take"] if take is None else take,
-        valid,
-        s["neutral"] if neutral is None else neutral,
-        valid,
-        s["faces"],
-        s["pairs"],
-        s["upper"],
-        params,
-        source=source,
+    take = s["take"] if take is None else take
+    meshes = AlignMeshes(
+        take, valid, s["neutral"] if neutral is None else neutral, valid, s["faces"]
     )
+    icp = IcpParams(**params) if params else None
+    return align_take(meshes, s["pairs"], s["upper"], icp, source=source)
 
 
 def test_align_take_garbage_target_is_flagged():
@@ -375,12 +361,11 @@ def test_region_grows_into_the_still_skin(seed):
     band = np.flatnonzero((y > 62) & (np.abs(x) < 45))
     moved = np.abs(np.einsum("ij,ij->i", s["motion"], vertex_normals(v, f))) > 0.3  # 3 x noise
     valid = np.ones(len(v), dtype=bool)
-    args = (s["take"], valid, s["neutral"], valid, s["faces"], s["pairs"], band)
-    alone = align_take(*args, {"kernel_k_mm": 0.3}, source="s01/sad")
-    grown = align_take(*args, {"kernel_k_mm": 0.3}, source="s01/sad", grow_indices=s["upper"])
-    everywhere = align_take(
-        *args, {"kernel_k_mm": 0.3}, source="s01/sad", grow_indices=np.arange(len(v))
-    )
+    args = (AlignMeshes(s["take"], valid, s["neutral"], valid, s["faces"]), s["pairs"], band)
+    icp = IcpParams(kernel_k_mm=0.3)
+    alone = align_take(*args, icp, source="s01/sad")
+    grown = align_take(*args, icp, source="s01/sad", grow_indices=s["upper"])
+    everywhere = align_take(*args, icp, source="s01/sad", grow_indices=np.arange(len(v)))
     rot0, _ = _errors(alone.transform, s["truth"], s["centre"])
     assert rot0 > 0.5
     for res in (grown, everywhere):
@@ -437,13 +422,13 @@ def test_mesh_noise_measures_the_noise_it_was_given(sigma):
 
 
 def test_rmse_limit_relative_absolute_and_floor():
-    prm = dict(DEFAULT_ICP)
+    prm = IcpParams()
     assert rmse_limit(0.3, 0.4, prm) == (pytest.approx(3.0 * 0.5), "relative")
     assert rmse_limit(0.0, 0.0, prm) == (pytest.approx(0.1), "relative")  # floor
     assert rmse_limit(float("nan"), 0.4, prm) == (pytest.approx(1.2), "relative")
-    assert rmse_limit(0.3, 0.4, prm | {"max_rmse_mm": 0.25}) == (0.25, "absolute")
-    with pytest.raises(InputError, match="max_rmse_mm must be a positive number or None"):
-        align_take(*([None] * 7), params={"max_rmse_mm": -1.0}, source="s01/too")
+    assert rmse_limit(0.3, 0.4, IcpParams(max_rmse_mm=0.25)) == (0.25, "absolute")
+    with pytest.raises(InputError, match="^IcpParams: max_rmse_mm must be a positive number or"):
+        IcpParams(max_rmse_mm=-1.0)
 
 
 def test_align_take_three_mm_noise_passes_the_relative_gate():
@@ -496,7 +481,7 @@ def test_rmse_gate_one_degree_off(noise_mm, passes):
     c = s["centre"]
     off[:3, 3] = c - off[:3, :3] @ c
     valid = np.ones(len(take), dtype=bool)
-    args = (take, valid, s["neutral"], valid, s["faces"], s["upper"])
+    args = (AlignMeshes(take, valid, s["neutral"], valid, s["faces"]), s["upper"])
     right = rmse_gate(*args, s["truth"], source="s01/she")
     wrong = rmse_gate(*args, off @ s["truth"], source="s01/she")
     assert right.problem is None
@@ -525,10 +510,12 @@ def test_a_pair_vertex_missing_in_one_mesh_is_left_out_of_the_initial_pose():
     gap = s["pairs"][3]
     take, tv = _invalidate(s["take"], [gap])
     neutral, nv = _invalidate(s["neutral"], [gap])
-    args = (s["faces"], s["pairs"], s["upper"])
+    args = (s["pairs"], s["upper"])
+    gap_take = AlignMeshes(take, tv, s["neutral"], full, s["faces"])
+    gap_neutral = AlignMeshes(s["take"], full, neutral, nv, s["faces"])
     for res, which in (
-        (align_take(take, tv, s["neutral"], full, *args, source="s01/she"), "the take's mesh"),
-        (align_take(s["take"], full, neutral, nv, *args, source="s01/she"), "the neutral mesh"),
+        (align_take(gap_take, *args, source="s01/she"), "the take's mesh"),
+        (align_take(gap_neutral, *args, source="s01/she"), "the neutral mesh"),
     ):
         rot, t = _errors(res.transform, s["truth"], s["centre"])
         assert rot < 0.1 and t < 0.2, (rot, t)  # oracle: the known motion
@@ -543,9 +530,8 @@ def test_too_few_pairs_fall_back_to_the_region_correspondence():
     s = _scene(seed=0)
     full = np.ones(len(s["take"]), dtype=bool)
     take, tv = _invalidate(s["take"], s["pairs"][:4])
-    res = align_take(
-        take, tv, s["neutral"], full, s["faces"], s["pairs"], s["upper"], source="s01/she"
-    )
+    meshes = AlignMeshes(take, tv, s["neutral"], full, s["faces"])
+    res = align_take(meshes, s["pairs"], s["upper"], source="s01/she")
     rot, t = _errors(res.transform, s["truth"], s["centre"])
     assert rot < 0.1 and t < 0.2, (rot, t)
     assert res.ok, res.problems
@@ -557,20 +543,31 @@ def test_too_few_pairs_fall_back_to_the_region_correspondence():
     # nothing left to pose from: one clear error
     take, tv = _invalidate(s["take"], np.concatenate([s["pairs"], s["upper"]]))
     with pytest.raises(InputError, match=r"^s01/she: pair_indices: pair vertex .* invalid, and"):
-        align_take(
-            take, tv, s["neutral"], full, s["faces"], s["pairs"], s["upper"], source="s01/she"
-        )
+        meshes = AlignMeshes(take, tv, s["neutral"], full, s["faces"])
+        align_take(meshes, s["pairs"], s["upper"], source="s01/she")
 
 
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        ({"params": {"max_iter": 3}}, "unknown key"),
-        ({"params": {"robust_kernel": "cauchy"}}, "robust_kernel must be one of"),
-        ({"params": {"method": "magic"}}, "method must be one of"),
-        ({"params": {"max_correspondence_mm": -1}}, "max_correspondence_mm must be a positive"),
-        ({"params": {"min_fitness": 1.5}}, r"min_fitness must be in \[0, 1\]"),
-        ({"params": {"max_iterations": 0}}, "max_iterations must be an integer >= 1"),
+        ({"robust_kernel": "cauchy"}, "robust_kernel must be one of"),
+        ({"method": "magic"}, "method must be one of"),
+        ({"max_correspondence_mm": -1}, "max_correspondence_mm must be a positive"),
+        ({"min_fitness": 1.5}, r"min_fitness must be in \[0, 1\]"),
+        ({"max_iterations": 0}, "max_iterations must be an integer >= 1"),
+        ({"trim_rounds": 1.5}, "trim_rounds must be an integer >= 0"),
+        ({"step_mm": float("nan")}, "step_mm must be >= 0"),
+    ],
+)
+def test_icp_params_bad_input(change, match):
+    with pytest.raises(InputError, match=f"^IcpParams: {match}"):
+        IcpParams(**change)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"params": {"max_iterations": 3}}, "params: expected IcpParams or None, got dict"),
         ({"pair_indices": np.array([0, 1])}, "at least 3 point pairs"),
         ({"pair_indices": np.array([0, 1, 10**6])}, "pair_indices: vertex index 1000000 out of"),
         ({"icp_indices": np.array([-1])}, "icp_indices: vertex index -1 out of range"),
@@ -594,12 +591,13 @@ def test_align_take_bad_input(change, match):
         params=None,
     )
     kw.update(change)
+    meshes = AlignMeshes(**{f.name: kw.pop(f.name) for f in fields(AlignMeshes)})
     with pytest.raises(InputError, match=f"^s01/too: .*{match}"):
-        align_take(**kw, source="s01/too")
+        align_take(meshes, **kw, source="s01/too")
 
 
 def test_default_icp_keys():
-    assert set(DEFAULT_ICP) == {
+    assert {f.name for f in fields(IcpParams)} == {
         "method",
         "max_correspondence_mm",
         "max_iterations",
@@ -627,13 +625,13 @@ def test_narrow_tukey_kernel_converges_from_a_pose_several_mm_off(seed, deg, mm)
     # pose is a few mm / degrees off, and the step goes astray (measured on these scenes:
     # 2-4 deg and 9-19 mm left); annealed from the correspondence distance down to 1 mm, ICP
     # lands on the true pose.
-    from scan2morph.align.icp import DEFAULT_ICP, _refine_icp
+    from scan2morph.align.icp import _refine_icp
 
     s = _scene(seed=seed)
     initial = _rigid(np.random.default_rng(seed + 10), deg, mm) @ s["truth"]
     up = s["upper"]
     normals = vertex_normals(s["neutral"], s["faces"])
-    prm = {**DEFAULT_ICP, "robust_kernel": "tukey", "kernel_k_mm": 1.0}
+    prm = IcpParams(robust_kernel="tukey", kernel_k_mm=1.0)
     t, fitness, _, _, converged = _refine_icp(
         s["take"][up], s["neutral"][up], normals[up], initial, prm
     )
@@ -667,13 +665,12 @@ def test_a_region_icp_whose_samples_alternate_settles_between_them():
     (0.2 mm apart) until its iterations run out and the ICP counts as not converged (a chin's
     registration in 2 of 16 click-noise draws of a car); with it, it converges between them."""
     from scan2morph.align.region import _region_icp
-    from scan2morph.align.settings import icp_settings
 
     g = np.linspace(-20.0, 20.0, 7)
     xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
     delta = 0.2
     region = np.hstack([xy, np.full((len(xy), 1), delta)])  # on the upper plane
-    prm = icp_settings({"max_iterations": 50}, "test")
+    prm = IcpParams(max_iterations=50)
     t, iterations, converged, _ = _region_icp(
         region, _AlternatingSurface(xy, delta), np.eye(4), prm
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import errno
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -417,6 +418,35 @@ def test_config_errors_are_one_short_line(extra, match):
     with pytest.raises(InputError, match=match) as exc:
         validate_config(config, ROOT / "schemas" / "config.schema.yaml")
     assert "\n" not in str(exc.value) and len(str(exc.value)) < 400
+
+
+@pytest.mark.parametrize(
+    "section, old, new",
+    [
+        ("refine", {"jaw_prior": False}, "refine.jaw_prior: renamed to refine.jaw.prior"),
+        ("refine", {"jaw_end": 0.4}, "refine.jaw_end: renamed to refine.jaw.end"),
+        ("refine", {"lip_stretch": 0.2}, "refine.lip_stretch: renamed to refine.lip.stretch"),
+        (
+            "refine",
+            {"lower_lip_shrink": 0.3},
+            "refine.lower_lip_shrink: renamed to refine.lower_lip.shrink",
+        ),
+        ("align", {"kernel_k_mm": 0.5}, "align.kernel_k_mm: renamed to align.icp.kernel_k_mm"),
+        ("align", {"max_rmse_mm": None}, "align.max_rmse_mm: renamed to align.icp.max_rmse_mm"),
+    ],
+)
+def test_a_config_key_that_moved_is_named_with_its_new_place(section, old, new):
+    """A user's config over the repo's (as Snakemake merges them) that still uses an old flat
+    key: one line naming the new key, before any other check."""
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config[section] |= old
+    with pytest.raises(InputError, match=f"^config: {re.escape(new)}$"):
+        validate_config(config, ROOT / "schemas" / "config.schema.yaml")
+    # two old keys: still one line, naming both
+    config["refine"] |= {"lip_prior": True}
+    with pytest.raises(InputError, match="renamed to refine.lip.prior") as exc:
+        validate_config(config, ROOT / "schemas" / "config.schema.yaml")
+    assert "\n" not in str(exc.value) and new in str(exc.value)
 
 
 def test_an_empty_cell_fails_only_its_subject(tmp_path):

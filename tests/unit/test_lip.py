@@ -15,6 +15,7 @@ from scan2morph.refine.lip import (
     NO_BORDER,
     NO_SURFACE,
     TOO_FAR,
+    LipImages,
     LipParams,
     LipPrior,
     lip_prior,
@@ -127,9 +128,9 @@ def _scene(angle_deg=55.0, slide_px=(0.0, 0.0, 2.0, 4.0), two_step=False, scale=
 
 
 def _prior(s, params=None, flow=None):
+    images = LipImages(s["neutral"][1], s["neutral"][0], s["take"][1], s["take"][0])
     return lip_prior(
-        s["region"], s["v2"], s["pn"], s["flow"] if flow is None else flow,
-        s["neutral"][1], s["neutral"][0], s["take"][1], s["take"][0], s["faces"],
+        s["region"], s["v2"], s["pn"], s["flow"] if flow is None else flow, images, s["faces"],
         LipParams() if params is None else params,
     )  # fmt: skip
 
@@ -364,16 +365,16 @@ def test_a_border_whose_steepest_fall_moves_is_registered():
 
 def test_lip_params_and_prior_name_bad_input():
     for bad, match in (
-        ({"min_contrast": 0.0}, "refine.lip_min_contrast"),
-        ({"search": 1.5}, "refine.lip_search"),
-        ({"max_shift": -1}, "refine.lip_max_shift"),
-        ({"max_shift": float("inf")}, "refine.lip_max_shift"),
-        ({"min_share": 0}, "refine.lip_min_share"),
-        ({"stretch": 1.0}, "refine.lip_stretch"),
-        ({"stretch": "a"}, "refine.lip_stretch: expected a number"),
-        ({"shrink": 1.0}, "refine.lower_lip_shrink"),
-        ({"shrink": None}, "refine.lower_lip_shrink: expected a number"),
-        ({"enabled": "no"}, "refine.lip_prior: expected true or false"),
+        ({"min_contrast": 0.0}, "^LipParams: min_contrast: expected 0 < contrast < 1"),
+        ({"search": 1.5}, "^LipParams: search"),
+        ({"max_shift": -1}, "^LipParams: max_shift"),
+        ({"max_shift": float("inf")}, "^LipParams: max_shift"),
+        ({"min_share": 0}, "^LipParams: min_share"),
+        ({"stretch": 1.0}, "^LipParams: stretch"),
+        ({"stretch": "a"}, "^LipParams: stretch: expected a number"),
+        ({"shrink": 1.0}, "^LipParams: shrink"),
+        ({"shrink": None}, "^LipParams: shrink: expected a number"),
+        ({"prior": "no"}, "^LipParams: prior: expected true or false"),
     ):
         with pytest.raises(InputError, match=match):
             LipParams(**bad)
@@ -387,7 +388,7 @@ def test_lip_params_and_prior_name_bad_input():
         names = ["lip", "v2", "pn", "pt", "cn", "xn", "ct", "xt", "faces", "params"]
         call = [change.get(k, a) for k, a in zip(names, args, strict=True)]
         with pytest.raises(InputError, match=match):
-            lip_prior(*call, source="s/she")
+            lip_prior(*call[:4], LipImages(*call[4:8]), *call[8:], source="s/she")
 
     bad(r"s/she: lip prior: take_points has shape \(28, 3\)", pt=np.zeros((28, 3)))
     bad("12 neutral points, 28 take points and 28 template vertices", pn=s["pn"][:12])

@@ -745,7 +745,14 @@ def test_alignment_grows_into_the_still_skin_of_a_real_face(head):
     of the real face constrains a smiling take's rotation only to about 0.2 degrees under
     0.1 mm noise; grown into the upper face's still skin, to < 0.1 degrees. The take smiles (cheeks, lower
     temples, mouth corners) and is moved by a random 5 degree / 10 mm motion."""
-    from scan2morph.align import align_take, invert, rotation_angle_deg, transform_points
+    from scan2morph.align import (
+        AlignMeshes,
+        IcpParams,
+        align_take,
+        invert,
+        rotation_angle_deg,
+        transform_points,
+    )
 
     v = head.vertices
     x, y = v[:, 0] - head.nose[0], v[:, 1] - head.nose[1]
@@ -775,14 +782,10 @@ def test_alignment_grows_into_the_still_skin_of_a_real_face(head):
         take[pairs] += rng.normal(scale=1.0, size=(len(pairs), 3))  # clicked, not exact
         for name, grow in (("alone", None), ("grown", upper)):
             res = align_take(
-                take,
-                face,
-                v,
-                face,
-                head.faces,
+                AlignMeshes(take, face, v, face, head.faces),
                 pairs,
                 np.flatnonzero(region),
-                {"kernel_k_mm": 0.3},  # as config/config.yaml
+                IcpParams(kernel_k_mm=0.3),  # as config/config.yaml
                 source="lee-perry-smith/smile",
                 grow_indices=grow,
             )
@@ -821,7 +824,7 @@ def test_jaw_registration_on_a_real_chin(head, pout_mm):
     its registration to the take's surface lands within a third of a millimetre, and its shape
     pins its motion (scan2morph.refine.jaw.MIN_CONSTRAINT); a pout that pushes part of the chin
     out by ``pout_mm`` fails the rigidity gate the still forehead sets."""
-    from scan2morph.align import region_motion, transform_points
+    from scan2morph.align import IcpParams, region_motion, transform_points
     from scan2morph.align.noise import robust_rms
     from scan2morph.refine.jaw import MIN_CONSTRAINT, scan_surface
 
@@ -861,7 +864,7 @@ def test_jaw_registration_on_a_real_chin(head, pout_mm):
     plane, seen, _ = still_surface.residuals(forehead, still_surface.reach(forehead, 0.0))
     reference = robust_rms(plane[seen])
     res = region_motion(
-        region, start, surface, {"kernel_k_mm": 0.3, "max_rmse_mm": 1.5 * reference}
+        region, start, surface, IcpParams(kernel_k_mm=0.3, max_rmse_mm=1.5 * reference)
     )
     truth = transform_points(jaw, v[chin])
     err = np.linalg.norm(transform_points(res.transform, v[chin]) - truth, axis=1)
@@ -925,7 +928,7 @@ def test_upper_lip_prior_on_a_real_face(head):
     0.13 px and the body to 0.20 px; a right flow is kept (within 0.16 px: the border is held
     to 0.1 mm); by default (a strain of 10% allowed, about 1.1 px at the slit here) every slit
     vertex is brought to within 1.5 px."""
-    from scan2morph.refine.lip import LipParams, lip_prior, redness
+    from scan2morph.refine.lip import LipImages, LipParams, lip_prior, redness
     from scan2morph.template.regions import Lip
     from scan2morph.template.sample import sample_range
 
@@ -962,8 +965,9 @@ def test_upper_lip_prior_on_a_real_face(head):
     flow[ids[2]] += 1.5 * up
 
     def run(take_points, params):
+        images = LipImages(c0, xyz0, c1, xyz1)
         prior = lip_prior(
-            region, template, points, take_points, c0, xyz0, c1, xyz1, faces, params, source="real"
+            region, template, points, take_points, images, faces, params, source="real"
         )
         placed = np.where(np.isfinite(prior.points), prior.points, take_points)
         return prior, np.linalg.norm(placed - true, axis=1)

@@ -248,7 +248,7 @@ def test_refinement_follows_the_skin_on_synthetic_takes():
 
 
 def _with_and_without(data, truths, run, take, key):
-    """A viseme refined with the config switch ``refine.<key>`` off and on: the material
+    """A viseme refined with the config switch ``refine.<key>.prior`` off and on: the material
     relative error of each, each one's refine part and the group attributes (off, on)."""
     from dataclasses import replace
 
@@ -256,7 +256,8 @@ def _with_and_without(data, truths, run, take, key):
 
     errors, parts = {}, {}
     for prior in (False, True):
-        config = dict(run.config) | {"refine": run.config["refine"] | {key: prior}}
+        section = run.config["refine"]
+        config = dict(run.config) | {"refine": section | {key: section[key] | {"prior": prior}}}
         errors[prior] = _material_errors(data, truths, replace(run, config=config))[take][1]
         params = refine.Params.from_config(config)
         parts[prior] = refine.run(run.template, Take.of(run.subject, take, data=data), params)
@@ -268,12 +269,12 @@ def _with_and_without(data, truths, run, take, key):
 def test_the_jaw_prior_follows_the_chin_of_an_open_jaw():
     """A synthetic car (jaw opened 14 degrees): the chin's flow is poor (its shading and
     foreshortening change), the jaw prior registers the chin and takes the material error of
-    the motion down; without it (refine.jaw_prior false) the flow's answer stays."""
+    the motion down; without it (refine.jaw.prior false) the flow's answer stays."""
     from scan2morph.refine.jaw import chin_weights
     from scan2morph.store import paths
 
     data, truths, run = _subject_in_memory(1.0, ("neutral", "car"))
-    errors, parts, (off, on) = _with_and_without(data, truths, run, "car", "jaw_prior")
+    errors, parts, (off, on) = _with_and_without(data, truths, run, "car", "jaw")
     config = run.config
     assert on["jaw_used"], on["jaw_problem"]
     assert 12.0 < on["jaw_angle_deg"] < 16.0  # the synthetic jaw opens 14 degrees
@@ -398,36 +399,51 @@ def test_jaw_settings_come_from_the_refine_section():
     import yaml
 
     from scan2morph.errors import InputError
+    from scan2morph.refine.jaw import JawParams
     from scan2morph.stages import refine
     from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    section = config["refine"] | {"jaw_prior": False, "jaw_start": 0.05, "jaw_max_rmse_ratio": 2}
-    params = refine.Params.from_config(config | {"refine": section})
-    assert not params.jaw.enabled and params.jaw.start == 0.05 and params.jaw.end == 0.3
-    assert params.jaw.max_rmse_ratio == 2.0 and params.still_region == "stable"
-    assert params.icp["kernel_k_mm"] == config["align"]["kernel_k_mm"]
-    bad = config["refine"] | {"jaw_start": 0.3, "jaw_end": 0.3}
-    with pytest.raises(InputError, match="refine.jaw_start"):
+    jaw = {"prior": False, "start": 0.05, "end": 0.3, "max_rmse_ratio": 2}
+    params = refine.Params.from_config(config | {"refine": config["refine"] | {"jaw": jaw}})
+    assert params.jaw == JawParams(False, 0.05, 0.3, 2.0) and params.still_region == "stable"
+    assert params.icp.kernel_k_mm == config["align"]["icp"]["kernel_k_mm"]
+    # the library checks its own arguments; the stage names the config key
+    bad = config["refine"] | {"jaw": config["refine"]["jaw"] | {"start": 0.3, "end": 0.3}}
+    with pytest.raises(InputError, match=r"^config: refine.jaw: start, end: expected 0 <= start"):
         refine.Params.from_config(config | {"refine": bad})
+    with pytest.raises(InputError, match=r"^JawParams: max_rmse_ratio: expected a positive"):
+        JawParams(max_rmse_ratio=0)
 
 
 def test_lip_settings_come_from_the_refine_section():
     import yaml
 
     from scan2morph.errors import InputError
+    from scan2morph.refine.lip import LipParams
     from scan2morph.stages import refine
     from tests.support.workflow_api import REPO
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     params = refine.Params.from_config(config)
-    assert params.lip.enabled and params.lip.stretch == config["refine"]["lip_stretch"]
-    section = config["refine"] | {"lip_prior": False, "lip_stretch": 0.2, "lip_min_share": 0.8}
-    params = refine.Params.from_config(config | {"refine": section})
-    assert not params.lip.enabled and params.lip.stretch == 0.2 and params.lip.min_share == 0.8
-    bad = config["refine"] | {"lip_search": 0}
-    with pytest.raises(InputError, match="refine.lip_search"):
+    section = config["refine"]
+    assert params.lip.prior and params.lip.stretch == section["lip"]["stretch"]
+    # the lower lip: the lip's settings with its own over them
+    assert params.lower_lip == params.lip.__class__(
+        **section["lip"] | {"prior": True, "shrink": section["lower_lip"]["shrink"]}
+    )
+    lip = section["lip"] | {"prior": False, "stretch": 0.2, "min_share": 0.8}
+    params = refine.Params.from_config(config | {"refine": section | {"lip": lip}})
+    assert not params.lip.prior and params.lip.stretch == 0.2 and params.lip.min_share == 0.8
+    assert params.lower_lip.stretch == 0.2 and params.lower_lip.prior
+    bad = section | {"lip": section["lip"] | {"search": 0}}
+    with pytest.raises(InputError, match=r"^config: refine.lip: search: expected 0 < share < 1"):
         refine.Params.from_config(config | {"refine": bad})
+    bad = section | {"lower_lip": {"prior": True, "shrink": 1.0}}
+    with pytest.raises(InputError, match=r"^config: refine.lower_lip: shrink: expected 0 <="):
+        refine.Params.from_config(config | {"refine": bad})
+    with pytest.raises(InputError, match=r"^LipParams: prior: expected true or false"):
+        LipParams(prior="yes")
 
 
 @pytest.mark.slow
@@ -435,7 +451,7 @@ def test_the_lip_prior_follows_a_rounded_upper_lip():
     """A synthetic she (lips rounded and protruded): the flow leaves the upper lip's slit short
     of where its skin went; the lip prior places it from the vermilion border and the material
     error of the motion goes down; it moves only the upper lip;
-    without it (refine.lip_prior false) the flow's answer stays. On grey images (a face whose
+    without it (refine.lip.prior false) the flow's answer stays. On grey images (a face whose
     lips are no redder than its skin) it is not used, and says why."""
     from scan2morph.refine.lip import NO_BORDER
     from scan2morph.stages import refine
@@ -443,7 +459,7 @@ def test_the_lip_prior_follows_a_rounded_upper_lip():
     from scan2morph.template.regions import lip
 
     data, truths, run = _subject_in_memory(1.0, ("neutral", "she"))
-    errors, parts, (off, on) = _with_and_without(data, truths, run, "she", "lip_prior")
+    errors, parts, (off, on) = _with_and_without(data, truths, run, "she", "lip")
     print("she material relative error, without / with the lip prior:", errors, on)
     assert on["lip_used"], on["lip_problem"]
     assert on["lip_measured"] >= 0.5 * on["lip_vertices"] and on["lip_contrast"] > 0.02

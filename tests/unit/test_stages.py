@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from scan2morph.align import IcpParams
 from scan2morph.errors import InputError
 from scan2morph.sheet import validate_config
 from scan2morph.stages import Part, Subject, Take, align, fit, modal, morph, motion
@@ -91,9 +92,11 @@ def test_fiducial_set_of_each_kind():
 def test_params_from_config_sections():
     a = align.Params.from_config(CONFIG)
     assert a.point_pairs == CONFIG["align"]["point_pairs"]
-    assert not set(align.REGION_KEYS) & set(a.icp)
     assert a.grow_into == CONFIG["align"]["grow_into"]
-    assert a.icp["max_iterations"] == CONFIG["align"]["max_iterations"]
+    assert a.icp == IcpParams(**CONFIG["align"]["icp"]) and a.icp.kernel_k_mm == 0.3
+    bad = CONFIG | {"align": CONFIG["align"] | {"icp": {"robust_kernel": "cauchy"}}}
+    with pytest.raises(InputError, match=r"^config: align.icp: robust_kernel must be one of"):
+        align.Params.from_config(bad)
     m = motion.Params.from_config({k: v for k, v in CONFIG.items() if k != "refine"})
     assert (m.radius_mm, m.w, m.iterations) == (20.0, 0.1, 30)  # the paper's values
     assert m.include_failed is False and m.refined is False

@@ -89,7 +89,8 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         "template_fiducials_viseme",
     ]
     assert table.first_stage == "fit"
-    assert first_stage(["smoothing.w", "align.kernel_k_mm"]) == "align"
+    assert first_stage(["smoothing.w", "align.icp.kernel_k_mm"]) == "align"
+    assert first_stage(["refine.jaw.end", "mask.radius_mm"]) == "refine"
     assert first_stage(["motion_noise.click_noise_px"]) == "motion_noise"
     assert first_stage(["repair.max_hole_px", "mask.radius_mm"]) == "repair"
     assert read_sweep_table(_table(tmp_path, "# nothing\n"), SCHEMA).rows == ()
@@ -116,7 +117,16 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         ("smoothing.max_stretch\n1\n", r"1 is less than or equal to the minimum of 1"),
         ("smoothing.confidence_relief\n1.5\n", r"1.5 is greater than the maximum of 1"),
         ("smoothing.expression_iterations\n-1\n", r"-1 is less than the minimum of 0"),
-        ("align.robust_kernel\ncauchy\n", r"'cauchy' is not one of \['tukey', 'huber', 'none'\]"),
+        (
+            "align.icp.robust_kernel\ncauchy\n",
+            r"'cauchy' is not one of \['tukey', 'huber', 'none'\]",
+        ),
+        ("refine.jaw.end\n1.5\n", r"1.5 is greater than the maximum of 1"),
+        ("refine.jaw_end\n0.4\n", r"column 'refine.jaw_end': renamed to refine.jaw.end"),
+        (
+            "align.kernel_k_mm\n0.5\n",
+            r"column 'align.kernel_k_mm': renamed to align.icp.kernel_k_mm",
+        ),
         ("mask.radius_mm\n-2\n", r"-2 is less than or equal to the minimum of 0"),
         (
             "modal.modes\n20\n",

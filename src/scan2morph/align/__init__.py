@@ -1,8 +1,9 @@
 """Rigid alignment of a subject's takes to its neutral frame (Kabsch initial pose + ICP)."""
 
 from scan2morph.align.icp import (
-    DEFAULT_ICP,
+    AlignMeshes,
     AlignResult,
+    IcpParams,
     RmseGate,
     SampledSurface,
     align_take,
@@ -15,8 +16,9 @@ from scan2morph.align.noise import MeshNoise, mesh_noise
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 
 __all__ = [
-    "DEFAULT_ICP",
+    "AlignMeshes",
     "AlignResult",
+    "IcpParams",
     "align_take",
     "invert",
     "kabsch",

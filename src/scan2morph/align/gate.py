@@ -4,13 +4,18 @@ meshes' measured noise (:func:`rmse_limit`), and the verdict on a given pose (:f
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
 from scan2morph.align.noise import mesh_noise
 from scan2morph.align.rigid import transform_points
-from scan2morph.align.settings import check_indices, check_mesh, icp_settings
+from scan2morph.align.settings import (
+    AlignMeshes,
+    IcpParams,
+    check_indices,
+    check_mesh,
+    icp_settings,
+)
 from scan2morph.align.surface import SampledSurface
 from scan2morph.align.trim import trim_moving
 from scan2morph.errors import InputError
@@ -52,14 +57,10 @@ class RmseGate:
 
 
 def rmse_gate(
-    src_vertices: np.ndarray,
-    src_valid: np.ndarray,
-    dst_vertices: np.ndarray,
-    dst_valid: np.ndarray,
-    faces: np.ndarray,
+    meshes: AlignMeshes,
     icp_indices: np.ndarray,
     transform: np.ndarray,
-    params: dict[str, Any] | None = None,
+    params: IcpParams | None = None,
     source: str = "subject/take",
 ) -> RmseGate:
     """Judge a given take -> neutral pose by the RMSE gate :func:`align_take` applies.
@@ -69,12 +70,12 @@ def rmse_gate(
 
     Parameters
     ----------
-    src_vertices, src_valid, dst_vertices, dst_valid, faces, icp_indices
-        As :func:`align_take`.
+    meshes, icp_indices
+        As :func:`~scan2morph.align.align_take`.
     transform : (4, 4) float
         Take scanner frame -> neutral frame.
-    params : dict, optional
-        ``max_rmse_ratio``, ``max_rmse_mm``, ``trim_*`` (overrides of :data:`DEFAULT_ICP`).
+    params : IcpParams, optional
+        Its ``max_rmse_ratio``, ``max_rmse_mm`` and ``trim_*`` are used.
     source : str
         ``subject/take`` for messages.
 
@@ -83,11 +84,11 @@ def rmse_gate(
     RmseGate
     """
     prm = icp_settings(params, source)
-    src, sv = check_mesh(src_vertices, src_valid, "src", source)
-    dst, dv = check_mesh(dst_vertices, dst_valid, "dst", source, src.shape[0])
+    src, sv = check_mesh(meshes.src_vertices, meshes.src_valid, "src", source)
+    dst, dv = check_mesh(meshes.dst_vertices, meshes.dst_valid, "dst", source, src.shape[0])
     region = np.zeros(src.shape[0], dtype=bool)
     region[check_indices(icp_indices, src.shape[0], "icp_indices", source)] = True
-    normals = vertex_normals(dst, np.asarray(faces))
+    normals = vertex_normals(dst, np.asarray(meshes.faces))
     target = region & dv & np.isfinite(normals).all(axis=1)
     p_idx = np.flatnonzero(region & sv)
     if p_idx.size < 3 or np.count_nonzero(target) < 3:
@@ -116,7 +117,7 @@ def residual_gate(residuals, noise_take, noise_neutral, prm) -> RmseGate:
     return RmseGate(rmse, float(noise_take), float(noise_neutral), limit, kind, problem)
 
 
-def rmse_limit(noise_take: float, noise_neutral: float, params: dict[str, Any]) -> tuple:
+def rmse_limit(noise_take: float, noise_neutral: float, params: IcpParams) -> tuple:
     """The point-to-plane RMSE above which an alignment is poor.
 
     Parameters
@@ -124,8 +125,8 @@ def rmse_limit(noise_take: float, noise_neutral: float, params: dict[str, Any]) 
     noise_take, noise_neutral : float
         Measured noise (standard deviation) of the take's and the neutral's ICP region, mm;
         NaN when unknown (counted as 0).
-    params : dict
-        ``max_rmse_ratio`` and ``max_rmse_mm`` (None: relative), as in :data:`DEFAULT_ICP`.
+    params : IcpParams
+        Its ``max_rmse_ratio`` and ``max_rmse_mm`` (None: relative).
 
     Returns
     -------
@@ -135,10 +136,10 @@ def rmse_limit(noise_take: float, noise_neutral: float, params: dict[str, Any]) 
     kind : str
         ``"absolute"`` or ``"relative"``.
     """
-    if params.get("max_rmse_mm") is not None:
-        return float(params["max_rmse_mm"]), "absolute"
+    if params.max_rmse_mm is not None:
+        return float(params.max_rmse_mm), "absolute"
     expected = np.hypot(*(x if np.isfinite(x) else 0.0 for x in (noise_take, noise_neutral)))
-    return float(max(params["max_rmse_ratio"] * expected, _RMSE_FLOOR_MM)), "relative"
+    return float(max(params.max_rmse_ratio * expected, _RMSE_FLOOR_MM)), "relative"
 
 
 def _rmse_verdict(residual_rmse, limit, kind, noise_take, noise_neutral, prm) -> str | None:
@@ -151,7 +152,7 @@ def _rmse_verdict(residual_rmse, limit, kind, noise_take, noise_neutral, prm) ->
     else:
         expected = np.hypot(noise_take, noise_neutral)
         why = (
-            f"limit {limit:.3f} mm (max_rmse_ratio {prm['max_rmse_ratio']:g} x the "
+            f"limit {limit:.3f} mm (max_rmse_ratio {prm.max_rmse_ratio:g} x the "
             f"{expected:.3f} mm a right alignment leaves; {noise})"
         )
     return (

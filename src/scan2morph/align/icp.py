@@ -4,7 +4,7 @@ The initial pose comes from six user-chosen point pairs (the same template verti
 meshes, placed where the mouth does not move them); it is refined by ICP over the upper face
 only, so that the moving mouth does not bias the fit.
 
-Two refinements are offered (``params["method"]``):
+Two refinements are offered (``params.method``):
 
 ``"icp"`` (the paper's, default)
     open3d point-to-plane ICP with a robust kernel: closest points, target normals are the
@@ -48,8 +48,7 @@ region's rigid motion (the jaw prior's) in :mod:`scan2morph.align.region`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -60,7 +59,8 @@ from scan2morph.align.region import region_motion
 from scan2morph.align.result import AlignResult
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
 from scan2morph.align.settings import (
-    DEFAULT_ICP,
+    AlignMeshes,
+    IcpParams,
     check_indices,
     check_mesh,
     icp_settings,
@@ -83,32 +83,31 @@ def _residual_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -
 def _small_step(t_new: np.ndarray, t_old: np.ndarray, prm: dict) -> bool:
     """True if the pose moved by less than ``step_deg`` and ``step_mm`` in one iteration."""
     d = t_new @ invert(t_old)
-    return rotation_angle_deg(d[:3, :3]) < prm["step_deg"] and bool(
-        np.linalg.norm(d[:3, 3]) < prm["step_mm"]
+    return rotation_angle_deg(d[:3, :3]) < prm.step_deg and bool(
+        np.linalg.norm(d[:3, 3]) < prm.step_mm
     )
 
 
 def _refine_correspondence(p, q, initial, prm, source):
     """Iteratively reweighted Kabsch over vertex-to-vertex correspondences."""
     t = initial
-    r, fitness, rmse = _residual_stats(p, q, t, prm["max_correspondence_mm"])
+    r, fitness, rmse = _residual_stats(p, q, t, prm.max_correspondence_mm)
     converged = False
     it = 0
-    for it in range(1, prm["max_iterations"] + 1):  # noqa: B007 (it is reported)
-        inl = r <= prm["max_correspondence_mm"]
+    for it in range(1, prm.max_iterations + 1):  # noqa: B007 (it is reported)
+        inl = r <= prm.max_correspondence_mm
         # First pass plain least squares on the inliers: robust weights need a decent pose.
         w = (
             inl.astype(float)
             if it == 1
-            else inl * kernel_weights(r, prm["robust_kernel"], prm["kernel_k_mm"])
+            else inl * kernel_weights(r, prm.robust_kernel, prm.kernel_k_mm)
         )
         if np.count_nonzero(w) < 3:
             break
         t_old, t = t, kabsch(p, q, w, source=source)
-        r, f_new, rmse_new = _residual_stats(p, q, t, prm["max_correspondence_mm"])
+        r, f_new, rmse_new = _residual_stats(p, q, t, prm.max_correspondence_mm)
         done = (
-            abs(f_new - fitness) < prm["relative_fitness"]
-            and abs(rmse_new - rmse) < prm["relative_rmse"]
+            abs(f_new - fitness) < prm.relative_fitness and abs(rmse_new - rmse) < prm.relative_rmse
         ) or (it > 1 and _small_step(t, t_old, prm))
         fitness, rmse = f_new, rmse_new
         if done:
@@ -129,17 +128,17 @@ def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(q))
     tgt.normals = o3d.utility.Vector3dVector(q_normals)
-    k_final = prm["kernel_k_mm"]
-    k = max(prm["max_correspondence_mm"] if k_start is None else k_start, k_final)
-    loss = {"tukey": reg.TukeyLoss, "huber": reg.HuberLoss}.get(prm["robust_kernel"])
+    k_final = prm.kernel_k_mm
+    k = max(prm.max_correspondence_mm if k_start is None else k_start, k_final)
+    loss = {"tukey": reg.TukeyLoss, "huber": reg.HuberLoss}.get(prm.robust_kernel)
     one_step = reg.ICPConvergenceCriteria(relative_fitness=0.0, relative_rmse=0.0, max_iteration=1)
-    max_d = prm["max_correspondence_mm"]
+    max_d = prm.max_correspondence_mm
     t = np.array(initial)
     prev = reg.evaluate_registration(src, tgt, max_d, t)
     fitness, rmse = prev.fitness, prev.inlier_rmse
     converged = False
     it = 0
-    for it in range(1, prm["max_iterations"] + 1):  # noqa: B007 (it is reported)
+    for it in range(1, prm.max_iterations + 1):  # noqa: B007 (it is reported)
         if fitness == 0.0:
             break
         est = reg.TransformationEstimationPointToPlane(loss(k) if loss else reg.L2Loss())
@@ -147,8 +146,8 @@ def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
         t_old, t = t, np.asarray(res.transformation)
         done = k == k_final and (
             (
-                abs(res.fitness - fitness) < prm["relative_fitness"]
-                and abs(res.inlier_rmse - rmse) < prm["relative_rmse"]
+                abs(res.fitness - fitness) < prm.relative_fitness
+                and abs(res.inlier_rmse - rmse) < prm.relative_rmse
             )
             or _small_step(t, t_old, prm)
         )
@@ -235,14 +234,10 @@ def _initial_pose(
 
 
 def align_take(
-    src_vertices: np.ndarray,
-    src_valid: np.ndarray,
-    dst_vertices: np.ndarray,
-    dst_valid: np.ndarray,
-    faces: np.ndarray,
+    meshes: AlignMeshes,
     pair_indices: np.ndarray,
     icp_indices: np.ndarray,
-    params: dict[str, Any] | None = None,
+    params: IcpParams | None = None,
     source: str = "subject/take",
     grow_indices: np.ndarray | None = None,
 ) -> AlignResult:
@@ -250,16 +245,9 @@ def align_take(
 
     Parameters
     ----------
-    src_vertices : (V, 3) float, mm
-        The take's mesh in its scanner frame; NaN where invalid.
-    src_valid : (V,) bool
-        Valid vertices of the take's mesh.
-    dst_vertices : (V, 3) float, mm
-        The neutral mesh (neutral frame), same template topology.
-    dst_valid : (V,) bool
-        Valid vertices of the neutral mesh.
-    faces : (F, 3) int
-        Template faces (used for the target's vertex normals).
+    meshes : AlignMeshes
+        The take's mesh (src, in its scanner frame) and the neutral's (dst, neutral frame), in
+        one template topology, with the template's faces.
     pair_indices : (n,) int
         Template vertex indices of the point pairs for the initial pose (the paper uses 6;
         at least 3 non-collinear). Pairs invalid in either mesh are left out; with fewer
@@ -268,15 +256,9 @@ def align_take(
     icp_indices : (m,) int
         Template vertex indices of the upper face, which the mouth does not move; the
         refinement uses the valid ones only.
-    params : dict, optional
-        Overrides of :data:`DEFAULT_ICP`: ``method`` ('icp' | 'correspondence'),
-        ``max_correspondence_mm``, ``max_iterations``, ``robust_kernel``
-        ('tukey' | 'huber' | 'none'), ``kernel_k_mm``, ``relative_fitness``, ``relative_rmse``,
-        ``step_deg``, ``step_mm`` (convergence); ``trim_rounds``, ``trim_radius_mm``,
-        ``trim_sigma`` (trimming the region's moving parts); ``kernel_noise_sigmas`` (the
-        kernel's least scale in units of the expected RMSE of the measured noise);
-        ``min_fitness``, ``max_rmse_ratio``, ``max_rmse_mm``, ``min_inlier_fraction`` (the
-        quality gate).
+    params : IcpParams, optional
+        The ICP settings (default :class:`IcpParams`'s): method, convergence, trimming of the
+        region's moving parts, the robust kernel and the quality gate.
     source : str
         ``subject/take`` label for error messages.
     grow_indices : (k,) int, optional
@@ -303,18 +285,18 @@ def align_take(
         Bad shapes, indices or params, too few valid upper-face vertices.
     """
     prm = icp_settings(params, source)
-    src, sv = check_mesh(src_vertices, src_valid, "src", source)
-    dst, dv = check_mesh(dst_vertices, dst_valid, "dst", source, src.shape[0])
-    faces = _check_faces(faces, src.shape[0], source)
+    src, sv = check_mesh(meshes.src_vertices, meshes.src_valid, "src", source)
+    dst, dv = check_mesh(meshes.dst_vertices, meshes.dst_valid, "dst", source, src.shape[0])
+    faces = _check_faces(meshes.faces, src.shape[0], source)
     pairs, upper, cand = _vertex_sets(src.shape[0], pair_indices, icp_indices, grow_indices, source)
     initial, note = _initial_pose(src, sv, dst, dv, pairs, upper, source)
     recovery = [note] if note else []
-    s = _icp_problem((src, sv), (dst, dv, faces), upper, cand, prm["method"], source)
+    s = _icp_problem((src, sv), (dst, dv, faces), upper, cand, prm.method, source)
     known = s.expected if np.isfinite(s.expected) else 0.0
-    prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
+    prm = replace(prm, kernel_k_mm=max(prm.kernel_k_mm, prm.kernel_noise_sigmas * known))
 
     def refine(keep, start, prm_=prm, k_start=None):
-        if prm["method"] == "icp":
+        if prm.method == "icp":
             return _refine_icp(s.p[keep], s.q, s.q_normals, start, prm_, k_start)
         return _refine_correspondence(s.p[keep], s.q[keep], start, prm_, source)
 
@@ -418,9 +400,9 @@ def _recover(refine, keep, t, initial, prm, recovery) -> tuple:
     Huber kernel. Appends what was tried to ``recovery``; returns ``(t, converged,
     iterations)``."""
     attempts = [("re-initialised from the point pairs", initial, prm, None)]
-    if prm["method"] == "icp" and prm["robust_kernel"] != "none":
-        huber = prm | {"robust_kernel": "huber"}
-        attempts.append(("resumed with a Huber kernel", None, huber, prm["kernel_k_mm"]))
+    if prm.method == "icp" and prm.robust_kernel != "none":
+        huber = replace(prm, robust_kernel="huber")
+        attempts.append(("resumed with a Huber kernel", None, huber, prm.kernel_k_mm))
     iterations, conv = 0, False
     for what, start, prm_, k_start in attempts:
         t_new, _, _, n_it, conv = refine(keep, t if start is None else start, prm_, k_start)
@@ -438,11 +420,11 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
     ``run`` is ``(converged, iterations)`` of the refinements."""
     conv, iterations = run
     in_region = s.in_region
-    if prm["method"] == "icp":
-        fitness, rmse = _nearest_stats(s.p[in_region], s.q, t, prm["max_correspondence_mm"])
+    if prm.method == "icp":
+        fitness, rmse = _nearest_stats(s.p[in_region], s.q, t, prm.max_correspondence_mm)
     else:
         _, fitness, rmse = _residual_stats(
-            s.p[in_region], s.q[in_region], t, prm["max_correspondence_mm"]
+            s.p[in_region], s.q[in_region], t, prm.max_correspondence_mm
         )
     judged = s.p[keep & in_region]  # the region's kept vertices (grown ones are still by choice)
     gate = residual_gate(s.plane(transform_points(t, judged)), s.noise_take, s.noise_neutral, prm)
@@ -456,7 +438,7 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
         inlier_rmse=float(rmse),
         iterations=int(iterations),
         converged=bool(conv),
-        method=prm["method"],
+        method=prm.method,
         n_points=int(s.p_idx.size),
         residual_rmse=gate.residual_rmse,
         inlier_fraction=kept,
@@ -468,7 +450,7 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
         expected_rmse=s.expected,
         rmse_limit=gate.limit,
         rmse_limit_kind=gate.kind,
-        kernel_k=prm["kernel_k_mm"],
+        kernel_k=prm.kernel_k_mm,
         kept_indices=s.p_idx[keep].astype(np.int64),
     )
 
@@ -486,16 +468,16 @@ def _verdict(conv, iterations, fitness, kept, recovery, prm) -> list[str]:
     if not conv:
         tried = "; ".join(r for r in recovery if r.startswith("not converged")) or "none"
         problems.append(f"ICP did not converge ({iterations} iterations; recovery tried: {tried})")
-    if fitness < prm["min_fitness"]:
+    if fitness < prm.min_fitness:
         problems.append(
-            f"fitness {fitness:.3f} < min_fitness {prm['min_fitness']:.3f} (share of the "
-            f"region within max_correspondence_mm={prm['max_correspondence_mm']:g} of the "
+            f"fitness {fitness:.3f} < min_fitness {prm.min_fitness:.3f} (share of the "
+            f"region within max_correspondence_mm={prm.max_correspondence_mm:g} of the "
             "neutral mesh): check the point pairs and that the take shows the same subject"
         )
-    if kept < prm["min_inlier_fraction"]:
+    if kept < prm.min_inlier_fraction:
         problems.append(
             f"only {100 * kept:.0f}% of the region kept (min_inlier_fraction "
-            f"{prm['min_inlier_fraction']:g}): the stable region itself moved"
+            f"{prm.min_inlier_fraction:g}): the stable region itself moved"
         )
     return problems
 
@@ -503,7 +485,8 @@ def _verdict(conv, iterations, fitness, kept, recovery, prm) -> list[str]:
 # The names below moved to modules of their own (settings, result, gate, region, surface); they
 # stay importable from here.
 __all__ = [
-    "DEFAULT_ICP",
+    "AlignMeshes",
+    "IcpParams",
     "AlignResult",
     "RmseGate",
     "align_take",

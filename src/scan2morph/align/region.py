@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -12,7 +12,7 @@ from scan2morph.align.gate import residual_gate
 from scan2morph.align.noise import mesh_noise
 from scan2morph.align.result import AlignResult
 from scan2morph.align.rigid import transform_points
-from scan2morph.align.settings import icp_settings, kernel_weights
+from scan2morph.align.settings import IcpParams, icp_settings, kernel_weights
 from scan2morph.align.surface import SampledSurface
 from scan2morph.errors import InputError
 
@@ -35,7 +35,7 @@ def region_motion(
     region: np.ndarray,
     initial: np.ndarray,
     surface: SampledSurface,
-    params: dict[str, Any] | None = None,
+    params: IcpParams | None = None,
     source: str = "subject/take",
 ) -> AlignResult:
     """The rigid motion of one region of skin onto a surface, with a verdict on its rigidity.
@@ -55,8 +55,8 @@ def region_motion(
         The initial pose (for example the least-squares fit of a template correspondence).
     surface : SampledSurface
         The target (a range image's samples, in the region's frame).
-    params : dict, optional
-        Overrides of :data:`DEFAULT_ICP` (used: ``max_correspondence_mm``, ``max_iterations``,
+    params : IcpParams, optional
+        The ICP settings (used: ``max_correspondence_mm``, ``max_iterations``,
         ``robust_kernel``, ``kernel_k_mm``, ``kernel_noise_sigmas``, ``step_mm``, ``min_fitness``
         and the RMSE gate's keys); its RMSE gate
         (``max_rmse_ratio`` times the expected RMSE, or ``max_rmse_mm``) judges rigidity, over
@@ -87,7 +87,7 @@ def region_motion(
     noise_surface = surface.noise(placed, source)
     expected = float(np.hypot(noise_surface, noise_region))
     known = expected if np.isfinite(expected) else 0.0
-    prm = prm | {"kernel_k_mm": max(prm["kernel_k_mm"], prm["kernel_noise_sigmas"] * known)}
+    prm = replace(prm, kernel_k_mm=max(prm.kernel_k_mm, prm.kernel_noise_sigmas * known))
     reach = surface.reach(placed, known)
     t, iterations, conv, constraint = _region_icp(p, surface, initial, prm, reach, known)
     if not np.isfinite(t).all():
@@ -114,7 +114,7 @@ def region_motion(
         expected_rmse=expected,
         rmse_limit=gate.limit,
         rmse_limit_kind=gate.kind,
-        kernel_k=prm["kernel_k_mm"],
+        kernel_k=prm.kernel_k_mm,
         constraint=constraint,
     )
 
@@ -137,10 +137,10 @@ def _region_problems(conv, iterations, fitness, gate, prm) -> list[str]:
     """Why a region's motion is not rigid: ICP not converged, too little of it covered by the
     surface's data (``fitness`` below ``min_fitness``), its RMSE above the ``gate``'s limit."""
     problems = [] if conv else [f"ICP did not converge ({iterations} iterations)"]
-    if fitness < prm["min_fitness"]:
+    if fitness < prm.min_fitness:
         problems.append(
             f"the surface's data covers only {100 * fitness:.0f}% of the region (min_fitness "
-            f"{prm['min_fitness']:g})"
+            f"{prm.min_fitness:g})"
         )
     if gate.problem:
         problems.append(
@@ -173,19 +173,19 @@ def _region_icp(p, surface, initial, prm, reach=0.0, noise=0.0):
     """
     q, q_normals = surface.points, surface.normals
     t = np.array(initial, dtype=np.float64)
-    k_final = prm["kernel_k_mm"]
-    k = max(prm["max_correspondence_mm"], k_final)
-    tolerance = max(prm["step_mm"], _STEP_NOISE_SHARE * noise)
+    k_final = prm.kernel_k_mm
+    k = max(prm.max_correspondence_mm, k_final)
+    tolerance = max(prm.step_mm, _STEP_NOISE_SHARE * noise)
     scale, last = 1.0, None  # the step's share; the points' motion in the last step
     it = 0
-    for it in range(1, prm["max_iterations"] + 1):  # noqa: B007 (it is reported)
+    for it in range(1, prm.max_iterations + 1):  # noqa: B007 (it is reported)
         x = transform_points(t, p)
-        d, j = surface.tree.query(x, distance_upper_bound=prm["max_correspondence_mm"])
+        d, j = surface.tree.query(x, distance_upper_bound=prm.max_correspondence_mm)
         near = d <= max(k, reach)
         near[near] = ~surface.edge[j[near]]
         x, n = x[near], q_normals[j[near]]
         r = np.einsum("ij,ij->i", x - q[j[near]], n)
-        w = kernel_weights(np.abs(r), prm["robust_kernel"], k)
+        w = kernel_weights(np.abs(r), prm.robust_kernel, k)
         if np.count_nonzero(w) < 6:
             return t, it, False, 0.0
         c = (w[:, None] * x).sum(axis=0) / w.sum()

@@ -1,4 +1,4 @@
-"""ICP settings (:data:`DEFAULT_ICP`) and the checks of an alignment's inputs.
+"""ICP settings (:class:`IcpParams`) and the checks of an alignment's inputs.
 
 Shared by the take alignment (:mod:`scan2morph.align.icp`), its RMSE gate
 (:mod:`scan2morph.align.gate`) and a region's rigid motion (:mod:`scan2morph.align.region`).
@@ -6,98 +6,161 @@ Shared by the take alignment (:mod:`scan2morph.align.icp`), its RMSE gate
 
 from __future__ import annotations
 
-from typing import Any
+import numbers
+from dataclasses import dataclass
 
 import numpy as np
 
 from scan2morph.errors import InputError
 
-#: Default ICP parameters (mm where a unit applies). ``relative_fitness`` / ``relative_rmse``
-#: stop the iteration when both the fitness and the inlier RMSE change by less than that
-#: between iterations (open3d's criterion: absolute changes, despite the name); so does a pose
-#: step below ``step_deg`` and ``step_mm``. ``trim_*``: trimming of the region's moving parts
-#: (``trim_rounds`` 0: off). ``kernel_k_mm`` is the kernel's least final scale; it is widened to
-#: ``kernel_noise_sigmas`` times the expected RMSE of the measured noise. ``min_fitness``,
-#: ``max_rmse_ratio`` (times the expected RMSE; ``max_rmse_mm``, if not None, is an absolute
-#: limit instead) and ``min_inlier_fraction`` are the quality gate of :attr:`AlignResult.ok`.
-DEFAULT_ICP: dict[str, Any] = {
-    "method": "icp",
-    "max_correspondence_mm": 10.0,
-    "max_iterations": 50,
-    "robust_kernel": "tukey",
-    "kernel_k_mm": 3.0,
-    "kernel_noise_sigmas": 3.0,
-    "min_fitness": 0.5,
-    "relative_fitness": 1e-6,
-    "relative_rmse": 1e-6,
-    "step_deg": 0.01,
-    "step_mm": 0.01,
-    "trim_rounds": 6,
-    "trim_radius_mm": 8.0,
-    "trim_sigma": 3.0,
-    "max_rmse_ratio": 3.0,
-    "max_rmse_mm": None,
-    "min_inlier_fraction": 0.3,
-}
-
-
 _METHODS = ("icp", "correspondence")
 _KERNELS = ("tukey", "huber", "none")
+#: Settings that must be finite and positive, at least 0, or shares in [0, 1].
+_POSITIVE = (
+    "max_correspondence_mm",
+    "kernel_k_mm",
+    "trim_radius_mm",
+    "trim_sigma",
+    "max_rmse_ratio",
+    "kernel_noise_sigmas",
+)
+_NON_NEGATIVE = ("relative_fitness", "relative_rmse", "step_deg", "step_mm")
+_SHARES = ("min_fitness", "min_inlier_fraction")
 
 
-def icp_settings(params: dict[str, Any] | None, source: str) -> dict[str, Any]:
-    p = dict(DEFAULT_ICP)
-    if params:
-        unknown = sorted(set(params) - set(DEFAULT_ICP))
-        if unknown:
-            raise InputError(
-                source, f"icp params: unknown key(s) {unknown}; expected {sorted(DEFAULT_ICP)}"
-            )
-        p.update(params)
-    if p["method"] not in _METHODS:
-        raise InputError(
-            source, f"icp params: method must be one of {_METHODS}, got {p['method']!r}"
-        )
-    if p["robust_kernel"] not in _KERNELS:
-        raise InputError(
-            source,
-            f"icp params: robust_kernel must be one of {_KERNELS}, got {p['robust_kernel']!r}",
-        )
-    for key in (
-        "max_correspondence_mm",
-        "kernel_k_mm",
-        "trim_radius_mm",
-        "trim_sigma",
-        "max_rmse_ratio",
-        "kernel_noise_sigmas",
-    ):
-        v = float(p[key])
-        if not (np.isfinite(v) and v > 0):
-            raise InputError(source, f"icp params: {key} must be a positive number, got {p[key]!r}")
-        p[key] = v
-    if p["max_rmse_mm"] is not None:
-        v = p["max_rmse_mm"]
-        if isinstance(v, bool) or not isinstance(v, int | float) or not (np.isfinite(v) and v > 0):
-            raise InputError(
-                source, f"icp params: max_rmse_mm must be a positive number or None, got {v!r}"
-            )
-        p["max_rmse_mm"] = float(v)
-    for key in ("relative_fitness", "relative_rmse", "step_deg", "step_mm"):
-        v = float(p[key])
-        if not (np.isfinite(v) and v >= 0):
-            raise InputError(source, f"icp params: {key} must be >= 0, got {p[key]!r}")
-        p[key] = v
-    for key in ("min_fitness", "min_inlier_fraction"):
-        v = float(p[key])
-        if not 0.0 <= v <= 1.0:
-            raise InputError(source, f"icp params: {key} must be in [0, 1], got {p[key]!r}")
-        p[key] = v
-    for key, least in (("max_iterations", 1), ("trim_rounds", 0)):
-        it = p[key]
-        if isinstance(it, bool) or int(it) != it or it < least:
-            raise InputError(source, f"icp params: {key} must be an integer >= {least}, got {it!r}")
-        p[key] = int(it)
-    return p
+@dataclass(frozen=True)
+class IcpParams:
+    """ICP settings of an alignment (mm where a unit applies).
+
+    Attributes
+    ----------
+    method : {"icp", "correspondence"}
+        open3d point-to-plane ICP, or a robust Kabsch over matching vertices.
+    max_correspondence_mm : float
+        Correspondence distance, mm.
+    max_iterations : int
+        Iterations at most.
+    robust_kernel : {"tukey", "huber", "none"}
+        The robust kernel.
+    kernel_k_mm : float
+        The kernel's least final scale, mm (its scale halves each iteration from
+        ``max_correspondence_mm``); widened to ``kernel_noise_sigmas`` times the RMSE the
+        meshes' measured noise predicts.
+    kernel_noise_sigmas : float
+    relative_fitness, relative_rmse : float
+        The iteration stops when both the fitness and the inlier RMSE change by less than these
+        between iterations (open3d's criterion: absolute changes, despite the name); so does a
+        pose step below ``step_deg`` (degrees) and ``step_mm``.
+    step_deg, step_mm : float
+    trim_rounds : int
+        Rounds of trimming the region's moving parts (0: off): residuals averaged over
+        ``trim_radius_mm`` beyond ``trim_sigma`` robust standard deviations are left out.
+    trim_radius_mm, trim_sigma : float
+    min_fitness : float
+        Quality gate: least share of the region within ``max_correspondence_mm``.
+    max_rmse_ratio : float
+        Quality gate: most point-to-plane RMSE, in units of the RMSE the measured noise predicts.
+    max_rmse_mm : float or None
+        Quality gate: an absolute RMSE limit (mm) instead of ``max_rmse_ratio``.
+    min_inlier_fraction : float
+        Quality gate: least share of the region kept after trimming.
+
+    Raises
+    ------
+    InputError
+        A value out of its range (naming the attribute).
+    """
+
+    method: str = "icp"
+    max_correspondence_mm: float = 10.0
+    max_iterations: int = 50
+    robust_kernel: str = "tukey"
+    kernel_k_mm: float = 3.0
+    kernel_noise_sigmas: float = 3.0
+    min_fitness: float = 0.5
+    relative_fitness: float = 1e-6
+    relative_rmse: float = 1e-6
+    step_deg: float = 0.01
+    step_mm: float = 0.01
+    trim_rounds: int = 6
+    trim_radius_mm: float = 8.0
+    trim_sigma: float = 3.0
+    max_rmse_ratio: float = 3.0
+    max_rmse_mm: float | None = None
+    min_inlier_fraction: float = 0.3
+
+    def __post_init__(self):
+        for name, choices in (("method", _METHODS), ("robust_kernel", _KERNELS)):
+            if getattr(self, name) not in choices:
+                raise InputError(
+                    "IcpParams", f"{name} must be one of {choices}, got {getattr(self, name)!r}"
+                )
+        for names, ok, expected in (
+            (_POSITIVE, lambda v: np.isfinite(v) and v > 0, "a positive number"),
+            (_NON_NEGATIVE, lambda v: np.isfinite(v) and v >= 0, ">= 0"),
+            (_SHARES, lambda v: 0.0 <= v <= 1.0, "in [0, 1]"),
+        ):
+            for name in names:
+                value = getattr(self, name)
+                if isinstance(value, bool) or not isinstance(value, numbers.Real) or not ok(value):
+                    raise InputError("IcpParams", f"{name} must be {expected}, got {value!r}")
+                object.__setattr__(self, name, float(value))
+        v = self.max_rmse_mm
+        if v is not None:
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, numbers.Real)
+                or not (np.isfinite(v) and v > 0)
+            ):
+                raise InputError(
+                    "IcpParams", f"max_rmse_mm must be a positive number or None, got {v!r}"
+                )
+            object.__setattr__(self, "max_rmse_mm", float(v))
+        for name, least in (("max_iterations", 1), ("trim_rounds", 0)):
+            it = getattr(self, name)
+            if (
+                isinstance(it, bool)
+                or not isinstance(it, numbers.Real)
+                or int(it) != it
+                or it < least
+            ):
+                raise InputError("IcpParams", f"{name} must be an integer >= {least}, got {it!r}")
+            object.__setattr__(self, name, int(it))
+
+
+@dataclass(frozen=True)
+class AlignMeshes:
+    """The two meshes of an alignment, in one template topology (checked by the functions that
+    take them).
+
+    Attributes
+    ----------
+    src_vertices : (V, 3) float, mm
+        The take's mesh in its scanner frame; NaN where invalid.
+    src_valid : (V,) bool
+        Valid vertices of the take's mesh.
+    dst_vertices : (V, 3) float, mm
+        The neutral mesh (neutral frame).
+    dst_valid : (V,) bool
+        Valid vertices of the neutral mesh.
+    faces : (F, 3) int
+        Template faces (the target's vertex normals).
+    """
+
+    src_vertices: np.ndarray
+    src_valid: np.ndarray
+    dst_vertices: np.ndarray
+    dst_valid: np.ndarray
+    faces: np.ndarray
+
+
+def icp_settings(params: IcpParams | None, source: str) -> IcpParams:
+    """``params``, or the defaults for None; anything else is an error naming ``source``."""
+    if params is None:
+        return IcpParams()
+    if not isinstance(params, IcpParams):
+        raise InputError(source, f"params: expected IcpParams or None, got {type(params).__name__}")
+    return params
 
 
 def check_indices(idx: np.ndarray, n_vertices: int, name: str, source: str) -> np.ndarray:
@@ -145,4 +208,4 @@ def kernel_weights(r: np.ndarray, kernel: str, k: float) -> np.ndarray:
     return np.ones_like(r)
 
 
-__all__ = ["DEFAULT_ICP"]
+__all__ = ["AlignMeshes", "IcpParams", "icp_settings"]

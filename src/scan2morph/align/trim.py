@@ -42,7 +42,7 @@ def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:
     plane : callable
         ``plane(x) -> (n,)`` signed point-to-plane distance of points ``x`` (n, 3) to the
         target, mm.
-    prm : dict
+    prm : IcpParams
         ICP settings (``trim_rounds``, ``trim_radius_mm``, ``trim_sigma``).
     grow : (n,) bool, optional
         Candidates outside the region.
@@ -58,20 +58,20 @@ def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:
     notes : list of str
         What was left out and added (for the result's ``recovery``).
     """
-    if prm["trim_rounds"] == 0 or not np.isfinite(t).all():
+    if prm.trim_rounds == 0 or not np.isfinite(t).all():
         return keep, t, conv, 0, []
-    pairs = cKDTree(p).query_pairs(prm["trim_radius_mm"], output_type="ndarray")
+    pairs = cKDTree(p).query_pairs(prm.trim_radius_mm, output_type="ndarray")
     n = len(p)
     adj = edge_adjacency(pairs, n) + sparse.eye_array(n, format="csr")  # each with itself
     mean = sparse.diags_array(1.0 / adj.sum(axis=1)) @ adj
     grow = np.zeros(n, dtype=bool) if grow is None else grow
     region = ~grow
     iterations, rounds = 0, 0
-    for rounds in range(1, prm["trim_rounds"] + 1):  # noqa: B007 (rounds is reported)
+    for rounds in range(1, prm.trim_rounds + 1):  # noqa: B007 (rounds is reported)
         r = mean @ plane(transform_points(t, p))
         rk = r[keep]
         sigma = 1.4826 * np.median(np.abs(rk - np.median(rk)))
-        new = (keep | grow) & (np.abs(r) <= max(prm["trim_sigma"] * sigma, _TRIM_FLOOR_MM))
+        new = (keep | grow) & (np.abs(r) <= max(prm.trim_sigma * sigma, _TRIM_FLOOR_MM))
         if new.sum() < 3 or np.array_equal(new, keep):
             break
         keep = new

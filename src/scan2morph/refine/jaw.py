@@ -23,15 +23,14 @@ confidence there: the prior fills in where the texture measured nothing.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import binary_erosion
 
 from scan2morph.align import (
-    DEFAULT_ICP,
     AlignResult,
+    IcpParams,
     SampledSurface,
     invert,
     kabsch,
@@ -45,6 +44,7 @@ from scan2morph.scan.depth_cleanup import smooth_depth
 from scan2morph.template.sample import range_pixels
 
 __all__ = [
+    "ChinMeshes",
     "JawParams",
     "JawPrior",
     "chin_weights",
@@ -75,12 +75,12 @@ MIN_CONSTRAINT = 0.02
 
 @dataclass(frozen=True)
 class JawParams:
-    """Parameters of the jaw prior (config keys ``refine.jaw_*``).
+    """Parameters of the jaw prior.
 
     Attributes
     ----------
-    enabled : bool
-        Use the prior (``refine.jaw_prior``).
+    prior : bool
+        Use the prior.
     start, end : float
         Shares of the way from iBUG 58 to iBUG 9 where the prior's weight starts to rise from 0
         and reaches 1; the vertices at weight 1 are the region registered.
@@ -88,30 +88,25 @@ class JawParams:
         The registration's RMSE gate, in units of the residual the still skin leaves.
     """
 
-    enabled: bool = True
+    prior: bool = True
     start: float = 0.0
     end: float = 0.3
     max_rmse_ratio: float = 1.5
 
     def __post_init__(self):
-        if not isinstance(self.enabled, bool | np.bool_):
-            raise InputError(
-                "config", f"refine.jaw_prior: expected true or false, got {self.enabled!r}"
-            )
+        if not isinstance(self.prior, bool | np.bool_):
+            raise InputError("JawParams", f"prior: expected true or false, got {self.prior!r}")
         require_numbers(
-            "config",
-            {f"refine.jaw_{n}": getattr(self, n) for n in ("start", "end", "max_rmse_ratio")},
+            "JawParams", {n: getattr(self, n) for n in ("start", "end", "max_rmse_ratio")}
         )
         if not 0.0 <= self.start < self.end <= 1.0:
             raise InputError(
-                "config",
-                f"refine.jaw_start, refine.jaw_end: expected 0 <= start < end <= 1, got "
-                f"{self.start} and {self.end}",
+                "JawParams",
+                f"start, end: expected 0 <= start < end <= 1, got {self.start} and {self.end}",
             )
         if not self.max_rmse_ratio > 0:
             raise InputError(
-                "config",
-                f"refine.jaw_max_rmse_ratio: expected a positive ratio, got {self.max_rmse_ratio}",
+                "JawParams", f"max_rmse_ratio: expected a positive ratio, got {self.max_rmse_ratio}"
             )
 
 
@@ -212,22 +207,11 @@ def chin_weights(
     return np.clip((share - start) / (end - start), 0.0, 1.0)
 
 
-def jaw_prior(
-    neutral: np.ndarray,
-    neutral_valid: np.ndarray,
-    take: np.ndarray,
-    take_valid: np.ndarray,
-    weights: np.ndarray,
-    still: np.ndarray,
-    take_xyz: np.ndarray,
-    take_transform: np.ndarray,
-    icp: dict[str, Any] | None = None,
-    max_rmse_ratio: float = 1.5,
-    source: str = "subject/take",
-) -> JawPrior:
-    """The jaw prior of one take.
+@dataclass(frozen=True)
+class ChinMeshes:
+    """The per-vertex inputs of :func:`jaw_prior` (checked there).
 
-    Parameters
+    Attributes
     ----------
     neutral : (V, 3) float, mm
         The neutral's mesh (neutral frame); NaN where invalid.
@@ -240,13 +224,37 @@ def jaw_prior(
         :func:`chin_weights`; the vertices at 1 are registered.
     still : (V,) bool
         Skin that the alignment holds still (its ICP region): the rigidity gate's reference.
+    """
+
+    neutral: np.ndarray
+    neutral_valid: np.ndarray
+    take: np.ndarray
+    take_valid: np.ndarray
+    weights: np.ndarray
+    still: np.ndarray
+
+
+def jaw_prior(
+    meshes: ChinMeshes,
+    take_xyz: np.ndarray,
+    take_transform: np.ndarray,
+    icp: IcpParams | None = None,
+    max_rmse_ratio: float = 1.5,
+    source: str = "subject/take",
+) -> JawPrior:
+    """The jaw prior of one take.
+
+    Parameters
+    ----------
+    meshes : ChinMeshes
+        The neutral's and the take's meshes, the chin's weights and the still skin.
     take_xyz : (H, W, 3) float, mm
         The take's range image (its own frame): the surface registered to, and where the moved
         skin points are looked up.
     take_transform : (4, 4) float
         The take's alignment (its frame -> the neutral frame).
-    icp : dict, optional
-        ICP settings (:data:`scan2morph.align.DEFAULT_ICP` keys; the config section ``align``).
+    icp : IcpParams, optional
+        ICP settings (the alignment's).
     max_rmse_ratio : float
         The rigidity gate: the chin's point-to-plane RMSE at most this many times the still
         skin's (robust) residual against the take's surface under the alignment, the RMSE that
@@ -258,8 +266,9 @@ def jaw_prior(
     -------
     JawPrior
     """
+    m = meshes
     weights, neutral, neutral_valid, take, take_valid, still = _checked(
-        weights, neutral, neutral_valid, take, take_valid, still, source
+        m.weights, m.neutral, m.neutral_valid, m.take, m.take_valid, m.still, source
     )
     xyz = _checked_scan(take_xyz, take_transform, source)
     n = len(weights)
@@ -292,7 +301,7 @@ def jaw_prior(
         return refused("the take's scan does not show the still skin (align.icp_region)")
     limit = max(max_rmse_ratio * reference, MIN_LIMIT_MM)
     motion = region_motion(
-        neutral[core], start, surface, (icp or {}) | {"max_rmse_mm": limit}, source
+        neutral[core], start, surface, replace(icp or IcpParams(), max_rmse_mm=limit), source
     )
     problem = _motion_problem(motion, limit, reference, max_rmse_ratio)
     if problem:
@@ -336,7 +345,7 @@ def _motion_problem(motion, limit: float, reference: float, max_rmse_ratio: floa
     if motion.converged and motion.residual_rmse > limit:
         return (
             f"the chin did not move rigidly: point-to-plane RMSE {motion.residual_rmse:.3f} "
-            f"mm > {limit:.3f} mm (refine.jaw_max_rmse_ratio {max_rmse_ratio:g} x the "
+            f"mm > {limit:.3f} mm (max_rmse_ratio {max_rmse_ratio:g} x the "
             f"{reference:.3f} mm the still skin leaves, at least {MIN_LIMIT_MM:g} mm)"
         )
     return "; ".join(motion.problems)
@@ -380,7 +389,7 @@ def scan_surface(
     xyz: np.ndarray,
     transform: np.ndarray,
     placed: np.ndarray,
-    icp: dict[str, Any] | None = None,
+    icp: IcpParams | None = None,
     source: str = "range image",
 ) -> tuple[SampledSurface | None, np.ndarray | None, np.ndarray | None]:
     """A range image's surface where some points can be.
@@ -400,8 +409,8 @@ def scan_surface(
         The image's frame -> the frame of ``placed`` and of the surface returned.
     placed : (n, 3) float, mm
         Where the points to register are (finite).
-    icp : dict, optional
-        ``max_correspondence_mm``, the window's margin (default :data:`DEFAULT_ICP`'s).
+    icp : IcpParams, optional
+        Its ``max_correspondence_mm`` is the window's margin.
     source : str
         Label for error messages.
 
@@ -422,9 +431,9 @@ def scan_surface(
     return _scan_surface(xyz, mapped, transform, placed, _margin(icp), source)
 
 
-def _margin(icp: dict[str, Any] | None) -> float:
+def _margin(icp: IcpParams | None) -> float:
     """The windows' margin around the points, mm: the ICP's correspondence distance."""
-    return float((icp or {}).get("max_correspondence_mm", DEFAULT_ICP["max_correspondence_mm"]))
+    return float((icp or IcpParams()).max_correspondence_mm)
 
 
 def _scan_surface(xyz, mapped, transform, placed, reach, source):

@@ -61,7 +61,7 @@ from scan2morph.refine.lip_profile import (
 from scan2morph.scan.view import scanner_view
 from scan2morph.template.regions import Lip
 
-__all__ = ["LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior"]
+__all__ = ["LipImages", "LipParams", "LipPrior", "redness", "vermilion_edge", "lip_prior"]
 
 #: The harmonic fill's pull of the lip's followers towards 0 (:func:`harmonic_fill`'s ``ridge``):
 #: a follower's weight stays below a placed vertex's 1.
@@ -89,12 +89,12 @@ NEAR = 0.5
 
 @dataclass(frozen=True)
 class LipParams:
-    """Parameters of the upper-lip prior (config keys ``refine.lip_*``).
+    """Parameters of a lip's prior.
 
     Attributes
     ----------
-    enabled : bool
-        Use the prior (``refine.lip_prior``).
+    prior : bool
+        Use the prior.
     min_contrast : float
         Least redness step at the border, lip minus skin (each side's mean along the profile),
         in both images.
@@ -117,7 +117,7 @@ class LipParams:
         (a closed mouth keeps the flow's answer).
     """
 
-    enabled: bool = True
+    prior: bool = True
     min_contrast: float = 0.02
     search: float = 0.5
     max_shift: float = 0.6
@@ -126,44 +126,22 @@ class LipParams:
     shrink: float = 0.0
 
     def __post_init__(self):
-        if not isinstance(self.enabled, bool | np.bool_):
-            raise InputError(
-                "config", f"refine.lip_prior: expected true or false, got {self.enabled!r}"
-            )
-        require_numbers(
-            "config",
-            {
-                f"refine.lip_{n}": getattr(self, n)
-                for n in ("min_contrast", "search", "max_shift", "min_share", "stretch")
-            }
-            | {"refine.lower_lip_shrink": self.shrink},
-        )
-        if not 0.0 < self.min_contrast < 1.0:
-            raise InputError(
-                "config",
-                f"refine.lip_min_contrast: expected 0 < contrast < 1, got {self.min_contrast}",
-            )
-        if not 0.0 < self.search < 1.0:
-            raise InputError(
-                "config", f"refine.lip_search: expected 0 < share < 1, got {self.search}"
-            )
-        if not 0.0 < self.max_shift <= MAX_SHIFT:
-            raise InputError(
-                "config",
-                f"refine.lip_max_shift: expected 0 < share <= {MAX_SHIFT}, got {self.max_shift}",
-            )
-        if not 0.0 <= self.stretch < 1.0:
-            raise InputError(
-                "config", f"refine.lip_stretch: expected 0 <= share < 1, got {self.stretch}"
-            )
-        if not 0.0 <= self.shrink < 1.0:
-            raise InputError(
-                "config", f"refine.lower_lip_shrink: expected 0 <= share < 1, got {self.shrink}"
-            )
-        if not 0.0 < self.min_share <= 1.0:
-            raise InputError(
-                "config", f"refine.lip_min_share: expected 0 < share <= 1, got {self.min_share}"
-            )
+        if not isinstance(self.prior, bool | np.bool_):
+            raise InputError("LipParams", f"prior: expected true or false, got {self.prior!r}")
+        names = ("min_contrast", "search", "max_shift", "min_share", "stretch", "shrink")
+        require_numbers("LipParams", {n: getattr(self, n) for n in names})
+        for name, ok, expected in (
+            ("min_contrast", 0.0 < self.min_contrast < 1.0, "0 < contrast < 1"),
+            ("search", 0.0 < self.search < 1.0, "0 < share < 1"),
+            ("max_shift", 0.0 < self.max_shift <= MAX_SHIFT, f"0 < share <= {MAX_SHIFT}"),
+            ("stretch", 0.0 <= self.stretch < 1.0, "0 <= share < 1"),
+            ("shrink", 0.0 <= self.shrink < 1.0, "0 <= share < 1"),
+            ("min_share", 0.0 < self.min_share <= 1.0, "0 < share <= 1"),
+        ):
+            if not ok:
+                raise InputError(
+                    "LipParams", f"{name}: expected {expected}, got {getattr(self, name)}"
+                )
 
 
 @dataclass(frozen=True)
@@ -231,19 +209,37 @@ class LipPrior:
         return np.where(has[:, None], self.points, p), c + w * (1.0 - c)
 
 
+@dataclass(frozen=True)
+class LipImages:
+    """The neutral's and the take's images of :func:`lip_prior` (checked there), and how their
+    range images are sampled.
+
+    Attributes
+    ----------
+    neutral_color, take_color : (H, W, 3)
+        Colour images, pixel to pixel with the range images.
+    neutral_xyz, take_xyz : (H, W, 3) float
+        Range images, mm (any frame: only lengths are used), NaN where there is no data.
+    min_weight, max_slope_deg : float
+        The range images' sampling rules (:func:`~scan2morph.template.sample.sample_range`).
+    """
+
+    neutral_color: np.ndarray
+    neutral_xyz: np.ndarray
+    take_color: np.ndarray
+    take_xyz: np.ndarray
+    min_weight: float = 0.5
+    max_slope_deg: float | None = 80.0
+
+
 def lip_prior(
     lip: Lip,
     vertices2d: np.ndarray,
     neutral_points: np.ndarray,
     take_points: np.ndarray,
-    neutral_color: np.ndarray,
-    neutral_xyz: np.ndarray,
-    take_color: np.ndarray,
-    take_xyz: np.ndarray,
+    images: LipImages,
     faces: np.ndarray,
     params: LipParams,
-    min_weight: float = 0.5,
-    max_slope_deg: float | None = 80.0,
     source: str = "take",
 ) -> LipPrior:
     """Where the upper lip's length from the vermilion border puts its vertices in a take.
@@ -257,15 +253,11 @@ def lip_prior(
     neutral_points, take_points : (V, 2) float
         The template's vertices in the neutral's image (its fit: they define the skin points)
         and in the take's (the flow's answer), px.
-    neutral_color, take_color : (H, W, 3)
-        Colour images, pixel to pixel with the range images.
-    neutral_xyz, take_xyz : (H, W, 3) float
-        Range images, mm (any frame: only lengths are used), NaN where there is no data.
+    images : LipImages
+        The neutral's and the take's colour and range images.
     faces : (F, 3) int
         The template's triangles (the harmonic interpolation's mesh).
     params : LipParams
-    min_weight, max_slope_deg : float
-        The range images' sampling rules (:func:`~scan2morph.template.sample.sample_range`).
     source : str
         ``subject/take``, for messages.
 
@@ -284,9 +276,10 @@ def lip_prior(
     pt = _points(take_points, "take_points", source)
     v2 = _points(vertices2d, "vertices2d", source)
     f = _check_mesh(lip, (pn, pt, v2), faces, source)
+    i, rules = images, (images.min_weight, images.max_slope_deg)
     img_n, img_t = (
-        _lip_image(color, xyz, what, (min_weight, max_slope_deg), source)
-        for what, color, xyz in (("neutral", neutral_color, neutral_xyz), ("take", take_color, take_xyz))
+        _lip_image(color, xyz, what, rules, source)
+        for what, color, xyz in (("neutral", i.neutral_color, i.neutral_xyz), ("take", i.take_color, i.take_xyz))
     )  # fmt: skip
     targets, contrasts, reasons = _place_all(lip, v2, (pn, pt), (img_n, img_t), params)
     ok = np.isfinite(targets).all(axis=1)

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scan2morph.align import align_take, transform_points
+from scan2morph.align import AlignMeshes, IcpParams, align_take, transform_points
+from scan2morph.errors import InputError
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
@@ -17,8 +18,6 @@ from scan2morph.template.regions import icp_region, named_indices
 
 #: Config sections this stage reads (``template`` for the subdivision level).
 SECTIONS = ("align", "template")
-#: Keys of ``align`` that name vertices and regions (the rest are align_take's settings).
-REGION_KEYS = ("point_pairs", "icp_region", "grow_into")
 log = logging.getLogger("scan2morph")
 
 
@@ -37,28 +36,36 @@ class Params:
     grow_into : str
         The region whose still skin the ICP region grows into (``align.grow_into``: a region
         name of :func:`~scan2morph.template.regions.icp_region`, or ``none``).
-    icp : dict
-        Everything else of ``align``: :func:`scan2morph.align.align_take`'s settings.
+    icp : IcpParams
+        ICP's settings (``align.icp``).
     """
 
     levels: int
     point_pairs: list
     icp_region: str
     grow_into: str
-    icp: dict
+    icp: IcpParams
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
         """From the config's sections ``align`` and ``template``."""
         align, template = config["align"], config["template"]
-        icp = {k: v for k, v in align.items() if k not in REGION_KEYS}
         return cls(
             int(template["subdivision_levels"]),
             list(align["point_pairs"]),
             align["icp_region"],
             align["grow_into"],
-            icp,
+            icp_params(align),
         )
+
+
+def icp_params(align: Mapping) -> IcpParams:
+    """:class:`~scan2morph.align.IcpParams` of the config section ``align`` (its ``icp``); their
+    own check's problem named by the config key."""
+    try:
+        return IcpParams(**align.get("icp", {}))
+    except InputError as exc:
+        raise InputError("config", f"align.icp: {exc.problem}") from None
 
 
 def grow_indices(fine: Template, name: str) -> np.ndarray | None:
@@ -98,12 +105,15 @@ def run(template: Template, take: Take, params: Params) -> Part:
         transform = np.eye(4)
     else:
         fine = subdivide_template(template, params.levels)
-        result = align_take(
+        meshes = AlignMeshes(
             src,
             need(data, paths.mesh(name, "valid"), source),
             need(data, paths.mesh(neutral, "vertices"), source),
             need(data, paths.mesh(neutral, "valid"), source),
             fine.faces,
+        )
+        result = align_take(
+            meshes,
             named_indices(fine, params.point_pairs, "align.point_pairs"),
             np.flatnonzero(icp_region(fine, params.icp_region)),
             params.icp,

@@ -13,11 +13,12 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from scan2morph.align import rotation_angle_deg, transform_points
+from scan2morph.align import IcpParams, rotation_angle_deg, transform_points
+from scan2morph.errors import InputError
 from scan2morph.io.mesh_scan import SHADED
 from scan2morph.refine import RefineParams, grey, refine_points
-from scan2morph.refine.jaw import JawParams, JawPrior, chin_weights, jaw_prior
-from scan2morph.refine.lip import LipParams, LipPrior, lip_prior
+from scan2morph.refine.jaw import ChinMeshes, JawParams, JawPrior, chin_weights, jaw_prior
+from scan2morph.refine.lip import LipImages, LipParams, LipPrior, lip_prior
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
@@ -56,14 +57,14 @@ class Params:
     flow : RefineParams
         The image correlation's settings of the section ``refine``.
     jaw : JawParams
-        The jaw prior's (``refine.jaw_*``; :mod:`scan2morph.refine.jaw`).
+        The jaw prior's (``refine.jaw``; :mod:`scan2morph.refine.jaw`).
     lip : LipParams
-        The upper-lip prior's (``refine.lip_*``; :mod:`scan2morph.refine.lip`).
+        The upper-lip prior's (``refine.lip``; :mod:`scan2morph.refine.lip`).
     lower_lip : LipParams
-        The lower lip's: the same settings, with ``refine.lower_lip_prior`` and
-        ``refine.lower_lip_shrink``.
-    icp : dict
-        The ICP settings of the section ``align`` (the jaw prior's registration).
+        The lower lip's: ``refine.lip``'s settings with ``refine.lower_lip`` over them.
+    icp : IcpParams or None
+        The alignment's ICP settings (``align.icp``: the jaw prior's registration); None: the
+        defaults.
     still_region : str
         ``align.icp_region``: the skin the alignment holds still (the jaw prior's reference).
     """
@@ -77,8 +78,8 @@ class Params:
     flow: RefineParams
     jaw: JawParams = JawParams()
     lip: LipParams = LipParams()
-    lower_lip: LipParams = LipParams(enabled=False)
-    icp: dict | None = None
+    lower_lip: LipParams = LipParams(prior=False)
+    icp: IcpParams | None = None
     still_region: str = "stable"
 
     @classmethod
@@ -86,24 +87,10 @@ class Params:
         """From the config's sections ``refine``, ``template`` and ``align``."""
         refine, template, align = config["refine"], config["template"], config["align"]
         names = {f.name for f in fields(RefineParams)}
-        jaw = {
-            k: refine[f"jaw_{k}"]
-            for k in ("start", "end", "max_rmse_ratio")
-            if f"jaw_{k}" in refine
-        }
-        if "jaw_prior" in refine:
-            jaw["enabled"] = refine["jaw_prior"]
-        lip = {
-            k: refine[f"lip_{k}"]
-            for k in ("min_contrast", "search", "max_shift", "min_share", "stretch")
-            if f"lip_{k}" in refine
-        }
-        if "lip_prior" in refine:
-            lip["enabled"] = refine["lip_prior"]
-        lower = lip | {
-            "enabled": refine.get("lower_lip_prior", False),
-            "shrink": refine.get("lower_lip_shrink", 0.4),
-        }
+        jaw = _settings(JawParams, refine, "jaw")
+        lip = _settings(LipParams, refine, "lip")
+        base = {"prior": False, "shrink": 0.4} | dict(refine.get("lip", {}))
+        lower = _settings(LipParams, refine, "lower_lip", base)
         return cls(
             str(refine["method"]),
             int(template["subdivision_levels"]),
@@ -112,12 +99,21 @@ class Params:
             fit_stage.Params.from_config(config),
             float(refine.get("min_confident_share", 0.0)),
             RefineParams(**{k: v for k, v in refine.items() if k in names}),
-            JawParams(**jaw),
-            LipParams(**lip),
-            LipParams(**lower),
-            align_stage.Params.from_config(config).icp,
+            jaw,
+            lip,
+            lower,
+            align_stage.icp_params(align),
             str(align["icp_region"]),
         )
+
+
+def _settings(kind, refine: Mapping, name: str, base: Mapping | None = None):
+    """``kind`` (:class:`JawParams` or :class:`LipParams`) from the section ``refine.{name}``
+    over ``base``; its own check's problem named by the config key."""
+    try:
+        return kind(**(dict(base or {}) | dict(refine.get(name, {}))))
+    except InputError as exc:
+        raise InputError("config", f"refine.{name}: {exc.problem}") from None
 
 
 def enabled(refine: Mapping) -> bool:
@@ -193,7 +189,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
         the ``refine`` group's attributes hold the median correction (px), the share of
         vertices with a confident measurement, whether the flow was ``used`` and, when not,
         the ``problem``; whether the jaw prior was used (``jaw_used``), why not
-        (``jaw_problem``, ``"off"`` with ``refine.jaw_prior`` false) and, when the chin was
+        (``jaw_problem``, ``"off"`` with ``refine.jaw.prior`` false) and, when the chin was
         registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
         upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
         and those placed (``lip_vertices``, ``lip_measured``) and the median redness step at
@@ -229,7 +225,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
     jaw = _jaw(template, fine, name, neutral, data, neutral_points, params, source)
     if jaw.used:  # the geometry's answer where the texture gave none
         refined, report["confidence"] = jaw.fill(refined, report["confidence"])
-    elif params.jaw.enabled:
+    elif params.jaw.prior:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     refined, priors = _lips(fine, take, neutral_points, refined, report, params)
     vertices, ok = sample_points(data, name, refined, fine.faces, params, source)
@@ -257,12 +253,12 @@ def _lips(fine, take: Take, neutral_points, refined, report, params: Params) -> 
     for side, settings in (("upper", params.lip), ("lower", params.lower_lip)):
         prior = _lip(
             fine, side, name, neutral, data, neutral_points, refined, params, settings, source,
-        ) if not (shaded and settings.enabled) else LipPrior.unused(
+        ) if not (shaded and settings.prior) else LipPrior.unused(
             len(fine.vertices), f"{shaded}: the lip's border is found by its colour"
         )  # fmt: skip
         if prior.used:
             refined, report["confidence"] = prior.apply(refined, report["confidence"])
-        elif settings.enabled:
+        elif settings.prior:
             log.info("%s: %s-lip prior not used: %s", source, side, prior.problem)
         priors["lip" if side == "upper" else "lower_lip"] = prior
     return refined, priors
@@ -325,7 +321,7 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
     shaded = _shaded(data, (neutral, take))
     if shaded:  # no skin texture to correlate: the shading follows the geometry, not the skin
         report = {"median_correction_px": 0.0, "confident_share": 0.0}
-        jaw = " (the jaw prior may still move the chin)" if params.jaw.enabled else ""
+        jaw = " (the jaw prior may still move the chin)" if params.jaw.prior else ""
         kept = "texture-driven refinement is not available, the template fit is kept"
         return None, report, f"{shaded}: {kept}{jaw}"
     refined, report = refine_points(
@@ -344,9 +340,9 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
     priors = "".join(
         f" (the {name} prior may still move the {what})"
         for name, what, on in (
-            ("jaw", "chin", params.jaw.enabled),
-            ("lip", "upper lip", params.lip.enabled),
-            ("lower-lip", "lower lip", params.lower_lip.enabled),
+            ("jaw", "chin", params.jaw.prior),
+            ("lip", "upper lip", params.lip.prior),
+            ("lower-lip", "lower lip", params.lower_lip.prior),
         )
         if on
     )
@@ -363,7 +359,7 @@ def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, so
 
     The neutral's mesh is sampled here from its range image at ``neutral_points`` (its fit's
     pixels, (V, 2)): a click-noise draw refits the neutral with other clicks."""
-    if not params.jaw.enabled:
+    if not params.jaw.prior:
         n = len(fine.vertices)
         return JawPrior(np.full((n, 2), np.nan), np.zeros(n), None, False, "off")
     weights = chin_weights(fine.vertices, template.ibug_xy, params.jaw.start, params.jaw.end)
@@ -375,13 +371,16 @@ def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, so
         params.min_weight,
         params.max_slope_deg,
     )
-    return jaw_prior(
+    meshes = ChinMeshes(
         neutral_vertices,
         neutral_valid,
         need(data, paths.align(take, "vertices"), source),
         np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool),
         weights,
         icp_region(fine, params.still_region),
+    )
+    return jaw_prior(
+        meshes,
         need(data, paths.range_image(take, "xyz"), source),
         need(data, paths.align(take, "transform"), source),
         params.icp,
@@ -396,21 +395,24 @@ def _lip(
     """A lip's prior in a take (:mod:`scan2morph.refine.lip`: ``settings`` are
     ``params.lip`` or ``params.lower_lip``), or why there is none."""
     n = len(fine.vertices)
-    if not settings.enabled:
+    if not settings.prior:
         return LipPrior.unused(n, "off")
+    images = LipImages(
+        need(data, paths.range_image(neutral, "color"), source),
+        need(data, paths.range_image(neutral, "xyz"), source),
+        need(data, paths.range_image(take, "color"), source),
+        need(data, paths.range_image(take, "xyz"), source),
+        params.min_weight,
+        params.max_slope_deg,
+    )
     return lip_prior(
         lip(fine, side),
         fine.vertices,
         neutral_points,
         take_points,
-        need(data, paths.range_image(neutral, "color"), source),
-        need(data, paths.range_image(neutral, "xyz"), source),
-        need(data, paths.range_image(take, "color"), source),
-        need(data, paths.range_image(take, "xyz"), source),
+        images,
         fine.faces,
         settings,
-        params.min_weight,
-        params.max_slope_deg,
         source,
     )
 
