@@ -35,6 +35,8 @@ as it stands, with these additions and one correction:
   ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
   mesh-scan reader and the figures).
 - **synth** (the synthetic scanners) writes takes in ``io``'s formats: after ``io``.
+- **landmarks** (the detector, trained on synthetic heads, reading a take's repaired grid) uses
+  ``synth`` and ``scan``: after ``template``, before ``align``.
 - **refine** (dense correspondence of the aligned fits) uses ``align``'s region motion: between
   ``align`` and ``motion``.
 - **evaluate** (accuracy against the truth) reads motion and the fits: beside ``morph/modal``.
@@ -76,6 +78,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("synth", ("scan2morph.synth",)),
     ("scan", ("scan2morph.scan",)),
     ("template", ("scan2morph.template",)),
+    ("landmarks", ("scan2morph.landmarks",)),
     ("align", ("scan2morph.align",)),
     ("refine", ("scan2morph.refine",)),
     ("motion", ("scan2morph.motion",)),

@@ -209,8 +209,7 @@ def synthetic_rows(
         The same for textured mesh scans and RGB-D takes. A take listed for a subject under
         two modalities is an error.
     landmarks : ``clicked`` or ``detect``
-        ``detect`` leaves the rows' ``landmarks`` empty, as a user's scans without landmark
-        files come (the generator still writes its clicks, which no job then reads).
+        ``detect``: the rows' ``landmarks`` empty (the generator's clicks are not read).
 
     Returns
     -------
@@ -222,7 +221,7 @@ def synthetic_rows(
         (``{take}_calib.yaml``), a mesh take ``mesh`` (``{take}.obj``, with its MTL and
         texture), an RGB-D take ``depth`` (``{take}_depth.png``), ``color`` and
         ``intrinsics`` (``{take}_intrinsics.yaml``); all have ``landmarks`` (``{take}.pts``,
-        for a mesh take ``{take}_landmarks3d.txt``).
+        for a mesh take ``{take}_landmarks3d.txt``) unless ``landmarks`` is ``detect``.
 
     Raises
     ------
@@ -238,8 +237,7 @@ def synthetic_rows(
         numbers = list(switch.get("subjects", []))
         if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
             raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
-        # a switch whose subjects are all beyond the cohort is off: its takes are not checked
-        # (a smaller cohort with its own takes keeps the default switches)
+        # a switch whose subjects are all beyond a smaller cohort is off: takes not checked
         unknown = [t for t in switch.get("takes", []) if t not in take_ids]
         if unknown and any(n <= n_subjects for n in numbers):
             raise InputError(

@@ -15,7 +15,7 @@ import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.sheet import read_sheet, subject_problems
-from scan2morph.stages import align, fit, ingest, refine, repair
+from scan2morph.stages import align, fit, ingest, landmarks, refine, repair
 from scan2morph.stages.part import Run, Subject, Take
 from scan2morph.store import paths
 from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d
@@ -84,7 +84,7 @@ def test_an_untextured_mesh_is_shaded_fitted_and_keeps_its_fit_at_refine(scans, 
 
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     run = Run(Subject("s1", KINDS, {t: t for t in KINDS}), build_template(), config)
-    for stage in (repair, fit, align):
+    for stage in (repair, landmarks, fit, align):
         data |= stage.apply(data, run)
     assert data[paths.mesh("car", "valid")].mean() > 0.9
     params = refine.Params.from_config(config)
@@ -109,9 +109,7 @@ def test_a_mesh_in_metres_with_its_unit_equals_the_mesh_in_mm(scans):
     car = scans["car"]
     mm = _ingest(_row("car"), car["obj"], car["landmarks"])
     metres = _ingest(_row("car", units="m"), car["obj_m"], car["landmarks_m"])
-    np.testing.assert_allclose(
-        metres[paths.landmarks("car")], mm[paths.landmarks("car")], atol=1e-3
-    )
+    np.testing.assert_allclose(metres[paths.clicks("car")], mm[paths.clicks("car")], atol=1e-3)
     a, b = metres[paths.raw("car", "xyz")], mm[paths.raw("car", "xyz")]
     both = np.isfinite(a[..., 2]) & np.isfinite(b[..., 2])
     assert both.sum() > 0.99 * np.isfinite(b[..., 2]).sum()
@@ -172,7 +170,7 @@ def test_a_range_scan_without_colour_is_shaded_and_keeps_its_fit_at_refine(tmp_p
         assert not part.attrs[paths.take(take)]["grey_color"]  # said once, as geometry-only
     config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     run = Run(Subject("s1", KINDS, {t: t for t in KINDS}), build_template(), config)
-    for stage in (repair, fit, align):
+    for stage in (repair, landmarks, fit, align):
         data |= stage.apply(data, run)
     params = refine.Params.from_config(config)
     attrs = refine.run(run.template, Take.of(run.subject, "car", data=data), params).attrs

@@ -171,6 +171,7 @@ def test_sweep_settings_override_a_copy():
     assert CONFIG["template"]["fiducials"]["viseme"] == "open"  # the config is untouched
     assert set(settings) == {
         "repair",
+        "landmarks",
         "template",
         "align",
         "refine",
