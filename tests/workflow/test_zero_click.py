@@ -71,6 +71,14 @@ def run(tmp_path_factory):
             "",
         ]
     )
+    # a subject whose neutral has no face: it stops alone
+    for take, kind, label, scan in (
+        ("neutral", "neutral", "neutral", "board"),
+        ("car", "viseme", "car", "car"),
+    ):
+        rows.append(
+            ["flat", take, kind, label, "range", f"scans/{scan}.abs.gz", f"scans/{scan}.png", ""]
+        )
     header = ["subject", "take", "kind", "label", "modality", "xyz", "color", "landmarks"]
     (work / "subjects.tsv").write_text("\n".join("\t".join(r) for r in [header, *rows]) + "\n")
     cfg = dict(
@@ -79,8 +87,10 @@ def run(tmp_path_factory):
         modal=dict(modes=10, reconstruction_k=[1, 2, 5, 10]),
     )
     (work / "cfg.yaml").write_text(yaml.safe_dump(cfg))
-    ok = run_workflow(work, work / "cfg.yaml", targets=[f"results/{SUBJECT}/report.html"])
-    assert ok, f"the zero-click run failed; see {work / 'logs'}"
+    targets = [f"results/{s}/report.html" for s in (SUBJECT, "flat")]
+    ok = run_workflow(work, work / "cfg.yaml", targets=targets)
+    assert not ok  # the subject "flat" stops: its neutral has no face
+    assert (work / "results" / SUBJECT / "report.html").is_file(), f"see {work / 'logs'}"
     return work, truths
 
 
@@ -130,3 +140,11 @@ def test_a_take_without_a_face_is_left_out_with_one_line(run):
     assert "face" in reason and "\n" not in reason
     report = (work / "results" / SUBJECT / "report.html").read_text()
     assert "board" in report and "left out" in report
+
+
+def test_a_neutral_without_a_face_stops_only_its_subject(run):
+    work, _ = run
+    assert not (work / "results" / "flat" / "flat.h5").exists()
+    logs = "\n".join(p.read_text() for p in (work / "logs").rglob("*.log") if "flat" in str(p))
+    assert "the neutral take neutral was refused at landmarks" in logs
+    assert "subject is not built" in logs
