@@ -26,7 +26,7 @@ from scan2morph.motion.precision import resolve_click_noise
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
-from scan2morph.template.sample import fit_take
+from scan2morph.template.sample import FitRules, fit_take
 
 #: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid, confidence)``: a
 #: take's refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them),
@@ -59,15 +59,15 @@ def noise_by_take(store: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]
     }
 
 
-def _fit(template, take: ClickedTake, landmarks, fit_options, source):
+def _fit(template, take: ClickedTake, landmarks, fit_rules: FitRules, source):
     xyz = take.xyz
     mesh = fit_take(
         template,
         landmarks,
         xyz,
         fiducial_set=take.fiducial_set,
+        rules=fit_rules,
         source=source,
-        **fit_options,
     )
     return transform_points(np.asarray(take.transform, float), mesh["vertices"]), mesh
 
@@ -78,7 +78,7 @@ def click_noise_motion(
     visemes: Mapping[str, ClickedTake],
     suppressed: np.ndarray,
     smoothing: Mapping[str, float],
-    fit_options: Mapping[str, object],
+    fit_rules: FitRules,
     click_noise_px: float,
     draws: int,
     seed: int,
@@ -106,10 +106,8 @@ def click_noise_motion(
     smoothing : mapping
         ``w``, ``iterations``, ``max_stretch`` and ``confidence_relief`` (config ``smoothing``;
         ``inf`` tears nothing; the relief applies to a ``refiner``'s confidence).
-    fit_options : mapping
-        Keyword arguments of :func:`fit_take` besides the take's data and fiducial set
-        (``levels``, ``min_valid_fraction``, ``max_fold_fraction``, ``min_weight``,
-        ``max_slope_deg``).
+    fit_rules : FitRules
+        The pipeline's fit rules (:func:`fit_take`'s besides the take's data and fiducial set).
     click_noise_px : float
         Standard deviation of the click noise, px per coordinate (> 0).
     draws : int
@@ -173,7 +171,7 @@ def click_noise_motion(
             relief=relief,
         )
 
-    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, fit_options, f"{source}/neutral")
+    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, fit_rules, f"{source}/neutral")
     faces = n_mesh["faces"]
     if suppressed.shape != (len(n_base),):
         raise InputError(
@@ -191,7 +189,7 @@ def click_noise_motion(
 
     reference = {}
     for take, data in visemes.items():
-        t_fit = _fit(template, data, data.landmarks, fit_options, f"{source}/{take}")
+        t_fit = _fit(template, data, data.landmarks, fit_rules, f"{source}/{take}")
         v, valid, conf = corresponded(take, t_fit, data.landmarks, neutral.landmarks)
         reference[take] = final(v, valid, conf, n_base, n_mesh["valid"], faces, take)
 
@@ -202,7 +200,7 @@ def click_noise_motion(
         for k in range(draws):
             noisy = data.landmarks + click_noise_px * rng.standard_normal(np.shape(data.landmarks))
             try:
-                fits.append((*_fit(template, data, noisy, fit_options, f"{source}/{name}"), noisy))
+                fits.append((*_fit(template, data, noisy, fit_rules, f"{source}/{name}"), noisy))
             except InputError as err:
                 fits.append(None)
                 first = first or f"draw {k}: {err}"
@@ -257,7 +255,7 @@ def subject_motion_noise(
     visemes: Sequence[str],
     fiducial_sets: Mapping[str, str],
     smoothing: Mapping[str, float],
-    fit_options: Mapping[str, object],
+    fit_rules: FitRules,
     settings: Mapping[str, object],
     source: str = "subject",
     refiner: Refiner | None = None,
@@ -274,7 +272,7 @@ def subject_motion_noise(
     neutral : str
     visemes : sequence of str
     fiducial_sets : mapping take -> fiducial set
-    smoothing, fit_options
+    smoothing, fit_rules
         As :func:`click_noise_motion`.
     settings : mapping
         The config section ``motion_noise``: ``click_noise_px`` (px or ``"auto"``),
@@ -303,7 +301,7 @@ def subject_motion_noise(
         takes,
         points,
         settings["fallback_px"],
-        fit_options.get("max_slope_deg"),
+        fit_rules.max_slope_deg,
         source,
     )
     result = click_noise_motion(
@@ -312,7 +310,7 @@ def subject_motion_noise(
         {t: takes[t] for t in visemes},
         store[paths.mask("suppressed")],
         smoothing,
-        fit_options,
+        fit_rules,
         noise["click_noise_px"],
         settings["draws"] if refiner is None else settings["refine_draws"],
         settings["seed"],

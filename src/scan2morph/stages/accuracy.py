@@ -99,9 +99,9 @@ def run(
         (kept := modelled(subject, store)).visemes,
         template=template,
         fiducial_sets={t: fit.fiducial_set(k) for t, k in subject.kinds.items()},
-        levels=int(fit.options["levels"]),
+        levels=fit.rules.levels,
         smoothing=params.smoothing,
-        max_slope_deg=fit.options["max_slope_deg"],
+        max_slope_deg=fit.rules.max_slope_deg,
         expressions=kept.expressions,
     )
     report |= {

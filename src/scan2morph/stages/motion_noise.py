@@ -130,7 +130,7 @@ def run(
         subject.visemes,
         fiducials,
         params.smoothing,
-        params.fit.options,
+        params.fit.rules,
         noise_cfg,
         source=subject.name,
         refiner=refiner,
