@@ -9,7 +9,13 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scan2morph.align.rigid import transform_points
 from scan2morph.errors import InputError
 from scan2morph.motion.model import AlignedMesh, VisemeSmoothing, viseme_motion
-from scan2morph.motion.uncertainty import ClickedTake, click_noise_motion, noise_datasets
+from scan2morph.motion.uncertainty import (
+    ClickedTake,
+    ClickNoise,
+    DrawRecipe,
+    click_noise_motion,
+    noise_datasets,
+)
 from scan2morph.store import read_part, write_part
 from scan2morph.template import FitRules, build_template, fit_take, noise_gain
 from scan2morph.template.regions import named_indices
@@ -50,7 +56,9 @@ def _run(template, takes, **kw):
         "seed": 1,
     }
     args.update(kw)
-    return click_noise_motion(template, neutral, visemes, source="subj", **args)
+    recipe = DrawRecipe(args["fit_rules"], args["smoothing"], args.get("refiner"))
+    noise = ClickNoise(args["click_noise_px"], args["draws"], args["seed"])
+    return click_noise_motion(template, neutral, visemes, args["suppressed"], recipe, noise, "subj")
 
 
 def test_error_bar_matches_the_spline_noise_gain_on_a_plane(template, takes):
@@ -128,9 +136,9 @@ def test_a_bad_take_is_named(template, takes):
 def test_a_subject_without_visemes_gets_empty_datasets(template, takes, tmp_path):
     """No viseme takes: nothing to perturb, and the empty result still round-trips the store."""
     neutral, _ = takes
-    args = {"smoothing": NO_SMOOTHING, "fit_rules": FIT, "draws": 4, "seed": 1}
     suppressed = np.zeros(len(template.vertices), bool)
-    result = click_noise_motion(template, neutral, {}, suppressed, click_noise_px=0.5, **args)
+    recipe, noise = DrawRecipe(FIT, NO_SMOOTHING), ClickNoise(0.5, 4, 1)
+    result = click_noise_motion(template, neutral, {}, suppressed, recipe, noise)
     assert result == {}
     write_part(tmp_path / "part.h5", noise_datasets(result))
     back = read_part(tmp_path / "part.h5")

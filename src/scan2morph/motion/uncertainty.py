@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -72,18 +73,58 @@ def _fit(template, take: ClickedTake, landmarks, fit_rules: FitRules, source):
     return transform_points(np.asarray(take.transform, float), mesh["vertices"]), mesh
 
 
+@dataclass(frozen=True)
+class DrawRecipe:
+    """How each click-noise draw is made into a motion, as the pipeline makes its own.
+
+    Attributes
+    ----------
+    fit_rules : FitRules
+        The pipeline's fit rules (:func:`fit_take`'s besides the take's data and fiducial set).
+    smoothing : mapping
+        ``w``, ``iterations``, ``max_stretch`` and ``confidence_relief`` (config ``smoothing``;
+        ``inf`` tears nothing; the relief applies to a ``refiner``'s confidence).
+    refiner : callable, optional
+        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid,
+        confidence)``: the take's correspondence refined against the neutral from those clicks
+        and the take's fit to them (:func:`fit_take`'s result, not fitted again; neutral frame,
+        mm), when the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every
+        draw is then that of the refined meshes, smoothed with their confidence, as the
+        pipeline's is.
+    """
+
+    fit_rules: FitRules
+    smoothing: Mapping[str, float]
+    refiner: Refiner | None = None
+
+
+@dataclass(frozen=True)
+class ClickNoise:
+    """The click-noise draws of :func:`click_noise_motion`.
+
+    Attributes
+    ----------
+    px : float
+        Standard deviation of the click noise, px per coordinate (> 0).
+    draws : int
+        Perturbed refits per take (>= 2).
+    seed : int
+        Seed of the draws (each take has its own stream, seeded by this and the take id).
+    """
+
+    px: float
+    draws: int
+    seed: int
+
+
 def click_noise_motion(
     template,
     neutral: ClickedTake,
     visemes: Mapping[str, ClickedTake],
     suppressed: np.ndarray,
-    smoothing: Mapping[str, float],
-    fit_rules: FitRules,
-    click_noise_px: float,
-    draws: int,
-    seed: int,
+    recipe: DrawRecipe,
+    noise: ClickNoise,
     source: str = "subject",
-    refiner: Refiner | None = None,
 ) -> dict[str, dict]:
     """Spread of each viseme's final motion under landmark click noise.
 
@@ -103,26 +144,12 @@ def click_noise_motion(
     visemes : mapping take -> ClickedTake
     suppressed : (V,) bool
         The stencil mask (``/mask/suppressed``).
-    smoothing : mapping
-        ``w``, ``iterations``, ``max_stretch`` and ``confidence_relief`` (config ``smoothing``;
-        ``inf`` tears nothing; the relief applies to a ``refiner``'s confidence).
-    fit_rules : FitRules
-        The pipeline's fit rules (:func:`fit_take`'s besides the take's data and fiducial set).
-    click_noise_px : float
-        Standard deviation of the click noise, px per coordinate (> 0).
-    draws : int
-        Number of perturbed fits (>= 2).
-    seed : int
-        Seed of the noise generator.
+    recipe : DrawRecipe
+        How a draw is fitted, refined and smoothed.
+    noise : ClickNoise
+        The click noise (px), the number of draws and their seed.
     source : str
         The subject, for messages.
-    refiner : callable, optional
-        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid,
-        confidence)``: the take's correspondence refined against the neutral from those clicks
-        and the take's fit to them (:func:`fit_take`'s result, not fitted again; neutral frame,
-        mm), when the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every
-        draw is then that of the refined meshes, smoothed with their confidence, as the
-        pipeline's is.
 
     Returns
     -------
@@ -140,11 +167,13 @@ def click_noise_motion(
     Raises
     ------
     InputError
-        ``click_noise_px`` <= 0, ``draws`` < 2, a mask of the wrong length, or a take's own
+        ``noise.px`` <= 0, ``noise.draws`` < 2, a mask of the wrong length, or a take's own
         fit error with its clicks (naming it). Fewer than half of the draws of the neutral or of
         a take fitted is an error too, naming that take and quoting the first refusal: the click
         noise is then too large for the template.
     """
+    click_noise_px, draws, seed = noise.px, noise.draws, noise.seed
+    smoothing, fit_rules, refiner = recipe.smoothing, recipe.fit_rules, recipe.refiner
     if not (np.isfinite(click_noise_px) and click_noise_px > 0):
         raise InputError(source, f"click_noise_px: expected > 0 px, got {click_noise_px}")
     if int(draws) != draws or draws < 2:
@@ -254,11 +283,9 @@ def subject_motion_noise(
     neutral: str,
     visemes: Sequence[str],
     fiducial_sets: Mapping[str, str],
-    smoothing: Mapping[str, float],
-    fit_rules: FitRules,
+    recipe: DrawRecipe,
     settings: Mapping[str, object],
     source: str = "subject",
-    refiner: Refiner | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, dict], dict]:
     """The motion_noise stage of one subject: click precision, then the error bar.
 
@@ -272,16 +299,14 @@ def subject_motion_noise(
     neutral : str
     visemes : sequence of str
     fiducial_sets : mapping take -> fiducial set
-    smoothing, fit_rules
-        As :func:`click_noise_motion`.
+    recipe : DrawRecipe
+        As :func:`click_noise_motion`'s.
     settings : mapping
         The config section ``motion_noise``: ``click_noise_px`` (px or ``"auto"``),
         ``fallback_px``, ``stable_points``, ``draws``, ``seed`` (and ``refine_draws``: the draws
-        with a ``refiner``, each of which refines every viseme).
+        with a ``recipe.refiner``, each of which refines every viseme).
     source : str
         The subject, for messages.
-    refiner : callable, optional
-        As :func:`click_noise_motion`'s.
 
     Returns
     -------
@@ -301,21 +326,18 @@ def subject_motion_noise(
         takes,
         points,
         settings["fallback_px"],
-        fit_rules.max_slope_deg,
+        recipe.fit_rules.max_slope_deg,
         source,
     )
+    draws = settings["draws"] if recipe.refiner is None else settings["refine_draws"]
     result = click_noise_motion(
         template,
         takes[neutral],
         {t: takes[t] for t in visemes},
         store[paths.mask("suppressed")],
-        smoothing,
-        fit_rules,
-        noise["click_noise_px"],
-        settings["draws"] if refiner is None else settings["refine_draws"],
-        settings["seed"],
+        recipe,
+        ClickNoise(noise["click_noise_px"], draws, settings["seed"]),
         source=source,
-        refiner=refiner,
     )
     data = noise_datasets(result)
     data[paths.motion_noise("click_noise_px")] = np.float64(noise["click_noise_px"])
