@@ -7,7 +7,7 @@ import pytest
 
 from scan2morph.errors import InputError
 from scan2morph.modal import ModalParams
-from scan2morph.modal.subject import subject_modal
+from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 from scan2morph.morph.subject import label_models, pca_component_targets, subject_morph
 from scan2morph.motion.model import (
     AlignedMesh,
@@ -162,9 +162,9 @@ def test_subject_modal_coordinates_semantics_and_statistics(face):
     labels = {"smile1": "smile", "smile2": "smile", "sad1": "sad"}
     params = ModalParams(n_modes=12, upper_thickness_factor=3.0, seed=0)
     upper = v[:, 1] > 30
-    basis, data = subject_modal(
-        v, f, upper, params, fields, labels, ["smile1"], [1, 5, 12, 50], "s"
-    )
+    shell = NeutralShell(v, f, upper)
+    expressions = ExpressionFields(fields, labels, ["smile1"], [1, 5, 12, 50])
+    basis, data = subject_modal(shell, params, expressions, "s")
     assert data["/modal/frequencies_hz"].shape == (12,)
     np.testing.assert_array_equal(data["/modal/reconstruction_k"], [1, 5, 12])
     m = basis.mass
@@ -185,4 +185,4 @@ def test_subject_modal_coordinates_semantics_and_statistics(face):
     )
     assert np.isnan(data["/modal/statistics/sad/std"]).all()
     with pytest.raises(InputError, match="semantic_takes: \\['nope'\\]"):
-        subject_modal(v, f, upper, params, fields, labels, ["nope"], [1], "s")
+        subject_modal(shell, params, ExpressionFields(fields, labels, ["nope"], [1]), "s")
