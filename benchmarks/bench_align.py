@@ -161,7 +161,8 @@ def simulate(config: dict, template, subject: str, stereo: set[str] = frozenset(
     """
     from scan2morph.evaluate.truth import Truth
     from scan2morph.scan import repair_range
-    from scan2morph.template import fit_options, fit_take
+    from scan2morph.stages.fit import Params as FitParams
+    from scan2morph.template import fit_take
 
     tpl = config["template"]
     meshes, truths = {}, {}
@@ -175,7 +176,7 @@ def simulate(config: dict, template, subject: str, stereo: set[str] = frozenset(
             (xyz.shape[1], xyz.shape[0]),
             fiducial_set=tpl["fiducials"].get(t["kind"], "closed"),
             source=f"{subject}/{t['take']}",
-            **fit_options(tpl),
+            rules=FitParams.from_config(config).rules,
         )
         truths[t["take"]] = Truth.from_arrays(take["truth"])
     return meshes, truths

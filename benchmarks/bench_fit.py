@@ -8,7 +8,14 @@ from __future__ import annotations
 import time
 
 from scan2morph.synth import make_take
-from scan2morph.template import TPS, build_template, fit_take, sample_range, subdivide_template
+from scan2morph.template import (
+    TPS,
+    FitRules,
+    build_template,
+    fit_take,
+    sample_range,
+    subdivide_template,
+)
 
 
 def best_of(fn, repeats=5):
@@ -38,7 +45,9 @@ def main():
         )
         t_sample = best_of(lambda pts=pts: sample_range(xyz, pts))
         t_fit = best_of(
-            lambda level=level: fit_take(template, lm, xyz, (640, 480), "open", level, "bench")
+            lambda level=level: fit_take(
+                template, lm, xyz, (640, 480), "open", FitRules(level), "bench"
+            )
         )
         print(
             f"{level:>5} {fine.n_vertices:>6} {len(fine.faces):>6} {t_sub:>13.2f} {t_warp:>8.2f} {t_sample:>10.2f} {t_fit:>12.2f}"

@@ -210,21 +210,11 @@ def reconstruction(run: str, subject: str, config: str, ks: list[int]) -> None:
             print(line)
         if true:  # what a perfect correspondence would leave: the basis on the true motion
             choice = modal.outline_choice(fine, subj, data, fields, params)
-            from scan2morph.modal.subject import subject_modal
+            from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 
-            _, dt = subject_modal(
-                neutral,
-                fine.faces,
-                upper_face(fine, params.stiff_above),
-                params.modal,
-                true,
-                labels,
-                [],
-                ks,
-                subject,
-                fixed=choice,
-                target_mm=params.target_rms_mm,
-            )
+            shell = NeutralShell(neutral, fine.faces, upper_face(fine, params.stiff_above))
+            expressions = ExpressionFields(true, labels, [], ks, params.target_rms_mm)
+            _, dt = subject_modal(shell, params.modal, expressions, subject, fixed=choice)
             print("true material motion:")
             for t in exprs:
                 parts = [dt[paths.expression(t, k)] for k in modal.RECONSTRUCTION_PARTS.values()]

@@ -48,7 +48,7 @@ from scan2morph.evaluate.truth import read_truth
 from scan2morph.geometry import vertex_normals
 from scan2morph.stages import Take, refine
 from scan2morph.store import paths, read_parts
-from scan2morph.template import fit_options, fit_take, load_template, subdivide_template
+from scan2morph.template import fit_take, load_template, subdivide_template
 
 
 def _kind(take: str, config: dict) -> str:
@@ -81,7 +81,6 @@ def main() -> None:
     section = config["template"]
     fine = subdivide_template(template, int(section["subdivision_levels"]))
     params = refine.Params.from_config(config | {"refine": config["refine"] | {"method": "flow"}})
-    options = fit_options(section)
     nv = np.asarray(data[paths.mesh(neutral, "vertices")])
     n_valid = np.asarray(data[paths.mesh(neutral, "valid")], dtype=bool)
     normals = vertex_normals(nv, fine.faces)
@@ -104,7 +103,7 @@ def main() -> None:
             np.asarray(data[paths.range_image(take, "xyz")]),
             fiducial_set=params.fit.fiducial_set(kind),
             source=take,
-            **options,
+            rules=params.fit.rules,
         )
         return {
             paths.mesh(take, "vertices"): mesh["vertices"],

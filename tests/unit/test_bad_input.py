@@ -33,8 +33,9 @@ from scan2morph.io import (
 )
 from scan2morph.sheet import read_sheet, subject_problems, validate_config
 from scan2morph.stages import Take, ingest
+from scan2morph.stages import fit as fit_stage
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
-from scan2morph.template import build_template, fit_options, fit_take
+from scan2morph.template import build_template, fit_take
 from scan2morph.template.sample import SCANNER_FRAME, scanner_view
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -306,9 +307,10 @@ def test_a_rotated_scanner_frame_gives_the_same_fit(take, template, degrees):
     axis = np.array([0.3, -0.8, 0.52])
     R = Rotation.from_rotvec(np.radians(degrees) * axis / np.linalg.norm(axis)).as_matrix()
     t = np.array([120.0, -40.0, 300.0])
-    options = fit_options(yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["template"])
-    a = fit_take(template, take["landmarks"], take["xyz"], source="s1/a", **options)
-    b = fit_take(template, take["landmarks"], take["xyz"] @ R.T + t, source="s1/b", **options)
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    rules = fit_stage.Params.from_config(config).rules
+    a = fit_take(template, take["landmarks"], take["xyz"], rules=rules, source="s1/a")
+    b = fit_take(template, take["landmarks"], take["xyz"] @ R.T + t, rules=rules, source="s1/b")
     np.testing.assert_array_equal(a["valid"], b["valid"])
     ok = a["valid"]
     np.testing.assert_allclose(b["vertices"][ok], a["vertices"][ok] @ R.T + t, rtol=0, atol=1e-9)

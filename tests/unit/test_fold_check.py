@@ -14,7 +14,7 @@ import pytest
 
 from scan2morph.errors import InputError
 from scan2morph.synth import cohort
-from scan2morph.template import build_template, fit_take, subdivide_template
+from scan2morph.template import FitRules, build_template, fit_take, subdivide_template
 from scan2morph.template.regions import mouth_faces
 from scan2morph.template.sample import check_no_folds, folded_faces
 
@@ -50,7 +50,9 @@ def test_folds_in_the_lips_are_marked_invalid_not_refused(too):
     lips = mouth_faces(fine)
     assert lips.sum() == 80  # the triangles inside the outer-lip contour (iBUG 49-60)
     lm = _crossed_inner_lips(too["truth"]["landmarks2d"])
-    mesh = fit_take(template, lm, too["xyz"], SIZE, "open", 1, "s1/too", max_fold_fraction=0.01)
+    mesh = fit_take(
+        template, lm, too["xyz"], SIZE, "open", FitRules(max_fold_fraction=0.01), "s1/too"
+    )
     folded = folded_faces(mesh["points2d"], fine.faces)
     assert mesh["n_folded"] == folded.sum() == 41
     assert (folded & ~lips).sum() == 10  # 0.3% of the rest: the nose-to-lip skin
@@ -70,7 +72,7 @@ def test_a_wrong_landmark_order_is_refused_with_what_was_measured(too, order):
     else:
         lm[36:42], lm[42:48] = lm[42:48].copy(), lm[36:42].copy()
     with pytest.raises(InputError) as exc:
-        fit_take(build_template(), lm, too["xyz"], SIZE, "open", 1, "s1/too")
+        fit_take(build_template(), lm, too["xyz"], SIZE, "open", FitRules(), "s1/too")
     message = str(exc.value)
     print(order, message)
     match = re.search(

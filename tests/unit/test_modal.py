@@ -30,7 +30,7 @@ from scan2morph.modal import (
     thickness_map,
 )
 from scan2morph.modal.boundary import outline_motion, still_outline
-from scan2morph.modal.subject import subject_modal
+from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 from scan2morph.store import paths
 from tests.support.meshes import plate_mesh
 
@@ -356,19 +356,9 @@ def test_subject_modal_stores_the_split_and_the_outline(cap_basis):
     choice = still_outline(loop, [field], len(v), "still", still_mm=0.05)
     assert 0 < choice.fixed.sum() < len(loop)
     params = ModalParams(n_modes=10, upper_thickness_factor=1.0)
-    basis, data = subject_modal(
-        v,
-        f,
-        np.zeros(len(v), bool),
-        params,
-        {"e1": field},
-        {"e1": "smile"},
-        [],
-        [1, 5],
-        "cap",
-        fixed=choice,
-        target_mm=0.5,
-    )
+    shell = NeutralShell(v, f, np.zeros(len(v), bool))
+    expressions = ExpressionFields({"e1": field}, {"e1": "smile"}, [], [1, 5], target_mm=0.5)
+    basis, data = subject_modal(shell, params, expressions, "cap", fixed=choice)
     np.testing.assert_array_equal(data[paths.modal("fixed_vertices")], choice.fixed)
     np.testing.assert_array_equal(data[paths.modal("outline_vertices")], choice.outline)
     assert data[paths.expression("e1", "clamped_rms_mm")] == 0.0

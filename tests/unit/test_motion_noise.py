@@ -8,23 +8,23 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from scan2morph.align.rigid import transform_points
 from scan2morph.errors import InputError
-from scan2morph.motion.model import AlignedMesh, viseme_motion
-from scan2morph.motion.uncertainty import ClickedTake, click_noise_motion, noise_datasets
+from scan2morph.motion.model import AlignedMesh, VisemeSmoothing, viseme_motion
+from scan2morph.motion.uncertainty import (
+    ClickedTake,
+    ClickNoise,
+    DrawRecipe,
+    click_noise_motion,
+    noise_datasets,
+)
 from scan2morph.store import read_part, write_part
-from scan2morph.template import build_template, fit_take, noise_gain
+from scan2morph.template import FitRules, build_template, fit_take, noise_gain
 from scan2morph.template.regions import named_indices
 
 W, H = 640, 480
 #: d(xyz)/dx, d(xyz)/dy (mm per px) and the offset of a tilted plane seen by the scanner.
 PLANE = np.array([[0.7, 0.0, 0.05], [0.0, 0.7, -0.03], [-224.0, -168.0, 1000.0]])
 SHIFT_MM = np.array([0.0, 0.0, 5.0])
-FIT = {
-    "levels": 0,
-    "min_valid_fraction": 0.1,
-    "max_fold_fraction": 0.01,
-    "min_weight": 1.0,
-    "max_slope_deg": None,
-}
+FIT = FitRules(levels=0, min_valid_fraction=0.1, max_fold_fraction=0.01, min_weight=1.0)
 NO_SMOOTHING = {"w": 0.1, "iterations": 0, "max_stretch": 2.0, "confidence_relief": 0.5}
 
 
@@ -50,13 +50,15 @@ def _run(template, takes, **kw):
     args = {
         "suppressed": np.zeros(len(template.vertices), bool),
         "smoothing": NO_SMOOTHING,
-        "fit_options": FIT,
+        "fit_rules": FIT,
         "click_noise_px": 0.5,
         "draws": 8,
         "seed": 1,
     }
     args.update(kw)
-    return click_noise_motion(template, neutral, visemes, source="subj", **args)
+    recipe = DrawRecipe(args["fit_rules"], args["smoothing"], args.get("refiner"))
+    noise = ClickNoise(args["click_noise_px"], args["draws"], args["seed"])
+    return click_noise_motion(template, neutral, visemes, args["suppressed"], recipe, noise, "subj")
 
 
 def test_error_bar_matches_the_spline_noise_gain_on_a_plane(template, takes):
@@ -134,9 +136,9 @@ def test_a_bad_take_is_named(template, takes):
 def test_a_subject_without_visemes_gets_empty_datasets(template, takes, tmp_path):
     """No viseme takes: nothing to perturb, and the empty result still round-trips the store."""
     neutral, _ = takes
-    args = {"smoothing": NO_SMOOTHING, "fit_options": FIT, "draws": 4, "seed": 1}
     suppressed = np.zeros(len(template.vertices), bool)
-    result = click_noise_motion(template, neutral, {}, suppressed, click_noise_px=0.5, **args)
+    recipe, noise = DrawRecipe(FIT, NO_SMOOTHING), ClickNoise(0.5, 4, 1)
+    result = click_noise_motion(template, neutral, {}, suppressed, recipe, noise)
     assert result == {}
     write_part(tmp_path / "part.h5", noise_datasets(result))
     back = read_part(tmp_path / "part.h5")
@@ -165,7 +167,7 @@ def test_reference_motion_is_the_pipelines_and_takes_do_not_share_noise(template
     neutral, visemes = takes
     meshes = {}
     for name, take in (("neutral", neutral), ("she", visemes["she"])):
-        mesh = fit_take(template, take.landmarks, take.xyz, (W, H), "closed", **FIT)
+        mesh = fit_take(template, take.landmarks, take.xyz, (W, H), "closed", FIT)
         aligned = transform_points(take.transform, mesh["vertices"])
         meshes[name] = AlignedMesh(aligned, mesh["valid"])
     paths = named_indices(template, [["temple_r", "temple_l"]], "mask.paths")
@@ -174,11 +176,8 @@ def test_reference_motion_is_the_pipelines_and_takes_do_not_share_noise(template
         {"she": meshes["she"]},
         template.faces,
         paths,
-        20.0,
-        0.1,
-        30,
+        VisemeSmoothing(20.0, 0.1, 30, max_stretch=2.0),
         "subj",
-        max_stretch=2.0,
     )
     smoothing = {"w": 0.1, "iterations": 30, "max_stretch": 2.0, "confidence_relief": 0.5}
     mask = stored["/mask/suppressed"]
@@ -225,7 +224,9 @@ def test_a_refiner_that_finds_the_skin_whatever_the_clicks_leaves_only_the_neutr
 
     def exact(take, fit, take_landmarks, neutral_landmarks):
         seen.append(np.array(take_landmarks))
-        mesh = fit_take(template, neutral.landmarks, neutral.xyz, levels=0)  # the true points
+        mesh = fit_take(
+            template, neutral.landmarks, neutral.xyz, rules=FitRules(levels=0)
+        )  # the true points
         # confidence 0: smoothed as the plain run is, so that its oracle holds
         zero = np.zeros(len(mesh["valid"]))
         return transform_points(visemes[take].transform, mesh["vertices"]), mesh["valid"], zero
@@ -246,7 +247,7 @@ def test_a_refiners_confidence_shortens_the_smoothing_of_the_draws(template, tak
 
     def refiner(confidence):
         def refine(take, fit, take_landmarks, neutral_landmarks):
-            mesh = fit_take(template, neutral.landmarks, neutral.xyz, levels=0)
+            mesh = fit_take(template, neutral.landmarks, neutral.xyz, rules=FitRules(levels=0))
             v = transform_points(visemes[take].transform, mesh["vertices"])
             bumps = np.random.default_rng(3).normal(0.0, 0.5, v.shape)  # what smoothing removes
             return v + bumps, mesh["valid"], np.full(len(v), confidence)

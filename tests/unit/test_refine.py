@@ -311,7 +311,7 @@ def _plane_take(template, texture_seed, config):
     from scan2morph.align import transform_points
     from scan2morph.stages import fit
     from scan2morph.store import paths
-    from scan2morph.template import fit_options, fit_take
+    from scan2morph.template import fit_take
 
     y, x = np.mgrid[0:480, 0:640].astype(np.float64)
     plane = np.array([[0.7, 0.0, 0.05], [0.0, 0.7, -0.03], [-224.0, -168.0, 1000.0]])
@@ -323,7 +323,7 @@ def _plane_take(template, texture_seed, config):
         landmarks,
         xyz,
         fiducial_set=fit.Params.from_config(config).fiducial_set("viseme"),
-        **fit_options(config["template"]),
+        rules=fit.Params.from_config(config).rules,
     )
     return {
         paths.range_image("t", "xyz"): xyz,

@@ -34,6 +34,7 @@ from scan2morph.errors import InputError
 from scan2morph.io import read_glb_targets
 from scan2morph.report import (
     ReportFigure,
+    ReportPage,
     image_uri,
     read_caption,
     sections,
@@ -325,9 +326,7 @@ def report(run, tmp_path_factory):
     accuracy = json.loads(run.path("results", SUBJECT, "accuracy.json").read_text())
     timings = stage_timings(run.path("benchmarks", "rules"), SUBJECT, ["synth_subject", "ingest"])
     path = out / "report.html"
-    write_subject_report(
-        path,
-        store,
+    page = ReportPage(
         figures=figures,
         accuracy=accuracy,
         timings=timings,
@@ -336,6 +335,7 @@ def report(run, tmp_path_factory):
         thumbnail_px=THUMB_PX,
         glb=run.path("results", SUBJECT, f"{SUBJECT}.glb"),
     )
+    write_subject_report(path, store, page)
     return path, store, figures, accuracy
 
 
@@ -663,7 +663,7 @@ def bare_subject(report, run, tmp_path_factory):
         glb, model.neutral, model.faces, uv=model.uv, texture=model.texture, frame=model.head_frame
     )
     page = out / "report.html"
-    write_subject_report(page, bare, versions={}, glb=glb, n_coordinates=4)
+    write_subject_report(page, bare, ReportPage(versions={}, glb=glb, n_coordinates=4))
     return page, model
 
 
@@ -728,7 +728,7 @@ def test_viewer_of_a_glb_without_its_frame_keeps_its_sliders_and_says_why(report
         node.extras = {}
     old = tmp_path / "old.glb"
     gltf.save_binary(str(old))
-    text = subject_report_html(store, versions={}, glb=old, n_coordinates=4)
+    text = subject_report_html(store, ReportPage(versions={}, glb=old, n_coordinates=4))
     missing = re.search(r'<ul class="missing">(.*?)</ul>', text, re.S)[1]
     assert "No modal sliders or fitted takes: old.glb does not say its frame" in missing
     assert "data-mode=" not in text and '<select name="take">' not in text
@@ -761,10 +761,12 @@ def test_viewer_script_is_the_one_the_policy_allows(report):
 def test_report_without_three_says_why(report, run, tmp_path):
     _, store, *_ = report
     glb = run.path("results", SUBJECT, f"{SUBJECT}.glb")
-    text = subject_report_html(store, versions={}, glb=glb, three_dir=tmp_path / "three")
+    text = subject_report_html(
+        store, ReportPage(versions={}, glb=glb, three_dir=tmp_path / "three")
+    )
     assert "No 3D viewer: three.js is not installed" in text and "make setup" in text
     assert "<script" not in text and "script-src" not in text
-    text = subject_report_html(store, versions={}, glb=tmp_path / "absent.glb")
+    text = subject_report_html(store, ReportPage(versions={}, glb=tmp_path / "absent.glb"))
     assert "No 3D viewer: absent.glb was not written" in text and "<script" not in text
 
 
@@ -936,19 +938,23 @@ def test_figures_are_embedded_byte_for_byte_with_their_captions(report):
 def test_text_is_escaped(report, tmp_path):
     _, store, figures, _ = report
     nasty = '<script>alert("x")</script> & <b>'
-    text = subject_report_html(store, figures=[ReportFigure(figures[0].path, nasty)], versions={})
+    text = subject_report_html(
+        store, ReportPage(figures=[ReportFigure(figures[0].path, nasty)], versions={})
+    )
     assert "<script" not in text
     # Jinja2's autoescape (markupsafe) writes the double quote as &#34;
     assert "&lt;script&gt;alert(&#34;x&#34;)&lt;/script&gt; &amp; &lt;b&gt;" in text
     assert f"{figures[0].path.stem}: {nasty}" in _parse(text).captions  # the same text, shown
-    flat = subject_report_html(store, accuracy={"summary": {"<i>": 1.0}}, versions={"a<b": "c&d"})
+    flat = subject_report_html(
+        store, ReportPage(accuracy={"summary": {"<i>": 1.0}}, versions={"a<b": "c&d"})
+    )
     assert "&lt;i&gt;" in flat and "a&lt;b" in flat and "c&amp;d" in flat and "<i>" not in flat
 
 
 @pytest.mark.slow
 def test_report_without_figures_or_ground_truth_says_so(report):
     _, store, *_ = report
-    text = subject_report_html(store, versions={})
+    text = subject_report_html(store, ReportPage(versions={}))
     assert "No figures were drawn for this subject." in text
     assert "No ground truth" in text
     assert "No benchmark files were found" in text

@@ -8,6 +8,7 @@ import trimesh
 
 from scan2morph.errors import InputError
 from scan2morph.template import (
+    FitRules,
     behind_steps,
     build_template,
     check_no_folds,
@@ -263,7 +264,7 @@ def test_fold_check_counts_flipped_triangles(template):
 @pytest.mark.parametrize("fiducials", ["closed", "open"])
 def test_fit_take_is_exact_when_the_landmarks_are_an_affine_image(template, xyz, levels, fiducials):
     lm = _landmarks(template)
-    mesh = fit_take(template, lm, xyz, (W, H), fiducials, levels, "s/t")
+    mesh = fit_take(template, lm, xyz, (W, H), fiducials, FitRules(levels=levels), "s/t")
     fine = subdivide_template(template, levels)
     expect2d = np.asarray([320.0, 230.0]) + 70.0 * fine.vertices
     np.testing.assert_allclose(mesh["points2d"], expect2d, atol=1e-9)
@@ -276,7 +277,7 @@ def test_fit_take_is_exact_when_the_landmarks_are_an_affine_image(template, xyz,
 
 def test_fitted_faces_face_the_scanner(template, xyz):
     # counter-clockwise as seen in the image => normals point back to the camera at the origin
-    mesh = fit_take(template, _landmarks(template), xyz, (W, H), "closed", 1, "s/t")
+    mesh = fit_take(template, _landmarks(template), xyz, (W, H), "closed", FitRules(), "s/t")
     tm = trimesh.Trimesh(mesh["vertices"], mesh["faces"], process=False)
     to_camera = -tm.triangles_center
     assert ((tm.face_normals * to_camera).sum(axis=1) > 0).all()
@@ -285,7 +286,7 @@ def test_fitted_faces_face_the_scanner(template, xyz):
 def test_fit_take_marks_vertices_over_holes_invalid(template, xyz):
     img = xyz.copy()
     img[200:260, 280:360] = np.nan  # a hole over the nose and mouth
-    mesh = fit_take(template, _landmarks(template), img, (W, H), "closed", 1, "s/t")
+    mesh = fit_take(template, _landmarks(template), img, (W, H), "closed", FitRules(), "s/t")
     p = mesh["points2d"]
     over_hole = (p[:, 0] > 279) & (p[:, 0] < 360) & (p[:, 1] > 199) & (p[:, 1] < 260)
     np.testing.assert_array_equal(mesh["valid"], ~over_hole)
@@ -320,7 +321,7 @@ def test_fit_take_bad_input(template, xyz):
     with pytest.raises(InputError, match=r"^s/t: fiducials: the image points all coincide"):
         fit_take(template, same, xyz, (W, H), source="s/t")
     with pytest.raises(InputError, match="^config: template.subdivision_levels: .* got -1"):
-        fit_take(template, lm, xyz, (W, H), levels=-1, source="s/t")
+        fit_take(template, lm, xyz, (W, H), rules=FitRules(levels=-1), source="s/t")
     sparse = np.full_like(xyz, np.nan)
     sparse[:150, :260] = xyz[:150, :260]  # range data over a small corner of the face only
     with pytest.raises(InputError, match=r"^s/t: only \d+\.\d% of the template's vertices"):
@@ -334,7 +335,7 @@ def test_fit_take_bad_input(template, xyz):
 
 def test_custom_fiducial_sets_by_ibug_number(template, xyz):
     lm = _landmarks(template)
-    mesh = fit_take(template, lm, xyz, (W, H), [9, 28, 37, 46, 49, 55], 0, "s/t")
+    mesh = fit_take(template, lm, xyz, (W, H), [9, 28, 37, 46, 49, 55], FitRules(levels=0), "s/t")
     np.testing.assert_allclose(
         mesh["points2d"], [320.0, 230.0] + 70.0 * template.vertices, atol=1e-9
     )

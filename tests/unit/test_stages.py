@@ -19,7 +19,7 @@ from scan2morph.sheet import validate_config
 from scan2morph.stages import Part, Subject, Take, align, fit, modal, morph, motion
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import SECTION_STAGE, STAGES
-from scan2morph.template import load_template
+from scan2morph.template import FitRules, load_template
 from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
 
 REPO = Path(__file__).resolve().parents[2]
@@ -85,8 +85,8 @@ def test_fiducial_set_of_each_kind():
     params = fit.Params.from_config(CONFIG)
     assert params.fiducial_set("viseme") == section["fiducials"]["viseme"]
     # a kind the config does not name gets the closed-mouth set
-    assert fit.Params({}, {}).fiducial_set("expression") == "closed"
-    assert params.options["levels"] == 1
+    assert fit.Params({}, FitRules()).fiducial_set("expression") == "closed"
+    assert params.rules.levels == 1 and params.rules.max_slope_deg == section["max_slope_deg"]
 
 
 def test_params_from_config_sections():

@@ -7,9 +7,14 @@ import pytest
 
 from scan2morph.errors import InputError
 from scan2morph.modal import ModalParams
-from scan2morph.modal.subject import subject_modal
+from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 from scan2morph.morph.subject import label_models, pca_component_targets, subject_morph
-from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
+from scan2morph.motion.model import (
+    AlignedMesh,
+    VisemeSmoothing,
+    expression_displacements,
+    viseme_motion,
+)
 from tests.support.meshes import grid_mesh
 
 
@@ -33,9 +38,7 @@ def test_viseme_motion_masks_smooths_and_builds_models(face):
     car = AlignedMesh(v + _field(v, 8.0), np.ones(len(v), bool))
     top = np.flatnonzero(v[:, 1] == v[:, 1].max())
     paths = np.array([[top[0], top[-1]]])
-    out = viseme_motion(
-        neutral, {"car": car}, f, paths, radius_mm=12.0, w=0.1, iterations=30, source="s"
-    )
+    out = viseme_motion(neutral, {"car": car}, f, paths, VisemeSmoothing(12.0, 0.1, 30), "s")
     suppressed = out["/mask/suppressed"]
     # everything within 12 mm of the top row is masked, nothing farther
     np.testing.assert_array_equal(suppressed, v[:, 1] >= v[:, 1].max() - 12.0)
@@ -62,11 +65,11 @@ def test_viseme_motion_keeps_what_the_refinement_measured(face):
     noise = np.random.default_rng(9).normal(0.0, 0.3, v.shape)
     top = np.flatnonzero(v[:, 1] == v[:, 1].max())
     paths = np.array([[top[0], top[-1]]])
-    args = dict(radius_mm=12.0, w=0.1, iterations=30, source="s", relief=1.0)
+    smoothing = VisemeSmoothing(12.0, 0.1, 30, relief=1.0)
     out = {}
     for c in (0.0, 1.0):
         car = AlignedMesh(v + _field(v, 8.0) + noise, np.ones(len(v), bool), np.full(len(v), c))
-        out[c] = viseme_motion(neutral, {"car": car}, f, paths, **args)
+        out[c] = viseme_motion(neutral, {"car": car}, f, paths, smoothing, "s")
     free = ~out[1.0]["/mask/suppressed"]
     raw = out[1.0]["/visemes/car/motion_raw"]
     np.testing.assert_allclose(out[1.0]["/visemes/car/motion"][free], raw[free], atol=1e-12)
@@ -159,9 +162,9 @@ def test_subject_modal_coordinates_semantics_and_statistics(face):
     labels = {"smile1": "smile", "smile2": "smile", "sad1": "sad"}
     params = ModalParams(n_modes=12, upper_thickness_factor=3.0, seed=0)
     upper = v[:, 1] > 30
-    basis, data = subject_modal(
-        v, f, upper, params, fields, labels, ["smile1"], [1, 5, 12, 50], "s"
-    )
+    shell = NeutralShell(v, f, upper)
+    expressions = ExpressionFields(fields, labels, ["smile1"], [1, 5, 12, 50])
+    basis, data = subject_modal(shell, params, expressions, "s")
     assert data["/modal/frequencies_hz"].shape == (12,)
     np.testing.assert_array_equal(data["/modal/reconstruction_k"], [1, 5, 12])
     m = basis.mass
@@ -182,4 +185,4 @@ def test_subject_modal_coordinates_semantics_and_statistics(face):
     )
     assert np.isnan(data["/modal/statistics/sad/std"]).all()
     with pytest.raises(InputError, match="semantic_takes: \\['nope'\\]"):
-        subject_modal(v, f, upper, params, fields, labels, ["nope"], [1], "s")
+        subject_modal(shell, params, ExpressionFields(fields, labels, ["nope"], [1]), "s")

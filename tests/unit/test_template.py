@@ -13,6 +13,7 @@ from scan2morph.io import write_obj
 from scan2morph.io.obj import read_obj
 from scan2morph.template import (
     TPS,
+    FitRules,
     build_template,
     fit_take,
     load_template,
@@ -182,7 +183,13 @@ def test_fit_take_samples_the_true_surface(template, neutral_scan):
 
     s = neutral_scan
     mesh = fit_take(
-        template, s["truth"]["landmarks2d"], s["xyz"], (320, 240), "closed", 1, "t1/neutral"
+        template,
+        s["truth"]["landmarks2d"],
+        s["xyz"],
+        (320, 240),
+        "closed",
+        FitRules(),
+        "t1/neutral",
     )
     assert mesh["vertices"].shape == (subdivide_template(template, 1).n_vertices, 3)
     assert mesh["valid"].mean() > 0.8

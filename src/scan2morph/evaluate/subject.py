@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,16 +28,40 @@ from scan2morph.store import paths
 SEG_SKIN = 0
 
 
+@dataclass(frozen=True)
+class IdealMotion:
+    """How :func:`subject_accuracy` makes the ideal motion, the reference of a viseme's motion
+    error: the pipeline's own fit of the true surface, smoothed as the pipeline smooths.
+
+    Attributes
+    ----------
+    template : Template, optional
+        The base template; with ``fiducial_sets`` (take -> set) and ``levels`` it gives the ideal
+        motion (see ``evaluate.motion``). Without it, motion is compared to material motion only.
+    fiducial_sets : mapping take -> str, optional
+    levels : int
+        Template subdivisions.
+    smoothing : mapping, optional
+        ``w``, ``iterations`` and ``confidence_relief`` of the pipeline's smoothing, applied with
+        its mask (and the take's ``refine/confidence``, when the store has it) to the ideal
+        motion for the ``relative_error`` reference.
+    max_slope_deg : float, optional
+        The fit's depth-step rule (degrees), applied to the ideal motion too.
+    """
+
+    template: object = None
+    fiducial_sets: Mapping[str, str] | None = None
+    levels: int = 1
+    smoothing: Mapping[str, float] | None = None
+    max_slope_deg: float | None = None
+
+
 def subject_accuracy(
     store: Mapping[str, np.ndarray],
     truths: Mapping[str, Truth],
     neutral: str,
     visemes: list[str],
-    template=None,
-    fiducial_sets: Mapping[str, str] | None = None,
-    levels: int = 1,
-    smoothing: Mapping[str, float] | None = None,
-    max_slope_deg: float | None = None,
+    reference: IdealMotion | None = None,
     expressions: Sequence[str] = (),
 ) -> dict:
     """Errors of one subject's pipeline outputs against its ground truth.
@@ -51,15 +76,9 @@ def subject_accuracy(
         The neutral take id.
     visemes : list of str
         Viseme take ids.
-    template : Template, optional
-        The base template; with ``fiducial_sets`` (take -> set) and ``levels`` it gives the ideal
-        motion (see ``evaluate.motion``). Without it, motion is compared to material motion only.
-    smoothing : mapping, optional
-        ``w``, ``iterations`` and ``confidence_relief`` of the pipeline's smoothing, applied with
-        its mask (and the take's ``refine/confidence``, when the store has it) to the ideal
-        motion for the ``relative_error`` reference.
-    max_slope_deg : float, optional
-        The fit's depth-step rule (``template.max_slope_deg``), applied to the ideal motion too.
+    reference : IdealMotion, optional
+        How the ideal motion, the reference of a viseme's motion error, is made (default: the
+        material motion, unsmoothed).
     expressions : sequence of str
         Expression take ids whose displacement fields (``/expressions/{take}/displacement``)
         are measured against the material motion (``expression`` entry).
@@ -69,6 +88,9 @@ def subject_accuracy(
     dict
         ``{"units": ..., "takes": {take: {"mesh": ..., "align": ..., "motion": ...}}, "summary": ...}``
     """
+    im = IdealMotion() if reference is None else reference
+    template, fiducial_sets, levels = im.template, im.fiducial_sets, im.levels
+    smoothing, max_slope_deg = im.smoothing, im.max_slope_deg
     takes: dict[str, dict] = {}
     n_vertices = store[paths.mesh(neutral, "vertices")]
     n_normals = vertex_normals(n_vertices, store[paths.template("faces")])

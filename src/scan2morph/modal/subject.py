@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -28,30 +29,33 @@ def rms_length(field: np.ndarray, where: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(f**2, axis=1)))) if len(f) else float("nan")
 
 
-def subject_modal(
-    neutral: np.ndarray,
-    faces: np.ndarray,
-    upper_face: np.ndarray,
-    params: ModalParams,
-    displacements: Mapping[str, np.ndarray],
-    labels: Mapping[str, str],
-    semantic_takes: Sequence[str],
-    ks: Sequence[int],
-    source: str,
-    fixed: np.ndarray | OutlineChoice | None = None,
-    normals: np.ndarray | None = None,
-    target_mm: float = 0.5,
-    basis: ModalBasis | None = None,
-) -> tuple[ModalBasis, dict[str, np.ndarray]]:
-    """Modal basis of the neutral face and everything the store keeps about it.
+@dataclass(frozen=True)
+class NeutralShell:
+    """The neutral face a subject's modal basis is built on.
 
-    Parameters
+    Attributes
     ----------
-    neutral : (V, 3) float, mm, complete
+    vertices : (V, 3) float, mm, complete
     faces : (F, 3) int
     upper_face : (V,) bool
         Vertices whose elements are thickened.
-    params : ModalParams
+    normals : (V, 3) float, optional
+        Unit vertex normals (default: computed from ``vertices`` and ``faces``), for the normal
+        / tangential split of the reconstruction error.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    upper_face: np.ndarray
+    normals: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ExpressionFields:
+    """A subject's expressions and how their modal reconstruction is measured.
+
+    Attributes
+    ----------
     displacements : mapping take -> (V, 3) mm
         Expression displacement fields in the neutral frame.
     labels : mapping take -> label
@@ -59,26 +63,59 @@ def subject_modal(
         Expression takes inserted into the basis as semantic modes (may be empty).
     ks : sequence of int
         Numbers of modes at which the reconstruction error is reported.
+    target_mm : float
+        RMS reconstruction error (mm) whose mode count is reported (``modes_to_target``).
+    """
+
+    displacements: Mapping[str, np.ndarray]
+    labels: Mapping[str, str]
+    semantic_takes: Sequence[str] = ()
+    ks: Sequence[int] = ()
+    target_mm: float = 0.5
+
+
+def subject_modal(
+    shell: NeutralShell,
+    params: ModalParams,
+    expressions: ExpressionFields,
+    source: str,
+    fixed: np.ndarray | OutlineChoice | None = None,
+    basis: ModalBasis | None = None,
+) -> tuple[ModalBasis, dict[str, np.ndarray]]:
+    """Modal basis of the neutral face and everything the store keeps about it.
+
+    Parameters
+    ----------
+    shell : NeutralShell
+        The neutral face, its thickened part and its normals.
+    params : ModalParams
+    expressions : ExpressionFields
+        The expression fields, their labels, the semantic takes and the reconstruction's
+        reporting (mode counts, target RMS).
     source : str
     fixed : (V,) bool or OutlineChoice, optional
         Vertices held fixed (the outer outline, or the part of it
         :func:`scan2morph.modal.boundary.still_outline` chose, whose outline and measured
         outline motion are then stored too); default every boundary vertex.
-    normals : (V, 3) float, optional
-        Unit vertex normals of the neutral (default: computed from ``neutral`` and ``faces``),
-        for the normal / tangential split of the reconstruction error.
-    target_mm : float
-        RMS reconstruction error (mm) whose mode count is reported (``modes_to_target``).
     basis : ModalBasis, optional
         The natural basis, when the caller built it (with more of the physics than
-        ``params``, ``upper_face`` and ``fixed`` say); its fixed vertices replace ``fixed``'s
-        mask.
+        ``params``, ``shell.upper_face`` and ``fixed`` say); its fixed vertices replace
+        ``fixed``'s mask.
 
     Returns
     -------
     basis : ModalBasis
     datasets : dict of store path -> array
     """
+    neutral, faces, upper_face, normals = (
+        shell.vertices,
+        shell.faces,
+        shell.upper_face,
+        shell.normals,
+    )
+    e = expressions
+    displacements, labels, semantic_takes = e.displacements, e.labels, e.semantic_takes
+    ks, target_mm = e.ks, e.target_mm
     choice = fixed if isinstance(fixed, OutlineChoice) else None
     mask = choice.fixed if choice is not None else fixed
     if basis is None:
@@ -110,7 +147,7 @@ def subject_modal(
     if unknown:
         raise InputError(
             source,
-            f"modal.semantic_takes: {unknown} are not expression takes ({sorted(displacements)})",
+            f"semantic_takes: {unknown} are not expression takes ({sorted(displacements)})",
         )
     if semantic_takes:
         sem = semantic_basis(

@@ -65,17 +65,40 @@ def _raw_motion(
     )
 
 
+@dataclass(frozen=True)
+class VisemeSmoothing:
+    """How :func:`viseme_motion` masks and smooths.
+
+    Attributes
+    ----------
+    radius_mm : float
+        Sphere radius of the stencil mask, mm.
+    w : float
+        Laplacian smoothing weight.
+    iterations : int
+        Laplacian smoothing iterations.
+    max_stretch : float
+        Take vertices torn off the face beyond this stretch count as invalid
+        (:func:`~scan2morph.motion.vectors.motion_vectors`).
+    relief : float
+        Share of the smoothing step taken off where a viseme's correspondence was measured with
+        confidence 1 (:func:`~scan2morph.motion.smooth.laplacian_smooth`; 0: the paper's step).
+    """
+
+    radius_mm: float
+    w: float
+    iterations: int
+    max_stretch: float = np.inf
+    relief: float = 0.0
+
+
 def viseme_motion(
     neutral: AlignedMesh,
     visemes: dict[str, AlignedMesh],
     faces: np.ndarray,
     mask_paths: np.ndarray,
-    radius_mm: float,
-    w: float,
-    iterations: int,
+    smoothing: VisemeSmoothing,
     source: str,
-    max_stretch: float = np.inf,
-    relief: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Mask, motion vectors and viseme models.
 
@@ -86,16 +109,10 @@ def viseme_motion(
     faces : (F, 3) int
     mask_paths : (P, 2) int
         Start and goal vertices of the Dijkstra paths that seed the stencil mask.
-    radius_mm, w, iterations
-        Sphere radius (mm) and Laplacian smoothing weight and iteration count.
+    smoothing : VisemeSmoothing
+        The mask's radius and the smoothing.
     source : str
         ``subject`` label for messages.
-    max_stretch : float
-        Take vertices torn off the face beyond this stretch count as invalid
-        (:func:`~scan2morph.motion.vectors.motion_vectors`).
-    relief : float
-        Share of the smoothing step taken off where a viseme's correspondence was measured with
-        confidence 1 (:func:`~scan2morph.motion.smooth.laplacian_smooth`; 0: the paper's step).
 
     Returns
     -------
@@ -104,8 +121,9 @@ def viseme_motion(
         ``/neutral/filled`` (V,), and per viseme ``/visemes/{take}/motion_raw``,
         ``/visemes/{take}/motion``, ``/visemes/{take}/model``.
     """
+    sm = smoothing
     base, filled = complete_neutral(neutral, faces, source)
-    suppressed, seeds = stencil_mask(base, faces, mask_paths, radius_mm=radius_mm, source=source)
+    suppressed, seeds = stencil_mask(base, faces, mask_paths, radius_mm=sm.radius_mm, source=source)
     out = {
         paths.mask("suppressed"): suppressed,
         paths.mask("seeds"): seeds,
@@ -113,18 +131,18 @@ def viseme_motion(
         paths.neutral("filled"): filled,
     }
     for take, mesh in visemes.items():
-        raw = _raw_motion(mesh, neutral, faces, max_stretch, f"{source}/{take}")
+        raw = _raw_motion(mesh, neutral, faces, sm.max_stretch, f"{source}/{take}")
         missing = ~np.isfinite(raw).all(axis=1)
         smooth = laplacian_smooth(
             raw,
             faces,
-            w=w,
-            iterations=iterations,
+            w=sm.w,
+            iterations=sm.iterations,
             fixed=suppressed,
             missing=missing,
             source=f"{source}/{take}",
             confidence=mesh.confidence,
-            relief=relief,
+            relief=sm.relief,
         )
         out[paths.viseme(take, "motion_raw")] = raw
         out[paths.viseme(take, "motion")] = smooth

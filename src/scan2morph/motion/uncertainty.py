@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from scan2morph.motion.precision import resolve_click_noise
 from scan2morph.motion.smooth import laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
-from scan2morph.template.sample import fit_take
+from scan2morph.template.sample import FitRules, fit_take
 
 #: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid, confidence)``: a
 #: take's refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them),
@@ -60,17 +60,61 @@ def noise_by_take(store: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]
     }
 
 
-def _fit(template, take: ClickedTake, landmarks, fit_options, source):
+def _fit(template, take: ClickedTake, landmarks, fit_rules: FitRules, source):
     xyz = take.xyz
     mesh = fit_take(
         template,
         landmarks,
         xyz,
         fiducial_set=take.fiducial_set,
+        rules=fit_rules,
         source=source,
-        **fit_options,
     )
     return transform_points(np.asarray(take.transform, float), mesh["vertices"]), mesh
+
+
+@dataclass(frozen=True)
+class DrawRecipe:
+    """How each click-noise draw is made into a motion, as the pipeline makes its own.
+
+    Attributes
+    ----------
+    fit_rules : FitRules
+        The pipeline's fit rules (:func:`fit_take`'s besides the take's data and fiducial set).
+    smoothing : mapping
+        ``w``, ``iterations``, ``max_stretch`` and ``confidence_relief`` (config ``smoothing``;
+        ``inf`` tears nothing; the relief applies to a ``refiner``'s confidence).
+    refiner : callable, optional
+        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid,
+        confidence)``: the take's correspondence refined against the neutral from those clicks
+        and the take's fit to them (:func:`fit_take`'s result, not fitted again; neutral frame,
+        mm), when the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every
+        draw is then that of the refined meshes, smoothed with their confidence, as the
+        pipeline's is.
+    """
+
+    fit_rules: FitRules
+    smoothing: Mapping[str, float]
+    refiner: Refiner | None = None
+
+
+@dataclass(frozen=True)
+class ClickNoise:
+    """The click-noise draws of :func:`click_noise_motion`.
+
+    Attributes
+    ----------
+    px : float
+        Standard deviation of the click noise, px per coordinate (> 0).
+    draws : int
+        Perturbed refits per take (>= 2).
+    seed : int
+        Seed of the draws (each take has its own stream, seeded by this and the take id).
+    """
+
+    px: float
+    draws: int
+    seed: int
 
 
 def click_noise_motion(
@@ -78,13 +122,9 @@ def click_noise_motion(
     neutral: ClickedTake,
     visemes: Mapping[str, ClickedTake],
     suppressed: np.ndarray,
-    smoothing: Mapping[str, float],
-    fit_options: Mapping[str, object],
-    click_noise_px: float,
-    draws: int,
-    seed: int,
+    recipe: DrawRecipe,
+    noise: ClickNoise,
     source: str = "subject",
-    refiner: Refiner | None = None,
 ) -> dict[str, dict]:
     """Spread of each viseme's final motion under landmark click noise.
 
@@ -104,28 +144,12 @@ def click_noise_motion(
     visemes : mapping take -> ClickedTake
     suppressed : (V,) bool
         The stencil mask (``/mask/suppressed``).
-    smoothing : mapping
-        ``w``, ``iterations``, ``max_stretch`` and ``confidence_relief`` (config ``smoothing``;
-        ``inf`` tears nothing; the relief applies to a ``refiner``'s confidence).
-    fit_options : mapping
-        Keyword arguments of :func:`fit_take` besides the take's data and fiducial set
-        (``levels``, ``min_valid_fraction``, ``max_fold_fraction``, ``min_weight``,
-        ``max_slope_deg``).
-    click_noise_px : float
-        Standard deviation of the click noise, px per coordinate (> 0).
-    draws : int
-        Number of perturbed fits (>= 2).
-    seed : int
-        Seed of the noise generator.
+    recipe : DrawRecipe
+        How a draw is fitted, refined and smoothed.
+    noise : ClickNoise
+        The click noise (px), the number of draws and their seed.
     source : str
         The subject, for messages.
-    refiner : callable, optional
-        ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid,
-        confidence)``: the take's correspondence refined against the neutral from those clicks
-        and the take's fit to them (:func:`fit_take`'s result, not fitted again; neutral frame,
-        mm), when the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every
-        draw is then that of the refined meshes, smoothed with their confidence, as the
-        pipeline's is.
 
     Returns
     -------
@@ -143,11 +167,13 @@ def click_noise_motion(
     Raises
     ------
     InputError
-        ``click_noise_px`` <= 0, ``draws`` < 2, a mask of the wrong length, or a take's own
+        ``noise.px`` <= 0, ``noise.draws`` < 2, a mask of the wrong length, or a take's own
         fit error with its clicks (naming it). Fewer than half of the draws of the neutral or of
         a take fitted is an error too, naming that take and quoting the first refusal: the click
         noise is then too large for the template.
     """
+    click_noise_px, draws, seed = noise.px, noise.draws, noise.seed
+    smoothing, fit_rules, refiner = recipe.smoothing, recipe.fit_rules, recipe.refiner
     if not (np.isfinite(click_noise_px) and click_noise_px > 0):
         raise InputError(source, f"click_noise_px: expected > 0 px, got {click_noise_px}")
     if int(draws) != draws or draws < 2:
@@ -174,7 +200,7 @@ def click_noise_motion(
             relief=relief,
         )
 
-    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, fit_options, f"{source}/neutral")
+    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, fit_rules, f"{source}/neutral")
     faces = n_mesh["faces"]
     if suppressed.shape != (len(n_base),):
         raise InputError(
@@ -192,7 +218,7 @@ def click_noise_motion(
 
     reference = {}
     for take, data in visemes.items():
-        t_fit = _fit(template, data, data.landmarks, fit_options, f"{source}/{take}")
+        t_fit = _fit(template, data, data.landmarks, fit_rules, f"{source}/{take}")
         v, valid, conf = corresponded(take, t_fit, data.landmarks, neutral.landmarks)
         reference[take] = final(v, valid, conf, n_base, n_mesh["valid"], faces, take)
 
@@ -203,7 +229,7 @@ def click_noise_motion(
         for k in range(draws):
             noisy = data.landmarks + click_noise_px * rng.standard_normal(np.shape(data.landmarks))
             try:
-                fits.append((*_fit(template, data, noisy, fit_options, f"{source}/{name}"), noisy))
+                fits.append((*_fit(template, data, noisy, fit_rules, f"{source}/{name}"), noisy))
             except InputError as err:
                 fits.append(None)
                 first = first or f"draw {k}: {err}"
@@ -257,11 +283,9 @@ def subject_motion_noise(
     neutral: str,
     visemes: Sequence[str],
     fiducial_sets: Mapping[str, str],
-    smoothing: Mapping[str, float],
-    fit_options: Mapping[str, object],
+    recipe: DrawRecipe,
     settings: Mapping[str, object],
     source: str = "subject",
-    refiner: Refiner | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, dict], dict]:
     """The motion_noise stage of one subject: click precision, then the error bar.
 
@@ -275,16 +299,14 @@ def subject_motion_noise(
     neutral : str
     visemes : sequence of str
     fiducial_sets : mapping take -> fiducial set
-    smoothing, fit_options
-        As :func:`click_noise_motion`.
+    recipe : DrawRecipe
+        As :func:`click_noise_motion`'s.
     settings : mapping
         The config section ``motion_noise``: ``click_noise_px`` (px or ``"auto"``),
         ``fallback_px``, ``stable_points``, ``draws``, ``seed`` (and ``refine_draws``: the draws
-        with a ``refiner``, each of which refines every viseme).
+        with a ``recipe.refiner``, each of which refines every viseme).
     source : str
         The subject, for messages.
-    refiner : callable, optional
-        As :func:`click_noise_motion`'s.
 
     Returns
     -------
@@ -310,21 +332,18 @@ def subject_motion_noise(
         placed,
         points,
         settings["fallback_px"],
-        fit_options.get("max_slope_deg"),
+        recipe.fit_rules.max_slope_deg,
         source,
     )
+    draws = settings["draws"] if recipe.refiner is None else settings["refine_draws"]
     result = click_noise_motion(
         template,
         takes[neutral],
         {t: takes[t] for t in visemes},
         store[paths.mask("suppressed")],
-        smoothing,
-        fit_options,
-        noise["click_noise_px"],
-        settings["draws"] if refiner is None else settings["refine_draws"],
-        settings["seed"],
+        recipe,
+        ClickNoise(noise["click_noise_px"], draws, settings["seed"]),
         source=source,
-        refiner=refiner,
     )
     data = noise_datasets(result)
     data[paths.motion_noise("click_noise_px")] = np.float64(noise["click_noise_px"])

@@ -8,6 +8,7 @@ chin to brows) or, failing that, the mesh's longest extent across the view.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
@@ -50,20 +51,56 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     return pose
 
 
+@dataclass(frozen=True)
+class MeshLook:
+    """How a rendered mesh is coloured.
+
+    Attributes
+    ----------
+    colors : (V, 3) float in [0, 1], optional
+        Per-vertex colors (linear; e.g. a colormap of distances).
+    texture, uv : (H, W, 3) uint8 and (V, 2), optional
+        Texture image and texture coordinates (image convention: v down).
+    wireframe : bool
+        Draw the triangle edges only.
+    """
+
+    colors: np.ndarray | None = None
+    texture: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    wireframe: bool = False
+
+
+@dataclass(frozen=True)
+class Framing:
+    """Where a rendered mesh is seen from.
+
+    Attributes
+    ----------
+    up : (3,) float, optional
+        Direction that should point up in the image.
+    front : (3,) float, optional
+        Direction from the mesh towards the camera; default :func:`front_direction`.
+    yaw_deg : float
+        Turn the camera about ``up`` (degrees), e.g. 30 for a three-quarter view.
+    center, radius : optional
+        Default the bounding sphere of the finite vertices (pass the same values to render
+        several meshes at one scale).
+    """
+
+    up: np.ndarray | None = None
+    front: np.ndarray | None = None
+    yaw_deg: float = 0.0
+    center: np.ndarray | None = None
+    radius: float | None = None
+
+
 def render_mesh(
     vertices: np.ndarray,
     faces: np.ndarray,
-    *,
-    up: np.ndarray | None = None,
-    front: np.ndarray | None = None,
-    colors: np.ndarray | None = None,
-    texture: np.ndarray | None = None,
-    uv: np.ndarray | None = None,
-    wireframe: bool = False,
+    look: MeshLook | None = None,
+    framing: Framing | None = None,
     size: tuple[int, int] = (480, 480),
-    yaw_deg: float = 0.0,
-    center: np.ndarray | None = None,
-    radius: float | None = None,
 ) -> np.ndarray:
     """Render a mesh to an RGB image.
 
@@ -71,22 +108,11 @@ def render_mesh(
     ----------
     vertices : (V, 3) float, mm. Faces touching a non-finite vertex are not drawn.
     faces : (F, 3) int.
-    up : (3,) float, optional
-        Direction that should point up in the image.
-    front : (3,) float, optional
-        Direction from the mesh towards the camera; default :func:`front_direction`.
-    colors : (V, 3) float in [0, 1], optional
-        Per-vertex colors (e.g. a colormap of distances).
-    texture, uv : (H, W, 3) uint8 and (V, 2), optional
-        Texture image and texture coordinates (image convention: v down).
-    wireframe : bool
-        Draw the triangle edges only.
+    look : MeshLook, optional
+        Colours, texture or wireframe (default: shaded grey).
+    framing : Framing, optional
+        The view (default: from the front, the whole mesh).
     size : (width, height)
-    yaw_deg : float
-        Turn the camera about ``up`` (degrees), e.g. 30 for a three-quarter view.
-    center, radius : optional
-        Framing; default the bounding sphere of the finite vertices (pass the same values to
-        render several meshes at one scale).
 
     Returns
     -------
@@ -99,9 +125,12 @@ def render_mesh(
         raise InputError("render", "nothing to draw: no face has three finite vertices")
     faces = faces[keep]
     safe = np.where(np.isfinite(vertices), vertices, 0.0)
-    center, radius, front, up = _framing(vertices, safe, faces, center, radius, front, up, yaw_deg)
+    lk, fr = look or MeshLook(), framing or Framing()
+    center, radius, front, up = _framing(
+        vertices, safe, faces, fr.center, fr.radius, fr.front, fr.up, fr.yaw_deg
+    )
     scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0], ambient_light=[0.35, 0.35, 0.35])
-    scene.add(_mesh_node(safe, faces, colors, texture, uv, wireframe))
+    scene.add(_mesh_node(safe, faces, lk.colors, lk.texture, lk.uv, lk.wireframe))
     w, h = size
     _add_camera_and_light(scene, center, radius, front, up, w / h)
     flags = pyrender.RenderFlags.SKIP_CULL_FACES

@@ -26,7 +26,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from scan2morph.errors import InputError
-from scan2morph.render.scene import front_direction, render_mesh
+from scan2morph.render.scene import Framing, MeshLook, front_direction, render_mesh
 
 #: Width and height of one rendered panel, pixels.
 PANEL_PX = 360
@@ -212,20 +212,9 @@ def render_view(
     colors = None if rgb is None else linear_rgb(np.broadcast_to(rgb, vertices.shape))
     if uv is not None:
         uv = np.nan_to_num(np.asarray(uv, dtype=np.float64))
-    return render_mesh(
-        vertices,
-        faces,
-        up=view.up,
-        front=view.front,
-        colors=colors,
-        texture=texture,
-        uv=uv,
-        wireframe=wireframe,
-        size=(size, size),
-        yaw_deg=yaw_deg,
-        center=view.center,
-        radius=view.radius,
-    )
+    look = MeshLook(colors, texture, uv, wireframe)
+    framing = Framing(view.up, view.front, yaw_deg, view.center, view.radius)
+    return render_mesh(vertices, faces, look, framing, (size, size))
 
 
 def new_figure(**kwargs) -> Figure:

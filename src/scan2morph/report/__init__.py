@@ -12,7 +12,7 @@ from scan2morph.report.cohort import (
     subject_summary,
     write_cohort_summary,
 )
-from scan2morph.report.html import subject_report_html, write_subject_report
+from scan2morph.report.html import ReportPage, subject_report_html, write_subject_report
 from scan2morph.report.provenance import software_versions, stage_timings, store_provenance
 from scan2morph.report.sections import (
     ReportFigure,
@@ -42,5 +42,6 @@ __all__ = [
     "thumbnail_jpeg",
     "write_cohort_summary",
     "write_subject_report",
+    "ReportPage",
     "write_sweep_summary",
 ]

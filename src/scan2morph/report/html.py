@@ -25,6 +25,7 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -74,24 +75,12 @@ def _status_section(h5: h5py.File) -> str:
     return render_blocks(sections.status(h5)).strip()
 
 
-def subject_report_html(
-    store_path: str | Path,
-    figures: Sequence[ReportFigure] = (),
-    accuracy: Mapping | None = None,
-    timings: Sequence[Mapping[str, object]] = (),
-    versions: Mapping[str, str] | None = None,
-    takes: Sequence[str] | None = None,
-    n_coordinates: int = 10,
-    thumbnail_px: int = 160,
-    glb: str | Path | None = None,
-    three_dir: str | Path = viewer.THREE_DIR,
-) -> str:
-    """The report page of one subject.
+@dataclass(frozen=True)
+class ReportPage:
+    """What a subject's report page shows besides its store (:func:`subject_report_html`).
 
-    Parameters
+    Attributes
     ----------
-    store_path : str or Path
-        ``results/{subject}/{subject}.h5`` (its major format version is checked).
     figures : sequence of ReportFigure
         PNG/JPEG files (stems ``{stage}_{name}``) with one-line captions, in report order.
     accuracy : mapping, optional
@@ -112,6 +101,28 @@ def subject_report_html(
         three.js in ``three_dir``, the viewer section says why there is none).
     three_dir : str or Path
         The npm package ``three`` (default ``tools/viewer/node_modules/three``).
+    """
+
+    figures: Sequence[ReportFigure] = ()
+    accuracy: Mapping | None = None
+    timings: Sequence[Mapping[str, object]] = ()
+    versions: Mapping[str, str] | None = None
+    takes: Sequence[str] | None = None
+    n_coordinates: int = 10
+    thumbnail_px: int = 160
+    glb: str | Path | None = None
+    three_dir: str | Path = viewer.THREE_DIR
+
+
+def subject_report_html(store_path: str | Path, page: ReportPage | None = None) -> str:
+    """The report page of one subject.
+
+    Parameters
+    ----------
+    store_path : str or Path
+        ``results/{subject}/{subject}.h5`` (its major format version is checked).
+    page : ReportPage, optional
+        What the page shows besides the store (default: nothing more).
 
     Returns
     -------
@@ -123,6 +134,10 @@ def subject_report_html(
     InputError
         Unreadable store, glTF or figure, a figure of an unsupported type, bad checksum attribute.
     """
+    p = ReportPage() if page is None else page
+    figures, accuracy, timings, takes, glb = p.figures, p.accuracy, p.timings, p.takes, p.glb
+    n_coordinates, thumbnail_px, versions = p.n_coordinates, p.thumbnail_px, p.versions
+    three_dir = p.three_dir
     if n_coordinates < 1 or thumbnail_px < 1:
         raise InputError("report", "n_coordinates and thumbnail_px: expected positive integers")
     versions = software_versions() if versions is None else versions
@@ -176,12 +191,11 @@ def _files(subject: str, synthetic: bool) -> list[dict]:
     return [{"href": f, "what": what} for f, what in files.items()]
 
 
-def write_subject_report(path: str | Path, store_path: str | Path, **kwargs) -> None:
-    """Write :func:`subject_report_html` to ``path`` (replaced atomically).
-
-    Keyword arguments are those of :func:`subject_report_html`.
-    """
-    write_html(path, subject_report_html(store_path, **kwargs))
+def write_subject_report(
+    path: str | Path, store_path: str | Path, page: ReportPage | None = None
+) -> None:
+    """Write :func:`subject_report_html` to ``path`` (replaced atomically)."""
+    write_html(path, subject_report_html(store_path, page))
 
 
 def write_html(path: str | Path, text: str) -> None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from scan2morph.evaluate.landmarks import landmark_summary, take_landmarks
-from scan2morph.evaluate.subject import subject_accuracy
+from scan2morph.evaluate.subject import IdealMotion, subject_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.failure import failures, usable
@@ -95,17 +95,16 @@ def run(
     subject = usable(subject, store)
     truths = _truths(data, subject.kinds)
     fit = params.fit
+    ideal = IdealMotion(
+        template,
+        {t: fit.fiducial_set(k) for t, k in subject.kinds.items()},
+        fit.rules.levels,
+        params.smoothing,
+        fit.rules.max_slope_deg,
+    )
+    kept = modelled(subject, store)
     report = subject_accuracy(
-        store,
-        truths,
-        subject.neutral,
-        (kept := modelled(subject, store)).visemes,
-        template=template,
-        fiducial_sets={t: fit.fiducial_set(k) for t, k in subject.kinds.items()},
-        levels=int(fit.options["levels"]),
-        smoothing=params.smoothing,
-        max_slope_deg=fit.options["max_slope_deg"],
-        expressions=kept.expressions,
+        store, truths, subject.neutral, kept.visemes, ideal, expressions=kept.expressions
     )
     sources = {
         t: _text(store[paths.landmark_info(t, "source")])

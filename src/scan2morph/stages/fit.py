@@ -11,7 +11,7 @@ import numpy as np
 
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
-from scan2morph.template import Template, fit_options, fit_take, subdivide_template
+from scan2morph.template import FitRules, Template, fit_take, subdivide_template
 
 #: Config section this stage reads.
 SECTIONS = ("template",)
@@ -30,19 +30,27 @@ class Params:
         Each take kind's fiducial set (``template.fiducials``: ``closed``, ``open`` or
         ``open_corners``, ``template.mesh.FIDUCIAL_SETS``); a kind not named gets
         :data:`DEFAULT_FIDUCIALS`.
-    options : dict
-        :func:`scan2morph.template.fit_options` of the section ``template`` (levels, validity
-        and fold limits, sampling weight, depth-step rule).
+    rules : FitRules
+        Subdivisions (``template.subdivision_levels``), validity and fold limits
+        (``min_valid_fraction``, ``max_fold_fraction``) and sampling rules
+        (``sample_min_weight``, ``max_slope_deg``).
     """
 
     fiducials: Mapping[str, str]
-    options: dict
+    rules: FitRules
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
         """From the config's section ``template``."""
         section = config["template"]
-        return cls(dict(section["fiducials"]), fit_options(section))
+        rules = FitRules(
+            int(section["subdivision_levels"]),
+            section["min_valid_fraction"],
+            section["max_fold_fraction"],
+            section["sample_min_weight"],
+            section["max_slope_deg"],
+        )
+        return cls(dict(section["fiducials"]), rules)
 
     def fiducial_set(self, kind: str) -> str:
         """The fiducial set of a take of ``kind``."""
@@ -51,12 +59,12 @@ class Params:
 
 def template_part(template: Template, params: Params) -> Part:
     """The ``/template`` group: faces, canonical 2D vertices and fiducials of the subdivided
-    template (``params.options["levels"]`` subdivisions).
+    template (``params.rules.levels`` subdivisions).
 
     Fiducials are every iBUG point that is a template vertex (named ``ibugNN``, 1-based as in
     iBUG) followed by the named template points (``eye_r_outer``, ``forehead_centre``, ...).
     """
-    fine = subdivide_template(template, params.options["levels"])
+    fine = subdivide_template(template, params.rules.levels)
     numbers = np.flatnonzero(fine.ibug_vertex >= 0) + 1
     names = [f"ibug{n:02d}" for n in numbers] + list(fine.named)
     indices = np.concatenate([fine.ibug_vertex[numbers - 1], list(fine.named.values())])
@@ -97,8 +105,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
         need(data, paths.landmarks(name), source),
         need(data, paths.range_image(name, "xyz"), source),
         fiducial_set=fiducials,
+        rules=params.rules,
         source=source,
-        **params.options,
     )
     log.info(
         "%s: %d vertices, %.1f%% valid, %d folded triangles",

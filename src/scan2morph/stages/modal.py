@@ -16,7 +16,7 @@ from scan2morph.errors import InputError
 from scan2morph.io import write_obj
 from scan2morph.modal import ModalBasis, ModalParams, ShellMaterial
 from scan2morph.modal.boundary import POLICIES, OutlineChoice, still_outline
-from scan2morph.modal.subject import subject_modal
+from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 from scan2morph.stages.part import Part, Subject, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
@@ -324,19 +324,16 @@ def run(
         int(outline.outline.sum()),
         params.fixed_outline,
     )
-    basis, datasets = subject_modal(
-        base,
-        fine.faces,
-        upper_face(fine, params.stiff_above),
-        params.modal,
+    shell = NeutralShell(base, fine.faces, upper_face(fine, params.stiff_above))
+    expressions = ExpressionFields(
         fields,
         subject.labels,
         semantic_takes(subject, params.semantic_labels),
         params.reconstruction_k,
-        source=name,
-        fixed=outline,
-        target_mm=params.target_rms_mm,
-        basis=natural,
+        params.target_rms_mm,
+    )
+    basis, datasets = subject_modal(
+        shell, params.modal, expressions, name, fixed=outline, basis=natural
     )
     datasets[paths.modal("preset")] = str(params.physics.get("preset", ""))
     datasets[paths.modal("physics")] = json.dumps(params.physics, sort_keys=True)

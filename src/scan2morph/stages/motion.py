@@ -9,7 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scan2morph.motion.model import AlignedMesh, expression_displacements, viseme_motion
+from scan2morph.motion.model import (
+    AlignedMesh,
+    VisemeSmoothing,
+    expression_displacements,
+    viseme_motion,
+)
 from scan2morph.stages.failure import usable
 from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import aligned_takes
@@ -138,17 +143,16 @@ def run(
     name = subject.name
     ref = params.refined
     neutral = aligned_mesh(data, subject.neutral, name, ref)
+    smoothing = VisemeSmoothing(
+        params.radius_mm, params.w, params.iterations, params.max_stretch, params.relief
+    )
     out = viseme_motion(
         neutral,
         {t: aligned_mesh(data, t, name, ref) for t in subject.visemes},
         fine.faces,
         named_indices(fine, params.mask_paths, "mask.paths"),
-        params.radius_mm,
-        params.w,
-        params.iterations,
-        source=name,
-        max_stretch=params.max_stretch,
-        relief=params.relief,
+        smoothing,
+        name,
     )
     out |= expression_displacements(
         neutral,

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from scan2morph.align import transform_points
-from scan2morph.motion.uncertainty import subject_motion_noise
+from scan2morph.motion.uncertainty import DrawRecipe, subject_motion_noise
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
@@ -123,17 +123,9 @@ def run(
     refiner = None
     if params.refine is not None:
         refiner = _refiner(template, subject, data, params.refine)
+    recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
     datasets, result, noise = subject_motion_noise(
-        template,
-        data,
-        subject.neutral,
-        subject.visemes,
-        fiducials,
-        params.smoothing,
-        params.fit.options,
-        noise_cfg,
-        source=subject.name,
-        refiner=refiner,
+        template, data, subject.neutral, subject.visemes, fiducials, recipe, noise_cfg, subject.name
     )
     log.info("%s: click noise %s", subject.name, noise["note"])
     for take, name, r in noise["misclicks"]:

@@ -145,8 +145,9 @@ class Run:
     template : Template
         The base template (``resources/template.npz``).
     config : mapping section -> mapping
-        The config sections the stages read (``repair``, ``template``, ``align``, ``mask``,
-        ``smoothing``, ``motion_noise``), with any swept values set.
+        The config, or at least the sections the stages read (``repair``, ``template``,
+        ``align``, ``refine``, ``mask``, ``smoothing``, ``quality``, ``motion_noise``), with any
+        swept values set: each stage's ``Params.from_config`` reads it.
     """
 
     subject: Subject

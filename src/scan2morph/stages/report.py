@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from scan2morph.report import report_figures, subject_report_html
+from scan2morph.report import ReportPage, report_figures, subject_report_html
 from scan2morph.stages.part import Part, Subject
 from scan2morph.template import Template
 
@@ -59,8 +59,7 @@ def run(template: Template | None, subject: Subject, data: Mapping, params: Para
         No datasets; ``files["html"]`` is the page's text (for
         :func:`scan2morph.report.html.write_html`).
     """
-    html = subject_report_html(
-        data["store"],
+    page = ReportPage(
         figures=report_figures(data.get("figures", ()), data.get("captions", ())),
         accuracy=data.get("accuracy"),
         timings=data.get("timings", ()),
@@ -69,4 +68,5 @@ def run(template: Template | None, subject: Subject, data: Mapping, params: Para
         thumbnail_px=params.thumbnail_px,
         glb=data.get("glb"),
     )
+    html = subject_report_html(data["store"], page)
     return Part(files={"html": html})

@@ -26,7 +26,7 @@ from scan2morph.synth.head import (
     label_coefficients,
     sample_identity,
 )
-from scan2morph.synth.scanner import camera_matrix, head_pose, project, scan
+from scan2morph.synth.scanner import ScanDefects, camera_matrix, head_pose, project, scan
 from scan2morph.synth.texture import texture_seed
 
 #: Scanner and camera parameters of a synthetic take, with their defaults.
@@ -275,22 +275,16 @@ def make_take(
     head, vertices, rng = articulated_head(subject, label, kind, take, seed)
     K = camera_matrix(p["width"], p["height"], p["focal_px"])
     pose = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], AIM)
-    out = scan(
-        head,
-        vertices,
-        pose,
-        K,
-        p["width"],
-        p["height"],
-        rng,
-        noise_mm=p["noise_mm"],
-        spike_fraction=p["spike_fraction"],
-        spike_mm=p["spike_mm"],
-        hole_blobs=p["hole_blobs"],
-        grazing_deg=p["grazing_deg"],
-        skin_texture=p["skin_texture"],
-        texture_seed=texture_seed(subject, seed),
+    defects = ScanDefects(
+        p["noise_mm"],
+        p["spike_fraction"],
+        p["spike_mm"],
+        p["hole_blobs"],
+        p["grazing_deg"],
+        p["skin_texture"],
+        texture_seed(subject, seed),
     )
+    out = scan(head, vertices, pose, K, p["width"], p["height"], rng, defects)
     lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
     lm2 = project(K, lm3)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)

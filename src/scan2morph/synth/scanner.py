@@ -16,6 +16,7 @@ the oral cavity or the background.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
@@ -289,6 +290,35 @@ def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], cell: float)
     return ndimage.map_coordinates(g, [Y, X], order=3, mode="nearest")
 
 
+@dataclass(frozen=True)
+class ScanDefects:
+    """A simulated range scanner's defects (:func:`scan`).
+
+    Attributes
+    ----------
+    noise_mm : float
+        Standard deviation of the noise along each pixel's ray, mm.
+    spike_fraction : float
+        Fraction of the measured pixels displaced along their ray by ``spike_mm`` x U(0.5, 1.5),
+        towards or away from the camera at random.
+    spike_mm : float
+    hole_blobs : int
+        Number of random round holes (radius 1.5 to 4 mm on the face).
+    grazing_deg : float
+        Pixels whose surface normal is farther than this from the view ray are dropped.
+    skin_texture, texture_seed
+        The skin detail (see :func:`render`).
+    """
+
+    noise_mm: float = 0.1
+    spike_fraction: float = 0.001
+    spike_mm: float = 30.0
+    hole_blobs: int = 4
+    grazing_deg: float = 75.0
+    skin_texture: float = 0.0
+    texture_seed: int = 0
+
+
 def scan(
     head: HeadModel,
     vertices_head: np.ndarray,
@@ -297,13 +327,7 @@ def scan(
     width: int,
     height: int,
     rng: np.random.Generator,
-    noise_mm: float = 0.1,
-    spike_fraction: float = 0.001,
-    spike_mm: float = 30.0,
-    hole_blobs: int = 4,
-    grazing_deg: float = 75.0,
-    skin_texture: float = 0.0,
-    texture_seed: int = 0,
+    defects: ScanDefects | None = None,
 ) -> dict:
     """Scan a posed head: XYZ with realistic defects and the colour image.
 
@@ -318,18 +342,9 @@ def scan(
     width, height : int
     rng : numpy.random.Generator
         Drives every defect.
-    noise_mm : float
-        Standard deviation of the noise along each pixel's ray, mm.
-    spike_fraction : float
-        Fraction of the measured pixels displaced along their ray by ``spike_mm`` x U(0.5, 1.5),
-        towards or away from the camera at random.
-    spike_mm : float
-    hole_blobs : int
-        Number of random round holes (radius 1.5 to 4 mm on the face).
-    grazing_deg : float
-        Pixels whose surface normal is farther than this from the view ray are dropped.
-    skin_texture, texture_seed
-        The skin detail (see :func:`render`).
+    defects : ScanDefects, optional
+        Noise, spikes, holes, the grazing-angle dropout and the skin detail (default
+        :class:`ScanDefects`'s).
 
     Returns
     -------
@@ -337,8 +352,11 @@ def scan(
         ``xyz`` (H, W, 3) float64 mm, NaN = no data; ``color`` (H, W, 3) uint8;
         ``segment`` (H, W) int8 (-1 = background); ``depth`` (H, W) float64, exact camera Z.
     """
+    d = ScanDefects() if defects is None else defects
+    noise_mm, spike_fraction, spike_mm = d.noise_mm, d.spike_fraction, d.spike_mm
+    hole_blobs, grazing_deg = d.hole_blobs, d.grazing_deg
     color, depth, seg = render(
-        head, vertices_head, pose, K, width, height, skin_texture, texture_seed
+        head, vertices_head, pose, K, width, height, d.skin_texture, d.texture_seed
     )
     xyz_true = backproject(K, depth)
     valid = np.isin(seg, _MEASURED)  # no data from the background, the cavity or a pupil

@@ -9,10 +9,10 @@ from scan2morph.template.mesh import (
     build_template,
 )
 from scan2morph.template.sample import (
+    FitRules,
     behind_steps,
     check_no_folds,
     fit_map,
-    fit_options,
     fit_take,
     sample_mesh,
     sample_range,
@@ -33,7 +33,7 @@ __all__ = [
     "build_template",
     "check_no_folds",
     "fit_map",
-    "fit_options",
+    "FitRules",
     "fit_take",
     "load_template",
     "sample_mesh",

@@ -17,7 +17,7 @@ come from the pixel position (color and range are pixel to pixel).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -366,20 +366,34 @@ def check_no_folds(
     return folded
 
 
-def fit_options(section: Mapping[str, object]) -> dict[str, object]:
-    """The :func:`fit_take` keyword arguments set by a config ``template`` section.
+@dataclass(frozen=True)
+class FitRules:
+    """How a take's fit is made and sampled: what every fit of a subject shares besides the
+    take's own data and fiducial set (:func:`fit_take`).
 
-    ``levels`` (``subdivision_levels``), ``min_valid_fraction``, ``max_fold_fraction``,
-    ``min_weight`` (``sample_min_weight``) and ``max_slope_deg``: what every fit of a subject
-    shares besides the take's own data and fiducial set.
+    Attributes
+    ----------
+    levels : int
+        1-to-4 subdivisions of the template.
+    min_valid_fraction : float
+        Fewer valid vertices than this share is an error (no range data over the face).
+    max_fold_fraction : float
+        Share of the warped triangles outside the lips allowed to fold (the lips' may all
+        fold); the folded triangles' vertices are marked invalid.
+    min_weight : float
+        Sampling at the edge of the data (see :func:`sample_range`).
+    max_slope_deg : float or None
+        Sampling across depth steps, degrees (see :func:`sample_range`); also invalidates
+        vertices behind a depth step of the fitted mesh (:func:`behind_steps`), both along the
+        scanner's viewing direction estimated from the range image (:func:`scanner_view`: the
+        XYZ may come in any right-handed frame). None: off.
     """
-    return {
-        "levels": int(section["subdivision_levels"]),
-        "min_valid_fraction": section["min_valid_fraction"],
-        "max_fold_fraction": section["max_fold_fraction"],
-        "min_weight": section["sample_min_weight"],
-        "max_slope_deg": section["max_slope_deg"],
-    }
+
+    levels: int = 1
+    min_valid_fraction: float = 0.1
+    max_fold_fraction: float = 0.01
+    min_weight: float = 1.0
+    max_slope_deg: float | None = None
 
 
 def sample_mesh(
@@ -469,12 +483,8 @@ def fit_take(
     xyz: np.ndarray,
     image_size: tuple[int, int] | None = None,
     fiducial_set: str = "closed",
-    levels: int = 1,
+    rules: FitRules | None = None,
     source: str = "take",
-    min_valid_fraction: float = 0.1,
-    max_fold_fraction: float = 0.01,
-    min_weight: float = 1.0,
-    max_slope_deg: float | None = None,
 ) -> dict[str, np.ndarray]:
     """Fit the template to one take and sample its range image.
 
@@ -490,20 +500,10 @@ def fit_take(
         pixel).
     fiducial_set : str
         ``"closed"``, ``"open"`` or ``"open_corners"`` (see ``template.mesh.FIDUCIAL_SETS``).
-    levels : int
-        1-to-4 subdivisions.
+    rules : FitRules, optional
+        Subdivisions, validity and fold limits, sampling rules (default :class:`FitRules`'s).
     source : str
         ``subject/take`` for messages.
-    min_valid_fraction : float
-        Fewer valid vertices than this share is an error (no range data over the face).
-    max_fold_fraction : float
-        Share of the warped triangles outside the lips allowed to fold (the lips' may all
-        fold); the folded triangles' vertices are marked invalid.
-    min_weight, max_slope_deg : float
-        Sampling at the edge of the data and across depth steps (see :func:`sample_range`);
-        ``max_slope_deg`` also invalidates vertices behind a depth step of the fitted mesh
-        (:func:`behind_steps`), both along the scanner's viewing direction estimated from
-        ``xyz`` (:func:`scanner_view`: the XYZ may come in any right-handed frame).
 
     Returns
     -------
@@ -516,19 +516,22 @@ def fit_take(
     InputError
         Naming ``source``: landmarks not (68, 2) or not finite; ``xyz`` not (H, W, 3) or not
         ``image_size``; an unknown fiducial set; fiducials outside the image, coincident or
-        collinear; more than ``max_fold_fraction`` folded triangles outside the lips; fewer than
-        ``min_valid_fraction`` valid vertices.
+        collinear; more than ``rules.max_fold_fraction`` folded triangles outside the lips;
+        fewer than ``rules.min_valid_fraction`` valid vertices.
     """
+    r = FitRules() if rules is None else rules
     landmarks, xyz, (width, height) = _checked_take(landmarks, xyz, image_size, source)
     numbers, _ = template.fiducial_set(fiducial_set, source=source)
     _check_inside(landmarks[numbers - 1], numbers, (width, height), source)
-    fine = subdivide_template(template, levels)
+    fine = subdivide_template(template, r.levels)
     points = fit_map(template, landmarks, fiducial_set, source, image_size)(fine.vertices)
-    folded = check_no_folds(points, fine.faces, source, max_fold_fraction, mouth_faces(fine))
+    folded = check_no_folds(points, fine.faces, source, r.max_fold_fraction, mouth_faces(fine))
+    exclude = np.unique(fine.faces[folded])
     vertices, valid = sample_mesh(
-        xyz, points, fine.faces, source, min_weight, max_slope_deg, np.unique(fine.faces[folded])
+        xyz, points, fine.faces, source, r.min_weight, r.max_slope_deg, exclude
     )
     share = float(valid.mean())
+    min_valid_fraction = r.min_valid_fraction
     if share < min_valid_fraction:
         raise InputError(
             source,
