@@ -71,7 +71,8 @@ def grid_camera(xyz: np.ndarray) -> GridCamera | None:
     ok = np.flatnonzero(np.isfinite(xyz).all(axis=2).reshape(-1))
     if len(ok) < 50:
         return None
-    view = scanner_view(xyz)
+    # the camera's centre and axes do not depend on the pixel pitch: every other pixel will do
+    view = scanner_view(xyz[::2, ::2] if min(h, w) >= 200 else xyz)
     rotation = np.array(view.rotation, dtype=np.float64)
     idx = ok[:: max(1, len(ok) // _FIT_PIXELS)]
     cam = (xyz.reshape(-1, 3)[idx] - view.centre) @ rotation.T

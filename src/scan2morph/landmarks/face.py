@@ -30,8 +30,9 @@ SECOND_SHARE = 0.6
 PLANE_MM = (35.0, 75.0)
 #: The nose tip: the point nearest the camera within this of the peak, mm.
 TIP_MM = 20.0
-#: Largest yaw (turn about the vertical) the detector handles, degrees.
-MAX_YAW_DEG = 35.0
+#: Largest yaw (turn about the vertical) the detector handles, degrees, as the face plane
+#: measures it (it reads about 2/3 of the true turn of a head: 22 at 30, 26 at 50 degrees).
+MAX_YAW_DEG = 25.0
 #: Smallest face handled: px per mm at the nose tip (about 36 px between the outer eye corners).
 MIN_PX_PER_MM = 0.4
 #: The scale of the peak search is that of the surface this deep behind the nearest point, mm.
@@ -117,18 +118,57 @@ def peak_height(z: np.ndarray, step_px: float) -> np.ndarray:
     return np.where(np.isfinite(z), out, np.nan)
 
 
-def _peaks(cam: np.ndarray, camera: GridCamera) -> tuple[np.ndarray, np.ndarray]:
-    """Height map (H, W) mm and the smoothed depth (H, W) mm."""
+def _head_depth(cam: np.ndarray) -> float:
+    """Typical depth of the nearest object (a wall behind it is left out), mm."""
+    z = cam[::4, ::4, 2]
+    near = float(np.nanpercentile(z, 1))
+    return float(np.nanmedian(np.where(z < near + HEAD_DEPTH_MM, z, np.nan)))
+
+
+def _peaks(cam: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Height map (H, W) mm and the smoothed depth (H, W) mm of a grid of ``scale`` px per
+    mm."""
     z = cam[..., 2]
-    near = float(np.nanpercentile(z, 1))  # the nearest surface: a wall behind is no face
-    depth = float(np.nanmedian(np.where(z < near + HEAD_DEPTH_MM, z, np.nan)))
-    scale = camera.px_per_mm(depth)
     zs = _smooth_depth(z, max(1.0, 2.0 * scale))
     height = peak_height(zs, PEAK_MM * scale)
     # isolated blobs (spikes, hair) are no nose: most of the surroundings must have data
     size = max(3, int(round(2 * PEAK_MM * scale)) | 1)
     share = cv2.blur(np.isfinite(z).astype(np.float32), (size, size))
     return np.where(share > 0.5, height, np.nan), zs
+
+
+def silhouette_bump(valid: np.ndarray, scale: float) -> float:
+    """How far the outline of the data sticks out sideways like a nose in profile, mm.
+
+    Per row the leftmost and rightmost pixels with data; a row's bump is how far its edge
+    lies beyond both edges ``PEAK_MM`` above and below it.
+
+    Parameters
+    ----------
+    valid : (H, W) bool
+    scale : float
+        px per mm.
+
+    Returns
+    -------
+    float
+        The largest bump over both sides, mm (0 when there are too few rows).
+    """
+    rows = np.flatnonzero(valid.any(axis=1))
+    d = int(round(PEAK_MM * scale))
+    if len(rows) < 2 * d + 1 or d < 1:
+        return 0.0
+    w = valid.shape[1]
+    right = np.full(valid.shape[0], np.nan)
+    left = np.full(valid.shape[0], np.nan)
+    right[rows] = w - 1 - np.argmax(valid[rows, ::-1], axis=1)
+    left[rows] = np.argmax(valid[rows], axis=1)
+    best = 0.0
+    for edge in (right, -left):
+        bump = edge[d:-d] - np.fmax(edge[: -2 * d], edge[2 * d :])
+        if np.isfinite(bump).any():
+            best = max(best, float(np.nanmax(bump)) / scale)
+    return best
 
 
 def _plane_normal(cam: np.ndarray, tip: np.ndarray) -> np.ndarray | None:
@@ -183,9 +223,21 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
             source, f"no face found: {n_valid} pixels have range data (at least {MIN_PIXELS})"
         )
     cam = camera.to_camera(xyz)
-    height, zs = _peaks(cam, camera)
+    # the search runs on every other pixel of a fine grid (about 1 mm per pixel at 640 x 480)
+    scale = camera.px_per_mm(_head_depth(cam))
+    stride = 2 if scale >= 1.2 else 1
+    coarse = cam[::stride, ::stride]
+    height, zs = _peaks(coarse, scale / stride)
     if not np.isfinite(height).any() or np.nanmax(height) < MIN_PEAK_MM:
         best = float(np.nanmax(height)) if np.isfinite(height).any() else 0.0
+        bump = silhouette_bump(np.isfinite(coarse).all(axis=2), scale / stride)
+        if bump >= MIN_PEAK_MM:
+            raise InputError(
+                source,
+                f"profile view: no nose seen from the front (highest peak {best:.1f} mm), but the "
+                f"outline sticks out {bump:.0f} mm sideways like a nose in profile; the face "
+                f"must be turned at most {MAX_YAW_DEG:g} degrees from the camera",
+            )
         raise InputError(
             source,
             f"no face found: no nose-like peak on the surface (highest {best:.1f} mm, at least "
@@ -193,8 +245,8 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
         )
     flat = np.nan_to_num(height, nan=-np.inf)
     iy, ix = np.unravel_index(int(np.argmax(flat)), flat.shape)
-    tip, peak = cam[iy, ix], float(flat[iy, ix])
-    _refuse_second_face(cam, flat, tip, peak, source)
+    tip, peak = coarse[iy, ix], float(flat[iy, ix])
+    _refuse_second_face(coarse, flat, tip, peak, stride, source)
     scale = camera.px_per_mm(float(tip[2]))
     if scale < MIN_PX_PER_MM:
         raise InputError(
@@ -202,7 +254,7 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
             f"face too small: about {90 * scale:.0f} px between the outer eye corners "
             f"(at least {90 * MIN_PX_PER_MM:.0f} px, {MIN_PX_PER_MM:g} px per mm)",
         )
-    normal = _plane_normal(cam, tip)
+    normal = _plane_normal(coarse, tip)
     if normal is None:
         raise InputError(source, "no face found: too little surface around the nose-like peak")
     yaw = float(np.degrees(np.arctan2(normal[0], -normal[2])))
@@ -213,20 +265,20 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
             f"profile view: the face is turned about {abs(yaw):.0f} degrees from the camera "
             f"(at most {MAX_YAW_DEG:g} handled)",
         )
-    iy, ix = _tip_near(cam, zs, tip)
-    nose_px = np.array([ix, iy], dtype=np.float64)
-    return Face(camera, cam, nose_px, cam[iy, ix], scale, yaw, pitch, peak)
+    iy, ix = _tip_near(coarse, zs, tip)
+    nose_px = stride * np.array([ix, iy], dtype=np.float64)
+    return Face(camera, cam, nose_px, coarse[iy, ix], scale, yaw, pitch, peak)
 
 
 def _refuse_second_face(
-    cam: np.ndarray, height: np.ndarray, tip: np.ndarray, peak: float, source: str
+    cam: np.ndarray, height: np.ndarray, tip: np.ndarray, peak: float, stride: int, source: str
 ) -> None:
     """Raise when another peak as nose-like as the tip lies far from it (a second face)."""
     dist = np.linalg.norm(np.nan_to_num(cam - tip, nan=np.inf), axis=2)
     other = np.where(dist > OTHER_FACE_MM, height, -np.inf)
     second = float(other.max())
     if second >= max(MIN_PEAK_MM, SECOND_SHARE * peak):
-        oy, ox = np.unravel_index(int(np.argmax(other)), other.shape)
+        oy, ox = stride * np.array(np.unravel_index(int(np.argmax(other)), other.shape))
         raise InputError(
             source,
             f"more than one face: a second nose-like peak at pixel ({ox}, {oy}), "
