@@ -23,14 +23,17 @@ import argparse
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
 from scan2morph.landmarks.canonical import canonical  # noqa: E402
+from scan2morph.landmarks.cascade import run  # noqa: E402
 from scan2morph.landmarks.detect import cached_model, detect  # noqa: E402
 from scan2morph.landmarks.face import find_face  # noqa: E402
+from scan2morph.scan.view import shaded_image  # noqa: E402
 from tests.support.landmark_takes import GridTake, cohort_takes  # noqa: E402
 
 
@@ -40,11 +43,18 @@ def geometry_only(color, xyz, source):
     return can.to_image(cached_model().init)
 
 
+def cascade_single(color, xyz, source):
+    """The cascade from the mean shape alone (no ensemble)."""
+    model = cached_model()
+    can = canonical(find_face(xyz, source), color)
+    return can.to_image(run(model, can.channels, model.init))
+
+
 def cascade(color, xyz, source):
     return detect(color, xyz, source).points
 
 
-CANDIDATES = {"geometry": geometry_only, "cascade": cascade}
+CANDIDATES = {"geometry": geometry_only, "cascade-1": cascade_single, "cascade-7": cascade}
 
 
 def load_takes(cache: Path | None) -> list[GridTake]:
@@ -85,20 +95,52 @@ HEADER = (
 )
 
 
-def evaluate(takes: list[GridTake], groups) -> None:
-    """Print one row per candidate and group of takes."""
+def evaluate(takes, groups) -> None:
+    """Print one row per candidate and group of takes (objects with ``color``, ``xyz``,
+    ``truth`` and ``name``)."""
     print(HEADER)
     for name, fn in CANDIDATES.items():
-        results = {}
+        results = []
         for t in takes:
             t0 = time.perf_counter()
-            pts = fn(t.color, t.xyz, f"{t.subject}/{t.take}")
+            pts = fn(t.color, t.xyz, t.name)
             dt = time.perf_counter() - t0
-            results[(t.subject, t.take)] = (np.linalg.norm(pts - t.truth, axis=1), dt)
+            results.append((np.linalg.norm(pts - t.truth, axis=1), dt))
         for gname, pick in groups:
-            sel = [results[(t.subject, t.take)] for t in takes if pick(t)]
+            sel = [r for t, r in zip(takes, results, strict=True) if pick(t)]
             if sel:
                 print(_row(f"{name} {gname}", [s[0] for s in sel], [s[1] for s in sel]))
+
+
+#: Poses (yaw, pitch; degrees) of the real head's renders.
+REAL_POSES = [(0, 0), (10, 5), (-10, -5), (15, 0), (-15, 0), (0, 10), (0, -10), (20, 5)]
+
+
+@dataclass(frozen=True)
+class _Named:
+    name: str
+    color: np.ndarray
+    xyz: np.ndarray
+    truth: np.ndarray
+    modality: str
+
+
+def real_head_takes() -> list[_Named]:
+    """Colour renders of the real head in :data:`REAL_POSES`, and the frontal one shaded grey
+    (a geometry-only scan); empty when the data is absent."""
+    from tests.support.lps_landmarks import load_real_head, real_takes
+
+    try:
+        head = load_real_head()
+    except (OSError, ValueError) as exc:
+        print(f"real head skipped: {exc}")
+        return []
+    out = [
+        _Named(t.name, t.color, t.xyz, t.truth, "real colour") for t in real_takes(head, REAL_POSES)
+    ]
+    front = out[0]
+    out.append(_Named("front grey", shaded_image(front.xyz), front.xyz, front.truth, "real grey"))
+    return out
 
 
 def main() -> None:
@@ -106,10 +148,59 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=None, help="npz of the cohort's grids")
     args = parser.parse_args()
     cached_model()
-    takes = load_takes(args.cache)
-    groups = [(m, lambda t, m=m: t.modality == m) for m in ("range", "stereo", "mesh", "rgbd")]
-    groups.append(("all", lambda t: True))
-    evaluate(takes, groups)
+    takes = [
+        _Named(f"{t.subject}/{t.take}", t.color, t.xyz, t.truth, t.modality)
+        for t in load_takes(args.cache)
+    ]
+    modalities = ("range", "stereo", "mesh", "rgbd")
+    groups = [(m, lambda t, m=m: t.modality == m) for m in modalities]
+    groups.append(("synthetic, all", lambda t: t.modality in modalities))
+    groups += [(m, lambda t, m=m: t.modality == m) for m in ("real colour", "real grey")]
+    evaluate(takes + real_head_takes(), groups)
+    jaw_truth_report(load_takes(args.cache))
+
+
+def face_outline_distance(xyz: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance (px) of each point to the nearest occluding contour of the range grid: a depth
+    step of more than 4 mm between neighbouring pixels, or the edge of the data (the face's
+    silhouette against the neck or the background, where iBUG puts the jawline)."""
+    from scipy import ndimage
+
+    z = np.nan_to_num(np.asarray(xyz, dtype=np.float64)[..., 2], nan=1e5)
+    edge = np.zeros(z.shape, dtype=bool)
+    for axis in (0, 1):
+        step = np.abs(np.diff(z, axis=axis)) > 4.0
+        near = np.minimum(z[:-1], z[1:]) if axis == 0 else np.minimum(z[:, :-1], z[:, 1:])
+        nearer_first = (z[:-1] < z[1:]) if axis == 0 else (z[:, :-1] < z[:, 1:])
+        # the contour pixel is the nearer one of the pair (the occluding side)
+        a = step & nearer_first & (near < 1e5)
+        b = step & ~nearer_first & (near < 1e5)
+        if axis == 0:
+            edge[:-1] |= a
+            edge[1:] |= b
+        else:
+            edge[:, :-1] |= a
+            edge[:, 1:] |= b
+    dist = ndimage.distance_transform_edt(~edge)
+    ij = np.clip(np.rint(points[:, ::-1]).astype(int), 0, np.array(dist.shape) - 1)
+    return dist[ij[:, 0], ij[:, 1]]
+
+
+def jaw_truth_report(takes: list[GridTake]) -> None:
+    """How far the generator's jawline truth (points 4-14) lies from the face's outline, per
+    label (range takes: the scanner's own frame, no virtual camera)."""
+    print("\nGenerator jawline truth vs the face's silhouette (range takes, points 4-14, px):")
+    by_label: dict[str, list[np.ndarray]] = {}
+    for t in takes:
+        if t.modality != "range":
+            continue
+        d = face_outline_distance(t.xyz, t.truth)
+        by_label.setdefault(t.label, []).append(d[3:14])
+    for label, ds in by_label.items():
+        d = np.concatenate(ds)
+        print(
+            f"  {label:8s} median {np.median(d):5.2f}  p95 {np.percentile(d, 95):5.2f}  max {d.max():5.2f}"
+        )
 
 
 if __name__ == "__main__":

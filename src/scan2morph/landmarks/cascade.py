@@ -1,9 +1,11 @@
 """Cascaded shape regression (supervised descent) in the canonical frame.
 
-Each stage samples the canonical channels (:mod:`scan2morph.landmarks.canonical`) on a 3 x 3
-pattern of half-width ``radius`` cells around each of the 68 current points, standardises the
-2448 values and adds a ridge-regressed update of all 136 coordinates. Early stages look wide and
-move the whole shape; late stages look close and move single points.
+The first, global stage reads the smoothed canonical channels (:mod:`scan2morph.landmarks.
+canonical`) on a fixed 17 x 19 grid over the face (9 mm apart) and predicts the whole shape by
+ridge regression: where the eyes, mouth and chin are, whatever the face's proportions. Each
+following, local stage samples the channels on a 3 x 3 pattern of half-width ``radius`` cells
+around each of the 68 current points, standardises the 2448 values and adds a ridge-regressed
+update of all 136 coordinates; they look closer and closer.
 """
 
 from __future__ import annotations
@@ -32,6 +34,12 @@ MIRROR = np.array(
 )
 #: The 3 x 3 sampling pattern around a point, in units of the stage's radius.
 PATTERN = np.array([(x, y) for y in (-1.0, 0.0, 1.0) for x in (-1.0, 0.0, 1.0)])
+#: The global stage's grid about the nose tip, mm (x right, y down).
+GLOBAL_GRID_MM = np.array(
+    [(x, y) for y in np.arange(-75.0, 88.0, 9.0) for x in np.arange(-72.0, 73.0, 9.0)]
+)
+#: Smoothing of the channels the global stage reads, canonical cells.
+GLOBAL_BLUR = 3.0
 
 
 @dataclass(frozen=True)
@@ -41,7 +49,8 @@ class Stage:
     Attributes
     ----------
     radius : float
-        Half-width of the sampling pattern, canonical cells.
+        Half-width of the sampling pattern, canonical cells; 0 for the global stage (it
+        predicts the shape itself instead of an update).
     weights : (F, 136) float32
         Ridge weights on standardised features.
     bias : (136,) float32
@@ -74,6 +83,29 @@ class Cascade:
     meta: dict
 
 
+def _sample(channels: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """Bilinear samples (n, C) of the channels at canonical points (n, 2); outside: no data."""
+    flat = where.reshape(1, -1, 2).astype(np.float32)
+    border = [3.0] + [0.0] * (channels.shape[2] - 1)
+    vals = cv2.remap(
+        channels,
+        flat[..., 0],
+        flat[..., 1],
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=border,
+    )
+    return vals.reshape(len(where), -1)
+
+
+def global_features(channels: np.ndarray) -> np.ndarray:
+    """The global stage's features: smoothed channels on :data:`GLOBAL_GRID_MM`, (F,)."""
+    from scan2morph.landmarks.canonical import NOSE_CELL, STEP_MM
+
+    smooth = cv2.GaussianBlur(channels, (0, 0), GLOBAL_BLUR)
+    return _sample(smooth, NOSE_CELL + GLOBAL_GRID_MM / STEP_MM).reshape(-1)
+
+
 def features(channels: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
     """Channel values around each point.
 
@@ -92,30 +124,23 @@ def features(channels: np.ndarray, points: np.ndarray, radius: float) -> np.ndar
     """
     pts = np.asarray(points, dtype=np.float64)
     where = pts[..., :, None, :] + radius * PATTERN  # (..., 68, 9, 2)
-    flat = where.reshape(1, -1, 2).astype(np.float32)
-    border = [3.0] + [0.0] * (channels.shape[2] - 1)
-    vals = cv2.remap(
-        channels,
-        flat[..., 0],
-        flat[..., 1],
-        cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_CONSTANT,
-        borderValue=border,
-    )
-    return vals.reshape(*pts.shape[:-2], -1)
+    return _sample(channels, where.reshape(-1, 2)).reshape(*pts.shape[:-2], -1)
 
 
-def run(model: Cascade, channels: np.ndarray, start: np.ndarray, upto: int | None = None):
-    """Run the cascade from ``start``.
+def run(
+    model: Cascade, channels: np.ndarray, start: np.ndarray, first: int = 0, upto: int | None = None
+) -> np.ndarray:
+    """Run the cascade's stages ``first`` to ``upto`` from ``start``.
 
     Parameters
     ----------
     model : Cascade
     channels : (S, S, C) float32
     start : (..., 68, 2) float
-        Initial shapes, canonical cells (several at once: an ensemble).
-    upto : int, optional
-        Number of stages to run (all by default).
+        Initial shapes, canonical cells (several at once: an ensemble); a global stage
+        replaces them by its prediction.
+    first, upto : int
+        Stages run: ``model.stages[first:upto]`` (all by default).
 
     Returns
     -------
@@ -123,7 +148,12 @@ def run(model: Cascade, channels: np.ndarray, start: np.ndarray, upto: int | Non
         The final shapes, canonical cells.
     """
     shape = np.array(start, dtype=np.float64)
-    for stage in model.stages[:upto]:
+    for stage in model.stages[first:upto]:
+        if stage.radius == 0:
+            f = (global_features(channels) - stage.mean) / stage.scale
+            shape = np.broadcast_to((f @ stage.weights + stage.bias).reshape(68, 2), shape.shape)
+            shape = shape.astype(np.float64)
+            continue
         f = (features(channels, shape, stage.radius) - stage.mean) / stage.scale
         shape = shape + (f @ stage.weights + stage.bias).reshape(shape.shape)
     return shape

@@ -87,8 +87,14 @@ def check_grid(color: np.ndarray, xyz: np.ndarray, source: str) -> tuple[np.ndar
     return color, xyz
 
 
+def global_stages(model: Cascade) -> int:
+    """Number of leading global stages of a cascade (0 or 1)."""
+    return int(bool(model.stages) and model.stages[0].radius == 0)
+
+
 def ensemble_starts(init: np.ndarray) -> np.ndarray:
-    """(K, 68, 2) starts of the ensemble: the mean shape shifted and scaled about the nose."""
+    """(K, 68, 2) starts of the ensemble: a shape (the global stage's prediction) shifted and
+    scaled about the nose."""
     out = []
     for dx, dy, s in STARTS:
         out.append(NOSE_CELL + s * (init - NOSE_CELL) + np.array([dx, dy]) / STEP_MM)
@@ -116,7 +122,9 @@ def detect_canonical(
     color, xyz = check_grid(color, xyz, source)
     model = model or cached_model()
     can = canonical(find_face(xyz, source), color)
-    return can, run(model, can.channels, ensemble_starts(model.init))
+    n_global = global_stages(model)
+    base = run(model, can.channels, model.init, upto=n_global)
+    return can, run(model, can.channels, ensemble_starts(base), first=n_global)
 
 
 def detect(

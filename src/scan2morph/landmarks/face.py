@@ -23,6 +23,8 @@ from scan2morph.landmarks.camera import GridCamera, grid_camera
 PEAK_MM = 22.0
 #: Least height of a nose tip above its surroundings in every direction, mm.
 MIN_PEAK_MM = 6.0
+#: Least number of the eight probes around a peak that meet data.
+MIN_PROBES = 5
 #: A peak this far (3D) from the nose tip, at least SECOND_SHARE as high, is another face, mm.
 OTHER_FACE_MM = 140.0
 SECOND_SHARE = 0.6
@@ -89,33 +91,47 @@ def _smooth_depth(z: np.ndarray, sigma_px: float) -> np.ndarray:
     return np.where(ok & (den > 0.3), out, np.nan).astype(np.float64)
 
 
+def _probe(far: np.ndarray, dx: int, dy: int) -> np.ndarray:
+    """``far`` shifted so that each pixel sees the value ``(dx, dy)`` px away (inf outside)."""
+    h, w = far.shape
+    shifted = np.full(far.shape, np.inf)
+    ys, yd = slice(max(dy, 0), h + min(dy, 0)), slice(max(-dy, 0), h + min(-dy, 0))
+    xs, xd = slice(max(dx, 0), w + min(dx, 0)), slice(max(-dx, 0), w + min(-dx, 0))
+    shifted[yd, xd] = far[ys, xs]
+    return shifted
+
+
 def peak_height(z: np.ndarray, step_px: float) -> np.ndarray:
-    """Height of every pixel above the surface ``step_px`` away in eight directions, mm.
+    """Height of every pixel above the surface around it, mm: a nose tip's.
+
+    The depth ``step_px`` away in eight directions, and half as far to the left and right (a
+    nose is narrow, lips and chins are broad), minus the pixel's: the smallest difference.
 
     Parameters
     ----------
     z : (H, W) float
-        Depth, mm (larger = farther), NaN = no data (counts as infinitely far).
+        Depth, mm (larger = farther), NaN = no data (a probe there is left out).
     step_px : float
         Probe distance, px.
 
     Returns
     -------
     (H, W) float64
-        The smallest of the eight depth differences (probe minus pixel); NaN where ``z`` is.
+        NaN where ``z`` is, or where fewer than :data:`MIN_PROBES` of the eight probes meet
+        data.
     """
     far = np.where(np.isfinite(z), z, np.inf)
     out = np.full(z.shape, np.inf)
-    h, w = z.shape
-    for ang in np.arange(8) * np.pi / 4:
-        dx, dy = int(round(step_px * np.cos(ang))), int(round(step_px * np.sin(ang)))
-        shifted = np.full(z.shape, np.inf)
-        ys, yd = slice(max(dy, 0), h + min(dy, 0)), slice(max(-dy, 0), h + min(-dy, 0))
-        xs, xd = slice(max(dx, 0), w + min(dx, 0)), slice(max(-dx, 0), w + min(-dx, 0))
-        shifted[yd, xd] = far[ys, xs]
+    seen = np.zeros(z.shape, dtype=np.int64)
+    probes = [(step_px * np.cos(a), step_px * np.sin(a)) for a in np.arange(8) * np.pi / 4]
+    for k, (dx, dy) in enumerate(probes + [(step_px / 2, 0.0), (-step_px / 2, 0.0)]):
+        shifted = _probe(far, int(round(dx)), int(round(dy)))
+        if k < 8:
+            seen += np.isfinite(shifted)
         with np.errstate(invalid="ignore"):
             out = np.minimum(out, shifted - far)
-    return np.where(np.isfinite(z), out, np.nan)
+    # a peak stands on a surface: most probes must meet data (no isolated specks)
+    return np.where(np.isfinite(z) & (seen >= MIN_PROBES), out, np.nan)
 
 
 def _head_depth(cam: np.ndarray) -> float:

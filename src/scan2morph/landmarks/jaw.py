@@ -73,6 +73,8 @@ def complete_jawline(
     shape = s * model.init @ R.T + t
     shape[INNER] = inner
     for stage in model.stages:
+        if stage.radius == 0:  # the global stage predicts a whole shape: the 51 points do
+            continue
         f = (features(can.channels, shape, stage.radius) - stage.mean) / stage.scale
         step = (f @ stage.weights + stage.bias).reshape(shape.shape)
         shape[JAW] += step[JAW]

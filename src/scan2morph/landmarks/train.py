@@ -17,11 +17,19 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.landmarks.canonical import NOSE_CELL, SIZE, canonical
-from scan2morph.landmarks.cascade import MIRROR, Cascade, features, fit_stage, save
+from scan2morph.landmarks.canonical import NOSE_CELL, SIZE, STEP_MM, canonical
+from scan2morph.landmarks.cascade import (
+    MIRROR,
+    Cascade,
+    features,
+    fit_stage,
+    global_features,
+    save,
+)
 from scan2morph.landmarks.data import Sample, make_samples
 from scan2morph.landmarks.face import find_face
 
@@ -29,21 +37,52 @@ from scan2morph.landmarks.face import find_face
 VERSION = "1.0"
 #: Training settings of the committed model.
 DEFAULTS = {
-    "subjects": 30,
-    "takes": 10,
-    "radii_mm": [9.0, 6.0, 4.0, 2.5, 1.5],
-    "starts": 4,
-    "ridge": 0.05,
-    "jitter_mm": 4.0,
+    "subjects": 40,
+    "takes": 8,
+    "global": True,
+    "radii_mm": [10.0, 6.0, 4.0, 2.5, 1.5],
+    "starts": 6,
+    "ridges": [0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0],
+    "jitter_mm": 3.0,
     "jitter_scale": 0.05,
     "jitter_deg": 4.0,
+    "stretched": 1,
+    "stretch_x": [0.8, 1.1],
+    "stretch_up": [0.6, 1.1],
+    "stretch_down": [0.75, 1.1],
 }
+#: Every this many-th training identity is held out to choose each stage's ridge penalty.
+HOLDOUT_EVERY = 5
 log = logging.getLogger("scan2morph")
 
 
-def _prepared(samples: list[Sample]) -> tuple[list[np.ndarray], np.ndarray]:
-    """Canonical channels and truth (cells) of every sample, and of its mirror image."""
-    chans, truths = [], []
+def _stretched(
+    chans: np.ndarray, cells: np.ndarray, config: dict, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """A copy of a take's channels and truth stretched about the nose tip by random factors:
+    across (``stretch_x``), above (``stretch_up``) and below (``stretch_down``) it, so that the
+    cascade meets faces of other proportions than the generator's."""
+    sx = rng.uniform(*config["stretch_x"])
+    up, down = rng.uniform(*config["stretch_up"]), rng.uniform(*config["stretch_down"])
+    grid = np.arange(SIZE, dtype=np.float64) - NOSE_CELL[1]
+    src_y = NOSE_CELL[1] + np.where(grid < 0, grid / up, grid / down)
+    src_x = NOSE_CELL[0] + (np.arange(SIZE) - NOSE_CELL[0]) / sx
+    map_x, map_y = np.meshgrid(src_x.astype(np.float32), src_y.astype(np.float32))
+    out = cv2.remap(chans, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    rel = cells - NOSE_CELL
+    moved = np.column_stack(
+        [rel[:, 0] * sx, np.where(rel[:, 1] < 0, rel[:, 1] * up, rel[:, 1] * down)]
+    )
+    return out, NOSE_CELL + moved
+
+
+def _prepared(
+    samples: list[Sample], config: dict, seed: int
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """Canonical channels, truth (cells) and identity number of every sample, of its mirror
+    image and of ``config["stretched"]`` stretched copies of each."""
+    rng = np.random.default_rng([int(seed), 0x57E7])
+    chans, truths, groups = [], [], []
     for s in samples:
         try:
             can = canonical(find_face(s.xyz, s.name), s.color)
@@ -59,23 +98,69 @@ def _prepared(samples: list[Sample]) -> tuple[list[np.ndarray], np.ndarray]:
         flipped = cells[MIRROR].copy()
         flipped[:, 0] = (SIZE - 1) - flipped[:, 0]
         truths.append(flipped)
-    return chans, np.asarray(truths)
+        for ch, cells_k in [(c, t) for c, t in zip(chans[-2:], truths[-2:], strict=True)]:
+            for _ in range(int(config["stretched"])):
+                warped, moved = _stretched(ch, cells_k, config, rng)
+                chans.append(warped)
+                truths.append(moved)
+        groups += [int(s.name.split("/")[0].removeprefix("train"))] * (
+            2 + 2 * int(config["stretched"])
+        )
+    return chans, np.asarray(truths), np.asarray(groups)
 
 
 def _starts(init: np.ndarray, n: int, config: dict, rng: np.random.Generator) -> np.ndarray:
     """(n, 68, 2) jittered initial shapes: shift, scale and turn about the nose tip."""
-    step = 0.6
     out = np.empty((n, *init.shape))
     for k in range(n):
         ang = np.deg2rad(rng.normal(0.0, config["jitter_deg"]))
         s = 1.0 + rng.normal(0.0, config["jitter_scale"])
         R = s * np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
-        shift = rng.normal(0.0, config["jitter_mm"] / step, 2)
+        shift = rng.normal(0.0, config["jitter_mm"] / STEP_MM, 2)
         out[k] = NOSE_CELL + (init - NOSE_CELL) @ R.T + shift
     return out
 
 
-def fit_cascade(chans: list[np.ndarray], truths: np.ndarray, seed: int, config: dict) -> Cascade:
+def _predict(stage, X: np.ndarray) -> np.ndarray:
+    """A stage's updates (N, 136) for features X (N, F)."""
+    return (X - stage.mean) / stage.scale @ stage.weights + stage.bias
+
+
+def _chosen_ridge(X: np.ndarray, Y: np.ndarray, held: np.ndarray, radius: float, config) -> float:
+    """The ridge penalty of ``config["ridges"]`` that best predicts the held-out rows."""
+    ridges = [float(r) for r in config["ridges"]]
+    if len(ridges) == 1 or held.all() or not held.any():
+        return ridges[0]
+    errs = []
+    for ridge in ridges:
+        stage = fit_stage(X[~held], Y[~held], radius, ridge)
+        res = (Y[held] - _predict(stage, X[held])).reshape(-1, 2)
+        errs.append(float(np.median(np.linalg.norm(res, axis=1))))
+    return ridges[int(np.argmin(errs))]
+
+
+def _fit_global(chans, truths: np.ndarray, groups: np.ndarray, config: dict):
+    """The global stage, its out-of-fold predictions (N, 68, 2) (each identity predicted by a
+    stage fitted without it: as good as on new faces) and its ridge penalty."""
+    X = np.stack([global_features(c) for c in chans])
+    Y = truths.reshape(len(truths), -1)
+    fold = np.asarray(groups) % HOLDOUT_EVERY
+    ridge = _chosen_ridge(X, Y, fold == HOLDOUT_EVERY - 1, 0.0, config)
+    pred = np.empty_like(Y)
+    for k in range(HOLDOUT_EVERY):
+        out = fold == k
+        if out.all() or not out.any():
+            pred[out] = fit_stage(X, Y, 0.0, ridge).bias
+            continue
+        pred[out] = _predict(fit_stage(X[~out], Y[~out], 0.0, ridge), X[out])
+    err = np.linalg.norm((Y - pred).reshape(-1, 2), axis=1) * STEP_MM
+    log.info("global stage (ridge %g): out-of-fold error median %.2f mm", ridge, np.median(err))
+    return fit_stage(X, Y, 0.0, ridge), pred.reshape(truths.shape), ridge
+
+
+def fit_cascade(
+    chans: list[np.ndarray], truths: np.ndarray, groups: np.ndarray, seed: int, config: dict
+) -> Cascade:
     """Fit every stage of the cascade.
 
     Parameters
@@ -84,6 +169,9 @@ def fit_cascade(chans: list[np.ndarray], truths: np.ndarray, seed: int, config: 
         Canonical channels of the training takes.
     truths : (N, 68, 2) float
         Their truth, canonical cells.
+    groups : (N,) int
+        Identity of each take: every :data:`HOLDOUT_EVERY`-th identity is held out to choose
+        each stage's ridge penalty, then the stage is refitted on all takes.
     seed : int
         Seeds the initial jitter.
     config : dict
@@ -96,21 +184,31 @@ def fit_cascade(chans: list[np.ndarray], truths: np.ndarray, seed: int, config: 
     rng = np.random.default_rng([int(seed), 0xCA5C])
     init = truths.mean(axis=0)
     m = int(config["starts"])
-    shapes = np.stack([_starts(init, m, config, rng) for _ in chans])  # (N, m, 68, 2)
+    stages, ridges, base = [], [], np.repeat(init[None], len(chans), axis=0)
+    if config["global"]:
+        stage, base, ridge = _fit_global(chans, truths, groups, config)
+        stages.append(stage)
+        ridges.append(ridge)
+    shapes = np.stack([_starts(b, m, config, rng) for b in base])  # (N, m, 68, 2)
     target = np.repeat(truths[:, None], m, axis=1)
-    stages = []
+    held = np.repeat(np.asarray(groups) % HOLDOUT_EVERY == HOLDOUT_EVERY - 1, m)
     for radius_mm in config["radii_mm"]:
-        radius = radius_mm / 0.6
+        radius = radius_mm / STEP_MM
         feats = np.stack([features(c, s, radius) for c, s in zip(chans, shapes, strict=True)])
         X = feats.reshape(len(chans) * m, -1)
         Y = (target - shapes).reshape(len(chans) * m, -1)
-        stage = fit_stage(X, Y, radius, float(config["ridge"]))
-        shapes = shapes + ((X - stage.mean) / stage.scale @ stage.weights + stage.bias).reshape(
-            shapes.shape
+        ridges.append(_chosen_ridge(X, Y, held, radius, config))
+        stage = fit_stage(X, Y, radius, ridges[-1])
+        shapes = shapes + _predict(stage, X).reshape(shapes.shape)
+        err = np.linalg.norm(target - shapes, axis=-1) * STEP_MM
+        log.info(
+            "stage r=%.1f mm (ridge %g): training error median %.2f mm",
+            radius_mm,
+            ridges[-1],
+            np.median(err),
         )
-        err = np.linalg.norm(target - shapes, axis=-1) * 0.6
-        log.info("stage r=%.1f mm: training error median %.2f mm", radius_mm, np.median(err))
         stages.append(stage)
+    config = config | {"chosen_ridges": ridges}
     meta = {"version": VERSION, "seed": int(seed), "config": config, "takes": len(chans) // 2}
     return Cascade(init, tuple(stages), meta)
 
@@ -152,8 +250,8 @@ def train(seed: int, config: dict | None = None, cache: Path | None = None) -> C
     t0 = time.perf_counter()
     samples = _cached_samples(seed, config, cache)
     log.info("%d training takes simulated in %.0f s", len(samples), time.perf_counter() - t0)
-    chans, truths = _prepared(samples)
-    return fit_cascade(chans, truths, seed, config)
+    chans, truths, groups = _prepared(samples, config, seed)
+    return fit_cascade(chans, truths, groups, seed, config)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -163,14 +261,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--subjects", type=int, default=DEFAULTS["subjects"])
     parser.add_argument("--takes", type=int, default=DEFAULTS["takes"])
-    parser.add_argument("--ridge", type=float, default=DEFAULTS["ridge"])
     parser.add_argument("--cache", type=Path, default=None)
     args = parser.parse_args(argv)
     if args.seed == 2009:
         parser.error("seed 2009 is the default cohort's: train on other identities")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     t0 = time.perf_counter()
-    config = {"subjects": args.subjects, "takes": args.takes, "ridge": args.ridge}
+    config = {"subjects": args.subjects, "takes": args.takes}
     model = train(args.seed, config, args.cache)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save(model, args.out)
