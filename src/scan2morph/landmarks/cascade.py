@@ -167,7 +167,7 @@ def fit_stage(feats: np.ndarray, target: np.ndarray, radius: float, ridge: float
     feats : (N, F) float
         Features of N training shapes.
     target : (N, 136) float
-        Truth minus current shape, canonical cells.
+        Truth minus current shape (the global stage: the truth), canonical cells.
     radius : float
     ridge : float
         Ridge penalty per sample (the penalty is ``ridge * N``).
@@ -176,18 +176,37 @@ def fit_stage(feats: np.ndarray, target: np.ndarray, radius: float, ridge: float
     -------
     Stage
     """
+    return ridge_path(feats, target, radius, [ridge])[0]
+
+
+def ridge_path(
+    feats: np.ndarray, target: np.ndarray, radius: float, ridges: list[float]
+) -> list[Stage]:
+    """:func:`fit_stage` for several ridge penalties at the cost of one (an eigen-decomposition
+    of the Gram matrix serves them all).
+
+    Returns
+    -------
+    list of Stage
+        One per penalty, in order.
+    """
     X = np.asarray(feats, dtype=np.float64)
     mean = X.mean(axis=0)
     scale = np.maximum(X.std(axis=0), 1e-3)
     Xs = (X - mean) / scale
     ybar = target.mean(axis=0)
-    gram = Xs.T @ Xs
-    gram[np.diag_indices_from(gram)] += ridge * len(X)
-    W = np.linalg.solve(gram, Xs.T @ (target - ybar))
+    evals, evecs = np.linalg.eigh(Xs.T @ Xs)
+    proj = evecs.T @ (Xs.T @ (target - ybar))
     f32 = np.float32
-    return Stage(
-        float(radius), W.astype(f32), ybar.astype(f32), mean.astype(f32), scale.astype(f32)
-    )
+    out = []
+    for ridge in ridges:
+        W = evecs @ (proj / (np.maximum(evals, 0.0) + ridge * len(X))[:, None])
+        out.append(
+            Stage(
+                float(radius), W.astype(f32), ybar.astype(f32), mean.astype(f32), scale.astype(f32)
+            )
+        )
+    return out
 
 
 def save(model: Cascade, path: str | Path) -> None:

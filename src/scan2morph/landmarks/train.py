@@ -28,6 +28,7 @@ from scan2morph.landmarks.cascade import (
     features,
     fit_stage,
     global_features,
+    ridge_path,
     save,
 )
 from scan2morph.landmarks.data import Sample, make_samples
@@ -46,10 +47,11 @@ DEFAULTS = {
     "jitter_mm": 3.0,
     "jitter_scale": 0.05,
     "jitter_deg": 4.0,
-    "stretched": 1,
-    "stretch_x": [0.8, 1.1],
-    "stretch_up": [0.6, 1.1],
-    "stretch_down": [0.75, 1.1],
+    "stretched": 2,
+    "scale": [0.75, 1.1],
+    "stretch_x": [0.85, 1.1],
+    "stretch_up": [0.7, 1.1],
+    "stretch_down": [0.85, 1.1],
 }
 #: Every this many-th training identity is held out to choose each stage's ridge penalty.
 HOLDOUT_EVERY = 5
@@ -59,16 +61,21 @@ log = logging.getLogger("scan2morph")
 def _stretched(
     chans: np.ndarray, cells: np.ndarray, config: dict, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A copy of a take's channels and truth stretched about the nose tip by random factors:
-    across (``stretch_x``), above (``stretch_up``) and below (``stretch_down``) it, so that the
-    cascade meets faces of other proportions than the generator's."""
-    sx = rng.uniform(*config["stretch_x"])
-    up, down = rng.uniform(*config["stretch_up"]), rng.uniform(*config["stretch_down"])
+    """A copy of a take's channels and truth resized about the nose tip: a face of another
+    size (``scale``: every axis, the depth too) and other proportions (``stretch_x`` across,
+    ``stretch_up`` above and ``stretch_down`` below the nose tip), so that the cascade meets
+    faces unlike the generator's."""
+    size = rng.uniform(*config["scale"])
+    sx = size * rng.uniform(*config["stretch_x"])
+    up = size * rng.uniform(*config["stretch_up"])
+    down = size * rng.uniform(*config["stretch_down"])
     grid = np.arange(SIZE, dtype=np.float64) - NOSE_CELL[1]
     src_y = NOSE_CELL[1] + np.where(grid < 0, grid / up, grid / down)
     src_x = NOSE_CELL[0] + (np.arange(SIZE) - NOSE_CELL[0]) / sx
     map_x, map_y = np.meshgrid(src_x.astype(np.float32), src_y.astype(np.float32))
     out = cv2.remap(chans, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    depth = out[..., 0]
+    out[..., 0] = np.where(depth >= 2.99, depth, depth * size)  # relief scales with the face
     rel = cells - NOSE_CELL
     moved = np.column_stack(
         [rel[:, 0] * sx, np.where(rel[:, 1] < 0, rel[:, 1] * up, rel[:, 1] * down)]
@@ -132,8 +139,7 @@ def _chosen_ridge(X: np.ndarray, Y: np.ndarray, held: np.ndarray, radius: float,
     if len(ridges) == 1 or held.all() or not held.any():
         return ridges[0]
     errs = []
-    for ridge in ridges:
-        stage = fit_stage(X[~held], Y[~held], radius, ridge)
+    for stage in ridge_path(X[~held], Y[~held], radius, ridges):
         res = (Y[held] - _predict(stage, X[held])).reshape(-1, 2)
         errs.append(float(np.median(np.linalg.norm(res, axis=1))))
     return ridges[int(np.argmin(errs))]
