@@ -152,3 +152,51 @@ def make_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
             name = f"{subject}/{take}/{label}/{look}"
             out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
     return out
+
+
+def _mesh_take(subject: str, label: str, take: str, seed: int, folder: str):
+    """A mesh scan read and rendered by the mesh reader (the virtual camera): (colour, xyz,
+    truth px)."""
+    from pathlib import Path
+
+    from scan2morph.io.mesh_scan import read_mesh_take
+    from scan2morph.synth.mesh_scan import make_mesh_take, write_mesh_take
+
+    r = make_mesh_take(subject, label, LABEL_KIND[label], take, seed)
+    stem = Path(folder) / f"{subject}_{take}"
+    write_mesh_take(r, f"{stem}.ply", f"{stem}.txt", f"{stem}.npz")
+    scan = read_mesh_take(f"{stem}.ply", None, f"{stem}.txt")
+    cam = r["truth"]["landmarks3d"] @ scan.pose[:3, :3].T + scan.pose[:3, 3]
+    truth = cam[:, :2] / cam[:, 2:3] * np.diag(scan.K)[:2] + scan.K[:2, 2]
+    return scan.color, scan.xyz, truth
+
+
+def make_mesh_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+    """Simulated mesh scans (the mesh modality's look: no neck below the jaw's cut, unlit
+    vertex colours, a larger face), identities ``mesh000``, ... of the training seed.
+
+    Parameters
+    ----------
+    seed : int
+    subjects, takes : int
+        Identities and takes per identity.
+
+    Returns
+    -------
+    list of Sample
+    """
+    import tempfile
+
+    rng = np.random.default_rng([int(seed), 0x3E5A])
+    labels = list(LABELS)
+    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
+    out = []
+    with tempfile.TemporaryDirectory() as folder:
+        for i in range(subjects):
+            subject = f"mesh{i:03d}"
+            for j in range(takes):
+                label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+                color, xyz, truth = _mesh_take(subject, label, f"t{j:02d}", seed, folder)
+                name = f"{subject}/t{j:02d}/{label}/mesh"
+                out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
+    return out

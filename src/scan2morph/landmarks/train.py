@@ -31,7 +31,7 @@ from scan2morph.landmarks.cascade import (
     ridge_path,
     save,
 )
-from scan2morph.landmarks.data import Sample, make_samples
+from scan2morph.landmarks.data import Sample, make_mesh_samples, make_samples
 from scan2morph.landmarks.face import find_face
 
 #: Model version: bump when the features, the frame or the training change.
@@ -40,6 +40,8 @@ VERSION = "1.0"
 DEFAULTS = {
     "subjects": 40,
     "takes": 8,
+    "mesh_subjects": 10,
+    "mesh_takes": 4,
     "global": True,
     "radii_mm": [10.0, 6.0, 4.0, 2.5, 1.5],
     "starts": 6,
@@ -83,6 +85,14 @@ def _stretched(
     return out, NOSE_CELL + moved
 
 
+def _identity(name: str) -> int:
+    """A training take's identity number (``train007/...`` -> 7, ``mesh003/...`` -> 1003)."""
+    subject = name.split("/")[0]
+    if subject.startswith("mesh"):
+        return 1000 + int(subject.removeprefix("mesh"))
+    return int(subject.removeprefix("train"))
+
+
 def _prepared(
     samples: list[Sample], config: dict, seed: int
 ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
@@ -110,9 +120,7 @@ def _prepared(
                 warped, moved = _stretched(ch, cells_k, config, rng)
                 chans.append(warped)
                 truths.append(moved)
-        groups += [int(s.name.split("/")[0].removeprefix("train"))] * (
-            2 + 2 * int(config["stretched"])
-        )
+        groups += [_identity(s.name)] * (2 + 2 * int(config["stretched"]))
     return chans, np.asarray(truths), np.asarray(groups)
 
 
@@ -219,22 +227,36 @@ def fit_cascade(
     return Cascade(init, tuple(stages), meta)
 
 
-def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]:
-    """The training takes, from ``cache`` when it holds them (same seed and counts)."""
-    if cache is None:
-        return make_samples(seed, config["subjects"], config["takes"])
-    path = cache / f"samples-{seed}-{config['subjects']}x{config['takes']}.npz"
-    if path.is_file():
+def _cached(path: Path | None, make) -> list[Sample]:
+    """``make()``'s samples, kept in (and read back from) ``path`` when given."""
+    if path is not None and path.is_file():
         with np.load(path, allow_pickle=False) as z:
             names = [str(n) for n in z["names"]]
             return [Sample(z[f"c{i}"], z[f"x{i}"], z[f"t{i}"], n) for i, n in enumerate(names)]
-    samples = make_samples(seed, config["subjects"], config["takes"])
-    arrays = {"names": np.array([s.name for s in samples])}
-    for i, s in enumerate(samples):
-        arrays |= {f"c{i}": s.color, f"x{i}": s.xyz, f"t{i}": s.truth}
-    cache.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **arrays)
+    samples = make()
+    if path is not None:
+        arrays = {"names": np.array([s.name for s in samples])}
+        for i, s in enumerate(samples):
+            arrays |= {f"c{i}": s.color, f"x{i}": s.xyz, f"t{i}": s.truth}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, **arrays)
     return samples
+
+
+def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]:
+    """The training takes (range, RGB-D and mesh scans), from ``cache`` when it holds them."""
+    n, k = config["subjects"], config["takes"]
+    nm, km = config["mesh_subjects"], config["mesh_takes"]
+    out = _cached(
+        cache / f"samples-{seed}-{n}x{k}.npz" if cache else None,
+        lambda: make_samples(seed, n, k),
+    )
+    if nm and km:
+        out += _cached(
+            cache / f"mesh-{seed}-{nm}x{km}.npz" if cache else None,
+            lambda: make_mesh_samples(seed, nm, km),
+        )
+    return out
 
 
 def train(seed: int, config: dict | None = None, cache: Path | None = None) -> Cascade:
