@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.landmarks.canonical import canonical
-from scan2morph.landmarks.cascade import Cascade, features
-from scan2morph.landmarks.detect import cached_model, check_grid
-from scan2morph.landmarks.face import find_face
+from scan2morph.landmarks.cascade import Cascade
+from scan2morph.landmarks.detect import cached_model, detect_canonical
 
 #: iBUG-68 indices of the jawline (0-based) and of the 51 inner points.
 JAW = np.arange(17)
@@ -35,8 +33,11 @@ def complete_jawline(
 ) -> np.ndarray:
     """Add the jawline to 51 inner iBUG points.
 
-    The model's mean shape is placed on the 51 points (least-squares similarity), then the
-    cascade moves the jawline only, the 51 points held where they were given.
+    The detector runs on the take (:func:`scan2morph.landmarks.detect.detect_canonical`) and
+    its jawline is moved onto the given points by the least-squares similarity that takes its
+    own 51 inner points to them. (Moving the jawline further with the local stages, the 51
+    held, made it worse on the synthetic cohort: their updates were learnt with every point
+    free.)
 
     Parameters
     ----------
@@ -65,19 +66,13 @@ def complete_jawline(
         raise InputError(
             source, f"points51: expected 51 finite (x, y) points, got shape {pts.shape}"
         )
-    color, xyz = check_grid(color, xyz, source)
     model = model or cached_model()
-    can = canonical(find_face(xyz, source), color)
+    can, shapes = detect_canonical(color, xyz, source, model)
+    detected = np.median(shapes, axis=0)
     inner = can.to_cells(pts)
-    s, R, t = _similarity(model.init[INNER], inner)
-    shape = s * model.init @ R.T + t
+    s, R, t = _similarity(detected[INNER], inner)
+    shape = s * detected @ R.T + t
     shape[INNER] = inner
-    for stage in model.stages:
-        if stage.radius == 0:  # the global stage predicts a whole shape: the 51 points do
-            continue
-        f = (features(can.channels, shape, stage.radius) - stage.mean) / stage.scale
-        step = (f @ stage.weights + stage.bias).reshape(shape.shape)
-        shape[JAW] += step[JAW]
     out = can.to_image(shape)
     out[INNER] = pts
     return out
