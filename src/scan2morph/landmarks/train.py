@@ -223,7 +223,13 @@ def fit_cascade(
         )
         stages.append(stage)
     config = config | {"chosen_ridges": ridges}
-    meta = {"version": VERSION, "seed": int(seed), "config": config, "takes": len(chans) // 2}
+    meta = {
+        "version": VERSION,
+        "seed": int(seed),
+        "config": config,
+        "takes": len(chans) // (2 + 2 * int(config["stretched"])),  # each: mirrored, stretched
+        "images": len(chans),
+    }
     return Cascade(init, tuple(stages), meta)
 
 
