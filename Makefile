@@ -25,7 +25,7 @@ BPY_VERSION := 5.0.1
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-$(BPY_VERSION)-stamp
 export PYOPENGL_PLATFORM ?= osmesa
 
-.PHONY: setup run test test-fast bench lint dry-run clean
+.PHONY: setup run test test-fast bench lint dry-run clean detector
 
 setup: $(STAMP) $(BLENDER_STAMP)
 setup: $(VALIDATOR_STAMP)
@@ -77,6 +77,13 @@ test: setup
 # every test that runs no workflow (no Snakemake DAG, no SLURM): for quick checks while working
 test-fast: setup
 	$(BIN)/python -m pytest -q -m "not slow" --durations=10
+
+# The landmark detector's weights (src/scan2morph/landmarks/model.npz, committed package data, so
+# setup downloads nothing): retrained from the project's own synthetic heads, identical for the
+# same seed (docs/landmarks.md).
+DETECTOR_SEED ?= 1
+detector: setup
+	$(BIN)/python -m scan2morph.landmarks.train --seed $(DETECTOR_SEED) --out src/scan2morph/landmarks/model.npz
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

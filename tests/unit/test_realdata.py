@@ -886,14 +886,23 @@ def test_jaw_registration_on_a_real_chin(head, pout_mm):
         assert not res.ok and "point-to-plane RMSE" in " ".join(res.problems)
 
 
-def _colour_scan(head: Head, yaw_deg: float, pitch_deg: float, gain: float, zoom: float):
+def _colour_scan(
+    head: Head,
+    yaw_deg: float,
+    pitch_deg: float,
+    gain: float,
+    zoom: float,
+    size: tuple[int, int] = (WIDTH, HEIGHT),
+):
     """A range image (camera frame, mm) and its colour image (the colour map under Lambert
     light from the camera, times ``gain``) of the head, with the camera's K, R (camera ->
-    scanner) and centre; ``zoom`` times the range scan's focal length."""
+    scanner) and centre; ``zoom`` times the range scan's focal length; ``size`` (width,
+    height) px."""
     R_cw, centre = head.camera(yaw_deg=yaw_deg, pitch_deg=pitch_deg)
     f = zoom * head.focal_px()
-    K = np.array([[f, 0.0, 0.5 * (WIDTH - 1)], [0.0, f, 0.5 * (HEIGHT - 1)], [0.0, 0.0, 1.0]])
-    ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float64)
+    w, h = size
+    K = np.array([[f, 0.0, 0.5 * (w - 1)], [0.0, f, 0.5 * (h - 1)], [0.0, 0.0, 1.0]])
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
     d_cam = np.stack([(xs - K[0, 2]) / f, (ys - K[1, 2]) / f, np.ones_like(xs)], axis=-1)
     d_w = d_cam @ R_cw.T
     hit = head.cast(centre, d_w)

@@ -1,0 +1,207 @@
+"""Zero-click landmarks against the truth: candidates x modalities, and the real head.
+
+Candidates (scan2morph.landmarks):
+* ``geometry``: the training mean shape placed by the geometry alone (the nose tip found on the
+  range data, the metric scale of the grid), no image or shape fitting;
+* ``cascade``: the trained cascade (:func:`scan2morph.landmarks.detect`);
+* ``cascade+refine``: the cascade, then the geometric refinement on the 3D surface.
+
+Takes: every take of the default synthetic cohort (config/config.yaml: seed 2009, held out from
+training) after the ingest and repair stages, per modality; and range renders of the real head
+(Lee Perry-Smith, ``../shared/data``) in several poses against our own hand annotation
+(tests/support/lps_landmarks.py). Errors in px on the take's 640 x 480 grid: median and 95th
+percentile of the 51 inner points and of the 17 jawline points; CPU time per take (detection with
+the model already loaded). Also: whether the generator's jawline truth lies on the face's
+silhouette in open-mouth visemes.
+
+Run: ``PYOPENGL_PLATFORM=osmesa .venv/bin/python benchmarks/bench_landmarks.py [--cache F]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
+from scan2morph.landmarks.canonical import canonical  # noqa: E402
+from scan2morph.landmarks.cascade import run  # noqa: E402
+from scan2morph.landmarks.detect import cached_model, detect  # noqa: E402
+from scan2morph.landmarks.face import find_face  # noqa: E402
+from scan2morph.scan.view import shaded_image  # noqa: E402
+from tests.support.landmark_takes import GridTake, cohort_takes  # noqa: E402
+
+
+def geometry_only(color, xyz, source):
+    """The mean shape placed from the geometry alone (nose tip, scale)."""
+    can = canonical(find_face(xyz, source), color)
+    return can.to_image(cached_model().init)
+
+
+def cascade_single(color, xyz, source):
+    """The cascade from the mean shape alone (no ensemble)."""
+    model = cached_model()
+    can = canonical(find_face(xyz, source), color)
+    return can.to_image(run(model, can.channels, model.init))
+
+
+def cascade(color, xyz, source):
+    return detect(color, xyz, source).points
+
+
+CANDIDATES = {"geometry": geometry_only, "cascade-1": cascade_single, "cascade-7": cascade}
+
+
+def load_takes(cache: Path | None) -> list[GridTake]:
+    """Every take of the default cohort on its grid (from ``cache`` when it exists)."""
+    if cache is not None and cache.is_file():
+        with np.load(cache, allow_pickle=False) as z:
+            meta = [str(m).split("|") for m in z["meta"]]
+            return [GridTake(*m, z[f"c{i}"], z[f"x{i}"], z[f"t{i}"]) for i, m in enumerate(meta)]
+    with tempfile.TemporaryDirectory() as tmp:
+        takes = cohort_takes(Path(tmp))
+    if cache is not None:
+        arrays = {"meta": np.array([f"{t.subject}|{t.take}|{t.label}|{t.modality}" for t in takes])}
+        for i, t in enumerate(takes):
+            arrays |= {f"c{i}": t.color, f"x{i}": t.xyz, f"t{i}": t.truth}
+        np.savez(cache, **arrays)
+    return takes
+
+
+def _row(name: str, errs: list[np.ndarray], times: list[float]) -> str:
+    e = np.stack(errs)
+    inner, jaw = e[:, 17:].ravel(), e[:, :17].ravel()
+    cells = [
+        np.median(e),
+        np.percentile(e, 95),
+        np.median(inner),
+        np.percentile(inner, 95),
+        np.median(jaw),
+        np.percentile(jaw, 95),
+        np.max(e),
+    ]
+    vals = " ".join(f"{v:7.2f}" for v in cells)
+    return f"{name:<28} {len(errs):4d} {vals} {1000 * np.median(times):8.0f}"
+
+
+HEADER = (
+    f"{'candidate / takes':<28} {'n':>4} {'med':>7} {'p95':>7} {'in-med':>7} {'in-p95':>7} "
+    f"{'jaw-med':>7} {'jaw-p95':>7} {'max':>7} {'cpu ms':>8}"
+)
+
+
+def evaluate(takes, groups) -> None:
+    """Print one row per candidate and group of takes (objects with ``color``, ``xyz``,
+    ``truth`` and ``name``)."""
+    print(HEADER)
+    for name, fn in CANDIDATES.items():
+        results = []
+        for t in takes:
+            t0 = time.process_time()  # CPU time: the machine may be shared
+            pts = fn(t.color, t.xyz, t.name)
+            dt = time.process_time() - t0
+            results.append((np.linalg.norm(pts - t.truth, axis=1), dt))
+        for gname, pick in groups:
+            sel = [r for t, r in zip(takes, results, strict=True) if pick(t)]
+            if sel:
+                print(_row(f"{name} {gname}", [s[0] for s in sel], [s[1] for s in sel]))
+
+
+#: Poses (yaw, pitch; degrees) of the real head's renders.
+REAL_POSES = [(0, 0), (10, 5), (-10, -5), (15, 0), (-15, 0), (0, 10), (0, -10), (20, 5)]
+
+
+@dataclass(frozen=True)
+class _Named:
+    name: str
+    color: np.ndarray
+    xyz: np.ndarray
+    truth: np.ndarray
+    modality: str
+
+
+def real_head_takes() -> list[_Named]:
+    """Colour renders of the real head in :data:`REAL_POSES`, and the frontal one shaded grey
+    (a geometry-only scan); empty when the data is absent."""
+    from tests.support.lps_landmarks import load_real_head, real_takes
+
+    try:
+        head = load_real_head()
+    except (OSError, ValueError) as exc:
+        print(f"real head skipped: {exc}")
+        return []
+    out = [
+        _Named(t.name, t.color, t.xyz, t.truth, "real colour") for t in real_takes(head, REAL_POSES)
+    ]
+    front = out[0]
+    out.append(_Named("front grey", shaded_image(front.xyz), front.xyz, front.truth, "real grey"))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--cache", type=Path, default=None, help="npz of the cohort's grids")
+    args = parser.parse_args()
+    cached_model()
+    takes = [
+        _Named(f"{t.subject}/{t.take}", t.color, t.xyz, t.truth, t.modality)
+        for t in load_takes(args.cache)
+    ]
+    modalities = ("range", "stereo", "mesh", "rgbd")
+    groups = [(m, lambda t, m=m: t.modality == m) for m in modalities]
+    groups.append(("synthetic, all", lambda t: t.modality in modalities))
+    groups += [(m, lambda t, m=m: t.modality == m) for m in ("real colour", "real grey")]
+    evaluate(takes + real_head_takes(), groups)
+    jaw_truth_report(load_takes(args.cache))
+
+
+def face_outline_distance(xyz: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance (px) of each point to the nearest occluding contour of the range grid: a depth
+    step of more than 4 mm between neighbouring pixels, or the edge of the data (the face's
+    silhouette against the neck or the background, where iBUG puts the jawline)."""
+    from scipy import ndimage
+
+    z = np.nan_to_num(np.asarray(xyz, dtype=np.float64)[..., 2], nan=1e5)
+    edge = np.zeros(z.shape, dtype=bool)
+    for axis in (0, 1):
+        step = np.abs(np.diff(z, axis=axis)) > 4.0
+        near = np.minimum(z[:-1], z[1:]) if axis == 0 else np.minimum(z[:, :-1], z[:, 1:])
+        nearer_first = (z[:-1] < z[1:]) if axis == 0 else (z[:, :-1] < z[:, 1:])
+        # the contour pixel is the nearer one of the pair (the occluding side)
+        a = step & nearer_first & (near < 1e5)
+        b = step & ~nearer_first & (near < 1e5)
+        if axis == 0:
+            edge[:-1] |= a
+            edge[1:] |= b
+        else:
+            edge[:, :-1] |= a
+            edge[:, 1:] |= b
+    dist = ndimage.distance_transform_edt(~edge)
+    ij = np.clip(np.rint(points[:, ::-1]).astype(int), 0, np.array(dist.shape) - 1)
+    return dist[ij[:, 0], ij[:, 1]]
+
+
+def jaw_truth_report(takes: list[GridTake]) -> None:
+    """How far the generator's jawline truth (points 4-14) lies from the face's outline, per
+    label (range takes: the scanner's own frame, no virtual camera)."""
+    print("\nGenerator jawline truth vs the face's silhouette (range takes, points 4-14, px):")
+    by_label: dict[str, list[np.ndarray]] = {}
+    for t in takes:
+        if t.modality != "range":
+            continue
+        d = face_outline_distance(t.xyz, t.truth)
+        by_label.setdefault(t.label, []).append(d[3:14])
+    for label, ds in by_label.items():
+        d = np.concatenate(ds)
+        print(
+            f"  {label:8s} median {np.median(d):5.2f}  p95 {np.percentile(d, 95):5.2f}  max {d.max():5.2f}"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,11 @@
+"""Zero-click iBUG-68 landmarks from a take's range grid and image.
+
+:func:`detect` finds the face from the geometry and runs a cascaded shape regression trained on
+the project's own synthetic heads (:mod:`scan2morph.landmarks.train`); :func:`complete_jawline`
+adds the 17 jawline points to a 51-point set.
+"""
+
+from scan2morph.landmarks.detect import DETECTOR, Detection, detect
+from scan2morph.landmarks.jaw import complete_jawline
+
+__all__ = ["DETECTOR", "Detection", "complete_jawline", "detect"]

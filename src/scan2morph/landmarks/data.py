@@ -1,0 +1,202 @@
+"""Training takes for the detector, simulated from the project's own synthetic heads.
+
+Identities come from a training seed (never the default cohort's 2009); each take draws an
+articulation (neutral, a viseme or an expression at a random intensity), a head pose (yaw,
+pitch, roll), a distance and focal length (the face's scale), scanner defects, and how the
+face looks: its colour, a Lambert-shaded grey image (geometry-only scans) or a grey image with
+a projected speckle (stereo rigs). A share of the takes are RGB-D takes resampled onto their
+colour camera. Every range grid is repaired as the pipeline's repair stage does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from scan2morph.io.rgbd import depth_to_color_grid
+from scan2morph.scan import repair_range
+from scan2morph.scan.view import shaded_image
+from scan2morph.synth.cohort import AIM, articulated_head
+from scan2morph.synth.head import LABEL_KIND
+from scan2morph.synth.rgbd import make_rgbd_take
+from scan2morph.synth.scanner import camera_matrix, project, scan
+from scan2morph.synth.texture import texture_seed
+
+#: Labels drawn for training takes, with their weights.
+LABELS = {"neutral": 2, "car": 1, "man": 1, "she": 1, "eel": 1, "too": 1, "smile": 2, "sad": 2}
+#: Uniform ranges of the pose: yaw, pitch, roll (degrees), distance (mm), focal length (px).
+POSE_RANGE = {
+    "yaw": (-20.0, 20.0),
+    "pitch": (-12.0, 12.0),
+    "roll": (-8.0, 8.0),
+    "distance": (600.0, 1300.0),
+    "focal": (700.0, 2400.0),
+}
+#: Shares of the looks: colour, shaded grey, speckled grey; and of RGB-D takes.
+LOOKS = {"colour": 0.55, "shaded": 0.2, "speckle": 0.25}
+RGBD_SHARE = 0.15
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One training take on its pixel grid.
+
+    Attributes
+    ----------
+    color : (H, W, 3) uint8
+    xyz : (H, W, 3) float32
+        mm, NaN = no data (repaired).
+    truth : (68, 2) float64
+        The exact iBUG-68 projections, px.
+    name : str
+        ``subject/take/look``.
+    """
+
+    color: np.ndarray
+    xyz: np.ndarray
+    truth: np.ndarray
+    name: str
+
+
+def _speckled(color: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A grey image with a random speckle of 1.5-3 px and sensor noise (a stereo rig's view)."""
+    grey = color.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    cell = rng.uniform(1.5, 3.0)
+    noise = cv2.GaussianBlur(rng.standard_normal(grey.shape), (0, 0), cell / 2.0)
+    noise /= max(float(noise.std()), 1e-9)
+    grey = grey * (1.0 + rng.uniform(0.3, 0.6) * np.clip(noise, -2, 2) / 2.0)
+    grey += 1.5 * rng.standard_normal(grey.shape)
+    g = np.clip(np.rint(grey), 0, 255).astype(np.uint8)
+    return np.repeat(g[..., None], 3, axis=2)
+
+
+def _range_take(subject: str, label: str, take: str, seed: int, rng: np.random.Generator):
+    """A posed range take: (colour, xyz, truth px)."""
+    head, vertices, take_rng = articulated_head(subject, label, LABEL_KIND[label], take, seed)
+    angles = [rng.uniform(*POSE_RANGE[k]) for k in ("yaw", "pitch", "roll")]
+    dist, focal = (rng.uniform(*POSE_RANGE[k]) for k in ("distance", "focal"))
+    focal = float(np.clip(focal, 0.8 * dist, 2.6 * dist))  # 0.8-2.6 px per mm
+    flip = np.diag([1.0, -1.0, -1.0])
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_euler("yxz", angles, degrees=True).as_matrix() @ flip
+    pose[:3, 3] = np.array([0.0, 0.0, dist]) - flip @ AIM + rng.normal(0.0, 10.0, 3)
+    K = camera_matrix(640, 480, focal)
+    out = scan(
+        head,
+        vertices,
+        pose,
+        K,
+        640,
+        480,
+        take_rng,
+        noise_mm=float(rng.uniform(0.05, 0.4)),
+        hole_blobs=int(rng.integers(0, 10)),
+        skin_texture=float(rng.uniform(0.0, 1.5)),
+        texture_seed=texture_seed(subject, seed),
+    )
+    lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
+    xyz, _ = repair_range(out["xyz"], source=f"{subject}/{take}")
+    return out["color"], xyz, project(K, lm3)
+
+
+def _rgbd_take(subject: str, label: str, take: str, seed: int, rng: np.random.Generator):
+    """An RGB-D take resampled onto its colour camera: (colour, xyz, truth px)."""
+    params = {"pose_sigma_deg": 6.0, "distance_mm": float(rng.uniform(500.0, 800.0))}
+    r = make_rgbd_take(subject, label, LABEL_KIND[label], take, seed, params)
+    intr = r["intrinsics"]
+    depth = r["depth"].astype(np.float64) * intr.depth_scale_mm
+    xyz = depth_to_color_grid(np.where(depth > 0, depth, np.nan), intr)
+    xyz, _ = repair_range(xyz, source=f"{subject}/{take}", depth_camera=True)
+    return r["color"], xyz, r["truth"]["landmarks2d"]
+
+
+def make_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+    """Simulate the training takes.
+
+    Parameters
+    ----------
+    seed : int
+        Training seed: fixes identities, articulations, poses, looks and defects.
+    subjects : int
+        Number of training identities (``train000``, ...).
+    takes : int
+        Takes per identity.
+
+    Returns
+    -------
+    list of Sample
+        ``subjects * takes`` takes, in a fixed order.
+    """
+    rng = np.random.default_rng([int(seed), 0x1A4D])
+    labels = list(LABELS)
+    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
+    out = []
+    for i in range(subjects):
+        subject = f"train{i:03d}"
+        for j in range(takes):
+            label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+            take = f"t{j:02d}"
+            if rng.uniform() < RGBD_SHARE:
+                color, xyz, truth = _rgbd_take(subject, label, take, seed, rng)
+                look = "rgbd"
+            else:
+                color, xyz, truth = _range_take(subject, label, take, seed, rng)
+                look = str(rng.choice(list(LOOKS), p=list(LOOKS.values())))
+                if look == "shaded":
+                    color = shaded_image(xyz)
+                elif look == "speckle":
+                    color = _speckled(color, rng)
+            name = f"{subject}/{take}/{label}/{look}"
+            out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
+    return out
+
+
+def _mesh_take(subject: str, label: str, take: str, seed: int, folder: str):
+    """A mesh scan read and rendered by the mesh reader (the virtual camera): (colour, xyz,
+    truth px)."""
+    from pathlib import Path
+
+    from scan2morph.io.mesh_scan import read_mesh_take
+    from scan2morph.synth.mesh_scan import make_mesh_take, write_mesh_take
+
+    r = make_mesh_take(subject, label, LABEL_KIND[label], take, seed)
+    stem = Path(folder) / f"{subject}_{take}"
+    write_mesh_take(r, f"{stem}.ply", f"{stem}.txt", f"{stem}.npz")
+    scan = read_mesh_take(f"{stem}.ply", None, f"{stem}.txt")
+    cam = r["truth"]["landmarks3d"] @ scan.pose[:3, :3].T + scan.pose[:3, 3]
+    truth = cam[:, :2] / cam[:, 2:3] * np.diag(scan.K)[:2] + scan.K[:2, 2]
+    return scan.color, scan.xyz, truth
+
+
+def make_mesh_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+    """Simulated mesh scans (the mesh modality's look: no neck below the jaw's cut, unlit
+    vertex colours, a larger face), identities ``mesh000``, ... of the training seed.
+
+    Parameters
+    ----------
+    seed : int
+    subjects, takes : int
+        Identities and takes per identity.
+
+    Returns
+    -------
+    list of Sample
+    """
+    import tempfile
+
+    rng = np.random.default_rng([int(seed), 0x3E5A])
+    labels = list(LABELS)
+    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
+    out = []
+    with tempfile.TemporaryDirectory() as folder:
+        for i in range(subjects):
+            subject = f"mesh{i:03d}"
+            for j in range(takes):
+                label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+                color, xyz, truth = _mesh_take(subject, label, f"t{j:02d}", seed, folder)
+                name = f"{subject}/t{j:02d}/{label}/mesh"
+                out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
+    return out
