@@ -298,6 +298,47 @@ def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
     assert err[0] > 1.001 * lsc
 
 
+def test_vertex_coordinates_are_least_squares_on_the_natural_modes_span(plate):
+    """coordinates="vertex": the natural modes (consistent mass, uneven mesh) orthonormalised in
+    order in the per-vertex inner product. Each leading set of K vectors spans what the first K
+    natural modes span (least squares leaves the same), and the stored q = Q^T W v rebuilds
+    exactly that least squares at every K; the mass coordinates of the same modes do not."""
+    v, f = plate
+    v = v.copy()
+    v[:, 0] = A_MM * (v[:, 0] / A_MM) ** 1.6  # uneven spacing: dense near x = 0
+    free = np.zeros(len(v), bool)
+    natural = modal_basis(v, f, membrane_params(15), fixed=free)
+    params = ModalParams(**(vars(membrane_params(15)) | {"coordinates": "vertex"}))
+    basis = modal_basis(v, f, params, fixed=free)
+    total = RHO * H_MM * cotangent_laplacian(v, f)[1].sum()
+    assert_allclose(basis.mass.diagonal().reshape(-1, 6)[:, :3], total / len(v), rtol=1e-12)
+    assert_allclose(basis.vectors.T @ (basis.mass @ basis.vectors), np.eye(15), atol=1e-9)
+    assert basis.names == natural.names
+    rng = np.random.default_rng(3)
+    phase = rng.normal(size=3)
+    field = np.column_stack([np.cos(v[:, 0] / 25.0 + c) * (1 + v[:, 1] / 90.0) for c in phase])
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    ks = [1, 4, 9, 15]
+    ls = span_curve(natural.modes, field, ks, normals)
+    assert_allclose(span_curve(basis.modes, field, ks, normals).total_mm, ls.total_mm, rtol=1e-7)
+    everywhere = np.ones(len(v), bool)
+    for k, z in zip(ks, ls.total_mm, strict=True):  # numpy's least squares
+        direct = np.linalg.lstsq(natural.modes[:k].reshape(k, -1).T, field.ravel(), rcond=None)
+        assert_allclose(z, np.sqrt(direct[1][0] / len(v)), rtol=1e-8)
+
+    def stored(b):
+        q = project(b, field)
+        return [
+            residual_split(field - reconstruct(b, q, k), normals, everywhere, ~everywhere)[0]
+            for k in ks
+        ]
+
+    assert_allclose(stored(basis), ls.total_mm, rtol=1e-8)
+    assert np.all(np.asarray(stored(natural)) > 1.0001 * ls.total_mm)
+    with pytest.raises(InputError, match="coordinates"):
+        modal_basis(v, f, ModalParams(**(vars(params) | {"coordinates": "area"})), fixed=free)
+
+
 def test_reconstruction_figure_plots_the_share_left_and_names_the_preset():
     from scan2morph.render.modal_figures import fig_reconstruction
 

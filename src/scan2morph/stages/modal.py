@@ -62,6 +62,7 @@ PRESETS: dict[str, dict] = {
         "tether_n_per_mm3": 0.0,
         "tether_normal_n_per_mm3": 0.0,
         "tether_region": "none",
+        "coordinates": "mass",
     },
 }
 PRESETS["clamped_still"] = PRESETS["paper"] | {"fixed_outline": "still"}
@@ -76,6 +77,7 @@ PRESETS["skin"] = PRESETS["paper"] | {
     "tether_n_per_mm3": 0.003,
     "tether_normal_n_per_mm3": 0.01,
     "tether_region": "stable",
+    "coordinates": "vertex",
 }
 #: The preset used when the config names none.
 DEFAULT_PRESET = "skin"
@@ -183,6 +185,7 @@ class Params:
             foundation_n_per_mm3=float(phys["foundation_n_per_mm3"]),
             tether_n_per_mm3=float(phys["tether_n_per_mm3"]),
             tether_normal_n_per_mm3=float(phys["tether_normal_n_per_mm3"]),
+            coordinates=str(phys["coordinates"]),
         )
         return cls(
             int(template["subdivision_levels"]),
