@@ -16,6 +16,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import vertex_normals
 from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
 from scan2morph.modal.fem import boundary_vertices, cotangent_laplacian, skin_stiffness
 from scan2morph.modal.span import (
@@ -212,9 +213,10 @@ def test_presets_resolve_and_overrides_win():
     assert still.fixed_outline == "still" and still.modal == paper.modal
     skin = modal.Params.from_config(SECTION, TEMPLATE)  # the default
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
-    assert skin.fixed_outline == "none" and skin.tether_region == "stable"
+    assert skin.fixed_outline == "none" and skin.tether_region == "still"
     assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
-    assert skin.modal.tether_normal_n_per_mm3 == 0.01
+    assert skin.modal.tether_normal_n_per_mm3 == 0.1 and skin.modal.coordinates == "vertex"
+    assert paper.modal.coordinates == "mass" and paper.tether_region == "none"
     over = modal.Params.from_config(
         SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None}, TEMPLATE
     )
@@ -265,6 +267,44 @@ def test_the_stage_records_its_preset(template, preset):
         np.mean(np.sum(smile**2, axis=1))
     )
     assert left < (0.8 if preset == "skin" else 1.0)
+
+
+def test_still_skin_is_where_every_take_stays_within_still_mm():
+    from scan2morph.modal.boundary import still_skin
+
+    a = np.zeros((5, 3))
+    a[:, 0] = [0.2, 0.9, 1.5, np.nan, 0.0]
+    b = np.zeros((5, 3))
+    b[:, 1] = [0.5, 0.3, 0.1, np.nan, 2.0]
+    assert still_skin([a, b], 5, 1.0).tolist() == [True, True, False, False, False]
+    assert still_skin([a], 5, 2.0).tolist() == [True, True, True, False, True]
+    assert not still_skin([], 5).any()
+    with pytest.raises(InputError, match="field 1: expected shape"):
+        still_skin([a, b[:4]], 5)
+    with pytest.raises(InputError, match="still_mm"):
+        still_skin([a], 5, -1.0)
+
+
+def test_the_skin_is_tied_where_the_takes_leave_it_still(template):
+    """tether_region still: the tie covers the vertices no take moves by still_mm (the
+    template's stable face when there are no takes), and tying them puts the low modes on the
+    moving skin: 12 modes rebuild more of the smile than the untied skin's."""
+    from scan2morph.modal import modal_basis
+    from scan2morph.template import subdivide_template
+    from scan2morph.template.regions import stable_face
+
+    fine = subdivide_template(template, 1)
+    neutral, smile = _face(template)
+    params = modal.Params.from_config(SECTION, TEMPLATE)
+    assert_allclose(modal.tethered(fine, params, [smile]), np.linalg.norm(smile, axis=1) < 1.0)
+    assert (modal.tethered(fine, params, []) == stable_face(fine)).all()
+    free = np.zeros(len(neutral), bool)
+    normals = vertex_normals(neutral, fine.faces)
+    left = []
+    for tie in (modal.tethered(fine, params, [smile]), stable_face(fine), None):
+        basis = modal_basis(neutral, fine.faces, params.modal, fixed=free, tethered=tie)
+        left.append(span_curve(basis.modes, smile, [12], normals).left[0])
+    assert left[0] < 0.8 * min(left[1:])  # 0.24 against 0.63 (stable face), 0.72
 
 
 def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
