@@ -10,6 +10,7 @@ same shape in plane). Least squares against numpy's.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from numpy.testing import assert_allclose
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
 from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
+from scan2morph.modal.basis import vertex_orthonormal
 from scan2morph.modal.fem import boundary_vertices, cotangent_laplacian, skin_stiffness
 from scan2morph.modal.span import (
     laplace_beltrami,
@@ -377,6 +379,9 @@ def test_vertex_coordinates_are_least_squares_on_the_natural_modes_span(plate):
     assert np.all(np.asarray(stored(natural)) > 1.0001 * ls.total_mm)
     with pytest.raises(InputError, match="coordinates"):
         modal_basis(v, f, ModalParams(**(vars(params) | {"coordinates": "area"})), fixed=free)
+    twice = replace(natural, vectors=np.c_[natural.vectors, natural.vectors[:, :1]])
+    with pytest.raises(InputError, match="translations are independent"):
+        vertex_orthonormal(twice)
 
 
 def test_reconstruction_figure_plots_the_share_left_and_names_the_preset():

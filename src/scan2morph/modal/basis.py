@@ -257,12 +257,24 @@ def vertex_orthonormal(basis: ModalBasis) -> ModalBasis:
         ``mass`` is ``W`` (tonne), ``vectors.T @ W @ vectors = I``; ``frequencies_hz`` the
         Rayleigh quotients ``sqrt(q^T K q) / (2 pi)``; names, stiffness, thickness and fixed
         vertices as given.
+
+    Raises
+    ------
+    InputError
+        The vectors' translations are linearly dependent (``G`` not positive definite).
     """
     x = basis.vectors
     total = float(basis.mass[0 :: fem.DOF, 0 :: fem.DOF].sum())
     w = fem.vertex_mass(total, np.ones(basis.n_vertices, dtype=bool))
     g = x.T @ (w @ x)
-    r = np.linalg.cholesky(0.5 * (g + g.T)).T
+    try:
+        r = np.linalg.cholesky(0.5 * (g + g.T)).T
+    except np.linalg.LinAlgError as exc:
+        raise InputError(
+            "modal basis",
+            "coordinates: 'vertex' needs modes whose translations are independent; these are "
+            "not (a mode moves the rotations alone): use 'mass'",
+        ) from exc
     y = la.solve_triangular(r, x.T, trans="T", lower=False).T
     freqs = np.sqrt(np.maximum(np.einsum("ij,ij->j", y, basis.stiffness @ y), 0.0))
     return ModalBasis(
