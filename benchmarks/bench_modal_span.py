@@ -66,7 +66,7 @@ VARIANTS: dict[str, dict] = {
     },
     "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0, "tether_normal_n_per_mm3": 0.0},
     "skin_tangential_tether": {"preset": "skin", "tether_normal_n_per_mm3": 0.0},
-    "skin_clamped_still": {"preset": "skin", "fixed_outline": "still"},
+    "skin_free_outline": {"preset": "skin", "fixed_outline": "none"},
     "skin_stiff_upper": {"preset": "skin", "stiff_factor": 3.0, "youngs_modulus_mpa": 1.0},
     "skin_vertex_mass": {"preset": "skin", "mass": "vertex"},
     "skin_stable_tether": {  # the skin preset as first measured: a light tie on the stable face
@@ -76,6 +76,7 @@ VARIANTS: dict[str, dict] = {
         "tether_normal_n_per_mm3": 0.01,
         "tether_region": "stable",
         "coordinates": "mass",
+        "fixed_outline": "none",
     },
     "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
     "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},

@@ -215,7 +215,7 @@ def test_presets_resolve_and_overrides_win():
     assert still.fixed_outline == "still" and still.modal == paper.modal
     skin = modal.Params.from_config(SECTION, TEMPLATE)  # the default
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
-    assert skin.fixed_outline == "none" and skin.tether_region == "still"
+    assert skin.fixed_outline == "still" and skin.tether_region == "still"
     assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
     assert skin.modal.tether_normal_n_per_mm3 == 0.1 and skin.modal.coordinates == "vertex"
     assert paper.modal.coordinates == "mass" and paper.tether_region == "none"
@@ -263,8 +263,15 @@ def test_the_stage_records_its_preset(template, preset):
     assert d[paths.modal("preset")] == preset
     assert json.loads(d[paths.modal("physics")]) == params.physics
     fixed = d[paths.modal("fixed_vertices")]
-    n_outline = len(template.boundary) * 2  # one subdivision doubles the loop
-    assert fixed.sum() == (n_outline if preset == "paper" else 0)
+    outline = d[paths.modal("outline_vertices")]
+    assert outline.sum() == len(template.boundary) * 2  # one subdivision doubles the loop
+    assert not (fixed & ~outline).any()
+    if preset == "paper":
+        assert fixed.sum() == outline.sum()
+    else:  # the outline where the smile moves the skin less than still_mm, at least a quarter
+        moving = np.linalg.norm(smile, axis=1) >= 1.0
+        assert 0.25 * outline.sum() <= fixed.sum() < outline.sum()
+        assert not (fixed & moving).any() and (outline & moving).any()
     left = d[paths.expression("sm1", "reconstruction_rms_mm")][-1] / np.sqrt(
         np.mean(np.sum(smile**2, axis=1))
     )
