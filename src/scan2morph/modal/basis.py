@@ -237,8 +237,9 @@ def vertex_orthonormal(basis: ModalBasis) -> ModalBasis:
     translation alike.
 
     ``W`` is the model's total mass shared equally by the translations of its vertices
-    (:func:`fem.vertex_mass`; rotations weigh nothing; the modes are zero on fixed vertices). With ``G = Q^T W Q = R^T R``
-    (Cholesky, R upper triangular with a positive diagonal) the new vectors are ``Q R^-1``:
+    (:func:`fem.vertex_mass`; rotations weigh nothing; the modes are zero on fixed vertices).
+    With ``G = Q^T W Q = R^T R`` (Cholesky, R upper triangular with a positive diagonal) the
+    new vectors are ``Q R^-1``:
     vector j is natural vector j plus a combination of the ones before it, so the first K
     vectors span what the first K natural modes span, for every K, and ``q = Q^T W v`` is the
     least squares fit (uniform weight per vertex) of a field's translations on them. On an
