@@ -66,9 +66,20 @@ VARIANTS: dict[str, dict] = {
     },
     "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0, "tether_normal_n_per_mm3": 0.0},
     "skin_tangential_tether": {"preset": "skin", "tether_normal_n_per_mm3": 0.0},
-    "skin_clamped_still": {"preset": "skin", "fixed_outline": "still"},
+    "skin_free_outline": {"preset": "skin", "fixed_outline": "none"},
     "skin_stiff_upper": {"preset": "skin", "stiff_factor": 3.0, "youngs_modulus_mpa": 1.0},
     "skin_vertex_mass": {"preset": "skin", "mass": "vertex"},
+    "skin_stable_tether": {  # the skin preset as first measured: a light tie on the stable face
+        "preset": "skin",
+        "foundation_n_per_mm3": 0.005,
+        "tether_n_per_mm3": 0.003,
+        "tether_normal_n_per_mm3": 0.01,
+        "tether_region": "stable",
+        "coordinates": "mass",
+        "fixed_outline": "none",
+    },
+    "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
+    "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},
 }
 
 
@@ -199,7 +210,8 @@ def realdata_case(data_dir: str | None = None):
 
 def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
     """Rows of the real head's smile for one configuration: clamped where the preset clamps
-    (its whole boundary: no takes say which part is still), free otherwise."""
+    (its whole boundary: no takes say which part is still), free otherwise; tethered on the
+    stable face where the preset tethers."""
     from scan2morph.geometry import vertex_normals
     from scan2morph.modal import modal_basis, project, reconstruct
     from scan2morph.modal.fem import boundary_vertices
@@ -210,7 +222,8 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     v, f = real["vertices"], real["faces"]
     rim = boundary_vertices(f, len(v))
     fixed = rim if params.fixed_outline != "none" else np.zeros(len(v), bool)
-    tethered = real["stable"] if params.tether_region == "stable" else None
+    # no takes say which skin is still: the stable face, placed by measure, for "still" too
+    tethered = real["stable"] if params.tether_region in ("still", "stable") else None
     t0 = time.perf_counter()
     basis = modal_basis(v, f, params.modal, real["upper"], fixed=fixed, tethered=tethered)
     seconds = time.perf_counter() - t0

@@ -10,13 +10,16 @@ same shape in plane). Least squares against numpy's.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import vertex_normals
 from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
+from scan2morph.modal.basis import vertex_orthonormal
 from scan2morph.modal.fem import boundary_vertices, cotangent_laplacian, skin_stiffness
 from scan2morph.modal.span import (
     laplace_beltrami,
@@ -217,9 +220,10 @@ def test_presets_resolve_and_overrides_win():
     assert still.fixed_outline == "still" and still.modal == paper.modal
     skin = modal.Params.from_config(_config(SECTION))  # the default
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
-    assert skin.fixed_outline == "none" and skin.tether_region == "stable"
+    assert skin.fixed_outline == "still" and skin.tether_region == "still"
     assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
-    assert skin.modal.tether_normal_n_per_mm3 == 0.01
+    assert skin.modal.tether_normal_n_per_mm3 == 0.1 and skin.modal.coordinates == "vertex"
+    assert paper.modal.coordinates == "mass" and paper.tether_region == "none"
     over = modal.Params.from_config(
         _config(SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None})
     )
@@ -264,12 +268,57 @@ def test_the_stage_records_its_preset(template, preset):
     assert d[paths.modal("preset")] == preset
     assert json.loads(d[paths.modal("physics")]) == params.physics
     fixed = d[paths.modal("fixed_vertices")]
-    n_outline = len(template.boundary) * 2  # one subdivision doubles the loop
-    assert fixed.sum() == (n_outline if preset == "paper" else 0)
+    outline = d[paths.modal("outline_vertices")]
+    assert outline.sum() == len(template.boundary) * 2  # one subdivision doubles the loop
+    assert not (fixed & ~outline).any()
+    if preset == "paper":
+        assert fixed.sum() == outline.sum()
+    else:  # the outline where the smile moves the skin less than still_mm, at least a quarter
+        moving = np.linalg.norm(smile, axis=1) >= 1.0
+        assert 0.25 * outline.sum() <= fixed.sum() < outline.sum()
+        assert not (fixed & moving).any() and (outline & moving).any()
     left = d[paths.expression("sm1", "reconstruction_rms_mm")][-1] / np.sqrt(
         np.mean(np.sum(smile**2, axis=1))
     )
     assert left < (0.8 if preset == "skin" else 1.0)
+
+
+def test_still_skin_is_where_every_take_stays_within_still_mm():
+    from scan2morph.modal.boundary import still_skin
+
+    a = np.zeros((5, 3))
+    a[:, 0] = [0.2, 0.9, 1.5, np.nan, 0.0]
+    b = np.zeros((5, 3))
+    b[:, 1] = [0.5, 0.3, 0.1, np.nan, 2.0]
+    assert still_skin([a, b], 5, 1.0).tolist() == [True, True, False, False, False]
+    assert still_skin([a], 5, 2.0).tolist() == [True, True, True, False, True]
+    assert not still_skin([], 5).any()
+    with pytest.raises(InputError, match="field 1: expected shape"):
+        still_skin([a, b[:4]], 5)
+    with pytest.raises(InputError, match="still_mm"):
+        still_skin([a], 5, -1.0)
+
+
+def test_the_skin_is_tied_where_the_takes_leave_it_still(template):
+    """tether_region still: the tie covers the vertices no take moves by still_mm (the
+    template's stable face when there are no takes), and tying them puts the low modes on the
+    moving skin: 12 modes rebuild more of the smile than the untied skin's."""
+    from scan2morph.modal import modal_basis
+    from scan2morph.template import subdivide_template
+    from scan2morph.template.regions import stable_face
+
+    fine = subdivide_template(template, 1)
+    neutral, smile = _face(template)
+    params = modal.Params.from_config(SECTION, TEMPLATE)
+    assert_allclose(modal.tethered(fine, params, [smile]), np.linalg.norm(smile, axis=1) < 1.0)
+    assert (modal.tethered(fine, params, []) == stable_face(fine)).all()
+    free = np.zeros(len(neutral), bool)
+    normals = vertex_normals(neutral, fine.faces)
+    left = []
+    for tie in (modal.tethered(fine, params, [smile]), stable_face(fine), None):
+        basis = modal_basis(neutral, fine.faces, params.modal, fixed=free, tethered=tie)
+        left.append(span_curve(basis.modes, smile, [12], normals).left[0])
+    assert left[0] < 0.8 * min(left[1:])  # 0.24 against 0.63 (stable face), 0.72
 
 
 def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
@@ -301,6 +350,50 @@ def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
     err = residual_split(field - reconstruct(consistent, qc, 9), normals, everywhere, ~everywhere)
     lsc = span_curve(consistent.modes, field, [9], normals).total_mm[0]
     assert err[0] > 1.001 * lsc
+
+
+def test_vertex_coordinates_are_least_squares_on_the_natural_modes_span(plate):
+    """coordinates="vertex": the natural modes (consistent mass, uneven mesh) orthonormalised in
+    order in the per-vertex inner product. Each leading set of K vectors spans what the first K
+    natural modes span (least squares leaves the same), and the stored q = Q^T W v rebuilds
+    exactly that least squares at every K; the mass coordinates of the same modes do not."""
+    v, f = plate
+    v = v.copy()
+    v[:, 0] = A_MM * (v[:, 0] / A_MM) ** 1.6  # uneven spacing: dense near x = 0
+    free = np.zeros(len(v), bool)
+    natural = modal_basis(v, f, membrane_params(15), fixed=free)
+    params = ModalParams(**(vars(membrane_params(15)) | {"coordinates": "vertex"}))
+    basis = modal_basis(v, f, params, fixed=free)
+    total = RHO * H_MM * cotangent_laplacian(v, f)[1].sum()
+    assert_allclose(basis.mass.diagonal().reshape(-1, 6)[:, :3], total / len(v), rtol=1e-12)
+    assert_allclose(basis.vectors.T @ (basis.mass @ basis.vectors), np.eye(15), atol=1e-9)
+    assert basis.names == natural.names
+    rng = np.random.default_rng(3)
+    phase = rng.normal(size=3)
+    field = np.column_stack([np.cos(v[:, 0] / 25.0 + c) * (1 + v[:, 1] / 90.0) for c in phase])
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    ks = [1, 4, 9, 15]
+    ls = span_curve(natural.modes, field, ks, normals)
+    assert_allclose(span_curve(basis.modes, field, ks, normals).total_mm, ls.total_mm, rtol=1e-7)
+    everywhere = np.ones(len(v), bool)
+    for k, z in zip(ks, ls.total_mm, strict=True):  # numpy's least squares
+        direct = np.linalg.lstsq(natural.modes[:k].reshape(k, -1).T, field.ravel(), rcond=None)
+        assert_allclose(z, np.sqrt(direct[1][0] / len(v)), rtol=1e-8)
+
+    def stored(b):
+        q = project(b, field)
+        return [
+            residual_split(field - reconstruct(b, q, k), normals, everywhere, ~everywhere)[0]
+            for k in ks
+        ]
+
+    assert_allclose(stored(basis), ls.total_mm, rtol=1e-8)
+    assert np.all(np.asarray(stored(natural)) > 1.0001 * ls.total_mm)
+    with pytest.raises(InputError, match="coordinates"):
+        modal_basis(v, f, ModalParams(**(vars(params) | {"coordinates": "area"})), fixed=free)
+    twice = replace(natural, vectors=np.c_[natural.vectors, natural.vectors[:, :1]])
+    with pytest.raises(InputError, match="translations are independent"):
+        vertex_orthonormal(twice)
 
 
 def test_reconstruction_figure_plots_the_share_left_and_names_the_preset():

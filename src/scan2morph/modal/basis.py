@@ -5,12 +5,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg as la
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
 from scan2morph.modal import fem
 from scan2morph.modal.eigen import solve_modes
+
+#: What the coordinates of a basis are (:attr:`ModalParams.coordinates`).
+COORDINATES = ("mass", "vertex")
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,12 @@ class ModalParams:
     tether_normal_n_per_mm3 : float
         The bone's resistance to normal motion on the tethered vertices, added to the
         foundation there, N/mm^3; 0: none.
+    coordinates : {"mass", "vertex"}
+        The inner product the returned basis is orthonormal in, hence what the coordinates
+        ``q = Q^T M v`` (:func:`~scan2morph.modal.project`) are: ``"mass"`` (the paper, Eq. 7)
+        the model's mass; ``"vertex"`` every vertex's translation weighted alike
+        (:func:`vertex_orthonormal`), so that the first K coordinates are the least squares
+        fit of a field's translations on the first K vectors, for every K.
     """
 
     n_modes: int = 100
@@ -69,6 +79,7 @@ class ModalParams:
     foundation_n_per_mm3: float = 0.0
     tether_n_per_mm3: float = 0.0
     tether_normal_n_per_mm3: float = 0.0
+    coordinates: str = "mass"
 
     @property
     def has_skin(self) -> bool:
@@ -174,6 +185,10 @@ def modal_basis(
     v, f = fem.check_mesh(vertices, faces, source)
     if p.boundary not in ("clamped", "pinned"):
         raise InputError(source, f"boundary: expected 'clamped' or 'pinned', got {p.boundary!r}")
+    if p.coordinates not in COORDINATES:
+        raise InputError(
+            source, f"coordinates: expected one of {COORDINATES}, got {p.coordinates!r}"
+        )
     n_v = v.shape[0]
     boundary = fem.boundary_vertices(f, n_v)
     if fixed is not None:
@@ -213,7 +228,65 @@ def modal_basis(
         source=source,
     )
     names = tuple(f"mode_{i + 1:03d}" for i in range(p.n_modes))
-    return ModalBasis(freqs, vecs, m_mat, k_mat, thickness, fixed, names)
+    basis = ModalBasis(freqs, vecs, m_mat, k_mat, thickness, fixed, names)
+    return vertex_orthonormal(basis) if p.coordinates == "vertex" else basis
+
+
+def vertex_orthonormal(basis: ModalBasis) -> ModalBasis:
+    """The basis orthonormalised, in its order, in the inner product that weighs every vertex's
+    translation alike.
+
+    ``W`` is the model's total mass shared equally by the translations of its vertices
+    (:func:`fem.vertex_mass`; rotations weigh nothing; the modes are zero on fixed vertices).
+    With ``G = Q^T W Q = R^T R`` (Cholesky, R upper triangular with a positive diagonal) the
+    new vectors are ``Q R^-1``:
+    vector j is natural vector j plus a combination of the ones before it, so the first K
+    vectors span what the first K natural modes span, for every K, and ``q = Q^T W v`` is the
+    least squares fit (uniform weight per vertex) of a field's translations on them. On an
+    even mesh ``W`` is close to the consistent mass and the vectors close to the natural
+    modes; on an uneven one (a scan's mesh) the mass projection weighs big triangles more than
+    the per-vertex RMS does.
+
+    Parameters
+    ----------
+    basis : ModalBasis
+        Orthonormal in its ``mass``.
+
+    Returns
+    -------
+    ModalBasis
+        ``mass`` is ``W`` (tonne), ``vectors.T @ W @ vectors = I``; ``frequencies_hz`` the
+        Rayleigh quotients ``sqrt(q^T K q) / (2 pi)``; names, stiffness, thickness and fixed
+        vertices as given.
+
+    Raises
+    ------
+    InputError
+        The vectors' translations are linearly dependent (``G`` not positive definite).
+    """
+    x = basis.vectors
+    total = float(basis.mass[0 :: fem.DOF, 0 :: fem.DOF].sum())
+    w = fem.vertex_mass(total, np.ones(basis.n_vertices, dtype=bool))
+    g = x.T @ (w @ x)
+    try:
+        r = np.linalg.cholesky(0.5 * (g + g.T)).T
+    except np.linalg.LinAlgError as exc:
+        raise InputError(
+            "modal basis",
+            "coordinates: 'vertex' needs modes whose translations are independent; these are "
+            "not (a mode moves the rotations alone): use 'mass'",
+        ) from exc
+    y = la.solve_triangular(r, x.T, trans="T", lower=False).T
+    freqs = np.sqrt(np.maximum(np.einsum("ij,ij->j", y, basis.stiffness @ y), 0.0))
+    return ModalBasis(
+        freqs / (2.0 * np.pi),
+        y,
+        w,
+        basis.stiffness,
+        basis.thickness_mm,
+        basis.fixed_vertices,
+        basis.names,
+    )
 
 
 def _matrices(v, f, thickness, p: ModalParams, tethered, source: str):

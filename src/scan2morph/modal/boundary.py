@@ -162,3 +162,43 @@ def still_outline(
     fixed = np.zeros(n_vertices, dtype=bool)
     fixed[loop[still]] = True
     return OutlineChoice(fixed, outline, motion, policy)
+
+
+def still_skin(
+    fields: Sequence[ArrayLike], n_vertices: int, still_mm: float = 1.0, source: str = "modal"
+) -> NDArray[np.bool_]:
+    """The vertices every take leaves still: where the skin can be tied to the bone.
+
+    The skin over the skull's still parts (forehead, nose, temples, the sides of the face) does
+    not slide; where it does differs between faces and takes (a sad face raises the lower
+    forehead, a smile the lower temples). A vertex is still when the longest of the takes'
+    displacements there is below ``still_mm``: only which skin moves is taken from the takes,
+    no shape of their motion.
+
+    Parameters
+    ----------
+    fields : sequence of (V, 3) float, mm
+        The subject's measured displacement fields (viseme motion, expression displacement);
+        NaN rows are ignored.
+    n_vertices : int
+        V.
+    still_mm : float
+        Displacement below which a vertex is still in a take, mm.
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (V,) bool
+        Still in every take that measures it; False where no take gives a value, and
+        everywhere when ``fields`` is empty.
+    """
+    if not (np.isfinite(still_mm) and still_mm >= 0):
+        raise InputError(source, f"modal.still_mm: expected a number >= 0, got {still_mm}")
+    longest = np.full(int(n_vertices), np.nan)
+    for i, f in enumerate(fields):
+        f = np.asarray(f, dtype=np.float64)
+        if f.shape != (n_vertices, 3):
+            raise InputError(source, f"field {i}: expected shape ({n_vertices}, 3), got {f.shape}")
+        longest = np.fmax(longest, np.linalg.norm(f, axis=1))
+    return longest < still_mm

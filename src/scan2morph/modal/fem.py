@@ -279,7 +279,9 @@ def assemble(
     n_dof = DOF * v.shape[0]
     if mass == "vertex":
         total = mat.density_t_per_mm3 * float(np.sum(t * face_areas(v, f)))
-        return _symmetric_csc(kr, kc, kv, n_dof), _vertex_mass(total, f, v.shape[0])
+        used = np.zeros(v.shape[0], dtype=bool)
+        used[f.ravel()] = True
+        return _symmetric_csc(kr, kc, kv, n_dof), vertex_mass(total, used)
     return _symmetric_csc(kr, kc, kv, n_dof), _symmetric_csc(mr, mc, mv, n_dof)
 
 
@@ -341,10 +343,21 @@ def _element_matrices(v, f, t, mat: ShellMaterial, element: str, mass: str):
     return kr, kc, kv, mr, mc, mv
 
 
-def _vertex_mass(total: float, faces: NDArray[np.int64], n_vertices: int) -> sp.csc_matrix:
-    """A mass ``total`` (tonne) shared equally by the translations of the vertices faces use."""
-    used = np.zeros(n_vertices, dtype=bool)
-    used[faces.ravel()] = True
+def vertex_mass(total: float, used: NDArray[np.bool_]) -> sp.csc_matrix:
+    """A mass shared equally by the translations of the vertices ``used``.
+
+    Parameters
+    ----------
+    total : float
+        Total mass, tonne.
+    used : (V,) bool
+        Vertices that carry it.
+
+    Returns
+    -------
+    (6V, 6V) scipy.sparse.csc_matrix, diagonal, tonne (zero on rotations and other vertices)
+    """
+    n_vertices = used.shape[0]
     diag = np.zeros(DOF * n_vertices)
     for a in range(3):
         diag[a::DOF] = np.where(used, total / used.sum(), 0.0)

@@ -15,7 +15,7 @@ import pandas as pd
 from scan2morph.errors import InputError
 from scan2morph.io import write_obj
 from scan2morph.modal import ModalBasis, ModalParams, ShellMaterial
-from scan2morph.modal.boundary import POLICIES, OutlineChoice, still_outline
+from scan2morph.modal.boundary import POLICIES, OutlineChoice, still_outline, still_skin
 from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 from scan2morph.stages.part import Part, Subject, need
 from scan2morph.stages.quality import modelled
@@ -39,11 +39,12 @@ log = logging.getLogger("scan2morph")
 #: the same name overrides one value. ``paper``: the modal-analysis paper's steel shell, 1 mm,
 #: three times thicker above the nose tip, whole outline clamped. ``clamped_still``: the same
 #: shell clamped only where the takes leave the outline still (this pipeline's basis before
-#: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation, free at its outline: a
-#: soft 1 mm shell (E = 0.01 MPa, no rotary inertia) under an isotropic tension of 1 N/mm, on
-#: tissue that resists normal motion (0.005 N/mm^3) and, where the skin lies on bone (the stable
-#: forehead, nose ridge and temples), sliding (0.003 N/mm^3) and normal motion more (another
-#: 0.01 N/mm^3). Chosen by
+#: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation, clamped where the takes
+#: leave the outline still (as ``clamped_still``): a soft 1 mm shell (E = 0.01 MPa, no rotary
+#: inertia) under an isotropic tension of 1 N/mm, on tissue that resists normal motion
+#: (0.01 N/mm^3) and, where every take leaves the skin still (``tether_region: still``, within
+#: ``still_mm``), ties it to the bone against sliding (0.1 N/mm^3) and normal motion (another
+#: 0.1 N/mm^3); its coordinates are the least squares fit (``coordinates: vertex``). Chosen by
 #: ``benchmarks/bench_modal_span.py`` (docs/outputs.md, "The modal basis's physics").
 PRESETS: dict[str, dict] = {
     "paper": {
@@ -62,26 +63,28 @@ PRESETS: dict[str, dict] = {
         "tether_n_per_mm3": 0.0,
         "tether_normal_n_per_mm3": 0.0,
         "tether_region": "none",
+        "coordinates": "mass",
     },
 }
 PRESETS["clamped_still"] = PRESETS["paper"] | {"fixed_outline": "still"}
 PRESETS["skin"] = PRESETS["paper"] | {
-    "fixed_outline": "none",
+    "fixed_outline": "still",
     "youngs_modulus_mpa": 0.01,
     "density_t_per_mm3": 1.1e-9,
     "stiff_factor": 1.0,
     "rotary_inertia": False,
     "tension_n_per_mm": 1.0,
-    "foundation_n_per_mm3": 0.005,
-    "tether_n_per_mm3": 0.003,
-    "tether_normal_n_per_mm3": 0.01,
-    "tether_region": "stable",
+    "foundation_n_per_mm3": 0.01,
+    "tether_n_per_mm3": 0.1,
+    "tether_normal_n_per_mm3": 0.1,
+    "tether_region": "still",
+    "coordinates": "vertex",
 }
 #: The preset used when the config names none.
 DEFAULT_PRESET = "skin"
 #: Outline policies: clamp the whole outline, its still part, or nothing (a free model).
 FIXED_OUTLINE = POLICIES
-TETHER_REGIONS = ("stable", "none")
+TETHER_REGIONS = ("still", "stable", "none")
 
 
 def physics(modal: Mapping, source: str = "config modal") -> dict:
@@ -136,13 +139,16 @@ class Params:
         Outline vertices clamped: those the takes do not move (``still``), all (the paper) or
         none (a free model).
     still_mm : float
-        Median displacement over the takes below which an outline vertex is still, mm.
+        Median displacement over the takes below which an outline vertex is still
+        (``fixed_outline: still``), and the longest displacement below which a vertex is still
+        (``tether_region: still``), mm.
     min_fixed_share : float
         Share of the outline clamped at least.
     target_rms_mm : float
         Reconstruction error whose mode count is reported, mm.
-    tether_region : {"stable", "none"}
-        Vertices whose skin is tied to the bone: the template's stable face, or none.
+    tether_region : {"still", "stable", "none"}
+        Vertices whose skin is tied to the bone: those the takes leave still (within
+        ``still_mm``), the template's stable face, or none.
     physics : dict
         The resolved physics (:func:`physics`: the preset's name and every value), recorded
         in the store.
@@ -185,6 +191,7 @@ class Params:
             foundation_n_per_mm3=float(phys["foundation_n_per_mm3"]),
             tether_n_per_mm3=float(phys["tether_n_per_mm3"]),
             tether_normal_n_per_mm3=float(phys["tether_normal_n_per_mm3"]),
+            coordinates=str(phys["coordinates"]),
         )
         return cls(
             int(template["subdivision_levels"]),
@@ -228,14 +235,9 @@ def outline_choice(
     The paper fixes the face's outline; the mouth loop (the lips) stays free. With
     ``fixed_outline: still``, only the part of the outline that the takes do not move.
     """
-    moved = [
-        data[paths.viseme(t, "motion")]
-        for t in subject.visemes
-        if paths.viseme(t, "motion") in data
-    ]
     return still_outline(
         fine.boundary,
-        [*moved, *fields.values()],
+        takes_motion(subject, data, fields),
         fine.n_vertices,
         params.fixed_outline,
         params.still_mm,
@@ -275,15 +277,34 @@ def natural_basis(
         params.modal,
         upper_face(fine, params.stiff_above),
         fixed=outline.fixed,
-        tethered=tethered(fine, params),
+        tethered=tethered(fine, params, takes_motion(subject, data, fields)),
         source=subject.name,
     )
     return basis, outline
 
 
-def tethered(fine: Template, params: Params) -> np.ndarray | None:
-    """Vertices whose skin is tied to the bone (``modal.tether_region``), or None."""
-    return stable_face(fine) if params.tether_region == "stable" else None
+def takes_motion(
+    subject: Subject, data: Mapping[str, np.ndarray], fields: Mapping[str, np.ndarray]
+) -> list[np.ndarray]:
+    """The visemes' motion and the expressions' displacement ``fields``, (V, 3) mm each."""
+    moved = [
+        data[paths.viseme(t, "motion")]
+        for t in subject.visemes
+        if paths.viseme(t, "motion") in data
+    ]
+    return [*moved, *fields.values()]
+
+
+def tethered(fine: Template, params: Params, moved: list | None = None) -> np.ndarray | None:
+    """Vertices whose skin is tied to the bone (``modal.tether_region``), or None.
+
+    ``still``: the vertices every take in ``moved`` (:func:`takes_motion`) leaves within
+    ``modal.still_mm`` (:func:`~scan2morph.modal.boundary.still_skin`), the template's stable
+    face when there are no takes; ``stable``: the template's stable face.
+    """
+    if params.tether_region == "still" and moved:
+        return still_skin(moved, fine.n_vertices, params.still_mm)
+    return stable_face(fine) if params.tether_region in ("still", "stable") else None
 
 
 def run(
