@@ -18,6 +18,7 @@ import yaml
 
 from scan2morph.sheet import input_roles, synthetic_rows
 from scan2morph.stages import ingest, repair, synth
+from scan2morph.stages.part import Take
 from scan2morph.store import paths
 
 REPO = Path(__file__).resolve().parents[2]
@@ -64,7 +65,6 @@ def _rows(config: dict, root: Path):
 
 def _write_subject(rows, config: dict, root: Path) -> None:
     """Write a subject's takes (the rows given) with the synth stage."""
-    syn = config["synthetic"]
     subject = rows[0]["subject"]
     files: dict[str, list[str]] = {"landmarks": [], "truth": []}
     for r in rows:
@@ -74,18 +74,21 @@ def _write_subject(rows, config: dict, root: Path) -> None:
         files["landmarks"].append(r["landmarks"])
         files["truth"].append(str(root / subject / "truth" / f"{r['take']}.npz"))
     (root / subject / "truth").mkdir(parents=True, exist_ok=True)
-    takes = [{k: r[k] for k in ("take", "kind", "label", "modality")} for r in rows]
-    sensors = {"rgbd": syn["rgbd"]["sensor"], "mesh": syn["mesh"]["scanner"]}
-    synth.run(subject, takes, syn["seed"], syn["scanner"], syn["stereo"]["rig"], files, sensors)
+    params = synth.Params.from_config(config)
+    for i, r in enumerate(rows):
+        take = Take.from_row(r)
+        part = synth.run(None, take, params)
+        synth.write_files(part, {role: paths_[i] for role, paths_ in files.items()})
 
 
 def _grid(row, config: dict, root: Path) -> GridTake:
     """Ingest and repair one written take; its truth on the grid."""
     take, subject = row["take"], row["subject"]
     files = {role: row[role] for role in input_roles(row)} | {"landmarks": row["landmarks"]}
-    part = ingest.run(row, files, config["stereo"], config["mesh_camera"])
+    part = ingest.run(None, Take.from_row(row, files=files), ingest.Params.from_config(config))
     attrs = part.attrs[paths.take(take)]
-    fixed = repair.run(take, part.datasets, attrs, config["repair"], f"{subject}/{take}")
+    raw = Take.from_row(row, data=part.datasets, attrs=attrs)
+    fixed = repair.run(None, raw, repair.Params.from_config(config))
     data = fixed.datasets
     with np.load(root / subject / "truth" / f"{take}.npz") as z:
         if row["modality"] == "mesh":

@@ -18,7 +18,7 @@ from scan2morph.landmarks import complete_jawline, detect
 from scan2morph.landmarks.cascade import load
 from scan2morph.landmarks.train import train
 from scan2morph.synth.cohort import AIM, articulated_head
-from scan2morph.synth.scanner import camera_matrix, scan
+from scan2morph.synth.scanner import ScanDefects, camera_matrix, scan
 from tests.support.landmark_takes import cohort_takes
 
 #: One held-out take of each modality (synth02's car is a stereo take, synth03's a mesh scan,
@@ -107,7 +107,9 @@ def _scene(yaw_deg: float = 0.0, distance_mm: float = 1000.0, shifts=(0.0,), wid
         pose = np.eye(4)
         pose[:3, :3] = Rotation.from_euler("y", yaw_deg, degrees=True).as_matrix() @ flip
         pose[:3, 3] = np.array([dx, 0.0, distance_mm]) - flip @ AIM
-        out = scan(head, vertices, pose, K, width, 480, np.random.default_rng(1), hole_blobs=0)
+        out = scan(
+            head, vertices, pose, K, width, 480, np.random.default_rng(1), ScanDefects(hole_blobs=0)
+        )
         if best is None:
             best = out
             continue

@@ -309,7 +309,7 @@ def test_the_skin_is_tied_where_the_takes_leave_it_still(template):
 
     fine = subdivide_template(template, 1)
     neutral, smile = _face(template)
-    params = modal.Params.from_config(SECTION, TEMPLATE)
+    params = modal.Params.from_config(_config(SECTION))
     assert_allclose(modal.tethered(fine, params, [smile]), np.linalg.norm(smile, axis=1) < 1.0)
     assert (modal.tethered(fine, params, []) == stable_face(fine)).all()
     free = np.zeros(len(neutral), bool)

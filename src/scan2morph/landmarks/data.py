@@ -22,7 +22,7 @@ from scan2morph.scan.view import shaded_image
 from scan2morph.synth.cohort import AIM, articulated_head
 from scan2morph.synth.head import LABEL_KIND
 from scan2morph.synth.rgbd import make_rgbd_take
-from scan2morph.synth.scanner import camera_matrix, project, scan
+from scan2morph.synth.scanner import ScanDefects, camera_matrix, project, scan
 from scan2morph.synth.texture import texture_seed
 
 #: Labels drawn for training takes, with their weights.
@@ -92,10 +92,12 @@ def _range_take(subject: str, label: str, take: str, seed: int, rng: np.random.G
         640,
         480,
         take_rng,
-        noise_mm=float(rng.uniform(0.05, 0.4)),
-        hole_blobs=int(rng.integers(0, 10)),
-        skin_texture=float(rng.uniform(0.0, 1.5)),
-        texture_seed=texture_seed(subject, seed),
+        ScanDefects(
+            noise_mm=float(rng.uniform(0.05, 0.4)),
+            hole_blobs=int(rng.integers(0, 10)),
+            skin_texture=float(rng.uniform(0.0, 1.5)),
+            texture_seed=texture_seed(subject, seed),
+        ),
     )
     lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
     xyz, _ = repair_range(out["xyz"], source=f"{subject}/{take}")
