@@ -41,7 +41,7 @@ def run(tmp_path_factory):
         mesh_camera=dict(width=160, height=120),
         # an absolute alignment gate: repair smooths the RGB-D depth noise, so the meshes look
         # smoother (their roughness ~0.03 mm) than they are against each other (~0.2 mm)
-        align=dict(max_rmse_mm=0.5),
+        align=dict(icp=dict(max_rmse_mm=0.5)),
         modal=dict(modes=10, reconstruction_k=[1, 2, 5, 10]),
     )
     (work / "cfg.yaml").write_text(yaml.safe_dump(cfg))
