@@ -138,7 +138,9 @@ def get_noise_repairs(wildcards):
     return sum(
         (
             _take_files(
-                f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
+                f"results/{{subject}}/takes/{{take}}/{stage}.h5",
+                wildcards.subject,
+                takes,
             )
             for stage in ("repair", "landmarks")
         ),
@@ -176,7 +178,11 @@ def get_neutral_parts_for_others(stages):
     of_neutral = get_neutral_parts(stages)
 
     def parts(wildcards):
-        return [] if wildcards.take == get_neutral_take(wildcards) else of_neutral(wildcards)
+        return (
+            []
+            if wildcards.take == get_neutral_take(wildcards)
+            else of_neutral(wildcards)
+        )
 
     return parts
 
@@ -196,7 +202,9 @@ def get_subject_parts(wildcards):
         _take_files(
             f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
         )
-        for stage in ("repair", "landmarks", "fit", "align", "refine")[: 5 if REFINE else 4]
+        for stage in ("repair", "landmarks", "fit", "align", "refine")[
+            : 5 if REFINE else 4
+        ]
     ]
     per_subject = [
         f"results/{wildcards.subject}/{stage}.h5"
