@@ -23,9 +23,10 @@ so the list can only shrink. Exit status 1 when anything is reported.
 
 The layers
 ----------
-CONTRIBUTING.md's flow is ``io -> scan -> template -> align -> motion -> morph/modal -> stages ->
-store/render/report``: a module may import from its own layer and the layers before it. Encoded
-as it stands, with these additions and one correction:
+CONTRIBUTING.md's flow is ``io -> scan -> template -> landmarks -> align -> refine -> motion ->
+morph/modal -> render/report -> stages``: a module may import from its own layer and the layers
+before it. The stages come last: each one runs its libraries, the figures and the report
+included. Encoded as it stands, with these additions and one correction:
 
 - **base** (correction): ``errors``, ``tol``, ``geometry``, ``jobs`` and the whole ``store``
   package (``store.paths`` builds every store path; ``hdf5``, ``warnings``, ``layout`` and
@@ -33,7 +34,7 @@ as it stands, with these additions and one correction:
   each other: they come before ``io``, not after ``stages``. ``sheet`` (the sample sheet) and
   ``tables`` (the result tables) import only the base and are placed in it, and so is
   ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
-  mesh-scan reader and the figures).
+  mesh-scan reader and the figures), and ``version`` (the installed version the store records).
 - **synth** (the synthetic scanners) writes takes in ``io``'s formats: after ``io``.
 - **landmarks** (the detector, trained on synthetic heads, reading a take's repaired grid) uses
   ``synth`` and ``scan``: after ``template``, before ``align``.
@@ -72,6 +73,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.sheet",
             "scan2morph.tables",
             "scan2morph.offscreen",
+            "scan2morph.version",
         ),
     ),
     ("io", ("scan2morph.io",)),
@@ -83,8 +85,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("refine", ("scan2morph.refine",)),
     ("motion", ("scan2morph.motion",)),
     ("morph/modal", ("scan2morph.morph", "scan2morph.modal", "scan2morph.evaluate")),
+    ("render/report", ("scan2morph.render", "scan2morph.report")),
     ("stages", ("scan2morph.stages",)),
-    ("store/render/report", ("scan2morph.render", "scan2morph.report")),
     ("top", ("scan2morph.model", "scan2morph.sweep", "scan2morph")),
 )
 

@@ -2,17 +2,13 @@
 
 The library is split by concept and data flows one way::
 
-    io -> scan -> template -> align -> motion -> morph / modal -> store / render / report
+    io -> scan -> template -> landmarks -> align -> refine -> motion -> morph / modal
+       -> render / report -> stages
 
 Nothing here imports snakemake; the workflow under ``workflow/`` is a thin layer on top.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("scan2morph")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
+from scan2morph.version import __version__
 
 __all__ = ["__version__", "load_model"]
 

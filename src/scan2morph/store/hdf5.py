@@ -22,9 +22,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from scan2morph import __version__
 from scan2morph.errors import InputError, writing
 from scan2morph.jobs import atomic_output
+from scan2morph.version import __version__
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
 FORMAT_VERSION = "1.5.0"
