@@ -89,8 +89,6 @@ def subject_accuracy(
         ``{"units": ..., "takes": {take: {"mesh": ..., "align": ..., "motion": ...}}, "summary": ...}``
     """
     im = IdealMotion() if reference is None else reference
-    template, fiducial_sets, levels = im.template, im.fiducial_sets, im.levels
-    smoothing, max_slope_deg = im.smoothing, im.max_slope_deg
     takes: dict[str, dict] = {}
     n_vertices = store[paths.mesh(neutral, "vertices")]
     n_normals = vertex_normals(n_vertices, store[paths.template("faces")])
@@ -106,69 +104,95 @@ def subject_accuracy(
     # the virtual camera), with the rotation from the take's frame into that camera
     views = {take: grid_view(truth, store, take) for take, truth in truths.items()}
     for take, truth in truths.items():
-        v, valid = store[paths.mesh(take, "vertices")], store[paths.mesh(take, "valid")]
-        modality = take_modality(store, take)
-        entry = {"modality": modality, "mesh": mesh_accuracy(v, valid, truth)}
-        if "xyz_true" in truth.extra and paths.range_image(take, "xyz") in store:
-            # a stereo or RGB-D take: depth error and coverage over the face
-            face = face_region(truth.extra["segment"] == SEG_SKIN, truth.landmarks2d)
-            entry["rgbd" if modality == "rgbd" else "stereo"] = stereo_accuracy(
-                np.asarray(store[paths.range_image(take, "xyz")], dtype=np.float64),
-                truth.extra["xyz_true"],
-                face,
-                source=take,
-            )
-        if take != neutral:
-            entry["align"] = alignment_accuracy(
-                store[paths.align(take, "transform")], v, valid, truth, truths[neutral]
-            )
+        entry = _take_entry(store, take, truth, truths[neutral] if take != neutral else None)
         if take in visemes:
-            material = materials[take]
-            ideal = material
-            if template is not None:
-                sets = (fiducial_sets[neutral], fiducial_sets[take])
-                view_n, rot_n = views[neutral]
-                ideal = ideal_motion(template, view_n, views[take][0], sets, levels, max_slope_deg)
-                ideal = ideal @ rot_n  # the neutral camera's frame -> the neutral frame
-            processed = None
-            if smoothing is not None:
-                # the same steps as the take's: shorter where its refinement measured the skin
-                processed = laplacian_smooth(
-                    ideal,
-                    store[paths.template("faces")],
-                    w=smoothing["w"],
-                    iterations=smoothing["iterations"],
-                    fixed=store[paths.mask("suppressed")],
-                    missing=~np.isfinite(ideal).all(axis=1),
-                    confidence=store.get(paths.refine(take, "confidence")),
-                    relief=smoothing["confidence_relief"],
-                )
-            entry["motion"] = motion_accuracy(
-                store[paths.viseme(take, "motion")],
-                store[paths.viseme(take, "motion_raw")],
-                ideal,
-                material,
-                store[paths.mask("suppressed")],
-                processed,
-                normals=n_normals,
+            entry["motion"] = _viseme_motion(
+                store, take, neutral, materials[take], views, im, n_normals
             )
             if take in bars:
                 rel = bars[take]["relative"]
                 entry["motion"]["click_noise_relative"] = rel if np.isfinite(rel) else None
         if take in expressions and paths.expression(take, "displacement") in store:
-            material = materials[take]
             field = np.asarray(store[paths.expression(take, "displacement")], dtype=np.float64)
             entry["expression"] = material_accuracy(
-                field, material, n_normals, np.ones(len(field), dtype=bool)
+                field, materials[take], n_normals, np.ones(len(field), dtype=bool)
             )
         takes[take] = entry
+    summary = _summary(takes)
+    summary |= _click_noise(store, {t: views[t][0] for t in truths}, neutral, visemes)
+    summary |= _stereo_summary(takes)
+    summary["by_modality"] = modality_summary(takes)
+    return {
+        "units": {"distances": "mm", "angles": "degrees", "relative": "fraction"},
+        "takes": takes,
+        "summary": summary,
+    }
+
+
+def _take_entry(store, take: str, truth: Truth, neutral_truth: Truth | None) -> dict:
+    """A take's fitted mesh against its truth; a stereo or RGB-D take's depth over the face; a
+    take's alignment (``neutral_truth`` None for the neutral itself)."""
+    v, valid = store[paths.mesh(take, "vertices")], store[paths.mesh(take, "valid")]
+    modality = take_modality(store, take)
+    entry = {"modality": modality, "mesh": mesh_accuracy(v, valid, truth)}
+    if "xyz_true" in truth.extra and paths.range_image(take, "xyz") in store:
+        # a stereo or RGB-D take: depth error and coverage over the face
+        face = face_region(truth.extra["segment"] == SEG_SKIN, truth.landmarks2d)
+        entry["rgbd" if modality == "rgbd" else "stereo"] = stereo_accuracy(
+            np.asarray(store[paths.range_image(take, "xyz")], dtype=np.float64),
+            truth.extra["xyz_true"],
+            face,
+            source=take,
+        )
+    if neutral_truth is not None:
+        entry["align"] = alignment_accuracy(
+            store[paths.align(take, "transform")], v, valid, truth, neutral_truth
+        )
+    return entry
+
+
+def _viseme_motion(store, take: str, neutral: str, material, views, im, n_normals) -> dict:
+    """A viseme's motion against its material motion and the method-ideal one (``im``: how the
+    ideal is made; without a template the material motion is the reference too)."""
+    ideal = material
+    if im.template is not None:
+        sets = (im.fiducial_sets[neutral], im.fiducial_sets[take])
+        view_n, rot_n = views[neutral]
+        ideal = ideal_motion(im.template, view_n, views[take][0], sets, im.levels, im.max_slope_deg)
+        ideal = ideal @ rot_n  # the neutral camera's frame -> the neutral frame
+    processed = None
+    if im.smoothing is not None:
+        # the same steps as the take's: shorter where its refinement measured the skin
+        processed = laplacian_smooth(
+            ideal,
+            store[paths.template("faces")],
+            w=im.smoothing["w"],
+            iterations=im.smoothing["iterations"],
+            fixed=store[paths.mask("suppressed")],
+            missing=~np.isfinite(ideal).all(axis=1),
+            confidence=store.get(paths.refine(take, "confidence")),
+            relief=im.smoothing["confidence_relief"],
+        )
+    return motion_accuracy(
+        store[paths.viseme(take, "motion")],
+        store[paths.viseme(take, "motion_raw")],
+        ideal,
+        material,
+        store[paths.mask("suppressed")],
+        processed,
+        normals=n_normals,
+    )
+
+
+def _summary(takes: Mapping[str, dict]) -> dict:
+    """The worst value of each measure over the takes."""
 
     def worst(stage, key):
         values = [t[stage].get(key) for t in takes.values() if stage in t]
         values = [v for v in values if v is not None]
         return float(np.max(values)) if values else None
 
-    summary = {
+    return {
         "motion_material_relative_error_max": worst("motion", "material_relative_error"),
         "expression_material_relative_error_max": worst("expression", "material_relative_error"),
         "mesh_rms_mm_max": worst("mesh", "rms_mm"),
@@ -179,7 +203,11 @@ def subject_accuracy(
         "masked_true_motion_share_max": worst("motion", "masked_true_motion_share"),
         "motion_click_noise_relative_max": worst("motion", "click_noise_relative"),
     }
-    summary |= _click_noise(store, {t: views[t][0] for t in truths}, neutral, visemes)
+
+
+def _stereo_summary(takes: Mapping[str, dict]) -> dict:
+    """The stereo takes' worst depth error and coverage (empty without stereo takes)."""
+    summary = {}
     stereo = [
         t["stereo"]
         for t in takes.values()
@@ -188,12 +216,7 @@ def subject_accuracy(
     if stereo:  # only subjects with stereo takes get the stereo summary
         summary["stereo_depth_rms_mm_max"] = max(s["depth_rms_mm"] for s in stereo)
         summary["stereo_coverage_min"] = min(s["coverage"] for s in stereo)
-    summary["by_modality"] = modality_summary(takes)
-    return {
-        "units": {"distances": "mm", "angles": "degrees", "relative": "fraction"},
-        "takes": takes,
-        "summary": summary,
-    }
+    return summary
 
 
 def _click_noise(store, truths, neutral, visemes) -> dict:
