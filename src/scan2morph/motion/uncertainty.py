@@ -172,35 +172,12 @@ def click_noise_motion(
         a take fitted is an error too, naming that take and quoting the first refusal: the click
         noise is then too large for the template.
     """
-    click_noise_px, draws, seed = noise.px, noise.draws, noise.seed
-    smoothing, fit_rules, refiner = recipe.smoothing, recipe.fit_rules, recipe.refiner
-    if not (np.isfinite(click_noise_px) and click_noise_px > 0):
-        raise InputError(source, f"click_noise_px: expected > 0 px, got {click_noise_px}")
-    if int(draws) != draws or draws < 2:
-        raise InputError(source, f"draws: expected an integer >= 2, got {draws}")
-    draws = int(draws)
+    draws = _checked_draws(noise, source)
     suppressed = np.asarray(suppressed, dtype=bool)
-    w, iterations = float(smoothing["w"]), int(smoothing["iterations"])
-    max_stretch = float(smoothing["max_stretch"])
-    relief = float(smoothing["confidence_relief"])
-
-    def final(aligned, valid, confidence, base, base_valid, faces, where):
-        raw = motion_vectors(
-            aligned, base, valid, base_valid, source=where, faces=faces, max_stretch=max_stretch
-        )
-        return laplacian_smooth(
-            raw,
-            faces,
-            w=w,
-            iterations=iterations,
-            fixed=suppressed,
-            missing=~np.isfinite(raw).all(axis=1),
-            source=where,
-            confidence=confidence,
-            relief=relief,
-        )
-
-    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, fit_rules, f"{source}/neutral")
+    smooth = _FinalMotion(suppressed, recipe.smoothing)
+    n_base, n_mesh = _fit(
+        template, neutral, neutral.landmarks, recipe.fit_rules, f"{source}/neutral"
+    )
     faces = n_mesh["faces"]
     if suppressed.shape != (len(n_base),):
         raise InputError(
@@ -208,73 +185,124 @@ def click_noise_motion(
         )
     if not visemes:
         return {}
-
-    def corresponded(take, t_fit, t_landmarks, n_landmarks):
-        """The take's vertices, validity and correspondence confidence compared with the
-        neutral's: its aligned fit (no confidence), or its refined mesh."""
-        if refiner is None:
-            return t_fit[0], t_fit[1]["valid"], None
-        return refiner(take, t_fit[1], t_landmarks, n_landmarks)
-
     reference = {}
     for take, data in visemes.items():
-        t_fit = _fit(template, data, data.landmarks, fit_rules, f"{source}/{take}")
-        v, valid, conf = corresponded(take, t_fit, data.landmarks, neutral.landmarks)
-        reference[take] = final(v, valid, conf, n_base, n_mesh["valid"], faces, take)
-
-    def perturbed(name, data, stream):
-        """The take's ``draws`` fits with perturbed clicks (None where refused)."""
-        rng = np.random.default_rng([int(seed), *stream])
-        fits, first = [], None
-        for k in range(draws):
-            noisy = data.landmarks + click_noise_px * rng.standard_normal(np.shape(data.landmarks))
-            try:
-                fits.append((*_fit(template, data, noisy, fit_rules, f"{source}/{name}"), noisy))
-            except InputError as err:
-                fits.append(None)
-                first = first or f"draw {k}: {err}"
-        done = sum(f is not None for f in fits)
-        if done < max(2, draws / 2):
-            raise InputError(
-                f"{source}/{name}",
-                f"click_noise_px {click_noise_px}: only {done} of {draws} perturbed fits "
-                f"succeeded (the noise is too large for the template; first refusal, {first})",
-            )
-        return fits
-
-    n_fits = perturbed("neutral", neutral, [0])
-    free = ~suppressed
+        t_fit = _fit(template, data, data.landmarks, recipe.fit_rules, f"{source}/{take}")
+        v, valid, conf = _corresponded(
+            recipe.refiner, take, t_fit, data.landmarks, neutral.landmarks
+        )
+        reference[take] = smooth(v, valid, conf, n_base, n_mesh["valid"], faces, take)
+    n_fits = _perturbed(template, "neutral", neutral, [0], noise, draws, recipe, source)
     out = {}
     for take, data in visemes.items():
+        stream = [1, zlib.crc32(take.encode())]
+        t_fits = _perturbed(template, take, data, stream, noise, draws, recipe, source)
         sq, count = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64)
         used = 0
-        t_fits = perturbed(take, data, [1, zlib.crc32(take.encode())])
         for n_fit, t_fit in zip(n_fits, t_fits, strict=True):
             if n_fit is None or t_fit is None:
                 continue
             where = f"{source}/{take} (click-noise draw)"
-            v, valid, conf = corresponded(take, t_fit, t_fit[2], n_fit[2])
-            moved = final(v, valid, conf, n_fit[0], n_fit[1]["valid"], faces, where)
+            v, valid, conf = _corresponded(recipe.refiner, take, t_fit, t_fit[2], n_fit[2])
+            moved = smooth(v, valid, conf, n_fit[0], n_fit[1]["valid"], faces, where)
             d2 = np.sum((moved - reference[take]) ** 2, axis=1)
             have = np.isfinite(d2)  # a vertex the smoothing could not reach has no value
             sq[have] += d2[have]
             count += have
             used += 1
-        rms = np.full(len(n_base), np.nan)
-        rms[count > 0] = np.sqrt(sq[count > 0] / count[count > 0])
-        motion = reference[take]
-        where = free & np.isfinite(rms) & np.isfinite(motion).all(axis=1)
-        err = float(np.sqrt(np.mean(rms[where] ** 2))) if where.any() else float("nan")
-        ref = float(np.sqrt(np.mean(np.sum(motion[where] ** 2, axis=1)))) if where.any() else 0.0
-        out[take] = {
-            "rms_mm": rms,
-            "motion": motion,
-            "relative": err / ref if ref > 0 else float("nan"),
-            "rms_error_mm": err,
-            "motion_rms_mm": ref,
-            "failed_draws": draws - used,
+        out[take] = _spread(sq, count, reference[take], ~suppressed) | {
+            "failed_draws": draws - used
         }
     return out
+
+
+def _checked_draws(noise: ClickNoise, source: str) -> int:
+    """The number of draws, after checking the noise's size and count."""
+    if not (np.isfinite(noise.px) and noise.px > 0):
+        raise InputError(source, f"click_noise_px: expected > 0 px, got {noise.px}")
+    if int(noise.draws) != noise.draws or noise.draws < 2:
+        raise InputError(source, f"draws: expected an integer >= 2, got {noise.draws}")
+    return int(noise.draws)
+
+
+class _FinalMotion:
+    """A take's final motion as the pipeline makes it: motion vectors, then the masked
+    Laplacian smoothing (``smoothing``: ``w``, ``iterations``, ``max_stretch``,
+    ``confidence_relief``)."""
+
+    def __init__(self, suppressed: np.ndarray, smoothing: Mapping[str, float]):
+        self.suppressed = suppressed
+        self.w, self.iterations = float(smoothing["w"]), int(smoothing["iterations"])
+        self.max_stretch = float(smoothing["max_stretch"])
+        self.relief = float(smoothing["confidence_relief"])
+
+    def __call__(self, aligned, valid, confidence, base, base_valid, faces, where) -> np.ndarray:
+        raw = motion_vectors(
+            aligned,
+            base,
+            valid,
+            base_valid,
+            source=where,
+            faces=faces,
+            max_stretch=self.max_stretch,
+        )
+        return laplacian_smooth(
+            raw,
+            faces,
+            w=self.w,
+            iterations=self.iterations,
+            fixed=self.suppressed,
+            missing=~np.isfinite(raw).all(axis=1),
+            source=where,
+            confidence=confidence,
+            relief=self.relief,
+        )
+
+
+def _corresponded(refiner, take, t_fit, t_landmarks, n_landmarks):
+    """The take's vertices, validity and correspondence confidence compared with the neutral's:
+    its aligned fit (no confidence), or its refined mesh."""
+    if refiner is None:
+        return t_fit[0], t_fit[1]["valid"], None
+    return refiner(take, t_fit[1], t_landmarks, n_landmarks)
+
+
+def _perturbed(template, name, data, stream, noise: ClickNoise, draws, recipe, source) -> list:
+    """The take's ``draws`` fits with perturbed clicks (None where refused), each with its
+    clicks; its own noise stream (``noise.seed`` and ``stream``)."""
+    rng = np.random.default_rng([int(noise.seed), *stream])
+    fits, first = [], None
+    for k in range(draws):
+        noisy = data.landmarks + noise.px * rng.standard_normal(np.shape(data.landmarks))
+        try:
+            fits.append((*_fit(template, data, noisy, recipe.fit_rules, f"{source}/{name}"), noisy))
+        except InputError as err:
+            fits.append(None)
+            first = first or f"draw {k}: {err}"
+    done = sum(f is not None for f in fits)
+    if done < max(2, draws / 2):
+        raise InputError(
+            f"{source}/{name}",
+            f"click_noise_px {noise.px}: only {done} of {draws} perturbed fits "
+            f"succeeded (the noise is too large for the template; first refusal, {first})",
+        )
+    return fits
+
+
+def _spread(sq: np.ndarray, count: np.ndarray, motion: np.ndarray, free: np.ndarray) -> dict:
+    """A take's per-vertex RMS change over the draws and its share of the motion."""
+    rms = np.full(len(sq), np.nan)
+    rms[count > 0] = np.sqrt(sq[count > 0] / count[count > 0])
+    where = free & np.isfinite(rms) & np.isfinite(motion).all(axis=1)
+    err = float(np.sqrt(np.mean(rms[where] ** 2))) if where.any() else float("nan")
+    ref = float(np.sqrt(np.mean(np.sum(motion[where] ** 2, axis=1)))) if where.any() else 0.0
+    return {
+        "rms_mm": rms,
+        "motion": motion,
+        "relative": err / ref if ref > 0 else float("nan"),
+        "rms_error_mm": err,
+        "motion_rms_mm": ref,
+    }
 
 
 def subject_motion_noise(
