@@ -697,19 +697,21 @@ def test_viewer_of_a_subject_without_visemes_or_expressions_works(bare_subject, 
     def act(evaluate, call):
         _viewer_ready(evaluate)
         base = _canvas(evaluate)
-        _set(evaluate, "mode_1", 0.02)
+        # half the slider's range: the mode's largest vertex moves 5 mm (MODE_PEAK_MM / 2)
+        q = 0.5 * float(evaluate(f"{VIEWER}.querySelector('input[name=mode_1]').max"))
+        _set(evaluate, "mode_1", q)
         moved, drawn = _canvas(evaluate), _drawn(evaluate)
         options = evaluate(
             f"Array.from({VIEWER}.querySelectorAll('select[name=take] option'), o => o.text)"
         )
         _click(evaluate, 'button[name="next-take"]')
-        return base, moved, drawn, options, _drawn(evaluate)
+        return base, moved, drawn, options, _drawn(evaluate), q
 
     state = browser.inspect(page.resolve().as_uri(), act)
     assert state["errors"] == []
-    base, moved, drawn, options, neutral_take = state["actions"]
+    base, moved, drawn, options, neutral_take, q = state["actions"]
     assert _changed(np.asarray(base, np.uint8), np.asarray(moved, np.uint8)) > 200
-    err = np.abs(np.asarray(drawn) - head(model.expression([0.02]))).max()
+    err = np.abs(np.asarray(drawn) - head(model.expression([q]))).max()
     assert err < VIEWER_ATOL_M, err
     assert options == ["model (the sliders below)", "neutral: neutral"]
     assert np.isfinite(neutral_take).all()

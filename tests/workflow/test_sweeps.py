@@ -414,8 +414,8 @@ def test_rerun_refuses_bad_input(run):
     good = Run(Subject(SUBJECT, *_kinds_labels()), tpl, settings)
     with pytest.raises(
         InputError,
-        match=r"start stage: expected one of \('repair', 'fit', 'align', 'refine', 'motion', "
-        r"'motion_noise'\)",
+        match=r"start stage: expected one of \('repair', 'landmarks', 'fit', 'align', 'refine', "
+        r"'motion', 'motion_noise'\)",
     ):
         rerun_accuracy(store, good, {}, "morph")
     with pytest.raises(InputError, match="/takes/neutral/raw/xyz: missing"):
