@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 #: Rules that run once per take; every other rule runs once per subject (template, cohort: once;
 #: the synthetic subjects' generators are left out of the extrapolation: real scans are read).
-PER_TAKE = ("ingest", "repair", "fit", "align", "refine")
+PER_TAKE = ("ingest", "repair", "landmarks", "fit", "align", "refine")
 ONCE = ("template", "cohort")
 
 

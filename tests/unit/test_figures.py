@@ -111,68 +111,82 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
     smile2 (label smile) and sad1 (label sad), all in an arbitrarily rotated frame."""
     rng = np.random.default_rng(seed)
     xy, faces, names, indices, ibug_xy = template if template is not None else grid_template()
-    v = len(xy)
     frame = Rotation.random(random_state=rng).as_matrix()  # the neutral frame, arbitrary
-    camera = np.column_stack([SCALE_MM * xy, DEPTH_MM - _height(xy)])
     store: dict[str, np.ndarray] = {
         paths.template("faces"): faces.astype(np.int64),
         paths.template("vertices2d"): xy.astype(float),
         paths.template("fiducials/names"): np.asarray(names, dtype=object),
         paths.template("fiducials/indices"): np.asarray(indices, dtype=np.int64),
     }
-    yy, xx = np.mgrid[0:HEIGHT, 0:WIDTH]
-    takes = ["neutral", "car", "too", "smile1", "smile2", "sad1"]
     aligned = {}
-    for n, take in enumerate(takes):
-        deformed = camera + _deformation(xy, take)
-        pose = np.eye(4)
-        if n:
-            pose[:3, :3] = Rotation.from_rotvec(rng.normal(0, np.radians(3), 3)).as_matrix()
-            pose[:3, 3] = rng.normal(0, 15, 3)
-        scan_cam = deformed @ pose[:3, :3].T + pose[:3, 3]  # the take's camera frame
-        u = FOCAL_PX * scan_cam[:, 0] / scan_cam[:, 2] + WIDTH / 2
-        w = FOCAL_PX * scan_cam[:, 1] / scan_cam[:, 2] + HEIGHT / 2
-        points2d = np.column_stack([u, w])
-        valid = np.ones(v, dtype=bool)
-        if n:
-            valid[rng.choice(v, 3, replace=False)] = False
-        scan = scan_cam @ frame.T  # the take's scanner frame: the same arbitrary rotation
-        scan[~valid] = np.nan
-        # scanner -> neutral frame: undo the take's pose in camera coordinates
-        to_neutral = np.eye(4)
-        to_neutral[:3, :3] = frame @ pose[:3, :3].T @ frame.T
-        to_neutral[:3, 3] = -to_neutral[:3, :3] @ (frame @ pose[:3, 3])
-        aligned[take] = scan @ to_neutral[:3, :3].T + to_neutral[:3, 3]
-        color = np.stack(
-            [
-                180 + 40 * np.sin(xx / 23.0),
-                140 + 30 * np.cos(yy / 17.0),
-                120 + 20 * np.sin((xx + yy) / 31.0),
-            ],
-            axis=-1,
-        ).astype(np.uint8)
-        if ibug_xy is None:
-            marks = rng.uniform([u.min(), w.min()], [u.max(), w.max()], (68, 2))
-        else:
-            marks = np.asarray(ibug_xy) * SCALE_MM * FOCAL_PX / DEPTH_MM + [WIDTH / 2, HEIGHT / 2]
-        store |= {
-            paths.range_image(take, "color"): color,
-            paths.landmarks(take): marks,
-            paths.mesh(take, "vertices"): scan,
-            paths.mesh(take, "uv"): np.column_stack([(u + 0.5) / WIDTH, (w + 0.5) / HEIGHT]),
-            paths.mesh(take, "valid"): valid,
-            paths.mesh(take, "points2d"): points2d,
-            paths.align(take, "transform"): to_neutral,
-            paths.align(take, "vertices"): aligned[take],
-        }
+    for n, take in enumerate(["neutral", "car", "too", "smile1", "smile2", "sad1"]):
+        aligned[take] = _take_datasets(store, take, n, xy, ibug_xy, frame, rng)
     neutral = aligned["neutral"]
     suppressed = xy[:, 1] < 0.3
     store |= {
         paths.neutral("vertices"): neutral,
-        paths.neutral("filled"): np.zeros(v, dtype=bool),
+        paths.neutral("filled"): np.zeros(len(xy), dtype=bool),
         paths.mask("suppressed"): suppressed,
         paths.mask("seeds"): np.flatnonzero(np.abs(xy[:, 1] + 0.4) < 0.2),
     }
+    models = _viseme_datasets(store, aligned, suppressed)
+    _pca_datasets(store, neutral, models)
+    _modal_datasets(store, xy, faces, frame, aligned)
+    return store
+
+
+def _take_datasets(store, take: str, n: int, xy, ibug_xy, frame, rng) -> np.ndarray:
+    """A take's image, landmarks, fit and alignment (the n-th take, posed at random but the
+    neutral); returns its aligned vertices."""
+    v = len(xy)
+    camera = np.column_stack([SCALE_MM * xy, DEPTH_MM - _height(xy)])
+    deformed = camera + _deformation(xy, take)
+    pose = np.eye(4)
+    if n:
+        pose[:3, :3] = Rotation.from_rotvec(rng.normal(0, np.radians(3), 3)).as_matrix()
+        pose[:3, 3] = rng.normal(0, 15, 3)
+    scan_cam = deformed @ pose[:3, :3].T + pose[:3, 3]  # the take's camera frame
+    u = FOCAL_PX * scan_cam[:, 0] / scan_cam[:, 2] + WIDTH / 2
+    w = FOCAL_PX * scan_cam[:, 1] / scan_cam[:, 2] + HEIGHT / 2
+    valid = np.ones(v, dtype=bool)
+    if n:
+        valid[rng.choice(v, 3, replace=False)] = False
+    scan = scan_cam @ frame.T  # the take's scanner frame: the same arbitrary rotation
+    scan[~valid] = np.nan
+    # scanner -> neutral frame: undo the take's pose in camera coordinates
+    to_neutral = np.eye(4)
+    to_neutral[:3, :3] = frame @ pose[:3, :3].T @ frame.T
+    to_neutral[:3, 3] = -to_neutral[:3, :3] @ (frame @ pose[:3, 3])
+    aligned = scan @ to_neutral[:3, :3].T + to_neutral[:3, 3]
+    yy, xx = np.mgrid[0:HEIGHT, 0:WIDTH]
+    color = np.stack(
+        [
+            180 + 40 * np.sin(xx / 23.0),
+            140 + 30 * np.cos(yy / 17.0),
+            120 + 20 * np.sin((xx + yy) / 31.0),
+        ],
+        axis=-1,
+    ).astype(np.uint8)
+    if ibug_xy is None:
+        marks = rng.uniform([u.min(), w.min()], [u.max(), w.max()], (68, 2))
+    else:
+        marks = np.asarray(ibug_xy) * SCALE_MM * FOCAL_PX / DEPTH_MM + [WIDTH / 2, HEIGHT / 2]
+    store |= {
+        paths.range_image(take, "color"): color,
+        paths.landmarks(take): marks,
+        paths.mesh(take, "vertices"): scan,
+        paths.mesh(take, "uv"): np.column_stack([(u + 0.5) / WIDTH, (w + 0.5) / HEIGHT]),
+        paths.mesh(take, "valid"): valid,
+        paths.mesh(take, "points2d"): np.column_stack([u, w]),
+        paths.align(take, "transform"): to_neutral,
+        paths.align(take, "vertices"): aligned,
+    }
+    return aligned
+
+
+def _viseme_datasets(store, aligned, suppressed) -> dict[str, np.ndarray]:
+    """The visemes' motion, models and click-noise error bar; returns the models."""
+    neutral = aligned["neutral"]
     models = {}
     for take in ("car", "too"):
         raw = aligned[take] - neutral
@@ -191,7 +205,13 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
         paths.motion_noise("relative"): np.array([0.1, 0.2]),
         paths.motion_noise("rms_error_mm"): np.array([1.0, 0.5]),
     }
-    # PCA over neutral + viseme models (the paper's convention: eigenvalue = sum of coef^2)
+    return models
+
+
+def _pca_datasets(store, neutral: np.ndarray, models: dict) -> None:
+    """PCA over neutral + viseme models (the paper's convention: eigenvalue = sum of coef^2),
+    blend shapes and a PCA blend."""
+    v = len(neutral)
     shapes = np.stack([neutral, *models.values()])
     mean = shapes.mean(axis=0)
     centred = (shapes - mean).reshape(len(shapes), -1)
@@ -220,7 +240,12 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
     store[paths.pca_blend("pca_blend1")] = mean + (
         0.5 * sigma[0] * comps[0] + 1.0 * sigma[1] * comps[1]
     ).reshape(v, 3)
-    # modal basis: smooth normal-direction patterns on the face, frequencies ascending
+
+
+def _modal_datasets(store, xy, faces, frame, aligned) -> None:
+    """A modal basis of smooth normal-direction patterns on the face (frequencies ascending),
+    the expressions' coordinates, reconstructions and per-label statistics."""
+    v, neutral = len(xy), aligned["neutral"]
     normal = frame @ np.array([0.0, 0.0, -1.0])
     n_modes = 8
     modes = np.stack(
@@ -267,7 +292,6 @@ def synthetic_store(template=None, seed: int = 0) -> dict[str, np.ndarray]:
         paths.modal_statistics("sad", "std"): np.full(n_modes, np.nan),
         paths.modal_statistics("sad", "takes"): np.asarray(["sad1"], dtype=object),
     }
-    return store
 
 
 @pytest.fixture(scope="module")

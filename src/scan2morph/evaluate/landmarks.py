@@ -10,6 +10,7 @@ from scan2morph.evaluate.modality import grid_view
 from scan2morph.evaluate.truth import Truth
 from scan2morph.io.landmarks import JAWLINE
 from scan2morph.store import paths
+from scan2morph.store.warnings import text_value
 
 #: 0-based rows of the jawline (iBUG 1-17) and of the 51 inner-face points.
 _JAW = np.asarray(JAWLINE) - 1
@@ -41,23 +42,20 @@ def landmark_errors(points: np.ndarray, truth: np.ndarray) -> dict:
     }
 
 
-def take_landmarks(
-    store: Mapping[str, np.ndarray], truths: Mapping[str, Truth], sources: Mapping[str, str]
-) -> dict[str, dict]:
+def take_landmarks(store: Mapping[str, np.ndarray], truths: Mapping[str, Truth]) -> dict[str, dict]:
     """Each take's landmark errors against its truth seen through its grid's camera.
 
     Parameters
     ----------
     store : mapping store path -> array
     truths : mapping take -> Truth
-    sources : mapping take -> str
-        Each take's landmark source (``clicked``, ``detected``, ...).
 
     Returns
     -------
     dict take -> dict
-        :func:`landmark_errors` with the take's ``source``; takes without landmarks in the
-        store are left out.
+        :func:`landmark_errors` with the take's ``source`` (``/takes/{take}/landmark_source``;
+        ``clicked`` in a store from before it); takes without landmarks in the store are left
+        out.
     """
     out = {}
     for take, truth in truths.items():
@@ -65,7 +63,8 @@ def take_landmarks(
             continue
         view = grid_view(truth, store, take)[0]
         errors = landmark_errors(store[paths.landmarks(take)], view.landmarks2d)
-        out[take] = {"source": sources.get(take, "clicked")} | errors
+        source = store.get(paths.landmark_info(take, "source"), "clicked")
+        out[take] = {"source": text_value(source)} | errors
     return out
 
 

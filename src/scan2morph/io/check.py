@@ -82,7 +82,7 @@ def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping
     files as their readers ``loaded`` them (a range scan is parsed once)."""
     if modality == "range":
         scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"), loaded)
-        if scan.landmarks is not None and complete(scan.landmarks):  # else checked once detected
+        if complete(scan.landmarks):  # else checked once detected
             check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
             check_handedness(scan.xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":

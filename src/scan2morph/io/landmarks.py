@@ -60,9 +60,9 @@ def as_ibug68(points: np.ndarray) -> np.ndarray:
     return np.concatenate([jaw, points])
 
 
-def complete(points: np.ndarray) -> bool:
-    """True when every one of the 68 points is given (no NaN row)."""
-    return bool(np.isfinite(points).all())
+def complete(points: np.ndarray | None) -> bool:
+    """True when every one of the 68 points is given (no NaN row; False for None: no file)."""
+    return points is not None and bool(np.isfinite(points).all())
 
 
 def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:

@@ -35,7 +35,7 @@ from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
-from scan2morph.io.mesh_view import face_view, surface_camera  # noqa: E402
+from scan2morph.io.mesh_view import face_camera, face_view, surface_camera  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
     _UNITS,
@@ -315,20 +315,11 @@ def virtual_camera(
     x = lm3[45] - lm3[36]
     x = x - (x @ z) * z
     x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
+    R = np.stack([x, np.cross(z, x), z])
     centre = lm3.mean(axis=0)
-    pose = np.eye(4)
-    pose[:3, :3] = R
-    pose[:3, 3] = np.array([0.0, 0.0, settings["distance_mm"]]) - R @ centre
-    w, h = settings["width"], settings["height"]
-    pixel_mm = settings.get("pixel_mm")
-    if pixel_mm is None:  # the landmarks' extent across the camera fills face_share of the image
-        extent = np.ptp((lm3 - centre) @ R[:2].T, axis=0)
-        pixel_mm = max(extent[0] / w, extent[1] / h) / settings["face_share"]
-    f = settings["distance_mm"] / pixel_mm
-    K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-    return K, pose
+    # the landmarks' extent across the camera fills face_share of the image (without pixel_mm)
+    extent = np.ptp((lm3 - centre) @ R[:2].T, axis=0)
+    return face_camera(R, centre, (float(extent[0]), float(extent[1])), settings)
 
 
 def _check_not_mirrored(lm3: np.ndarray, pose: np.ndarray, landmarks_path) -> None:
@@ -470,7 +461,7 @@ def read_mesh_take(
         _check_units(lm3, mesh_path)
         _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
     view = face_view(mesh, None if lm3 is None else lm3[30], str(mesh_path))
-    if lm3 is not None and complete(lm3):
+    if complete(lm3):
         K, pose = virtual_camera(lm3, view.direction, cfg)
         _check_not_mirrored(lm3, pose, landmarks_path)
     else:

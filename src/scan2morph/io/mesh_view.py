@@ -347,16 +347,31 @@ def surface_camera(
     """
     z = view.direction
     y = -face_up(vertices, view, source)
-    x = np.cross(y, z)
-    R = np.stack([x, y, z])
+    R = np.stack([np.cross(y, z), y, z])
     centre = view.tip + CENTRE_BELOW_TIP_MM * y
+    return face_camera(R, centre, (NOMINAL_FACE_MM, NOMINAL_FACE_MM), settings)
+
+
+def face_camera(
+    rotation: np.ndarray, centre: np.ndarray, extent_mm: tuple[float, float], settings: dict
+) -> tuple[np.ndarray, np.ndarray]:
+    """A pinhole camera ``distance_mm`` in front of ``centre``, its axes the rows of
+    ``rotation``, with ``pixel_mm`` mm per pixel at that distance (None: the face's
+    ``extent_mm`` (across, down) fills ``face_share`` of the image).
+
+    Returns
+    -------
+    K : (3, 3) float64, px
+    pose : (4, 4) float64
+        Mesh frame -> camera frame (x right, y down, z forward), mm.
+    """
     pose = np.eye(4)
-    pose[:3, :3] = R
-    pose[:3, 3] = np.array([0.0, 0.0, settings["distance_mm"]]) - R @ centre
+    pose[:3, :3] = rotation
+    pose[:3, 3] = np.array([0.0, 0.0, settings["distance_mm"]]) - rotation @ centre
     w, h = settings["width"], settings["height"]
     pixel_mm = settings.get("pixel_mm")
     if pixel_mm is None:
-        pixel_mm = NOMINAL_FACE_MM / min(w, h) / settings["face_share"]
+        pixel_mm = max(extent_mm[0] / w, extent_mm[1] / h) / settings["face_share"]
     f = settings["distance_mm"] / pixel_mm
     K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
     return K, pose
@@ -364,6 +379,7 @@ def surface_camera(
 
 __all__ = [
     "FaceView",
+    "face_camera",
     "face_up",
     "face_view",
     "nose_tip",

@@ -14,7 +14,6 @@ from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.failure import failures, usable
 from scan2morph.stages.part import Part, Subject
 from scan2morph.stages.quality import modelled, read_warnings
-from scan2morph.store import paths
 from scan2morph.template import Template
 
 #: Config sections this stage reads (the fit's and the smoothing's, for the ideal motion).
@@ -106,12 +105,7 @@ def run(
     report = subject_accuracy(
         store, truths, subject.neutral, kept.visemes, ideal, expressions=kept.expressions
     )
-    sources = {
-        t: _text(store[paths.landmark_info(t, "source")])
-        for t in truths
-        if paths.landmark_info(t, "source") in store
-    }
-    errors = take_landmarks(store, truths, sources)
+    errors = take_landmarks(store, truths)
     for t, entry in errors.items():
         report["takes"][t]["landmarks"] = entry
     report["summary"] |= landmark_summary(errors)
@@ -120,9 +114,3 @@ def run(
         "failed_takes": {t: {"stage": f.stage, "reason": f.reason} for t, f in left_out.items()},
     }
     return Part(files={"accuracy": report})
-
-
-def _text(value) -> str:
-    """A string dataset as read from a part or store (bytes or str)."""
-    value = value.item() if hasattr(value, "item") else value
-    return value.decode() if isinstance(value, bytes) else str(value)

@@ -103,7 +103,7 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
     scan = _READERS[modality](files, row, params)
     attrs = {k: row[k] for k in ("kind", "label", "modality")} | scan.attrs
     first = FILES[modality][0]
-    if scan.landmarks is not None and complete(scan.landmarks):
+    if complete(scan.landmarks):
         attrs["nose_depth_mm"] = check_handedness(scan.xyz, scan.landmarks, files.get(first, first))
     clicks = {} if scan.landmarks is None else {paths.clicks(name): scan.landmarks}
     # a geometry-only mesh is shaded grey on purpose (its own warning says so)
@@ -162,7 +162,7 @@ def _read_mesh(files, row, params: Params) -> _Scan:
 def _read_range(files, row, params: Params) -> _Scan:
     scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"))
     xyz = scan.xyz * mm_per_unit(row)
-    if scan.landmarks is not None and complete(scan.landmarks):
+    if complete(scan.landmarks):
         check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"])
     if scan.color is not None:
         return _Scan(xyz, scan.color, scan.landmarks)
@@ -190,7 +190,7 @@ def _read_stereo(files, row, params: Params) -> _Scan:
             raise InputError(exc.source, f"{exc.problem}; {hint}") from None
         raise
     log.info("%s: stereo %s", row["take"], report)
-    if pair.landmarks is None or not complete(pair.landmarks):
+    if not complete(pair.landmarks):
         return _Scan(xyz, pair.left, pair.landmarks, {}, {"stereo": report})
     check_face(
         xyz,

@@ -124,7 +124,7 @@ def settle(clicks: np.ndarray | None, color: np.ndarray, xyz: np.ndarray, source
         From the detector (no face, several faces, a face too small, a profile view); detected
         landmarks that fail the face checks of :func:`~scan2morph.io.check_face`.
     """
-    if clicks is not None and complete(clicks):
+    if complete(clicks):
         return Landmarks(np.asarray(clicks, dtype=np.float64), CLICKED)
     from scan2morph.landmarks import DETECTOR, complete_jawline, detect
 

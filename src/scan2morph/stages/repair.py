@@ -73,7 +73,7 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
             paths.range_image(name, "color"): need(data, paths.raw(name, "color"), source),
             paths.range_image(name, "spikes"): spikes,
             paths.range_image(name, "filled"): filled,
-            **{k: data[k] for k in (paths.clicks(name),) if k in data},
+            **_clicks(data, name),
             **camera_datasets(data, name),
         },
         attrs={paths.take(name): dict(take.attrs) | {"repair": report}},
@@ -87,6 +87,12 @@ def _modality(data: Mapping[str, np.ndarray], attrs: Mapping, take: str) -> str:
         return str(attrs["modality"])
     value = data.get(paths.camera(take, "modality"), "range")
     return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _clicks(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:
+    """The take's clicked landmarks, passed on when its ingest part has them."""
+    key = paths.clicks(take)
+    return {key: data[key]} if key in data else {}
 
 
 def camera_datasets(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:

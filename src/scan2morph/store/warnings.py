@@ -81,7 +81,7 @@ def read_failures(data) -> dict[str, Failure]:
     else:
         takes = paths.ids(data, paths.FAILED, "reason")
     return {
-        t: Failure(t, *(_one_text(data[paths.failed(t, f)]) for f in ("stage", "reason")))
+        t: Failure(t, *(text_value(data[paths.failed(t, f)]) for f in ("stage", "reason")))
         for t in takes
     }
 
@@ -109,7 +109,9 @@ def _text(value) -> list[str]:
     return [str(v) for v in np.asarray(value, dtype=object).tolist()]
 
 
-def _one_text(value) -> str:
+def text_value(value) -> str:
+    """A string dataset's text, whether an h5py dataset, bytes or str (as :func:`read_part`
+    gives it)."""
     if hasattr(value, "asstr"):  # an h5py dataset
         value = value.asstr()[()]
     return value.decode() if isinstance(value, bytes) else str(value)
