@@ -8,6 +8,8 @@ may use it. Meshes follow the project convention: ``vertices`` (V, 3) float mm, 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -18,6 +20,30 @@ from scan2morph.tol import SHADE_AMBIENT
 #: A vertex whose summed (area-weighted) normal is shorter than this fraction of the longest
 #: face normal has no usable direction (isolated, or its faces are degenerate or cancel out).
 _NORMAL_RTOL = 1e-12
+
+
+@dataclass(frozen=True)
+class TexturedMesh:
+    """A triangle mesh with optional texture, as the exporters take it.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float, mm
+        Vertex positions.
+    faces : (F, 3) int
+        Counter-clockwise triangles, indices into ``vertices``.
+    uv : (V, 2) float in [0, 1], optional
+        Texture coordinates in the image convention (top-left origin, v down).
+    texture : (H, W, 3) uint8, optional
+        RGB texture image; needs ``uv``.
+
+    Nothing is checked here: each consumer checks what it needs and names its own source.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray | None = None
+    texture: np.ndarray | None = None
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

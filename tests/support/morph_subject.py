@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scan2morph.geometry import TexturedMesh
 from scan2morph.io.gltf import write_glb
 from scan2morph.stages import Subject, morph
 from scan2morph.store import paths
@@ -90,11 +91,6 @@ def subject_glb(folder: Path):
     path = Path(folder) / "viewer.glb"
     # as stages.morph.write_files writes it
     write_glb(
-        path,
-        f["shapes"]["neutral"],
-        f["faces"],
-        uv=f["uv"],
-        texture=f["texture"],
-        targets=f["targets"],
+        path, TexturedMesh(f["shapes"]["neutral"], f["faces"], f["uv"], f["texture"]), f["targets"]
     )
     return path, part, sub, data

@@ -14,6 +14,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pygltflib.validator import validate
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.io.gltf import MM_TO_M, MorphTargets, read_glb_frame, read_glb_targets, write_glb
 
 OFFSET = np.array([812.3, -1034.7, 1487.9])  # mm: a face ~1000 mm from the scanner origin
@@ -50,7 +51,7 @@ def _face_grid(seed: int = 0, nx: int = 40, ny: int = 50, w: int = 64, h: int = 
 def written(tmp_path_factory):
     vertices, faces, uv, texture, targets = _face_grid()
     path = tmp_path_factory.mktemp("glb") / "subject.glb"
-    write_glb(path, vertices, faces, uv, texture, targets)
+    write_glb(path, TexturedMesh(vertices, faces, uv, texture), targets)
     return path, vertices, faces, uv, texture, targets
 
 
@@ -185,7 +186,7 @@ def test_minimal_mesh_without_uv_texture_targets_or_metres(tmp_path):
     vertices = np.array([[0.0, 0.0, 1000.0], [10.0, 0.0, 1000.0], [0.0, 10.0, 1000.0]])
     faces = np.array([[0, 1, 2]])
     path = tmp_path / "tri.glb"
-    write_glb(path, vertices, faces, normals=False, metres=False)
+    write_glb(path, TexturedMesh(vertices, faces), normals=False, metres=False)
     base, targets = read_glb_targets(path)
     assert targets == {}
     assert_allclose(base, vertices, atol=1e-5)
@@ -200,7 +201,7 @@ def test_minimal_mesh_without_uv_texture_targets_or_metres(tmp_path):
 def test_isolated_vertex_gets_a_unit_normal(tmp_path):
     vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]])
     path = tmp_path / "iso.glb"
-    write_glb(path, vertices, np.array([[0, 1, 2]]))
+    write_glb(path, TexturedMesh(vertices, np.array([[0, 1, 2]])))
     g = pygltflib.GLTF2().load_binary(str(path))
     normals = _accessor(g, g.meshes[0].primitives[0].attributes.NORMAL)
     assert_allclose(normals, np.tile([0.0, 0.0, 1.0], (4, 1)), atol=1e-7)
@@ -212,27 +213,27 @@ def test_write_glb_rejects_bad_input(tmp_path):
     nan = vertices.copy()
     nan[3, 0] = np.nan
     with pytest.raises(InputError, match=r"bad\.glb: vertices: 1 vertices are NaN/inf .*index 3"):
-        write_glb(path, nan, faces)
+        write_glb(path, TexturedMesh(nan, faces))
     with pytest.raises(InputError, match=r"targets\['eel'\]: 1 vertices are NaN/inf"):
-        write_glb(path, vertices, faces, targets=dict(targets, eel=nan))
+        write_glb(path, TexturedMesh(vertices, faces), targets=dict(targets, eel=nan))
     with pytest.raises(InputError, match=r"targets\['car'\]: expected 20 vertices"):
-        write_glb(path, vertices, faces, targets=dict(targets, car=vertices[:-1]))
+        write_glb(path, TexturedMesh(vertices, faces), targets=dict(targets, car=vertices[:-1]))
     with pytest.raises(InputError, match=r"vertices: expected a \(V, 3\) array"):
-        write_glb(path, vertices[:, :2], faces)
+        write_glb(path, TexturedMesh(vertices[:, :2], faces))
     with pytest.raises(InputError, match=r"faces: indices must lie in \[0, 19\], got \[0, 20\]"):
-        write_glb(path, vertices, np.vstack([faces, [[0, 1, 20]]]))
+        write_glb(path, TexturedMesh(vertices, np.vstack([faces, [[0, 1, 20]]])))
     with pytest.raises(InputError, match=r"faces: expected integer indices"):
-        write_glb(path, vertices, faces.astype(float))
+        write_glb(path, TexturedMesh(vertices, faces.astype(float)))
     with pytest.raises(InputError, match=r"faces: expected a non-empty \(F, 3\)"):
-        write_glb(path, vertices, faces[:, :2])
+        write_glb(path, TexturedMesh(vertices, faces[:, :2]))
     with pytest.raises(InputError, match=r"texture: given without uv"):
-        write_glb(path, vertices, faces, texture=texture)
+        write_glb(path, TexturedMesh(vertices, faces, texture=texture))
     with pytest.raises(InputError, match=r"texture: expected \(H, W, 3\) uint8"):
-        write_glb(path, vertices, faces, uv, texture.astype(np.float32))
+        write_glb(path, TexturedMesh(vertices, faces, uv, texture.astype(np.float32)))
     with pytest.raises(InputError, match=r"uv: expected finite texture coordinates in \[0, 1\]"):
-        write_glb(path, vertices, faces, uv * 2.0)
+        write_glb(path, TexturedMesh(vertices, faces, uv * 2.0))
     with pytest.raises(InputError, match=r"uv: expected shape \(20, 2\)"):
-        write_glb(path, vertices, faces, uv[:-1])
+        write_glb(path, TexturedMesh(vertices, faces, uv[:-1]))
     assert not path.exists()
 
 
@@ -259,7 +260,7 @@ def test_frame_places_the_mesh_and_targets_add(tmp_path):
     frame = _similarity(3, vertices.mean(axis=0))
     path = tmp_path / "framed.glb"
     framed = MorphTargets(targets, frame=frame, frame_name="test frame", notes={"car": "a note"})
-    write_glb(path, vertices, faces, uv, texture, framed)
+    write_glb(path, TexturedMesh(vertices, faces, uv, texture), framed)
     assert_array_equal(read_glb_frame(path), frame)
     g = pygltflib.GLTF2().load_binary(str(path))
     (node,) = g.nodes
@@ -287,7 +288,7 @@ def test_frame_places_the_mesh_and_targets_add(tmp_path):
     normals = _accessor(g, prim.attributes.NORMAL)
     assert np.min(np.sum(normals * oracle, axis=1)) > np.cos(np.radians(3.0))
     # an explicit frame wins over the targets' one
-    write_glb(path, vertices, faces, targets=framed, frame=np.eye(4))
+    write_glb(path, TexturedMesh(vertices, faces), framed, frame=np.eye(4))
     assert_array_equal(read_glb_frame(path), np.eye(4))
 
 
@@ -296,11 +297,11 @@ def test_frame_must_be_a_proper_similarity(tmp_path):
     path = tmp_path / "bad.glb"
     mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
     with pytest.raises(InputError, match=r"frame: expected a rotation times a positive scale"):
-        write_glb(path, vertices, faces, frame=mirror)
+        write_glb(path, TexturedMesh(vertices, faces), frame=mirror)
     with pytest.raises(InputError, match=r"frame: expected a rotation times a positive scale"):
-        write_glb(path, vertices, faces, frame=np.diag([1.0, 2.0, 1.0, 1.0]))
+        write_glb(path, TexturedMesh(vertices, faces), frame=np.diag([1.0, 2.0, 1.0, 1.0]))
     with pytest.raises(InputError, match=r"frame: expected a finite \(4, 4\)"):
-        write_glb(path, vertices, faces, frame=np.eye(3))
+        write_glb(path, TexturedMesh(vertices, faces), frame=np.eye(3))
     with pytest.raises(InputError, match=r"frame: 'head' unknown"):
         read_glb_targets(path, frame="head")
     assert not path.exists()

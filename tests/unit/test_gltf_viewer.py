@@ -20,6 +20,7 @@ import pytest
 import trimesh
 from numpy.testing import assert_allclose
 
+from scan2morph.geometry import TexturedMesh
 from scan2morph.io.gltf import read_glb_frame, read_glb_targets, write_glb
 from scan2morph.morph import synthesize
 from scan2morph.morph.frame import apply_frame
@@ -55,7 +56,7 @@ def test_khronos_validator_reports_no_error_and_no_warning(subject_glb, tmp_path
     # also a neutral-only file (a subject without visemes) and one without texture or frame
     plain = tmp_path / "plain.glb"
     v = np.array([[0.0, 0.0, 1000.0], [10.0, 0.0, 1000.0], [0.0, 10.0, 1000.0]])
-    write_glb(plain, v, np.array([[0, 1, 2]]), targets={"up": v + [0.0, 0.0, 1.0]})
+    write_glb(plain, TexturedMesh(v, np.array([[0, 1, 2]])), {"up": v + [0.0, 0.0, 1.0]})
     out = subprocess.run(
         [*_validator(), str(path), str(plain)], capture_output=True, text=True, check=True
     )

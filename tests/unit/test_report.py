@@ -31,6 +31,7 @@ import pytest
 import yaml
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.io import read_glb_targets
 from scan2morph.report import (
     ReportFigure,
@@ -659,9 +660,8 @@ def bare_subject(report, run, tmp_path_factory):
         skipped.attrs["modal_coordinates"] = NO_EXPRESSIONS
     model = load_model(bare)
     glb = out / "bare.glb"
-    write_glb(
-        glb, model.neutral, model.faces, uv=model.uv, texture=model.texture, frame=model.head_frame
-    )
+    mesh = TexturedMesh(model.neutral, model.faces, model.uv, model.texture)
+    write_glb(glb, mesh, frame=model.head_frame)
     page = out / "report.html"
     write_subject_report(page, bare, ReportPage(versions={}, glb=glb, n_coordinates=4))
     return page, model

@@ -50,7 +50,7 @@ import numpy as np
 import pygltflib
 
 from scan2morph.errors import InputError, writing
-from scan2morph.geometry import check_vertex_array, face_normals, vertex_normals
+from scan2morph.geometry import TexturedMesh, check_vertex_array, face_normals, vertex_normals
 
 _ARRAY_BUFFER = pygltflib.ARRAY_BUFFER
 _ELEMENT_ARRAY_BUFFER = pygltflib.ELEMENT_ARRAY_BUFFER
@@ -170,13 +170,10 @@ def _apply(frame: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def write_glb(
     path: str | PathLike[str],
-    vertices,
-    faces,
-    uv=None,
-    texture=None,
+    mesh: TexturedMesh,
     targets: Mapping[str, np.ndarray] | None = None,
-    normals: bool = True,
     *,
+    normals: bool = True,
     mesh_name: str = "face",
     metres: bool = True,
     frame=None,
@@ -188,14 +185,11 @@ def write_glb(
     ----------
     path : path-like
         The ``.glb`` file to write (parent directory must exist).
-    vertices : (V, 3) float, source frame (mm)
-        Base mesh vertices (e.g. the neutral mesh), no NaN.
-    faces : (F, 3) int
-        Counter-clockwise triangles (glTF's front faces), indices into ``vertices``.
-    uv : (V, 2) float in [0, 1], optional
-        Texture coordinates in our image convention (top-left origin, v down), the same as glTF's.
-    texture : (H, W, 3) uint8, optional
-        RGB texture image, embedded as PNG; requires ``uv``.
+    mesh : TexturedMesh
+        The base mesh (e.g. the neutral mesh): vertices (V, 3) mm in the source frame, no NaN;
+        counter-clockwise faces (glTF's front faces); optional uv (V, 2) in [0, 1] (our image
+        convention, the same as glTF's) and an RGB texture (H, W, 3) uint8, embedded as PNG,
+        which requires uv.
     targets : mapping name -> (V, 3) float, optional
         Morph targets as absolute vertex positions in the frame of ``vertices``; stored as
         displacements from the base, in the glTF frame. Names go to ``mesh.extras.targetNames``.
@@ -222,11 +216,11 @@ def write_glb(
         without uv, or a frame that is not a similarity with positive determinant.
     """
     source = str(path)
-    base = _check_vertices("vertices", vertices, source, None)
+    base = _check_vertices("vertices", mesh.vertices, source, None)
     n_vertices = base.shape[0]
     if n_vertices == 0:
         raise InputError(source, "vertices: the mesh has no vertices")
-    tri, uv, texture = _check_mesh(faces, uv, texture, n_vertices, source)
+    tri, uv, texture = _check_mesh(mesh.faces, mesh.uv, mesh.texture, n_vertices, source)
     frame, frame_name = _resolve_frame(frame, frame_name, targets, metres, source)
     notes = dict(getattr(targets, "notes", {}))
     sigmas = dict(getattr(targets, "sigmas", {}))
@@ -257,9 +251,9 @@ def write_glb(
         material=0,
         targets=target_list,
     )
-    mesh = pygltflib.Mesh(name=mesh_name, primitives=[primitive])
-    _name_targets(mesh, list(checked), notes, sigmas)
-    _finish(gltf, buf, mesh, centre, frame_rows, frame_name)
+    gltf_mesh = pygltflib.Mesh(name=mesh_name, primitives=[primitive])
+    _name_targets(gltf_mesh, list(checked), notes, sigmas)
+    _finish(gltf, buf, gltf_mesh, centre, frame_rows, frame_name)
     with writing(path):
         gltf.save_binary(str(path))
 

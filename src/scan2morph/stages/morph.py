@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from scan2morph.geometry import TexturedMesh
 from scan2morph.io import write_glb, write_obj
 from scan2morph.io.gltf import MorphTargets
 from scan2morph.morph import pca_tables
@@ -180,7 +181,7 @@ def write_files(part: Part, eigen: str, coefficients: str, glb: str, models: str
     write_table(eigen, f["eigen"], PCA_EIGENVALUES)
     write_table(coefficients, f["coefficients"], PCA_COEFFICIENTS)
     base = f["shapes"]["neutral"]
-    write_glb(glb, base, f["faces"], uv=f["uv"], texture=f["texture"], targets=f["targets"])
+    write_glb(glb, TexturedMesh(base, f["faces"], f["uv"], f["texture"]), f["targets"])
     folder = Path(models)
     folder.mkdir(parents=True, exist_ok=True)
     for name, shape in f["shapes"].items():
