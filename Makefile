@@ -77,7 +77,7 @@ test: setup
 # every test that runs no workflow (no Snakemake DAG, no SLURM): for quick checks while working;
 # one pytest-xdist worker per core, each with one BLAS/OpenMP thread
 test-fast: setup
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow" -n $(CORES) --dist worksteal --durations=10
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow" -n $(CORES) --dist loadscope --durations=10
 
 # The landmark detector's weights (src/scan2morph/landmarks/model.npz, committed package data, so
 # setup downloads nothing): retrained from the project's own synthetic heads, identical for the

@@ -58,6 +58,11 @@ OPTIONAL_FILES = {
 }
 #: Every column that holds a file path (resolved against the sheet's folder).
 PATH_COLUMNS = tuple(c for c in COLUMNS if c not in REQUIRED and c != "units")
+#: Columns whose cell may name several files separated by ``;`` (or a folder): an RGB-D take's
+#: depth frames (:func:`scan2morph.io.depth_image.depth_frame_paths`).
+MULTI_PATH_COLUMNS = ("depth",)
+#: The separator of several files in one cell.
+PATH_SEPARATOR = ";"
 #: The ``units`` column: the unit of a take's coordinates -> mm per unit (empty: mm).
 UNITS = {"": 1.0, "mm": 1.0, "cm": 10.0, "m": 1000.0}
 #: Modalities whose coordinates the ``units`` column scales (the others carry their unit in
@@ -109,7 +114,7 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
                 )
     base = path.resolve().parent
     for col in PATH_COLUMNS:
-        df[col] = [str(base / v) if v and not Path(v).is_absolute() else v for v in df[col]]
+        df[col] = [_resolve(v, base, col in MULTI_PATH_COLUMNS) for v in df[col]]
     df["sheet_row"] = range(2, len(df) + 2)
     df["sheet"] = str(path)
     df["synthetic"] = False
@@ -149,6 +154,18 @@ def units_problem(value: str, modality: str) -> str:
     return ""
 
 
+def split_paths(value: str) -> list[str]:
+    """The paths of a cell of :data:`MULTI_PATH_COLUMNS` (``a.png; b.png``), blanks left out."""
+    return [v.strip() for v in str(value).split(PATH_SEPARATOR) if v.strip()]
+
+
+def _resolve(value: str, base: Path, several: bool) -> str:
+    """A cell's path(s) resolved against the sheet's folder ``base``."""
+    parts = split_paths(value) if several else ([value] if value else [])
+    out = [v if Path(v).is_absolute() else str(base / v) for v in parts]
+    return f"{PATH_SEPARATOR} ".join(out)
+
+
 def input_roles(row) -> list[str]:
     """The file columns of a take's row that its ingest reads: its modality's
     :data:`FILES`, then the :data:`OPTIONAL_FILES` that are not empty."""
@@ -172,6 +189,30 @@ SYNTHETIC_FILES = {
         "intrinsics": "{stem}_intrinsics.yaml",
     },
 }
+
+
+def rgbd_frames(rgbd: Mapping) -> int:
+    """Depth frames per synthetic RGB-D take (config ``synthetic.rgbd.sensor.frames``)."""
+    return int(rgbd.get("sensor", {}).get("frames", 1))
+
+
+def synthetic_depth_frames(stem: str, frames: int) -> list[str]:
+    """A synthetic RGB-D take's depth files: ``{stem}_depth.png`` (the colour image's frame),
+    then ``{stem}_depth_2.png`` ... for a take of several frames."""
+    first = SYNTHETIC_FILES["rgbd"]["depth"].format(stem=stem)
+    return [first, *(f"{stem}_depth_{k}.png" for k in range(2, frames + 1))]
+
+
+def _synthetic_files(modality: str, stem: str, frames: int) -> dict[str, str]:
+    """A synthetic take's file columns (the landmarks' left empty): :data:`SYNTHETIC_FILES`,
+    an RGB-D take's depth frames joined as in a sheet."""
+    files = dict.fromkeys(PATH_COLUMNS[:-1], "")
+    files |= {c: v.format(stem=stem) for c, v in SYNTHETIC_FILES[modality].items()}
+    if modality == "rgbd":
+        files["depth"] = f"{PATH_SEPARATOR} ".join(synthetic_depth_frames(stem, frames))
+    return files
+
+
 #: Synthetic landmark file of each modality: 3D points on a mesh, iBUG .pts on an image.
 SYNTHETIC_LANDMARKS = {"mesh": "{stem}_landmarks3d.txt"}
 #: Modalities a synthetic take may be given for some subjects (config ``synthetic.{modality}``).
@@ -259,8 +300,7 @@ def synthetic_rows(
                     f"take {t['take']!r} of subject {i} is also listed under synthetic.{listed[0]}",
                 )
             modality = listed[0] if listed else t.get("modality", "range")
-            files = dict.fromkeys(PATH_COLUMNS[:-1], "")
-            files |= {c: v.format(stem=stem) for c, v in SYNTHETIC_FILES[modality].items()}
+            files = _synthetic_files(modality, stem, rgbd_frames(switches["rgbd"]))
             pattern = SYNTHETIC_LANDMARKS.get(modality, "{stem}.pts")
             rows.append(
                 dict(
@@ -340,8 +380,14 @@ def sheet_problems(
                                 f"{where}: column '{col}' is empty (a {rec.modality} take needs it)",
                             )
                         )
-                elif check_files and not rec.synthetic and not Path(value).is_file():
-                    out.append((rec.take, f"{where}: column '{col}': file not found: {value}"))
+                elif check_files and not rec.synthetic:
+                    several = col in MULTI_PATH_COLUMNS
+                    for part in split_paths(value) if several else [value]:
+                        found = Path(part).is_file() or (several and Path(part).is_dir())
+                        if not found:
+                            out.append(
+                                (rec.take, f"{where}: column '{col}': file not found: {part}")
+                            )
         dup = rows["take"][rows["take"].duplicated()].unique()
         for take in dup:
             out.append(

@@ -10,14 +10,13 @@ from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
 from scan2morph.evaluate.scan import face_region, stereo_accuracy
+from scan2morph.io.depth_image import read_depth, write_depth_png
 from scan2morph.io.rgbd import (
     PinholeCamera,
     RGBDIntrinsics,
     depth_to_color_grid,
-    read_depth,
     read_rgbd_intrinsics,
     read_rgbd_take,
-    write_depth_png,
     write_rgbd_intrinsics,
 )
 from scan2morph.scan.repair import repair_range, smooth_depth, trim_depth_edges

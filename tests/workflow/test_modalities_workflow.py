@@ -1,6 +1,6 @@
 """Mesh and RGB-D takes end to end (issue #18): two tiny synthetic subjects, one of mesh scans and
-one of RGB-D takes (a neutral and a viseme each), run through the workflow to their accuracy
-reports, and the stores record each take's modality and camera."""
+one of RGB-D takes of two depth frames each (a neutral and a viseme each), run through the
+workflow to their accuracy reports, and the stores record each take's modality and camera."""
 
 from __future__ import annotations
 
@@ -20,8 +20,15 @@ TAKES = [
     dict(take="neutral", kind="neutral", label="neutral"),
     dict(take="car", kind="viseme", label="car"),
 ]
+# two depth frames per RGB-D take, the head moving between them: the ingest fuses them
 SENSOR = dict(
-    width=160, height=120, focal_px=250.0, color_width=160, color_height=120, color_focal_px=258.0
+    width=160,
+    height=120,
+    focal_px=250.0,
+    color_width=160,
+    color_height=120,
+    color_focal_px=258.0,
+    frames=2,
 )
 
 
@@ -83,5 +90,9 @@ def test_stores_record_modality_and_camera(run):
                 assert K.shape == (3, 3) and K[2, 2] == 1.0
                 assert h5[paths.camera(take, "size")][()].tolist() == [160, 120]
             if modality == "rgbd":  # the colour camera, 15 mm beside the depth camera
+                attrs = h5[paths.take("car")].attrs
+                assert attrs["depth_frames"] == 2  # registered (a small motion) and averaged
+                assert 0.0 < attrs["depth_frame_motion_deg"][1] < 3.0
+                assert len(attrs["input_sha256_depth"].split(";")) == 2
                 assert h5[paths.camera("car", "K")][0, 0] == 258.0
                 assert np.isclose(h5[paths.camera("car", "pose")][0, 3], -15.0)

@@ -2,7 +2,13 @@
 # wildcards and looks the subject or take up in the take table of common.smk.
 from pathlib import Path
 
-from scan2morph.sheet import SYNTHETIC_LANDMARKS, input_roles
+from scan2morph.sheet import (
+    MULTI_PATH_COLUMNS,
+    SYNTHETIC_LANDMARKS,
+    input_roles,
+    split_paths,
+    synthetic_depth_frames,
+)
 
 
 # --- one take ---
@@ -22,6 +28,11 @@ def take_inputs(subject, take):
     row = TAKES.loc[(subject, take)]
     files = {}
     for role in input_roles(row):
+        if role in MULTI_PATH_COLUMNS:  # several files (or a folder): a list
+            parts = split_paths(row[role])
+            if parts and (row["synthetic"] or all(Path(p).exists() for p in parts)):
+                files[role] = parts
+            continue
         path = row[role]
         if path and (row["synthetic"] or Path(path).is_file()):
             files[role] = path
@@ -46,6 +57,19 @@ def get_take_roles(wildcards):
     texture when given; none for an unknown modality, which the subject's check job reports).
     """
     return input_roles(TAKES.loc[(wildcards.subject, wildcards.take)])
+
+
+def synth_depth_files(takes):
+    """The depth frames a synthetic subject's generator writes for its RGB-D takes, in take
+    order (``synthetic.rgbd.sensor.frames`` per take), with ``{subject}`` kept."""
+    frames = int(config["synthetic"]["rgbd"]["sensor"].get("frames", 1))
+    stem = f"{SYNTH_ROOT}/{{subject}}/{{take}}"
+    return [
+        f
+        for t in takes
+        if t["modality"] == "rgbd"
+        for f in synthetic_depth_frames(stem.replace("{take}", t["take"]), frames)
+    ]
 
 
 def synth_landmark_files(takes):
@@ -93,7 +117,12 @@ def get_subject_files(wildcards):
 
 def get_subject_files_flat(wildcards):
     return sorted(
-        {f for files in get_subject_files(wildcards).values() for f in files.values()}
+        {
+            f
+            for files in get_subject_files(wildcards).values()
+            for value in files.values()
+            for f in ([value] if isinstance(value, str) else value)
+        }
     )
 
 

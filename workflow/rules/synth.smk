@@ -34,9 +34,7 @@ for _group in synth_groups():
                 _group["takes"],
                 "stereo",
             ),
-            depth=synth_files(
-                f"{SYNTH_ROOT}/{{subject}}/{{take}}_depth.png", _group["takes"], "rgbd"
-            ),
+            depth=synth_depth_files(_group["takes"]),
             rgbd_color=synth_files(
                 f"{SYNTH_ROOT}/{{subject}}/{{take}}.png", _group["takes"], "rgbd"
             ),

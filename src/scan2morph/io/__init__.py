@@ -5,6 +5,7 @@ from scan2morph.io.calibration import (
     read_stereo_calibration,
     write_stereo_calibration,
 )
+from scan2morph.io.depth_image import read_depth, write_depth_png
 from scan2morph.io.gltf import read_glb_targets, write_glb
 from scan2morph.io.image import read_color, write_color
 from scan2morph.io.landmarks import read_pts, write_pts
@@ -20,10 +21,8 @@ from scan2morph.io.range_image import (
 from scan2morph.io.rgbd import (
     RGBDIntrinsics,
     RGBDTake,
-    read_depth,
     read_rgbd_intrinsics,
     read_rgbd_take,
-    write_depth_png,
     write_rgbd_intrinsics,
 )
 from scan2morph.io.take import (

@@ -15,11 +15,12 @@ from pathlib import Path
 
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import read_stereo_calibration
+from scan2morph.io.depth_image import read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh
 from scan2morph.io.range_image import read_range
-from scan2morph.io.rgbd import read_depth, read_rgbd_intrinsics
+from scan2morph.io.rgbd import read_rgbd_intrinsics
 from scan2morph.io.take import check_face, check_handedness, read_range_take, read_stereo_take
 from scan2morph.sheet import OPTIONAL_FILES
 
@@ -33,7 +34,7 @@ READERS: dict[str, dict[str, Callable]] = {
         "landmarks": read_pts,
     },
     "rgbd": {
-        "depth": read_depth,
+        "depth": read_depth_frames,
         "color": read_color,
         "intrinsics": read_rgbd_intrinsics,
         "landmarks": read_pts,

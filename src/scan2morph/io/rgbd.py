@@ -25,6 +25,12 @@ pixel; distances in mm)::
 ``x_color = R @ x_depth + T``. Without a ``color`` block the colour image is taken with the
 depth camera itself (same size, pixel to pixel).
 
+Several depth frames. A take's ``depth`` may name several frames of the same pose: files
+separated by ``;``, or a folder (its ``.png``/``.npy``/``.npz`` files in name order). The first
+frame is the one the colour image was taken with. :func:`read_rgbd_take` hands the frames (in
+mm) to a ``fuse`` function (:func:`scan2morph.scan.fusion.fuse_depth_frames`, which registers
+and averages them) and goes on with the fused depth.
+
 The take's range image lies on the **colour** image's pixel grid (where the landmarks are
 clicked) and its XYZ in the **depth camera's** frame (mm, OpenCV axes). Every colour pixel's
 point is where its ray meets the depth surface: the depth image is triangulated (two triangles
@@ -37,19 +43,19 @@ small holes and removes flying pixels.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.io.depth_image import depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.take import RangeTake, check_face, check_image_size, check_landmarks_inside
 
-#: Depth file suffixes.
-DEPTH_SUFFIXES = (".png", ".npy", ".npz")
 #: A triangle of neighbouring depth pixels steeper than this to the view ray spans a depth step
 #: and is not meshed, degrees (a face's steepest measured parts, nose sides, are ~75).
 EDGE_SLOPE_DEG = 80.0
@@ -188,55 +194,6 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     return RGBDIntrinsics(depth, color, R, T, scale)
 
 
-def read_depth(path: str | Path) -> np.ndarray:
-    """Read a depth image in depth units: a 16-bit PNG, an ``.npy`` or an ``.npz`` with ``depth``.
-
-    Returns
-    -------
-    (H, W) float64
-        Depth units (multiply by ``depth_scale_mm``); 0 and NaN = no data.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, an 8-bit or colour PNG, an array that is not 2D, negative
-        or infinite values.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "file not found (expected a 16-bit depth PNG, .npy or .npz)")
-    suffix = path.suffix.lower()
-    if suffix not in DEPTH_SUFFIXES:
-        raise InputError(path, f"depth: unknown format {suffix!r} (expected {DEPTH_SUFFIXES})")
-    if suffix == ".png":
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise InputError(path, "depth: cannot decode the PNG (corrupt or not an image)")
-        if img.ndim != 2 or img.dtype != np.uint16:
-            kind = f"{img.dtype} with {1 if img.ndim == 2 else img.shape[2]} channels"
-            raise InputError(path, f"depth: expected a 16-bit single-channel PNG, got {kind}")
-        depth = img.astype(np.float64)
-    else:
-        try:
-            if suffix == ".npz":
-                with np.load(path, allow_pickle=False) as data:
-                    if "depth" not in data.files:
-                        raise InputError(path, f"key 'depth' missing (found {sorted(data.files)})")
-                    depth = np.asarray(data["depth"])
-            else:
-                depth = np.asarray(np.load(path, allow_pickle=False))
-        except InputError:
-            raise
-        except Exception as exc:  # zip, pickle or format errors from numpy
-            raise InputError(path, f"depth: cannot read as {suffix}: {exc}") from None
-        if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.number):
-            raise InputError(path, f"depth: expected an (H, W) number array, got {depth.shape}")
-        depth = depth.astype(np.float64)
-    if np.isinf(depth).any() or (depth < 0).any():
-        raise InputError(path, "depth: negative or infinite values (0 or NaN = no data)")
-    return depth
-
-
 def _rays(camera: PinholeCamera) -> np.ndarray:
     """(H, W, 2) undistorted normalised coordinates ``(x / z, y / z)`` of every pixel centre."""
     w, h = camera.size
@@ -254,6 +211,13 @@ def _to_pixels(camera: PinholeCamera, norm: np.ndarray) -> np.ndarray:
     """Pixel coordinates (n, 2) of undistorted normalised coordinates (n, 2)."""
     pts = np.column_stack([norm, np.ones(len(norm))])
     return cv2.projectPoints(pts, np.zeros(3), np.zeros(3), camera.K, camera.D)[0].reshape(-1, 2)
+
+
+def project_points(camera: PinholeCamera, xyz: np.ndarray) -> np.ndarray:
+    """Pixel coordinates (n, 2) of points (n, 3) in the camera's frame (mm, z > 0), with the
+    camera's distortion."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    return _to_pixels(camera, xyz[:, :2] / xyz[:, 2:3])
 
 
 def depth_points(depth_mm: np.ndarray, camera: PinholeCamera) -> np.ndarray:
@@ -295,15 +259,45 @@ def depth_to_color_grid(depth_mm: np.ndarray, intr: RGBDIntrinsics) -> np.ndarra
     pts = depth_points(depth_mm, intr.depth)
     if intr.color is intr.depth:
         return pts
-    wc, hc = intr.color.size
-    cam = pts.reshape(-1, 3) @ intr.R.T + intr.T
-    tris = _triangles(pts[..., 2], float(intr.depth.K[0, 0]))
+    xyz_c = surface_on_camera(pts, float(intr.depth.K[0, 0]), intr.color, intr.color_from_depth)
+    return ((xyz_c.reshape(-1, 3) - intr.T) @ intr.R).reshape(xyz_c.shape)
+
+
+def surface_on_camera(
+    pts: np.ndarray, focal_px: float, camera: PinholeCamera, pose: np.ndarray
+) -> np.ndarray:
+    """Where every pixel's ray of ``camera`` meets a depth grid's triangulated surface.
+
+    The grid is triangulated (two triangles per 2 x 2 block of pixels with data, none across a
+    depth step) and each triangle rasterised into ``camera`` exactly (inside test and
+    perspective-correct depth in undistorted normalised coordinates), nearest surface first.
+
+    Parameters
+    ----------
+    pts : (H, W, 3) float
+        The depth grid's points in its own camera's frame, mm; NaN without data.
+    focal_px : float
+        The depth grid's focal length, px (sets the steepest triangle meshed).
+    camera : PinholeCamera
+        The camera whose pixels are filled.
+    pose : (4, 4) float
+        Depth grid's frame -> ``camera``'s frame, mm.
+
+    Returns
+    -------
+    (Hc, Wc, 3) float64
+        mm in ``camera``'s frame, NaN where a pixel's ray meets no triangle.
+    """
+    wc, hc = camera.size
+    R, T = pose[:3, :3], pose[:3, 3]
+    cam = pts.reshape(-1, 3) @ R.T + T
+    tris = _triangles(pts[..., 2], focal_px)
     zc = cam[:, 2]
     tris = tris[(zc[tris] > 0).all(axis=1)]
     norm = cam[:, :2] / np.where(zc > 0, zc, np.nan)[:, None]
     used = np.unique(tris)
     pix = np.full((len(cam), 2), np.nan)
-    pix[used] = _to_pixels(intr.color, norm[used])
+    pix[used] = _to_pixels(camera, norm[used])
     tp = pix[tris]  # (T, 3, 2)
     lo = np.ceil(tp.min(axis=1)).astype(np.int64)
     hi = np.floor(tp.max(axis=1)).astype(np.int64)
@@ -315,7 +309,7 @@ def depth_to_color_grid(depth_mm: np.ndarray, intr: RGBDIntrinsics) -> np.ndarra
     e1, e2 = n1 - n0, n2 - n0
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     ok_det = np.abs(det) > 0
-    rays = _rays(intr.color).reshape(-1, 2)
+    rays = _rays(camera).reshape(-1, 2)
     zbuf = np.full(hc * wc, np.inf)
     span = np.minimum(hi - lo, MAX_TRIANGLE_PX - 1)
     for dy in range(int(span[:, 1].max(initial=-1)) + 1):
@@ -334,42 +328,49 @@ def depth_to_color_grid(depth_mm: np.ndarray, intr: RGBDIntrinsics) -> np.ndarra
             z = 1.0 / np.sum(w * inv_z[k[inside]], axis=1)  # perspective-correct depth
             np.minimum.at(zbuf, flat[inside], z)
     z = np.where(np.isfinite(zbuf), zbuf, np.nan)
-    xyz_c = np.column_stack([rays * z[:, None], z])
-    return ((xyz_c - intr.T) @ intr.R).reshape(hc, wc, 3)
+    return np.column_stack([rays * z[:, None], z]).reshape(hc, wc, 3)
 
 
 @dataclass(frozen=True, eq=False)
 class RGBDTake(RangeTake):
     """A read RGB-D take: the :class:`~scan2morph.io.RangeTake` on the colour grid plus the
-    sensor (``intrinsics``)."""
+    sensor (``intrinsics``) and, for a take of several depth frames, what fused them
+    (``fusion``, e.g. a :class:`~scan2morph.scan.fusion.FusedDepth`)."""
 
     intrinsics: RGBDIntrinsics | None = None
+    fusion: object | None = None
 
 
 def read_rgbd_take(
-    depth_path: str | Path,
+    depth_path,
     color_path: str | Path,
     intrinsics_path: str | Path,
     landmarks_path: str | Path | None,
+    fuse: Callable | None = None,
 ) -> RGBDTake:
     """Read an RGB-D take into a range take on the colour image's grid.
 
     Parameters
     ----------
-    depth_path : str or path-like
-        16-bit depth PNG, ``.npy`` or ``.npz`` (key ``depth``), in depth units.
+    depth_path : str, path-like or sequence of them
+        16-bit depth PNG, ``.npy`` or ``.npz`` (key ``depth``), in depth units; or several
+        frames (:func:`~scan2morph.io.depth_image.depth_frame_paths`).
     color_path : str or path-like
         The colour image.
     intrinsics_path : str or path-like
         The sensor's intrinsics YAML (module docstring).
     landmarks_path : str or path-like or None
         iBUG 68- (or 51-) point ``.pts`` on the colour image; None: no landmark file.
+    fuse : callable, optional
+        ``fuse(frames_mm, depth_camera, sources)`` -> an object with ``depth_mm`` (H, W): how
+        several frames become one (:func:`scan2morph.scan.fusion.fuse_depth_frames`); needed
+        when ``depth_path`` names more than one frame.
 
     Returns
     -------
     RGBDTake
-        ``xyz`` (Hc, Wc, 3) mm in the depth camera's frame, ``color``, ``landmarks`` (68, 2) px
-        and ``intrinsics``.
+        ``xyz`` (Hc, Wc, 3) mm in the depth camera's frame, ``color``, ``landmarks`` (68, 2) px,
+        ``intrinsics`` and, from several frames, ``fusion`` (what ``fuse`` returned).
 
     Raises
     ------
@@ -378,11 +379,13 @@ def read_rgbd_take(
         ``width``/``height`` (names the intrinsics file); no depth data at all; landmarks
         outside the colour image; the face check of :func:`~scan2morph.io.check_face`, which
         names a ``depth_scale_mm`` off by a factor 10 or 1000 when that factor gives a face of
-        the right size.
+        the right size; from ``fuse``.
     """
     intr = read_rgbd_intrinsics(intrinsics_path)
-    depth = read_depth(depth_path)
-    check_image_size(depth.shape, depth_path, "depth")
+    paths = depth_frame_paths(depth_path)
+    frames = read_depth_frames(paths)
+    depth = frames[0]
+    check_image_size(depth.shape, paths[0], "depth")
     color = read_color(color_path)
     for name, img, cam, where in (
         ("depth", depth, intr.depth, ""),
@@ -393,22 +396,32 @@ def read_rgbd_take(
             raise InputError(
                 intrinsics_path,
                 f"{where}width/{where}height: {cam.size[0]}x{cam.size[1]} but the {name} image "
-                f"{Path(depth_path if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
+                f"{Path(paths[0] if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
                 f"are these the intrinsics of this {name} camera?",
             )
-    valid = np.isfinite(depth) & (depth > 0)
-    if not valid.any():
-        raise InputError(depth_path, "depth: no pixel with data (all 0 or NaN)")
-    xyz = depth_to_color_grid(depth * intr.depth_scale_mm, intr)
+    for path, frame in zip(paths, frames, strict=True):
+        if not (np.isfinite(frame) & (frame > 0)).any():
+            raise InputError(path, "depth: no pixel with data (all 0 or NaN)")
+    fusion = None
+    depth_mm = depth * intr.depth_scale_mm
+    if len(frames) > 1:
+        if fuse is None:
+            raise ValueError("read_rgbd_take: several depth frames need a fuse function")
+        mm = [f * intr.depth_scale_mm for f in frames]
+        fusion = fuse(mm, intr.depth, [str(p) for p in paths])
+        depth_mm = np.nan_to_num(fusion.depth_mm, nan=0.0)
+    xyz = depth_to_color_grid(depth_mm, intr)
+    take = RGBDTake(xyz=xyz, color=color, landmarks=None, intrinsics=intr, fusion=fusion)
     if landmarks_path is None:
-        return RGBDTake(xyz=xyz, color=color, landmarks=None, intrinsics=intr)
+        return take
     landmarks = read_pts(landmarks_path)
     check_landmarks_inside(landmarks, *intr.color.size, landmarks_path)
+    take = replace(take, landmarks=landmarks)
     if not complete(landmarks):  # the face is checked once the jawline is detected
-        return RGBDTake(xyz=xyz, color=color, landmarks=landmarks, intrinsics=intr)
+        return take
     hint = f"; check depth_scale_mm = {intr.depth_scale_mm:g} in {Path(intrinsics_path).name}"
     try:
-        check_face(xyz, landmarks, depth_path, landmarks_path, unit_hint=hint)
+        check_face(xyz, landmarks, paths[0], landmarks_path, unit_hint=hint)
     except InputError as exc:
         factor = _scale_factor(depth, intr, landmarks)
         if factor is None:
@@ -419,7 +432,7 @@ def read_rgbd_take(
             f"depth_scale_mm = {intr.depth_scale_mm * factor:g} (x {factor:g}) the face has a "
             "plausible size: is the depth scale in mm per unit?",
         ) from None
-    return RGBDTake(xyz=xyz, color=color, landmarks=landmarks, intrinsics=intr)
+    return take
 
 
 def _scale_factor(depth: np.ndarray, intr: RGBDIntrinsics, landmarks: np.ndarray) -> float | None:
@@ -464,26 +477,15 @@ def write_rgbd_intrinsics(path: str | Path, intr: RGBDIntrinsics) -> None:
         Path(path).write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
 
 
-def write_depth_png(path: str | Path, depth_units: np.ndarray) -> None:
-    """Write depth units (H, W) as a 16-bit PNG (values rounded, clipped to 0..65535)."""
-    from scan2morph.errors import writing
-
-    img = np.clip(np.rint(np.nan_to_num(depth_units, nan=0.0)), 0, 65535).astype(np.uint16)
-    with writing(path):
-        ok = cv2.imwrite(str(path), img)
-    if not ok:
-        raise InputError(path, "depth: could not write the PNG")
-
-
 __all__ = [
     "PinholeCamera",
     "RGBDIntrinsics",
     "RGBDTake",
     "depth_points",
     "depth_to_color_grid",
-    "read_depth",
+    "project_points",
     "read_rgbd_intrinsics",
     "read_rgbd_take",
-    "write_depth_png",
+    "surface_on_camera",
     "write_rgbd_intrinsics",
 ]

@@ -26,19 +26,21 @@ from scan2morph.io import (
     read_range_take,
     read_stereo_take,
 )
+from scan2morph.io.depth_image import depth_frame_paths
 from scan2morph.io.landmarks import complete
 from scan2morph.io.mesh_scan import SHADED, read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
+from scan2morph.scan.fusion import FusionParams, fuse_depth_frames
 from scan2morph.scan.view import shaded_image
 from scan2morph.sheet import FILES, mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.store import paths
 from scan2morph.template import Template
 
-#: Config sections this stage reads (stereo takes; mesh takes).
-SECTIONS = ("stereo", "mesh_camera")
+#: Config sections this stage reads (stereo takes; mesh takes; RGB-D takes of several frames).
+SECTIONS = ("stereo", "mesh_camera", "depth_fusion")
 #: What the pixel grid of each modality's take is (``/takes/{take}/camera/model``).
 CAMERA_MODELS = {
     "range": "the range scanner's (as given)",
@@ -59,15 +61,22 @@ class Params:
         The config section ``stereo`` (the reconstruction of stereo takes).
     mesh_camera : mapping
         The config section ``mesh_camera`` (the virtual camera of mesh takes).
+    fusion : FusionParams
+        The config section ``depth_fusion`` (RGB-D takes of several depth frames).
     """
 
     stereo: Mapping = field(default_factory=dict)
     mesh_camera: Mapping = field(default_factory=dict)
+    fusion: FusionParams = field(default_factory=FusionParams)
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
-        """From the config's sections ``stereo`` and ``mesh_camera``."""
-        return cls(dict(config.get("stereo", {})), dict(config.get("mesh_camera", {})))
+        """From the config's sections ``stereo``, ``mesh_camera`` and ``depth_fusion``."""
+        return cls(
+            dict(config.get("stereo", {})),
+            dict(config.get("mesh_camera", {})),
+            FusionParams(**config.get("depth_fusion", {})),
+        )
 
 
 def run(template: Template | None, take: Take, params: Params) -> Part:
@@ -109,7 +118,7 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
     # a geometry-only mesh is shaded grey on purpose (its own warning says so)
     shaded = scan.camera.get("color_source") == "shading"
     attrs["grey_color"] = bool(_grey(scan.color)) and not shaded
-    attrs |= {f"input_sha256_{r}": sha256_file(path) for r, path in files.items()}
+    attrs |= {f"input_sha256_{r}": _checksum(r, path) for r, path in files.items()}
     provenance = {"modality": modality, "model": CAMERA_MODELS[modality]} | scan.camera
     return Part(
         {
@@ -133,12 +142,29 @@ class _Scan(NamedTuple):
 
 
 def _read_rgbd(files, row, params: Params) -> _Scan:
+    def fuse(frames, camera, sources):
+        return fuse_depth_frames(frames, camera, sources, params.fusion)
+
     scan = read_rgbd_take(
-        files["depth"], files["color"], files["intrinsics"], files.get("landmarks")
+        files["depth"], files["color"], files["intrinsics"], files.get("landmarks"), fuse
     )
     cam = scan.intrinsics.color
     camera = dict(K=cam.K, distortion=cam.D, pose=scan.intrinsics.color_from_depth, size=cam.size)
-    return _Scan(scan.xyz, scan.color, scan.landmarks, camera)
+    attrs = {"depth_frames": 1}
+    if scan.fusion is not None:
+        f = scan.fusion
+        attrs = {
+            "depth_frames": len(f.transforms),
+            "depth_frame_motion_deg": f.motion_deg,
+            "depth_frame_motion_mm": f.motion_mm,
+            "depth_frame_rmse_mm": f.rmse_mm,
+        }
+        log.info(
+            "%s/%s: %d depth frames fused (motion up to %.2f degrees, %.2f mm; RMSE %.2f mm)",
+            row["subject"], row["take"], len(f.transforms), f.motion_deg.max(),
+            f.motion_mm.max(), f.rmse_mm.max(),
+        )  # fmt: skip
+    return _Scan(scan.xyz, scan.color, scan.landmarks, camera, attrs)
 
 
 def _read_mesh(files, row, params: Params) -> _Scan:
@@ -207,6 +233,13 @@ def _read_stereo(files, row, params: Params) -> _Scan:
 
 #: Each modality's reader: (files, row, params) -> _Scan.
 _READERS = {"rgbd": _read_rgbd, "mesh": _read_mesh, "range": _read_range, "stereo": _read_stereo}
+
+
+def _checksum(role: str, path) -> str:
+    """SHA-256 of an input file; of every frame (``;``-separated) for an RGB-D take's depth."""
+    if role == "depth":
+        return ";".join(sha256_file(p) for p in depth_frame_paths(path))
+    return sha256_file(path)
 
 
 def _grey(color: np.ndarray) -> bool:

@@ -17,7 +17,9 @@ distance); **quantisation** to ``depth_unit_mm`` (the PNG's units, written as
 Truth: ``pose`` maps the head into the depth camera's frame (the take's frame), ``K`` is the
 colour camera's (the landmarks' and the range image's grid), ``color_from_scanner`` (4, 4) the
 depth -> colour transform, ``xyz_true`` (H, W, 3) the exact surface point of every colour pixel
-in the depth camera's frame and ``segment`` its ``SEG_*`` code.
+in the depth camera's frame and ``segment`` its ``SEG_*`` code. A take of several depth
+frames (``frames``) also has ``frame_poses`` (N, 4, 4), each frame's head -> depth camera pose
+(the first is ``pose``): the head turns a little about its origin between frames.
 """
 
 from __future__ import annotations
@@ -65,8 +67,11 @@ DEFAULT_RGBD: dict[str, float | int] = {
     "skin_texture": 1.0,  # strength of the skin's freckles and mottling (0: flat albedo)
     "image_noise": 1.5,  # colour sensor noise, grey levels (std)
     "click_noise_px": 0.5,  # landmark clicking noise on the colour image
+    "frames": 1,  # depth frames of the take (the first taken with the colour image)
+    "frame_motion_deg": 0.3,  # the head's motion between frames: rotation, per axis (std)
+    "frame_motion_mm": 0.5,  # ... and translation, per axis (std)
 }
-_INT_RGBD = ("width", "height", "color_width", "color_height")
+_INT_RGBD = ("width", "height", "color_width", "color_height", "frames")
 #: Surfaces that return depth (the mouth cavity and the pupils do not).
 _MEASURED = (SEG_SKIN, SEG_BROW, SEG_HAIR, SEG_EYE)
 
@@ -93,7 +98,15 @@ def rgbd_params(params: dict | None = None, source: str = "params") -> dict:
     for k in ("baseline_mm", "pose_sigma_deg", "pose_sigma_mm", "noise_mm_at_1m", "edge_jump_mm"):
         if p[k] < 0:
             raise InputError(source, f"params.{k}: expected >= 0, got {p[k]}")
-    for k in ("image_noise", "click_noise_px", "skin_texture"):
+    if p["frames"] < 1:
+        raise InputError(source, f"params.frames: expected >= 1, got {p['frames']}")
+    for k in (
+        "image_noise",
+        "click_noise_px",
+        "skin_texture",
+        "frame_motion_deg",
+        "frame_motion_mm",
+    ):
         if p[k] < 0:
             raise InputError(source, f"params.{k}: expected >= 0, got {p[k]}")
     return p
@@ -170,7 +183,8 @@ def make_rgbd_take(
     Returns
     -------
     dict
-        ``depth`` (Hd, Wd) uint16 depth units; ``color`` (Hc, Wc, 3) uint8; ``intrinsics``
+        ``depth`` (Hd, Wd) uint16 depth units (with ``frames`` > 1 a list of them, the first
+        taken with the colour image, the truth's); ``color`` (Hc, Wc, 3) uint8; ``intrinsics``
         (:class:`~scan2morph.io.rgbd.RGBDIntrinsics`, exact); ``landmarks`` (68, 2) float64
         on the colour image with click noise; ``truth`` (see the module docstring); ids.
     """
@@ -210,8 +224,31 @@ def make_rgbd_take(
         xyz_true=xyz_true,
         segment=seg_c,
     )
-    images = {"depth": units, "color": color, "intrinsics": intr}
+    depth_out = units
+    if p["frames"] > 1:  # drawn last: a one-frame take's draws stay as they were
+        poses, frames = _more_frames(head, vertices, pose, intr, p, rng)
+        depth_out = [units, *frames]
+        truth["frame_poses"] = np.stack([pose, *poses])
+    images = {"depth": depth_out, "color": color, "intrinsics": intr}
     return _take_result(images, clicked, truth, subject, take, kind, label)
+
+
+def _more_frames(head, vertices, pose: np.ndarray, intr: RGBDIntrinsics, p: dict, rng) -> list:
+    """Depth frames 2.. of a take: the head turned a little about its origin from ``pose``
+    (rotation ``frame_motion_deg``, translation ``frame_motion_mm`` per axis, std), each with
+    its own sensor defects. Returns the frames' head -> depth camera poses and their depth
+    images."""
+    poses, out = [], []
+    centre = pose[:3, 3]
+    for _ in range(p["frames"] - 1):
+        turn = Rotation.from_rotvec(np.deg2rad(p["frame_motion_deg"]) * rng.standard_normal(3))
+        motion = np.eye(4)
+        motion[:3, :3] = turn.as_matrix()
+        motion[:3, 3] = centre - turn.apply(centre) + p["frame_motion_mm"] * rng.standard_normal(3)
+        poses.append(motion @ pose)
+        _, depth, seg = render(head, vertices, poses[-1], intr.depth.K, *intr.depth.size)
+        out.append(depth_defects(depth, np.isin(seg, _MEASURED), p, rng))
+    return poses, out
 
 
 def write_rgbd_take(
@@ -228,8 +265,8 @@ def write_rgbd_take(
     ----------
     result : dict
         Output of :func:`make_rgbd_take`.
-    depth_path : str or path-like
-        16-bit depth PNG (units of ``depth_scale_mm``).
+    depth_path : str or path-like, or a list of them
+        16-bit depth PNG (units of ``depth_scale_mm``); one per frame for a take of several.
     color_path : str or path-like
         Colour image (PNG).
     intrinsics_path : str or path-like
@@ -241,11 +278,17 @@ def write_rgbd_take(
         ``xyz_true`` and ``segment`` (module docstring).
     """
     from scan2morph.io import write_color, write_pts
-    from scan2morph.io.rgbd import write_depth_png, write_rgbd_intrinsics
+    from scan2morph.io.depth_image import write_depth_png
+    from scan2morph.io.rgbd import write_rgbd_intrinsics
 
     keys = ("depth", "color", "intrinsics", "landmarks", "truth")
     _check_result(result, keys, str(truth_path), "make_rgbd_take")
-    write_depth_png(depth_path, result["depth"])
+    frames = result["depth"] if isinstance(result["depth"], list) else [result["depth"]]
+    paths = depth_path if isinstance(depth_path, list | tuple) else [depth_path]
+    if len(paths) != len(frames):
+        raise InputError(str(truth_path), f"{len(frames)} depth frames but {len(paths)} paths")
+    for path, frame in zip(paths, frames, strict=True):
+        write_depth_png(path, frame)
     write_color(color_path, result["color"])
     write_rgbd_intrinsics(intrinsics_path, result["intrinsics"])
     write_pts(pts_path, result["landmarks"])
