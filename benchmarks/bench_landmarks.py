@@ -3,8 +3,11 @@
 Candidates (scan2morph.landmarks):
 * ``geometry``: the training mean shape placed by the geometry alone (the nose tip found on the
   range data, the metric scale of the grid), no image or shape fitting;
-* ``cascade``: the trained cascade (:func:`scan2morph.landmarks.detect`);
-* ``cascade+refine``: the cascade, then the geometric refinement on the 3D surface.
+* ``cascade-1``: the trained cascade from the mean shape alone;
+* ``cascade-7``: the cascade from 7 starts around the global stage's shape, on the canonical
+  frame only;
+* ``cascade-7+mirror``: the same on the frame and on its mirror image (the detector,
+  :func:`scan2morph.landmarks.detect`).
 
 Takes: every take of the default synthetic cohort (config/config.yaml: seed 2009, held out from
 training) after the ingest and repair stages, per modality; and range renders of the real head
@@ -40,7 +43,7 @@ from scan2morph.align.carry import carry_stable  # noqa: E402
 from scan2morph.align.rigid import transform_points  # noqa: E402
 from scan2morph.landmarks.canonical import canonical  # noqa: E402
 from scan2morph.landmarks.cascade import run  # noqa: E402
-from scan2morph.landmarks.detect import cached_model, detect  # noqa: E402
+from scan2morph.landmarks.detect import cached_model, detect, ensemble_shapes  # noqa: E402
 from scan2morph.landmarks.face import find_face  # noqa: E402
 from scan2morph.scan.view import shaded_image  # noqa: E402
 from scan2morph.stages.landmarks import DETECTED, Landmarks, Params, second_pass  # noqa: E402
@@ -63,11 +66,22 @@ def cascade_single(color, xyz, source):
     return can.to_image(run(model, can.channels, model.init))
 
 
+def cascade_frame_only(color, xyz, source):
+    """The cascade from the 7 starts on the canonical frame only (not its mirror image)."""
+    can = canonical(find_face(xyz, source), color)
+    return can.to_image(np.median(ensemble_shapes(cached_model(), can.channels), axis=0))
+
+
 def cascade(color, xyz, source):
     return detect(color, xyz, source).points
 
 
-CANDIDATES = {"geometry": geometry_only, "cascade-1": cascade_single, "cascade-7": cascade}
+CANDIDATES = {
+    "geometry": geometry_only,
+    "cascade-1": cascade_single,
+    "cascade-7": cascade_frame_only,
+    "cascade-7+mirror": cascade,
+}
 
 
 def load_takes(cache: Path | None) -> list[GridTake]:

@@ -65,9 +65,9 @@ def test_the_mirror_image_finds_the_mirrored_face(takes):
     tens of px apart), and the two answers differ by the detector's error, not more: their
     median is no worse than either."""
     from scan2morph.landmarks.detect import (
-        _ensemble,
         cached_model,
         canonical,
+        ensemble_shapes,
         find_face,
         mirror_channels,
         mirror_shapes,
@@ -79,9 +79,9 @@ def test_the_mirror_image_finds_the_mirrored_face(takes):
         mirror_shapes(mirror_shapes(can.to_cells(t.truth))), can.to_cells(t.truth)
     )
     model = cached_model()
-    direct = can.to_image(np.median(_ensemble(model, can.channels), axis=0))
+    direct = can.to_image(np.median(ensemble_shapes(model, can.channels), axis=0))
     back = can.to_image(
-        np.median(mirror_shapes(_ensemble(model, mirror_channels(can.channels))), axis=0)
+        np.median(mirror_shapes(ensemble_shapes(model, mirror_channels(can.channels))), axis=0)
     )
     both = detect(t.color, t.xyz, t.take).points
     err = {

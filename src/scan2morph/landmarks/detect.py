@@ -126,7 +126,7 @@ def mirror_shapes(shapes: np.ndarray) -> np.ndarray:
     return out
 
 
-def _ensemble(model: Cascade, channels: np.ndarray) -> np.ndarray:
+def ensemble_shapes(model: Cascade, channels: np.ndarray) -> np.ndarray:
     """The ensemble's final shapes (K, 68, 2) on one set of channels."""
     n_global = global_stages(model)
     base = run(model, channels, model.init, upto=n_global)
@@ -147,9 +147,9 @@ def detect_canonical(
     color, xyz = check_grid(color, xyz, source)
     model = model or cached_model()
     can = canonical(find_face(xyz, source), color)
-    direct = _ensemble(model, can.channels)
+    direct = ensemble_shapes(model, can.channels)
     return can, np.concatenate(
-        [direct, mirror_shapes(_ensemble(model, mirror_channels(can.channels)))]
+        [direct, mirror_shapes(ensemble_shapes(model, mirror_channels(can.channels)))]
     )
 
 
