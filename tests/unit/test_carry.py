@@ -103,8 +103,10 @@ def test_the_neutral_points_are_tracked_onto_the_take_by_the_skin_texture(takes)
     assert np.median(got.confidence[:17]) < np.median(got.confidence[17:])
 
 
-def _second_pass(takes, params):
+def _second_pass(takes, params, as_grey=False):
     (xyz_n, true_n, color_n), (xyz_t, true_t, color_t) = takes["neutral"], takes["car"]
+    if as_grey:  # a geometry-only or stereo scan's grey image
+        color_n, color_t = (np.rint(grey(c)).astype(np.uint8) for c in (color_n, color_t))
     data = {
         paths.range_image("neutral", "xyz"): xyz_n,
         paths.range_image("neutral", "color"): color_n,
@@ -136,3 +138,14 @@ def test_the_second_pass_takes_the_moving_points_halfway_to_the_tracked_ones(tak
     off, attrs_off, _, _ = _second_pass(takes, landmarks.Params(track=False))
     assert "landmarks_tracked" not in attrs_off
     np.testing.assert_array_equal(off.points[MOVING], noisy[MOVING])
+
+
+def test_the_second_pass_tracks_on_grey_images(takes):
+    """Grey (H, W) images are tracked like colour ones."""
+    got, attrs, noisy, true_t = _second_pass(takes, landmarks.Params(), as_grey=True)
+    moved = np.any(got.points != noisy, axis=1)
+    moved[IDX] = False
+    assert attrs["landmarks_tracked"] >= 20
+    before = np.linalg.norm(noisy - true_t, axis=1)[moved]
+    after = np.linalg.norm(got.points - true_t, axis=1)[moved]
+    assert np.median(after) < 0.6 * np.median(before)

@@ -219,6 +219,12 @@ def run(template, take: Take, params: Params) -> Part:
     )
 
 
+def _grey(color: np.ndarray) -> np.ndarray:
+    """Grey levels (H, W) float64 of a colour (H, W, 3) or grey (H, W) image."""
+    color = np.asarray(color)
+    return grey(color) if color.ndim == 3 else color.astype(np.float64)
+
+
 def second_pass(
     found: Landmarks, take: Take, grids: tuple[np.ndarray, np.ndarray], params: Params
 ) -> tuple[Landmarks, dict]:
@@ -257,10 +263,10 @@ def second_pass(
     attrs: dict = {"landmarks_carried_px": [float(v) for v in carried.shift_px]}
     points, confidence = carried.points, found.confidence
     if params.track:
-        neutral_grey = grey(need(data, paths.range_image(neutral, "color"), take.source))
+        neutral_color = need(data, paths.range_image(neutral, "color"), take.source)
         tracked = track_points(
-            (xyz, grey(color)),
-            (neutral_xyz, neutral_grey),
+            (xyz, _grey(color)),
+            (neutral_xyz, _grey(neutral_color)),
             neutral_points,
             carried.transform,
             partial(
