@@ -3,8 +3,11 @@
 Candidates (scan2morph.landmarks):
 * ``geometry``: the training mean shape placed by the geometry alone (the nose tip found on the
   range data, the metric scale of the grid), no image or shape fitting;
-* ``cascade``: the trained cascade (:func:`scan2morph.landmarks.detect`);
-* ``cascade+refine``: the cascade, then the geometric refinement on the 3D surface.
+* ``cascade-1``: the trained cascade from the mean shape alone;
+* ``cascade-7``: the cascade from 7 starts around the global stage's shape, on the canonical
+  frame only;
+* ``cascade-7+mirror``: the same on the frame and on its mirror image (the detector,
+  :func:`scan2morph.landmarks.detect`).
 
 Takes: every take of the default synthetic cohort (config/config.yaml: seed 2009, held out from
 training) after the ingest and repair stages, per modality; and range renders of the real head
@@ -13,6 +16,13 @@ training) after the ingest and repair stages, per modality; and range renders of
 percentile of the 51 inner points and of the 17 jawline points; CPU time per take (detection with
 the model already loaded). Also: whether the generator's jawline truth lies on the face's
 silhouette in open-mouth visemes.
+
+The second pass (the landmarks stage's :func:`~scan2morph.stages.landmarks.second_pass`, each
+subject's takes against its detected neutral) step by step: the detector alone, its stable
+points carried from the neutral, and its other points tracked from the neutral by image
+correlation; per modality against the truth, the takes' error relative to their neutral's
+(what a motion sees: ``(take - truth) - (neutral - truth)`` per point, px) and how well the
+stable points agree with the neutral's after the rigid alignment.
 
 Run: ``PYOPENGL_PLATFORM=osmesa .venv/bin/python benchmarks/bench_landmarks.py [--cache F]``
 """
@@ -29,11 +39,17 @@ from pathlib import Path
 import numpy as np
 
 sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
+from scan2morph.align.carry import carry_stable  # noqa: E402
+from scan2morph.align.rigid import transform_points  # noqa: E402
 from scan2morph.landmarks.canonical import canonical  # noqa: E402
 from scan2morph.landmarks.cascade import run  # noqa: E402
-from scan2morph.landmarks.detect import cached_model, detect  # noqa: E402
+from scan2morph.landmarks.detect import cached_model, detect, ensemble_shapes  # noqa: E402
 from scan2morph.landmarks.face import find_face  # noqa: E402
 from scan2morph.scan.view import shaded_image  # noqa: E402
+from scan2morph.stages.landmarks import DETECTED, Landmarks, Params, second_pass  # noqa: E402
+from scan2morph.stages.part import Take  # noqa: E402
+from scan2morph.store import paths  # noqa: E402
+from scan2morph.template.sample import range_pixels, sample_range  # noqa: E402
 from tests.support.landmark_takes import GridTake, cohort_takes  # noqa: E402
 
 
@@ -50,11 +66,22 @@ def cascade_single(color, xyz, source):
     return can.to_image(run(model, can.channels, model.init))
 
 
+def cascade_frame_only(color, xyz, source):
+    """The cascade from the 7 starts on the canonical frame only (not its mirror image)."""
+    can = canonical(find_face(xyz, source), color)
+    return can.to_image(np.median(ensemble_shapes(cached_model(), can.channels), axis=0))
+
+
 def cascade(color, xyz, source):
     return detect(color, xyz, source).points
 
 
-CANDIDATES = {"geometry": geometry_only, "cascade-1": cascade_single, "cascade-7": cascade}
+CANDIDATES = {
+    "geometry": geometry_only,
+    "cascade-1": cascade_single,
+    "cascade-7": cascade_frame_only,
+    "cascade-7+mirror": cascade,
+}
 
 
 def load_takes(cache: Path | None) -> list[GridTake]:
@@ -157,7 +184,9 @@ def main() -> None:
     groups.append(("synthetic, all", lambda t: t.modality in modalities))
     groups += [(m, lambda t, m=m: t.modality == m) for m in ("real colour", "real grey")]
     evaluate(takes + real_head_takes(), groups)
-    jaw_truth_report(load_takes(args.cache))
+    cohort = load_takes(args.cache)
+    second_pass_report(cohort)
+    jaw_truth_report(cohort)
 
 
 def face_outline_distance(xyz: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -201,6 +230,76 @@ def jaw_truth_report(takes: list[GridTake]) -> None:
         print(
             f"  {label:8s} median {np.median(d):5.2f}  p95 {np.percentile(d, 95):5.2f}  max {d.max():5.2f}"
         )
+
+
+#: Second-pass steps: name -> the landmarks stage's parameters (None: the detector alone).
+STEPS = {
+    "detector": None,
+    "+ carry stable": Params(track=False),
+    "+ track moving": Params(),
+}
+
+
+def _agreement(take: GridTake, neutral: GridTake, points, neutral_points, transform) -> np.ndarray:
+    """Distance (px on the neutral's grid) of a take's stable points, carried into the neutral
+    by the rigid ``transform``, to the neutral's own."""
+    idx = np.asarray(Params().stable_points) - 1
+    lifted = sample_range(take.xyz, points[idx], take.take, 0.5)[0]
+    found = range_pixels(neutral.xyz, transform_points(transform, lifted), neutral_points[idx])
+    return np.linalg.norm(found - neutral_points[idx], axis=1)
+
+
+def second_pass_report(takes: list[GridTake]) -> None:
+    """The second pass step by step (see the module's docstring), per modality."""
+    det = {(t.subject, t.take): detect(t.color, t.xyz, t.take) for t in takes}
+    rows: dict[str, list] = {name: [] for name in STEPS}
+    for t in takes:
+        n = next(u for u in takes if u.subject == t.subject and u.take == "neutral")
+        d, dn = det[(t.subject, t.take)], det[(n.subject, n.take)]
+        transform = None
+        if t is not n:
+            transform = carry_stable(t.xyz, d.points, n.xyz, dn.points, Params().stable_points)
+        for name, params in STEPS.items():
+            pts, dt = d.points, 0.0
+            if params is not None and t is not n:
+                data = {
+                    paths.range_image("neutral", "xyz"): n.xyz,
+                    paths.range_image("neutral", "color"): n.color,
+                    paths.landmarks("neutral"): dn.points,
+                    paths.landmark_confidence("neutral"): dn.confidence,
+                }
+                take = Take(t.subject, t.take, "", t.label, "neutral", data)
+                t0 = time.process_time()
+                found = second_pass(
+                    Landmarks(d.points, DETECTED, d.confidence),
+                    take,
+                    (t.xyz.astype(float), t.color),
+                    params,
+                )[0]
+                dt, pts = time.process_time() - t0, found.points
+            err = np.linalg.norm(pts - t.truth, axis=1)
+            rel = agree = None
+            if t is not n:
+                rel = np.linalg.norm((pts - t.truth) - (dn.points - n.truth), axis=1)
+                agree = _agreement(t, n, pts, dn.points, transform.transform)
+            rows[name].append((t.modality, err, rel, agree, dt))
+    print("\nSecond pass, step by step (px at 640 x 480; rel: a take's error minus its neutral's;")
+    print("stable agreement: its stable points against the neutral's after alignment):")
+    print(
+        f"{'step / modality':<26} {'med':>6} {'p95':>6} {'rel-in':>7} {'rel-jaw':>7} {'agree':>6} {'cpu ms':>7}"
+    )
+    for name, results in rows.items():
+        for mod in ("range", "stereo", "mesh", "rgbd", "all"):
+            sel = [r for r in results if mod in ("all", r[0])]
+            e = np.concatenate([r[1] for r in sel])
+            rel = np.stack([r[2] for r in sel if r[2] is not None])
+            agree = np.concatenate([r[3] for r in sel if r[3] is not None])
+            cpu = [r[4] for r in sel if r[2] is not None]
+            print(
+                f"{name + ' ' + mod:<26} {np.median(e):6.2f} {np.percentile(e, 95):6.2f} "
+                f"{np.median(rel[:, 17:]):7.2f} {np.median(rel[:, :17]):7.2f} "
+                f"{np.nanmedian(agree):6.2f} {1000 * np.median(cpu):7.0f}"
+            )
 
 
 if __name__ == "__main__":

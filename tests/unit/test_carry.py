@@ -1,13 +1,20 @@
-"""Stable landmarks carried from the neutral onto a take (scan2morph.align.carry), against the
-generator's exact landmarks."""
+"""Stable landmarks carried from the neutral onto a take, and the others tracked from it by image
+correlation (scan2morph.align.carry), against the generator's exact landmarks."""
 
 from __future__ import annotations
+
+from functools import partial
 
 import numpy as np
 import pytest
 
-from scan2morph.align.carry import carry_stable
+from scan2morph.align.carry import carry_stable, track_points
+from scan2morph.refine import grey
+from scan2morph.refine.flow import measure_flow
 from scan2morph.scan import DEFAULT_REPAIR, repair_range
+from scan2morph.stages import landmarks
+from scan2morph.stages.part import Take
+from scan2morph.store import paths
 from scan2morph.synth.cohort import make_take
 
 STABLE = (28, 37, 40, 43, 46)
@@ -20,12 +27,12 @@ def takes():
     for take, kind, label in (("neutral", "neutral", "neutral"), ("car", "viseme", "car")):
         r = make_take("c1", label, kind, take, 11)
         xyz = repair_range(r["xyz"], dict(DEFAULT_REPAIR), source=take)[0]
-        out[take] = (xyz, r["truth"]["landmarks2d"])
+        out[take] = (xyz, r["truth"]["landmarks2d"], r["color"])
     return out
 
 
 def test_noisy_stable_points_are_carried_onto_the_true_ones(takes):
-    (xyz_n, true_n), (xyz_t, true_t) = takes["neutral"], takes["car"]
+    (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     rng = np.random.default_rng(0)
     noisy = true_t + rng.normal(0.0, 2.0, size=true_t.shape)
     got = carry_stable(xyz_t, noisy, xyz_n, true_n, STABLE, "c1/car")
@@ -44,7 +51,7 @@ def test_noisy_stable_points_are_carried_onto_the_true_ones(takes):
 
 def test_a_neutral_error_is_carried_as_it_is(takes):
     """The neutral's own error moves every take's stable points with it: they agree."""
-    (xyz_n, true_n), (xyz_t, true_t) = takes["neutral"], takes["car"]
+    (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     off = true_n.copy()
     off[IDX] += np.array([1.5, -1.0])
     got = carry_stable(xyz_t, true_t, xyz_n, off, STABLE, "c1/car")
@@ -54,9 +61,91 @@ def test_a_neutral_error_is_carried_as_it_is(takes):
 
 
 def test_too_few_stable_points_with_data_leaves_the_take_as_it_is(takes):
-    (xyz_n, true_n), (xyz_t, true_t) = takes["neutral"], takes["car"]
+    (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     far = true_t.copy()
     far[IDX] = -50.0  # off the grid
     got = carry_stable(xyz_t, far, xyz_n, true_n, STABLE, "c1/car")
     assert not got.carried.any()
     np.testing.assert_array_equal(got.points, far)
+
+
+#: The points on skin that moves with the mouth and the jaw (iBUG 1-based): not carried.
+MOVING = np.setdiff1d(np.arange(68), IDX)
+
+
+def test_the_neutral_points_are_tracked_onto_the_take_by_the_skin_texture(takes):
+    """From the neutral's true points, the correlation finds the take's true points on the
+    moving skin (the mouth opens for *car*), where the rigid prediction alone is off."""
+    (xyz_n, true_n, color_n), (xyz_t, true_t, color_t) = takes["neutral"], takes["car"]
+    carried = carry_stable(xyz_t, true_t, xyz_n, true_n, STABLE, "c1/car")
+    got = track_points(
+        (xyz_t, grey(color_t)),
+        (xyz_n, grey(color_n)),
+        true_n,
+        carried.transform,
+        partial(measure_flow, sigma=3.0, noise=2.0),
+        "c1/car",
+    )
+    sure = got.confidence >= 0.3
+    err = np.linalg.norm(got.points - true_t, axis=1)
+    rigid = true_n @ got.affine[:, :2].T + got.affine[:, 2]
+    err_rigid = np.linalg.norm(rigid - true_t, axis=1)
+    print(
+        f"\ntracked {sure.sum()} points: median {np.median(err[sure]):.2f} px, "
+        f"rigid prediction {np.median(err_rigid[sure]):.2f} px"
+    )
+    assert sure.sum() >= 25
+    assert np.median(err[sure]) < 0.5 and np.percentile(err[sure], 90) < 1.2
+    # the mouth moved: the rigid prediction alone does not find it
+    mouth = sure & (np.arange(68) >= 48)
+    assert mouth.sum() >= 5 and np.median(err_rigid[mouth]) > 2 * np.median(err[mouth])
+    # low confidence where the texture does not pin a point (the jawline's outline)
+    assert np.median(got.confidence[:17]) < np.median(got.confidence[17:])
+
+
+def _second_pass(takes, params, as_grey=False):
+    (xyz_n, true_n, color_n), (xyz_t, true_t, color_t) = takes["neutral"], takes["car"]
+    if as_grey:  # a geometry-only or stereo scan's grey image
+        color_n, color_t = (np.rint(grey(c)).astype(np.uint8) for c in (color_n, color_t))
+    data = {
+        paths.range_image("neutral", "xyz"): xyz_n,
+        paths.range_image("neutral", "color"): color_n,
+        paths.landmarks("neutral"): true_n,
+    }
+    noisy = true_t + np.random.default_rng(1).normal(0.0, 2.0, size=true_t.shape)
+    found = landmarks.Landmarks(noisy, landmarks.DETECTED, np.full(68, 0.4), "d", "1")
+    take = Take("c1", "car", "viseme", "car", "neutral", data)
+    got, attrs = landmarks.second_pass(found, take, (xyz_t, color_t), params)
+    return got, attrs, noisy, true_t
+
+
+def test_the_second_pass_takes_the_moving_points_halfway_to_the_tracked_ones(takes):
+    """A detection 2 px off (each axis): with the neutral's true points, the tracked share of
+    each confidently tracked point removes that share of its error; without tracking the moving
+    points stay where the detector put them."""
+    got, attrs, noisy, true_t = _second_pass(takes, landmarks.Params(track_weight=0.5))
+    moved = np.any(got.points != noisy, axis=1)
+    moved[IDX] = False
+    assert attrs["landmarks_tracked"] == moved.sum() >= 20
+    before = np.linalg.norm(noisy - true_t, axis=1)[moved]
+    after = np.linalg.norm(got.points - true_t, axis=1)[moved]
+    print(f"\nmoving points: before {np.median(before):.2f} px, after {np.median(after):.2f} px")
+    assert np.median(after) < 0.6 * np.median(before)
+    # the tracked points' confidence: half the take's (0.4), half the neutral's (clicked: 1)
+    np.testing.assert_allclose(got.confidence[moved], 0.7)
+    full, _, _, _ = _second_pass(takes, landmarks.Params(track_weight=1.0))
+    assert np.median(np.linalg.norm(full.points - true_t, axis=1)[moved]) < 0.5
+    off, attrs_off, _, _ = _second_pass(takes, landmarks.Params(track=False))
+    assert "landmarks_tracked" not in attrs_off
+    np.testing.assert_array_equal(off.points[MOVING], noisy[MOVING])
+
+
+def test_the_second_pass_tracks_on_grey_images(takes):
+    """Grey (H, W) images are tracked like colour ones."""
+    got, attrs, noisy, true_t = _second_pass(takes, landmarks.Params(), as_grey=True)
+    moved = np.any(got.points != noisy, axis=1)
+    moved[IDX] = False
+    assert attrs["landmarks_tracked"] >= 20
+    before = np.linalg.norm(noisy - true_t, axis=1)[moved]
+    after = np.linalg.norm(got.points - true_t, axis=1)[moved]
+    assert np.median(after) < 0.6 * np.median(before)

@@ -63,3 +63,10 @@ def test_params_from_the_whole_config():
     )
     assert params == landmarks.Params(0.3, False, (28, 40))
     assert landmarks.Params.from_config({}) == landmarks.Params()
+
+
+def test_tracking_params_from_the_config():
+    section = {"track": False, "min_track_confidence": 0.6, "max_track_px": 4, "track_weight": 1}
+    params = landmarks.Params.from_config({"landmarks": section})
+    assert (params.track, params.min_track_confidence) == (False, 0.6)
+    assert (params.max_track_px, params.track_weight) == (4.0, 1.0)

@@ -14,13 +14,24 @@ alignment's error, and the template fit then places the upper face the same way 
    model needed).
 
 A point that cannot be carried (no surface there) keeps its detected position.
+
+The points on skin that moves (the mouth, the jaw, the brows) cannot be carried rigidly.
+:func:`track_points` follows them from the neutral by the skin's texture instead: the take's
+image is brought onto the neutral's grid by the affine map that the rigid alignment predicts,
+and an image-correlation flow (given by the caller, e.g.
+:func:`scan2morph.refine.flow.measure_flow`) measures where each of the neutral's points went,
+with a confidence. A tracked point inherits the neutral's error, not the take's own detection
+error, so that the take's landmarks move with its skin relative to the neutral's.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
+from scipy.ndimage import map_coordinates
 
 from scan2morph.align.rigid import invert, kabsch, transform_points
 from scan2morph.geometry import surface_normals
@@ -34,6 +45,8 @@ MAX_PAIR_MM = 3.0
 ICP_ITERATIONS = 30
 #: At most this many take pixels enter the ICP (an even stride of them).
 MAX_ICP_POINTS = 6000
+#: Image around the neutral's landmarks that the tracking correlates, px.
+TRACK_MARGIN_PX = 40
 
 
 @dataclass(frozen=True)
@@ -139,4 +152,88 @@ def _surface_icp(
     return np.asarray(result.transformation, dtype=np.float64)
 
 
-__all__ = ["Carried", "carry_stable"]
+@dataclass(frozen=True)
+class Tracked:
+    """The neutral's landmarks followed into a take by the skin's texture.
+
+    Attributes
+    ----------
+    points : (68, 2) float64
+        Where each of the neutral's points is in the take, px (NaN: not found).
+    confidence : (68,) float64
+        The flow's confidence at each neutral point, in [0, 1] (0 where not found).
+    affine : (2, 3) float64
+        The rigid alignment's prediction: neutral px -> take px (``affine @ [x, y, 1]``).
+    """
+
+    points: np.ndarray
+    confidence: np.ndarray
+    affine: np.ndarray
+
+
+def track_points(
+    take: tuple[np.ndarray, np.ndarray],
+    neutral: tuple[np.ndarray, np.ndarray],
+    neutral_points: np.ndarray,
+    transform: np.ndarray,
+    measure: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    source: str = "take",
+) -> Tracked:
+    """Follow the neutral's landmarks into a take by image correlation.
+
+    Parameters
+    ----------
+    take, neutral : tuple of ((H, W, 3) float, (H, W) float)
+        Each scan's repaired range image (mm, NaN = no surface) and grey image on the same grid.
+    neutral_points : (n, 2) float
+        The neutral's landmarks, px.
+    transform : (4, 4) float
+        Take frame -> neutral frame, mm (:attr:`Carried.transform`).
+    measure : callable
+        ``measure(reference, moving) -> (flow, confidence)`` on two (rows, cols) grey images
+        (NaN = missing): ``moving(x + flow(x)) ~ reference(x)``, flow (rows, cols, 2) px,
+        confidence (rows, cols) in [0, 1].
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    Tracked
+        All NaN / 0 when fewer than 3 of the neutral's points can be placed in the take.
+    """
+    (t_xyz, t_grey), (n_xyz, n_grey) = take, neutral
+    pn = np.asarray(neutral_points, dtype=np.float64)
+    n = len(pn)
+    lifted = sample_range(n_xyz, pn, source, 0.5)[0]
+    predicted = range_pixels(t_xyz, transform_points(invert(transform), lifted), source=source)
+    ok = np.isfinite(predicted).all(axis=1)
+    if ok.sum() < 3:
+        return Tracked(np.full((n, 2), np.nan), np.zeros(n), np.full((2, 3), np.nan))
+    design = np.column_stack([pn[ok], np.ones(ok.sum())])
+    affine = np.linalg.lstsq(design, predicted[ok], rcond=None)[0].T  # (2, 3)
+    h, w = np.shape(n_grey)
+    x0, y0 = np.maximum(np.floor(pn.min(axis=0)) - TRACK_MARGIN_PX, 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(pn.max(axis=0)) + TRACK_MARGIN_PX + 1, [w, h]).astype(int)
+    gx, gy = np.meshgrid(np.arange(x0, x1, dtype=np.float64), np.arange(y0, y1, dtype=np.float64))
+    mx = affine[0, 0] * gx + affine[0, 1] * gy + affine[0, 2]
+    my = affine[1, 0] * gx + affine[1, 1] * gy + affine[1, 2]
+    take_img = np.where(np.isfinite(t_xyz).all(axis=2), t_grey, np.nan).astype(np.float32)
+    moving = cv2.remap(
+        take_img,
+        mx.astype(np.float32),
+        my.astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=float("nan"),
+    )
+    reference = np.where(np.isfinite(n_xyz).all(axis=2), n_grey, np.nan)[y0:y1, x0:x1]
+    flow, conf = measure(reference, moving.astype(np.float64))
+    rc = [pn[:, 1] - y0, pn[:, 0] - x0]
+    shift = np.column_stack([map_coordinates(flow[..., k], rc, order=1) for k in (0, 1)])
+    at = np.clip(map_coordinates(conf, rc, order=1, cval=0.0), 0.0, 1.0)
+    moved = pn + shift
+    points = moved @ affine[:, :2].T + affine[:, 2]
+    return Tracked(points, at, affine)
+
+
+__all__ = ["Carried", "Tracked", "carry_stable", "track_points"]

@@ -2,9 +2,11 @@
 
 The face is found from the range data (:mod:`scan2morph.landmarks.face`), resampled into the
 canonical frame (:mod:`scan2morph.landmarks.canonical`) and the cascade
-(:mod:`scan2morph.landmarks.cascade`) is run from an ensemble of shifted starts. The points are
-the ensemble's median; a point's confidence falls with the ensemble's spread there (a point the
-image does not pin down ends where its start put it).
+(:mod:`scan2morph.landmarks.cascade`) is run from an ensemble of shifted starts, on the frame
+and on its mirror image (the cascade was trained on both; its answers on the two differ by its
+own error, not by the face). The points are the ensemble's median; a point's confidence falls
+with the ensemble's spread there (a point the image does not pin down ends where its start put
+it, or where the mirror image puts it).
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.landmarks.canonical import NOSE_CELL, STEP_MM, Canonical, canonical
-from scan2morph.landmarks.cascade import Cascade, load, run
+from scan2morph.landmarks.canonical import NOSE_CELL, SIZE, STEP_MM, Canonical, canonical
+from scan2morph.landmarks.cascade import MIRROR, Cascade, load, run
 from scan2morph.landmarks.face import find_face
 from scan2morph.tol import N_IBUG
 
@@ -108,6 +110,29 @@ def confidence_of(shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, 1.0 / (1.0 + (spread_mm / HALF_CONFIDENCE_MM) ** 2)
 
 
+def mirror_channels(channels: np.ndarray) -> np.ndarray:
+    """The canonical channels (S, S, C) mirrored left-right (the normal's x component turns)."""
+    out = channels[:, ::-1].copy()
+    out[..., 1] *= -1.0
+    return out
+
+
+def mirror_shapes(shapes: np.ndarray) -> np.ndarray:
+    """Shapes (..., 68, 2) in canonical cells reflected left-right and renumbered
+    (:data:`~scan2morph.landmarks.cascade.MIRROR`): a face's points on
+    :func:`mirror_channels`, or those found there back in the frame."""
+    out = np.array(shapes[..., MIRROR, :], dtype=np.float64)
+    out[..., 0] = (SIZE - 1) - out[..., 0]
+    return out
+
+
+def ensemble_shapes(model: Cascade, channels: np.ndarray) -> np.ndarray:
+    """The ensemble's final shapes (K, 68, 2) on one set of channels."""
+    n_global = global_stages(model)
+    base = run(model, channels, model.init, upto=n_global)
+    return run(model, channels, ensemble_starts(base), first=n_global)
+
+
 def detect_canonical(
     color: np.ndarray, xyz: np.ndarray, source: str, model: Cascade | None = None
 ) -> tuple[Canonical, np.ndarray]:
@@ -116,15 +141,16 @@ def detect_canonical(
     Returns
     -------
     can : Canonical
-    shapes : (K, 68, 2) float64
-        Canonical cells.
+    shapes : (2 K, 68, 2) float64
+        Canonical cells: the K starts of :data:`STARTS` on the frame, then on its mirror image.
     """
     color, xyz = check_grid(color, xyz, source)
     model = model or cached_model()
     can = canonical(find_face(xyz, source), color)
-    n_global = global_stages(model)
-    base = run(model, can.channels, model.init, upto=n_global)
-    return can, run(model, can.channels, ensemble_starts(base), first=n_global)
+    direct = ensemble_shapes(model, can.channels)
+    return can, np.concatenate(
+        [direct, mirror_shapes(ensemble_shapes(model, mirror_channels(can.channels)))]
+    )
 
 
 def detect(

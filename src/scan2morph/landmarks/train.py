@@ -23,7 +23,6 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.landmarks.canonical import NOSE_CELL, SIZE, STEP_MM, canonical
 from scan2morph.landmarks.cascade import (
-    MIRROR,
     Cascade,
     features,
     fit_stage,
@@ -32,6 +31,7 @@ from scan2morph.landmarks.cascade import (
     save,
 )
 from scan2morph.landmarks.data import Sample, make_mesh_samples, make_samples
+from scan2morph.landmarks.detect import mirror_channels, mirror_shapes
 from scan2morph.landmarks.face import find_face
 
 #: Model version: bump when the features, the frame or the training change.
@@ -109,12 +109,8 @@ def _prepared(
         cells = can.to_cells(s.truth)
         chans.append(can.channels)
         truths.append(cells)
-        mirrored = can.channels[:, ::-1].copy()
-        mirrored[..., 1] *= -1.0  # nx changes sign
-        chans.append(mirrored)
-        flipped = cells[MIRROR].copy()
-        flipped[:, 0] = (SIZE - 1) - flipped[:, 0]
-        truths.append(flipped)
+        chans.append(mirror_channels(can.channels))
+        truths.append(mirror_shapes(cells))
         for ch, cells_k in [(c, t) for c, t in zip(chans[-2:], truths[-2:], strict=True)]:
             for _ in range(int(config["stretched"])):
                 warped, moved = _stretched(ch, cells_k, config, rng)

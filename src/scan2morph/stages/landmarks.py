@@ -8,7 +8,11 @@ confidence, its name and version, and are checked as clicked ones are at ingest 
 frontal, right-handed face). A detected take other than the neutral then takes its stable points
 (nose bridge, eye corners) from the neutral's, carried over by a rigid alignment of the two
 scans (:func:`scan2morph.align.carry.carry_stable`), so that they agree across the subject's
-takes. A detection whose confidence is low is *doubtful*: the take is
+takes, and its other points are followed from the neutral's by the skin's texture
+(:func:`scan2morph.align.carry.track_points` with the refinement's image correlation,
+:func:`scan2morph.refine.flow.measure_flow`) where the correlation is confident and lands near
+the detection: the take's landmarks then move with its skin relative to the neutral's instead
+of scattering by the detector's error. A detection whose confidence is low is *doubtful*: the take is
 still used, with a warning at the top of the report and in ``accuracy.json``.
 
 Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) that a
@@ -19,12 +23,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
-from scan2morph.align.carry import carry_stable
+from scan2morph.align.carry import carry_stable, track_points
 from scan2morph.io import check_face, check_handedness
 from scan2morph.io.landmarks import complete
+from scan2morph.refine import RefineParams, grey
+from scan2morph.refine.flow import measure_flow
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 
@@ -32,6 +39,9 @@ from scan2morph.store import paths
 SECTIONS = ("landmarks",)
 #: ``source`` of a take's landmarks.
 CLICKED, DETECTED, JAWLINE_DETECTED = "clicked", "detected", "clicked+detected jawline"
+#: The image correlation that tracks a take's points from the neutral: the refinement's default
+#: high-pass, noise, consistency and correlation tests.
+FLOW = RefineParams()
 
 
 @dataclass(frozen=True)
@@ -47,11 +57,26 @@ class Params:
         Whether a detected take's stable points are carried over from its neutral.
     stable_points : tuple of int
         iBUG numbers (1-based) of the points that do not move with the mouth.
+    track : bool
+        Whether a detected take's other points are followed from its neutral by image
+        correlation (needs ``carry_stable``'s alignment).
+    min_track_confidence : float
+        A point is tracked when the correlation's confidence there is at least this, in [0, 1].
+    max_track_px : float
+        ... and the tracked position lies within this of the detected one, px.
+    track_weight : float
+        A tracked point's place: this share of the tracked position, the rest the detected one,
+        in [0, 1] (1: the neutral's point as tracked; the neutral's own detection error then
+        passes whole to the take, the take's is averaged out).
     """
 
     min_confidence: float = 0.5
     carry_stable: bool = True
     stable_points: tuple[int, ...] = (28, 37, 40, 43, 46)
+    track: bool = True
+    min_track_confidence: float = 0.3
+    max_track_px: float = 6.0
+    track_weight: float = 0.5
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -60,6 +85,12 @@ class Params:
             min_confidence=float(section.get("min_confidence", cls.min_confidence)),
             carry_stable=bool(section.get("carry_stable", cls.carry_stable)),
             stable_points=tuple(int(n) for n in section.get("stable_points", cls.stable_points)),
+            track=bool(section.get("track", cls.track)),
+            min_track_confidence=float(
+                section.get("min_track_confidence", cls.min_track_confidence)
+            ),
+            max_track_px=float(section.get("max_track_px", cls.max_track_px)),
+            track_weight=float(section.get("track_weight", cls.track_weight)),
         )
 
 
@@ -159,7 +190,7 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmarks`` (68, 2) px, ``landmark_source``, ``landmark_detector`` and
         ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
-        px, the detector's points before the stable ones were carried over; the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
+        px, the detector's points before the second pass (:func:`second_pass`); the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
         ``files["pts"]`` the points for the ``.pts`` file.
     """
     t, data = take.take, take.data
@@ -168,14 +199,8 @@ def run(template, take: Take, params: Params) -> Part:
     found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
-        neutral_xyz = need(data, paths.range_image(take.neutral, "xyz"), take.source)
-        neutral_points = need(data, paths.landmarks(take.neutral), take.source)
-        carried = carry_stable(
-            xyz, found.points, neutral_xyz, neutral_points, params.stable_points, take.source
-        )
         detected = found.points
-        found = replace(found, points=carried.points)
-        attrs["landmarks_carried_px"] = [float(v) for v in carried.shift_px]
+        found, attrs = second_pass(found, take, (xyz, color), params)
     datasets = {
         paths.landmarks(t): found.points,
         paths.landmark_info(t, "source"): found.source,
@@ -194,6 +219,80 @@ def run(template, take: Take, params: Params) -> Part:
     )
 
 
+def _grey(color: np.ndarray) -> np.ndarray:
+    """Grey levels (H, W) float64 of a colour (H, W, 3) or grey (H, W) image."""
+    color = np.asarray(color)
+    return grey(color) if color.ndim == 3 else color.astype(np.float64)
+
+
+def second_pass(
+    found: Landmarks, take: Take, grids: tuple[np.ndarray, np.ndarray], params: Params
+) -> tuple[Landmarks, dict]:
+    """A detected take's landmarks against its neutral's: the stable points carried over, the
+    others tracked by image correlation where it is confident (``params.track``).
+
+    Parameters
+    ----------
+    found : Landmarks
+        The take's detected landmarks.
+    take : Take
+        ``data`` holds the neutral's repair and landmarks parts.
+    grids : tuple of ((H, W, 3) float, (H, W, 3) uint8)
+        The take's repaired range image (mm) and colour image.
+    params : Params
+
+    Returns
+    -------
+    found : Landmarks
+        With the carried and tracked points in place; a tracked point's confidence is the
+        neutral's and the take's weighted as its position is (it inherits the neutral's error
+        in that share).
+    attrs : dict
+        ``landmarks_carried_px`` (the stable points' shifts, px) and ``landmarks_tracked``
+        (how many points were tracked).
+    """
+    xyz, color = grids
+    data, neutral = take.data, take.neutral
+    neutral_xyz = np.asarray(
+        need(data, paths.range_image(neutral, "xyz"), take.source), dtype=np.float64
+    )
+    neutral_points = need(data, paths.landmarks(neutral), take.source)
+    carried = carry_stable(
+        xyz, found.points, neutral_xyz, neutral_points, params.stable_points, take.source
+    )
+    attrs: dict = {"landmarks_carried_px": [float(v) for v in carried.shift_px]}
+    points, confidence = carried.points, found.confidence
+    if params.track:
+        neutral_color = need(data, paths.range_image(neutral, "color"), take.source)
+        tracked = track_points(
+            (xyz, _grey(color)),
+            (neutral_xyz, _grey(neutral_color)),
+            neutral_points,
+            carried.transform,
+            partial(
+                measure_flow,
+                sigma=FLOW.high_pass_px,
+                noise=FLOW.noise_grey,
+                max_fb_px=FLOW.max_fb_px,
+                min_zncc=FLOW.min_zncc,
+                level=FLOW.flow_level,
+            ),
+            take.source,
+        )
+        use = (tracked.confidence >= params.min_track_confidence) & (
+            np.linalg.norm(tracked.points - found.points, axis=1) <= params.max_track_px
+        )
+        use[np.asarray(params.stable_points) - 1] = False  # carried already
+        neutral_conf = data.get(paths.landmark_confidence(neutral))
+        neutral_conf = np.ones(len(use)) if neutral_conf is None else np.asarray(neutral_conf)
+        w = params.track_weight
+        points = np.where(use[:, None], w * tracked.points + (1 - w) * points, points)
+        neutral_conf = np.nan_to_num(neutral_conf, nan=1.0)
+        confidence = np.where(use, w * neutral_conf + (1 - w) * confidence, confidence)
+        attrs["landmarks_tracked"] = int(use.sum())
+    return replace(found, points=points, confidence=confidence), attrs
+
+
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     """Every take of a subject (:class:`~scan2morph.stages.part.Run`)."""
     params = Params.from_config(run_.config)
@@ -205,4 +304,13 @@ def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
     return out
 
 
-__all__ = ["CLICKED", "DETECTED", "JAWLINE_DETECTED", "Landmarks", "Params", "run", "settle"]
+__all__ = [
+    "CLICKED",
+    "DETECTED",
+    "JAWLINE_DETECTED",
+    "Landmarks",
+    "Params",
+    "run",
+    "second_pass",
+    "settle",
+]
