@@ -10,6 +10,7 @@ from scipy.sparse.csgraph import shortest_path
 
 from scan2morph.errors import InputError
 from scan2morph.motion import (
+    Relief,
     dijkstra_path,
     fill_missing,
     laplacian_smooth,
@@ -305,30 +306,30 @@ def test_confidence_shortens_each_vertex_step():
     rng = np.random.default_rng(11)
     d = rng.normal(size=(n * n, 3))
     c = rng.random(n * n)
-    out = laplacian_smooth(d, f, w=w, iterations=1, confidence=c, relief=relief)
+    out = laplacian_smooth(d, f, w=w, iterations=1, relief=Relief(c, relief))
     for i in (0, 37, 99):
         r, col = divmod(i, n)
         nbrs = [((r + dr) % n) * n + (col + dc) % n for dr, dc in NEIGHBOURS]
         step = w * (1 - relief * c[i])
         assert_allclose(out[i], d[i] + step * (d[nbrs].mean(axis=0) - d[i]), rtol=1e-13)
     plain = laplacian_smooth(d, f, w=w, iterations=7)
-    assert_allclose(laplacian_smooth(d, f, w=w, iterations=7, confidence=c, relief=0.0), plain)
+    assert_allclose(laplacian_smooth(d, f, w=w, iterations=7, relief=Relief(c, 0.0)), plain)
     # full confidence with full relief: nothing moves
     ones = np.ones(n * n)
-    assert_allclose(laplacian_smooth(d, f, iterations=30, confidence=ones, relief=1.0), d)
+    assert_allclose(laplacian_smooth(d, f, iterations=30, relief=Relief(ones, 1.0)), d)
     # a missing vertex is filled, then smoothed with the full step however confident it was said
     missing = np.zeros(n * n, dtype=bool)
     missing[37] = True
     d_in = d.copy()
     d_in[37] = np.nan
     filled = laplacian_smooth(d_in, f, iterations=0, missing=missing)
-    one = laplacian_smooth(d_in, f, w=w, iterations=1, missing=missing, confidence=ones, relief=1)
+    one = laplacian_smooth(d_in, f, w=w, iterations=1, missing=missing, relief=Relief(ones, 1))
     nbrs = [((3 + dr) % n) * n + (7 + dc) % n for dr, dc in NEIGHBOURS]
     assert_allclose(one[37], filled[37] + w * (filled[nbrs].mean(axis=0) - filled[37]))
     # NaN confidence counts as 0
     nan_c = np.where(np.arange(n * n) % 2 == 0, np.nan, 0.0)
     assert_allclose(
-        laplacian_smooth(d, f, w=w, iterations=3, confidence=nan_c, relief=1),
+        laplacian_smooth(d, f, w=w, iterations=3, relief=Relief(nan_c, 1)),
         laplacian_smooth(d, f, w=w, iterations=3),
     )
 
@@ -351,7 +352,7 @@ def test_confidence_keeps_a_measured_step_and_smooths_the_noise():
         return float(np.sqrt(np.mean(np.sum((a[where] - truth[where]) ** 2, axis=1))))
 
     uniform = laplacian_smooth(noisy, f)
-    relieved = laplacian_smooth(noisy, f, confidence=measured.astype(float), relief=1.0)
+    relieved = laplacian_smooth(noisy, f, relief=Relief(measured.astype(float), 1.0))
     step = interior & measured
     assert rms(relieved, step) < 0.5 * rms(uniform, step)
     assert rms(uniform, step) > 1.0  # mm: the uniform step blurs the drop
@@ -363,10 +364,13 @@ def test_confidence_keeps_a_measured_step_and_smooths_the_noise():
 @pytest.mark.parametrize(
     ("kw", "match"),
     [
-        ({"relief": 1.5}, r"relief: expected 0 <= relief <= 1"),
-        ({"relief": -0.1}, r"relief: expected 0 <= relief <= 1"),
-        ({"confidence": np.ones(3)}, r"confidence: expected \(16,\) values in \[0, 1\]"),
-        ({"confidence": np.full(16, 1.2)}, r"confidence: expected values in \[0, 1\], got 1.2"),
+        ({"relief": Relief(None, 1.5)}, r"relief: expected 0 <= share <= 1"),
+        ({"relief": Relief(None, -0.1)}, r"relief: expected 0 <= share <= 1"),
+        ({"relief": Relief(np.ones(3), 1.0)}, r"confidence: expected \(16,\) values in \[0, 1\]"),
+        (
+            {"relief": Relief(np.full(16, 1.2), 1.0)},
+            r"confidence: expected values in \[0, 1\], got 1.2",
+        ),
         ({"w": 1.5}, r"w: expected 0 <= w <= 1"),
         ({"w": -0.1}, r"w: expected 0 <= w <= 1"),
         ({"iterations": -1}, r"iterations: expected an integer >= 0"),

@@ -19,7 +19,7 @@ from scan2morph.evaluate.motion import (
 from scan2morph.evaluate.scan import face_region, stereo_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.geometry import vertex_normals
-from scan2morph.motion.smooth import laplacian_smooth
+from scan2morph.motion.smooth import Relief, laplacian_smooth
 from scan2morph.motion.uncertainty import noise_by_take
 from scan2morph.store import paths
 
@@ -170,8 +170,9 @@ def _viseme_motion(store, take: str, neutral: str, material, views, im, n_normal
             iterations=im.smoothing["iterations"],
             fixed=store[paths.mask("suppressed")],
             missing=~np.isfinite(ideal).all(axis=1),
-            confidence=store.get(paths.refine(take, "confidence")),
-            relief=im.smoothing["confidence_relief"],
+            relief=Relief(
+                store.get(paths.refine(take, "confidence")), im.smoothing["confidence_relief"]
+            ),
         )
     return motion_accuracy(
         store[paths.viseme(take, "motion")],

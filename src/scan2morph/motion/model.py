@@ -15,7 +15,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.geometry import harmonic_fill
 from scan2morph.motion.mask import stencil_mask
-from scan2morph.motion.smooth import laplacian_smooth
+from scan2morph.motion.smooth import Relief, laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 
@@ -141,8 +141,7 @@ def viseme_motion(
             fixed=suppressed,
             missing=missing,
             source=f"{source}/{take}",
-            confidence=mesh.confidence,
-            relief=sm.relief,
+            relief=Relief(mesh.confidence, sm.relief),
         )
         out[paths.viseme(take, "motion_raw")] = raw
         out[paths.viseme(take, "motion")] = smooth
@@ -175,7 +174,6 @@ def expression_displacements(
             iterations=iterations,
             missing=~np.isfinite(raw).all(axis=1),
             source=f"{source}/{take}",
-            confidence=mesh.confidence,
-            relief=relief,
+            relief=Relief(mesh.confidence, relief),
         )
     return out

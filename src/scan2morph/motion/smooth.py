@@ -18,6 +18,8 @@ uniform step).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -123,6 +125,23 @@ def fill_missing(
     return _fill(d, _adjacency(f, n), ~missing | fixed)
 
 
+@dataclass(frozen=True)
+class Relief:
+    """How much shorter :func:`laplacian_smooth`'s step is where a correspondence was measured.
+
+    Attributes
+    ----------
+    confidence : (V,) float in [0, 1], optional
+        How well each vertex's correspondence was measured (NaN and missing vertices: 0).
+        None: 0 everywhere.
+    share : float
+        Share of the step taken off at confidence 1, in [0, 1] (0: the paper's uniform step).
+    """
+
+    confidence: np.ndarray | None = None
+    share: float = 0.0
+
+
 def laplacian_smooth(
     d: np.ndarray,
     faces: np.ndarray,
@@ -131,8 +150,7 @@ def laplacian_smooth(
     fixed: np.ndarray | None = None,
     missing: np.ndarray | None = None,
     source: str = "motion",
-    confidence: np.ndarray | None = None,
-    relief: float = 0.0,
+    relief: Relief | None = None,
 ) -> np.ndarray:
     """Smooth per-vertex motion vectors with the 1-ring umbrella Laplacian.
 
@@ -152,12 +170,10 @@ def laplacian_smooth(
         Invalid vertices: first filled from their neighbours (:func:`fill_missing`).
     source : str
         Label for error messages.
-    confidence : (V,) float, optional
-        How well each vertex's correspondence was measured, in [0, 1] (NaN and missing
-        vertices: 0). None: 0 everywhere.
-    relief : float
-        Share of the step taken off at confidence 1, in [0, 1]: vertex ``i`` steps by
-        ``w * (1 - relief * confidence_i)``. 0 (default) is the paper's uniform step.
+    relief : Relief, optional
+        Shorter steps where the correspondence was measured with confidence: vertex ``i``
+        steps by ``w * (1 - relief.share * relief.confidence_i)``. None (default) is the
+        paper's uniform step.
 
     Returns
     -------
@@ -175,9 +191,10 @@ def laplacian_smooth(
         raise InputError(source, f"w: expected 0 <= w <= 1, got {w!r}")
     if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 0:
         raise InputError(source, f"iterations: expected an integer >= 0, got {iterations!r}")
-    relief_f = float(relief)
+    relief = relief or Relief()
+    relief_f = float(relief.share)
     if not 0.0 <= relief_f <= 1.0:
-        raise InputError(source, f"relief: expected 0 <= relief <= 1, got {relief!r}")
+        raise InputError(source, f"relief: expected 0 <= share <= 1, got {relief.share!r}")
     d = _field(d, source)
     n = len(d)
     f = _check_faces(faces, n, source)
@@ -189,7 +206,7 @@ def laplacian_smooth(
 
     # One step is d <- M d with M = (1 - W) I + W D^-1 A on vertices that have neighbours,
     # W = diag(w_i)
-    w_i = w_f * (1.0 - relief_f * _confidence(confidence, n, missing, source))
+    w_i = w_f * (1.0 - relief_f * _confidence(relief.confidence, n, missing, source))
     deg = adj.sum(axis=1)
     has = deg > 0
     inv_deg = np.divide(1.0, deg, out=np.zeros(n), where=has)
@@ -201,4 +218,4 @@ def laplacian_smooth(
     return d
 
 
-__all__ = ["fill_missing", "laplacian_smooth"]
+__all__ = ["Relief", "fill_missing", "laplacian_smooth"]

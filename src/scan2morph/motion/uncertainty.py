@@ -24,7 +24,7 @@ from scan2morph.align.rigid import transform_points
 from scan2morph.errors import InputError
 from scan2morph.motion.clicks import ClickedTake, clicked_take
 from scan2morph.motion.precision import resolve_click_noise
-from scan2morph.motion.smooth import laplacian_smooth
+from scan2morph.motion.smooth import Relief, laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 from scan2morph.template.sample import FitRules, fit_take
@@ -254,8 +254,7 @@ class _FinalMotion:
             fixed=self.suppressed,
             missing=~np.isfinite(raw).all(axis=1),
             source=where,
-            confidence=confidence,
-            relief=self.relief,
+            relief=Relief(confidence, self.relief),
         )
 
 
