@@ -192,14 +192,7 @@ def register_redness(arc_n, red_n, arc_t, red_t, limit):
     where = grid[None, :] + shifts[:, None]
     inside = (where >= at[0]) & (where <= at[-1])
     moved = np.where(inside, np.interp(where, at, rt), np.nan)
-    cover = inside.mean(axis=1)
-    score = np.full(len(shifts), np.nan)
-    for k in np.flatnonzero(cover >= MIN_COVER):
-        keep = inside[k]
-        a, b = ref[keep] - ref[keep].mean(), moved[k, keep] - moved[k, keep].mean()
-        den = np.sqrt((a @ a) * (b @ b))
-        if den > 0:
-            score[k] = (a @ b) / den
+    score = _correlations(ref, moved, inside)
     if not np.isfinite(score).any():
         return None
     k = int(np.nanargmax(score))
@@ -212,6 +205,27 @@ def register_redness(arc_n, red_n, arc_t, red_t, limit):
     if c < 0:
         shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
     return float(shift)
+
+
+def _correlations(ref: np.ndarray, moved: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """Zero-mean normalised correlation of ``ref`` (n,) with each row of ``moved`` (s, n) over
+    the row's samples ``inside`` (s, n) bool: (s,), NaN for a row covering under
+    :data:`MIN_COVER` of ``ref`` or without variation. All rows at once (a loop over the
+    shifts took a fifth of a refinement)."""
+    score = np.full(len(moved), np.nan)
+    rows = np.flatnonzero(inside.mean(axis=1) >= MIN_COVER)
+    if not len(rows):
+        return score
+    keep = inside[rows]
+    count = keep.sum(axis=1, keepdims=True)
+    r = np.where(keep, ref[None, :], 0.0)
+    m = np.where(keep, moved[rows], 0.0)
+    a = np.where(keep, r - r.sum(axis=1, keepdims=True) / count, 0.0)
+    b = np.where(keep, m - m.sum(axis=1, keepdims=True) / count, 0.0)
+    den = np.sqrt(np.einsum("ij,ij->i", a, a) * np.einsum("ij,ij->i", b, b))
+    ok = den > 0
+    score[rows[ok]] = np.einsum("ij,ij->i", a[ok], b[ok]) / den[ok]
+    return score
 
 
 __all__ = ["LipImage", "arc_length", "lip_profile", "redness", "register_redness", "vermilion_edge"]
