@@ -436,3 +436,20 @@ def test_redness_correlations_are_pearson_per_shift():
             want = np.corrcoef(ref[keep], moved[k, keep])[0, 1]
             assert got[k] == pytest.approx(want, abs=1e-14), k
     assert np.isnan(got[[2, 5]]).all() and np.isfinite(got).sum() == shifts - 2
+
+
+def test_profile_smoothing_of_columns_is_each_columns_own():
+    """A profile's surface points are smoothed all three coordinates at once: bit for bit each
+    coordinate smoothed alone (gaps and ends normalised away, NaN kept), and a constant
+    coordinate stays constant across a gap."""
+    from scan2morph.refine.lip_profile import _smooth
+
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(57, 3)) * 100
+    points[rng.random(57) < 0.2] = np.nan
+    points[:, 2] = np.where(np.isnan(points[:, 2]), np.nan, 7.0)
+    together = _smooth(points, 2.3)
+    alone = np.stack([_smooth(points[:, k], 2.3) for k in range(3)], axis=1)
+    np.testing.assert_array_equal(together, alone)
+    assert np.array_equal(np.isnan(together), np.isnan(points))
+    np.testing.assert_allclose(together[~np.isnan(points[:, 2]), 2], 7.0, rtol=1e-12)

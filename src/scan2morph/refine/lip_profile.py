@@ -143,18 +143,18 @@ def lip_profile(image: LipImage, origin, direction, start: float, end: float) ->
         image.xyz, px, image.source, image.min_weight, image.max_slope_deg, image.view
     )
     points = np.where(ok[:, None], points, np.nan)
-    points = np.stack([_smooth(points[:, k], XYZ_SIGMA_PX / step) for k in range(3)], axis=1)
+    points = _smooth(points, XYZ_SIGMA_PX / step)
     keep = (t >= start - 1e-9) & (t <= end + 1e-9)
     return t[keep], r[keep], points[keep], px[keep]
 
 
 def _smooth(values: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing along a profile, normalised over its finite samples (so neither a gap
-    nor an end pulls it); NaN stays NaN."""
+    """Gaussian smoothing along a profile (n,) or each column of profiles (n, k), normalised
+    over its finite samples (so neither a gap nor an end pulls it); NaN stays NaN."""
     bad = ~np.isfinite(values)
     v = np.where(bad, 0.0, values)
-    w = gaussian_filter1d((~bad).astype(np.float64), sigma, mode="constant")
-    out = gaussian_filter1d(v, sigma, mode="constant") / np.maximum(w, 1e-12)
+    w = gaussian_filter1d((~bad).astype(np.float64), sigma, axis=0, mode="constant")
+    out = gaussian_filter1d(v, sigma, axis=0, mode="constant") / np.maximum(w, 1e-12)
     out[bad] = np.nan
     return out
 
