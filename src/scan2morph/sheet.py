@@ -14,10 +14,12 @@ import re
 from collections.abc import Mapping
 from os import PathLike
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from scan2morph.errors import InputError
+
+if TYPE_CHECKING:  # pandas is imported where a table is made: a take's ingest needs none (0.3 s)
+    import pandas as pd
 
 COLUMNS = (
     "subject",
@@ -83,6 +85,8 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
         The file is missing, a required column is missing or an id has forbidden characters
         (these make the sheet unreadable as a whole, so the run stops before any job).
     """
+    import pandas as pd
+
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "sheet not found (config key 'subjects')")
@@ -271,6 +275,8 @@ def synthetic_rows(
         subject in the cohort), ``{modality}.subjects`` holds something other than positive
         integers, or a take is listed twice.
     """
+    import pandas as pd
+
     switches = {"stereo": stereo or {}, "mesh": mesh or {}, "rgbd": rgbd or {}}
     take_ids = [t["take"] for t in takes]
     for name, switch in switches.items():
@@ -570,6 +576,8 @@ def _problem(error) -> str:
 
 def take_table(sheet: pd.DataFrame, synthetic: pd.DataFrame) -> pd.DataFrame:
     """All takes (user and synthetic), indexed by (subject, take), first row of a duplicate kept."""
+    import pandas as pd
+
     both = pd.concat([sheet, synthetic], ignore_index=True)
     clash = set(sheet["subject"]) & set(synthetic["subject"])
     if clash:

@@ -411,3 +411,45 @@ def test_lip_params_and_prior_name_bad_input():
     with pytest.raises(InputError, match="increasing"):
         vermilion_edge(np.zeros(4), np.array([0.0, 1.0, 1.0, 2.0]), 1.0, 0.5)
     assert vermilion_edge(np.array([0.5, np.nan]), np.array([0.0, 1.0]), 1.0, 0.5) is None
+
+
+def test_redness_correlations_are_pearson_per_shift():
+    """The registration's scores, all shifts at once, against numpy's Pearson correlation of
+    each shift's overlap: equal to rounding; a shift covering under MIN_COVER of the profile,
+    or one with a flat overlap, has no score."""
+    from scan2morph.refine.lip_profile import MIN_COVER, _correlations
+
+    rng = np.random.default_rng(3)
+    n, shifts = 120, 9
+    ref = rng.normal(size=n)
+    moved = rng.normal(size=(shifts, n)) + 0.5 * ref
+    inside = rng.random((shifts, n)) < 0.9
+    inside[2, : int(0.5 * n)] = False  # under MIN_COVER
+    inside[5] = True
+    moved[5] = 0.5  # flat overlap (exactly: its mean is 0.5)
+    got = _correlations(ref, moved, inside)
+    for k in range(shifts):
+        keep = inside[k]
+        if keep.mean() < MIN_COVER or np.ptp(moved[k, keep]) == 0:
+            assert np.isnan(got[k]), k
+        else:
+            want = np.corrcoef(ref[keep], moved[k, keep])[0, 1]
+            assert got[k] == pytest.approx(want, abs=1e-14), k
+    assert np.isnan(got[[2, 5]]).all() and np.isfinite(got).sum() == shifts - 2
+
+
+def test_profile_smoothing_of_columns_is_each_columns_own():
+    """A profile's surface points are smoothed all three coordinates at once: bit for bit each
+    coordinate smoothed alone (gaps and ends normalised away, NaN kept), and a constant
+    coordinate stays constant across a gap."""
+    from scan2morph.refine.lip_profile import _smooth
+
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(57, 3)) * 100
+    points[rng.random(57) < 0.2] = np.nan
+    points[:, 2] = np.where(np.isnan(points[:, 2]), np.nan, 7.0)
+    together = _smooth(points, 2.3)
+    alone = np.stack([_smooth(points[:, k], 2.3) for k in range(3)], axis=1)
+    np.testing.assert_array_equal(together, alone)
+    assert np.array_equal(np.isnan(together), np.isnan(points))
+    np.testing.assert_allclose(together[~np.isnan(points[:, 2]), 2], 7.0, rtol=1e-12)

@@ -134,3 +134,17 @@ def test_inner_lip_corners_raise_the_noise_gain_at_the_outline():
 def test_noise_gain_bad_input():
     with pytest.raises(InputError, match="coincide"):
         noise_gain(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.zeros((1, 2)))
+
+
+def test_pairwise_distances_are_scipys():
+    """The spline's distances by coordinate: scipy's Euclidean distances to rounding, and bit
+    for bit the broadcast formula they replace (so every warp is unchanged)."""
+    from scipy.spatial.distance import cdist
+
+    from scan2morph.template.tps import _pairwise
+
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=(300, 2)) * 50, rng.normal(size=(28, 2)) * 50
+    got = _pairwise(a, b)
+    np.testing.assert_allclose(got, cdist(a, b), rtol=1e-15, atol=0)
+    np.testing.assert_array_equal(got, np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)))

@@ -35,6 +35,7 @@ from scipy.ndimage import map_coordinates
 
 from scan2morph.align.rigid import invert, kabsch, transform_points
 from scan2morph.geometry import surface_normals
+from scan2morph.open3d_light import open3d
 from scan2morph.template.sample import range_pixels, sample_range
 
 #: Surface around the lifted stable points that the ICP aligns, mm.
@@ -127,7 +128,7 @@ def _surface_icp(
     take_xyz: np.ndarray, neutral_xyz: np.ndarray, take_centres: np.ndarray, initial: np.ndarray
 ) -> np.ndarray:
     """Point-to-plane ICP of the take's surface near ``take_centres`` onto the neutral's."""
-    import open3d as o3d
+    o3d = open3d()
 
     src = _near(np.asarray(take_xyz, float), take_centres, SURFACE_RADIUS_MM)
     src = src[:: max(1, len(src) // MAX_ICP_POINTS)]

@@ -70,6 +70,7 @@ from scan2morph.align.surface import SampledSurface
 from scan2morph.align.trim import trim_moving
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
+from scan2morph.open3d_light import open3d
 
 
 def _residual_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -> tuple:
@@ -122,7 +123,7 @@ def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
     The kernel scale halves from ``k_start`` (default ``max_correspondence_mm``) to
     ``kernel_k_mm``.
     """
-    import open3d as o3d
+    o3d = open3d()
 
     reg = o3d.pipelines.registration
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))

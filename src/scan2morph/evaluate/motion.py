@@ -23,6 +23,7 @@ from scipy.spatial import cKDTree
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
+from scan2morph.open3d_light import open3d
 from scan2morph.template.mesh import IBUG_CANONICAL, INNER_LIPS
 from scan2morph.template.regions import inner_lip_midline, lip_side
 from scan2morph.template.sample import behind_steps
@@ -58,7 +59,7 @@ def ideal_points(
         np.float32
     )
     rays[:, 3:] /= np.linalg.norm(rays[:, 3:], axis=1, keepdims=True)
-    import open3d as o3d
+    o3d = open3d()
 
     hit = surface_scene(truth.posed_vertices(), truth.faces).cast_rays(o3d.core.Tensor(rays))
     t = hit["t_hit"].numpy().astype(np.float64).reshape(len(offsets), -1)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.open3d_light import open3d
 
 _KEYS = (
     "vertices",
@@ -67,7 +68,7 @@ def read_truth(path: str | Path) -> Truth:
 
 def surface_scene(vertices: np.ndarray, faces: np.ndarray):
     """An open3d ray-casting scene of a triangle surface (for distances and closest points)."""
-    import open3d as o3d
+    o3d = open3d()
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
@@ -86,7 +87,7 @@ def closest_points(vertices: np.ndarray, faces: np.ndarray, queries: np.ndarray)
     bary : (Q, 3) float64, barycentric weights of the face's three vertices
     distance : (Q,) float64, mm
     """
-    import open3d as o3d
+    o3d = open3d()
 
     scene = surface_scene(vertices, faces)
     res = scene.compute_closest_points(

@@ -44,6 +44,7 @@ from scan2morph.io.take import (  # noqa: E402
     check_face,
     check_landmarks_inside,
 )
+from scan2morph.open3d_light import open3d  # noqa: E402
 
 log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
@@ -225,7 +226,7 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
 
 def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> None:
     """Refuse landmarks off the mesh or of another face."""
-    import open3d as o3d
+    o3d = open3d()
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(

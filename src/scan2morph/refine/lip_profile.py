@@ -143,18 +143,18 @@ def lip_profile(image: LipImage, origin, direction, start: float, end: float) ->
         image.xyz, px, image.source, image.min_weight, image.max_slope_deg, image.view
     )
     points = np.where(ok[:, None], points, np.nan)
-    points = np.stack([_smooth(points[:, k], XYZ_SIGMA_PX / step) for k in range(3)], axis=1)
+    points = _smooth(points, XYZ_SIGMA_PX / step)
     keep = (t >= start - 1e-9) & (t <= end + 1e-9)
     return t[keep], r[keep], points[keep], px[keep]
 
 
 def _smooth(values: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing along a profile, normalised over its finite samples (so neither a gap
-    nor an end pulls it); NaN stays NaN."""
+    """Gaussian smoothing along a profile (n,) or each column of profiles (n, k), normalised
+    over its finite samples (so neither a gap nor an end pulls it); NaN stays NaN."""
     bad = ~np.isfinite(values)
     v = np.where(bad, 0.0, values)
-    w = gaussian_filter1d((~bad).astype(np.float64), sigma, mode="constant")
-    out = gaussian_filter1d(v, sigma, mode="constant") / np.maximum(w, 1e-12)
+    w = gaussian_filter1d((~bad).astype(np.float64), sigma, axis=0, mode="constant")
+    out = gaussian_filter1d(v, sigma, axis=0, mode="constant") / np.maximum(w, 1e-12)
     out[bad] = np.nan
     return out
 
@@ -192,14 +192,7 @@ def register_redness(arc_n, red_n, arc_t, red_t, limit):
     where = grid[None, :] + shifts[:, None]
     inside = (where >= at[0]) & (where <= at[-1])
     moved = np.where(inside, np.interp(where, at, rt), np.nan)
-    cover = inside.mean(axis=1)
-    score = np.full(len(shifts), np.nan)
-    for k in np.flatnonzero(cover >= MIN_COVER):
-        keep = inside[k]
-        a, b = ref[keep] - ref[keep].mean(), moved[k, keep] - moved[k, keep].mean()
-        den = np.sqrt((a @ a) * (b @ b))
-        if den > 0:
-            score[k] = (a @ b) / den
+    score = _correlations(ref, moved, inside)
     if not np.isfinite(score).any():
         return None
     k = int(np.nanargmax(score))
@@ -212,6 +205,27 @@ def register_redness(arc_n, red_n, arc_t, red_t, limit):
     if c < 0:
         shift += 0.5 * (score[k - 1] - score[k + 1]) / c * SHIFT_STEP_MM
     return float(shift)
+
+
+def _correlations(ref: np.ndarray, moved: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """Zero-mean normalised correlation of ``ref`` (n,) with each row of ``moved`` (s, n) over
+    the row's samples ``inside`` (s, n) bool: (s,), NaN for a row covering under
+    :data:`MIN_COVER` of ``ref`` or without variation. All rows at once (a loop over the
+    shifts took a fifth of a refinement)."""
+    score = np.full(len(moved), np.nan)
+    rows = np.flatnonzero(inside.mean(axis=1) >= MIN_COVER)
+    if not len(rows):
+        return score
+    keep = inside[rows]
+    count = keep.sum(axis=1, keepdims=True)
+    r = np.where(keep, ref[None, :], 0.0)
+    m = np.where(keep, moved[rows], 0.0)
+    a = np.where(keep, r - r.sum(axis=1, keepdims=True) / count, 0.0)
+    b = np.where(keep, m - m.sum(axis=1, keepdims=True) / count, 0.0)
+    den = np.sqrt(np.einsum("ij,ij->i", a, a) * np.einsum("ij,ij->i", b, b))
+    ok = den > 0
+    score[rows[ok]] = np.einsum("ij,ij->i", a[ok], b[ok]) / den[ok]
+    return score
 
 
 __all__ = ["LipImage", "arc_length", "lip_profile", "redness", "register_redness", "vermilion_edge"]

@@ -8,6 +8,8 @@ template's vertices (:mod:`scan2morph.template.sample`) take their rules in its 
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +26,12 @@ FRAME_SNAP_SHARE = 0.05
 _FRAME_PIXELS = 4000
 #: Largest RMS reprojection error (px) of an estimated camera that is trusted.
 _FRAME_MAX_RMS_PX = 0.5
+#: The last estimates, keyed by a hash of the pixels and points they were fitted to: one job
+#: samples one range image many times (a refinement's lip profiles, the click-noise draws), and
+#: each sampler asks for its camera. The key is the estimate's whole input, so a hit returns
+#: exactly what the fit would.
+_ESTIMATES: OrderedDict[bytes, ScannerView] = OrderedDict()
+_ESTIMATES_KEPT = 16
 
 
 @dataclass(frozen=True)
@@ -70,6 +78,9 @@ def scanner_view(xyz: np.ndarray) -> ScannerView:
     (so the conventional frame gives exactly the conventional rules), and when no pinhole camera
     is determined (fewer than 12 pixels, planar data, an affine view, RMS reprojection error
     above 0.5 px).
+
+    The last few estimates are kept, keyed by the sampled pixels and their points: asking again
+    for the same data (in any array) returns the same estimate without refitting it.
     """
     xyz = np.asarray(xyz, dtype=np.float64)
     h, w = xyz.shape[:2]
@@ -79,8 +90,21 @@ def scanner_view(xyz: np.ndarray) -> ScannerView:
         return SCANNER_FRAME
     idx = idx[:: max(1, len(idx) // _FRAME_PIXELS)]
     X = xyz.reshape(-1, 3)[idx]
-    uv = np.column_stack([idx % w, idx // w]).astype(np.float64)
-    keep = np.ones(len(idx), dtype=bool)
+    key = hashlib.blake2b(
+        np.int64(w).tobytes() + idx.tobytes() + X.tobytes(), digest_size=20
+    ).digest()
+    if key not in _ESTIMATES:
+        _ESTIMATES[key] = _estimate(X, np.column_stack([idx % w, idx // w]).astype(np.float64))
+        if len(_ESTIMATES) > _ESTIMATES_KEPT:
+            _ESTIMATES.popitem(last=False)
+    _ESTIMATES.move_to_end(key)
+    return _ESTIMATES[key]
+
+
+def _estimate(X: np.ndarray, uv: np.ndarray) -> ScannerView:
+    """:func:`scanner_view`'s camera fitted to the points ``X`` (n, 3) mm seen at the pixels
+    ``uv`` (n, 2) (column, row)."""
+    keep = np.ones(len(X), dtype=bool)
     for _ in range(2):
         P, sv = _dlt(X[keep], uv[keep])
         if P is None or sv[-1] > 0.1 * sv[-2]:

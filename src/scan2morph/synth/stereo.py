@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import vertex_normals  # noqa: E402
 from scan2morph.io.calibration import StereoCalibration  # noqa: E402
+from scan2morph.open3d_light import open3d  # noqa: E402
 from scan2morph.synth.cohort import (  # noqa: E402
     AIM,
     _check_result,
@@ -303,7 +304,7 @@ def _left_truth(
     head: HeadModel, v_left: np.ndarray, K: np.ndarray, D: np.ndarray, width: int, height: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exact surface point and segment of every left pixel centre (ray cast with Open3D)."""
-    import open3d as o3d
+    o3d = open3d()
 
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
     pix = np.stack([xs.ravel(), ys.ravel()], axis=-1).reshape(-1, 1, 2)

@@ -16,6 +16,8 @@ import hashlib
 
 import numpy as np
 
+from scan2morph.open3d_light import open3d
+
 #: Odd 64-bit multipliers combining the three lattice coordinates into one hash key.
 _HASH_MUL = (
     np.uint64(0x9E3779B97F4A7C15),
@@ -161,7 +163,7 @@ def rest_positions(
     (n, 3) float64
         Rest positions, NaN where a ray misses the mesh.
     """
-    import open3d as o3d
+    o3d = open3d()
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(

@@ -27,7 +27,11 @@ def _phi(r: np.ndarray) -> np.ndarray:
 
 
 def _pairwise(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=-1))
+    """Distances (n, m) between the 2D points ``a`` (n, 2) and ``b`` (m, 2), by coordinate:
+    no (n, m, 2) temporary (a template's vertices against the fiducials are millions)."""
+    dx = a[:, None, 0] - b[None, :, 0]
+    dy = a[:, None, 1] - b[None, :, 1]
+    return np.sqrt(dx * dx + dy * dy)
 
 
 def _system(src: np.ndarray) -> np.ndarray:
