@@ -34,7 +34,8 @@ included. Encoded as it stands, with these additions and one correction:
   each other: they come before ``io``, not after ``stages``. ``sheet`` (the sample sheet) and
   ``tables`` (the result tables) import only the base and are placed in it, and so is
   ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
-  mesh-scan reader and the figures), and ``version`` (the installed version the store records).
+  mesh-scan reader and the figures), ``open3d_light`` (open3d imported without its web viewer,
+  for every layer that registers or samples point clouds), and ``version`` (the installed version the store records).
 - **synth** (the synthetic scanners) writes takes in ``io``'s formats: after ``io``.
 - **landmarks** (the detector, trained on synthetic heads, reading a take's repaired grid) uses
   ``synth`` and ``scan``: after ``template``, before ``align``.
@@ -73,6 +74,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.sheet",
             "scan2morph.tables",
             "scan2morph.offscreen",
+            "scan2morph.open3d_light",
             "scan2morph.version",
         ),
     ),

@@ -207,6 +207,21 @@ def synthetic_depth_frames(stem: str, frames: int) -> list[str]:
     return [first, *(f"{stem}_depth_{k}.png" for k in range(2, frames + 1))]
 
 
+def _check_switches(switches: Mapping, take_ids: list[str], n_subjects: int) -> None:
+    """The modality switches of :func:`synthetic_rows`: subject numbers and known takes."""
+    for name, switch in switches.items():
+        source = f"config: synthetic.{name}"
+        numbers = list(switch.get("subjects", []))
+        if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
+            raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
+        # a switch whose subjects are all beyond a smaller cohort is off: takes not checked
+        unknown = [t for t in switch.get("takes", []) if t not in take_ids]
+        if unknown and any(n <= n_subjects for n in numbers):
+            raise InputError(
+                source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
+            )
+
+
 def _synthetic_files(modality: str, stem: str, frames: int) -> dict[str, str]:
     """A synthetic take's file columns (the landmarks' left empty): :data:`SYNTHETIC_FILES`,
     an RGB-D take's depth frames joined as in a sheet."""
@@ -279,17 +294,7 @@ def synthetic_rows(
 
     switches = {"stereo": stereo or {}, "mesh": mesh or {}, "rgbd": rgbd or {}}
     take_ids = [t["take"] for t in takes]
-    for name, switch in switches.items():
-        source = f"config: synthetic.{name}"
-        numbers = list(switch.get("subjects", []))
-        if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in numbers):
-            raise InputError(source, f"subjects: expected 1-based subject numbers, got {numbers}")
-        # a switch whose subjects are all beyond a smaller cohort is off: takes not checked
-        unknown = [t for t in switch.get("takes", []) if t not in take_ids]
-        if unknown and any(n <= n_subjects for n in numbers):
-            raise InputError(
-                source, f"takes: {unknown} not among synthetic.takes (expected some of {take_ids})"
-            )
+    _check_switches(switches, take_ids, n_subjects)
     rows = []
     for i in range(1, n_subjects + 1):
         subject = f"{prefix}{i:02d}"
