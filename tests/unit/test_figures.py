@@ -11,6 +11,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.render.figures import (
     STAGE_FIGURES,
     figure_names,
@@ -339,12 +340,12 @@ def test_render_is_upright_and_not_mirrored_in_any_frame():
         vertices = camera @ rot.T + rng.normal(0, 300, 3)
         # top half red, bottom half blue; image-right half (template +x) gets green added
         rgb = np.where(xy[:, 1:2] < 0.5, [0.9, 0.1, 0.1], [0.1, 0.1, 0.9])
-        image = render_view(vertices, faces, face_view(vertices, faces, xy), rgb=rgb)
+        image = render_view(TexturedMesh(vertices, faces), face_view(vertices, faces, xy), rgb=rgb)
         rows, cols = np.nonzero(_surface(image))
         red = image[rows, cols, 0] > image[rows, cols, 2]
         assert rows[red].mean() < rows[~red].mean() - 40  # red (forehead) above blue (chin)
         rgb[xy[:, 0] > 0.5] = [0.1, 0.9, 0.1]
-        image = render_view(vertices, faces, face_view(vertices, faces, xy), rgb=rgb)
+        image = render_view(TexturedMesh(vertices, faces), face_view(vertices, faces, xy), rgb=rgb)
         rows, cols = np.nonzero(_surface(image))
         green = image[rows, cols, 1] > np.maximum(image[rows, cols, 0], image[rows, cols, 2])
         assert cols[green].mean() > cols[~green].mean() + 40  # template +x on the image's right
@@ -355,7 +356,9 @@ def test_rendered_colours_decode_to_the_field_values():
     vertices = np.column_stack([SCALE_MM * xy, np.full(len(xy), DEPTH_MM)])
     scale = ColorScale(0.0, 10.0, "mm")
     values = np.where(xy[:, 0] < 0, 2.0, 8.0)
-    image = render_view(vertices, faces, face_view(vertices, faces, xy), rgb=scale.rgb(values))
+    image = render_view(
+        TexturedMesh(vertices, faces), face_view(vertices, faces, xy), rgb=scale.rgb(values)
+    )
     rows, cols = np.nonzero(_surface(image))
     mid = cols.mean()
     left = image[rows[cols < mid - 20], cols[cols < mid - 20]]

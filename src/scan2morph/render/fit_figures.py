@@ -9,6 +9,7 @@ from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.render.source import (
     example_take,
     fiducials,
@@ -220,9 +221,12 @@ def fig_model(store: Mapping[str, np.ndarray]) -> Figure:
         vertices, faces, need(store, paths.template("vertices2d"), what), source=source_of(store)
     )
     panels = [
-        Panel(render_view(vertices, faces, view), "(a) shaded"),
-        Panel(render_view(vertices, faces, view, texture=color, uv=uv), "(b) textured"),
-        Panel(render_view(vertices, faces, view, rgb=WIRE_RGB, wireframe=True), "(c) wireframe"),
+        Panel(render_view(TexturedMesh(vertices, faces), view), "(a) shaded"),
+        Panel(render_view(TexturedMesh(vertices, faces, uv, color), view), "(b) textured"),
+        Panel(
+            render_view(TexturedMesh(vertices, faces), view, rgb=WIRE_RGB, wireframe=True),
+            "(c) wireframe",
+        ),
     ]
     return panel_figure(
         panels, ncols=3, title=f"3D face model of the neutral take ({take}), scanner frame"

@@ -8,6 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.render.source import (
     expression_takes,
     groups,
@@ -70,7 +71,7 @@ def fig_modes(store: Mapping[str, np.ndarray]) -> Figure:
         peak = np.nanmax(mag) if np.isfinite(mag).any() else 0.0
         rgb = scale.rgb(mag / peak if peak > 0 else mag)
         hz = f", {freq[i]:.1f} Hz" if i < len(freq) else ""
-        panels.append(Panel(render_view(base, f, view, rgb=rgb), f"mode {i + 1}{hz}"))
+        panels.append(Panel(render_view(TexturedMesh(base, f), view, rgb=rgb), f"mode {i + 1}{hz}"))
     return panel_figure(
         panels,
         ncols=min(3, len(panels)),
@@ -96,7 +97,9 @@ def fig_expressions(store: Mapping[str, np.ndarray]) -> Figure:
     view = neutral_view(store, what)
     scale = _field_scale(list(fields.values()), "displacement magnitude (mm)")
     panels = [
-        Panel(render_view(base, f, view, rgb=scale.rgb(np.linalg.norm(d, axis=1))), take)
+        Panel(
+            render_view(TexturedMesh(base, f), view, rgb=scale.rgb(np.linalg.norm(d, axis=1))), take
+        )
         for take, d in fields.items()
     ]
     return panel_figure(
@@ -224,15 +227,21 @@ def fig_synthesis(store: Mapping[str, np.ndarray]) -> Figure:
         s = synth[take]
         panels += [
             Panel(
-                render_view(base + d, f, view, rgb=scale.rgb(np.linalg.norm(d, axis=1))),
+                render_view(
+                    TexturedMesh(base + d, f), view, rgb=scale.rgb(np.linalg.norm(d, axis=1))
+                ),
                 f"{take}: measured",
             ),
             Panel(
-                render_view(base + s, f, view, rgb=scale.rgb(np.linalg.norm(s, axis=1))),
+                render_view(
+                    TexturedMesh(base + s, f), view, rgb=scale.rgb(np.linalg.norm(s, axis=1))
+                ),
                 f"{take}: synthesised",
             ),
             Panel(
-                render_view(base + s, f, view, rgb=scale.rgb(np.linalg.norm(s - d, axis=1))),
+                render_view(
+                    TexturedMesh(base + s, f), view, rgb=scale.rgb(np.linalg.norm(s - d, axis=1))
+                ),
                 f"{take}: |synth. - meas.|",
             ),
         ]

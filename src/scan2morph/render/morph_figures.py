@@ -9,6 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.render.source import (
     groups,
     mesh,
@@ -52,7 +53,7 @@ def _render_shapes(
     """Shaded renders of neutral-frame shapes at one scale (the neutral's view)."""
     faces = template_faces(store, what)
     view = frame_view(neutral_view(store, what), list(shapes.values()), faces)
-    return {name: render_view(v, faces, view) for name, v in shapes.items()}
+    return {name: render_view(TexturedMesh(v, faces), view) for name, v in shapes.items()}
 
 
 def blend_title(name: str) -> str:
@@ -119,8 +120,8 @@ def fig_mean(store: Mapping[str, np.ndarray]) -> Figure:
     color = need(store, paths.range_image(neutral, "color"), what)
     view = frame_view(neutral_view(store, what), [mean], faces)
     panels = [
-        Panel(render_view(mean, faces, view), "shaded"),
-        Panel(render_view(mean, faces, view, texture=color, uv=uv), "textured (neutral image)"),
+        Panel(render_view(TexturedMesh(mean, faces), view), "shaded"),
+        Panel(render_view(TexturedMesh(mean, faces, uv, color), view), "textured (neutral image)"),
     ]
     n = len(need(store, paths.pca("takes"), what))
     return panel_figure(panels, ncols=2, title=f"Average face model of the {n} models of the PCA")

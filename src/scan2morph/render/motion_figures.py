@@ -8,6 +8,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from scan2morph.geometry import TexturedMesh
 from scan2morph.motion.uncertainty import noise_by_take
 from scan2morph.render.source import (
     example_take,
@@ -79,7 +80,11 @@ def fig_point_pairs(store: Mapping[str, np.ndarray]) -> Figure:
         idx = np.array([fid[n] for n in names])
         rgb = _spots(vertices, vertices[idx], colors)
         view = face_view(vertices, faces, xy, source=source_of(store))
-        panels.append(Panel(render_view(vertices, faces, view, rgb=rgb), f"{take} (scanner frame)"))
+        panels.append(
+            Panel(
+                render_view(TexturedMesh(vertices, faces), view, rgb=rgb), f"{take} (scanner frame)"
+            )
+        )
     legend = [(tuple(c), n.replace("_", " ")) for c, n in zip(colors, names, strict=True)]
     return panel_figure(
         panels,
@@ -124,7 +129,9 @@ def fig_alignment(store: Mapping[str, np.ndarray]) -> Figure:
         vertices, both, rgb = _pair(base, other, faces)
         view = frame_view(direction, [base, other], faces)
         for yaw, side in ((0.0, "front"), (PROFILE_DEG, "profile")):
-            panels.append(Panel(render_view(vertices, both, view, rgb=rgb, yaw_deg=yaw), side))
+            panels.append(
+                Panel(render_view(TexturedMesh(vertices, both), view, rgb=rgb, yaw_deg=yaw), side)
+            )
     legend = [(PAIR_RGB[0], f"{neutral} (neutral)"), (PAIR_RGB[1], take)]
     return panel_figure(
         panels,
@@ -148,11 +155,11 @@ def fig_mask(store: Mapping[str, np.ndarray]) -> Figure:
     mask_rgb = np.where(suppressed[:, None], MASK_RGB, UNMASKED_RGB)
     panels = [
         Panel(
-            render_view(base, faces, view, rgb=seed_rgb),
+            render_view(TexturedMesh(base, faces), view, rgb=seed_rgb),
             f"(a) seeds: {len(seeds)} vertices on the paths",
         ),
         Panel(
-            render_view(base, faces, view, rgb=mask_rgb),
+            render_view(TexturedMesh(base, faces), view, rgb=mask_rgb),
             f"(b) mask: {suppressed.sum()} of {len(base)} vertices",
         ),
     ]
@@ -182,7 +189,9 @@ def _viseme_fields(
     scale = ColorScale(0.0, max(vmax, 1e-3), label)
     view = frame_view(neutral_view(store, what), list(models.values()), faces)
     panels = [
-        Panel(render_view(models[t], faces, view, rgb=scale.rgb(values[t])), titles[t])
+        Panel(
+            render_view(TexturedMesh(models[t], faces), view, rgb=scale.rgb(values[t])), titles[t]
+        )
         for t in takes
     ]
     return panel_figure(panels, ncols=min(len(panels), 5), title=title, scale=scale)
@@ -239,9 +248,9 @@ def fig_visemes(store: Mapping[str, np.ndarray]) -> Figure:
     uv = need(store, paths.mesh(neutral, "uv"), what)
     color = need(store, paths.range_image(neutral, "color"), what)
     view = frame_view(neutral_view(store, what), list(shapes.values()), faces)
-    shaded = [Panel(render_view(v, faces, view), name) for name, v in shapes.items()]
+    shaded = [Panel(render_view(TexturedMesh(v, faces), view), name) for name, v in shapes.items()]
     textured = [
-        Panel(render_view(v, faces, view, texture=color, uv=uv), "") for v in shapes.values()
+        Panel(render_view(TexturedMesh(v, faces, uv, color), view), "") for v in shapes.values()
     ]
     return panel_figure(
         shaded + textured,

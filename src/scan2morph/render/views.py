@@ -26,6 +26,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import TexturedMesh
 from scan2morph.render.scene import Framing, MeshLook, front_direction, render_mesh
 
 #: Width and height of one rendered panel, pixels.
@@ -176,13 +177,10 @@ def linear_rgb(rgb: np.ndarray) -> np.ndarray:
 
 
 def render_view(
-    vertices: np.ndarray,
-    faces: np.ndarray,
+    mesh: TexturedMesh,
     view: View,
     *,
     rgb: np.ndarray | None = None,
-    texture: np.ndarray | None = None,
-    uv: np.ndarray | None = None,
     wireframe: bool = False,
     yaw_deg: float = 0.0,
     size: int = PANEL_PX,
@@ -191,13 +189,13 @@ def render_view(
 
     Parameters
     ----------
-    vertices : (V, 3) float, mm; faces touching a NaN vertex are not drawn.
-    faces : (F, 3) int
+    mesh : TexturedMesh
+        Vertices (V, 3) mm (faces touching a NaN vertex are not drawn), faces (F, 3) and,
+        optionally, a texture (H, W, 3) uint8 with its coordinates uv (V, 2) (v down; NaN
+        coordinates are drawn at (0, 0)).
     view : View
     rgb : (V, 3) or (3,) float in [0, 1], optional
         Per-vertex (or one) sRGB colour (as a colour map gives them).
-    texture, uv : (H, W, 3) uint8 and (V, 2), optional
-        Texture image and coordinates (v down); NaN texture coordinates are drawn at (0, 0).
     wireframe : bool
     yaw_deg : float
         Turn about ``up`` (90 = profile).
@@ -208,11 +206,10 @@ def render_view(
     -------
     (size, size, 3) uint8
     """
-    vertices, faces = _check_mesh(vertices, faces, "render")
+    vertices, faces = _check_mesh(mesh.vertices, mesh.faces, "render")
     colors = None if rgb is None else linear_rgb(np.broadcast_to(rgb, vertices.shape))
-    if uv is not None:
-        uv = np.nan_to_num(np.asarray(uv, dtype=np.float64))
-    look = MeshLook(colors, texture, uv, wireframe)
+    uv = None if mesh.uv is None else np.nan_to_num(np.asarray(mesh.uv, dtype=np.float64))
+    look = MeshLook(colors, mesh.texture, uv, wireframe)
     framing = Framing(view.up, view.front, yaw_deg, view.center, view.radius)
     return render_mesh(vertices, faces, look, framing, (size, size))
 
