@@ -24,6 +24,8 @@ Usage::
 
 ``total`` is the wall time of assembly and eigensolve, ``cpu`` their CPU time (all threads):
 with one solve thread and one BLAS thread it is the wall time an idle machine would give.
+``DOF`` is the model's layout (six per vertex), ``free`` the DOFs solved: the ``skin`` preset is
+a membrane (translations only), so ``--dofs 120000 --physics skin`` solves 60,000.
 
 ``--reconstruction RUN SUBJECT`` measures instead what the basis rebuilds on a finished run
 (``RUN/results/{SUBJECT}/motion.h5``, ``RUN/resources/template.npz``): the modal stage with the
