@@ -18,9 +18,10 @@ factorisation, one vector at a time; ``method="dense"`` solves the dense pencil 
 Measured on a face-sized curved shell of 60,000 DOF (``benchmarks/bench_modal.py``, two
 cores, one BLAS thread): 100 modes in about 7-8 s for the block solver against 13 s for
 ARPACK, both to a relative residual below 1e-10; the paper needed about 5 min for 15,000 DOF.
-CPU time of assembly and 100 modes on one thread (what an idle core takes): the paper's steel
-shell on 10,000 vertices (60,000 DOF) 9.9 s; the ``skin`` preset's membrane (translations
-only) on the same mesh (30,000 DOF) 4.2 s and on 20,000 vertices (60,000 DOF) 9.8 s.
+CPU time of assembly and 100 modes on one thread (what an idle core takes; fastest of three,
+on a shared machine): the paper's steel shell on 10,000 vertices (60,000 DOF) 8-10 s; the
+``skin`` preset's membrane (translations only) on the same mesh (30,000 DOF) about 4 s (11 s
+as a soft shell of 60,000 DOF) and on 20,000 vertices (60,000 DOF) 8-10 s.
 
 The mass matrix of a shell is only semi-definite (the drilling rotation has no inertia), so
 ``M^-1`` is never formed: every vector the iteration produces lies in the range of ``T``, on
