@@ -78,6 +78,7 @@ VARIANTS: dict[str, dict] = {
         "coordinates": "mass",
         "fixed_outline": "none",
     },
+    "skin_soft_shell": {"preset": "skin", "youngs_modulus_mpa": 0.01},  # skin until the membrane
     "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
     "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},
 }

@@ -20,7 +20,14 @@ from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
 from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
 from scan2morph.modal.basis import vertex_orthonormal
-from scan2morph.modal.fem import boundary_vertices, cotangent_laplacian, skin_stiffness
+from scan2morph.modal.fem import (
+    assemble,
+    boundary_vertices,
+    cotangent_laplacian,
+    face_areas,
+    membrane_mass,
+    skin_stiffness,
+)
 from scan2morph.modal.span import (
     laplace_beltrami,
     per_axis_fields,
@@ -130,6 +137,42 @@ def test_skin_membrane_modes_match_membrane_theory(skin_plate):
     assert np.all(freqs[:3] < 1e-3 * freqs[3])
     exact = np.repeat([membrane_hz(1, 0), membrane_hz(1, 1), membrane_hz(2, 0)], [6, 3, 6])
     assert_allclose(freqs[3:18], exact, rtol=0.02)
+
+
+def test_a_membrane_without_shell_matches_membrane_theory(plate, skin_plate):
+    """E = 0: no shell, the tension alone on the translations. The same frequencies as the
+    membrane theory and as the skin on a negligible shell, and no rotation in any vector."""
+    v, f = plate
+    params = replace(membrane_params(18), material=ShellMaterial(0.0, 0.3, RHO))
+    basis = modal_basis(v, f, params, fixed=np.zeros(len(v), bool), source="membrane")
+    freqs = basis.frequencies_hz
+    assert np.all(freqs[:3] < 1e-3 * freqs[3])
+    exact = np.repeat([membrane_hz(1, 0), membrane_hz(1, 1), membrane_hz(2, 0)], [6, 3, 6])
+    assert_allclose(freqs[3:18], exact, rtol=0.02)
+    assert_allclose(freqs[3:], skin_plate.frequencies_hz[3:], rtol=1e-3)
+    assert np.all(basis.dof_modes[:, :, 3:] == 0)
+    # no tension, foundation or tether: nothing holds the membrane
+    bare = replace(params, tension_n_per_mm=0.0)
+    with pytest.raises(InputError, match="youngs_modulus_mpa: 0"):
+        modal_basis(v, f, bare, fixed=np.zeros(len(v), bool))
+
+
+@pytest.mark.parametrize("kind", ["consistent", "lumped", "vertex"])
+def test_membrane_mass_is_the_shells_translational_mass(plate, kind):
+    """Oracle: pyfe3d's shell mass without rotary inertia (consistent), and for every kind
+    the total rho t A on each axis, none on the rotations."""
+    v, f = plate
+    t = np.where(np.arange(len(f)) % 3 == 0, 2.0, 1.0)
+    m = membrane_mass(v, f, t, RHO, kind)
+    total = RHO * np.sum(t * face_areas(v, f))
+    for axis in range(6):
+        want = total if axis < 3 else 0.0
+        assert_allclose(m[axis::6, axis::6].sum(), want, rtol=1e-12)
+    if kind == "consistent":
+        _, shell = assemble(v, f, t, ShellMaterial(1.0, 0.3, RHO, rotary_inertia=False))
+        assert abs(m - shell).max() < 1e-12 * abs(shell).max()
+    with pytest.raises(InputError, match="density"):
+        membrane_mass(v, f, t, 0.0, kind)
 
 
 @pytest.mark.parametrize("on_bone", [False, True])

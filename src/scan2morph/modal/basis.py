@@ -35,7 +35,10 @@ class ModalParams:
         cap the upper half's mean share of the six lowest modes' motion is 42 % uniform,
         25 % at 2, 18 % at 3, 11 % at 5 and 6 % at 10.
     material : fem.ShellMaterial
-        Steel by default (the paper's choice; it only scales the frequencies).
+        Steel by default (the paper's choice; it only scales the frequencies). Young's
+        modulus 0: no shell at all, a membrane whose stiffness is the skin terms' alone
+        (:func:`fem.skin_stiffness`, which must then hold it) on the translations, its mass
+        :func:`fem.membrane_mass`; the rotations are held (zero in every vector).
     boundary : {"clamped", "pinned"}
         Fixed vertices held in all six DOFs (paper) or in translation only.
     element : {"tria3dsg", "tria3r"}
@@ -80,6 +83,11 @@ class ModalParams:
     tether_n_per_mm3: float = 0.0
     tether_normal_n_per_mm3: float = 0.0
     coordinates: str = "mass"
+
+    @property
+    def has_shell(self) -> bool:
+        """Whether the model has a shell (Young's modulus > 0) or is a membrane."""
+        return self.material.youngs_modulus_mpa != 0
 
     @property
     def has_skin(self) -> bool:
@@ -214,6 +222,7 @@ def modal_basis(
         [
             fem.fixed_dofs(boundary, "all" if p.boundary == "clamped" else "translations"),
             fem.fixed_dofs(unused, "all"),
+            fem.fixed_dofs(np.full(n_v, not p.has_shell), "rotations"),
         ]
     )
     freqs, vecs = solve_modes(
@@ -290,10 +299,21 @@ def vertex_orthonormal(basis: ModalBasis) -> ModalBasis:
 
 
 def _matrices(v, f, thickness, p: ModalParams, tethered, source: str):
-    """Stiffness (shell plus the skin terms, if any) and mass of the model, N/mm and tonne."""
-    k_mat, m_mat = fem.assemble(
-        v, f, thickness, p.material, element=p.element, mass=p.mass, source=source
-    )
+    """Stiffness (shell plus the skin terms, if any; the skin terms alone for a membrane) and
+    mass of the model, N/mm and tonne."""
+    if p.has_shell:
+        k_mat, m_mat = fem.assemble(
+            v, f, thickness, p.material, element=p.element, mass=p.mass, source=source
+        )
+    elif not p.has_skin:
+        raise InputError(
+            source,
+            "youngs_modulus_mpa: 0 (no shell) needs the skin's tension, foundation or tether "
+            "to hold the membrane; all are 0",
+        )
+    else:
+        m_mat = fem.membrane_mass(v, f, thickness, p.material.density_t_per_mm3, p.mass, source)
+        k_mat = sp.csc_matrix(m_mat.shape)
     if p.has_skin:
         skin = fem.skin_stiffness(
             v,

@@ -364,6 +364,60 @@ def vertex_mass(total: float, used: NDArray[np.bool_]) -> sp.csc_matrix:
     return sp.diags(diag).tocsc()
 
 
+def membrane_mass(
+    vertices: ArrayLike,
+    faces: ArrayLike,
+    thickness_mm: float | ArrayLike,
+    density_t_per_mm3: float,
+    mass: str = "consistent",
+    source: str = "mesh",
+) -> sp.csc_matrix:
+    """Mass matrix of a membrane (a shell without stiffness of its own: translations only).
+
+    Linear triangles: the consistent mass ``rho t A / 12`` times ``[[2, 1, 1], [1, 2, 1],
+    [1, 1, 2]]`` per axis (what :func:`assemble` gives the translations of a shell without
+    rotary inertia), lumped ``rho t A / 3`` per corner, or (``"vertex"``) the total shared
+    equally by the vertices (:func:`vertex_mass`).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+    faces : (F, 3) int
+    thickness_mm : float or (F,) float, mm
+    density_t_per_mm3 : float
+        rho > 0, tonne/mm^3.
+    mass : {"consistent", "lumped", "vertex"}
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (6V, 6V) scipy.sparse.csc_matrix, symmetric positive semi-definite, tonne (zero on the
+    rotations)
+    """
+    v, f = check_mesh(vertices, faces, source)
+    if mass not in _MASS_TYPES:
+        raise InputError(source, f"mass: expected one of {tuple(_MASS_TYPES)}, got {mass!r}")
+    rho = float(density_t_per_mm3)
+    if not (np.isfinite(rho) and rho > 0):
+        raise InputError(source, f"density_t_per_mm3: expected a positive number, got {rho}")
+    face_mass = rho * _thickness(thickness_mm, f.shape[0], source) * face_areas(v, f)
+    if mass == "vertex":
+        used = np.zeros(v.shape[0], dtype=bool)
+        used[f.ravel()] = True
+        return vertex_mass(float(face_mass.sum()), used)
+    if mass == "lumped":
+        share = np.zeros(v.shape[0])
+        np.add.at(share, f.ravel(), np.repeat(face_mass / 3.0, 3))
+        return sp.diags(np.repeat(share, DOF) * np.tile([1.0, 1, 1, 0, 0, 0], v.shape[0])).tocsc()
+    i, j = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    pair = np.where(i == j, 2.0, 1.0).ravel() / 12.0  # (9,) corner pairs
+    rows = DOF * f[:, i.ravel()][:, :, None] + np.arange(3)  # (F, 9, 3): each axis
+    cols = DOF * f[:, j.ravel()][:, :, None] + np.arange(3)
+    vals = np.broadcast_to((face_mass[:, None] * pair)[:, :, None], rows.shape)
+    return _symmetric_csc(rows.ravel(), cols.ravel(), vals.ravel(), DOF * v.shape[0])
+
+
 def _shell_prop(thickness: float, mat: ShellMaterial):
     """pyfe3d's isotropic ShellProp with the material's membrane scale and rotary inertia."""
     from pyfe3d.shellprop_utils import isotropic_plate
@@ -384,8 +438,12 @@ def _shell_prop(thickness: float, mat: ShellMaterial):
 
 def _symmetric_csc(rows, cols, vals, n):
     """Sum COO triplets into a CSC matrix, symmetrised (element matrices are symmetric only
-    to round-off). int32 indices make scipy's COO-to-CSR summation about twice as fast."""
+    to round-off). int32 indices make scipy's COO-to-CSR summation about twice as fast; exact
+    zeros (the massless rotations' rows of a mass matrix without rotary inertia) are left out."""
     idx = np.int32 if n < np.iinfo(np.int32).max else np.int64
+    nonzero = vals != 0.0
+    if not nonzero.all():
+        rows, cols, vals = rows[nonzero], cols[nonzero], vals[nonzero]
     a = sp.coo_matrix((vals, (rows.astype(idx), cols.astype(idx))), shape=(n, n)).tocsr()
     a = ((a + a.T) * 0.5).tocsc()
     a.sort_indices()
@@ -522,17 +580,19 @@ def fixed_dofs(vertex_mask: ArrayLike, components: str = "all") -> NDArray[np.in
     ----------
     vertex_mask : (V,) bool
         Vertices to fix.
-    components : {"all", "translations"}
-        Fix all six DOFs (clamped) or only u, v, w (pinned / simply supported).
+    components : {"all", "translations", "rotations"}
+        Fix all six DOFs (clamped), only u, v, w (pinned / simply supported) or only the
+        rotations (a membrane, which has none).
 
     Returns
     -------
     (n,) int64, sorted
     """
-    if components not in ("all", "translations"):
+    comps = {"all": np.arange(DOF), "translations": np.arange(3), "rotations": np.arange(3, DOF)}
+    if components not in comps:
         raise InputError(
-            "fixed_dofs", f"components: expected 'all' or 'translations', got {components!r}"
+            "fixed_dofs", f"components: expected one of {tuple(comps)}, got {components!r}"
         )
     idx = np.flatnonzero(np.asarray(vertex_mask, dtype=bool))
-    comps = np.arange(DOF) if components == "all" else np.arange(3)
+    comps = comps[components]
     return (DOF * idx[:, None] + comps[None, :]).ravel().astype(np.int64)

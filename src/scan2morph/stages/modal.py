@@ -40,8 +40,8 @@ log = logging.getLogger("scan2morph")
 #: three times thicker above the nose tip, whole outline clamped. ``clamped_still``: the same
 #: shell clamped only where the takes leave the outline still (this pipeline's basis before
 #: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation, clamped where the takes
-#: leave the outline still (as ``clamped_still``): a soft 1 mm shell (E = 0.01 MPa, no rotary
-#: inertia) under an isotropic tension of 1 N/mm, on tissue that resists normal motion
+#: leave the outline still (as ``clamped_still``): a 1 mm membrane (no shell: E = 0, the
+#: rotations held) under an isotropic tension of 1 N/mm, on tissue that resists normal motion
 #: (0.01 N/mm^3) and, where every take leaves the skin still (``tether_region: still``, within
 #: ``still_mm``), ties it to the bone against sliding (0.1 N/mm^3) and normal motion (another
 #: 0.1 N/mm^3); its coordinates are the least squares fit (``coordinates: vertex``). Chosen by
@@ -69,7 +69,7 @@ PRESETS: dict[str, dict] = {
 PRESETS["clamped_still"] = PRESETS["paper"] | {"fixed_outline": "still"}
 PRESETS["skin"] = PRESETS["paper"] | {
     "fixed_outline": "still",
-    "youngs_modulus_mpa": 0.01,
+    "youngs_modulus_mpa": 0.0,
     "density_t_per_mm3": 1.1e-9,
     "stiff_factor": 1.0,
     "rotary_inertia": False,
