@@ -110,7 +110,7 @@ def run_case(
 
     import numpy as np
 
-    from scan2morph.modal import solve_modes
+    from scan2morph.modal import SolverOptions, solve_modes
 
     n = max(2, round(np.sqrt(dofs / 6)) - 1)
     vertices, faces = cap_mesh(n)
@@ -120,9 +120,8 @@ def run_case(
     t_asm, c_asm = time.perf_counter() - t0, time.process_time() - c0
     rss_asm = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     t0, c0 = time.perf_counter(), time.process_time()
-    freqs, modes = solve_modes(
-        k_mat, m_mat, fixed, k, method=method, threads=solve_threads, shift=shift
-    )
+    options = SolverOptions(method=method, threads=solve_threads, shift=shift)
+    freqs, modes = solve_modes(k_mat, m_mat, fixed, k, options)
     t_eig, c_eig = time.perf_counter() - t0, time.process_time() - c0
     rss_eig = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     free = np.setdiff1d(np.arange(k_mat.shape[0]), fixed)
@@ -137,7 +136,7 @@ def run_case(
         k_mat, m_mat, fixed, shift = case_model(vertices, faces, physics)
         py_asm = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.reset_peak()
-        solve_modes(k_mat, m_mat, fixed, k, method=method, threads=solve_threads, shift=shift)
+        solve_modes(k_mat, m_mat, fixed, k, options)
         py_eig = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
     return {

@@ -16,6 +16,7 @@ from scan2morph.errors import InputError
 from scan2morph.modal import (
     ModalParams,
     ShellMaterial,
+    SolverOptions,
     assemble,
     boundary_vertices,
     coordinate_statistics,
@@ -161,7 +162,7 @@ def test_block_solver_matches_arpack_on_a_curved_shell():
     k, m = assemble(v, f, H_MM)
     fixed = fixed_dofs(boundary_vertices(f), "all")
     n_modes = 10
-    freqs, modes = solve_modes(k, m, fixed, n_modes, method="block", block_size=4)
+    freqs, modes = solve_modes(k, m, fixed, n_modes, SolverOptions(method="block", block_size=4))
     # oracle: ARPACK shift-invert called directly on the free-DOF matrices
     free = np.setdiff1d(np.arange(k.shape[0]), fixed)
     kf, mf = k[free][:, free].tocsc(), m[free][:, free].tocsc()
@@ -174,9 +175,9 @@ def test_block_solver_matches_arpack_on_a_curved_shell():
     lam_hz = (2 * np.pi * freqs) ** 2
     res = (k @ modes - (m @ modes) * lam_hz)[free]
     assert np.all(np.linalg.norm(res, axis=0) < 1e-8 * np.linalg.norm((k @ modes)[free], axis=0))
-    arp, _ = solve_modes(k, m, fixed, n_modes, method="arpack")
-    dense, _ = solve_modes(k, m, fixed, n_modes, method="dense")
-    restarted, q2 = solve_modes(k, m, fixed, n_modes, block_size=3, max_basis=24)
+    arp, _ = solve_modes(k, m, fixed, n_modes, SolverOptions(method="arpack"))
+    dense, _ = solve_modes(k, m, fixed, n_modes, SolverOptions(method="dense"))
+    restarted, q2 = solve_modes(k, m, fixed, n_modes, SolverOptions(block_size=3, max_basis=24))
     assert_allclose(arp, freqs, rtol=1e-9)
     assert_allclose(dense, freqs, rtol=1e-9)
     assert_allclose(restarted, freqs, rtol=1e-9)
@@ -193,9 +194,11 @@ def test_block_solver_with_massless_rotations():
     k = (k + skin_stiffness(v, f, 1.0, 0.01)).tocsc()
     assert np.count_nonzero(m.diagonal()) == 3 * len(v)
     n_modes = 12
-    dense, _ = solve_modes(k, m, [], n_modes, method="dense")
+    dense, _ = solve_modes(k, m, [], n_modes, SolverOptions(method="dense"))
     for size, basis in ((4, None), (3, 30)):  # with and without thick restarts
-        freqs, modes = solve_modes(k, m, [], n_modes, block_size=size, max_basis=basis)
+        freqs, modes = solve_modes(
+            k, m, [], n_modes, SolverOptions(block_size=size, max_basis=basis)
+        )
         assert_allclose(freqs, dense, rtol=1e-9)
         assert_allclose(modes.T @ m @ modes, np.eye(n_modes), atol=1e-8)
         res = k @ modes - (m @ modes) * (2 * np.pi * freqs) ** 2
@@ -494,7 +497,7 @@ def test_bad_eigen_requests_raise():
     with pytest.raises(InputError, match="k: expected"):
         modal_basis(v, f, ModalParams(n_modes=500))
     with pytest.raises(InputError, match="method"):
-        solve_modes(k, m, fixed, 2, method="lobpcg")
+        solve_modes(k, m, fixed, 2, SolverOptions(method="lobpcg"))
     with pytest.raises(InputError, match="fixed_dofs"):
         solve_modes(k, m, [k.shape[0]], 2)
     with pytest.raises(InputError, match="square"):

@@ -12,7 +12,7 @@ eigenfunctions per axis). Units: mm, N, tonne, s (frequencies in Hz).
 """
 
 from scan2morph.modal.basis import ModalBasis, ModalParams, modal_basis
-from scan2morph.modal.eigen import solve_modes
+from scan2morph.modal.eigen import SolverOptions, solve_modes
 from scan2morph.modal.fem import (
     ShellMaterial,
     assemble,
@@ -47,6 +47,7 @@ __all__ = [
     "reconstruction_split",
     "semantic_basis",
     "skin_stiffness",
+    "SolverOptions",
     "solve_modes",
     "thickness_map",
 ]

@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
 from scan2morph.modal import fem
-from scan2morph.modal.eigen import solve_modes
+from scan2morph.modal.eigen import SolverOptions, solve_modes
 
 #: What the coordinates of a basis are (:attr:`ModalParams.coordinates`).
 COORDINATES = ("mass", "vertex")
@@ -230,10 +230,12 @@ def modal_basis(
         m_mat,
         dofs,
         p.n_modes,
-        method=p.method,
-        threads=p.threads,
-        seed=p.seed,
-        shift=_free_shift(k_mat, m_mat) if free_model else 0.0,
+        SolverOptions(
+            method=p.method,
+            threads=p.threads,
+            seed=p.seed,
+            shift=_free_shift(k_mat, m_mat) if free_model else 0.0,
+        ),
         source=source,
     )
     names = tuple(f"mode_{i + 1:03d}" for i in range(p.n_modes))

@@ -31,6 +31,7 @@ which the M inner product is definite.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as la
@@ -48,19 +49,32 @@ _MIN_COLS_PER_THREAD = 2
 _DENSE_MAX_DOF = 1500
 
 
+@dataclass(frozen=True)
+class SolverOptions:
+    """How :func:`solve_modes` solves (not what: the model is K, M and the fixed DOFs).
+
+    Attributes
+    ----------
+    options : SolverOptions, optional
+        Method, tolerance, block and basis sizes, threads, seed and shift; default
+        :class:`SolverOptions()`.
+    """
+
+    method: str = "block"
+    tol: float = 1e-12
+    block_size: int | None = None
+    max_basis: int | None = None
+    threads: int = 2
+    seed: int = 0
+    shift: float = 0.0
+
+
 def solve_modes(
     K: sp.spmatrix,
     M: sp.spmatrix,
     fixed_dofs: ArrayLike,
     k: int = 100,
-    *,
-    method: str = "block",
-    tol: float = 1e-12,
-    block_size: int | None = None,
-    max_basis: int | None = None,
-    threads: int = 2,
-    seed: int = 0,
-    shift: float = 0.0,
+    options: SolverOptions | None = None,
     source: str = "modal",
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Lowest natural frequencies and mass-orthonormal mode shapes.
@@ -114,21 +128,23 @@ def solve_modes(
         with no stiffness, or a stiffness matrix that is singular on the free DOFs (a part of
         the model that the fixed DOFs do not hold).
     """
+    opt = options or SolverOptions()
+    method, tol, seed = opt.method, opt.tol, opt.seed
     if method not in _METHODS:
         raise InputError(source, f"method: expected one of {_METHODS}, got {method!r}")
     n = K.shape[0]
-    free, kf, mf, ks = _free_system(K, M, fixed_dofs, k, shift, source)
+    free, kf, mf, ks = _free_system(K, M, fixed_dofs, k, opt.shift, source)
     if method == "dense" or (method == "block" and free.size <= _DENSE_MAX_DOF):
         lam, xf = _dense(ks, mf, k, source)
     else:
-        op = _ShiftInvert(ks, mf, source, threads)
+        op = _ShiftInvert(ks, mf, source, opt.threads)
         if method == "arpack":
             lam, xf = _arpack(op, k, tol, seed)
         else:
-            b = int(np.clip(k // 12, 4, 12)) if block_size is None else int(block_size)
+            b = int(np.clip(k // 12, 4, 12)) if opt.block_size is None else int(opt.block_size)
             if b < 1:
                 raise InputError(source, f"block_size: expected a positive integer, got {b}")
-            lam, xf = _block_krylov_schur(op, k, b, tol, seed, source, max_basis)
+            lam, xf = _block_krylov_schur(op, k, b, tol, seed, source, opt.max_basis)
     # Rayleigh quotients (more accurate than 1/theta) and exact M-orthonormalisation.
     xf = _loewdin(xf, mf @ xf)
     lam = np.einsum("ij,ij->j", xf, kf @ xf)
