@@ -95,11 +95,16 @@ def _spots(points: np.ndarray, seed: int) -> np.ndarray:
     the cell, with a random radius and darkness and a Gaussian profile; overlapping spots combine
     multiplicatively.
     """
-    q = points / _SPOT_CELL_MM
-    # the draws are made once per distinct cell, then handed to the points in it
-    cells, inverse = np.unique(np.floor(q).astype(np.int64), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
     light = np.ones(len(points))
+    if len(points) == 0:
+        return 1.0 - light
+    # the draws are made once per distinct cell, then handed to the points in it
+    base = np.floor(points / _SPOT_CELL_MM).astype(np.int64)
+    index = base - base.min(axis=0)
+    span = index.max(axis=0) + 1
+    key = (index[:, 0] * span[1] + index[:, 1]) * span[2] + index[:, 2]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    cells, inverse = base[first], inverse.reshape(-1)
     draws = [seed ^ (0x51ED2701 * (k + 1)) for k in range(6)]
     for offset in np.ndindex(3, 3, 3):
         cell = cells + np.asarray(offset) - 1
