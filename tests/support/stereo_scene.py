@@ -31,6 +31,8 @@ PLATE_CENTRE_MM = np.array([10.0, -5.0])  # (x, y)
 PLATE_HALF_MM = np.array([110.0, 80.0])  # half width, half height
 # untextured discs on the plate, (x, y, radius) mm: a small one (~30 px) and a large one
 FLAT_SPOTS_MM = ((-50.0, 25.0, 3.0), (45.0, -25.0, 22.0))
+#: A depth range holding both scenes: sphere 670-820 mm, plate 800 mm, plane 1150-1250 mm.
+DEPTHS = {"min_depth_mm": 600.0, "max_depth_mm": 1300.0}
 
 
 @dataclass
@@ -438,3 +440,24 @@ def render_step_scene(
     c1 = cams[0]
     flat = _cast_step(c1["C"], _rotate(rays_cam, c1["R"]), tex_plate, tex_plane)[3]
     return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam, flat)
+
+
+def surface_errors(xyz: np.ndarray, truth: np.ndarray, mask: np.ndarray):
+    """Distances (mm) of reconstructed points to their truth within ``mask``, and coverage.
+
+    Parameters
+    ----------
+    xyz, truth : (H, W, 3) float
+        Reconstruction (NaN = no depth) and ray-cast truth, mm.
+    mask : (H, W) bool
+
+    Returns
+    -------
+    err : (n,) float
+        Distances at the masked pixels that have depth, mm.
+    coverage : float
+        Fraction of the masked pixels that have depth.
+    """
+    err = np.linalg.norm(xyz - truth, axis=-1)[mask]
+    valid = np.isfinite(err)
+    return err[valid], valid.mean()

@@ -15,8 +15,6 @@ from scipy.spatial.transform import Rotation
 
 from scan2morph.errors import InputError
 from scan2morph.landmarks import complete_jawline, detect
-from scan2morph.landmarks.cascade import load
-from scan2morph.landmarks.train import train
 from scan2morph.synth.cohort import AIM, articulated_head
 from scan2morph.synth.scanner import ScanDefects, camera_matrix, scan
 from tests.support.landmark_takes import cohort_takes
@@ -189,33 +187,3 @@ def test_frontal_scene_is_accepted():
     1 m is detected."""
     color, xyz = _scene()
     assert detect(color, xyz, "s/front").points.shape == (68, 2)
-
-
-# --------------------------------------------------------------------------------------------
-# training
-
-
-def test_training_is_deterministic(tmp_path):
-    """Two trainings with the same seed on a tiny set give identical weights; another seed
-    gives other weights."""
-    config = {
-        "subjects": 1,
-        "takes": 1,
-        "mesh_subjects": 0,
-        "radii_mm": [6.0, 3.0],
-        "starts": 2,
-        "stretched": 1,
-    }
-    a, b = train(5, config), train(5, config)
-    c = train(6, config)
-    for s, t in zip(a.stages, b.stages, strict=True):
-        np.testing.assert_array_equal(s.weights, t.weights)
-        np.testing.assert_array_equal(s.bias, t.bias)
-    np.testing.assert_array_equal(a.init, b.init)
-    assert not np.array_equal(a.stages[0].weights, c.stages[0].weights)
-    assert a.meta["seed"] == 5 and a.meta["config"]["takes"] == 1
-
-
-def test_missing_model_is_named(tmp_path):
-    with pytest.raises(InputError, match="landmark model not found"):
-        load(tmp_path / "none.npz")

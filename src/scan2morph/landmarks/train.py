@@ -157,15 +157,16 @@ def _fit_global(chans, truths: np.ndarray, groups: np.ndarray, config: dict):
     fold = np.asarray(groups) % HOLDOUT_EVERY
     ridge = _chosen_ridge(X, Y, fold == HOLDOUT_EVERY - 1, 0.0, config)
     pred = np.empty_like(Y)
+    stage = fit_stage(X, Y, 0.0, ridge)
     for k in range(HOLDOUT_EVERY):
         out = fold == k
         if out.all() or not out.any():
-            pred[out] = fit_stage(X, Y, 0.0, ridge).bias
+            pred[out] = stage.bias
             continue
         pred[out] = _predict(fit_stage(X[~out], Y[~out], 0.0, ridge), X[out])
     err = np.linalg.norm((Y - pred).reshape(-1, 2), axis=1) * STEP_MM
     log.info("global stage (ridge %g): out-of-fold error median %.2f mm", ridge, np.median(err))
-    return fit_stage(X, Y, 0.0, ridge), pred.reshape(truths.shape), ridge
+    return stage, pred.reshape(truths.shape), ridge
 
 
 def fit_cascade(

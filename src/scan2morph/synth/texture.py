@@ -97,21 +97,30 @@ def _spots(points: np.ndarray, seed: int) -> np.ndarray:
     the cell, with a random radius and darkness and a Gaussian profile; overlapping spots combine
     multiplicatively.
     """
-    q = points / _SPOT_CELL_MM
-    base = np.floor(q).astype(np.int64)
     light = np.ones(len(points))
+    if len(points) == 0:
+        return 1.0 - light
+    # the draws are made once per distinct cell, then handed to the points in it
+    base = np.floor(points / _SPOT_CELL_MM).astype(np.int64)
+    index = base - base.min(axis=0)
+    span = index.max(axis=0) + 1
+    key = (index[:, 0] * span[1] + index[:, 1]) * span[2] + index[:, 2]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    cells, inverse = base[first], inverse.reshape(-1)
     draws = [seed ^ (0x51ED2701 * (k + 1)) for k in range(6)]
     for offset in np.ndindex(3, 3, 3):
-        cell = base + np.asarray(offset) - 1
+        cell = cells + np.asarray(offset) - 1
         u = [_cell_uniform(cell, d & 0xFFFFFFFFFFFFFFFF) for d in draws]
         present = u[0] < _SPOT_CHANCE
         if not present.any():
             continue
-        centre = (cell + np.stack(u[1:4], axis=1)) * _SPOT_CELL_MM
-        radius = _SPOT_RADIUS_MM[0] + u[4] * (_SPOT_RADIUS_MM[1] - _SPOT_RADIUS_MM[0])
-        dark = _SPOT_DARKNESS[0] + u[5] * (_SPOT_DARKNESS[1] - _SPOT_DARKNESS[0])
-        d2 = np.sum((points - centre) ** 2, axis=1)
-        light *= 1.0 - np.where(present, dark * np.exp(-0.5 * d2 / (0.6 * radius) ** 2), 0.0)
+        at = np.flatnonzero(present[inverse])  # points beside a spot; the others keep light
+        k = inverse[at]
+        centre = (cell[k] + np.stack([v[k] for v in u[1:4]], axis=1)) * _SPOT_CELL_MM
+        radius = _SPOT_RADIUS_MM[0] + u[4][k] * (_SPOT_RADIUS_MM[1] - _SPOT_RADIUS_MM[0])
+        dark = _SPOT_DARKNESS[0] + u[5][k] * (_SPOT_DARKNESS[1] - _SPOT_DARKNESS[0])
+        d2 = np.sum((points[at] - centre) ** 2, axis=1)
+        light[at] *= 1.0 - dark * np.exp(-0.5 * d2 / (0.6 * radius) ** 2)
     return 1.0 - light
 
 
