@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from scan2morph.errors import InputError
-from scan2morph.landmarks.cascade import load
+from scan2morph.landmarks.cascade import load, ridge_path
 from scan2morph.landmarks.train import train
 
 
@@ -36,3 +36,20 @@ def test_training_is_deterministic(tmp_path):
 def test_missing_model_is_named(tmp_path):
     with pytest.raises(InputError, match="landmark model not found"):
         load(tmp_path / "none.npz")
+
+
+@pytest.mark.parametrize("n_samples", [30, 200])
+def test_ridge_path_is_the_ridge_solution_with_few_or_many_samples(n_samples):
+    """Against numpy's solve of the normal equations on the standardised features, for fewer
+    samples than features (the kernel form) and for more (the Gram form), each penalty."""
+    rng = np.random.default_rng(3)
+    X = rng.normal(2.0, 3.0, size=(n_samples, 80))
+    Y = X[:, :5] @ rng.normal(size=(5, 6)) + 0.1 * rng.normal(size=(n_samples, 6))
+    ridges = [0.01, 1.0]
+    stages = ridge_path(X, Y, 4.0, ridges)
+    Xs = (X - X.mean(axis=0)) / X.std(axis=0)
+    for ridge, stage in zip(ridges, stages, strict=True):
+        lam = ridge * n_samples
+        W = np.linalg.solve(Xs.T @ Xs + lam * np.eye(80), Xs.T @ (Y - Y.mean(axis=0)))
+        np.testing.assert_allclose(stage.weights, W, rtol=0, atol=2e-6 * np.abs(W).max())
+        assert stage.radius == 4.0

@@ -183,7 +183,8 @@ def ridge_path(
     feats: np.ndarray, target: np.ndarray, radius: float, ridges: list[float]
 ) -> list[Stage]:
     """:func:`fit_stage` for several ridge penalties at the cost of one (an eigen-decomposition
-    of the Gram matrix serves them all).
+    of the Gram matrix serves them all; of the samples' kernel matrix when there are fewer
+    samples than features, the same solution).
 
     Returns
     -------
@@ -195,12 +196,17 @@ def ridge_path(
     scale = np.maximum(X.std(axis=0), 1e-3)
     Xs = (X - mean) / scale
     ybar = target.mean(axis=0)
-    evals, evecs = np.linalg.eigh(Xs.T @ Xs)
-    proj = evecs.T @ (Xs.T @ (target - ybar))
+    # fewer samples than features: the same solution from the N x N kernel matrix,
+    # (Xs^T Xs + l I)^-1 Xs^T = Xs^T (Xs Xs^T + l I)^-1, far cheaper to decompose
+    dual = len(X) < X.shape[1]
+    evals, evecs = np.linalg.eigh(Xs @ Xs.T if dual else Xs.T @ Xs)
+    proj = evecs.T @ (target - ybar if dual else Xs.T @ (target - ybar))
     f32 = np.float32
     out = []
     for ridge in ridges:
         W = evecs @ (proj / (np.maximum(evals, 0.0) + ridge * len(X))[:, None])
+        if dual:
+            W = Xs.T @ W
         out.append(
             Stage(
                 float(radius), W.astype(f32), ybar.astype(f32), mean.astype(f32), scale.astype(f32)
