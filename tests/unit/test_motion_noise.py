@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
@@ -188,6 +190,20 @@ def test_reference_motion_is_the_pipelines_and_takes_do_not_share_noise(template
     both = _run(template, (neutral, two), suppressed=mask, smoothing=smoothing)
     assert_array_equal(both["she"]["rms_mm"], alone["rms_mm"])
     assert not np.array_equal(both["car"]["rms_mm"], alone["rms_mm"])
+
+
+def test_a_take_with_the_pipelines_motion_is_not_refitted_for_the_reference(template, takes):
+    """Given its motion (as the stage reads it from the store), a take's reference is that
+    motion: the same numbers as the refit gives, and a different motion moves the spread."""
+    neutral, visemes = takes
+    refitted = _run(template, takes)["she"]
+    given = {"she": replace(visemes["she"], motion=refitted["motion"].copy())}
+    again = _run(template, (neutral, given))["she"]
+    assert_array_equal(again["motion"], refitted["motion"])
+    assert_array_equal(again["rms_mm"], refitted["rms_mm"])
+    off = {"she": replace(visemes["she"], motion=refitted["motion"] + [0.0, 0.0, 0.3])}
+    moved = _run(template, (neutral, off))["she"]
+    assert np.nanmin(moved["rms_mm"]) > 0.25  # the spread is measured around the given motion
 
 
 def test_the_table_states_its_rms_is_over_the_unmasked_vertices(template, takes):

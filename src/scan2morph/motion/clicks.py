@@ -24,19 +24,25 @@ class ClickedTake:
         The take's fiducial set (``template.fiducials`` of its kind).
     transform : (4, 4) float
         The take's alignment to the neutral (identity for the neutral).
+    motion : (V, 3) float, mm, optional
+        The take's final motion as the pipeline made it from these clicks
+        (``/visemes/{take}/motion``), when known: the click-noise draws' reference, which is
+        otherwise refitted from the clicks (the same numbers).
     """
 
     xyz: np.ndarray
     landmarks: np.ndarray
     fiducial_set: str
     transform: np.ndarray
+    motion: np.ndarray | None = None
 
 
 def clicked_take(store: Mapping[str, np.ndarray], take: str, fiducial_set: str) -> ClickedTake:
     """A take's repaired range image, clicks and alignment from (a merge of) its store parts.
 
     Reads ``/takes/{take}/range/xyz``, ``/takes/{take}/landmarks`` and, when present,
-    ``/takes/{take}/align/transform`` (identity otherwise: the neutral).
+    ``/takes/{take}/align/transform`` (identity otherwise: the neutral) and
+    ``/visemes/{take}/motion``.
     """
     transform = store.get(paths.align(take, "transform"))
     return ClickedTake(
@@ -44,4 +50,5 @@ def clicked_take(store: Mapping[str, np.ndarray], take: str, fiducial_set: str) 
         store[paths.landmarks(take)],
         fiducial_set,
         np.eye(4) if transform is None else transform,
+        store.get(paths.viseme(take, "motion")),
     )
