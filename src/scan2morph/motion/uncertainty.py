@@ -188,16 +188,10 @@ def click_noise_motion(
         )
     if not visemes:
         return {}
-    reference = {}
-    for take, data in visemes.items():
-        if data.motion is not None:  # the pipeline's own, from these clicks: no refit
-            reference[take] = np.asarray(data.motion, dtype=np.float64)
-            continue
-        t_fit = _fit(template, data, data.landmarks, recipe.fit_rules, f"{source}/{take}")
-        v, valid, conf = _corresponded(
-            recipe.refiner, take, t_fit, data.landmarks, neutral.landmarks
-        )
-        reference[take] = smooth(v, valid, conf, n_base, n_mesh["valid"], faces, take)
+    reference = {
+        take: _reference(template, take, data, neutral, (n_base, n_mesh), recipe, smooth, source)
+        for take, data in visemes.items()
+    }
     n_fits = _perturbed(template, "neutral", neutral, [0], noise, draws, recipe, source)
     out = {}
     for take, data in visemes.items():
@@ -220,6 +214,19 @@ def click_noise_motion(
             "failed_draws": draws - used
         }
     return out
+
+
+def _reference(
+    template, take, data: ClickedTake, neutral: ClickedTake, n_fit, recipe, smooth, source
+):
+    """A viseme's final motion from its unperturbed clicks: the pipeline's own when the take
+    brings it (no refit), else refitted, refined and smoothed as the pipeline does."""
+    if data.motion is not None:
+        return np.asarray(data.motion, dtype=np.float64)
+    n_base, n_mesh = n_fit
+    t_fit = _fit(template, data, data.landmarks, recipe.fit_rules, f"{source}/{take}")
+    v, valid, conf = _corresponded(recipe.refiner, take, t_fit, data.landmarks, neutral.landmarks)
+    return smooth(v, valid, conf, n_base, n_mesh["valid"], n_mesh["faces"], take)
 
 
 def _checked_draws(noise: ClickNoise, source: str) -> int:
