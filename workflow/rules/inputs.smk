@@ -6,6 +6,7 @@ from scan2morph.sheet import (
     MULTI_PATH_COLUMNS,
     SYNTHETIC_LANDMARKS,
     input_roles,
+    rgbd_frames,
     split_paths,
     synthetic_depth_frames,
 )
@@ -62,7 +63,7 @@ def get_take_roles(wildcards):
 def synth_depth_files(takes):
     """The depth frames a synthetic subject's generator writes for its RGB-D takes, in take
     order (``synthetic.rgbd.sensor.frames`` per take), with ``{subject}`` kept."""
-    frames = int(config["synthetic"]["rgbd"]["sensor"].get("frames", 1))
+    frames = rgbd_frames(config["synthetic"]["rgbd"])
     stem = f"{SYNTH_ROOT}/{{subject}}/{{take}}"
     return [
         f

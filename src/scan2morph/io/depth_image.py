@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.sheet import split_paths
 
 #: Depth file suffixes.
 DEPTH_SUFFIXES = (".png", ".npy", ".npz")
@@ -36,7 +37,7 @@ def depth_frame_paths(value) -> list[Path]:
         A folder without depth files, or nothing named.
     """
     if isinstance(value, str):
-        parts = value.split(";")
+        parts = split_paths(value)
     elif isinstance(value, Path):
         parts = [value]
     else:

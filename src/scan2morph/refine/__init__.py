@@ -74,8 +74,11 @@ class RefineParams:
 
 
 def grey(color: np.ndarray) -> np.ndarray:
-    """Luminance (Rec. 601) of an (H, W, 3) colour image, float64 grey levels."""
+    """Luminance (Rec. 601) of an (H, W, 3) colour image, float64 grey levels; an (H, W) grey
+    image (a geometry-only or stereo scan's) as it is."""
     c = np.asarray(color, dtype=np.float64)
+    if c.ndim == 2:
+        return c
     return c[..., 0] * 0.299 + c[..., 1] * 0.587 + c[..., 2] * 0.114
 
 

@@ -218,11 +218,12 @@ def register_frame(
     kernel = params.max_pair_mm
     fit, err = 0.0, np.inf
     for _ in range(params.iterations):
-        q, n, paired = _pairs(p @ t[:3, :3].T + t[:3, 3], ref, ref_normals, camera, params)
+        moved = p @ t[:3, :3].T + t[:3, 3]
+        q, n, paired = _pairs(moved, ref, ref_normals, camera, params)
         fit = paired.mean() if len(paired) else 0.0
         if fit < MIN_FITNESS:
             break
-        moved = p[paired] @ t[:3, :3].T + t[:3, 3]
+        moved = moved[paired]
         r = np.einsum("ij,ij->i", moved - q, n)
         sigma = MAD_TO_SIGMA * float(np.median(np.abs(r)))
         kernel = max(kernel / 2.0, 3.0 * sigma, MIN_KERNEL_MM)

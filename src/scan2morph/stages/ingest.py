@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -34,7 +35,7 @@ from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
 from scan2morph.scan.fusion import FusionParams, fuse_depth_frames
 from scan2morph.scan.view import shaded_image
-from scan2morph.sheet import FILES, mm_per_unit
+from scan2morph.sheet import FILES, MULTI_PATH_COLUMNS, PATH_SEPARATOR, mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.store import paths
 from scan2morph.template import Template
@@ -142,9 +143,7 @@ class _Scan(NamedTuple):
 
 
 def _read_rgbd(files, row, params: Params) -> _Scan:
-    def fuse(frames, camera, sources):
-        return fuse_depth_frames(frames, camera, sources, params.fusion)
-
+    fuse = partial(fuse_depth_frames, params=params.fusion)
     scan = read_rgbd_take(
         files["depth"], files["color"], files["intrinsics"], files.get("landmarks"), fuse
     )
@@ -236,9 +235,10 @@ _READERS = {"rgbd": _read_rgbd, "mesh": _read_mesh, "range": _read_range, "stere
 
 
 def _checksum(role: str, path) -> str:
-    """SHA-256 of an input file; of every frame (``;``-separated) for an RGB-D take's depth."""
-    if role == "depth":
-        return ";".join(sha256_file(p) for p in depth_frame_paths(path))
+    """SHA-256 of an input file; of every file, joined as in the sheet, for a column that may
+    name several (an RGB-D take's depth frames)."""
+    if role in MULTI_PATH_COLUMNS:
+        return PATH_SEPARATOR.join(sha256_file(p) for p in depth_frame_paths(path))
     return sha256_file(path)
 
 

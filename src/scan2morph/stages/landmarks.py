@@ -219,12 +219,6 @@ def run(template, take: Take, params: Params) -> Part:
     )
 
 
-def _grey(color: np.ndarray) -> np.ndarray:
-    """Grey levels (H, W) float64 of a colour (H, W, 3) or grey (H, W) image."""
-    color = np.asarray(color)
-    return grey(color) if color.ndim == 3 else color.astype(np.float64)
-
-
 def second_pass(
     found: Landmarks, take: Take, grids: tuple[np.ndarray, np.ndarray], params: Params
 ) -> tuple[Landmarks, dict]:
@@ -265,8 +259,8 @@ def second_pass(
     if params.track:
         neutral_color = need(data, paths.range_image(neutral, "color"), take.source)
         tracked = track_points(
-            (xyz, _grey(color)),
-            (neutral_xyz, _grey(neutral_color)),
+            (xyz, grey(color)),
+            (neutral_xyz, grey(neutral_color)),
             neutral_points,
             carried.transform,
             partial(
