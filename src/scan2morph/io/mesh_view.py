@@ -57,6 +57,10 @@ MAX_PROTRUSION_TRIANGLES = 30000
 SYMMETRY_STARTS = 3
 #: At most this many face points pair with their mirror images (an even stride of them).
 MAX_SYMMETRY_POINTS = 4000
+#: Nearest-surface searches of mirrored points stop at this distance: a search's median and the
+#: pairs it keeps are exact whenever they lie within it, and it is repeated without the bound
+#: otherwise; far points (a trial plane 90 degrees off) are what make unbounded searches slow, mm.
+MIRROR_SEARCH_MM = 16.0
 #: Half-width of the band around the symmetry plane whose surface is the face's profile, mm.
 PROFILE_BAND_MM = 4.0
 #: The profile is compared this far above and below the nose tip (bridge against upper lip), mm.
@@ -205,22 +209,37 @@ def symmetry_plane(tree, points, origin, forward, iterations=20) -> tuple[np.nda
     u = _unit(np.cross(forward, helper))
     v = np.cross(forward, u)
     trials = [np.cos(t) * u + np.sin(t) * v for t in np.radians(np.arange(0.0, 180.0, 15.0))]
-    residuals = [np.median(tree.query(_mirror(points, origin, x))[0]) for x in trials]
+    residuals = [np.median(_nearest(tree, _mirror(points, origin, x))[0]) for x in trials]
+    if np.isfinite(residuals).sum() < SYMMETRY_STARTS:  # the ranking needs the far medians
+        residuals = [np.median(tree.query(_mirror(points, origin, x))[0]) for x in trials]
     best = None
     for k in np.argsort(residuals)[:SYMMETRY_STARTS]:
         axis, centre = _refine_symmetry(tree, points, origin, trials[k], iterations)
-        residual = float(np.median(tree.query(_mirror(points, centre, axis))[0]))
+        residual = float(np.median(_nearest(tree, _mirror(points, centre, axis))[0]))
+        if not np.isfinite(residual):
+            residual = float(np.median(tree.query(_mirror(points, centre, axis))[0]))
         if best is None or residual < best[1]:
             best = (axis, residual)
     return best
+
+
+def _nearest(tree, points):
+    """Distances (n,) and indices (n,) of the surface points nearest ``points``: exact within
+    :data:`MIRROR_SEARCH_MM`, ``inf`` (index ``tree.n``) beyond it."""
+    return tree.query(points, distance_upper_bound=MIRROR_SEARCH_MM)
 
 
 def _refine_symmetry(tree, points, origin, axis, iterations):
     """Pair each point with the surface point nearest its mirror image; the plane through the
     pairs' midpoints (least squares) is the next plane."""
     for _ in range(iterations):
-        dist, j = tree.query(_mirror(points, origin, axis))
-        keep = dist < max(3.0 * float(np.median(dist)), 2.0)
+        mirrored = _mirror(points, origin, axis)
+        dist, j = _nearest(tree, mirrored)
+        limit = max(3.0 * float(np.median(dist)), 2.0)
+        if not limit < MIRROR_SEARCH_MM:  # the pairs kept reach beyond the bounded search
+            dist, j = tree.query(mirrored)
+            limit = max(3.0 * float(np.median(dist)), 2.0)
+        keep = dist < limit
         mid = 0.5 * (points[keep] + tree.data[j[keep]])
         if len(mid) < 3:
             break
