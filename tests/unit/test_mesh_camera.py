@@ -55,11 +55,6 @@ def _below_horizontal_deg(vector_head: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(-vector_head[1], vector_head[2])))
 
 
-#: The takes checked by ``make test-fast``: a neutral, a rounded-lips viseme and a smile; the
-#: other takes of the subject run with the whole suite (marked ``slow``).
-FAST_TAKES = ("neutral", "she", "smile1")
-
-
 @functools.cache
 def _synth03_take(take: str) -> dict:
     """A take of the default cohort's mesh subject (synth03, seed 2009), made once a session."""
@@ -67,13 +62,7 @@ def _synth03_take(take: str) -> dict:
     return make_mesh_take("synth03", label, kind, take, 2009)
 
 
-@pytest.mark.parametrize(
-    "take",
-    [
-        pytest.param(t, marks=() if t in FAST_TAKES else pytest.mark.slow, id=t)
-        for t, _, _ in default_takes()
-    ],
-)
+@pytest.mark.parametrize("take", [t for t, _, _ in default_takes()])
 def test_camera_faces_each_synthetic_mesh_take_from_the_surface_alone(take):
     r = _synth03_take(take)
     mesh = trimesh.Trimesh(r["vertices"], r["faces"], process=False)
