@@ -439,8 +439,11 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
     ``run`` is ``(converged, iterations)`` of the refinements."""
     conv, iterations = run
     in_region = s.in_region
-    # with the still skin searched for, every candidate it kept is judged, not the region's
-    judge = np.ones_like(in_region) if prm.still_groups else in_region
+    # with the still skin searched for, the kept share is of every candidate (the region may
+    # have moved), the RMSE still of the region's kept vertices (of every kept one if the
+    # region kept fewer than 6)
+    share = np.ones_like(in_region) if prm.still_groups else in_region
+    judge = in_region if np.count_nonzero(keep & in_region) >= 6 else share
     if prm.method == "icp":
         fitness, rmse = _nearest_stats(s.p[in_region], s.q, t, prm.max_correspondence_mm)
     else:
@@ -449,7 +452,7 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
         )
     judged = s.p[keep & judge]  # the region's kept vertices (grown ones are still by choice)
     gate = residual_gate(s.plane(transform_points(t, judged)), s.noise_take, s.noise_neutral, prm)
-    kept = float(keep[judge].mean())
+    kept = float(keep[share].mean())
     problems = _verdict(conv, iterations, fitness, kept, recovery, prm)
     problems += [gate.problem] if gate.problem else []
     return AlignResult(
