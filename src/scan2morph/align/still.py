@@ -48,7 +48,7 @@ class StillSkin:
     labels : (n,) int64
         The patch of every candidate.
     agree : (h,) int64
-        The number of candidates agreeing with each hypothesis' pose.
+        The number of candidates agreeing with each fitted hypothesis' pose.
     notes : list of str
         What was found (for the alignment's ``recovery``).
     """
@@ -98,7 +98,7 @@ def patches(p: np.ndarray, k: int) -> np.ndarray:
     return labels.astype(np.int64)
 
 
-def still_skin(p, t, refine, plane, prm, usable=None) -> StillSkin:
+def still_skin(p, t, refine, plane, prm) -> StillSkin:
     """The pose that the most candidate skin agrees with, and that skin.
 
     Parameters
@@ -117,15 +117,12 @@ def still_skin(p, t, refine, plane, prm, usable=None) -> StillSkin:
         ``still_groups`` patches, up to ``still_drop`` left out at once; the agreement
         threshold: ``still_sigma`` robust standard deviations of the averaged residuals (over
         ``trim_radius_mm``) of the best-fitting hypothesis, at least 0.05 mm.
-    usable : (n,) bool, optional
-        Candidates a hypothesis may fit on (default all); the others still vote.
 
     Returns
     -------
     StillSkin
     """
     n = len(p)
-    usable = np.ones(n, dtype=bool) if usable is None else usable
     labels = patches(p, prm.still_groups)
     k = int(labels.max()) + 1
     mean = neighbour_mean(p, prm.trim_radius_mm)
@@ -134,7 +131,7 @@ def still_skin(p, t, refine, plane, prm, usable=None) -> StillSkin:
     ]
     fits, iterations = [], 0
     for drop in hypotheses:
-        use = usable & ~np.isin(labels, drop)
+        use = ~np.isin(labels, drop)
         if use.sum() < 6:
             continue
         t_h, _, _, n_it, conv = refine(use, t)
@@ -144,7 +141,9 @@ def still_skin(p, t, refine, plane, prm, usable=None) -> StillSkin:
         r = mean @ plane(transform_points(t_h, p))
         fits.append((drop, t_h, conv, r, robust_sigma(r[use])))
     if not fits:
-        return StillSkin(usable.copy(), t, False, iterations, (), labels, np.zeros(0, int), [])
+        return StillSkin(
+            np.ones(n, dtype=bool), t, False, iterations, (), labels, np.zeros(0, int), []
+        )
     tau = max(prm.still_sigma * min(f[4] for f in fits), _TRIM_FLOOR_MM)
     agree = np.array([np.count_nonzero(np.abs(f[3]) <= tau) for f in fits], dtype=np.int64)
     drop, t_best, conv, r, _ = fits[int(np.argmax(agree))]  # the first: fewest left out
