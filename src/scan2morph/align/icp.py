@@ -66,6 +66,7 @@ from scan2morph.align.settings import (
     icp_settings,
     kernel_weights,
 )
+from scan2morph.align.still import still_skin
 from scan2morph.align.surface import SampledSurface
 from scan2morph.align.trim import trim_moving
 from scan2morph.errors import InputError
@@ -306,6 +307,10 @@ def align_take(
     keep, t, conv, n_it, notes = trim_moving(s.p, keep, t, conv, refine, s.plane, prm, ~s.in_region)
     recovery += notes
     iterations += n_it
+    if prm.still_groups and np.isfinite(t).all():
+        keep, t, conv, n_it, notes = _found_still(s, t, refine, prm)
+        recovery += notes
+        iterations += n_it
     if not conv:
         t, conv, n_it = _recover(refine, keep, t, initial, prm, recovery)
         iterations += n_it
@@ -395,6 +400,19 @@ def _icp_problem(take, neutral, upper, cand, method: str, source: str) -> _IcpPr
     )
 
 
+def _found_still(s: _IcpProblem, t, refine, prm) -> tuple:
+    """The still skin among all the candidates (:func:`~scan2morph.align.still.still_skin`,
+    from the region's trimmed pose ``t``), refined on, then trimmed with every candidate free
+    to join or leave: ``(keep, t, converged, iterations, notes)`` as
+    :func:`~scan2morph.align.trim.trim_moving` returns them."""
+    found = still_skin(s.p, t, refine, s.plane, prm)
+    t_new, _, _, iterations, conv = refine(found.keep, found.transform)
+    t = t_new if np.isfinite(t_new).all() else found.transform
+    every = np.ones(len(s.p), dtype=bool)
+    keep, t, conv, n_it, notes = trim_moving(s.p, found.keep, t, conv, refine, s.plane, prm, every)
+    return keep, t, conv, found.iterations + iterations + n_it, found.notes + notes
+
+
 def _recover(refine, keep, t, initial, prm, recovery) -> tuple:
     """A refinement that did not converge, tried again: re-initialised on the kept region from
     the point pairs' pose ``initial``, then (ICP with a robust kernel) resumed with a convex
@@ -421,15 +439,20 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
     ``run`` is ``(converged, iterations)`` of the refinements."""
     conv, iterations = run
     in_region = s.in_region
+    # with the still skin searched for, the kept share is of every candidate (the region may
+    # have moved), the RMSE still of the region's kept vertices (of every kept one if the
+    # region kept fewer than 6)
+    share = np.ones_like(in_region) if prm.still_groups else in_region
+    judge = in_region if np.count_nonzero(keep & in_region) >= 6 else share
     if prm.method == "icp":
         fitness, rmse = _nearest_stats(s.p[in_region], s.q, t, prm.max_correspondence_mm)
     else:
         _, fitness, rmse = _residual_stats(
             s.p[in_region], s.q[in_region], t, prm.max_correspondence_mm
         )
-    judged = s.p[keep & in_region]  # the region's kept vertices (grown ones are still by choice)
+    judged = s.p[keep & judge]  # the region's kept vertices (grown ones are still by choice)
     gate = residual_gate(s.plane(transform_points(t, judged)), s.noise_take, s.noise_neutral, prm)
-    kept = float(keep[in_region].mean())
+    kept = float(keep[share].mean())
     problems = _verdict(conv, iterations, fitness, kept, recovery, prm)
     problems += [gate.problem] if gate.problem else []
     return AlignResult(

@@ -21,6 +21,7 @@ _POSITIVE = (
     "kernel_k_mm",
     "trim_radius_mm",
     "trim_sigma",
+    "still_sigma",
     "max_rmse_ratio",
     "kernel_noise_sigmas",
 )
@@ -56,6 +57,16 @@ class IcpParams:
         Rounds of trimming the region's moving parts (0: off): residuals averaged over
         ``trim_radius_mm`` beyond ``trim_sigma`` robust standard deviations are left out.
     trim_radius_mm, trim_sigma : float
+    still_groups : int
+        The search for the still skin of a take (0: off, the region is taken as still): the
+        region and the skin it may grow into are split into this many patches, and the pose
+        that the most of them agree with, fitted with up to ``still_drop`` patches left out,
+        is kept (:func:`scan2morph.align.still.still_skin`).
+    still_drop : int
+        The most patches left out at once in that search.
+    still_sigma : float
+        A candidate agrees with a hypothesis' pose when its averaged residual is within this
+        many robust standard deviations of the best-fitting hypothesis' (at least 0.05 mm).
     min_fitness : float
         Quality gate: least share of the region within ``max_correspondence_mm``.
     max_rmse_ratio : float
@@ -85,6 +96,9 @@ class IcpParams:
     trim_rounds: int = 6
     trim_radius_mm: float = 8.0
     trim_sigma: float = 3.0
+    still_groups: int = 0
+    still_drop: int = 2
+    still_sigma: float = 2.0
     max_rmse_ratio: float = 3.0
     max_rmse_mm: float | None = None
     min_inlier_fraction: float = 0.3
@@ -116,7 +130,12 @@ class IcpParams:
                     "IcpParams", f"max_rmse_mm must be a positive number or None, got {v!r}"
                 )
             object.__setattr__(self, "max_rmse_mm", float(v))
-        for name, least in (("max_iterations", 1), ("trim_rounds", 0)):
+        for name, least in (
+            ("max_iterations", 1),
+            ("trim_rounds", 0),
+            ("still_groups", 0),
+            ("still_drop", 1),
+        ):
             it = getattr(self, name)
             if (
                 isinstance(it, bool)

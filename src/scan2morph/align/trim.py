@@ -14,6 +14,21 @@ from scan2morph.geometry import edge_adjacency
 _TRIM_FLOOR_MM = 0.05
 
 
+def neighbour_mean(p: np.ndarray, radius: float) -> sparse.csr_array:
+    """The (n, n) operator averaging a value over each point's neighbours within ``radius`` (mm),
+    the point itself included; ``p`` is (n, 3), mm."""
+    n = len(p)
+    pairs = cKDTree(p).query_pairs(radius, output_type="ndarray")
+    adj = edge_adjacency(pairs, n) + sparse.eye_array(n, format="csr")  # each with itself
+    return sparse.diags_array(1.0 / adj.sum(axis=1)) @ adj
+
+
+def robust_sigma(r: np.ndarray) -> float:
+    """The robust standard deviation of values ``r`` (n,): 1.4826 times their median absolute
+    deviation."""
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
 def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:
     """Leave out the parts of the region that moved, refining again after each change.
 
@@ -60,17 +75,15 @@ def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:
     """
     if prm.trim_rounds == 0 or not np.isfinite(t).all():
         return keep, t, conv, 0, []
-    pairs = cKDTree(p).query_pairs(prm.trim_radius_mm, output_type="ndarray")
     n = len(p)
-    adj = edge_adjacency(pairs, n) + sparse.eye_array(n, format="csr")  # each with itself
-    mean = sparse.diags_array(1.0 / adj.sum(axis=1)) @ adj
+    mean = neighbour_mean(p, prm.trim_radius_mm)
     grow = np.zeros(n, dtype=bool) if grow is None else grow
     region = ~grow
     iterations, rounds = 0, 0
     for rounds in range(1, prm.trim_rounds + 1):  # noqa: B007 (rounds is reported)
         r = mean @ plane(transform_points(t, p))
         rk = r[keep]
-        sigma = 1.4826 * np.median(np.abs(rk - np.median(rk)))
+        sigma = robust_sigma(rk)
         new = (keep | grow) & (np.abs(r) <= max(prm.trim_sigma * sigma, _TRIM_FLOOR_MM))
         if new.sum() < 3 or np.array_equal(new, keep):
             break
@@ -92,4 +105,4 @@ def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:
     return keep, t, conv, iterations, notes
 
 
-__all__ = ["trim_moving"]
+__all__ = ["neighbour_mean", "robust_sigma", "trim_moving"]

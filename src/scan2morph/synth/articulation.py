@@ -2,7 +2,8 @@
 
 Articulation is a small set of displacement fields (lip protrusion, rounding, spreading, upper
 lip raise, smile, sad, and the upper-face action units of the expressions: cheek raise and lid
-squint in a smile, inner-brow raise and brow lowering in a sad face) plus a jaw rotation about an
+squint in a smile, inner-brow raise and brow lowering in a sad face, and the strong brow
+expressions that move the whole forehead: a brow raise and a frown) plus a jaw rotation about an
 axis near the ears whose weight is one on the chin and lower lip and fades smoothly into the
 cheeks. All takes of one subject share one topology; only the vertex positions change. The fields
 are functions of each vertex's rest position, so they move the skin (brows, lashes, landmarks)
@@ -29,6 +30,8 @@ LABEL_KIND = {
     "too": "viseme",
     "smile": "expression",
     "sad": "expression",
+    "brows": "expression",
+    "frown": "expression",
 }
 
 #: Articulation of each label at nominal intensity: ``jaw`` in degrees, the rest unitless
@@ -42,6 +45,8 @@ LABEL_COEFFS: dict[str, dict[str, float]] = {
     "too": {"jaw": 2.5, "round": 1.0, "protrude": 1.0},
     "smile": {"smile": 1.0, "cheek_raise": 1.0, "squint": 1.0},
     "sad": {"sad": 1.0, "brow_inner_raise": 1.0, "brow_lower": 1.0},
+    "brows": {"brow_raise": 1.0, "sad": 0.5},
+    "frown": {"frown": 1.0},
 }
 
 #: Names of the displacement fields (``jaw`` is a rotation, not a field).
@@ -56,6 +61,8 @@ FIELDS = (
     "squint",
     "brow_inner_raise",
     "brow_lower",
+    "brow_raise",
+    "frown",
 )
 
 #: Fields that contract with another one: a take draws one intensity for the driver (the key
@@ -160,7 +167,7 @@ def _unit_fields(
     )
     ment = np.exp(-(((y - (ym - 22.0)) / 10.0) ** 2)) * lipx * frontw
     fields["sad"] = vec(-1.0 * sgx * C, -4.0 * C + 2.0 * ment, 0.0)
-    return fields | _upper_face_fields(lc.p, brow_y0, eye)
+    return fields | _upper_face_fields(lc.p, brow_y0, eye) | _forehead_fields(lc.p, brow_y0)
 
 
 def _upper_face_fields(p: np.ndarray, brow_y0: float, eye: np.ndarray) -> dict[str, np.ndarray]:
@@ -219,6 +226,56 @@ def _upper_face_fields(p: np.ndarray, brow_y0: float, eye: np.ndarray) -> dict[s
     glabella = np.exp(-((ax / 8.0) ** 2) - ((yb + 6.0) / 8.0) ** 2) * forehead
     lower = vec(-2.5 * odd * pull, -3.5 * body - 1.5 * glabella, 0.8 * glabella)
     return {"cheek_raise": cheek, "squint": squint, "brow_inner_raise": inner, "brow_lower": lower}
+
+
+def _forehead_fields(p: np.ndarray, brow_y0: float) -> dict[str, np.ndarray]:
+    """The strong brow expressions, which move the whole forehead, at unit weight, mm.
+
+    ``brow_raise`` (AU1 with AU2, frontalis): the inner brow rises 6.5 mm, the lateral brow
+    less (half at 25 mm from the midline), and the forehead above follows up to the hairline
+    (two thirds at 25 mm above the brow, a fifth at 50 mm), folding into horizontal furrows
+    0.4 mm deep, 11 mm apart. ``frown`` (a strong AU4 with the procerus): the brows drop 5 mm
+    and move 3.5 mm towards the midline, the glabella drops 2 mm, bunches 1.2 mm forward and
+    folds into two vertical furrows, and the forehead above follows the brows down (half at
+    20 mm above them). Amplitudes at the upper end of the measured ranges (inner brow raise
+    4-8 mm, brow lowering 3-5 mm), so that the still skin of a take is less than the
+    forehead.
+
+    Parameters
+    ----------
+    p : (N, 3) float64
+        Rest position of each vertex's skin source, mm.
+    brow_y0 : float
+        Height of the inner brow, mm.
+    """
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    ax = np.abs(x)
+    odd = np.tanh(x / 4.0)
+    yb = y - brow_y0
+    forehead = _smoothstep(z, 55.0, 75.0)
+    zeros = np.zeros_like(x)
+
+    def vec(dx, dy, dz):
+        return np.stack([dx + zeros, dy + zeros, dz + zeros], axis=1)
+
+    # AU1+2: the brows and the forehead above them, furrowed
+    up = np.where(yb >= 0.0, np.exp(-((yb / 40.0) ** 2)), np.exp(-((yb / 9.0) ** 2)))
+    across = np.exp(-((ax - 10.0) ** 2) / (2 * 17.0**2)) * forehead
+    furrow = 0.5 - 0.5 * np.cos(2.0 * np.pi * yb / 11.0)
+    folds = furrow * _smoothstep(yb, 4.0, 12.0) * (1.0 - _smoothstep(yb, 40.0, 55.0))
+    raise_ = vec(0.0, 6.5 * across * up, -0.4 * across * folds)
+    # strong AU4: brows down and in, the forehead following, the glabella bunched and furrowed
+    down = np.where(yb >= 0.0, np.exp(-((yb / 24.0) ** 2)), np.exp(-((yb / 8.0) ** 2)))
+    body = np.exp(-((ax - 18.0) ** 2) / (2 * 14.0**2)) * down * forehead
+    pull = np.exp(-((ax - 14.0) ** 2) / (2 * 10.0**2)) * down * forehead
+    glabella = np.exp(-((ax / 9.0) ** 2) - ((yb + 4.0) / 10.0) ** 2) * forehead
+    creases = np.exp(-(((ax - 4.5) / 1.8) ** 2))
+    frown = vec(
+        -3.5 * odd * pull,
+        -5.0 * body - 2.0 * glabella,
+        1.2 * glabella - 0.6 * creases * glabella,
+    )
+    return {"brow_raise": raise_, "frown": frown}
 
 
 def _jaw(mesh: _RestMesh, lc: _LipCoords, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
