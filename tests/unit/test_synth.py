@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import open3d as o3d
 import pytest
 import trimesh
+import yaml
 from matplotlib.path import Path as MplPath
 
 from scan2morph.errors import InputError
@@ -60,7 +63,10 @@ def test_default_takes():
     assert takes[0] == ("neutral", "neutral", "neutral")
     assert [t for t, k, lab in takes if k == "viseme"] == ["car", "man", "she", "eel", "too"]
     assert ("smile2", "expression", "smile") in takes and ("sad1", "expression", "sad") in takes
-    assert len({t for t, _, _ in takes}) == len(takes) == 10
+    assert len({t for t, _, _ in takes}) == len(takes) == 12
+    # the config's default cohort takes exactly these
+    config = yaml.safe_load((Path(__file__).parents[2] / "config" / "config.yaml").read_text())
+    assert [(t["take"], t["kind"], t["label"]) for t in config["synthetic"]["takes"]] == takes
 
 
 def test_camera_convention_round_trip():

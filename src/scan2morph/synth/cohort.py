@@ -59,12 +59,14 @@ def default_takes() -> list[tuple[str, str, str]]:
     Returns
     -------
     list of (take, kind, label)
-        The neutral, the five visemes (take id = label), two smiles and two sad faces.
+        The neutral, the five visemes (take id = label), two smiles, two sad faces, a strong
+        inner-brow raise and a frown (``config/config.yaml``'s ``synthetic.takes``).
     """
     takes = [("neutral", "neutral", "neutral")]
     takes += [(v, "viseme", v) for v in ("car", "man", "she", "eel", "too")]
     takes += [("smile1", "expression", "smile"), ("smile2", "expression", "smile")]
     takes += [("sad1", "expression", "sad"), ("sad2", "expression", "sad")]
+    takes += [("brows1", "expression", "brows"), ("frown1", "expression", "frown")]
     return takes
 
 
