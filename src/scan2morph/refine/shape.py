@@ -74,7 +74,7 @@ class ShapeParams:
     texture_gate_px: float = 1.0
     texture_precision_px: float = 0.25
     surface: bool = True
-    surface_tolerance_mm: float = 0.5
+    surface_tolerance_mm: float = 0.2
     surface_precision_px: float = 1.0
 
     def __post_init__(self):
