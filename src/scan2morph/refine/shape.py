@@ -43,8 +43,13 @@ class ShapeParams:
     precision_px : float
         Precision of one confident shape flow vector, px (its weight is ``1 / precision^2``).
     min_confident_share : float
-        Least share of the face confidently measured (by the shape and the texture together)
-        for the shape-driven refinement to be used; below it the take keeps its template fit.
+        Least share of the face confidently measured (by the shape, the still skin and the
+        texture together) for the shape-driven refinement to be used; below it the take keeps
+        its template fit.
+    fade_px : float
+        Where nothing is measured, the correction fades back to the fit over about this, px
+        (the section ``refine``'s ``fade_px`` for this refinement: the mouth's skin, which
+        leaves the surface and changes its shape, is measured by neither).
     texture : bool
         Add the skin's texture (its flow where it correlates: a stereo neutral's speckle lies
         over the skin's own texture). A texture wholly unrelated to the neutral's finds false
@@ -65,11 +70,12 @@ class ShapeParams:
     """
 
     use: bool = True
-    sigma_mm: float = 3.0
-    high_pass_px: float = 10.0
+    sigma_mm: float = 2.0
+    high_pass_px: float = 8.0
     noise: float = 10.0
     precision_px: float = 1.0
     min_confident_share: float = 0.1
+    fade_px: float = 30.0
     texture: bool = True
     texture_gate_px: float = 1.0
     texture_precision_px: float = 0.25
@@ -88,6 +94,7 @@ class ShapeParams:
             "high_pass_px",
             "noise",
             "precision_px",
+            "fade_px",
             "texture_gate_px",
             "texture_precision_px",
             "surface_tolerance_mm",

@@ -402,8 +402,9 @@ def _by_shape(fine, takes, data, maps, anchors, texture: list, params: Params):
         for c in (texture if prm.texture else [])
     ]
     channels = [shape, *gated] + ([surface] if prm.surface else [])
+    flow = replace(params.flow, fade_px=prm.fade_px)
     refined, report = refine_channels(
-        fine.vertices, fine.faces, tuple(maps), channels, anchors, params.flow
+        fine.vertices, fine.faces, tuple(maps), channels, anchors, flow
     )
     return refined, report | {"shape": True}
 
