@@ -202,3 +202,17 @@ def test_a_bad_shape_setting_in_the_config_is_named_by_its_key():
     config["refine"]["shape"]["sigma_mm"] = -1.0
     with pytest.raises(InputError, match=r"refine\.shape: sigma_mm: expected a number > 0"):
         refine.Params.from_config(config)
+
+
+def test_a_degenerate_surface_has_no_shape_and_no_warning():
+    """Points along a line (every row the same: no surface) give NaN everywhere, quietly
+    (warnings are errors here), and the still skin measures nothing on them."""
+    from scan2morph.refine.shape import surface_flow
+
+    line = np.zeros((20, 20, 3))
+    line[..., 0] = np.arange(20.0)[None]
+    line[..., 2] = 1000.0
+    assert np.isnan(shape_image(line, 1.0)).all()
+    grid = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), axis=-1)
+    flow, conf = surface_flow(line, line, grid, 0.2)
+    assert (flow == 0).all() and (conf == 0).all()

@@ -179,8 +179,11 @@ def shape_image(xyz: np.ndarray, sigma_mm: float, source: str = "range image") -
     xuu, xuv = np.gradient(xu, axis=1), np.gradient(xu, axis=0)
     xvv = np.gradient(xv, axis=0)
     n = np.cross(xu, xv)
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a degenerate pixel: NaN, not ok
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
     ok = mask & (cover >= MIN_COVER) & np.isfinite(n).all(axis=-1)
+    if not ok.any():
+        return np.full(mask.shape, np.nan)
     # towards the camera: the side of the points' mean viewing direction
     if np.nanmedian(np.einsum("...k,...k->...", n[ok], x[ok])) > 0:
         n = -n
@@ -228,7 +231,8 @@ def surface_flow(
     xt = pull_back(take_xyz, mapped).astype(np.float64)
     ju, jv = np.gradient(xt, axis=1), np.gradient(xt, axis=0)
     n = np.cross(ju, jv)
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a degenerate grid point: NaN
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
     d = np.asarray(reference, dtype=np.float64) - xt
     dn = np.einsum("...k,...k->...", d, n)
     tangential = d - dn[..., None] * n
