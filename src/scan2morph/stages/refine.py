@@ -202,7 +202,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
         by and, on the upper lip, the lip prior's weight times one minus that);
         the ``refine`` group's attributes hold the median correction (px), the share of
         vertices with a confident measurement, whether the flow was ``used`` and, when not,
-        the ``problem``; whether the jaw prior was used (``jaw_used``), why not
+        the ``problem``; whether the take's texture did not correlate and the surface's shape
+        refined it (``shape_used``, :mod:`scan2morph.refine.shape`); whether the jaw prior was used (``jaw_used``), why not
         (``jaw_problem``, ``"off"`` with ``refine.jaw.prior`` false) and, when the chin was
         registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
         upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
