@@ -336,12 +336,16 @@ def _plane_take(template, texture_seed, config):
     }
 
 
-@pytest.mark.parametrize("same_skin", [True, False])
-def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(same_skin):
+@pytest.mark.parametrize(("same_skin", "by_shape"), [(True, True), (False, False), (False, True)])
+def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(same_skin, by_shape):
     """The neutral and the take see the same plane; with the same texture the refinement is used
     (and moves nothing: the fit is right); with an unrelated texture (another light, paint or
-    modality) the confident share falls below refine.min_confident_share and the take keeps its
-    template fit, with the problem named for the store's warnings."""
+    modality) the confident share falls below refine.min_confident_share: with
+    ``refine.shape.use`` false the take keeps its template fit, with the problem named for the
+    store's warnings; with it (the default) the surface's shape and the still skin refine it
+    (and move nothing either: the plane did not move)."""
+    from dataclasses import replace
+
     import yaml
 
     from scan2morph.stages import refine
@@ -354,6 +358,7 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
     data = rename(_plane_take(template, 21, config), "neutral")
     data |= rename(_plane_take(template, 21 if same_skin else 22, config), "she")
     params = refine.Params.from_config(config)
+    params = replace(params, shape=replace(params.shape, use=by_shape))
     take = Take("x", "she", "viseme", "she", "neutral", data=data)
     part = refine.run(template, take, params)
     attrs = part.attrs[paths.refine_group("she")]
@@ -365,10 +370,14 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
     # a plane's chin slides freely over the plane: its geometry says nothing (the jaw prior)
     assert not attrs["jaw_used"] and "does not pin its motion" in attrs["jaw_problem"]
     if same_skin:
-        assert attrs["used"] and attrs["problem"] == ""
+        assert attrs["used"] and attrs["problem"] == "" and not attrs["shape_used"]
         assert attrs["confident_share"] > 0.8
         assert np.median(moved) < 0.05  # mm: nothing to correct
         assert np.mean(confidence > 0.5) > 0.8  # the motion stage smooths less there
+    elif by_shape:
+        assert attrs["used"] and attrs["shape_used"] and attrs["problem"] == ""
+        assert attrs["confident_share"] > 0.8  # the still skin, everywhere on the plane
+        assert np.median(moved) < 0.05  # mm: the unrelated texture's false matches lost
     else:
         assert not attrs["used"] and "correlates" in attrs["problem"]
         assert attrs["confident_share"] < params.min_confident_share

@@ -22,9 +22,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.refine.shape import surface_flow
 from scan2morph.refine.template_space import pull_back, template_grid
 
-__all__ = ["RefineParams", "refine_points", "grey"]
+__all__ = [
+    "Channel",
+    "SurfaceChannel",
+    "RefineParams",
+    "grey",
+    "refine_channels",
+    "refine_points",
+    "texture_channel",
+]
 
 
 @dataclass(frozen=True)
@@ -82,6 +91,69 @@ def grey(color: np.ndarray) -> np.ndarray:
     return c[..., 0] * 0.299 + c[..., 1] * 0.587 + c[..., 2] * 0.114
 
 
+@dataclass(frozen=True)
+class Channel:
+    """One pair of images the refinement correlates (the skin's texture, the surface's shape).
+
+    Attributes
+    ----------
+    neutral, take : (H, W) float
+        The neutral's and the take's image, pixel to pixel with their range images, NaN where
+        there is none.
+    high_pass_px : float
+        The flow's high-pass scale, px (:func:`~scan2morph.refine.flow.measure_flow`'s
+        ``sigma``).
+    noise : float
+        The images' noise in their own units: weaker contrast is not trusted.
+    precision_px : float
+        Precision of one confident flow vector, px (its weight is ``1 / precision^2``).
+    gate_px : float or None
+        When given, the channel's vectors count only where the other channels measured, and
+        within this of their answer, px (a texture that may find false matches).
+    """
+
+    neutral: np.ndarray
+    take: np.ndarray
+    high_pass_px: float
+    noise: float
+    precision_px: float
+    gate_px: float | None = None
+
+
+@dataclass(frozen=True)
+class SurfaceChannel:
+    """The still skin's measurement (:func:`~scan2morph.refine.shape.surface_flow`): each of
+    the neutral's skin points found on the take's surface where the skin did not leave it.
+
+    Attributes
+    ----------
+    neutral_xyz : (H, W, 3) float
+        The neutral's range image, mm in the neutral frame.
+    take_xyz : (H, W, 3) float
+        The take's range image, mm in the neutral frame (its alignment applied).
+    tolerance_mm : float
+        Distance off the take's surface over which the confidence falls, mm.
+    precision_px : float
+        Precision of one confident vector, px.
+    """
+
+    neutral_xyz: np.ndarray
+    take_xyz: np.ndarray
+    tolerance_mm: float
+    precision_px: float
+
+
+def texture_channel(neutral_image, take_image, params: RefineParams) -> Channel:
+    """The skin's texture as a :class:`Channel`, with the section ``refine``'s settings."""
+    return Channel(
+        neutral_image,
+        take_image,
+        params.high_pass_px,
+        params.noise_grey,
+        params.flow_precision_px,
+    )
+
+
 def refine_points(
     vertices2d: np.ndarray,
     faces: np.ndarray,
@@ -118,6 +190,40 @@ def refine_points(
         the measurement confidence at each vertex in [0, 1]; ``confident_share`` and
         ``median_correction_px`` (over the vertices).
     """
+    channel = texture_channel(neutral_image, take_image, params)
+    return refine_channels(vertices2d, faces, (neutral_map, take_map), [channel], anchors, params)
+
+
+def refine_channels(
+    vertices2d: np.ndarray,
+    faces: np.ndarray,
+    maps: tuple[Callable, Callable],
+    channels: list[Channel],
+    anchors: np.ndarray,
+    params: RefineParams,
+) -> tuple[np.ndarray, dict]:
+    """:func:`refine_points` on several image pairs at once: each round measures the flow of
+    every channel and fuses them all, each vector weighted by its confidence over its
+    channel's precision squared.
+
+    Parameters
+    ----------
+    vertices2d, faces, anchors, params
+        As :func:`refine_points`'s.
+    maps : (callable, callable)
+        The neutral's and the take's fit maps (:func:`refine_points`' ``neutral_map``,
+        ``take_map``).
+    channels : list of Channel or SurfaceChannel
+        At least one :class:`Channel`.
+
+    Returns
+    -------
+    points, report
+        As :func:`refine_points`'s; ``confidence`` is the fused weight over the weight of one
+        fully confident vector of precision ``params.flow_precision_px``, clipped to [0, 1]
+        (with the texture alone: its confidence).
+    """
+    neutral_map, take_map = maps
     v2 = np.asarray(vertices2d, dtype=np.float64)
     pn = np.asarray(neutral_map(v2), dtype=np.float64)
     pt = np.asarray(take_map(v2), dtype=np.float64)
@@ -129,39 +235,92 @@ def refine_points(
     grid = template_grid(v2, faces, step, int(np.ceil(params.margin_px)))
     where = grid.points().reshape(-1, 2)
     shape = (*grid.shape, 2)
-    reference = pull_back(neutral_image, np.asarray(neutral_map(where)).reshape(shape))
+    at_neutral = np.asarray(neutral_map(where)).reshape(shape)
+    references = [
+        pull_back(c.neutral_xyz if isinstance(c, SurfaceChannel) else c.neutral, at_neutral)
+        for c in channels
+    ]
     mapped = np.asarray(take_map(where), dtype=np.float64).reshape(shape)
-    inside = grid.domain & np.isfinite(reference)
+    images = [r for r, c in zip(references, channels, strict=True) if isinstance(c, Channel)]
+    inside = grid.domain & np.all([np.isfinite(r) for r in images], axis=0)
     g_vertices = grid.to_grid(v2)
     anchor_rc = np.rint(g_vertices[np.asarray(anchors, dtype=np.int64)][:, ::-1]).astype(np.int64)
     w_data = 1.0 / params.flow_precision_px**2
     smooth = w_data * params.smooth_px**2
     prior = smooth / params.fade_px**2
     anchor_w = 1.0 / (2.0 * params.click_precision_px**2)
-    conf = np.zeros(grid.shape)
+    conf = measured = np.zeros(grid.shape)
     for _ in range(int(params.iterations)):
-        moving = pull_back(take_image, mapped)
-        flow, conf = measure_flow(
-            reference,
-            np.where(inside, moving, np.nan),
-            sigma=params.high_pass_px,
-            noise=params.noise_grey,
-            max_fb_px=params.max_fb_px,
-            min_zncc=params.min_zncc,
-            level=params.flow_level,
-        )
-        f = fuse(flow, w_data * conf, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
+        flow, weight, conf, measured = _measure(channels, references, mapped, inside, params)
+        f = fuse(flow, weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
         mapped = _compose(mapped, f)
     at = pull_back_field(mapped, g_vertices)
     points = np.where(np.isfinite(at).all(axis=1)[:, None], at, pt)
-    vconf = pull_back_field(conf[..., None], g_vertices)[:, 0]
+    vconf = np.nan_to_num(pull_back_field(conf[..., None], g_vertices)[:, 0])
+    vmeasured = np.nan_to_num(pull_back_field(measured[..., None], g_vertices)[:, 0])
     corr = points - pt
     return points, {
         "correction": corr,
-        "confidence": np.nan_to_num(vconf),
-        "confident_share": float(np.mean(np.nan_to_num(vconf) > 0.5)),
+        "confidence": vconf,
+        "confident_share": float(np.mean(vmeasured > 0.5)),
         "median_correction_px": float(np.median(np.linalg.norm(corr, axis=1))),
     }
+
+
+def _measure(channels, references, mapped, inside, params: RefineParams):
+    """Every channel's flow from its reference to its take image pulled back through
+    ``mapped``, averaged by weight: ``(flow (rows, cols, 2), weight, confidence, measured)``
+    (the last three (rows, cols)), the weight the sum of each channel's confidence over its
+    precision squared, the confidence that weight over ``1 / params.flow_precision_px^2`` and
+    ``measured`` the sum of the channels' confidences, both at most 1 (one image channel: its
+    own confidence and measurement as they are). A channel with a ``gate_px`` counts after
+    the others, only where they measured and its vector lies within ``gate_px`` of theirs."""
+    if len(channels) == 1 and isinstance(channels[0], Channel):
+        flow, conf = _channel_flow(channels[0], references[0], mapped, inside, params)
+        return flow, conf * (1.0 / channels[0].precision_px ** 2), conf, conf  # w_data * conf
+    total = np.zeros(inside.shape)
+    summed = np.zeros(inside.shape)
+    acc = np.zeros((*inside.shape, 2))
+    order = sorted(range(len(channels)), key=lambda k: _gate(channels[k]) < np.inf)
+    for k in order:
+        channel = channels[k]
+        flow, conf = _channel_flow(channel, references[k], mapped, inside, params)
+        if _gate(channel) < np.inf:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                others = acc / total[..., None]
+            near = np.linalg.norm(flow - others, axis=-1) <= _gate(channel)
+            conf = np.where((total > 0) & near, conf, 0.0)
+        w = conf / channel.precision_px**2
+        summed += conf
+        total += w
+        acc += w[..., None] * flow
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(total[..., None] > 0, acc / total[..., None], 0.0)
+    confidence = np.clip(total * params.flow_precision_px**2, 0.0, 1.0)
+    return mean, total, confidence, np.clip(summed, 0.0, 1.0)
+
+
+def _gate(channel) -> float:
+    """A channel's ``gate_px`` (inf: none)."""
+    gate = getattr(channel, "gate_px", None)
+    return np.inf if gate is None else float(gate)
+
+
+def _channel_flow(channel, reference, mapped, inside, params: RefineParams):
+    """One channel's ``(flow, confidence)`` on the grid (see :func:`_measure`)."""
+    if isinstance(channel, SurfaceChannel):
+        flow, conf = surface_flow(reference, channel.take_xyz, mapped, channel.tolerance_mm)
+        return flow, np.where(inside, conf, 0.0)
+    moving = pull_back(channel.take, mapped)
+    return measure_flow(
+        reference,
+        np.where(inside, moving, np.nan),
+        sigma=channel.high_pass_px,
+        noise=channel.noise,
+        max_fb_px=params.max_fb_px,
+        min_zncc=params.min_zncc,
+        level=params.flow_level,
+    )
 
 
 def _compose(field: np.ndarray, flow: np.ndarray) -> np.ndarray:

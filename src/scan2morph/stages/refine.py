@@ -9,16 +9,25 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from scan2morph.align import IcpParams, rotation_angle_deg, transform_points
 from scan2morph.errors import InputError
 from scan2morph.io.mesh_scan import SHADED
-from scan2morph.refine import RefineParams, grey, refine_points
+from scan2morph.refine import (
+    Channel,
+    RefineParams,
+    SurfaceChannel,
+    grey,
+    refine_channels,
+    refine_points,
+    texture_channel,
+)
 from scan2morph.refine.jaw import ChinMeshes, JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipImages, LipParams, LipPrior, lip_prior
+from scan2morph.refine.shape import ShapeParams, shape_image
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
@@ -67,6 +76,9 @@ class Params:
         defaults.
     still_region : str
         ``align.icp_region``: the skin the alignment holds still (the jaw prior's reference).
+    shape : ShapeParams
+        The shape-driven refinement's (``refine.shape``; :mod:`scan2morph.refine.shape`): a
+        take whose texture does not correlate with the neutral's.
     """
 
     method: str
@@ -81,6 +93,7 @@ class Params:
     lower_lip: LipParams = LipParams(prior=False)
     icp: IcpParams | None = None
     still_region: str = "stable"
+    shape: ShapeParams = ShapeParams()
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -104,12 +117,13 @@ class Params:
             lower,
             align_stage.icp_params(align),
             str(align["icp_region"]),
+            _settings(ShapeParams, refine, "shape"),
         )
 
 
 def _settings(kind, refine: Mapping, name: str, base: Mapping | None = None):
-    """``kind`` (:class:`JawParams` or :class:`LipParams`) from the section ``refine.{name}``
-    over ``base``; its own check's problem named by the config key."""
+    """``kind`` (:class:`JawParams`, :class:`LipParams` or :class:`ShapeParams`) from the
+    section ``refine.{name}`` over ``base``; its own check's problem named by the config key."""
     try:
         return kind(**(dict(base or {}) | dict(refine.get(name, {}))))
     except InputError as exc:
@@ -188,7 +202,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
         by and, on the upper lip, the lip prior's weight times one minus that);
         the ``refine`` group's attributes hold the median correction (px), the share of
         vertices with a confident measurement, whether the flow was ``used`` and, when not,
-        the ``problem``; whether the jaw prior was used (``jaw_used``), why not
+        the ``problem``; whether the take's texture did not correlate and the surface's shape
+        refined it (``shape_used``, :mod:`scan2morph.refine.shape`); whether the jaw prior was used (``jaw_used``), why not
         (``jaw_problem``, ``"off"`` with ``refine.jaw.prior`` false) and, when the chin was
         registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
         upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
@@ -272,6 +287,7 @@ def _attrs(params: Params, problem: str, report, ok, jaw: JawPrior, priors) -> d
         "problem": problem,
         "median_correction_px": report["median_correction_px"],
         "confident_share": report["confident_share"],
+        "shape_used": bool(report.get("shape", False)) and not problem,
         "valid_share": float(ok.mean()),
         "jaw_used": jaw.used,
         "jaw_problem": jaw.problem,
@@ -317,26 +333,38 @@ def _anchors(template, fiducials, source: str) -> np.ndarray:
 def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str):
     """The image correlation of the take's skin against the neutral's
     (:func:`~scan2morph.refine.refine_points`): ``(points, report, problem)``, ``problem``
-    saying why the points are not to be used (``""`` when they are)."""
+    saying why the points are not to be used (``""`` when they are). Where the texture does
+    not correlate, the surface's shape with whatever texture correlates (:func:`_by_shape`),
+    when ``refine.shape.use``; ``report["shape"]`` says whether it did. A geometry-only scan
+    keeps its fit."""
     shaded = _shaded(data, (neutral, take))
     if shaded:  # no skin texture to correlate: the shading follows the geometry, not the skin
-        report = {"median_correction_px": 0.0, "confident_share": 0.0}
+        report = {"median_correction_px": 0.0, "confident_share": 0.0, "shape": False}
         jaw = " (the jaw prior may still move the chin)" if params.jaw.prior else ""
         kept = "texture-driven refinement is not available, the template fit is kept"
         return None, report, f"{shaded}: {kept}{jaw}"
-    refined, report = refine_points(
-        fine.vertices,
-        fine.faces,
-        *maps,
-        grey(need(data, paths.range_image(neutral, "color"), source)),
-        grey(need(data, paths.range_image(take, "color"), source)),
-        anchors,
-        params.flow,
-    )
+    images = [grey(need(data, paths.range_image(t, "color"), source)) for t in (neutral, take)]
+    refined, report = refine_points(fine.vertices, fine.faces, *maps, *images, anchors, params.flow)
+    report["shape"] = False
     if report["confident_share"] >= params.min_confident_share:
         return refined, report, ""
     # the two images do not share the skin's texture (another light, paint, camera or
-    # modality): the measurement is not to be trusted, so the take keeps its fit
+    # modality): the texture's measurement is not to be trusted
+    kept = (
+        f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
+        f"neutral's texture (refine.min_confident_share "
+        f"{100 * params.min_confident_share:.0f}%)"
+    )
+    if params.shape.use:
+        texture = [texture_channel(*images, params.flow)]
+        refined, by_shape = _by_shape(fine, (take, neutral), data, maps, anchors, texture, params)
+        if by_shape["confident_share"] >= params.shape.min_confident_share:
+            log.info("%s: %s: refined by the surface's shape", source, kept)
+            return refined, by_shape | {"texture_confident_share": report["confident_share"]}, ""
+        kept += (
+            f", and only {100 * by_shape['confident_share']:.0f}% by its shape "
+            f"(refine.shape.min_confident_share {100 * params.shape.min_confident_share:.0f}%)"
+        )
     priors = "".join(
         f" (the {name} prior may still move the {what})"
         for name, what, on in (
@@ -346,12 +374,40 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
         )
         if on
     )
-    problem = (
-        f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
-        f"neutral's texture (refine.min_confident_share "
-        f"{100 * params.min_confident_share:.0f}%): the template fit is kept{priors}"
+    return None, report, f"{kept}: the template fit is kept{priors}"
+
+
+def _by_shape(fine, takes, data, maps, anchors, texture: list, params: Params):
+    """The refinement by the surface's shape (:mod:`scan2morph.refine.shape`) and the
+    ``texture`` channels (the skin's, where it correlates; none for a geometry-only scan):
+    ``(points, report)`` of :func:`~scan2morph.refine.refine_channels`, ``report["shape"]``
+    True. ``takes`` are the take's and the neutral's names."""
+    take, neutral = takes
+    prm = params.shape
+    sources = {t: f"{paths.range_image(t, 'xyz')}" for t in takes}
+    images = [
+        shape_image(need(data, paths.range_image(t, "xyz"), sources[t]), prm.sigma_mm, sources[t])
+        for t in (neutral, take)
+    ]
+    shape = Channel(*images, prm.high_pass_px, prm.noise, prm.precision_px)
+    xyz = need(data, paths.range_image(take, "xyz"), sources[take])
+    moved = transform_points(need(data, paths.align(take, "transform"), take), xyz.reshape(-1, 3))
+    surface = SurfaceChannel(
+        need(data, paths.range_image(neutral, "xyz"), sources[neutral]),
+        moved.reshape(xyz.shape),
+        prm.surface_tolerance_mm,
+        prm.surface_precision_px,
     )
-    return refined, report, problem
+    gated = [
+        replace(c, gate_px=prm.texture_gate_px, precision_px=prm.texture_precision_px)
+        for c in (texture if prm.texture else [])
+    ]
+    channels = [shape, *gated] + ([surface] if prm.surface else [])
+    flow = replace(params.flow, fade_px=prm.fade_px)
+    refined, report = refine_channels(
+        fine.vertices, fine.faces, tuple(maps), channels, anchors, flow
+    )
+    return refined, report | {"shape": True}
 
 
 def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, source: str):
