@@ -1,24 +1,24 @@
 """A subject's own jobs (besides its takes), tree against tree: job wall, CPU and profile (issue #35).
 
 ``.venv/bin/python benchmarks/bench_subject_jobs.py RUN --trees OLD NEW [--subject synth01]
-[--repeat 2] [--cores 1] [--top 8]`` copies one subject of a finished run ``RUN`` (its
-``results/{subject}``, ``results/synthetic/{subject}`` and ``resources``, modification times
-kept) into a scratch folder per tree and re-runs there, with each tree's own Snakefile, rules and
-``src`` (a checkout, e.g. ``git archive <commit> | tar -x -C OLD``), the subject's own jobs:
-motion, motion_noise, morph, modal, store, head_meshes, accuracy, the figures and the report
-(``--forcerun``; the takes' parts are kept: ``--rerun-triggers mtime``). Trees alternate, each
-repeat in a fresh copy, with every job profiling itself (``SCAN2MORPH_PROFILE``,
-:func:`scan2morph.jobs.run_job`).
+[--repeat 2] [--cores 1] [--top 8] [--keep DIR]`` copies one subject of a finished run ``RUN``
+(its ``results/{subject}``, ``results/synthetic/{subject}`` and ``resources``, modification
+times kept) into a scratch folder per tree and re-runs there, with each tree's own Snakefile,
+rules and ``src`` (a checkout, e.g. ``git archive <commit> | tar -x -C OLD``), the subject's own
+jobs: motion, motion_noise, morph, modal, store, head_meshes, accuracy, the figures and the
+report (``--forcerun``; the takes' parts are kept: ``--rerun-triggers mtime``). Trees
+alternate, each repeat in a fresh copy.
 
 It prints, per tree and repeat: each rule's job wall time (Snakemake's benchmark file, ``s``),
-the sum over the subject's jobs and the CPU seconds of the whole Snakemake run (its children:
-every job, Snakemake's own start-up and scheduling included; the benchmark files' sampled
-``cpu_time`` misses most of a short job); then, for the last repeat of each tree, every rule's
-start-up CPU (interpreter, Snakemake's script wrapper, imports) and its body's functions with
-the most time of their own; and whether the trees' outputs agree: the largest absolute
-difference of every float dataset of the subject's store and ``motion_noise.h5``,
-``accuracy.json``'s numbers, and the figures pixel for pixel. Nothing is asserted; the printed
-tables are the measurement. Run it on a quiet machine (``OMP_NUM_THREADS=1``).
+their sum and the CPU seconds of the whole Snakemake run (its children: every job, Snakemake's
+own start-up and scheduling included; the benchmark files' sampled ``cpu_time`` misses most of
+a short job). Then one more run per tree with every job profiling itself
+(``SCAN2MORPH_PROFILE``, :func:`scan2morph.jobs.run_job`): each rule's start-up CPU
+(interpreter, Snakemake's script wrapper, imports), its body's CPU (cProfile adds to it) and
+the functions with the most time of their own. Last, whether the trees' outputs agree: the
+largest absolute difference of every float dataset of the subject's store and
+``motion_noise.h5``, ``accuracy.json`` byte for byte, and the figures pixel for pixel. Nothing
+is asserted; the printed tables are the measurement. Run it on a quiet machine.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -68,22 +69,31 @@ def copy_subject(run: Path, work: Path, subject: str) -> None:
     shutil.copytree(run / "resources", work / "resources", symlinks=True)
 
 
-def run_tree(tree: Path, run: Path, work: Path, args) -> dict:
-    """One re-run of the subject's own jobs with ``tree``; returns the run's measurements."""
+def tree_rules(tree: Path) -> list[str]:
+    """The rules of :data:`RULES` that ``tree``'s workflow defines."""
+    text = "\n".join(f.read_text() for f in (tree / "workflow" / "rules").glob("*.smk"))
+    defined = set(re.findall(r"^rule (\w+):", text, flags=re.MULTILINE))
+    return [r for r in RULES if r in defined]
+
+
+def run_tree(tree: Path, run: Path, work: Path, args, profiled: bool = False) -> dict:
+    """One re-run of the subject's own jobs with ``tree`` (each job profiling itself when
+    ``profiled``); returns the run's measurements."""
     copy_subject(run, work, args.subject)
     config = work / "bench.yaml"
     config.write_text(f"subjects: {tree / 'config' / 'subjects.tsv'}\n")
-    targets = [f"results/{args.subject}/report.html", f"results/{args.subject}/accuracy.json"]
+    targets = [
+        f"results/{args.subject}/{name}" for name in ("report.html", "accuracy.json", "meshes/head")
+    ]
     cmd = [str(SNAKEMAKE), "--cores", str(args.cores), "-s", str(tree / "Snakefile")]
     cmd += ["-d", str(work), "--configfile", str(tree / "config" / "config.yaml"), str(config)]
-    cmd += ["--rerun-triggers", "mtime", "--quiet", "--forcerun", *RULES, "--", *targets]
-    env = dict(
-        os.environ,
-        PYTHONPATH=str(tree / "src"),
-        OMP_NUM_THREADS="1",
-        OPENBLAS_NUM_THREADS="1",
-        **{PROFILE_ENV: str(work / "profile")},
-    )
+    cmd += ["--rerun-triggers", "mtime", "--quiet", "--forcerun", *tree_rules(tree), "--"]
+    cmd += targets
+    env = dict(os.environ, PYTHONPATH=str(tree / "src"), OMP_NUM_THREADS="1")
+    env["OPENBLAS_NUM_THREADS"] = "1"
+    env.pop(PROFILE_ENV, None)
+    if profiled:
+        env[PROFILE_ENV] = str(work / "profile")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     with open(work / "snakemake.out", "w") as out:
@@ -97,13 +107,17 @@ def run_tree(tree: Path, run: Path, work: Path, args) -> dict:
     return {"jobs": jobs, "run_wall_s": wall, "run_cpu_s": cpu}
 
 
-def startup_table(work: Path) -> pd.Series:
-    """Per rule, the start-up CPU of its job (before the job's body), s."""
+def job_cpu_table(work: Path) -> pd.DataFrame:
+    """Per rule of a profiled run: its job's start-up CPU (interpreter, Snakemake's script
+    wrapper, imports) and its body's CPU (under cProfile, which adds to it), s."""
     rows = {}
     for f in (work / "profile").glob("*.json"):
-        rule = f.stem.split("-")[0]
-        rows[rule] = rows.get(rule, 0.0) + json.loads(f.read_text())["startup_cpu_s"]
-    return pd.Series(rows, name="startup_cpu_s")
+        times = json.loads(f.read_text())
+        rows[f.stem.split("-")[0]] = {
+            "startup_cpu_s": times["startup_cpu_s"],
+            "body_cpu_s": times.get("body_cpu_s", float("nan")),
+        }
+    return pd.DataFrame(rows).T.sort_index()
 
 
 def float_datasets(path: Path) -> dict[str, np.ndarray]:
@@ -185,10 +199,15 @@ def main(argv=None) -> int:
     jobs.loc["sum"] = jobs.sum()
     print(f"\n== job wall time per rule, s ({args.subject}; Snakemake's benchmark files)")
     print(jobs.round(2).to_string())
-    for i, work in last.items():
-        print(f"\n== tree{i}: start-up CPU per rule, s")
-        print(startup_table(work).round(2).to_string())
-        for rule in sorted(startup_table(work).index):
+    for i, tree in enumerate(trees):
+        work = scratch / f"tree{i}-profiled"
+        shutil.rmtree(work, ignore_errors=True)
+        run_tree(tree, args.run.resolve(), work, args, profiled=True)
+        cpu = job_cpu_table(work)
+        cpu.loc["sum"] = cpu.sum()
+        print(f"\n== tree{i}, a profiled run: CPU per job, s")
+        print(cpu.round(2).to_string())
+        for rule in cpu.index.drop("sum"):
             own, _ = top_functions(work / "profile", rule, args.top)
             print(f"-- tree{i} {rule}: own time")
             print("\n".join(own))
