@@ -149,7 +149,7 @@ def compare(a: Path, b: Path, subject: str) -> list[str]:
             if not np.array_equal(np.isnan(x), np.isnan(y)):
                 lines.append(f"{name}: {key}: NaNs differ")
                 continue
-            d = float(np.nanmax(np.abs(x - y), initial=0.0)) if np.size(x) else 0.0
+            d = float(np.max(np.abs(x - y)[np.isfinite(x)], initial=0.0))
             if d > worst:
                 worst, where = d, key
         lines.append(f"{name}: {len(da)} float datasets, largest |difference| {worst:.3g} {where}")
