@@ -62,8 +62,9 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
 
 
 #: Environment variable naming a folder: every job then writes its cProfile statistics there
-#: (``{log name}.prof``) and its start-up (interpreter and imports) CPU time
-#: (``{log name}.json``), for ``benchmarks/bench_profile.py``.
+#: (``{log name}.prof``), its start-up (interpreter and imports) CPU time and its body's wall
+#: and CPU time (``{log name}.json``), for ``benchmarks/bench_profile.py`` and
+#: ``benchmarks/bench_subject_jobs.py``.
 PROFILE_ENV = "SCAN2MORPH_PROFILE"
 
 
@@ -85,10 +86,12 @@ def _profiled(func: Callable[[], object], log_path: str | Path | None) -> None:
         profile.runcall(func)
     finally:
         wall = time.perf_counter() - t0
+        cpu = time.process_time() - startup
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
         profile.dump_stats(out / f"{name}.prof")
-        write_json(out / f"{name}.json", {"startup_cpu_s": startup, "body_wall_s": wall})
+        times = {"startup_cpu_s": startup, "body_wall_s": wall, "body_cpu_s": cpu}
+        write_json(out / f"{name}.json", times)
 
 
 def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:

@@ -16,6 +16,7 @@ from scan2morph.render.figures import (
     STAGE_FIGURES,
     figure_names,
     stage_figures,
+    write_figures,
     write_stage_figures,
 )
 from scan2morph.render.fit_figures import fig_model
@@ -576,6 +577,41 @@ def test_write_stage_figures_from_an_hdf5_store(tmp_path, store):
         image = np.asarray(Image.open(p).convert("RGB"))
         assert image.shape[0] > 300 and image.shape[1] > 300
         assert image.std() > 20
+
+
+def test_one_job_draws_every_stage_as_the_stages_alone(tmp_path, store):
+    """write_figures draws all stages from one opening of the store, each figure once: the
+    same pixels as one write_stage_figures per stage and as matplotlib's savefig; the PNGs are
+    written at the set zlib level."""
+    path = tmp_path / "s01.h5"
+    _write_store(path, store)
+    stages = ["fit", "morph"]
+    declared = [tmp_path / "all" / f"{s}.png" for st in stages for s in figure_names(st)]
+    timings = {}
+    together = write_figures(path, tmp_path / "all", stages, declared, timings)
+    assert together == declared
+    assert set(timings) == set(stages) and all(t > 0 for t in timings.values())
+    alone = [p for st in stages for p in write_stage_figures(path, tmp_path / st, st)]
+    # the oracle: matplotlib's own savefig of each figure (its two drawings, zlib level 6)
+    for st in stages:
+        for stem, fig in stage_figures(store, st).items():
+            fig.savefig(tmp_path / f"{stem}.png", dpi=DPI, facecolor="white")
+    for a, b in zip(together, alone, strict=True):
+        assert a.name == b.name
+        want = np.asarray(Image.open(tmp_path / a.name))
+        np.testing.assert_array_equal(np.asarray(Image.open(a)), want)
+        np.testing.assert_array_equal(np.asarray(Image.open(b)), want)
+    # level 3, not Pillow's default 6: the zlib header's FLEVEL is 1 (levels 2-5), not 2
+    assert {_zlib_flevel(p) for p in together} == {1}
+    with pytest.raises(InputError, match="differ from the figures drawn"):
+        write_figures(path, tmp_path / "all", stages, declared[:-1])
+
+
+def _zlib_flevel(png) -> int:
+    """The compression-level field (FLEVEL, RFC 1950) of a PNG file's zlib stream."""
+    data = png.read_bytes()
+    at = data.index(b"IDAT")  # the first image-data chunk: the zlib header follows its type
+    return data[at + 5] >> 6
 
 
 def test_bad_input(tmp_path, store):

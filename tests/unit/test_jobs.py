@@ -66,7 +66,8 @@ def test_a_full_disk_is_one_line(tmp_path):
 
 def test_a_job_profiles_itself_when_asked(tmp_path, monkeypatch):
     """With SCAN2MORPH_PROFILE set, a job writes its cProfile statistics (the body's functions,
-    not the wrapper's) and the CPU time spent before its body (benchmarks/bench_profile.py)."""
+    not the wrapper's), the CPU time spent before its body and the body's wall and CPU time
+    (benchmarks/bench_profile.py, bench_subject_jobs.py)."""
     import json
     import pstats
     import time
@@ -85,6 +86,8 @@ def test_a_job_profiles_itself_when_asked(tmp_path, monkeypatch):
     assert own["busy_body"] >= 0.05
     record = json.loads((tmp_path / "prof" / "align-s1-car.json").read_text())
     assert record["startup_cpu_s"] > 0 and record["body_wall_s"] >= 0.05
+    # the body's own CPU: the busy loop's 0.05 s, not the start-up's
+    assert 0.05 <= record["body_cpu_s"] < record["body_wall_s"] + 0.01
     monkeypatch.delenv(PROFILE_ENV)
     run_job(tmp_path / "logs" / "align" / "s1" / "too.log", busy_body)
     assert not (tmp_path / "prof" / "align-s1-too.prof").exists()

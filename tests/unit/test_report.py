@@ -1249,9 +1249,7 @@ def test_report_rule_takes_every_figure_and_the_accuracy(run):
     res = _snakemake(run, f"results/{SUBJECT}/report.html", "-n", "-F", "--quiet", "rules")
     assert res.returncode == 0, res.stderr
     rules = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
-    wanted = {"report_subject", "accuracy", "store"} | {
-        f"figures_{stage}" for stage in ("fit", "motion", "morph", "modal")
-    }
+    wanted = {"report_subject", "accuracy", "store", "figures"}
     assert wanted <= rules
     assert "cohort" not in rules
 

@@ -6,11 +6,11 @@ from scan2morph.render.names import FIGURE_NAMES, figure_names
 
 
 def get_subject_figures(wildcards):
-    """Every figure of the subject that the figures rules draw (a stage whose rule is not in the
-    workflow contributes the PNGs already in the figures folder)."""
+    """Every figure of the subject that the figures rule draws (without that rule in the
+    workflow, the PNGs already in the figures folder)."""
     files = []
     for stage in FIGURE_NAMES:
-        if rules.has(f"figures_{stage}"):
+        if rules.has("figures"):
             files += expand(
                 "results/{subject}/figures/{stem}.png",
                 subject=wildcards.subject,
