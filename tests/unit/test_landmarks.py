@@ -23,8 +23,8 @@ from tests.support.landmark_takes import cohort_takes
 #: synth04's an RGB-D take), open-mouth and smiling ones included.
 PICKS = [("synth01", "too"), ("synth02", "car"), ("synth03", "smile1"), ("synth04", "she")]
 #: Asserted bounds, px at 640 x 480. Measured with the committed model (median / p95): range
-#: too 1.42 / 4.53, stereo car 1.75 / 5.33, mesh smile1 1.15 / 3.12, RGB-D she 0.72 / 1.95; the
-#: jawline completed from the 51 inner truth points: median 1.4-3.4 px a take.
+#: too 1.50 / 3.92, stereo car 1.38 / 3.64, mesh smile1 1.12 / 3.08, RGB-D she 0.76 / 1.73; the
+#: jawline completed from the 51 inner truth points: median 1.2-2.3 px a take.
 MAX_MEDIAN_PX = 2.0
 MAX_P95_PX = 7.0
 MAX_JAW_MEDIAN_PX = 5.0

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from scan2morph.errors import InputError
 from scan2morph.io.rgbd import depth_to_color_grid
 from scan2morph.scan import repair_range
 from scan2morph.scan.view import shaded_image
@@ -153,6 +154,59 @@ def make_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
                     color = _speckled(color, rng)
             name = f"{subject}/{take}/{label}/{look}"
             out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
+    return out
+
+
+#: Uniform ranges of the simulated stereo rigs' settings (the rest: the synthetic rig's).
+STEREO_RANGE = {
+    "distance_mm": (500.0, 900.0),
+    "focal_px": (1000.0, 1700.0),
+    "speckle_px": (1.5, 3.5),
+    "speckle_contrast": (0.3, 0.6),
+    "image_noise": (0.5, 3.0),
+    "skin_texture": (0.0, 1.5),
+}
+
+
+def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+    """Simulated stereo takes reconstructed as the ingest stage does (the stereo modality's
+    look: a projected speckle on a grey face, the reconstruction's coverage and noise, the raw
+    left camera's distortion), identities ``stereo000``, ... of the training seed.
+
+    Parameters
+    ----------
+    seed : int
+    subjects, takes : int
+        Identities and takes per identity.
+
+    Returns
+    -------
+    list of Sample
+        ``subjects * takes`` takes on the raw left image's grid, in a fixed order.
+    """
+    from scan2morph.scan import reconstruct_stereo
+    from scan2morph.synth.stereo import make_stereo_take
+
+    rng = np.random.default_rng([int(seed), 0x57E2])
+    labels = list(LABELS)
+    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
+    out = []
+    for i in range(subjects):
+        subject = f"stereo{i:03d}"
+        for j in range(takes):
+            label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+            rig = {k: float(rng.uniform(*r)) for k, r in STEREO_RANGE.items()}
+            rig["pose_sigma_deg"] = 6.0
+            take = f"t{j:02d}"
+            r = make_stereo_take(subject, label, LABEL_KIND[label], take, seed, rig)
+            name = f"{subject}/{take}/{label}/stereo"
+            try:
+                xyz, _ = reconstruct_stereo(r["left"], r["right"], r["calib"], {}, source=name)
+            except InputError:
+                continue  # a rig that sees too little of the face: no training take
+            xyz, _ = repair_range(xyz, source=name)
+            truth = np.asarray(r["truth"]["landmarks2d"], float)
+            out.append(Sample(r["left"], xyz.astype(np.float32), truth, name))
     return out
 
 

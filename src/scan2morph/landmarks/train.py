@@ -30,18 +30,25 @@ from scan2morph.landmarks.cascade import (
     ridge_path,
     save,
 )
-from scan2morph.landmarks.data import Sample, make_mesh_samples, make_samples
+from scan2morph.landmarks.data import (
+    Sample,
+    make_mesh_samples,
+    make_samples,
+    make_stereo_samples,
+)
 from scan2morph.landmarks.detect import mirror_channels, mirror_shapes
 from scan2morph.landmarks.face import find_face
 
 #: Model version: bump when the features, the frame or the training change.
-VERSION = "1.0"
+VERSION = "1.1"
 #: Training settings of the committed model.
 DEFAULTS = {
     "subjects": 40,
     "takes": 8,
     "mesh_subjects": 10,
     "mesh_takes": 4,
+    "stereo_subjects": 15,
+    "stereo_takes": 4,
     "global": True,
     "radii_mm": [10.0, 6.0, 4.0, 2.5, 1.5],
     "starts": 6,
@@ -49,11 +56,11 @@ DEFAULTS = {
     "jitter_mm": 3.0,
     "jitter_scale": 0.05,
     "jitter_deg": 4.0,
-    "stretched": 2,
-    "scale": [0.75, 1.1],
-    "stretch_x": [0.85, 1.1],
-    "stretch_up": [0.7, 1.1],
-    "stretch_down": [0.85, 1.1],
+    "stretched": 3,
+    "scale": [0.7, 1.15],
+    "stretch_x": [0.8, 1.15],
+    "stretch_up": [0.55, 1.1],
+    "stretch_down": [0.8, 1.15],
 }
 #: Every this many-th training identity is held out to choose each stage's ridge penalty.
 HOLDOUT_EVERY = 5
@@ -86,10 +93,13 @@ def _stretched(
 
 
 def _identity(name: str) -> int:
-    """A training take's identity number (``train007/...`` -> 7, ``mesh003/...`` -> 1003)."""
+    """A training take's identity number (``train007/...`` -> 7, ``mesh003/...`` -> 1003,
+    ``stereo002/...`` -> 2002)."""
     subject = name.split("/")[0]
     if subject.startswith("mesh"):
         return 1000 + int(subject.removeprefix("mesh"))
+    if subject.startswith("stereo"):
+        return 2000 + int(subject.removeprefix("stereo"))
     return int(subject.removeprefix("train"))
 
 
@@ -247,7 +257,8 @@ def _cached(path: Path | None, make) -> list[Sample]:
 
 
 def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]:
-    """The training takes (range, RGB-D and mesh scans), from ``cache`` when it holds them."""
+    """The training takes (range, RGB-D, mesh and stereo scans), from ``cache`` when it holds
+    them."""
     n, k = config["subjects"], config["takes"]
     nm, km = config["mesh_subjects"], config["mesh_takes"]
     out = _cached(
@@ -258,6 +269,12 @@ def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]
         out += _cached(
             cache / f"mesh-{seed}-{nm}x{km}.npz" if cache else None,
             lambda: make_mesh_samples(seed, nm, km),
+        )
+    ns, ks = config["stereo_subjects"], config["stereo_takes"]
+    if ns and ks:
+        out += _cached(
+            cache / f"stereo-{seed}-{ns}x{ks}.npz" if cache else None,
+            lambda: make_stereo_samples(seed, ns, ks),
         )
     return out
 
