@@ -15,7 +15,7 @@ import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import partial
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -38,7 +38,9 @@ from scan2morph.scan.view import shaded_image
 from scan2morph.sheet import FILES, MULTI_PATH_COLUMNS, PATH_SEPARATOR, mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.store import paths
-from scan2morph.template import Template
+
+if TYPE_CHECKING:  # a type only: the template (and scipy) stay unimported until used
+    from scan2morph.template import Template
 
 #: Config sections this stage reads (stereo takes; mesh takes; RGB-D takes of several frames).
 SECTIONS = ("stereo", "mesh_camera", "depth_fusion")

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.template import Template
+
+if TYPE_CHECKING:  # a type only: the template (and scipy) stay unimported until used
+    from scan2morph.template import Template
 
 
 @dataclass

@@ -5,13 +5,16 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scan2morph.scan import repair_range
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
-from scan2morph.template import Template
+
+if TYPE_CHECKING:  # a type only: the template (and scipy) stay unimported until used
+    from scan2morph.template import Template
 
 #: Config section this stage reads.
 SECTIONS = ("repair",)
