@@ -26,3 +26,46 @@ def test_take_stage_imports_are_light(stage):
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout
     assert out.split() == [], f"scan2morph.stages.{stage} imports {out.split()}"
+
+
+#: Modules that the stages which neither read stereo pairs nor write glTF do not import.
+UNUSED = ("scan2morph.scan.stereo", "scan2morph.io.gltf", "pygltflib", "scan2morph.template")
+
+
+@pytest.mark.parametrize(
+    ("stage", "unused"),
+    [("repair", UNUSED), ("fit", UNUSED[:3]), ("align", UNUSED[:3])],
+)
+def test_packages_import_only_the_modules_used(stage, unused):
+    """scan2morph.scan and scan2morph.io import a module when one of its names is first used
+    (scan2morph.lazy); the stages import the template for its type only."""
+    code = (
+        "import sys\n"
+        f"import scan2morph.stages.{stage}\n"
+        f"print(' '.join(m for m in {unused!r} if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.split() == [], f"scan2morph.stages.{stage} imports {out.split()}"
+
+
+def test_a_lazy_package_gives_its_names_on_first_use():
+    code = (
+        "import sys\n"
+        "import scan2morph.scan as scan\n"
+        "before = 'scan2morph.scan.stereo' in sys.modules\n"
+        "from scan2morph.scan import DEFAULT_STEREO\n"
+        "from scan2morph.scan.stereo import DEFAULT_STEREO as direct\n"
+        "print(before, DEFAULT_STEREO is direct, 'DEFAULT_STEREO' in vars(scan),\n"
+        "      'reconstruct_stereo' in dir(scan), 'reconstruct_stereo' in scan.__all__)\n"
+        "try:\n"
+        "    scan.no_such_name\n"
+        "except AttributeError as error:\n"
+        "    print(error)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+    assert out[0].split() == ["False", "True", "True", "True", "True"]
+    assert out[1] == "module 'scan2morph.scan' has no attribute 'no_such_name'"
