@@ -15,6 +15,13 @@ import pytest
 HEAVY = ("pandas", "matplotlib", "pyrender", "trimesh", "open3d", "dash", "plotly")
 
 
+def _python(code: str) -> str:
+    """What ``code`` prints, run in a fresh interpreter."""
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+
+
 @pytest.mark.parametrize("stage", ["ingest", "repair", "fit", "align", "refine"])
 def test_take_stage_imports_are_light(stage):
     code = (
@@ -22,9 +29,7 @@ def test_take_stage_imports_are_light(stage):
         f"import scan2morph.stages.{stage}, scan2morph.stages.failure, scan2morph.store\n"
         f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout
+    out = _python(code)
     assert out.split() == [], f"scan2morph.stages.{stage} imports {out.split()}"
 
 
@@ -44,9 +49,7 @@ def test_packages_import_only_the_modules_used(stage, unused):
         f"import scan2morph.stages.{stage}\n"
         f"print(' '.join(m for m in {unused!r} if m in sys.modules))"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout
+    out = _python(code)
     assert out.split() == [], f"scan2morph.stages.{stage} imports {out.split()}"
 
 
@@ -64,8 +67,6 @@ def test_a_lazy_package_gives_its_names_on_first_use():
         "except AttributeError as error:\n"
         "    print(error)\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout.splitlines()
+    out = _python(code).splitlines()
     assert out[0].split() == ["False", "True", "True", "True", "True"]
     assert out[1] == "module 'scan2morph.scan' has no attribute 'no_such_name'"

@@ -74,6 +74,13 @@ def _speckled(color: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.repeat(g[..., None], 3, axis=2)
 
 
+def _draw_label(rng: np.random.Generator) -> str:
+    """A take's label drawn with the weights of :data:`LABELS`."""
+    labels = list(LABELS)
+    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
+    return labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+
+
 def _range_take(subject: str, label: str, take: str, seed: int, rng: np.random.Generator):
     """A posed range take: (colour, xyz, truth px)."""
     head, vertices, take_rng = articulated_head(subject, label, LABEL_KIND[label], take, seed)
@@ -134,13 +141,11 @@ def make_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
         ``subjects * takes`` takes, in a fixed order.
     """
     rng = np.random.default_rng([int(seed), 0x1A4D])
-    labels = list(LABELS)
-    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
     out = []
     for i in range(subjects):
         subject = f"train{i:03d}"
         for j in range(takes):
-            label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+            label = _draw_label(rng)
             take = f"t{j:02d}"
             if rng.uniform() < RGBD_SHARE:
                 color, xyz, truth = _rgbd_take(subject, label, take, seed, rng)
@@ -188,13 +193,11 @@ def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
     from scan2morph.synth.stereo import make_stereo_take
 
     rng = np.random.default_rng([int(seed), 0x57E2])
-    labels = list(LABELS)
-    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
     out = []
     for i in range(subjects):
         subject = f"stereo{i:03d}"
         for j in range(takes):
-            label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+            label = _draw_label(rng)
             rig = {k: float(rng.uniform(*r)) for k, r in STEREO_RANGE.items()}
             rig["pose_sigma_deg"] = 6.0
             take = f"t{j:02d}"
@@ -244,14 +247,12 @@ def make_mesh_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
     import tempfile
 
     rng = np.random.default_rng([int(seed), 0x3E5A])
-    labels = list(LABELS)
-    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
     out = []
     with tempfile.TemporaryDirectory() as folder:
         for i in range(subjects):
             subject = f"mesh{i:03d}"
             for j in range(takes):
-                label = labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
+                label = _draw_label(rng)
                 color, xyz, truth = _mesh_take(subject, label, f"t{j:02d}", seed, folder)
                 name = f"{subject}/t{j:02d}/{label}/mesh"
                 out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
