@@ -116,3 +116,27 @@ def test_patches_are_compact_and_deterministic():
 def test_still_settings_bad_input(change, match):
     with pytest.raises(InputError, match=match):
         IcpParams(**change)
+
+
+def test_without_any_patch_pose_the_regions_trimmed_pose_is_kept():
+    """When no set of patches gives a finite pose (every refit fails), the search keeps what
+    the region's trimming found instead of refitting on every candidate, and says so."""
+    from types import SimpleNamespace
+
+    from scan2morph.align.icp import _found_still
+
+    v, _ = _face()
+    keep = v[:, 1] > 64.0
+    t = _rigid(np.random.default_rng(3), 2, 5)
+    calls = []
+
+    def failing(use, start):
+        calls.append(int(use.sum()))
+        return np.full((4, 4), np.nan), 0.0, np.nan, 3, False
+
+    s = SimpleNamespace(p=v, plane=lambda x: np.zeros(len(x)))
+    out = _found_still(s, (keep, t, True), failing, IcpParams(still_groups=6))
+    assert len(calls) == 1 + 6 + 15  # none, each one and each pair of the 6 patches left out
+    assert out[0] is keep and out[1] is t and out[2] is True
+    assert out[3] == 3 * len(calls)
+    assert "the region's trimmed pose is kept" in out[4][-1]

@@ -81,6 +81,10 @@ def test_the_shape_image_is_the_mean_curvature_of_a_sphere():
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     moved = shape_image(xyz @ turn.T + np.array([5.0, -3.0, 20.0]), 2.0)
     assert np.nanmax(np.abs(moved - h)) < 0.3
+    # a frame whose origin lies behind the surface (a mesh scan's own frame): the same sign
+    for depth_mm in (-1000.0, -100.0, 0.0, 40.0, 500.0):
+        shifted = shape_image(xyz - np.array([0.0, 0.0, xyz[..., 2][inner].mean() + depth_mm]), 2.0)
+        assert np.nanmax(np.abs(shifted - h)) < 0.3, depth_mm
 
 
 def test_a_range_image_without_shape_is_refused():
@@ -139,6 +143,25 @@ def test_the_shape_follows_a_tangential_motion_the_texture_cannot(fine):
     assert t_report["confident_share"] < 0.1
     assert shape_err < 0.35 * fit_err, (fit_err, shape_err)
     assert s_report["confident_share"] > ShapeParams().min_confident_share
+
+
+def test_the_confidence_has_one_scale_whatever_the_channels(fine):
+    """A lone channel whose precision is not the flow's has its confidence on the scale of
+    several channels (its weight times ``flow_precision_px^2``): adding a channel that measures
+    nothing (a flat image) changes neither the points nor the confidence."""
+    height = _bumps(7)
+    image = shape_image(_surface(height), ShapeParams().sigma_mm)
+    prm, params = ShapeParams(), RefineParams()
+    shape = Channel(image, image, prm.high_pass_px, prm.noise, prm.precision_px)
+    flat = Channel(np.ones_like(image), np.ones_like(image), 3.0, 2.0, prm.precision_px)
+    _, anchors = build_template().fiducial_set("closed")
+    maps = (_fit, _fit)
+    one = refine_channels(fine.vertices, fine.faces, maps, [shape], anchors, params)
+    two = refine_channels(fine.vertices, fine.faces, maps, [shape, flat], anchors, params)
+    np.testing.assert_allclose(one[0], two[0], atol=1e-9)
+    np.testing.assert_allclose(one[1]["confidence"], two[1]["confidence"], atol=1e-12)
+    assert prm.precision_px != params.flow_precision_px
+    assert 0.0 < np.max(one[1]["confidence"]) <= 1.0
 
 
 def test_the_still_skin_undoes_a_fit_that_slid_on_a_smooth_surface(fine):

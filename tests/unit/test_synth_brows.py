@@ -43,7 +43,7 @@ def test_brow_raise_and_frown_move_the_brows_and_the_forehead_above():
     assert np.abs(disp["frown"][head.landmarks[48:68]]).max() < 1e-9
 
 
-def test_new_labels_are_expressions_with_one_intensity_draw():
+def test_new_labels_are_expressions_with_one_intensity_draw_per_driver():
     assert LABEL_KIND["brows"] == LABEL_KIND["frown"] == "expression"
     # brows: the brow raise and the sad mouth each draw their own intensity
     a = label_coefficients("brows", np.random.default_rng(0))

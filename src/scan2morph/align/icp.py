@@ -308,7 +308,7 @@ def align_take(
     recovery += notes
     iterations += n_it
     if prm.still_groups and np.isfinite(t).all():
-        keep, t, conv, n_it, notes = _found_still(s, t, refine, prm)
+        keep, t, conv, n_it, notes = _found_still(s, (keep, t, conv), refine, prm)
         recovery += notes
         iterations += n_it
     if not conv:
@@ -400,12 +400,17 @@ def _icp_problem(take, neutral, upper, cand, method: str, source: str) -> _IcpPr
     )
 
 
-def _found_still(s: _IcpProblem, t, refine, prm) -> tuple:
+def _found_still(s: _IcpProblem, trimmed: tuple, refine, prm) -> tuple:
     """The still skin among all the candidates (:func:`~scan2morph.align.still.still_skin`,
-    from the region's trimmed pose ``t``), refined on, then trimmed with every candidate free
-    to join or leave: ``(keep, t, converged, iterations, notes)`` as
-    :func:`~scan2morph.align.trim.trim_moving` returns them."""
+    from the region's trimmed ``(keep, t, converged)``), refined on, then trimmed with every
+    candidate free to join or leave: ``(keep, t, converged, iterations, notes)`` as
+    :func:`~scan2morph.align.trim.trim_moving` returns them. When no set of patches gives a
+    pose, the region's trimmed pose is kept."""
+    keep, t, conv = trimmed
     found = still_skin(s.p, t, refine, s.plane, prm)
+    if len(found.agree) == 0:
+        note = "still skin: no set of patches gave a pose; the region's trimmed pose is kept"
+        return keep, t, conv, found.iterations, [*found.notes, note]
     t_new, _, _, iterations, conv = refine(found.keep, found.transform)
     t = t_new if np.isfinite(t_new).all() else found.transform
     every = np.ones(len(s.p), dtype=bool)

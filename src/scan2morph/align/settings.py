@@ -61,7 +61,8 @@ class IcpParams:
         The search for the still skin of a take (0: off, the region is taken as still): the
         region and the skin it may grow into are split into this many patches, and the pose
         that the most of them agree with, fitted with up to ``still_drop`` patches left out,
-        is kept (:func:`scan2morph.align.still.still_skin`).
+        is kept (:func:`scan2morph.align.still.still_skin`). Off by default here, so that a
+        library caller keeps the plain alignment; the pipeline's config turns it on (6).
     still_drop : int
         The most patches left out at once in that search.
     still_sigma : float

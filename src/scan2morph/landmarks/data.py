@@ -10,6 +10,7 @@ colour camera. Every range grid is repaired as the pipeline's repair stage does.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import cv2
@@ -25,6 +26,8 @@ from scan2morph.synth.head import LABEL_KIND
 from scan2morph.synth.rgbd import make_rgbd_take
 from scan2morph.synth.scanner import ScanDefects, camera_matrix, project, scan
 from scan2morph.synth.texture import texture_seed
+
+log = logging.getLogger("scan2morph")
 
 #: Labels drawn for training takes, with their weights.
 LABELS = {"neutral": 2, "car": 1, "man": 1, "she": 1, "eel": 1, "too": 1, "smile": 2, "sad": 2}
@@ -205,8 +208,9 @@ def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
             name = f"{subject}/{take}/{label}/stereo"
             try:
                 xyz, _ = reconstruct_stereo(r["left"], r["right"], r["calib"], {}, source=name)
-            except InputError:
-                continue  # a rig that sees too little of the face: no training take
+            except InputError as error:  # a rig that sees too little of the face
+                log.info("%s: no training take (%s)", name, error)
+                continue
             xyz, _ = repair_range(xyz, source=name)
             truth = np.asarray(r["truth"]["landmarks2d"], float)
             out.append(Sample(r["left"], xyz.astype(np.float32), truth, name))

@@ -273,9 +273,12 @@ def _measure(channels, references, mapped, inside, params: RefineParams):
     (the last three (rows, cols)), the weight the sum of each channel's confidence over its
     precision squared, the confidence that weight over ``1 / params.flow_precision_px^2`` and
     ``measured`` the sum of the channels' confidences, both at most 1 (one image channel: its
-    own confidence and measurement as they are). A channel with a ``gate_px`` counts after
-    the others, only where they measured and its vector lies within ``gate_px`` of theirs."""
-    if len(channels) == 1 and isinstance(channels[0], Channel):
+    own confidence and measurement as they are when its precision is
+    ``params.flow_precision_px``, the texture's refinement). A channel with a ``gate_px``
+    counts after the others, only where they measured and its vector lies within ``gate_px``
+    of theirs."""
+    lone = len(channels) == 1 and isinstance(channels[0], Channel)
+    if lone and channels[0].precision_px == params.flow_precision_px:
         flow, conf = _channel_flow(channels[0], references[0], mapped, inside, params)
         return flow, conf * (1.0 / channels[0].precision_px ** 2), conf, conf  # w_data * conf
     total = np.zeros(inside.shape)

@@ -33,7 +33,7 @@ class ShapeParams:
     ----------
     use : bool
         Refine by the shape image (with whatever texture correlates) a take whose texture
-        does not correlate with the neutral's (or which has none).
+        does not correlate with the neutral's (a geometry-only scan keeps its template fit).
     sigma_mm : float
         Scale of the curvature, mm (Gaussian smoothing of the surface before differentiating).
     high_pass_px : float
@@ -178,15 +178,14 @@ def shape_image(xyz: np.ndarray, sigma_mm: float, source: str = "range image") -
     xu, xv = np.gradient(x, axis=1), np.gradient(x, axis=0)
     xuu, xuv = np.gradient(xu, axis=1), np.gradient(xu, axis=0)
     xvv = np.gradient(xv, axis=0)
-    n = np.cross(xu, xv)
+    # towards the camera in any frame: a grid of x right and y down (ingest checks each take's
+    # handedness) has xu x xv pointing away from the viewer, wherever the frame's origin lies
+    n = -np.cross(xu, xv)
     with np.errstate(invalid="ignore", divide="ignore"):  # a degenerate pixel: NaN, not ok
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
     ok = mask & (cover >= MIN_COVER) & np.isfinite(n).all(axis=-1)
     if not ok.any():
         return np.full(mask.shape, np.nan)
-    # towards the camera: the side of the points' mean viewing direction
-    if np.nanmedian(np.einsum("...k,...k->...", n[ok], x[ok])) > 0:
-        n = -n
     dot = lambda a, b: np.einsum("...k,...k->...", a, b)  # noqa: E731
     big_e, big_f, big_g = dot(xu, xu), dot(xu, xv), dot(xv, xv)
     e, f, g = dot(xuu, n), dot(xuv, n), dot(xvv, n)

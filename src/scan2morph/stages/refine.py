@@ -379,7 +379,7 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
 
 def _by_shape(fine, takes, data, maps, anchors, texture: list, params: Params):
     """The refinement by the surface's shape (:mod:`scan2morph.refine.shape`) and the
-    ``texture`` channels (the skin's, where it correlates; none for a geometry-only scan):
+    ``texture`` channels (the skin's, where it correlates):
     ``(points, report)`` of :func:`~scan2morph.refine.refine_channels`, ``report["shape"]``
     True. ``takes`` are the take's and the neutral's names."""
     take, neutral = takes

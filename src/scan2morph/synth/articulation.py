@@ -232,7 +232,7 @@ def _forehead_fields(p: np.ndarray, brow_y0: float) -> dict[str, np.ndarray]:
     """The strong brow expressions, which move the whole forehead, at unit weight, mm.
 
     ``brow_raise`` (AU1 with AU2, frontalis): the inner brow rises 6.5 mm, the lateral brow
-    less (half at 25 mm from the midline), and the forehead above follows up to the hairline
+    less (half at about 30 mm from the midline), and the forehead above follows up to the hairline
     (two thirds at 25 mm above the brow, a fifth at 50 mm), folding into horizontal furrows
     0.4 mm deep, 11 mm apart. ``frown`` (a strong AU4 with the procerus): the brows drop 5 mm
     and move 3.5 mm towards the midline, the glabella drops 2 mm, bunches 1.2 mm forward and
