@@ -22,32 +22,25 @@ def _python(code: str) -> str:
     ).stdout
 
 
-@pytest.mark.parametrize("stage", ["ingest", "repair", "fit", "align", "refine"])
+#: Modules that the stages which neither read stereo pairs nor write glTF do not import either:
+#: scan2morph.scan and scan2morph.io import a module when one of its names is first used
+#: (scan2morph.lazy), and the stages import the template for its type only (repair needs none).
+UNUSED = ("scan2morph.scan.stereo", "scan2morph.io.gltf", "pygltflib", "scan2morph.template")
+NOT_IMPORTED = {
+    "ingest": HEAVY,
+    "repair": HEAVY + UNUSED,
+    "fit": HEAVY + UNUSED[:3],
+    "align": HEAVY + UNUSED[:3],
+    "refine": HEAVY,
+}
+
+
+@pytest.mark.parametrize("stage", list(NOT_IMPORTED))
 def test_take_stage_imports_are_light(stage):
     code = (
         "import sys\n"
         f"import scan2morph.stages.{stage}, scan2morph.stages.failure, scan2morph.store\n"
-        f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))"
-    )
-    out = _python(code)
-    assert out.split() == [], f"scan2morph.stages.{stage} imports {out.split()}"
-
-
-#: Modules that the stages which neither read stereo pairs nor write glTF do not import.
-UNUSED = ("scan2morph.scan.stereo", "scan2morph.io.gltf", "pygltflib", "scan2morph.template")
-
-
-@pytest.mark.parametrize(
-    ("stage", "unused"),
-    [("repair", UNUSED), ("fit", UNUSED[:3]), ("align", UNUSED[:3])],
-)
-def test_packages_import_only_the_modules_used(stage, unused):
-    """scan2morph.scan and scan2morph.io import a module when one of its names is first used
-    (scan2morph.lazy); the stages import the template for its type only."""
-    code = (
-        "import sys\n"
-        f"import scan2morph.stages.{stage}\n"
-        f"print(' '.join(m for m in {unused!r} if m in sys.modules))"
+        f"print(' '.join(m for m in {NOT_IMPORTED[stage]!r} if m in sys.modules))"
     )
     out = _python(code)
     assert out.split() == [], f"scan2morph.stages.{stage} imports {out.split()}"

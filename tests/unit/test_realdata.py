@@ -41,7 +41,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import open3d as o3d
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
@@ -53,8 +52,11 @@ from scan2morph.errors import InputError
 from scan2morph.io.calibration import StereoCalibration
 from scan2morph.modal import ModalParams, modal_basis, project, reconstruct
 from scan2morph.modal.fem import DOF, check_mesh
+from scan2morph.open3d_light import open3d
 from scan2morph.scan import DEFAULT_REPAIR, reconstruct_stereo, repair_range
 from tests.support.stereo_scene import pixel_rays
+
+o3d = open3d()  # open3d without its web viewer, as the library imports it
 
 DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "lee-perry-smith"
 GLB = DATA_DIR / "LeePerrySmith.glb"

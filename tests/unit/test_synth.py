@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import open3d as o3d
 import pytest
 import trimesh
 import yaml
@@ -13,6 +12,7 @@ from matplotlib.path import Path as MplPath
 
 from scan2morph.errors import InputError
 from scan2morph.io import read_abs, read_color, read_pts
+from scan2morph.open3d_light import open3d
 from scan2morph.synth import cohort
 from scan2morph.synth.head import (
     LABEL_COEFFS,
@@ -27,6 +27,8 @@ from scan2morph.synth.scanner import (
     project,
     surface_normals,
 )
+
+o3d = open3d()  # open3d without its web viewer, as the library imports it
 
 SMALL = {"width": 160, "height": 120, "focal_px": 362.5}
 CLEAN = {"noise_mm": 0.0, "spike_fraction": 0.0, "hole_blobs": 0, "click_noise_px": 0.0}
