@@ -22,12 +22,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 from jsonschema import Draft202012Validator, validators
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
-from scan2morph.sheet import RENAMED_KEYS
+from scan2morph.sheet import RENAMED_KEYS, load_schema
 from scan2morph.stages import accuracy, align, fit, landmarks, motion, motion_noise, refine, repair
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
@@ -197,8 +196,7 @@ def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTab
     if not path.is_file():
         raise InputError(source, "sweep table not found")
     if not isinstance(schema, Mapping):
-        with open(schema, encoding="utf-8") as fh:
-            schema = yaml.safe_load(fh)
+        schema = load_schema(schema)
     lines = [
         (n, line.rstrip("\r\n"))
         for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1)
