@@ -360,6 +360,9 @@ def _check_result(result: dict, keys: tuple[str, ...], source: str, producer: st
 def write_npz(path: str | PathLike[str], arrays: dict[str, np.ndarray]) -> None:
     """Write a compressed ``.npz`` with fixed zip timestamps, so equal arrays give equal bytes.
 
+    Deflate level 1: a take's truth (55k vertices) in 0.04 s instead of level 6's 0.13 s, 2%
+    larger.
+
     Parameters
     ----------
     path : str or path-like
@@ -373,7 +376,7 @@ def write_npz(path: str | PathLike[str], arrays: dict[str, np.ndarray]) -> None:
             info.compress_type = zipfile.ZIP_DEFLATED
             data = io.BytesIO()
             np.lib.format.write_array(data, np.asarray(arrays[name]), allow_pickle=False)
-            zf.writestr(info, data.getvalue())
+            zf.writestr(info, data.getvalue(), compresslevel=1)
     Path(path).write_bytes(buf.getvalue())
 
 
