@@ -72,12 +72,23 @@ def test_camera_faces_each_synthetic_mesh_take_from_the_surface_alone(take):
     # the generator's noses point down as real ones do (bridge to tip, head frame)
     assert _below_horizontal_deg(rot.T @ (lm[30] - lm[27])) > 55.0
     error = _angle_deg(view_direction(mesh), frontal)
-    with_landmarks = _angle_deg(view_direction(mesh, lm), frontal)
     old = _angle_deg(_old_rule(mesh, lm[27], lm[30]), frontal)
-    print(f"{take}: surface {error:.1f}, +landmarks {with_landmarks:.1f}, old {old:.1f}")
-    assert error < MAX_ERROR_DEG  # measured 0.6-3.2 degrees over the ten takes
-    assert with_landmarks < MAX_ERROR_DEG
+    print(f"{take}: surface {error:.1f}, old {old:.1f}")
+    assert error < MAX_ERROR_DEG  # measured 0.6-3.1 degrees over the twelve takes
     assert old > 10.0  # the old rule: 11.8-13.8 degrees off
+
+
+@pytest.mark.parametrize("take", ["neutral", "car", "smile1", "sad1"])
+def test_clicked_nose_tip_seeds_the_camera(take):
+    """With landmarks the nose tip is the clicked one, the rest is found on the surface as
+    without them: the closed and the open mouth, a smile and a sad face stand for the takes
+    (measured 0.3-1.2 degrees)."""
+    r = _synth03_take(take)
+    mesh = trimesh.Trimesh(r["vertices"], r["faces"], process=False)
+    frontal = -r["truth"]["pose"][:3, 2]
+    with_landmarks = _angle_deg(view_direction(mesh, r["landmarks"]), frontal)
+    print(f"{take}: +landmarks {with_landmarks:.1f}")
+    assert with_landmarks < MAX_ERROR_DEG
 
 
 def test_camera_ignores_the_frame_and_the_winding():
