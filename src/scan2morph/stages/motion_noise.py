@@ -13,6 +13,7 @@ import pandas as pd
 
 from scan2morph.align import transform_points
 from scan2morph.motion.uncertainty import DrawRecipe, subject_motion_noise
+from scan2morph.refine.memo import sharing
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
@@ -124,9 +125,12 @@ def run(
     if params.refine is not None:
         refiner = _refiner(template, subject, data, params.refine)
     recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
-    datasets, result, noise = subject_motion_noise(
-        template, data, subject.neutral, subject.visemes, fiducials, recipe, noise_cfg, subject.name
-    )
+    with sharing() as counts:  # the draws' common work (the neutral's side, each take's) once
+        datasets, result, noise = subject_motion_noise(
+            template, data, subject.neutral, subject.visemes, fiducials, recipe, noise_cfg,
+            subject.name,
+        )  # fmt: skip
+    log.info("%s: work shared by the draws (step: [reused, computed]): %s", subject.name, counts)
     log.info("%s: click noise %s", subject.name, noise["note"])
     for take, name, r in noise["misclicks"]:
         log.warning(
