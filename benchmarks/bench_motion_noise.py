@@ -23,14 +23,14 @@ tree, subject and repeat, each in a fresh interpreter with one BLAS thread (as S
 job), trees alternating. It prints each run's CPU and wall seconds, the work the draws shared
 (``scan2morph.refine.memo``: step -> reused, computed), and, with two trees, the largest
 difference of every output dataset between them over that dataset's largest value. ``--profile
-N`` adds the N functions with the most cumulative CPU (cProfile) of each tree's first run.
+N`` adds the N functions with the most CPU of their own (cProfile) of each tree's first run.
 
 Measured (2026-12-04, the default config's run, 2 cores shared with other jobs at a load of
-5-7.7; the stage's CPU s, then wall s, two runs each, before -> after the draws shared their
-work): synth01 16.7, 17.0 -> 14.8, 14.9 (wall 22.5, 23.3 -> 21.8, 20.9); synth02 47.8, 47.6 ->
-38.6, 39.7 (57.8, 65.3 -> 49.5, 52.0); synth03 24.4, 23.7 -> 21.8, 21.5 (33.2, 31.1 -> 28.5,
-29.0); synth04 12.5, 11.4 -> 10.0, 10.2 (16.4, 14.8 -> 13.5, 14.5). Every output identical, bit
-for bit.
+6-7; the stage's CPU s, then wall s, two runs each, before -> after the draws shared their work
+and OpenCV kept to the job's one thread): synth01 17.4, 17.8 -> 15.0, 15.6 (wall 23.7, 24.0 ->
+18.7, 19.5); synth02 47.0, 48.3 -> 38.7, 39.2 (56.6, 68.3 -> 45.5, 46.6); synth03 25.3, 23.5 ->
+22.5, 21.3 (36.3, 31.9 -> 28.4, 26.3); synth04 12.2, 11.7 -> 9.8, 9.8 (17.6, 15.8 -> 12.7,
+11.3). Every output identical, bit for bit.
 """
 
 from __future__ import annotations
@@ -178,7 +178,7 @@ cpu, wall = time.process_time() - c0, time.perf_counter() - w0
 out.write_bytes(pickle.dumps(part.datasets))
 text = io.StringIO()
 if profile:
-    pstats.Stats(profile, stream=text).sort_stats("cumulative").print_stats(top)
+    pstats.Stats(profile, stream=text).sort_stats("tottime").print_stats(top)
 print(json.dumps({"cpu_s": cpu, "wall_s": wall, "shared": shared, "profile": text.getvalue()}))
 """
 
