@@ -14,11 +14,34 @@ landmarks it prints the error bar each draw's pipeline reports (``click_noise_re
 over draws) against the click-noise part of the error the truth shows, ``sqrt(mean(rel^2) -
 rel0^2)`` with ``rel0`` the error at exact landmarks. Nothing is asserted; the printed tables are
 the measurement.
+
+The stage's own cost (issue #35): ``bench_motion_noise.py --stage RUN [--trees OLD NEW]
+[--repeat 2] [--profile N] [subject ...]`` runs the ``motion_noise`` stage (``motion_noise.run``)
+of each subject on a finished run's parts (``RUN/results/{subject}``: the neutral's and the
+visemes' repair, landmarks and align parts and ``motion.h5``, as the rule reads them), once per
+tree, subject and repeat, each in a fresh interpreter with one BLAS thread (as Snakemake runs a
+job), trees alternating. It prints each run's CPU and wall seconds, the work the draws shared
+(``scan2morph.refine.memo``: step -> reused, computed), and, with two trees, the largest
+difference of every output dataset between them over that dataset's largest value. ``--profile
+N`` adds the N functions with the most CPU of their own (cProfile) of each tree's first run.
+
+Measured (2026-12-04, the default config's run, 2 cores shared with other jobs at a load of
+6-7; the stage's CPU s, then wall s, two runs each, before -> after the draws shared their work
+and OpenCV kept to the job's one thread): synth01 17.4, 17.8 -> 15.0, 15.6 (wall 23.7, 24.0 ->
+18.7, 19.5); synth02 47.0, 48.3 -> 38.7, 39.2 (56.6, 68.3 -> 45.5, 46.6); synth03 25.3, 23.5 ->
+22.5, 21.3 (36.3, 31.9 -> 28.4, 26.3); synth04 12.2, 11.7 -> 9.8, 9.8 (17.6, 15.8 -> 12.7,
+11.3). Every output identical, bit for bit.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
+import pickle
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -117,5 +140,108 @@ def check_error_bar(subject, store, run, takes, truths, sigma, floor):
         print(f"{v:>8} {bar:10.3f} {truth:8.3f} {truth / bar:6.2f}")
 
 
+#: The stage's job, run in a fresh interpreter: ``run subject out profile`` -> JSON on stdout.
+CHILD = """
+import cProfile, io, json, logging, pickle, pstats, sys, time
+from pathlib import Path
+import yaml
+from scan2morph.stages import Subject, motion_noise
+from scan2morph.store import read_part, read_parts
+from scan2morph.template import load_template
+
+run, subject, out, top = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), int(sys.argv[4])
+shared = []
+class Counts(logging.Handler):
+    def emit(self, record):
+        if "shared by the draws" in record.getMessage():
+            shared.append(record.getMessage().split("): ", 1)[-1])
+logging.getLogger("scan2morph").addHandler(Counts())
+logging.getLogger("scan2morph").setLevel(logging.INFO)
+config = yaml.safe_load((run / "config" / "config.yaml").read_text())
+rows = config["synthetic"]["takes"]
+kinds, labels = {t["take"]: t["kind"] for t in rows}, {t["take"]: t["label"] for t in rows}
+takes = [t for t, k in kinds.items() if k in ("neutral", "viseme")]
+res = run / "results" / subject
+files = [res / "takes" / t / f"{p}.h5" for t in takes for p in ("repair", "landmarks")]
+files += [res / "takes" / t / "align.h5" for t in takes if kinds[t] == "viseme"]
+data = read_parts(files) | read_part(res / "motion.h5")
+template = load_template(run / "resources" / "template.npz")
+params = motion_noise.Params.from_config(config)
+profile = cProfile.Profile(time.process_time) if top else None
+c0, w0 = time.process_time(), time.perf_counter()
+if profile:
+    profile.enable()
+part = motion_noise.run(template, Subject(subject, kinds, labels), data, params)
+if profile:
+    profile.disable()
+cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+out.write_bytes(pickle.dumps(part.datasets))
+text = io.StringIO()
+if profile:
+    pstats.Stats(profile, stream=text).sort_stats("tottime").print_stats(top)
+print(json.dumps({"cpu_s": cpu, "wall_s": wall, "shared": shared, "profile": text.getvalue()}))
+"""
+
+
+def stage_run(tree: Path, run: Path, subject: str, out: Path, top: int = 0) -> dict:
+    """One run of the stage with ``tree``'s library (its ``src``), in a fresh interpreter with
+    one BLAS thread: CPU and wall seconds, the shared-work counts and the profile's table."""
+    env = dict(os.environ, PYTHONPATH=str(tree / "src"))
+    for name in ("OMP", "OPENBLAS", "MKL", "GOTO", "NUMEXPR"):
+        env[f"{name}_NUM_THREADS"] = "1"
+    cmd = [sys.executable, "-c", CHILD, str(run), subject, str(out), str(top)]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def largest_difference(a: Path, b: Path) -> float:
+    """Largest absolute difference of two runs' float datasets over each one's largest value
+    (NaN where one has a value and the other none counts as infinite)."""
+    x, y = pickle.loads(a.read_bytes()), pickle.loads(b.read_bytes())
+    worst = 0.0 if x.keys() == y.keys() else np.inf
+    for key in x.keys() & y.keys():
+        p, q = np.asarray(x[key]), np.asarray(y[key])
+        if p.dtype.kind not in "fi" or not p.size:
+            worst = max(worst, 0.0 if np.array_equal(p, q) else np.inf)
+            continue
+        if p.shape != q.shape or not np.array_equal(np.isnan(p), np.isnan(q)):
+            return np.inf
+        scale = float(np.nanmax(np.abs(p))) or 1.0
+        worst = max(worst, float(np.nanmax(np.abs(p - q))) / scale)
+    return worst
+
+
+def stage_main(args) -> int:
+    """``--stage``: the stage's CPU and wall time per tree and subject, and the trees' outputs."""
+    trees = [Path(t).resolve() for t in (args.trees or [ROOT])]
+    work = Path(tempfile.mkdtemp(prefix="bench_motion_noise_"))
+    print(
+        f"{'subject':8} {'tree':>5} {'run':>3} {'cpu s':>7} {'wall s':>7}  shared (reused, computed)"
+    )
+    for subject in args.subjects or ["synth01", "synth02", "synth03", "synth04"]:
+        for rep in range(args.repeat):
+            for k, tree in enumerate(trees):
+                out = work / f"{subject}-{k}.pkl"
+                top = args.profile if rep == 0 else 0
+                r = stage_run(tree, Path(args.stage).resolve(), subject, out, top)
+                print(f"{subject:8} {k:>5} {rep:>3} {r['cpu_s']:7.2f} {r['wall_s']:7.2f}  ", end="")
+                print(r["shared"][0] if r["shared"] else "-")
+                if r["profile"]:
+                    print(r["profile"])
+        if len(trees) == 2:
+            diff = largest_difference(work / f"{subject}-0.pkl", work / f"{subject}-1.pkl")
+            print(f"{subject}: largest difference of the trees' outputs {diff:.3g} of their values")
+    return 0
+
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:] or ["synth01", "synth02"]))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("subjects", nargs="*")
+    parser.add_argument("--stage", metavar="RUN", help="time the stage on this finished run")
+    parser.add_argument("--trees", nargs=2, metavar=("OLD", "NEW"))
+    parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--profile", type=int, default=0, metavar="N")
+    cli = parser.parse_args()
+    if cli.stage:
+        sys.exit(stage_main(cli))
+    sys.exit(main(cli.subjects or ["synth01", "synth02"]))

@@ -22,8 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
 from scan2morph.refine.template_space import pull_back, template_grid
+from scan2morph.template.tps import TPS
 
 __all__ = [
     "Channel",
@@ -225,24 +227,16 @@ def refine_channels(
     """
     neutral_map, take_map = maps
     v2 = np.asarray(vertices2d, dtype=np.float64)
-    pn = np.asarray(neutral_map(v2), dtype=np.float64)
-    pt = np.asarray(take_map(v2), dtype=np.float64)
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    ratio = np.linalg.norm(v2[e[:, 0]] - v2[e[:, 1]], axis=1) / np.linalg.norm(
-        pn[e[:, 0]] - pn[e[:, 1]], axis=1
-    )
-    step = float(np.median(ratio[np.isfinite(ratio)]))  # template units per neutral pixel
-    grid = template_grid(v2, faces, step, int(np.ceil(params.margin_px)))
-    where = grid.points().reshape(-1, 2)
-    shape = (*grid.shape, 2)
-    at_neutral = np.asarray(neutral_map(where)).reshape(shape)
-    references = [
-        pull_back(c.neutral_xyz if isinstance(c, SurfaceChannel) else c.neutral, at_neutral)
-        for c in channels
+    faces = np.asarray(faces)
+    pt = _warped(take_map, v2)
+    neutral_images = [
+        c.neutral_xyz if isinstance(c, SurfaceChannel) else c.neutral for c in channels
     ]
-    mapped = np.asarray(take_map(where), dtype=np.float64).reshape(shape)
-    images = [r for r, c in zip(references, channels, strict=True) if isinstance(c, Channel)]
-    inside = grid.domain & np.all([np.isfinite(r) for r in images], axis=0)
+    grid, references, inside = _neutral_side(
+        v2, faces, neutral_map, neutral_images, channels, params
+    )
+    where = grid.points().reshape(-1, 2)
+    mapped = _warped(take_map, where).reshape((*grid.shape, 2))
     g_vertices = grid.to_grid(v2)
     anchor_rc = np.rint(g_vertices[np.asarray(anchors, dtype=np.int64)][:, ::-1]).astype(np.int64)
     w_data = 1.0 / params.flow_precision_px**2
@@ -265,6 +259,43 @@ def refine_channels(
         "confident_share": float(np.mean(vmeasured > 0.5)),
         "median_correction_px": float(np.median(np.linalg.norm(corr, axis=1))),
     }
+
+
+def _warped(fit_map: Callable, points: np.ndarray) -> np.ndarray:
+    """``fit_map(points)`` as float64, computed once per spline and points in a
+    :func:`~scan2morph.refine.memo.sharing` scope (a fit's thin-plate spline)."""
+    if not isinstance(fit_map, TPS):
+        return np.asarray(fit_map(points), dtype=np.float64)
+    parts = (fit_map.centres, fit_map.weights, fit_map.affine, points)
+    return shared("tps", parts, lambda: np.asarray(fit_map(points), dtype=np.float64))
+
+
+def _neutral_side(v2, faces, neutral_map, neutral_images, channels, params: RefineParams):
+    """What :func:`refine_channels` measures against, from the neutral alone (the same for
+    every take refined against one fit of the neutral): ``(grid, references, inside)``, the
+    template grid at the neutral's pixel spacing, each channel's neutral image pulled back onto
+    it and the grid points inside the domain where every image channel has a value."""
+
+    def compute():
+        pn = _warped(neutral_map, v2)
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        ratio = np.linalg.norm(v2[e[:, 0]] - v2[e[:, 1]], axis=1) / np.linalg.norm(
+            pn[e[:, 0]] - pn[e[:, 1]], axis=1
+        )
+        step = float(np.median(ratio[np.isfinite(ratio)]))  # template units per neutral pixel
+        grid = template_grid(v2, faces, step, int(np.ceil(params.margin_px)))
+        where = grid.points().reshape(-1, 2)
+        at_neutral = _warped(neutral_map, where).reshape((*grid.shape, 2))
+        references = [pull_back(image, at_neutral) for image in neutral_images]
+        images = [r for r, c in zip(references, channels, strict=True) if isinstance(c, Channel)]
+        inside = grid.domain & np.all([np.isfinite(r) for r in images], axis=0)
+        return grid, references, inside
+
+    if not (active() and isinstance(neutral_map, TPS)):
+        return compute()
+    kinds = tuple(isinstance(c, Channel) for c in channels)
+    parts = (neutral_map.centres, neutral_map.weights, neutral_map.affine, v2, faces)
+    return shared("neutral", (*parts, params.margin_px, kinds, *neutral_images), compute)
 
 
 def _measure(channels, references, mapped, inside, params: RefineParams):

@@ -28,6 +28,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.sparse.linalg import splu
 
 from scan2morph.errors import InputError
+from scan2morph.refine.memo import shared
 
 #: Coarsest finest-level of the flow's search (:func:`measure_flow`'s ``level``): 2 is a quarter
 #: of the resolution; OpenCV quietly searches a small grid at a finer level than asked.
@@ -120,7 +121,9 @@ def measure_flow(
         raise InputError(
             "refine", f"refine.flow_level: expected an integer 0..{MAX_LEVEL}, got {level!r}"
         )
-    hp_r, rms_r = high_pass(reference, sigma)
+    # the reference is the same in every round of a refinement (and, in a sharing scope, for
+    # every take refined against one fit of the neutral)
+    hp_r, rms_r = shared("high_pass", (reference, sigma), lambda: high_pass(reference, sigma))
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
     contrast = float(np.median(rms_r[both])) if both.any() else 0.0

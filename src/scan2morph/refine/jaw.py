@@ -40,6 +40,7 @@ from scan2morph.align import (
 from scan2morph.align.noise import robust_rms
 from scan2morph.errors import InputError, require_numbers
 from scan2morph.geometry import surface_normals
+from scan2morph.refine.memo import shared
 from scan2morph.scan.depth_cleanup import smooth_depth
 from scan2morph.template.sample import range_pixels
 
@@ -447,7 +448,11 @@ def _scan_surface(xyz, mapped, transform, placed, reach, source):
     pad = int(np.ceil(3 * NORMAL_SIGMA_PX)) + 1
     r0, c0 = max(rows.min() - pad, 0), max(cols.min() - pad, 0)
     window = xyz[r0 : rows.max() + pad + 1, c0 : cols.max() + pad + 1]
-    normals = surface_normals(smooth_depth(window, NORMAL_SIGMA_PX, NORMAL_JUMP_MM))
+    normals = shared(  # a window the draws of a click-noise error bar share, once
+        "window_normals",
+        (window,),
+        lambda: surface_normals(smooth_depth(window, NORMAL_SIGMA_PX, NORMAL_JUMP_MM)),
+    )
     have = np.isfinite(window).all(axis=2) & np.isfinite(normals).all(axis=2)
     if have.sum() <= MIN_VERTICES:
         return None, None, None

@@ -58,6 +58,7 @@ from scan2morph.refine.lip_profile import (
     register_redness,
     vermilion_edge,
 )
+from scan2morph.refine.memo import shared
 from scan2morph.scan.view import scanner_view
 from scan2morph.template.regions import Lip
 
@@ -318,7 +319,7 @@ def _lip_image(color, xyz, what: str, rules: tuple, source: str) -> LipImage:
     """The neutral's or the take's (``what``) image: the redness of ``color``, the range image
     ``xyz`` (checked pixel to pixel with it), its scanner's view for the depth-step rule (when
     ``rules`` = ``(min_weight, max_slope_deg)`` has one)."""
-    red = redness(color, source)
+    red = shared("redness", (np.asarray(color),), lambda: redness(color, source))
     shape = np.shape(xyz)
     if len(shape) != 3 or shape[2] != 3 or shape[:2] != red.shape:
         raise InputError(
@@ -340,15 +341,24 @@ def _place_all(lip: Lip, v2, points: tuple, images: tuple, params: LipParams) ->
     (pn, pt), (img_n, img_t) = points, images
     columns = lip.columns(v2)
     border_n, border_t = lip.border_points(v2, pn), lip.border_points(v2, pt)
+    lines = [
+        _Line(pn[lip.inner[c]], border_n[c], pn[v])
+        for v, c in zip(lip.vertices, columns, strict=True)
+    ]
+    # the neutral's profiles depend on the neutral alone: once for every take of a draw
+    parts = (lip.vertices, lip.inner, columns, pn, img_n.red, img_n.xyz, img_n.min_weight)
+    profiles = shared(
+        "lip_profiles",
+        (*parts, img_n.max_slope_deg, params.search, params.min_contrast),
+        lambda: [_neutral_profile(line, img_n, params) for line in lines],
+    )
     targets = np.full((len(lip.vertices), 2), np.nan)
     contrasts = []
     reasons: dict[str, int] = {}
     for k, (v, c) in enumerate(zip(lip.vertices, columns, strict=True)):
         i = lip.inner[c]
-        found = _place(
-            _Line(pn[i], border_n[c], pn[v]), _Line(pt[i], border_t[c], pt[v]), img_n, img_t,
-            params,
-        )  # fmt: skip
+        take = _Line(pt[i], border_t[c], pt[v])
+        found = _place(lines[k], take, profiles[k], img_t, params)
         if isinstance(found, str):
             reasons[found] = reasons.get(found, 0) + 1
         else:
@@ -434,18 +444,12 @@ class _Line:
         return bool(finite and np.linalg.norm(self.direction) >= MIN_HEIGHT_PX)
 
 
-def _place(neutral: _Line, take: _Line, img_n: LipImage, img_t: LipImage, params: LipParams):
-    """One lip vertex: its place in the take (2,) px and the border's redness step (the lesser
-    of the two images'), or why not (one of the reasons above).
-
-    The vertex's skin point lies at a signed length from the vermilion border along the
-    neutral's surface. The border is found in each image (:func:`~scan2morph.refine.lip_profile.vermilion_edge`), and the
-    take's is then registered to the neutral's: the redness around it, as a function of the
-    length along the surface, is matched (the shift of best correlation), so that a border
-    whose fall is broad or uneven is found at the same skin in both. In the take the vertex
-    goes to its length from the border; a flow within ``stretch`` of that length (plus
-    :data:`FLOOR_MM`) stays, one beyond goes to the nearest length allowed."""
-    if not (neutral.ok() and take.ok()):
+def _neutral_profile(neutral: _Line, img_n: LipImage, params: LipParams):
+    """A lip vertex's profile in the neutral (:func:`_place`'s first half): ``(t, redness,
+    arc length from the border, the vertex's length, the lip's length, the border's redness
+    step)``, or why the vertex is not placed (:data:`NO_LINE`, :data:`NO_BORDER`,
+    :data:`NO_SURFACE`)."""
+    if not neutral.ok():
         return NO_LINE
     end = 1.0 + BEYOND
     t, r, xyz, _ = lip_profile(
@@ -459,6 +463,27 @@ def _place(neutral: _Line, take: _Line, img_n: LipImage, img_t: LipImage, params
     lip_length = -np.interp(0.0, t, arc_n)
     if not (np.isfinite(length) and np.isfinite(lip_length) and lip_length > 0.0):
         return NO_SURFACE
+    return t, r, arc_n, length, lip_length, edge[1]
+
+
+def _place(neutral: _Line, take: _Line, profile, img_t: LipImage, params: LipParams):
+    """One lip vertex: its place in the take (2,) px and the border's redness step (the lesser
+    of the two images'), or why not (one of the reasons above). ``profile`` is the vertex's
+    :func:`_neutral_profile`.
+
+    The vertex's skin point lies at a signed length from the vermilion border along the
+    neutral's surface. The border is found in each image (:func:`~scan2morph.refine.lip_profile.vermilion_edge`), and the
+    take's is then registered to the neutral's: the redness around it, as a function of the
+    length along the surface, is matched (the shift of best correlation), so that a border
+    whose fall is broad or uneven is found at the same skin in both. In the take the vertex
+    goes to its length from the border; a flow within ``stretch`` of that length (plus
+    :data:`FLOOR_MM`) stays, one beyond goes to the nearest length allowed."""
+    if not (neutral.ok() and take.ok()):
+        return NO_LINE
+    if isinstance(profile, str):
+        return profile
+    t, r, arc_n, length, lip_length, contrast = profile
+    end = 1.0 + BEYOND
     # the take's profile reaches max_shift further at both ends (and, for a lip that may
     # shorten, a crease's width further towards the slit, to tell a crease from an open mouth)
     past = CREASE_PX / np.linalg.norm(take.direction) if params.shrink > 0.0 else 0.0
@@ -483,7 +508,7 @@ def _place(neutral: _Line, take: _Line, img_n: LipImage, img_t: LipImage, params
         ends = np.flatnonzero(np.isfinite(arc_t))[0]
         crease = int(np.ceil(CREASE_PX / (np.linalg.norm(take.direction) * (t2[1] - t2[0]))))
         if ends == 0 or np.isfinite(xyz2[max(ends - crease, 0) : ends]).all(axis=1).any():
-            return take.at, min(edge[1], edge_t[1])
+            return take.at, min(contrast, edge_t[1])
         reach = shift - arc_t[ends]
         length *= float(np.clip(reach / lip_length, 1.0 - params.shrink, 1.0))
     target = length + shift
@@ -496,4 +521,4 @@ def _place(neutral: _Line, take: _Line, img_n: LipImage, img_t: LipImage, params
     place = float(np.interp(goal, arc_t[ok], t2[ok]))
     if abs(place - take.t) > params.max_shift:  # the correction, in shares of the lip's height
         return TOO_FAR
-    return take.origin + place * take.direction, min(edge[1], edge_t[1])
+    return take.origin + place * take.direction, min(contrast, edge_t[1])

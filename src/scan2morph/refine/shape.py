@@ -17,6 +17,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from scan2morph.errors import InputError, require_numbers
+from scan2morph.refine.memo import shared
 
 #: Shape images are in 1/m (curvature in 1/mm times this): the flow's grey-level settings
 #: (``noise``) then read as curvature in 1/m.
@@ -164,6 +165,12 @@ def shape_image(xyz: np.ndarray, sigma_mm: float, source: str = "range image") -
     xyz = np.asarray(xyz, dtype=np.float64)
     if xyz.ndim != 3 or xyz.shape[-1] != 3:
         raise InputError(source, f"xyz: expected an (H, W, 3) range image, got {xyz.shape}")
+    # a take's shape image is the same in every click-noise draw (computed once in a scope)
+    return shared("shape_image", (xyz, float(sigma_mm)), lambda: _curvature(xyz, sigma_mm, source))
+
+
+def _curvature(xyz: np.ndarray, sigma_mm: float, source: str) -> np.ndarray:
+    """:func:`shape_image` of a checked (H, W, 3) float64 range image."""
     spacing = pixel_spacing(xyz)
     if not np.isfinite(spacing) or spacing <= 0:
         raise InputError(source, "xyz: no two neighbouring pixels with data to measure a shape")

@@ -5,7 +5,8 @@ click-noise error bar of each viseme's motion (refits with perturbed landmarks; 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +14,7 @@ import pandas as pd
 
 from scan2morph.align import transform_points
 from scan2morph.motion.uncertainty import DrawRecipe, subject_motion_noise
+from scan2morph.refine.memo import sharing
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
@@ -93,6 +95,21 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
     return refiner
 
 
+@contextmanager
+def opencv_threads(n: int) -> Iterator[None]:
+    """OpenCV's worker threads (the refinement's optical flow and remaps) set to ``n`` for a
+    while. A job has one core (Snakemake's ``threads``); OpenCV's own second thread made the
+    flow take a third more CPU for the same numbers (bit for bit: each thread works a stripe)."""
+    import cv2
+
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(int(n))
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(before)
+
+
 def run(
     template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
@@ -124,9 +141,13 @@ def run(
     if params.refine is not None:
         refiner = _refiner(template, subject, data, params.refine)
     recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
-    datasets, result, noise = subject_motion_noise(
-        template, data, subject.neutral, subject.visemes, fiducials, recipe, noise_cfg, subject.name
-    )
+    # the draws' common work (the neutral's side, each take's) once; OpenCV on the job's one core
+    with sharing() as counts, opencv_threads(1):
+        datasets, result, noise = subject_motion_noise(
+            template, data, subject.neutral, subject.visemes, fiducials, recipe, noise_cfg,
+            subject.name,
+        )  # fmt: skip
+    log.info("%s: work shared by the draws (step: [reused, computed]): %s", subject.name, counts)
     log.info("%s: click noise %s", subject.name, noise["note"])
     for take, name, r in noise["misclicks"]:
         log.warning(

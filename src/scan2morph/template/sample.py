@@ -17,6 +17,7 @@ come from the pixel position (color and range are pixel to pixel).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,13 +54,24 @@ def _partial_weights(fx: np.ndarray, fy: np.ndarray, have: np.ndarray) -> np.nda
     pattern = have.T @ (1 << np.arange(4))
     for code in np.unique(pattern):
         rows = np.flatnonzero(pattern == code)
-        used = np.flatnonzero((int(code) >> np.arange(4)) & 1)
+        used, centre, solve = _corner_fit(int(code))
         if not len(used):
             continue
-        centre = _CORNERS[used].mean(axis=0)
-        design = np.column_stack([np.ones(len(used)), _CORNERS[used] - centre])
         at = np.column_stack([np.ones(len(rows)), fx[rows] - centre[0], fy[rows] - centre[1]])
-        out[np.ix_(used, rows)] = (at @ np.linalg.pinv(design)).T
+        out[np.ix_(used, rows)] = (at @ solve).T
+    return out
+
+
+@functools.cache
+def _corner_fit(code: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The corners with data of a bit mask ``code`` (:func:`_partial_weights`), their centre
+    (2,) and the pseudo-inverse (3, k) of their affine design (read-only): kept per mask."""
+    used = np.flatnonzero((code >> np.arange(4)) & 1)
+    centre = _CORNERS[used].mean(axis=0) if len(used) else np.zeros(2)
+    design = np.column_stack([np.ones(len(used)), _CORNERS[used] - centre])
+    out = (used, centre, np.linalg.pinv(design) if len(used) else np.zeros((3, 0)))
+    for a in out:
+        a.setflags(write=False)
     return out
 
 
