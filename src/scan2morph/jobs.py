@@ -44,7 +44,8 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
         force=True,
     )
     try:
-        _profiled(func, log_path)
+        with opencv_threads(job_threads()):
+            _profiled(func, log_path)
     except InputError as exc:
         log.error("%s", exc if isinstance(exc, OutputError) else f"bad input: {exc}")
         logging.shutdown()
@@ -66,6 +67,42 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
 #: and CPU time (``{log name}.json``), for ``benchmarks/bench_profile.py`` and
 #: ``benchmarks/bench_subject_jobs.py``.
 PROFILE_ENV = "SCAN2MORPH_PROFILE"
+
+
+def job_threads() -> int | None:
+    """The job's threads as Snakemake gives them (it sets ``OMP_NUM_THREADS`` to a job's
+    ``threads``), or None outside a job."""
+    n = os.environ.get("OMP_NUM_THREADS", "")
+    return int(n) if n.isdigit() and int(n) > 0 else None
+
+
+@contextmanager
+def opencv_threads(n: int | None) -> Iterator[None]:
+    """OpenCV's worker threads set to ``n`` for a while (None: left as they are).
+
+    Snakemake limits a job's BLAS and OpenMP threads to its ``threads`` but not OpenCV's own
+    pool, which takes every core: on a one-thread job its second thread made the refinement's
+    optical flow cost a third more CPU for the same numbers (bit for bit: each thread works a
+    stripe of the image). An OpenCV imported later reads ``OPENCV_FOR_THREADS_NUM``.
+    """
+    if n is None:
+        yield
+        return
+    env = os.environ.get("OPENCV_FOR_THREADS_NUM")
+    os.environ["OPENCV_FOR_THREADS_NUM"] = str(n)
+    cv2 = sys.modules.get("cv2")
+    before = cv2.getNumThreads() if cv2 is not None else None
+    if cv2 is not None:
+        cv2.setNumThreads(int(n))
+    try:
+        yield
+    finally:
+        if cv2 is not None:
+            cv2.setNumThreads(before)
+        if env is None:
+            os.environ.pop("OPENCV_FOR_THREADS_NUM", None)
+        else:
+            os.environ["OPENCV_FOR_THREADS_NUM"] = env
 
 
 def _profiled(func: Callable[[], object], log_path: str | Path | None) -> None:

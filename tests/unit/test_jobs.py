@@ -91,3 +91,38 @@ def test_a_job_profiles_itself_when_asked(tmp_path, monkeypatch):
     monkeypatch.delenv(PROFILE_ENV)
     run_job(tmp_path / "logs" / "align" / "s1" / "too.log", busy_body)
     assert not (tmp_path / "prof" / "align-s1-too.prof").exists()
+
+
+def test_a_job_runs_opencv_on_its_own_threads_for_the_same_flow(tmp_path, monkeypatch):
+    """Snakemake gives a job OMP_NUM_THREADS = its threads; the job runs OpenCV's pool on as
+    many (not on every core), and the refinement's optical flow is the same, bit for bit;
+    OpenCV's setting comes back afterwards. Outside a job (no OMP_NUM_THREADS) nothing is set."""
+    import cv2
+    import numpy as np
+    from scipy.ndimage import gaussian_filter
+
+    from scan2morph.jobs import job_threads, run_job
+    from scan2morph.refine.flow import measure_flow
+
+    noise = gaussian_filter(np.random.default_rng(2).standard_normal((200, 240)), 1.5)
+    reference = 150.0 + 25.0 * noise / noise.std()
+    moving = np.roll(reference, 2, axis=1) + np.roll(reference, 1, axis=0) * 0.1
+    before = cv2.getNumThreads()
+    plain = measure_flow(reference, moving)
+    seen = {}
+
+    def body():
+        seen["threads"] = cv2.getNumThreads()
+        seen["env"] = __import__("os").environ.get("OPENCV_FOR_THREADS_NUM")
+        seen["flow"] = measure_flow(reference, moving)
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    monkeypatch.delenv("OPENCV_FOR_THREADS_NUM", raising=False)
+    run_job(tmp_path / "job.log", body)
+    assert seen["threads"] == 1 and seen["env"] == "1"
+    assert cv2.getNumThreads() == before
+    for got, want in zip(seen["flow"][:2], plain[:2], strict=True):
+        np.testing.assert_array_equal(got, want)
+    assert (plain[1] > 0).mean() > 0.5  # the flow measured something
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert job_threads() is None

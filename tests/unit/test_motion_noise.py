@@ -277,25 +277,3 @@ def test_a_refiners_confidence_shortens_the_smoothing_of_the_draws(template, tak
     assert_allclose(sure["motion"], unsmoothed, atol=1e-12)
     assert np.abs(unsure["motion"] - unsmoothed).max() > 0.01  # mm: smoothed
 
-
-def test_the_stage_runs_opencv_on_one_thread_for_the_same_flow():
-    """The stage's draws run OpenCV on the job's one core: the flow is the same, bit for bit,
-    and OpenCV's own setting comes back afterwards."""
-    import cv2
-    from scipy.ndimage import gaussian_filter
-
-    from scan2morph.refine.flow import measure_flow
-    from scan2morph.stages.motion_noise import opencv_threads
-
-    noise = gaussian_filter(np.random.default_rng(2).standard_normal((200, 240)), 1.5)
-    reference = 150.0 + 25.0 * noise / noise.std()
-    moving = np.roll(reference, 2, axis=1) + np.roll(reference, 1, axis=0) * 0.1
-    before = cv2.getNumThreads()
-    plain = measure_flow(reference, moving)
-    with opencv_threads(1):
-        assert cv2.getNumThreads() == 1
-        alone = measure_flow(reference, moving)
-    assert cv2.getNumThreads() == before
-    assert_array_equal(alone[0], plain[0])
-    assert_array_equal(alone[1], plain[1])
-    assert (plain[1] > 0).mean() > 0.5  # the flow measured something

@@ -5,8 +5,7 @@ click-noise error bar of each viseme's motion (refits with perturbed landmarks; 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,21 +94,6 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
     return refiner
 
 
-@contextmanager
-def opencv_threads(n: int) -> Iterator[None]:
-    """OpenCV's worker threads (the refinement's optical flow and remaps) set to ``n`` for a
-    while. A job has one core (Snakemake's ``threads``); OpenCV's own second thread made the
-    flow take a third more CPU for the same numbers (bit for bit: each thread works a stripe)."""
-    import cv2
-
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(int(n))
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(before)
-
-
 def run(
     template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
@@ -141,8 +125,8 @@ def run(
     if params.refine is not None:
         refiner = _refiner(template, subject, data, params.refine)
     recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
-    # the draws' common work (the neutral's side, each take's) once; OpenCV on the job's one core
-    with sharing() as counts, opencv_threads(1):
+    # the draws' common work (the neutral's side, each take's) once
+    with sharing() as counts:
         datasets, result, noise = subject_motion_noise(
             template, data, subject.neutral, subject.visemes, fiducials, recipe, noise_cfg,
             subject.name,
