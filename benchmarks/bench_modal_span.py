@@ -101,6 +101,10 @@ VARIANTS: dict[str, dict] = {
         "mimic_mass_factor": 1.5,
         "mimic_foundation_factor": 0.5,
     },
+    # over the skin preset's mimic mass 1.4: neither leaves less on every expression (softer:
+    # synth01 frown1 +0.15 at K = 25; the foundation: synth03 frown1 +0.04 at K = 25)
+    "skin_mimic_tension_0.8": {"preset": "skin", "mimic_tension_factor": 0.8},
+    "skin_mimic_foundation_0.8": {"preset": "skin", "mimic_foundation_factor": 0.8},
     "skin_still_0.5": {"preset": "skin", "still_mm": 0.5},  # tied and clamped: less skin
     "skin_still_2": {"preset": "skin", "still_mm": 2.0},  # more skin
     "skin_foundation_0.003": {"preset": "skin", "foundation_n_per_mm3": 0.003},
