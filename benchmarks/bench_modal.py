@@ -66,7 +66,7 @@ def cap_mesh(n: int, radii=(75.0, 95.0, 60.0)):
 def case_model(vertices, faces, physics: str):
     """K, M, the fixed DOFs and the shift of the cap: the paper's clamped steel shell, or the
     ``skin`` preset's model (tensioned skin on its foundation, free rim, tied on the upper
-    half; as the preset says, a membrane or a soft shell)."""
+    half, the lower half its mimic skin; as the preset says, a membrane or a soft shell)."""
     import numpy as np
 
     from scan2morph.modal import ModalParams, assemble, boundary_vertices, fixed_dofs
@@ -79,6 +79,7 @@ def case_model(vertices, faces, physics: str):
         return k_mat, m_mat, fixed_dofs(boundary_vertices(faces), "all"), 0.0
     p = PRESETS["skin"]
     keys = ("tension_n_per_mm", "foundation_n_per_mm3", "tether_n_per_mm3")
+    mimic = ("mimic_tension_factor", "mimic_foundation_factor", "mimic_mass_factor")
     params = ModalParams(
         thickness_mm=p["thickness_mm"],
         material=ShellMaterial(
@@ -89,10 +90,11 @@ def case_model(vertices, faces, physics: str):
         ),
         mass=p["mass"],
         tether_normal_n_per_mm3=p["tether_normal_n_per_mm3"],
-        **{key: p[key] for key in keys},
+        **{key: p[key] for key in keys + mimic},
     )
     thickness = np.full(len(faces), float(p["thickness_mm"]))
-    k_mat, m_mat = _matrices(vertices, faces, thickness, params, vertices[:, 1] > 0, "cap")
+    regions = (vertices[:, 1] > 0, (vertices[:, 1] <= 0).astype(float))  # tied; mimic skin
+    k_mat, m_mat = _matrices(vertices, faces, thickness, params, regions, "cap")
     rotations = not getattr(params, "has_shell", True)  # a membrane has none
     fixed = fixed_dofs(np.full(len(vertices), rotations), "rotations" if rotations else "all")
     return k_mat, m_mat, fixed, _free_shift(k_mat, m_mat)

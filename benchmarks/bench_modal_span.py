@@ -81,6 +81,34 @@ VARIANTS: dict[str, dict] = {
     "skin_soft_shell": {"preset": "skin", "youngs_modulus_mpa": 0.01},  # skin until the membrane
     "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
     "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},
+    # The skin varying over the face (the mimic skin of scan2morph.modal.skin), measured with
+    # brows1 and frown1 in the cohort against skin before it (uniform): the share left of the
+    # worst expression moves by -0.14 (synth01 frown1, K = 25) to +0.08 at K = 25 / 50 / 100,
+    # with the mimic lines round the mouth, cheeks and brows only: heavier mimic skin (mass
+    # 2, 4) helps the smiles and sad faces at K = 50 (synth04 sad1 0.46 -> 0.39) and hurts the
+    # brow expressions (synth02 brows1 +0.08); softer (tension 0.5) is worse at K = 25 (up to
+    # +0.16); a softer foundation there (0.3) helps the brow expressions and the real smile's
+    # normal part and costs sad faces up to +0.02. With the forehead (frontalis) in the mimic
+    # skin too, mass 1.2-1.4 moves no expression by more than +0.004 and takes synth01 at
+    # K = 50 from 0.40 to 0.34 (the skin preset's mimic_mass_factor).
+    "skin_uniform": {"preset": "skin", "mimic_mass_factor": 1.0},
+    "skin_mimic_mass_2": {"preset": "skin", "mimic_mass_factor": 2.0},
+    "skin_mimic_mass_4": {"preset": "skin", "mimic_mass_factor": 4.0},
+    "skin_mimic_tension_0.5": {"preset": "skin", "mimic_tension_factor": 0.5},
+    "skin_mimic_foundation_0.3": {"preset": "skin", "mimic_foundation_factor": 0.3},
+    "skin_mimic_mass_1.5_foundation_0.5": {
+        "preset": "skin",
+        "mimic_mass_factor": 1.5,
+        "mimic_foundation_factor": 0.5,
+    },
+    # over the skin preset's mimic mass 1.4: neither leaves less on every expression (softer:
+    # synth01 frown1 +0.15 at K = 25; the foundation: synth03 frown1 +0.04 at K = 25)
+    "skin_mimic_tension_0.8": {"preset": "skin", "mimic_tension_factor": 0.8},
+    "skin_mimic_foundation_0.8": {"preset": "skin", "mimic_foundation_factor": 0.8},
+    "skin_still_0.5": {"preset": "skin", "still_mm": 0.5},  # tied and clamped: less skin
+    "skin_still_2": {"preset": "skin", "still_mm": 2.0},  # more skin
+    "skin_foundation_0.003": {"preset": "skin", "foundation_n_per_mm3": 0.003},
+    "skin_foundation_0.03": {"preset": "skin", "foundation_n_per_mm3": 0.03},
 }
 
 
@@ -183,9 +211,12 @@ def anchor_rows(subject: str, fields, valid, vertices, faces, outline) -> list[d
     return rows
 
 
-def realdata_case(data_dir: str | None = None):
+def realdata_case(template, data_dir: str | None = None):
     """The real head's face cut and its test smile (tests/unit/test_realdata.py), with the regions
-    the presets need placed by measure from the nose tip as the real-data tests place them."""
+    the presets need placed by measure from the nose tip as the real-data tests place them; the
+    mimic skin (:func:`~scan2morph.modal.skin.mimic_skin`) along the template's lines, placed
+    from the nose tip at 45 mm per template unit (the template's outer eye corners 90 mm
+    apart)."""
     sys.path[:0] = [str(REPO / "tests" / "unit"), str(REPO)]
     import test_realdata
     import trimesh
@@ -206,7 +237,30 @@ def realdata_case(data_dir: str | None = None):
     f = np.asarray(part.faces, dtype=np.int64)
     x, y = v[:, 0] - head.nose[0], v[:, 1] - head.nose[1]
     stable = (y > 55) | ((np.abs(x) < 8) & (y > 10) & (y < 45)) | ((np.abs(x) > 50) & (y > 10))
-    return {"vertices": v, "faces": f, "smile": _smile(x, y), "upper": y > 0, "stable": stable}
+    mimic = _mimic_by_measure(template, np.column_stack([x, y]))
+    return {
+        "vertices": v,
+        "faces": f,
+        "smile": _smile(x, y),
+        "upper": y > 0,
+        "stable": stable,
+        "mimic": mimic,
+    }
+
+
+def _mimic_by_measure(template, xy_mm, mm_per_unit: float = 45.0):
+    """The template's mimic lines in mm from the nose tip (x right, y up) and their weight."""
+    from scan2morph.modal.skin import MIMIC_LINES, mimic_weight
+
+    tv = np.asarray(template.vertices)[:, :2]
+    tip = tv[template.named["nose_tip"]]
+
+    def mm(name):
+        d = tv[template.named[name]] - tip
+        return [-d[0] * mm_per_unit, -d[1] * mm_per_unit]  # canonical: x image-right, y down
+
+    lines = [(np.array([mm(n) for n in names]), w * mm_per_unit) for names, w in MIMIC_LINES]
+    return mimic_weight(xy_mm, lines)
 
 
 def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
@@ -226,7 +280,17 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     # no takes say which skin is still: the stable face, placed by measure, for "still" too
     tethered = real["stable"] if params.tether_region in ("still", "stable") else None
     t0 = time.perf_counter()
-    basis = modal_basis(v, f, params.modal, real["upper"], fixed=fixed, tethered=tethered)
+    m = params.modal
+    soft = (m.mimic_tension_factor, m.mimic_foundation_factor, m.mimic_mass_factor) != (1, 1, 1)
+    basis = modal_basis(
+        v,
+        f,
+        params.modal,
+        real["upper"],
+        fixed=fixed,
+        tethered=tethered,
+        mimic=real["mimic"] if soft else None,
+    )
     seconds = time.perf_counter() - t0
     normals = vertex_normals(v, f)
     where = np.ones(len(v), bool)
@@ -302,7 +366,11 @@ def main() -> None:
         for name in args.configs:
             rows += subject_rows(case, cfg, name, VARIANTS[name])
     if args.realdata:
-        real = realdata_case(args.data)
+        from scan2morph.template import load_template
+
+        real = realdata_case(
+            load_template(Path(args.run) / "resources" / "template.npz"), args.data
+        )
         rim_fields = {"smile": real["smile"]}
         from scan2morph.modal.fem import boundary_vertices
 

@@ -23,11 +23,10 @@ from scan2morph.modal.basis import vertex_orthonormal
 from scan2morph.modal.fem import (
     assemble,
     boundary_vertices,
-    cotangent_laplacian,
     face_areas,
     membrane_mass,
-    skin_stiffness,
 )
+from scan2morph.modal.skin import cotangent_laplacian, skin_stiffness
 from scan2morph.modal.span import (
     laplace_beltrami,
     per_axis_fields,

@@ -2,7 +2,7 @@
 
 The neutral mesh becomes a finite element model (:mod:`.fem`: pyfe3d shell triangles, and for
 the ``skin`` physics a tension, a foundation and a tether on the translations,
-:func:`.fem.skin_stiffness`), held where :mod:`.boundary` says (the whole outline, its still part,
+:func:`.skin.skin_stiffness`, softer where the mimic muscles move the skin), held where :mod:`.boundary` says (the whole outline, its still part,
 or nowhere); its lowest natural modes (:mod:`.eigen`, :mod:`.basis`) form a mass-orthonormal basis
 in which expression displacement fields get their coordinates (:mod:`.project`; their
 reconstruction error split into normal and tangential parts), optionally after inserting
@@ -18,7 +18,6 @@ from scan2morph.modal.fem import (
     assemble,
     boundary_vertices,
     fixed_dofs,
-    skin_stiffness,
     thickness_map,
 )
 from scan2morph.modal.project import (
@@ -30,6 +29,7 @@ from scan2morph.modal.project import (
     reconstruction_split,
     semantic_basis,
 )
+from scan2morph.modal.skin import mimic_skin, skin_stiffness
 
 __all__ = [
     "CoordinateStats",
@@ -40,6 +40,7 @@ __all__ = [
     "boundary_vertices",
     "coordinate_statistics",
     "fixed_dofs",
+    "mimic_skin",
     "modal_basis",
     "project",
     "reconstruct",

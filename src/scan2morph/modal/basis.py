@@ -10,7 +10,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
-from scan2morph.modal import fem
+from scan2morph.modal import fem, skin
 from scan2morph.modal.eigen import SolverOptions, solve_modes
 
 #: What the coordinates of a basis are (:attr:`ModalParams.coordinates`).
@@ -37,7 +37,7 @@ class ModalParams:
     material : fem.ShellMaterial
         Steel by default (the paper's choice; it only scales the frequencies). Young's
         modulus 0: no shell at all, a membrane whose stiffness is the skin terms' alone
-        (:func:`fem.skin_stiffness`, which must then hold it) on the translations, its mass
+        (:func:`skin.skin_stiffness`, which must then hold it) on the translations, its mass
         :func:`fem.membrane_mass`; the rotations are held (zero in every vector).
     boundary : {"clamped", "pinned"}
         Fixed vertices held in all six DOFs (paper) or in translation only.
@@ -52,7 +52,7 @@ class ModalParams:
     seed : int
         Seed of the eigensolver's random start block.
     tension_n_per_mm : float
-        Isotropic skin tension ``T``, N/mm (:func:`fem.skin_stiffness`); 0: none.
+        Isotropic skin tension ``T``, N/mm (:func:`skin.skin_stiffness`); 0: none.
     foundation_n_per_mm3 : float
         Stiffness of the tissue under the skin against normal motion, N/mm^3; 0: none.
     tether_n_per_mm3 : float
@@ -60,6 +60,14 @@ class ModalParams:
     tether_normal_n_per_mm3 : float
         The bone's resistance to normal motion on the tethered vertices, added to the
         foundation there, N/mm^3; 0: none.
+    mimic_tension_factor : float
+        Factor on the tension in the mimic skin (the ``mimic`` weight of :func:`modal_basis`,
+        :func:`skin.face_field`): below 1 the skin there is softer, its waves shorter, and the
+        lowest modes put more of their motion there. 1: uniform.
+    mimic_foundation_factor : float
+        The same for the foundation (:func:`skin.vertex_field`).
+    mimic_mass_factor : float
+        The same for a membrane's mass (its thickness); only without shell.
     coordinates : {"mass", "vertex"}
         The inner product the returned basis is orthonormal in, hence what the coordinates
         ``q = Q^T M v`` (:func:`~scan2morph.modal.project`) are: ``"mass"`` (the paper, Eq. 7)
@@ -82,6 +90,9 @@ class ModalParams:
     foundation_n_per_mm3: float = 0.0
     tether_n_per_mm3: float = 0.0
     tether_normal_n_per_mm3: float = 0.0
+    mimic_tension_factor: float = 1.0
+    mimic_foundation_factor: float = 1.0
+    mimic_mass_factor: float = 1.0
     coordinates: str = "mass"
 
     @property
@@ -156,6 +167,7 @@ def modal_basis(
     *,
     fixed: ArrayLike | None = None,
     tethered: ArrayLike | None = None,
+    mimic: ArrayLike | None = None,
     source: str = "neutral",
 ) -> ModalBasis:
     """Natural modal basis of a neutral face mesh (paper Sec. III.B).
@@ -175,6 +187,9 @@ def modal_basis(
         it, comes first as modes of (numerically) zero frequency.
     tethered : (V,) bool, optional
         Vertices whose skin is tied tangentially (``params.tether_n_per_mm3``).
+    mimic : (V,) float in [0, 1], optional
+        How much each vertex belongs to the mimic skin (:func:`skin.mimic_skin`), where the
+        ``params.mimic_*_factor`` apply; None: nowhere.
     source : str
         Label for error messages, e.g. ``"subject/take"``.
 
@@ -214,7 +229,7 @@ def modal_basis(
     if not free_model:
         _check_every_part_held(f, n_v, boundary, source)
     thickness = fem.thickness_map(f, p.thickness_mm, upper_face, p.upper_thickness_factor, source)
-    k_mat, m_mat = _matrices(v, f, thickness, p, tethered, source)
+    k_mat, m_mat = _matrices(v, f, thickness, p, (tethered, mimic), source)
     unused = np.ones(n_v, dtype=bool)
     unused[f.ravel()] = False
     fixed = boundary | unused
@@ -300,9 +315,16 @@ def vertex_orthonormal(basis: ModalBasis) -> ModalBasis:
     )
 
 
-def _matrices(v, f, thickness, p: ModalParams, tethered, source: str):
+def _matrices(v, f, thickness, p: ModalParams, regions, source: str):
     """Stiffness (shell plus the skin terms, if any; the skin terms alone for a membrane) and
-    mass of the model, N/mm and tonne."""
+    mass of the model, N/mm and tonne; ``regions``: the tethered mask and the mimic weight."""
+    tethered, mimic = regions
+    if mimic is not None:
+        mimic = np.asarray(mimic, dtype=np.float64)
+        if mimic.shape != (len(v),) or not ((mimic >= 0) & (mimic <= 1)).all():
+            raise InputError(source, f"mimic: expected ({len(v)},) weights in [0, 1]")
+    if p.has_shell and p.mimic_mass_factor != 1.0:
+        raise InputError(source, "mimic_mass_factor: only a membrane (no shell) takes it")
     if p.has_shell:
         k_mat, m_mat = fem.assemble(
             v, f, thickness, p.material, element=p.element, mass=p.mass, source=source
@@ -314,20 +336,23 @@ def _matrices(v, f, thickness, p: ModalParams, tethered, source: str):
             "to hold the membrane; all are 0",
         )
     else:
+        thickness = thickness * skin.face_field(1.0, p.mimic_mass_factor, mimic, f, "mass")
         m_mat = fem.membrane_mass(v, f, thickness, p.material.density_t_per_mm3, p.mass, source)
         k_mat = sp.csc_matrix(m_mat.shape)
     if p.has_skin:
-        skin = fem.skin_stiffness(
+        terms = skin.skin_stiffness(
             v,
             f,
-            p.tension_n_per_mm,
-            p.foundation_n_per_mm3,
+            skin.face_field(p.tension_n_per_mm, p.mimic_tension_factor, mimic, f, "tension"),
+            skin.vertex_field(
+                p.foundation_n_per_mm3, p.mimic_foundation_factor, mimic, "foundation"
+            ),
             tethered,
             p.tether_n_per_mm3,
             p.tether_normal_n_per_mm3,
             source,
         )
-        k_mat = (k_mat + skin).tocsc()
+        k_mat = (k_mat + terms).tocsc()
     return k_mat, m_mat
 
 

@@ -22,7 +22,7 @@ import scipy.sparse.linalg as sla
 from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
-from scan2morph.modal import fem
+from scan2morph.modal import skin
 
 #: Share of a basis field's norm below which what it adds to the ones before it counts as nothing.
 RANK_TOL = 1e-8
@@ -33,7 +33,7 @@ def laplace_beltrami(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Lowest eigenpairs of the Laplace-Beltrami operator, free (Neumann) boundary.
 
-    Solves ``L phi = lambda A phi`` (:func:`~scan2morph.modal.fem.cotangent_laplacian`, ``A`` the lumped
+    Solves ``L phi = lambda A phi`` (:func:`~scan2morph.modal.skin.cotangent_laplacian`, ``A`` the lumped
     areas) by
     shift-invert just below zero, so the constant function (lambda = 0) comes first.
 
@@ -52,7 +52,7 @@ def laplace_beltrami(
     functions : (V, n) float
         Area-orthonormal: ``functions.T @ diag(area) @ functions = I``.
     """
-    lap, area = fem.cotangent_laplacian(vertices, faces, source)
+    lap, area = skin.cotangent_laplacian(vertices, faces, source)
     n_v = lap.shape[0]
     if not (isinstance(n, int | np.integer) and 1 <= n < n_v - 1):
         raise InputError(source, f"n: expected an integer in [1, {n_v - 2}], got {n}")
