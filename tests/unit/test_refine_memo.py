@@ -92,11 +92,11 @@ def refinements():
     slid by a known field), by thin-plate splines through slightly different clicks."""
     template = build_template()
     fine = subdivide_template(template, 1)
-    neutral = _texture((480, 640), 4)
-    yy, xx = np.mgrid[0:480, 0:640].astype(np.float64)
-    ux = 2.0 * np.exp(-(((xx - 320) / 70) ** 2 + ((yy - 260) / 60) ** 2))
+    neutral = _texture((240, 320), 4)
+    yy, xx = np.mgrid[0:240, 0:320].astype(np.float64)
+    ux = 2.0 * np.exp(-(((xx - 160) / 35) ** 2 + ((yy - 130) / 30) ** 2))
     takes = [_warp(neutral, -ux, -0.5 * ux), _warp(neutral, 0.5 * ux, ux)]
-    clicks = np.array([320.0, 240.0]) + 150.0 * template.ibug_xy
+    clicks = np.array([160.0, 120.0]) + 75.0 * template.ibug_xy
     rng = np.random.default_rng(3)
     maps = [fit_map(template, clicks + rng.normal(0, 0.5, clicks.shape)) for _ in range(3)]
     _, anchors = template.fiducial_set("closed")
