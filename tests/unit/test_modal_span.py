@@ -277,6 +277,15 @@ def test_presets_resolve_and_overrides_win():
         modal.Params.from_config(_config(SECTION | {"fixed_outline": "some"}))
     with pytest.raises(InputError, match="tether_region"):
         modal.Params.from_config(_config(SECTION | {"tether_region": "chin"}))
+    # the mimic skin's mass weighs a membrane's mass per area: a shell or equal vertex masses
+    # would ignore it, so the config says so before any job runs
+    heavier = {"mimic_mass_factor": 2.0}
+    assert modal.Params.from_config(_config(SECTION | heavier)).modal.mimic_mass_factor == 2.0
+    for other in ({"preset": "paper"}, {"youngs_modulus_mpa": 0.01}, {"mass": "vertex"}):
+        with pytest.raises(InputError, match=r"config modal: mimic_mass_factor: 2.0 .* set it to 1"):
+            modal.Params.from_config(_config(SECTION | heavier | other))
+    paper_plain = modal.Params.from_config(_config(SECTION | {"preset": "paper"}))
+    assert paper_plain.modal.mimic_mass_factor == 1.0  # the paper's shell is untouched
 
 
 @pytest.fixture(scope="module")

@@ -122,6 +122,15 @@ def physics(modal: Mapping, source: str = "config modal") -> dict:
         raise InputError(
             source, f"tether_region: expected one of {TETHER_REGIONS}, got {out['tether_region']!r}"
         )
+    heavier = float(out["mimic_mass_factor"]) != 1.0
+    if heavier and (float(out["youngs_modulus_mpa"]) != 0.0 or out["mass"] == "vertex"):
+        raise InputError(
+            source,
+            f"mimic_mass_factor: {out['mimic_mass_factor']} weighs a membrane's mass per area, so it "
+            "needs youngs_modulus_mpa 0 and mass consistent or lumped (preset "
+            f"{name!r} gives youngs_modulus_mpa {out['youngs_modulus_mpa']}, mass "
+            f"{out['mass']!r}); set it to 1 or use the skin preset",
+        )
     return {"preset": name} | out
 
 
