@@ -189,6 +189,7 @@ def stage_run(tree: Path, run: Path, subject: str, out: Path, top: int = 0) -> d
     env = dict(os.environ, PYTHONPATH=str(tree / "src"))
     for name in ("OMP", "OPENBLAS", "MKL", "GOTO", "NUMEXPR"):
         env[f"{name}_NUM_THREADS"] = "1"
+    env["OPENCV_FOR_THREADS_NUM"] = "1"  # as scan2morph.jobs.run_job sets it in a job
     cmd = [sys.executable, "-c", CHILD, str(run), subject, str(out), str(top)]
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])

@@ -378,6 +378,12 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
         assert attrs["used"] and attrs["shape_used"] and attrs["problem"] == ""
         assert attrs["confident_share"] > 0.8  # the still skin, everywhere on the plane
         assert np.median(moved) < 0.05  # mm: the unrelated texture's false matches lost
+        # told that the texture does not correlate (a click-noise draw after the take's first),
+        # the refinement skips measuring it and gives the same points, bit for bit
+        skipped = refine.run(template, take, replace(params, texture_unmatched=True))
+        assert skipped.attrs[paths.refine_group("she")]["shape_used"]
+        for key, value in part.datasets.items():
+            np.testing.assert_array_equal(skipped.datasets[key], value)
     else:
         assert not attrs["used"] and "correlates" in attrs["problem"]
         assert attrs["confident_share"] < params.min_confident_share

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -72,6 +72,7 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
     draw): the take's fit to its clicks refined against the neutral seen through its clicks."""
     neutral = subject.neutral
+    by_shape: dict[str, bool] = {}  # take -> its first draw was refined by the shape
 
     def refiner(take, mesh, take_landmarks, neutral_landmarks):
         source = subject.source(take)
@@ -83,7 +84,12 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
             paths.mesh(take, "points2d"): mesh["points2d"],
             paths.align(take, "vertices"): transform_points(transform, mesh["vertices"]),
         }
-        part = refine_stage.run(template, Take.of(subject, take, data=draw), params)
+        # a take whose texture did not correlate in its first draw is refined by the shape
+        # straight away in the others (the same numbers; the texture pass is a quarter of
+        # a texture-mismatched subject's draws)
+        p = replace(params, texture_unmatched=True) if by_shape.get(take) else params
+        part = refine_stage.run(template, Take.of(subject, take, data=draw), p)
+        by_shape.setdefault(take, bool(part.attrs[paths.refine_group(take)]["shape_used"]))
         d = part.datasets
         return (
             d[paths.refine(take, "vertices")],

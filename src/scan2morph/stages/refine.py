@@ -79,6 +79,10 @@ class Params:
     shape : ShapeParams
         The shape-driven refinement's (``refine.shape``; :mod:`scan2morph.refine.shape`): a
         take whose texture does not correlate with the neutral's.
+    texture_unmatched : bool
+        Take the texture as not correlating without measuring it, and go straight to the
+        shape-driven refinement (not a config key: the click-noise draws of a take whose first
+        draw found so; its texture's failed correlation is a quarter of those draws' CPU).
     """
 
     method: str
@@ -94,6 +98,7 @@ class Params:
     icp: IcpParams | None = None
     still_region: str = "stable"
     shape: ShapeParams = ShapeParams()
+    texture_unmatched: bool = False
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -344,17 +349,23 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
         kept = "texture-driven refinement is not available, the template fit is kept"
         return None, report, f"{shaded}: {kept}{jaw}"
     images = [grey(need(data, paths.range_image(t, "color"), source)) for t in (neutral, take)]
-    refined, report = refine_points(fine.vertices, fine.faces, *maps, *images, anchors, params.flow)
-    report["shape"] = False
-    if report["confident_share"] >= params.min_confident_share:
-        return refined, report, ""
-    # the two images do not share the skin's texture (another light, paint, camera or
-    # modality): the texture's measurement is not to be trusted
-    kept = (
-        f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
-        f"neutral's texture (refine.min_confident_share "
-        f"{100 * params.min_confident_share:.0f}%)"
-    )
+    if params.texture_unmatched and params.shape.use:
+        report = {"median_correction_px": np.nan, "confident_share": np.nan, "shape": False}
+        kept = "its texture was taken as not correlating with the neutral's"
+    else:
+        refined, report = refine_points(
+            fine.vertices, fine.faces, *maps, *images, anchors, params.flow
+        )
+        report["shape"] = False
+        if report["confident_share"] >= params.min_confident_share:
+            return refined, report, ""
+        # the two images do not share the skin's texture (another light, paint, camera or
+        # modality): the texture's measurement is not to be trusted
+        kept = (
+            f"only {100 * report['confident_share']:.0f}% of the face correlates with the "
+            f"neutral's texture (refine.min_confident_share "
+            f"{100 * params.min_confident_share:.0f}%)"
+        )
     if params.shape.use:
         texture = [texture_channel(*images, params.flow)]
         refined, by_shape = _by_shape(fine, (take, neutral), data, maps, anchors, texture, params)
