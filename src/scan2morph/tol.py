@@ -13,3 +13,6 @@ N_IBUG = 68
 #: Share of full white a geometry-only scan's surface shows where it faces away from the light
 #: (its shading stands in for the colour image: a mesh scan's render, a range scan's grid).
 SHADE_AMBIENT = 0.15
+
+#: A robust standard deviation is 1.4826 median absolute deviations (Gaussian data).
+MAD_TO_SIGMA = 1.4826

@@ -9,6 +9,7 @@ from scipy.spatial import cKDTree
 
 from scan2morph.align.rigid import transform_points
 from scan2morph.geometry import edge_adjacency
+from scan2morph.tol import MAD_TO_SIGMA
 
 #: Averaged residuals below this never count as motion, mm (a floor to the robust threshold).
 _TRIM_FLOOR_MM = 0.05
@@ -24,9 +25,9 @@ def neighbour_mean(p: np.ndarray, radius: float) -> sparse.csr_array:
 
 
 def robust_sigma(r: np.ndarray) -> float:
-    """The robust standard deviation of values ``r`` (n,): 1.4826 times their median absolute
-    deviation."""
-    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+    """The robust standard deviation of values ``r`` (n,): :data:`~scan2morph.tol.MAD_TO_SIGMA`
+    times their median absolute deviation."""
+    return float(MAD_TO_SIGMA * np.median(np.abs(r - np.median(r))))
 
 
 def trim_moving(p, keep, t, conv, refine, plane, prm, grow=None) -> tuple:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scan2morph.geometry import face_sides
 from scan2morph.refine.flow import fuse, measure_flow
 from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
@@ -278,7 +279,7 @@ def _neutral_side(v2, faces, neutral_map, neutral_images, channels, params: Refi
 
     def compute():
         pn = _warped(neutral_map, v2)
-        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        e = face_sides(faces)
         ratio = np.linalg.norm(v2[e[:, 0]] - v2[e[:, 1]], axis=1) / np.linalg.norm(
             pn[e[:, 0]] - pn[e[:, 1]], axis=1
         )

@@ -18,6 +18,7 @@ from scipy.ndimage import gaussian_filter
 
 from scan2morph.errors import InputError, require_numbers
 from scan2morph.refine.memo import shared
+from scan2morph.refine.template_space import pull_back
 
 #: Shape images are in 1/m (curvature in 1/mm times this): the flow's grey-level settings
 #: (``noise``) then read as curvature in 1/m.
@@ -193,13 +194,17 @@ def _curvature(xyz: np.ndarray, sigma_mm: float, source: str) -> np.ndarray:
     ok = mask & (cover >= MIN_COVER) & np.isfinite(n).all(axis=-1)
     if not ok.any():
         return np.full(mask.shape, np.nan)
-    dot = lambda a, b: np.einsum("...k,...k->...", a, b)  # noqa: E731
-    big_e, big_f, big_g = dot(xu, xu), dot(xu, xv), dot(xv, xv)
-    e, f, g = dot(xuu, n), dot(xuv, n), dot(xvv, n)
+    big_e, big_f, big_g = _dot(xu, xu), _dot(xu, xv), _dot(xv, xv)
+    e, f, g = _dot(xuu, n), _dot(xuv, n), _dot(xvv, n)
     with np.errstate(invalid="ignore", divide="ignore"):
         h = (e * big_g - 2 * f * big_f + g * big_e) / (2 * (big_e * big_g - big_f**2))
     # the normal points to the camera: a bump towards it curves away from the normal (h < 0)
     return np.where(ok & np.isfinite(h), -h * PER_METRE, np.nan)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The dot products of two (..., 3) arrays along their last axis, (...)."""
+    return np.einsum("...k,...k->...", a, b)
 
 
 def surface_flow(
@@ -232,20 +237,17 @@ def surface_flow(
     confidence : (rows, columns) float64
         In [0, 1].
     """
-    from scan2morph.refine.template_space import pull_back
-
     xt = pull_back(take_xyz, mapped).astype(np.float64)
     ju, jv = np.gradient(xt, axis=1), np.gradient(xt, axis=0)
     n = np.cross(ju, jv)
     with np.errstate(invalid="ignore", divide="ignore"):  # a degenerate grid point: NaN
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
     d = np.asarray(reference, dtype=np.float64) - xt
-    dn = np.einsum("...k,...k->...", d, n)
+    dn = _dot(d, n)
     tangential = d - dn[..., None] * n
     # J delta = tangential, J = [ju jv] (3 x 2): the normal equations' 2 x 2 solve per point
-    a, b, c = (np.einsum("...k,...k->...", p, q) for p, q in ((ju, ju), (ju, jv), (jv, jv)))
-    ru = np.einsum("...k,...k->...", ju, tangential)
-    rv = np.einsum("...k,...k->...", jv, tangential)
+    a, b, c = _dot(ju, ju), _dot(ju, jv), _dot(jv, jv)
+    ru, rv = _dot(ju, tangential), _dot(jv, tangential)
     with np.errstate(invalid="ignore", divide="ignore"):
         det = a * c - b * b
         flow = np.stack([(c * ru - b * rv) / det, (a * rv - b * ru) / det], axis=-1)

@@ -38,6 +38,7 @@ from scan2morph.errors import InputError
 from scan2morph.geometry import surface_normals
 from scan2morph.io.rgbd import PinholeCamera, depth_points, project_points, surface_on_camera
 from scan2morph.scan.depth_cleanup import smooth_depth
+from scan2morph.tol import MAD_TO_SIGMA
 
 #: Points of a frame used for its registration (a regular subsample), at most.
 MAX_POINTS = 40_000
@@ -53,8 +54,6 @@ STEP_RAD = 1e-6
 STEP_MM = 1e-4
 #: A registration pairs at least this share of the frame's points with the reference.
 MIN_FITNESS = 0.5
-#: A robust standard deviation is 1.4826 median absolute deviations.
-MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True)

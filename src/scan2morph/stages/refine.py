@@ -208,7 +208,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
         the ``refine`` group's attributes hold the median correction (px), the share of
         vertices with a confident measurement, whether the flow was ``used`` and, when not,
         the ``problem``; whether the take's texture did not correlate and the surface's shape
-        refined it (``shape_used``, :mod:`scan2morph.refine.shape`); whether the jaw prior was used (``jaw_used``), why not
+        refined it (``shape_used``, :mod:`scan2morph.refine.shape`); whether the jaw prior was
+        used (``jaw_used``), why not
         (``jaw_problem``, ``"off"`` with ``refine.jaw.prior`` false) and, when the chin was
         registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
         upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
@@ -395,17 +396,15 @@ def _by_shape(fine, takes, data, maps, anchors, texture: list, params: Params):
     True. ``takes`` are the take's and the neutral's names."""
     take, neutral = takes
     prm = params.shape
-    sources = {t: f"{paths.range_image(t, 'xyz')}" for t in takes}
-    images = [
-        shape_image(need(data, paths.range_image(t, "xyz"), sources[t]), prm.sigma_mm, sources[t])
-        for t in (neutral, take)
-    ]
+    sources = {t: paths.range_image(t, "xyz") for t in takes}
+    xyz = {t: need(data, sources[t], sources[t]) for t in takes}
+    images = [shape_image(xyz[t], prm.sigma_mm, sources[t]) for t in (neutral, take)]
     shape = Channel(*images, prm.high_pass_px, prm.noise, prm.precision_px)
-    xyz = need(data, paths.range_image(take, "xyz"), sources[take])
-    moved = transform_points(need(data, paths.align(take, "transform"), take), xyz.reshape(-1, 3))
+    transform = need(data, paths.align(take, "transform"), take)
+    moved = transform_points(transform, xyz[take].reshape(-1, 3))
     surface = SurfaceChannel(
-        need(data, paths.range_image(neutral, "xyz"), sources[neutral]),
-        moved.reshape(xyz.shape),
+        xyz[neutral],
+        moved.reshape(xyz[take].shape),
         prm.surface_tolerance_mm,
         prm.surface_precision_px,
     )
