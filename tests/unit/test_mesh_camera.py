@@ -168,3 +168,13 @@ def test_camera_faces_a_face_only_scan():
     view = face_view(shell)
     assert view.normal_sign == 1
     assert _angle_deg(view.direction, -pose[:3, 2]) < MAX_ERROR_DEG  # measured 2.0
+
+
+def test_first_in_each_cell_is_numpys_unique_rows():
+    """The one-key unique of the nose-tip search's grid cells against numpy's unique of rows
+    (negative cells and repeats included)."""
+    from scan2morph.io.mesh_view import _first_in_each_cell
+
+    cells = np.random.default_rng(4).integers(-30, 30, size=(5000, 3))
+    expected = np.unique(cells, axis=0, return_index=True)[1]
+    np.testing.assert_array_equal(_first_in_each_cell(cells), expected)

@@ -159,6 +159,17 @@ def _protrusion(tree, areas, normals, points, radius):
     return np.where(norm > 0, height, -np.inf)
 
 
+def _first_in_each_cell(cells: np.ndarray) -> np.ndarray:
+    """Index of the first row of each distinct row of ``cells`` (n, 3) int, the rows in
+    lexicographic order: ``np.unique(cells, axis=0, return_index=True)[1]``, from one int64 key
+    per row (a 1-D unique is about 10x faster)."""
+    lo = cells.min(axis=0)
+    span = cells.max(axis=0) - lo + 1
+    c = cells - lo
+    key = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
+    return np.unique(key, return_index=True)[1]
+
+
 def nose_tip(centres, areas, normals) -> np.ndarray:
     """(3,) the surface's most protruding point (module docstring, step 2), mm.
 
@@ -167,8 +178,7 @@ def nose_tip(centres, areas, normals) -> np.ndarray:
     centres, areas, normals : (F, 3), (F,), (F, 3) float
         Triangle centres (mm), areas (mm^2) and outward unit normals (:func:`outward_normals`).
     """
-    cells = np.floor(centres / TIP_GRID_MM).astype(np.int64)
-    coarse = centres[np.unique(cells, axis=0, return_index=True)[1]]
+    coarse = centres[_first_in_each_cell(np.floor(centres / TIP_GRID_MM).astype(np.int64))]
     every = max(1, len(centres) // MAX_COARSE_TRIANGLES)
     score = _protrusion(
         cKDTree(centres[::every]), areas[::every], normals[::every], coarse, PROTRUSION_RADIUS_MM
