@@ -17,8 +17,20 @@ from scan2morph.synth.identity import Identity
 
 def _smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
     """Polynomial smooth minimum (smooth union) with blend radius ``k`` mm."""
-    h = np.clip(0.5 + 0.5 * (b - a) / k, 0.0, 1.0)
-    return b + (a - b) * h - k * h * (1.0 - h)
+    # in place, the operations in the order of b + (a - b) h - k h (1 - h), h = clip(0.5 +
+    # 0.5 (b - a) / k): the same numbers with fewer temporaries (the sphere tracing's hot loop)
+    h = b - a
+    h *= 0.5
+    h /= k
+    h += 0.5
+    np.clip(h, 0.0, 1.0, out=h)
+    out = a - b
+    out *= h
+    out += b
+    tail = k * h
+    tail *= np.subtract(1.0, h, out=h)
+    out -= tail
+    return out
 
 
 def _smax(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
@@ -68,14 +80,22 @@ class _Ellipsoid:
             q = q @ self.rot  # head -> local (rot is orthonormal)
         return q
 
-    def sdf(self, p: np.ndarray) -> np.ndarray:
-        """Approximate signed distance (a close lower bound near the surface), mm; (N,)."""
-        q = self._local(p)
-        rx, ry, rz = self.radii
-        qx, qy, qz = q[:, 0], q[:, 1], q[:, 2]
-        k0 = np.sqrt((qx / rx) ** 2 + (qy / ry) ** 2 + (qz / rz) ** 2)
-        k1 = np.sqrt((qx / rx**2) ** 2 + (qy / ry**2) ** 2 + (qz / rz**2) ** 2)
-        return k0 * (k0 - 1.0) / np.maximum(k1, 1e-12)
+    def sdf(self, p: np.ndarray, columns: tuple | None = None) -> np.ndarray:
+        """Approximate signed distance (a close lower bound near the surface), mm; (N,).
+
+        ``columns`` are ``p``'s three columns as contiguous arrays, if the caller has them."""
+        if self.rot is not None:
+            q = self._local(p)
+            q = (q[:, 0], q[:, 1], q[:, 2])
+        else:
+            columns = columns or (p[:, 0], p[:, 1], p[:, 2])
+            q = tuple(c - o for c, o in zip(columns, self.centre, strict=True))
+        k0, k1 = (_norm3(q, tuple(r**power for r in self.radii)) for power in (1, 2))
+        np.maximum(k1, 1e-12, out=k1)
+        out = k0 - 1.0
+        out *= k0
+        out /= k1
+        return out
 
     def level(self, p: np.ndarray) -> np.ndarray:
         """Normalised radius of positions (N, 3): < 1 inside; (N,)."""
@@ -89,6 +109,19 @@ class _Ellipsoid:
             m = np.diag([-1.0, 1.0, 1.0])
             rot = m @ self.rot @ m
         return _Ellipsoid(c, self.radii, rot)
+
+
+def _norm3(q: tuple, scale: tuple) -> np.ndarray:
+    """sqrt((qx / sx)^2 + (qy / sy)^2 + (qz / sz)^2), (N,), from the three (N,) arrays ``q``."""
+    total = None
+    for c, r in zip(q, scale, strict=True):
+        t = c / r
+        t *= t
+        if total is None:
+            total = t
+        else:
+            total += t
+    return np.sqrt(total, out=total)
 
 
 def _round_cone(p: np.ndarray, a: np.ndarray, b: np.ndarray, ra: float, rb: float) -> np.ndarray:
@@ -225,33 +258,34 @@ class _Shape:
 
         With ``carve=False`` the eye openings are left closed (the lids run over the eyes).
         """
-        d = self.cranium.sdf(p)
-        d = _smin(d, self.midface.sdf(p), 25.0)
-        d = _smin(d, self.jaw.sdf(p), 22.0)
+        cols = tuple(np.ascontiguousarray(p[:, k]) for k in range(3))
+        d = self.cranium.sdf(p, cols)
+        d = _smin(d, self.midface.sdf(p, cols), 25.0)
+        d = _smin(d, self.jaw.sdf(p, cols), 22.0)
         d = _smin(d, self.neck(p), 25.0)
         for e in self.cheekbones:
-            d = _smin(d, e.sdf(p), 15.0)
+            d = _smin(d, e.sdf(p, cols), 15.0)
         for e in self.cheeks:
-            d = _smin(d, e.sdf(p), 22.0)
-        d = _smin(d, self.muzzle.sdf(p), 14.0)
-        d = _smin(d, self.chin.sdf(p), 18.0)
+            d = _smin(d, e.sdf(p, cols), 22.0)
+        d = _smin(d, self.muzzle.sdf(p, cols), 14.0)
+        d = _smin(d, self.chin.sdf(p, cols), 18.0)
         for e in self.brows:
-            d = _smin(d, e.sdf(p), 14.0)
+            d = _smin(d, e.sdf(p, cols), 14.0)
         for e in self.ears:
-            d = _smin(d, e.sdf(p), 5.0)
+            d = _smin(d, e.sdf(p, cols), 5.0)
         for e in self.sockets:
-            d = _smax(d, -e.sdf(p), 8.0)
+            d = _smax(d, -e.sdf(p, cols), 8.0)
         nose = _round_cone(p, *self.nose_bridge)
-        nose = _smin(nose, self.nose_ball.sdf(p), 6.0)
+        nose = _smin(nose, self.nose_ball.sdf(p, cols), 6.0)
         for e in self.alae:
-            nose = _smin(nose, e.sdf(p), 4.0)
-        nose = _smin(nose, self.columella.sdf(p), 3.0)
+            nose = _smin(nose, e.sdf(p, cols), 4.0)
+        nose = _smin(nose, self.columella.sdf(p, cols), 3.0)
         d = _smin(d, nose, 7.0)
-        d = _smin(d, self.upper_lip.sdf(p), 5.0)
-        d = _smin(d, self.lower_lip.sdf(p), 5.0)
+        d = _smin(d, self.upper_lip.sdf(p, cols), 5.0)
+        d = _smin(d, self.lower_lip.sdf(p, cols), 5.0)
         if carve:
             for e in self.almonds:
-                d = _smax(d, -e.sdf(p), 1.2)
+                d = _smax(d, -e.sdf(p, cols), 1.2)
         return d
 
 
