@@ -24,6 +24,11 @@ BLENDER_VENV := .venv-blender
 BPY_VERSION := 5.0.1
 BLENDER_STAMP := $(BLENDER_VENV)/.bpy-$(BPY_VERSION)-stamp
 export PYOPENGL_PLATFORM ?= osmesa
+# Python caches compiled modules, and pytest its rewritten test modules, in __pycache__: an
+# environment that turns this off (PYTHONDONTWRITEBYTECODE=1, as some containers do) would
+# compile every module again in every pipeline job and every test worker (test-fast: about
+# 2.5 s a worker).
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: setup run test test-fast bench lint dry-run clean detector
 
@@ -48,6 +53,7 @@ $(STAMP): requirements.lock pyproject.toml | $(DEB_STAMP)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
+	$(BIN)/python -m compileall -q src
 	@touch $@
 
 $(BLENDER_STAMP): | $(DEB_STAMP)
@@ -75,9 +81,9 @@ test: setup
 	$(BIN)/python -m pytest -q --durations=15
 
 # every test that runs no workflow (no Snakemake DAG, no SLURM): for quick checks while working;
-# one pytest-xdist worker per core, each with one BLAS/OpenMP thread
+# one pytest-xdist worker per core, each with one BLAS/OpenMP/OpenCV thread
 test-fast: setup
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -m "not slow" -n $(CORES) --dist loadscope --durations=10
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OPENCV_FOR_THREADS_NUM=1 $(BIN)/python -m pytest -q -m "not slow" -n $(CORES) --dist loadscope --durations=10
 
 # The landmark detector's weights (src/scan2morph/landmarks/model.npz, committed package data, so
 # setup downloads nothing): retrained from the project's own synthetic heads, identical for the

@@ -66,6 +66,9 @@ MAX_SYMMETRY_POINTS = 4000
 #: pairs it keeps are exact whenever they lie within it, and it is repeated without the bound
 #: otherwise; far points (a trial plane 90 degrees off) are what make unbounded searches slow, mm.
 MIRROR_SEARCH_MM = 16.0
+#: Points per leaf of the symmetry search's k-d tree: its nearest-neighbour queries (the same
+#: answers at any leaf size) are about 10% faster than at scipy's default of 16.
+NEAREST_LEAF_SIZE = 48
 #: Half-width of the band around the symmetry plane whose surface is the face's profile, mm.
 PROFILE_BAND_MM = 4.0
 #: The profile is compared this far above and below the nose tip (bridge against upper lip), mm.
@@ -298,7 +301,7 @@ def face_view(mesh, tip: np.ndarray | None = None, source: str = "mesh") -> Face
             source, f"mesh: {int(keep.sum())} triangles of non-zero area (expected a face)"
         )
     centres, areas, normals, sign = outward_normals(mesh.submesh([keep], append=True))
-    tree = cKDTree(centres)
+    tree = cKDTree(centres, leafsize=NEAREST_LEAF_SIZE)
     tip = nose_tip(centres, areas, normals) if tip is None else np.asarray(tip, float)
     near = np.linalg.norm(centres - tip, axis=1) < FACE_RADIUS_MM
     first = -(areas[near] @ normals[near])
