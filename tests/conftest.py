@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 
 import pytest
@@ -37,3 +38,13 @@ def pytest_collection_modifyitems(config, items):
     after this (tests/support/slurm_run.py)."""
     rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable
+
+
+def pytest_collection_finish(session):
+    """The objects of the collected test modules (modules, functions, fixtures' definitions) are
+    moved out of the garbage collector's view, and it runs less often: cyclic garbage of the tests
+    (figures, meshes) is still collected, at about a quarter of the collector's time (1.6 -> 0.4 s
+    on four of the longest modules)."""
+    gc.collect()
+    gc.freeze()
+    gc.set_threshold(50_000, 20, 20)
