@@ -62,7 +62,20 @@ def _synth03_take(take: str) -> dict:
     return make_mesh_take("synth03", label, kind, take, 2009)
 
 
-@pytest.mark.parametrize("take", [t for t, _, _ in default_takes()])
+@functools.cache
+def _surface_view(take: str) -> np.ndarray:
+    """The view direction of a synth03 take found from its surface alone, found once."""
+    r = _synth03_take(take)
+    return view_direction(trimesh.Trimesh(r["vertices"], r["faces"], process=False))
+
+
+#: Six of the twelve takes, each of another shape: the neutral, the open mouth, the rounded lips,
+#: a smile, a sad face and a frown (the other six are their variants; every take's angle is
+#: printed by benchmarks/bench_mesh_camera.py).
+SURFACE_TAKES = ["neutral", "car", "she", "smile1", "sad1", "frown1"]
+
+
+@pytest.mark.parametrize("take", SURFACE_TAKES)
 def test_camera_faces_each_synthetic_mesh_take_from_the_surface_alone(take):
     r = _synth03_take(take)
     mesh = trimesh.Trimesh(r["vertices"], r["faces"], process=False)
@@ -71,11 +84,11 @@ def test_camera_faces_each_synthetic_mesh_take_from_the_surface_alone(take):
     lm = r["landmarks"]
     # the generator's noses point down as real ones do (bridge to tip, head frame)
     assert _below_horizontal_deg(rot.T @ (lm[30] - lm[27])) > 55.0
-    error = _angle_deg(view_direction(mesh), frontal)
+    error = _angle_deg(_surface_view(take), frontal)
     old = _angle_deg(_old_rule(mesh, lm[27], lm[30]), frontal)
     print(f"{take}: surface {error:.1f}, old {old:.1f}")
     assert error < MAX_ERROR_DEG  # measured 0.6-3.1 degrees over the twelve takes
-    assert old > 10.0  # the old rule: 11.8-13.8 degrees off
+    assert old > 10.0  # the old rule: 11.8-15.4 degrees off
 
 
 @pytest.mark.parametrize("take", ["neutral", "car", "smile1", "sad1"])
@@ -107,8 +120,7 @@ def test_camera_ignores_the_frame_and_the_winding():
     assert _angle_deg(view.direction, frontal) < MAX_ERROR_DEG
     assert _angle_deg(turn @ (lm[30] - lm[27]), [0.0, -1.0, 0.0]) < 1e-6
     # the same direction up to the frame-bound coarse search (measured 0.3 degrees apart)
-    plain = view_direction(trimesh.Trimesh(r["vertices"], r["faces"], process=False))
-    assert _angle_deg(view.direction, turn @ plain) < 1.0
+    assert _angle_deg(view.direction, turn @ _surface_view("neutral")) < 1.0
 
 
 def _real_head():
