@@ -139,9 +139,10 @@ def test_a_mesh_take_without_landmarks_is_rendered_upright_and_frontal(mesh_file
     assert np.isfinite(free.xyz).all(axis=-1).mean() > 0.3
 
 
-@pytest.mark.parametrize("turn", [0, 1, 2, 3])
+@pytest.mark.parametrize("turn", [1, 2, 3])
 def test_the_surface_camera_finds_up_whatever_the_frame(mesh_files, tmp_path, turn):
-    """The mesh turned about its view axis by 0-270 degrees: the image stays upright."""
+    """The mesh turned about its view axis by 90-270 degrees: the image stays upright (as the
+    unturned mesh's in the test above)."""
     import trimesh
 
     scan, _ = mesh_files
