@@ -88,3 +88,43 @@ def test_texture_column_supplies_a_missing_texture(textured, tmp_path):
     take = read_mesh_take(tmp_path / "face.obj", png, d / "face.txt", TINY_CAMERA)
     assert take.report["colour"] == "texture"
     assert take.color[60, 80].tolist() != [44, 46, 56]  # the face, not the background
+
+
+def _colour_ratio(flat: dict, textured: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Textured over flat red of each vertex, and where both are far from 0 and 255 (uint8
+    rounding and clipping would spoil the ratio; the lit skin's red is its brightest)."""
+    a = flat["colors"][:, 0].astype(float)
+    b = textured["colors"][:, 0].astype(float)
+    ok = (a > 60) & (b > 20) & (b < 250)
+    return b / np.maximum(a, 1.0), ok
+
+
+def test_skin_texture_is_fixed_to_the_skin(scan):
+    """With ``skin_texture`` the vertex colours carry the skin's detail: the factor of a vertex
+    (textured over flat colour: the lamp's shading cancels) is the same in every take however
+    the face moves and its shading changes, the geometry and clicks are those of the flat scan,
+    and 0 gives the flat albedo."""
+    textured = make_mesh_take("s1", "neutral", "neutral", "neutral", 3, {"skin_texture": 1.0})
+    flat0 = make_mesh_take("s1", "neutral", "neutral", "neutral", 3, {"skin_texture": 0.0})
+    assert np.array_equal(flat0["colors"], scan["colors"])
+    for key in ("vertices", "faces", "landmarks"):
+        assert np.array_equal(textured[key], scan[key])
+    smile = make_mesh_take("s1", "smile", "expression", "smile1", 3)
+    smile_tex = make_mesh_take("s1", "smile", "expression", "smile1", 3, {"skin_texture": 1.0})
+    r_neutral, ok_n = _colour_ratio(scan, textured)
+    r_smile, ok_s = _colour_ratio(smile, smile_tex)
+    ok = ok_n & ok_s
+    assert ok.sum() > 5000  # the lit face
+    # the shading differs between the takes (the smile turns the cheeks' normals) ...
+    shading = smile["colors"][ok, 0].astype(float) / scan["colors"][ok, 0].astype(float)
+    moved = np.abs(shading - 1.0) > 0.05
+    assert moved.sum() > 200
+    # ... the skin's detail does not: the same factor to the uint8 rounding (0.5 / 60 ~ 1 %)
+    diff = np.abs(r_smile[ok] - r_neutral[ok])[moved]
+    print(f"\n{moved.sum()} vertices shaded otherwise; skin detail factor: neutral vs smile median {np.median(diff):.4f}, p99 "
+          f"{np.percentile(diff, 99):.4f}; |factor - 1| median "
+          f"{np.median(np.abs(r_neutral[ok] - 1)):.3f}")
+    assert np.median(diff) < 0.008 and np.percentile(diff, 99) < 0.03
+    # and there is detail to correlate: freckles and mottling of a few per cent and more
+    assert np.median(np.abs(r_neutral[ok] - 1.0)) > 0.02
+    assert np.percentile(r_neutral[ok], 1) < 0.9  # freckles: red down by up to 27 %

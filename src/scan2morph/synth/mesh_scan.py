@@ -3,8 +3,12 @@
 The scan is the articulated head's measured surface (skin, brows, hair, eyes; no mouth cavity,
 no pupils), each vertex moved along its normal by Gaussian noise (``noise_mm``), in the
 scanner's own frame: the head frame moved by a random rigid motion (``pose_sigma_deg``,
-``pose_sigma_mm``). Vertex colours are the albedo lit by the scanner's lamp. Landmarks are the
-68 landmark vertices with 3D click noise (``click_noise_mm``), written as lines ``x y z``.
+``pose_sigma_mm``). Vertex colours are the albedo lit by the scanner's lamp; with
+``skin_texture`` > 0 the skin's albedo carries the subject's freckles and mottling
+(:func:`~scan2morph.synth.texture.skin_detail` at each vertex's rest position: the same detail
+as the range scanner's, fixed to the skin, sampled once per vertex as a vertex-coloured scan
+stores it). Landmarks are the 68 landmark vertices with 3D click noise (``click_noise_mm``),
+written as lines ``x y z``.
 
 Truth: ``pose`` maps the head into the mesh's frame; ``K`` and ``landmarks2d`` are NaN (the
 virtual camera is chosen at ingest: the evaluation projects with the store's camera).
@@ -32,6 +36,7 @@ from scan2morph.synth.cohort import (
 )
 from scan2morph.synth.features import SEG_BROW, SEG_EYE, SEG_HAIR, SEG_SKIN
 from scan2morph.synth.scanner import head_pose, shade
+from scan2morph.synth.texture import skin_detail, texture_seed
 
 #: Parameters of a synthetic mesh scan, with their defaults.
 DEFAULT_MESH_SCAN: dict[str, float] = {
@@ -39,6 +44,7 @@ DEFAULT_MESH_SCAN: dict[str, float] = {
     "pose_sigma_deg": 10.0,  # random rotation of the scanner's frame, per axis
     "pose_sigma_mm": 50.0,  # random translation of the scanner's frame, per axis
     "click_noise_mm": 0.4,  # landmark clicking noise on the mesh, per coordinate
+    "skin_texture": 0.0,  # strength of the skin's freckles and mottling per vertex (0: flat albedo)
 }
 _KEPT = (SEG_SKIN, SEG_BROW, SEG_HAIR, SEG_EYE)
 
@@ -50,6 +56,33 @@ def mesh_scan_params(params: dict | None = None, source: str = "params") -> dict
         if v < 0:
             raise InputError(source, f"params.{k}: expected >= 0, got {v}")
     return p
+
+
+def skin_albedo(head, seed: int, strength: float) -> np.ndarray:
+    """The head's per-vertex albedo with the skin's detail at each skin vertex's rest position.
+
+    Parameters
+    ----------
+    head : HeadModel
+        The subject's head (``vertices`` at rest, mm; ``faces``, ``segment``, ``albedo``).
+    seed : int
+        The subject's texture seed (:func:`~scan2morph.synth.texture.texture_seed`).
+    strength : float
+        :func:`~scan2morph.synth.texture.skin_detail`'s strength; 0 gives ``head.albedo``.
+
+    Returns
+    -------
+    (N, 3) float64
+        Albedo in [0, 1]: a vertex of a skin triangle multiplied by the detail factor at its
+        rest position, every other vertex (brows, hair, eyes) as it is.
+    """
+    albedo = np.asarray(head.albedo, dtype=np.float64)
+    if strength <= 0:
+        return albedo
+    skin = np.unique(head.faces[head.segment == SEG_SKIN])
+    out = albedo.copy()
+    out[skin] = np.clip(albedo[skin] * skin_detail(head.vertices[skin], seed, strength), 0.0, 1.0)
+    return out
 
 
 def make_mesh_take(
@@ -77,7 +110,8 @@ def make_mesh_take(
     # colours: the albedo under the scanner's lamp, facing the face
     lamp = head_pose(rng, 1000.0, 0.0, 0.0, AIM)
     v_lamp = vertices @ lamp[:3, :3].T + lamp[:3, 3]
-    colors = shade(head.albedo, v_lamp, vertex_normals(v_lamp, head.faces, fill=0.0))
+    albedo = skin_albedo(head, texture_seed(subject, seed), p["skin_texture"])
+    colors = shade(albedo, v_lamp, vertex_normals(v_lamp, head.faces, fill=0.0))
 
     faces = head.faces[np.isin(head.segment, _KEPT)]
     used, inv = np.unique(faces, return_inverse=True)
@@ -129,6 +163,7 @@ __all__ = [
     "DEFAULT_MESH_SCAN",
     "make_mesh_take",
     "mesh_scan_params",
+    "skin_albedo",
     "write_landmarks3d",
     "write_mesh_take",
 ]
