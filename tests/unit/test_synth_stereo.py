@@ -161,9 +161,10 @@ def test_images_are_distorted_as_the_calibration_says():
     params = dict(
         width=320, height=240, focal_px=300.0, distance_mm=350.0, image_noise=0.0, speckle_px=6.0
     )
-    plain = make_stereo_take("s2", "neutral", "neutral", "neutral", seed=1, params=params)
+    # the module's subject (its head is built once for the module)
+    plain = make_stereo_take("s1", "neutral", "neutral", "neutral", seed=3, params=params)
     bent = make_stereo_take(
-        "s2", "neutral", "neutral", "neutral", seed=1, params=params | {"k1": -0.5}
+        "s1", "neutral", "neutral", "neutral", seed=3, params=params | {"k1": -0.5}
     )
     K, D = bent["calib"].K1, bent["calib"].D1
     assert D[0] == -0.5 and np.array_equal(K, plain["calib"].K1)
@@ -172,7 +173,7 @@ def test_images_are_distorted_as_the_calibration_says():
     for name, scale in (("calibrated", 1.0), ("half", 0.5), ("none", 0.0)):
         undone = cv2.undistort(bent["left"], K, scale * D).astype(float)
         diff[name] = np.abs(undone - plain["left"])[inner.astype(bool)].mean()
-    assert diff["calibrated"] < 1.6  # grey levels: resampling of the speckle
+    assert diff["calibrated"] < 1.6  # grey levels: resampling of the speckle (measured 1.52)
     assert diff["half"] > 2.5 * diff["calibrated"] and diff["none"] > 4 * diff["calibrated"]
 
 
