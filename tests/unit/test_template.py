@@ -256,6 +256,8 @@ def test_stable_region_covers_forehead_ridge_and_temples_only(template):
     assert 0.1 < stable.mean() < 0.4
     assert not (stable & ~upper_face(fine)).any()  # all of it lies above the nose tip
     np.testing.assert_array_equal(icp_region(fine, "upper_face"), upper_face(fine))
+    face = icp_region(fine, "face")  # every vertex: the region align.grow_into may name
+    assert face.shape == (len(fine.vertices),) and face.dtype == bool and face.all()
     with pytest.raises(InputError, match="align.icp_region: 'lips' unknown"):
         icp_region(fine, "lips")
 

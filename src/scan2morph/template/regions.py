@@ -44,8 +44,10 @@ def stable_face(template) -> np.ndarray:
     faces to < 0.16 degrees and < 0.15 mm, where the whole face above the nose tip gives up to
     0.6 degrees and 0.9 mm. A smile moves its lower temples by 1-3 mm, though, and once those are
     trimmed the rest constrains the rotation poorly (mesh and RGB-D takes: up to 0.21 and 0.38
-    degrees); the align stage therefore grows the region into the upper face's still skin
-    (``align.grow_into``, :func:`~scan2morph.align.align_take`'s ``grow_indices``).
+    degrees); the align stage therefore grows the region into the still skin of the whole face
+    (``align.grow_into``, :func:`~scan2morph.align.align_take`'s ``grow_indices``): above the
+    nose tip alone, a brow raise or a frown on a depth camera leaves too little still skin, and
+    no lever below it, to hold the rotation under 0.2 degrees.
 
     Returns
     -------
@@ -65,13 +67,17 @@ def stable_face(template) -> np.ndarray:
 
 
 def icp_region(template, name: str) -> np.ndarray:
-    """The ICP region named in config: ``stable`` (:func:`stable_face`) or ``upper_face``."""
+    """The ICP region named in config: ``stable`` (:func:`stable_face`), ``upper_face`` or
+    ``face`` (every template vertex: the region to grow into, ``align.grow_into``)."""
     if name == "stable":
         return stable_face(template)
     if name == "upper_face":
         return upper_face(template)
+    if name == "face":
+        return np.ones(len(template.vertices), dtype=bool)
     raise InputError(
-        "config", f"align.icp_region: {name!r} unknown (expected 'stable' or 'upper_face')"
+        "config",
+        f"align.icp_region: {name!r} unknown (expected 'stable', 'upper_face' or 'face')",
     )
 
 
