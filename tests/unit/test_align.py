@@ -425,19 +425,20 @@ def test_growing_into_the_whole_face_levers_a_brow_raise(seed):
         s = _scene(seed=seed, mouth_mm=mouth_mm, forehead_mm=forehead_mm)
         meshes = AlignMeshes(s["take"], valid, s["neutral"], valid, s["faces"])
         args = (meshes, s["pairs"], _stable_band(v), icp, "s01/brows")
-        upper = align_take(*args, grow_indices=s["upper"])
         face = align_take(*args, grow_indices=everywhere)
-        rot_u, t_u = _errors(upper.transform, s["truth"], s["centre"])
         rot, t = _errors(face.transform, s["truth"], s["centre"])
-        assert face.ok and upper.ok, (face.problems, upper.problems)
+        assert face.ok, face.problems
         # the kept skin is still: none of it moved 5 x the noise off the surface (the brows rise
         # 3 mm, the mouth 10 mm; the raise's fading edge may join)
         normal = np.einsum("ij,ij->i", s["motion"], vertex_normals(v, s["faces"]))
         assert np.abs(normal[face.kept_indices]).max() < 0.5
-        if forehead_mm:
+        if forehead_mm:  # against the growth into the upper face alone
+            upper = align_take(*args, grow_indices=s["upper"])
+            rot_u, _ = _errors(upper.transform, s["truth"], s["centre"])
+            assert upper.ok, upper.problems
             assert rot < 0.06 and t < 0.07 and rot < 0.6 * rot_u, (rot, t, "upper face", rot_u)
         else:
-            assert rot < 0.03 and t < 0.03, (rot, t, "upper face", rot_u, t_u)
+            assert rot < 0.03 and t < 0.03, (rot, t)
 
 
 def test_align_take_shifted_take_with_random_pairs_is_flagged():
