@@ -190,3 +190,7 @@ def test_first_in_each_cell_is_numpys_unique_rows():
     cells = np.random.default_rng(4).integers(-30, 30, size=(5000, 3))
     expected = np.unique(cells, axis=0, return_index=True)[1]
     np.testing.assert_array_equal(_first_in_each_cell(cells), expected)
+    # cells spanning more than one int64 key can number (a mesh kilometres wide)
+    cells[:3] = [[-(2**40), 0, 0], [2**40, 2**40, 0], [0, -(2**40), 2**40]]
+    expected = np.unique(cells, axis=0, return_index=True)[1]
+    np.testing.assert_array_equal(_first_in_each_cell(cells), expected)

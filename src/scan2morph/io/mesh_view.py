@@ -168,6 +168,8 @@ def _first_in_each_cell(cells: np.ndarray) -> np.ndarray:
     per row (a 1-D unique is about 10x faster)."""
     lo = cells.min(axis=0)
     span = cells.max(axis=0) - lo + 1
+    if float(np.prod(span.astype(np.float64))) >= 2.0**62:  # a key would overflow int64
+        return np.unique(cells, axis=0, return_index=True)[1]
     c = cells - lo
     key = (c[:, 0] * span[1] + c[:, 1]) * span[2] + c[:, 2]
     return np.unique(key, return_index=True)[1]
