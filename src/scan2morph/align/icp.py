@@ -7,8 +7,9 @@ only, so that the moving mouth does not bias the fit.
 Two refinements are offered (``params.method``):
 
 ``"icp"`` (the paper's, default)
-    open3d point-to-plane ICP with a robust kernel: closest points, target normals are the
-    neutral mesh's vertex normals. The kernel's scale starts at ``max_correspondence_mm`` and
+    Point-to-plane ICP with a robust kernel (open3d's step, against one k-d tree:
+    :mod:`scan2morph.align.point_plane`): closest points, target normals are the neutral mesh's
+    vertex normals. The kernel's scale starts at ``max_correspondence_mm`` and
     halves each iteration down to ``kernel_k_mm``: a redescending kernel (Tukey) as narrow as
     1 mm from the start would give zero weight to most points while the initial pose is still
     a few mm off, and the few left can pull a one-step solve anywhere.
@@ -55,6 +56,7 @@ from scipy.spatial import cKDTree
 
 from scan2morph.align.gate import RmseGate, residual_gate, rmse_gate, rmse_limit
 from scan2morph.align.noise import mesh_noise
+from scan2morph.align.point_plane import PointToPlane
 from scan2morph.align.region import region_motion
 from scan2morph.align.result import AlignResult
 from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
@@ -71,7 +73,6 @@ from scan2morph.align.surface import SampledSurface
 from scan2morph.align.trim import trim_moving
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
-from scan2morph.open3d_light import open3d
 
 
 def _residual_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -> tuple:
@@ -119,42 +120,33 @@ def _refine_correspondence(p, q, initial, prm, source):
 
 
 def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
-    """open3d point-to-plane ICP, stepped one iteration at a time to report iterations.
+    """Point-to-plane ICP (:class:`~scan2morph.align.point_plane.PointToPlane`: open3d's step
+    against one k-d tree), one iteration at a time to report iterations.
 
     The kernel scale halves from ``k_start`` (default ``max_correspondence_mm``) to
     ``kernel_k_mm``.
     """
-    o3d = open3d()
-
-    reg = o3d.pipelines.registration
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
-    tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(q))
-    tgt.normals = o3d.utility.Vector3dVector(q_normals)
+    surface = PointToPlane(q, q_normals, prm.max_correspondence_mm)
     k_final = prm.kernel_k_mm
     k = max(prm.max_correspondence_mm if k_start is None else k_start, k_final)
-    loss = {"tukey": reg.TukeyLoss, "huber": reg.HuberLoss}.get(prm.robust_kernel)
-    one_step = reg.ICPConvergenceCriteria(relative_fitness=0.0, relative_rmse=0.0, max_iteration=1)
-    max_d = prm.max_correspondence_mm
-    t = np.array(initial)
-    prev = reg.evaluate_registration(src, tgt, max_d, t)
-    fitness, rmse = prev.fitness, prev.inlier_rmse
+    t = np.array(initial, dtype=np.float64)
+    fitness, rmse = surface.evaluate(p, t)
     converged = False
     it = 0
     for it in range(1, prm.max_iterations + 1):  # noqa: B007 (it is reported)
         if fitness == 0.0:
             break
-        est = reg.TransformationEstimationPointToPlane(loss(k) if loss else reg.L2Loss())
-        res = reg.registration_icp(src, tgt, max_d, t, est, one_step)
-        t_old, t = t, np.asarray(res.transformation)
+        t_old, t = t, surface.step(p, t, prm.robust_kernel, k)
+        f_new, rmse_new = surface.evaluate(p, t)
         done = k == k_final and (
             (
-                abs(res.fitness - fitness) < prm.relative_fitness
-                and abs(res.inlier_rmse - rmse) < prm.relative_rmse
+                abs(f_new - fitness) < prm.relative_fitness
+                and abs(rmse_new - rmse) < prm.relative_rmse
             )
             or _small_step(t, t_old, prm)
         )
         k = max(k / 2.0, k_final)
-        fitness, rmse = res.fitness, res.inlier_rmse
+        fitness, rmse = f_new, rmse_new
         if done:
             converged = True
             break

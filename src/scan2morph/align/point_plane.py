@@ -1,0 +1,113 @@
+"""Point-to-plane ICP steps against one nearest-neighbour tree.
+
+The alignment steps ICP one iteration at a time (:func:`scan2morph.align.icp._refine_icp`
+halves the robust kernel's scale between iterations and reports the iterations). open3d's
+``registration_icp`` builds a k-d tree over the target and searches every correspondence twice
+on each call, so stepping it rebuilt the tree hundreds of times a take, and its parallel sums
+made the last digits of a pose vary from run to run. This module makes the same step against
+one scipy k-d tree, with sums in a fixed order:
+
+1. each source point (moved by the current pose) is paired with its closest target point within
+   ``max_d`` mm;
+2. the point-to-plane residual of a pair is ``r = (p - q) . n_q`` (mm), weighted by the robust
+   kernel at ``|r|`` (:func:`~scan2morph.align.settings.kernel_weights`);
+3. the Gauss-Newton step solves ``(sum w J J^T) x = -sum w J r`` with ``J = (p x n_q, n_q)``;
+   ``x`` holds small rotations about x, y and z (radians) and a translation (mm), the rotation
+   ``Rz Ry Rx`` (open3d's parametrisation), applied on the left of the pose.
+
+The fitness and inlier RMSE are open3d's: the share of source points with a pair, and the RMS
+distance (not point-to-plane) of the pairs, mm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from scan2morph.align.rigid import transform_points
+from scan2morph.align.settings import kernel_weights
+
+
+def _rotation_zyx(angles: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation ``Rz(c) Ry(b) Rx(a)`` of ``angles`` (a, b, c), radians."""
+    (ca, cb, cc), (sa, sb, sc) = np.cos(angles), np.sin(angles)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
+    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
+    rz = np.array([[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]])
+    return rz @ ry @ rx
+
+
+class PointToPlane:
+    """A target surface (points with unit normals) and its pairing distance.
+
+    Parameters
+    ----------
+    target : (m, 3) float
+        Target points, mm.
+    normals : (m, 3) float
+        Their unit normals.
+    max_d : float
+        Largest pairing distance, mm.
+    """
+
+    def __init__(self, target: np.ndarray, normals: np.ndarray, max_d: float):
+        self.q = np.asarray(target, dtype=np.float64)
+        self.n = np.asarray(normals, dtype=np.float64)
+        self.max_d = float(max_d)
+        self.tree = cKDTree(self.q)
+        self._last = None  # (source, pose bytes, moved points, pairs): a step follows an evaluate
+
+    def _pairs_at(self, source: np.ndarray, pose: np.ndarray) -> tuple:
+        """The moved source and its pairs at ``pose``, the last pose's searched once."""
+        key = pose.tobytes()
+        if self._last is None or self._last[0] is not source or self._last[1] != key:
+            moved = transform_points(pose, source)
+            self._last = (source, key, moved, self.pairs(moved))
+        return self._last[2], self._last[3]
+
+    def pairs(self, moved: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The pairs of source points already moved by the pose, (n, 3) mm.
+
+        Returns
+        -------
+        source : (k,) int
+            Indices of the source points with a target point within ``max_d``.
+        target : (k,) int
+            Their target points.
+        distance : (k,) float64
+            Their distances, mm.
+        """
+        d, j = self.tree.query(moved, distance_upper_bound=self.max_d)
+        ok = np.isfinite(d)
+        return np.flatnonzero(ok), j[ok], d[ok]
+
+    def evaluate(self, source: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
+        """Fitness (share of source points paired) and inlier RMSE (mm) of ``pose``, (4, 4)."""
+        _, (_, _, d) = self._pairs_at(source, pose)
+        if d.size == 0:
+            return 0.0, 0.0
+        return d.size / len(source), float(np.sqrt(np.mean(d**2)))
+
+    def step(self, source: np.ndarray, pose: np.ndarray, kernel: str, k: float) -> np.ndarray:
+        """One Gauss-Newton step from ``pose`` (4, 4): the next pose, (4, 4) float64.
+
+        ``kernel`` (``tukey``, ``huber`` or ``l2``) and its scale ``k`` (mm) weigh the pairs.
+        """
+        moved, (i, j, _) = self._pairs_at(source, pose)
+        p, q, n = moved[i], self.q[j], self.n[j]
+        r = np.einsum("ij,ij->i", p - q, n)
+        w = kernel_weights(np.abs(r), kernel, k)
+        jac = np.hstack([np.cross(p, n), n])
+        jtj = (jac * w[:, None]).T @ jac
+        jtr = jac.T @ (w * r)
+        try:
+            x = np.linalg.solve(jtj, -jtr)
+        except np.linalg.LinAlgError:  # too few pairs to fix every degree of freedom
+            x = np.linalg.lstsq(jtj, -jtr, rcond=None)[0]
+        update = np.eye(4)
+        update[:3, :3] = _rotation_zyx(x[:3])
+        update[:3, 3] = x[3:]
+        return update @ pose
+
+
+__all__ = ["PointToPlane"]
