@@ -52,7 +52,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from scan2morph.align.gate import RmseGate, residual_gate, rmse_gate, rmse_limit
 from scan2morph.align.noise import mesh_noise
@@ -130,27 +129,26 @@ def _refine_icp(p, q, q_normals, initial, prm, k_start=None):
     k_final = prm.kernel_k_mm
     k = max(prm.max_correspondence_mm if k_start is None else k_start, k_final)
     t = np.array(initial, dtype=np.float64)
-    fitness, rmse = surface.evaluate(p, t)
+    pairs = surface.at(p, t)
     converged = False
     it = 0
     for it in range(1, prm.max_iterations + 1):  # noqa: B007 (it is reported)
-        if fitness == 0.0:
+        if pairs.fitness == 0.0:
             break
-        t_old, t = t, surface.step(p, t, prm.robust_kernel, k)
-        f_new, rmse_new = surface.evaluate(p, t)
+        t_old, t = t, surface.step(pairs, prm.robust_kernel, k, t)
+        old, pairs = pairs, surface.at(p, t)
         done = k == k_final and (
             (
-                abs(f_new - fitness) < prm.relative_fitness
-                and abs(rmse_new - rmse) < prm.relative_rmse
+                abs(pairs.fitness - old.fitness) < prm.relative_fitness
+                and abs(pairs.rmse - old.rmse) < prm.relative_rmse
             )
             or _small_step(t, t_old, prm)
         )
         k = max(k / 2.0, k_final)
-        fitness, rmse = f_new, rmse_new
         if done:
             converged = True
             break
-    return t, float(fitness), float(rmse), it, converged
+    return t, float(pairs.fitness), float(pairs.rmse), it, converged
 
 
 def _initial_pose(
@@ -442,7 +440,8 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
     share = np.ones_like(in_region) if prm.still_groups else in_region
     judge = in_region if np.count_nonzero(keep & in_region) >= 6 else share
     if prm.method == "icp":
-        fitness, rmse = _nearest_stats(s.p[in_region], s.q, t, prm.max_correspondence_mm)
+        final = PointToPlane(s.q, s.q_normals, prm.max_correspondence_mm).at(s.p[in_region], t)
+        fitness, rmse = final.fitness, final.rmse
     else:
         _, fitness, rmse = _residual_stats(
             s.p[in_region], s.q[in_region], t, prm.max_correspondence_mm
@@ -474,13 +473,6 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
         kernel_k=prm.kernel_k_mm,
         kept_indices=s.p_idx[keep].astype(np.int64),
     )
-
-
-def _nearest_stats(p: np.ndarray, q: np.ndarray, t: np.ndarray, max_d: float) -> tuple:
-    """open3d's fitness and inlier RMSE: closest-point distances within ``max_d``."""
-    d, _ = cKDTree(q).query(transform_points(t, p))
-    inl = d <= max_d
-    return float(inl.mean()), float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else 0.0
 
 
 def _verdict(conv, iterations, fitness, kept, recovery, prm) -> list[str]:

@@ -21,6 +21,8 @@ distance (not point-to-plane) of the pairs, mm.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -35,6 +37,31 @@ def _rotation_zyx(angles: np.ndarray) -> np.ndarray:
     ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
     rz = np.array([[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]])
     return rz @ ry @ rx
+
+
+class Pairs(NamedTuple):
+    """A pose's pairs (:meth:`PointToPlane.at`).
+
+    Attributes
+    ----------
+    moved : (n, 3) float64
+        The source points moved by the pose, mm.
+    source, target : (k,) int
+        The paired source points and their closest target points within ``max_d``.
+    distance : (k,) float64
+        Their distances, mm.
+    fitness : float
+        Share of the source points paired.
+    rmse : float
+        RMS distance of the pairs, mm (0 without pairs).
+    """
+
+    moved: np.ndarray
+    source: np.ndarray
+    target: np.ndarray
+    distance: np.ndarray
+    fitness: float
+    rmse: float
 
 
 class PointToPlane:
@@ -55,46 +82,24 @@ class PointToPlane:
         self.n = np.asarray(normals, dtype=np.float64)
         self.max_d = float(max_d)
         self.tree = cKDTree(self.q)
-        self._last = None  # (source, pose bytes, moved points, pairs): a step follows an evaluate
 
-    def _pairs_at(self, source: np.ndarray, pose: np.ndarray) -> tuple:
-        """The moved source and its pairs at ``pose``, the last pose's searched once."""
-        key = pose.tobytes()
-        if self._last is None or self._last[0] is not source or self._last[1] != key:
-            moved = transform_points(pose, source)
-            self._last = (source, key, moved, self.pairs(moved))
-        return self._last[2], self._last[3]
-
-    def pairs(self, moved: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The pairs of source points already moved by the pose, (n, 3) mm.
-
-        Returns
-        -------
-        source : (k,) int
-            Indices of the source points with a target point within ``max_d``.
-        target : (k,) int
-            Their target points.
-        distance : (k,) float64
-            Their distances, mm.
-        """
+    def at(self, source: np.ndarray, pose: np.ndarray) -> Pairs:
+        """The pairs of ``source`` (n, 3) mm moved by ``pose`` (4, 4), with their fitness and
+        inlier RMSE."""
+        moved = transform_points(pose, source)
         d, j = self.tree.query(moved, distance_upper_bound=self.max_d)
         ok = np.isfinite(d)
-        return np.flatnonzero(ok), j[ok], d[ok]
+        d = d[ok]
+        rmse = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
+        return Pairs(moved, np.flatnonzero(ok), j[ok], d, d.size / len(source), rmse)
 
-    def evaluate(self, source: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
-        """Fitness (share of source points paired) and inlier RMSE (mm) of ``pose``, (4, 4)."""
-        _, (_, _, d) = self._pairs_at(source, pose)
-        if d.size == 0:
-            return 0.0, 0.0
-        return d.size / len(source), float(np.sqrt(np.mean(d**2)))
+    def step(self, pairs: Pairs, kernel: str, k: float, pose: np.ndarray) -> np.ndarray:
+        """One Gauss-Newton step from ``pose`` (4, 4), whose pairs are ``pairs``: the next pose,
+        (4, 4) float64.
 
-    def step(self, source: np.ndarray, pose: np.ndarray, kernel: str, k: float) -> np.ndarray:
-        """One Gauss-Newton step from ``pose`` (4, 4): the next pose, (4, 4) float64.
-
-        ``kernel`` (``tukey``, ``huber`` or ``l2``) and its scale ``k`` (mm) weigh the pairs.
+        ``kernel`` (``tukey``, ``huber`` or ``none``) and its scale ``k`` (mm) weigh the pairs.
         """
-        moved, (i, j, _) = self._pairs_at(source, pose)
-        p, q, n = moved[i], self.q[j], self.n[j]
+        p, q, n = pairs.moved[pairs.source], self.q[pairs.target], self.n[pairs.target]
         r = np.einsum("ij,ij->i", p - q, n)
         w = kernel_weights(np.abs(r), kernel, k)
         jac = np.hstack([np.cross(p, n), n])
@@ -110,4 +115,4 @@ class PointToPlane:
         return update @ pose
 
 
-__all__ = ["PointToPlane"]
+__all__ = ["Pairs", "PointToPlane"]
