@@ -219,7 +219,7 @@ def print_params(j, stage):
 
 def file_checksums(j, scriptdir):
     """SHA-256 of the files the stages read besides parts: this script, the template and the
-    take's input files (by sheet role)."""
+    take's input files (by sheet role, those given)."""
 
     def each(files):
         return [sha256_file(f) for f in ([files] if isinstance(files, str) else files)]
@@ -227,7 +227,8 @@ def file_checksums(j, scriptdir):
     return {
         "script": sha256_file(Path(scriptdir) / "take.py"),
         "template": sha256_file(j.inp.template),
-        "files": {role: each(j.inp[role]) for role in j.p.roles},
+        # the files that exist (a missing one is the check's problem: ingest refuses the take)
+        "files": {role: each(j.inp[role]) for role in j.p.roles if hasattr(j.inp, role)},
     }
 
 
