@@ -1,7 +1,7 @@
 # A take's stages, one job per take (one process: the interpreter and imports paid once a take):
 # ingest (stereo reconstructed, RGB-D depth resampled onto the colour image, a mesh rendered),
 # repair (Yano-Harada 3.1), landmarks, fit (TPS warp to fiducials, subdivision), align to the
-# neutral (Kabsch, then ICP on the upper face) and refine (image correlation of the skin against
+# neutral (Kabsch, then ICP on the still skin) and refine (image correlation of the skin against
 # the neutral; refine.method: none keeps the template fit). Each stage writes its own part, log
 # and benchmark as before; a stage whose part is up to date (its fingerprint in stages.json) is
 # not run again, so a config change re-runs only the stages it reaches.
