@@ -1,6 +1,6 @@
 # scan2morph: 3D face scans -> subject-specific morphable face models.
-# Stages (one file each under workflow/rules/): synth, ingest, repair, fit, align, motion, morph, modal, store, accuracy, figures,
-# report, cohort; sweeps (on demand: `snakemake sweep_all`).
+# Stages (rule files under workflow/rules/): synth, template, take (one job per take: ingest, repair, landmarks, fit,
+# align, refine), motion, morph, modal, store, accuracy, figures, report, cohort; sweeps (on demand: `snakemake sweep_all`).
 
 
 from snakemake.utils import min_version
@@ -28,12 +28,8 @@ wildcard_constraints:
 
 
 include: "workflow/rules/synth.smk"
-include: "workflow/rules/ingest.smk"
-include: "workflow/rules/repair.smk"
-include: "workflow/rules/landmarks.smk"
-include: "workflow/rules/fit.smk"
-include: "workflow/rules/align.smk"
-include: "workflow/rules/refine.smk"
+include: "workflow/rules/template.smk"
+include: "workflow/rules/take.smk"
 include: "workflow/rules/motion.smk"
 include: "workflow/rules/morph.smk"
 include: "workflow/rules/modal.smk"

@@ -32,7 +32,8 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
-#: Rules that run once per take; every other rule runs once per subject (template, cohort: once;
+#: Rules that run once per take (the stages of one job per take, rule ``take``, since issue #35);
+#: every other rule runs once per subject (template, cohort: once;
 #: the synthetic subjects' generators are left out of the extrapolation: real scans are read).
 PER_TAKE = ("ingest", "repair", "landmarks", "fit", "align", "refine")
 ONCE = ("template", "cohort")
@@ -84,7 +85,8 @@ def run(work: Path, subjects: int, args) -> dict:
     if code:
         sys.exit(f"snakemake failed ({code}): see {work / 'snakemake.out'}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    jobs = job_benchmarks(work)
+    lines = job_benchmarks(work)
+    jobs = lines[lines.job]
     takes = len(yaml.safe_load(config.read_text()).get("synthetic", {}).get("takes", [])) or len(
         yaml.safe_load((ROOT / "config" / "config.yaml").read_text())["synthetic"]["takes"]
     )
@@ -102,7 +104,7 @@ def run(work: Path, subjects: int, args) -> dict:
         peak_process_mb=(after.ru_maxrss) / 1024,
         store_mb=sum(f.stat().st_size for f in stores) / 2**20,
         results_mb=results / 2**20,
-        rules=jobs,
+        rules=lines,
     )
 
 
@@ -111,11 +113,19 @@ def synthetic_ids(n: int) -> list[str]:
 
 
 def job_benchmarks(work: Path) -> pd.DataFrame:
-    """Every job's benchmark line (benchmarks/rules/<rule>/...tsv) with its rule."""
+    """Every benchmark line (benchmarks/rules/<rule>/...tsv) with its rule, and whether it is a
+    job's (column ``job``): where a take's stages run in one job (rule ``take``, its lines under
+    benchmarks/takes/), the stages' lines are not jobs, the take jobs' are (rule ``take``)."""
     rows = []
+    takes = work / "benchmarks" / "takes"
     for f in (work / "benchmarks" / "rules").rglob("*.tsv"):
         d = pd.read_csv(f, sep="\t")
         d["rule"] = f.relative_to(work / "benchmarks" / "rules").parts[0]
+        d["job"] = not (takes.is_dir() and d["rule"].iloc[0] in PER_TAKE)
+        rows.append(d)
+    for f in takes.rglob("*.tsv"):
+        d = pd.read_csv(f, sep="\t")
+        d["rule"], d["job"] = "take", True
         rows.append(d)
     return pd.concat(rows, ignore_index=True)
 
@@ -200,9 +210,10 @@ def summarize(runs: list[dict], args) -> None:
     print(table.round(1).to_string(index=False))
     linear_fit(table)
 
-    # per rule, from the largest run: job seconds per take (per-take rules) or per subject
+    # per rule, from the largest run: job seconds per take (per-take rules: a take job's stages)
+    # or per subject
     big = runs[-1]
-    jobs = big["rules"]
+    jobs = big["rules"][big["rules"].rule != "take"]
     per = jobs.groupby("rule").agg(
         jobs=("s", "size"),
         job_s=("s", "sum"),

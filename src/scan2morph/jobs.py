@@ -105,6 +105,10 @@ def opencv_threads(n: int | None) -> Iterator[None]:
             os.environ["OPENCV_FOR_THREADS_NUM"] = env
 
 
+#: Whether this process ran a profiled job body already (its start-up is counted once).
+_STARTED = False
+
+
 def _profiled(func: Callable[[], object], log_path: str | Path | None) -> None:
     """Run ``func``; profile it when :data:`PROFILE_ENV` names a folder."""
     folder = os.environ.get(PROFILE_ENV)
@@ -114,16 +118,21 @@ def _profiled(func: Callable[[], object], log_path: str | Path | None) -> None:
     import cProfile
     import time
 
+    global _STARTED
     parts = Path(log_path).with_suffix("").parts
     name = "-".join(parts[parts.index("logs") + 1 :] if "logs" in parts else parts[-2:])
-    startup = time.process_time()  # CPU so far: the interpreter, Snakemake's wrapper, imports
+    start = time.process_time()
+    # the CPU so far: the interpreter, Snakemake's wrapper, imports; paid once a process (a
+    # take's stages share one job: the later ones have none)
+    startup = 0.0 if _STARTED else start
+    _STARTED = True
     profile = cProfile.Profile()
     t0 = time.perf_counter()
     try:
         profile.runcall(func)
     finally:
         wall = time.perf_counter() - t0
-        cpu = time.process_time() - startup
+        cpu = time.process_time() - start
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
         profile.dump_stats(out / f"{name}.prof")

@@ -79,6 +79,7 @@ def test_a_job_profiles_itself_when_asked(tmp_path, monkeypatch):
         while time.process_time() - t0 < 0.05:
             pass
 
+    monkeypatch.setattr("scan2morph.jobs._STARTED", False)  # a fresh process
     monkeypatch.setenv(PROFILE_ENV, str(tmp_path / "prof"))
     run_job(tmp_path / "logs" / "align" / "s1" / "car.log", busy_body)
     stats = pstats.Stats(str(tmp_path / "prof" / "align-s1-car.prof"))
@@ -88,6 +89,11 @@ def test_a_job_profiles_itself_when_asked(tmp_path, monkeypatch):
     assert record["startup_cpu_s"] > 0 and record["body_wall_s"] >= 0.05
     # the body's own CPU: the busy loop's 0.05 s, not the start-up's
     assert 0.05 <= record["body_cpu_s"] < record["body_wall_s"] + 0.01
+    # a second job of the same process (a take's next stage): no start-up, its own body's CPU
+    run_job(tmp_path / "logs" / "refine" / "s1" / "car.log", busy_body)
+    record = json.loads((tmp_path / "prof" / "refine-s1-car.json").read_text())
+    assert record["startup_cpu_s"] == 0.0
+    assert 0.05 <= record["body_cpu_s"] < 0.09  # not the first job's too
     monkeypatch.delenv(PROFILE_ENV)
     run_job(tmp_path / "logs" / "align" / "s1" / "too.log", busy_body)
     assert not (tmp_path / "prof" / "align-s1-too.prof").exists()

@@ -95,4 +95,4 @@ def test_every_per_subject_rule_is_in_the_subject_group():
     # jobs of their own: the sweeps (on demand) and the cohort summary over every subject
     own = {"sweep", "sweep_all", "cohort"}
     assert per_subject - own <= grouped, sorted(per_subject - own - grouped)
-    assert {"refine", "align", "motion", "store"} <= per_subject
+    assert {"take", "motion", "store"} <= per_subject

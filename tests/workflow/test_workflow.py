@@ -368,3 +368,104 @@ def test_one_viseme_gives_blends_and_a_pca_of_two_shapes(cohort):
         assert list(h5[paths.pca("takes")].asstr()[()]) == ["neutral", "car"]
         assert h5[paths.pca("eigenvalues")].shape == (1,)
         assert paths.blend("car_60") in h5
+
+
+# --- one job per take: its stages' parts, logs and benchmarks; re-runs; isolation ---
+TAKE_STAGES = ("ingest", "repair", "landmarks", "fit", "align", "refine")
+
+
+def test_each_stage_of_a_take_job_keeps_its_part_log_and_benchmark(cohort):
+    """A take's stages run in one job, each still with its own part, log and benchmark file
+    (Snakemake's format), which the report's run-time table reads per stage."""
+    import pandas as pd
+
+    from scan2morph.report.provenance import stage_timings
+
+    work, _, _ = cohort
+    for subject, take in (("alice", "neutral"), ("alice", "car"), ("synth01", "car")):
+        job = pd.read_csv(work / "benchmarks" / "takes" / subject / f"{take}.tsv", sep="\t")
+        wall = 0.0
+        for stage in TAKE_STAGES:
+            assert (work / "results" / subject / "takes" / take / f"{stage}.h5").is_file()
+            log = (work / "logs" / stage / subject / f"{take}.log").read_text()
+            assert "Traceback" not in log
+            bench = work / "benchmarks" / "rules" / stage / subject / f"{take}.tsv"
+            row = pd.read_csv(bench, sep="\t").iloc[0]
+            assert row["s"] > 0 and 0 < row["cpu_time"] and row["max_rss"] > 10, (bench, row)
+            wall += row["s"]
+        assert wall <= job["s"].iloc[0] + 1e-3  # the stages within their job's time
+    rows = {r["stage"]: r for r in stage_timings(work / "benchmarks" / "rules", "alice")}
+    assert all(rows[s]["jobs"] == 2 for s in TAKE_STAGES)  # neutral and car
+    assert "take" not in rows
+
+
+def test_a_take_refused_at_one_stage_hands_the_record_through_its_job(cohort):
+    """A take refused at ingest: its job still finishes, every later part of the take holds the
+    same record (the job's other takes and the subject's other jobs are untouched: see
+    test_broken_takes_are_left_out_and_the_subject_built_from_the_rest)."""
+    from scan2morph.stages.failure import part_failures
+    from scan2morph.stages.take_job import read_fingerprints
+
+    work, _, _ = cohort
+    folder = work / "results" / "broken" / "takes"
+    for stage in TAKE_STAGES:
+        (record,) = part_failures([folder / "pts67" / f"{stage}.h5"]).values()
+        assert (record.take, record.stage) == ("pts67", "ingest"), stage
+        assert part_failures([folder / "grey" / f"{stage}.h5"]) == {}
+    assert set(read_fingerprints(folder / "pts67" / "stages.json")) == set(TAKE_STAGES)
+    assert (
+        (work / "results" / "broken" / "landmarks" / "pts67.pts")
+        .read_text()
+        .startswith("# no landmarks: pts67 left out at ingest")
+    )
+
+
+def test_a_config_change_reruns_only_the_stages_it_reaches(cohort, tmp_path):
+    """A refine setting changed: the take jobs run again, but only their refine stage does; the
+    earlier parts stay as they were (same file, same bytes)."""
+    work, _, _ = cohort
+    copy = tmp_path / "wf"
+    shutil.copytree(work, copy, symlinks=True)
+    takes = copy / "results" / "alice" / "takes"
+
+    def files(stage):
+        return {t: takes / t / f"{stage}.h5" for t in ("neutral", "car")}
+
+    before = {
+        s: {t: (p.stat().st_ino, p.read_bytes()) for t, p in files(s).items()} for s in TAKE_STAGES
+    }
+    cfg = yaml.safe_load((copy / "tiny.yaml").read_text())
+    cfg["refine"] = {"smooth_px": 4.5}
+    (copy / "tiny2.yaml").write_text(yaml.safe_dump(cfg))
+    targets = [str(p.relative_to(copy)) for p in files("refine").values()]
+    assert run_workflow(copy, copy / "tiny2.yaml", targets=targets)
+    for take in ("neutral", "car"):
+        log = (copy / "logs" / "take" / "alice" / f"{take}.log").read_text()
+        assert log.split() == [
+            *(w for s in TAKE_STAGES[:-1] for w in (f"{s}:", "up", "to", "date,", "not", "run")),
+            "refine:",
+            "run",
+        ], log
+        for stage in TAKE_STAGES[:-1]:
+            part = files(stage)[take]
+            assert (part.stat().st_ino, part.read_bytes()) == before[stage][take], stage
+        assert files("refine")[take].stat().st_ino != before["refine"][take][0]
+    # a later stage refusing the takes (a stricter fit) isolates them within their jobs: the
+    # jobs finish, fit writes the record, align and refine hand it on, the earlier parts stay
+    from scan2morph.stages.failure import part_failures
+
+    cfg["template"] = {"min_valid_fraction": 0.9999}
+    (copy / "tiny3.yaml").write_text(yaml.safe_dump(cfg))
+    assert run_workflow(copy, copy / "tiny3.yaml", targets=targets)
+    for take in ("neutral", "car"):
+        log = (copy / "logs" / "take" / "alice" / f"{take}.log").read_text()
+        assert log.splitlines()[2:] == ["landmarks: up to date, not run"] + [
+            f"{s}: run" for s in ("fit", "align", "refine")
+        ], log
+        for stage in ("fit", "align", "refine"):
+            (record,) = part_failures([files(stage)[take]]).values()
+            assert (record.take, record.stage) == (take, "fit")
+        assert part_failures([files("landmarks")[take]]) == {}
+        assert (
+            "left out at fit" in (copy / "results" / "alice" / "meshes" / f"{take}.obj").read_text()
+        )

@@ -188,35 +188,6 @@ def get_neutral_fit(wildcards):
     return f"results/{wildcards.subject}/takes/{take}/fit.h5" if take else []
 
 
-def get_neutral_parts(stages):
-    """An input function: the ``stages`` parts of the subject's neutral take."""
-
-    def parts(wildcards):
-        take = get_neutral_take(wildcards)
-        return (
-            [f"results/{wildcards.subject}/takes/{take}/{s}.h5" for s in stages]
-            if take
-            else []
-        )
-
-    return parts
-
-
-def get_neutral_parts_for_others(stages):
-    """An input function: the ``stages`` parts of the subject's neutral for its other takes,
-    none for the neutral itself."""
-    of_neutral = get_neutral_parts(stages)
-
-    def parts(wildcards):
-        return (
-            []
-            if wildcards.take == get_neutral_take(wildcards)
-            else of_neutral(wildcards)
-        )
-
-    return parts
-
-
 def get_viseme_aligns(wildcards):
     return _take_files(
         "results/{subject}/takes/{take}/align.h5",
@@ -249,3 +220,30 @@ def get_truth_files(wildcards):
         subject=wildcards.subject,
         take=takes_of(wildcards.subject),
     )
+
+
+# --- the take job ---
+def get_take_job_inputs(wildcards):
+    """A take job's input files (:func:`take_inputs`) and, for a take other than the neutral,
+    the neutral's parts its stages read (``neutral_repair``, ``neutral_landmarks``,
+    ``neutral_fit``) and their fingerprints (``neutral_stages``)."""
+    files = take_inputs(wildcards.subject, wildcards.take)
+    neutral = get_neutral_take(wildcards)
+    if not neutral or wildcards.take == neutral:
+        return files
+    folder = f"results/{wildcards.subject}/takes/{neutral}"
+    parts = {f"neutral_{s}": f"{folder}/{s}.h5" for s in ("repair", "landmarks", "fit")}
+    return files | parts | {"neutral_stages": f"{folder}/stages.json"}
+
+
+def take_stage_files(pattern):
+    """A params function: ``pattern`` (with ``{stage}``, ``{subject}``, ``{take}``) for each of
+    the take's stages, stage -> path (the stages' logs and benchmark files)."""
+
+    def files(wildcards):
+        return {
+            s: pattern.format(stage=s, subject=wildcards.subject, take=wildcards.take)
+            for s in TAKE_STAGES
+        }
+
+    return files

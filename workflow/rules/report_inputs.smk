@@ -36,5 +36,7 @@ def get_subject_accuracy(wildcards):
 
 
 def get_rule_order(wildcards):
-    """Rule names in the order the workflow defines them (the stage order of the timings)."""
-    return [r.name for r in workflow.rules]
+    """Rule names in the order the workflow defines them (the stage order of the timings), a
+    take job's stages in its place."""
+    names = [r.name for r in workflow.rules]
+    return [n for name in names for n in (TAKE_STAGES if name == "take" else (name,))]

@@ -1,4 +1,4 @@
-# Template fitting (Yano-Harada 3.1): TPS warp to fiducials, subdivision, bilinear sampling.
+# The 2D template mesh the takes are fitted with (Yano-Harada 3.1), and each subject's copy of it.
 
 
 rule template:
@@ -36,28 +36,3 @@ rule template_part:
         template=config["template"],
     script:
         "../scripts/template_part.py"
-
-
-rule fit:
-    """Fit the template mesh to one take's range image by TPS warp to the fiducials and subdivision; export it as OBJ."""
-    input:
-        part="results/{subject}/takes/{take}/repair.h5",
-        landmarks="results/{subject}/takes/{take}/landmarks.h5",
-        template="resources/template.npz",
-    output:
-        part="results/{subject}/takes/{take}/fit.h5",
-        obj="results/{subject}/meshes/{take}.obj",
-        mtl="results/{subject}/meshes/{take}.mtl",
-        texture="results/{subject}/meshes/{take}.png",
-    log:
-        "logs/fit/{subject}/{take}.log",
-    benchmark:
-        "benchmarks/rules/fit/{subject}/{take}.tsv"
-    resources:
-        mem_mb=700,
-        runtime=2,
-    params:
-        take=get_take_ids,
-        template=config["template"],
-    script:
-        "../scripts/fit.py"

@@ -1,0 +1,112 @@
+"""One job per take: the stages' fingerprints (which of them re-run) and their benchmark files.
+
+The job itself (a config change re-running only the stages it reaches, take isolation, the
+per-stage benchmark files of a run) is tested end to end in ``tests/workflow/test_workflow.py``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from scan2morph.report.provenance import stage_timings
+from scan2morph.sheet import validate_config
+from scan2morph.stages import align, fit, ingest, landmarks, refine, repair
+from scan2morph.stages.take_job import (
+    BENCHMARK_COLUMNS,
+    benchmarked,
+    fingerprint,
+    read_fingerprints,
+    up_to_date,
+    write_benchmark,
+    write_fingerprints,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+MODULES = (ingest, repair, landmarks, fit, align, refine)
+
+
+@pytest.fixture(scope="module")
+def config():
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    return validate_config(config, ROOT / "schemas" / "config.schema.yaml")
+
+
+def test_a_fingerprint_depends_on_the_params_and_the_reads_not_on_their_order(config):
+    reads = {"take": {"kind": "viseme", "neutral": "n"}, "ingest": "ab" * 32}
+    base = fingerprint("repair", repair.Params.from_config(config), reads)
+    assert len(base) == 64 and int(base, 16) >= 0
+    # the same in any key order and from a fresh Params
+    again = dict(reversed(list(reads.items())))
+    assert fingerprint("repair", repair.Params.from_config(config), again) == base
+    # any change of the section, of what it reads or of the stage's name gives another
+    changed = {**config, "repair": {**config["repair"], "max_hole_px": 401}}
+    assert fingerprint("repair", repair.Params.from_config(changed), reads) != base
+    assert fingerprint("repair", repair.Params.from_config(config), reads | {"ingest": "0"}) != base
+    assert fingerprint("fit", repair.Params.from_config(config), reads) != base
+
+
+def test_every_stage_params_has_a_stable_fingerprint(config):
+    """Nested dataclasses, tuples and numbers are taken apart: no object address (a repr of an
+    object) reaches the fingerprint, so two builds of the Params agree."""
+    for module in MODULES:
+        a = fingerprint(module.__name__, module.Params.from_config(config), {})
+        b = fingerprint(module.__name__, module.Params.from_config(dict(config)), {})
+        assert a == b, module.__name__
+
+
+def test_a_stage_is_up_to_date_only_with_its_fingerprint_and_all_its_files(tmp_path):
+    record = tmp_path / "stages.json"
+    assert read_fingerprints(record) == {}  # no record: every stage runs
+    write_fingerprints(record, {"ingest": "a", "repair": "b"})
+    assert read_fingerprints(record) == {"ingest": "a", "repair": "b"}
+    part, report = tmp_path / "repair.h5", tmp_path / "repair.json"
+    part.write_bytes(b"x")
+    assert not up_to_date(read_fingerprints(record), "repair", "b", [part, report])
+    report.write_text("{}")
+    assert up_to_date(read_fingerprints(record), "repair", "b", [part, report])
+    assert not up_to_date(read_fingerprints(record), "repair", "c", [part, report])
+    assert not up_to_date(read_fingerprints(record), "fit", "b", [part])
+    record.write_text("not json")
+    assert read_fingerprints(record) == {}
+
+
+def test_benchmark_files_read_as_snakemake_s(tmp_path):
+    path = tmp_path / "rules" / "refine" / "s1" / "car.tsv"
+    write_benchmark(path, 3725.25, 1.5, 210.0)
+    table = pd.read_csv(path, sep="\t")
+    assert tuple(table.columns) == BENCHMARK_COLUMNS
+    row = table.iloc[0]
+    assert (row["s"], row["h:m:s"], row["cpu_time"], row["max_rss"]) == (
+        3725.25,
+        "1:02:05",
+        1.5,
+        210.0,
+    )
+    assert row["mean_load"] == pytest.approx(100 * 1.5 / 3725.25, abs=0.01)
+    assert pd.isna(row["max_vms"])
+    # the report's run-time table counts it as the rule's job
+    (rows,) = stage_timings(tmp_path / "rules", "s1")
+    assert (rows["stage"], rows["jobs"], rows["seconds"]) == ("refine", 1, 3725.25)
+
+
+def test_a_timed_block_records_its_own_wall_and_cpu_time(tmp_path):
+    path = tmp_path / "b.tsv"
+    t0 = time.perf_counter()
+    with benchmarked(path):
+        end = time.process_time() + 0.05
+        while time.process_time() < end:  # 50 ms of CPU
+            pass
+        time.sleep(0.05)  # and 50 ms of waiting
+    wall = time.perf_counter() - t0
+    row = pd.read_csv(path, sep="\t").iloc[0]
+    assert 0.1 <= row["s"] <= wall + 1e-3
+    assert 0.05 <= row["cpu_time"] <= 0.05 + 0.03
+    assert row["max_rss"] > 1.0  # MB: this process's peak while the block ran
+    with pytest.raises(ZeroDivisionError), benchmarked(path):  # written on an error too
+        raise ZeroDivisionError
+    assert pd.read_csv(path, sep="\t").iloc[0]["s"] < 0.05
