@@ -121,3 +121,24 @@ def test_knobs_move_what_they_name():
         return int((front & (np.asarray(head.segment) == SEG_HAIR)).sum())
 
     assert front_hair(h0) > 1000 and front_hair(bald) == 0
+
+
+def test_wide_identity_is_the_subjects_own_at_the_committed_shares(monkeypatch):
+    """At the committed shares (0, 0) the trainer's faces are the subjects' own (so the
+    committed model's training takes are unchanged); at issue #33's trial shares they are drawn
+    within their ranges, fixed by seed and subject."""
+    from scan2morph.landmarks import data
+
+    for i in range(5):
+        assert data.wide_identity(f"train{i:03d}", 1) == subject_identity(f"train{i:03d}", 1)
+    monkeypatch.setattr(data, "CLOSED_EYES", 0.35)
+    monkeypatch.setattr(data, "WIDE_SHARE", 0.65)
+    faces = [data.wide_identity(f"train{i:03d}", 1) for i in range(60)]
+    assert faces[:3] == [data.wide_identity(f"train{i:03d}", 1) for i in range(3)]
+    assert data.wide_identity("train000", 2) != faces[0]
+    assert abs(np.mean([f.eyes_closed for f in faces]) - 0.35) < 0.2
+    wide = [f for f in faces if f.face_width != 1.0]
+    assert 20 < len(wide) < 55
+    for f in wide:
+        for k, (lo, hi) in data.WIDE_RANGE.items():
+            assert lo <= getattr(f, k) <= hi
