@@ -66,19 +66,17 @@ def _rows(config: dict, root: Path):
 def _write_subject(rows, config: dict, root: Path) -> None:
     """Write a subject's takes (the rows given) with the synth stage."""
     subject = rows[0]["subject"]
-    files: dict[str, list[str]] = {"landmarks": [], "truth": []}
-    for r in rows:
-        for role in synth.ROLES[r["modality"]]:
-            column = "color" if role == "rgbd_color" else role
-            files.setdefault(role, []).append(r[column])
-        files["landmarks"].append(r["landmarks"])
-        files["truth"].append(str(root / subject / "truth" / f"{r['take']}.npz"))
     (root / subject / "truth").mkdir(parents=True, exist_ok=True)
     params = synth.Params.from_config(config)
-    for i, r in enumerate(rows):
-        take = Take.from_row(r)
-        part = synth.run(None, take, params)
-        synth.write_files(part, {role: paths_[i] for role, paths_ in files.items()})
+    for r in rows:
+        files = {
+            role: r["color" if role == "rgbd_color" else role]
+            for role in synth.ROLES[r["modality"]]
+        }
+        files["landmarks"] = r["landmarks"]
+        files["truth"] = str(root / subject / "truth" / f"{r['take']}.npz")
+        part = synth.run(None, Take.from_row(r), params)
+        synth.write_files(part, files)
 
 
 def _grid(row, config: dict, root: Path) -> GridTake:

@@ -53,6 +53,7 @@ def _hair_weight(verts: np.ndarray, shape: _Shape) -> np.ndarray:
     az = np.abs(np.arctan2(x, z))
     hairline = (
         76.0 * shape.scale[1]
+        + shape.idt.hairline_mm
         - 40.0 * _smoothstep(az, 0.7, 1.35)
         - 100.0 * _smoothstep(az, 1.75, 2.6)
     )
@@ -117,11 +118,16 @@ def _albedo(mesh: _RestMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         upper = y > e.centre[1]
         lash = np.exp(-(((lev - 1.0) / 0.07) ** 2)) * np.where(upper, 1.0, 0.45)
         alb *= 1.0 - 0.65 * lash[:, None]
+    if shape.lids:  # closed eyes: the lashes along the lid line
+        along, off = shape.lid_line(verts)
+        lash = np.exp(-((off / 0.8) ** 2)) * (1.0 - _smoothstep(np.abs(along + 0.4), 13.0, 15.0))
+        lash *= np.abs(verts[:, 0]) > 3.0
+        alb *= 1.0 - 0.65 * lash[:, None]
     # hair on the skin: scalp and eyebrows
     skinish = kind == _KIND_SKIN
     hair_w = _hair_weight(verts, shape) * skinish
     brow_w = _brow_band(verts, shape) * skinish
-    alb += (0.9 * brow_w)[:, None] * (hair - alb)
+    alb += (idt.brow_hair * brow_w)[:, None] * (hair - alb)
     alb += hair_w[:, None] * (hair - alb)
     # cavity: dark red, darker towards the back
     cav = kind == _KIND_POCKET

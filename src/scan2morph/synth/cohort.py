@@ -204,7 +204,7 @@ def check_take(subject: str, label: str, kind: str, take: str, seed: int) -> str
 
 
 def articulated_head(
-    subject: str, label: str, kind: str, take: str, seed: int
+    subject: str, label: str, kind: str, take: str, seed: int, identity: Identity | None = None
 ) -> tuple[HeadModel, np.ndarray, np.random.Generator]:
     """The checked set-up shared by every simulated take: head, deformed vertices, take rng.
 
@@ -212,6 +212,9 @@ def articulated_head(
     ----------
     subject, label, kind, take, seed
         As in :func:`make_take`.
+    identity : Identity, optional
+        The face instead of the subject's own (:func:`subject_identity`): the detector's
+        trainer draws wider faces than a cohort's. The take's randomness stays the subject's.
 
     Returns
     -------
@@ -229,7 +232,7 @@ def articulated_head(
         On an unknown label, a kind that does not match it, a bad id or seed.
     """
     check_take(subject, label, kind, take, seed)
-    head = build_head(subject_identity(subject, seed))
+    head = build_head(subject_identity(subject, seed) if identity is None else identity)
     rng = np.random.default_rng([int(seed), _key(subject), _key(take)])
     coeffs = label_coefficients(label, rng if label != "neutral" else None)
     return head, articulate(head, coeffs), rng

@@ -31,6 +31,22 @@ class Identity:
         Position along the skin and hair colour ramps, light to dark and dark to light.
     iris : int
         Iris colour: 0 brown, 1 blue, 2 green.
+    eyes_closed : bool
+        Lids closed over the eyeballs (no eyeball shows; the lid points of the truth lie on
+        the lid line, as iBUG annotates closed eyes).
+    eye_height_mm : float
+        Height of the eyes (and the sockets, openings and brows with them) above the
+        average, mm; the nose and the rest of the face stay.
+    face_width : float
+        Width of the face below the eyes (mid-face, cheeks, jaw), on top of ``width``.
+    brow_hair : float
+        Opacity of the eyebrow hair in [0, 1] (0.9 average; 0 none).
+    hairline_mm : float
+        Height of the scalp's hairline above the average, mm (large: bald).
+
+    The last five are 0 / 1 / 0.9 at their defaults, which give the same head as an
+    identity without them; :func:`sample_identity` never varies them (the detector's
+    trainer does, :mod:`scan2morph.landmarks.data`).
     """
 
     width: float = 1.0
@@ -46,6 +62,11 @@ class Identity:
     skin_tone: float = 0.3
     hair_tone: float = 0.2
     iris: int = 0
+    eyes_closed: bool = False
+    eye_height_mm: float = 0.0
+    face_width: float = 1.0
+    brow_hair: float = 0.9
+    hairline_mm: float = 0.0
 
 
 def sample_identity(rng: np.random.Generator) -> Identity:

@@ -139,6 +139,8 @@ def _eyes(mesh: _RestMesh, front: _Front) -> np.ndarray:
     40 inner, 41 lower-inner, 42 lower-outer) mirrors it.
     """
     shape, verts, cand, cxy, cz = mesh.shape, mesh.vertices, front.index, front.xy, front.z
+    if shape.lids:
+        return _closed_eyes(mesh, front)
     ec, er = shape.eye_centre, shape.eye_radius
     e = shape.almond
     tilt = np.arctan2(e.rot[1, 0], e.rot[0, 0]) if e.rot is not None else 0.0
@@ -166,6 +168,31 @@ def _eyes(mesh: _RestMesh, front: _Front) -> np.ndarray:
             ok = covering & (dang < np.deg2rad(6.0))
             best = np.flatnonzero(ok)[np.argmin(rho[ok] + 3.0 * dang[ok])]
         left[k] = front.visible(*cxy[best])
+    right = [front.visible(-verts[left[k], 0], verts[left[k], 1]) for k in (3, 2, 1, 0, 5, 4)]
+    return np.concatenate([right, left])
+
+
+#: Closed eyes: where the six points of an eye lie along its axis, mm (inner corner,
+#: upper-inner, upper-outer, outer corner, lower-outer, lower-inner): the corners where an
+#: open eye's are, the lid points at a third and two thirds of the way between them, the
+#: upper and the lower one at the same place (as iBUG annotates a closed eye).
+_CLOSED_ALONG = (-14.0, -14.0 + 27.2 / 3, -14.0 + 2 * 27.2 / 3, 13.2)
+
+
+def _closed_eyes(mesh: _RestMesh, front: _Front) -> np.ndarray:
+    """Landmarks 37-48 of closed eyes: on the lid line, the upper and the lower lid points
+    together (iBUG's convention; see :data:`_CLOSED_ALONG`)."""
+    shape = mesh.shape
+    ec = shape.eye_centre
+    c, s = np.cos(0.07), np.sin(0.07)
+    left = np.zeros(6, np.int64)
+    c0, c1, c2, c3 = _CLOSED_ALONG
+    for k, a in enumerate((c0, c1, c2, c3, c2, c1)):
+        # the lid line's height at ``a`` along the axis (shape.lid_line's curve)
+        u = 1.0 - 2.5 * (1.0 - min(abs(a) / 13.6, 1.0) ** 2)
+        x, y = ec[0] + a * c - u * s, ec[1] - 0.8 + a * s + u * c
+        left[k] = front.visible(x, y)
+    verts = mesh.vertices
     right = [front.visible(-verts[left[k], 0], verts[left[k], 1]) for k in (3, 2, 1, 0, 5, 4)]
     return np.concatenate([right, left])
 

@@ -35,6 +35,7 @@ from scan2morph.synth.cohort import (
     write_npz,
 )
 from scan2morph.synth.features import SEG_BROW, SEG_EYE, SEG_HAIR, SEG_SKIN
+from scan2morph.synth.identity import Identity
 from scan2morph.synth.scanner import head_pose, shade
 from scan2morph.synth.texture import skin_detail, texture_seed
 
@@ -92,17 +93,27 @@ def make_mesh_take(
     take: str,
     seed: int,
     params: dict | None = None,
+    identity: Identity | None = None,
 ) -> dict:
     """Simulate one mesh scan of a synthetic subject.
 
-    Returns
-    -------
-    dict
-        ``vertices`` (n, 3) mm, ``faces`` (m, 3), ``colors`` (n, 3) uint8 in the mesh's frame;
-        ``landmarks`` (68, 3) mm with click noise; ``truth``; ids.
+    Parameters
+        ----------
+        subject, label, kind, take, seed
+            As in :func:`~scan2morph.synth.cohort.make_take`.
+        params : dict, optional
+            Overrides of the mesh scan's parameters.
+        identity : Identity, optional
+            The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
+
+            Returns
+        -------
+        dict
+            ``vertices`` (n, 3) mm, ``faces`` (m, 3), ``colors`` (n, 3) uint8 in the mesh's frame;
+            ``landmarks`` (68, 3) mm with click noise; ``truth``; ids.
     """
     p = mesh_scan_params(params, check_take(subject, label, kind, take, seed))
-    head, vertices, rng = articulated_head(subject, label, kind, take, seed)
+    head, vertices, rng = articulated_head(subject, label, kind, take, seed, identity)
     rot = Rotation.from_rotvec(np.deg2rad(p["pose_sigma_deg"]) * rng.standard_normal(3))
     pose = np.eye(4)
     pose[:3, :3] = rot.as_matrix()

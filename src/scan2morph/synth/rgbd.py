@@ -43,6 +43,7 @@ from scan2morph.synth.cohort import (
     write_npz,
 )
 from scan2morph.synth.features import SEG_BROW, SEG_EYE, SEG_HAIR, SEG_SKIN
+from scan2morph.synth.identity import Identity
 from scan2morph.synth.scanner import backproject, camera_matrix, head_pose, project, render
 from scan2morph.synth.texture import texture_seed
 
@@ -167,6 +168,7 @@ def make_rgbd_take(
     take: str,
     seed: int,
     params: dict | None = None,
+    identity: Identity | None = None,
 ) -> dict:
     """Simulate one RGB-D take of a synthetic subject.
 
@@ -179,6 +181,8 @@ def make_rgbd_take(
         As in :func:`~scan2morph.synth.cohort.make_take`.
     params : dict, optional
         Overrides of :data:`DEFAULT_RGBD`.
+    identity : Identity, optional
+        The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
 
     Returns
     -------
@@ -189,7 +193,7 @@ def make_rgbd_take(
         on the colour image with click noise; ``truth`` (see the module docstring); ids.
     """
     p = rgbd_params(params, check_take(subject, label, kind, take, seed))
-    head, vertices, rng = articulated_head(subject, label, kind, take, seed)
+    head, vertices, rng = articulated_head(subject, label, kind, take, seed, identity)
     intr = sensor(p)
     pose = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], AIM)
     pose_color = intr.color_from_depth @ pose

@@ -14,6 +14,9 @@ import numpy as np
 
 from scan2morph.synth.identity import Identity
 
+#: Thickness of a closed lid over the eyeball, mm.
+_LID_MM = 1.2
+
 
 def _smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
     """Polynomial smooth minimum (smooth union) with blend radius ``k`` mm."""
@@ -159,7 +162,8 @@ class _Shape:
     nose_tip : (3,) float64
         Tip of the nose chain, mm.
     almond, almonds, ears, ... : _Ellipsoid or list of _Ellipsoid
-        The parts (lists hold both sides).
+        The parts (lists hold both sides); ``almonds`` (the eye openings) is empty and
+        ``lids`` (spheres over the eyeballs) is not when the eyes are closed.
     """
 
     def __init__(self, idt: Identity):
@@ -173,27 +177,34 @@ class _Shape:
             )
 
         n, nw, lp, mw, es = idt.nose, idt.nose_width, idt.lips, idt.mouth_width, idt.eye_spacing
-        self.eye_centre = np.array([32.5 * es * sx, 21.0 * sy, 71.0 * sz])
+        self.eye_centre = np.array([32.5 * es * sx, 21.0 * sy + idt.eye_height_mm, 71.0 * sz])
         self.eye_radius = 12.0
         self.stomion_y = -52.0 * sy
         self.lip_front_z = 97.0 * sz
         self.mouth_half_width = 25.0 * mw * sx
         self.brow_y0 = self.eye_centre[1] + 15.0 + idt.brow_mm
 
+        fw = idt.face_width
         self.cranium = E((0, 28, -5), (75, 100, 100))
-        self.midface = E((0, -5, 25), (58, 55, 62))
-        self.jaw = E((0, -55, 15), (52, 48, 62))
+        self.midface = E((0, -5, 25), (58 * fw, 55, 62))
+        self.jaw = E((0, -55, 15), (52 * fw, 48, 62))
         self.chin = E((0, -90, 66), (24 * idt.chin, 15, 19))
         self.muzzle = E((0, -45, 58), (30 * mw, 25, 34))
         self.cheekbones = [E((48, 5, 55), (18, 12, 20))]
-        self.cheeks = [E((38, -24, 50), (24, 24, 24))]
-        self.brows = [E((27, 38 + idt.brow_mm * 0.5, 82), (26, 9, 12), _rot_z(-0.12))]
+        self.cheeks = [E((38 * fw, -24, 50), (24 * fw, 24, 24))]
+        brow_y = 38 + idt.brow_mm * 0.5 + idt.eye_height_mm / sy
+        self.brows = [E((27, brow_y, 82), (26, 9, 12), _rot_z(-0.12))]
         self.ears = [E((73, 2, -10), (13, 30, 17), _rot_x(-0.2))]
         ecx, ecy = self.eye_centre[0], self.eye_centre[1]
         self.sockets = [_Ellipsoid((ecx, ecy + 2, 92 * sz), (19, 13, 12))]
         # the eye opening: an almond tilted up at the outer corner, carved deep behind the eyeball
         self.almond = _Ellipsoid((ecx, ecy - 0.8, 86.0 * sz), (16.0, 4.7, 13.0), _rot_z(0.07))
         self.almonds = [self.almond]
+        # closed eyes: a lid over each eyeball with a shallow groove along the lid line
+        self.lids = []
+        if idt.eyes_closed:
+            self.almonds = []
+            self.lids = [_Ellipsoid(tuple(self.eye_centre), (_LID_MM + self.eye_radius,) * 3)]
         # nose: a chain from the nasion to the tip, tip ball, alae, columella
         nasion = np.array([0.0, 22.0 * sy, 90.0 * sz])
         tip = nasion + n * np.array([0.0, -40.0 * sy, 26.0])
@@ -218,7 +229,8 @@ class _Shape:
         self.neck_top = -40.0 * sy
         self.neck_bottom = -250.0
 
-        for name in ("cheekbones", "cheeks", "brows", "ears", "sockets", "almonds", "alae"):
+        sides = ("cheekbones", "cheeks", "brows", "ears", "sockets", "almonds", "alae", "lids")
+        for name in sides:
             lst = getattr(self, name)
             setattr(self, name, lst + [e.mirrored() for e in lst])
 
@@ -275,6 +287,8 @@ class _Shape:
             d = _smin(d, e.sdf(p, cols), 5.0)
         for e in self.sockets:
             d = _smax(d, -e.sdf(p, cols), 8.0)
+        for e in self.lids:
+            d = _smin(d, e.sdf(p, cols), 1.5)
         nose = _round_cone(p, *self.nose_bridge)
         nose = _smin(nose, self.nose_ball.sdf(p, cols), 6.0)
         for e in self.alae:
@@ -286,7 +300,33 @@ class _Shape:
         if carve:
             for e in self.almonds:
                 d = _smax(d, -e.sdf(p, cols), 1.2)
+            if self.lids:
+                d = _smax(d, -self._lid_groove(p), 0.3)
         return d
+
+    def lid_line(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where positions ``p`` (N, 3) lie against the nearer eye's closed lid line, mm.
+
+        Returns ``along`` (N,), the distance along the eye's axis from its centre (towards the
+        outer corner positive), and ``off`` (N,), the height above the lid line there. The
+        line runs between the corners (``along`` -14 and 13.2 mm, 1 mm above the axis) and
+        sags 2.5 mm in the middle.
+        """
+        ec = self.eye_centre
+        rx, ry = np.abs(p[:, 0]) - ec[0], p[:, 1] - (ec[1] - 0.8)
+        c, s = np.cos(0.07), np.sin(0.07)
+        along, up = rx * c + ry * s, -rx * s + ry * c
+        return along, up - (1.0 - 2.5 * (1.0 - np.clip(along / 13.6, -1.0, 1.0) ** 2))
+
+    def _lid_groove(self, p: np.ndarray) -> np.ndarray:
+        """Signed distance (N,) to the groove along the closed lids (0.5 mm deep), mm."""
+        along, off = self.lid_line(p)
+        across = np.maximum(np.abs(off) - 0.5, np.abs(along + 0.4) - 13.6)
+        q = np.column_stack([np.abs(p[:, 0]), p[:, 1], p[:, 2]])
+        shell = (
+            np.abs(np.linalg.norm(q - self.eye_centre, axis=1) - (_LID_MM + self.eye_radius)) - 0.5
+        )
+        return np.maximum(across, shell)
 
 
 def _trace(

@@ -50,7 +50,7 @@ from scan2morph.synth.cohort import (  # noqa: E402
     numeric_params,
     write_npz,
 )
-from scan2morph.synth.head import SEG_SKIN, HeadModel  # noqa: E402
+from scan2morph.synth.head import SEG_SKIN, HeadModel, Identity  # noqa: E402
 from scan2morph.synth.scanner import (  # noqa: E402
     BACKGROUND_RGB,
     head_pose,
@@ -334,6 +334,7 @@ def make_stereo_take(
     take: str,
     seed: int,
     params: dict | None = None,
+    identity: Identity | None = None,
 ) -> dict:
     """Simulate one stereo take of a synthetic subject.
 
@@ -347,6 +348,8 @@ def make_stereo_take(
         As in :func:`~scan2morph.synth.cohort.make_take`.
     params : dict, optional
         Overrides of :data:`DEFAULT_RIG`.
+    identity : Identity, optional
+        The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
 
     Returns
     -------
@@ -362,7 +365,7 @@ def make_stereo_take(
         On an unknown label, a kind that does not match it, a bad id or seed, or bad params.
     """
     p = rig_params(params, check_take(subject, label, kind, take, seed))
-    head, vertices, rng = articulated_head(subject, label, kind, take, seed)
+    head, vertices, rng = articulated_head(subject, label, kind, take, seed, identity)
     rig_from_head = head_pose(rng, p["distance_mm"], p["pose_sigma_deg"], p["pose_sigma_mm"], AIM)
     cams, calib = rig_cameras(p)
     v_rig = vertices @ rig_from_head[:3, :3].T + rig_from_head[:3, 3]
