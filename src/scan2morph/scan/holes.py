@@ -55,6 +55,14 @@ def _binomial_kernel(size: int) -> np.ndarray:
     return k / k.sum()
 
 
+def _sorted_unique(keys: np.ndarray) -> np.ndarray:
+    """``np.unique`` of a 1-D integer array (sorted, each value once), by a sort: numpy 2's
+    hash-based ``unique`` is several times slower on the million rim keys of a depth camera's
+    speckled holes."""
+    keys = np.sort(keys)
+    return keys[np.concatenate(([True], keys[1:] != keys[:-1]))] if keys.size else keys
+
+
 def _hole_trends(
     pad: np.ndarray,
     valid_pad: np.ndarray,
@@ -107,7 +115,7 @@ def _hole_trends(
     cand = gap_idx[:, None] + offs[None, :]
     lab = np.broadcast_to(gap_lab[:, None], cand.shape)
     ok = valid_pad[cand]
-    key = np.unique(lab[ok].astype(np.int64) * pad.shape[0] + cand[ok])
+    key = _sorted_unique(lab[ok].astype(np.int64) * pad.shape[0] + cand[ok])
     pl, pp = np.divmod(key, pad.shape[0])
     pv, pu = np.divmod(pp, wp)
     gv, gu = np.divmod(gap_idx, wp)
@@ -127,8 +135,12 @@ def _hole_trends(
     basis = basis * used[pl]
     ata = np.zeros((n_lab, 6, 6))
     atb = np.zeros((n_lab, 6, 3))
-    np.add.at(ata, pl, basis[:, :, None] * basis[:, None, :])
-    np.add.at(atb, pl, basis[:, :, None] * pad[pp][:, None, :])
+    rim = pad[pp]
+    for i in range(6):  # each entry summed over the rim pixels in order, as np.add.at does
+        for j in range(i, 6):
+            ata[:, i, j] = ata[:, j, i] = np.bincount(pl, basis[:, i] * basis[:, j], n_lab)
+        for c in range(3):
+            atb[:, i, c] = np.bincount(pl, basis[:, i] * rim[:, c], n_lab)
     li, ji = np.nonzero(~used)
     ata[li, ji, ji] = 1.0  # unused terms solve to 0
     coef = np.linalg.pinv(ata, rcond=_FIT_RCOND) @ atb  # (L, 6, 3)
