@@ -93,8 +93,8 @@ def test_closed_eyes_show_no_eyeball_and_the_lids_meet(closed):
         assert shape(front[None])[0] > 0.0
         assert min(gaps) > 7.0
     # the corners stay about where an open eye's are (within 2.5 mm; theirs vary by 3 mm)
-    lm_open = np.asarray(build_head(replace(idt, eyes_closed=False)).vertices)
-    corners = lm_open[build_head(replace(idt, eyes_closed=False)).landmarks][[36, 39, 42, 45]]
+    open_head = build_head(replace(idt, eyes_closed=False))
+    corners = np.asarray(open_head.vertices)[open_head.landmarks][[36, 39, 42, 45]]
     assert np.abs(lm[[36, 39, 42, 45], :2] - corners[:, :2]).max() < 2.5
 
 

@@ -5,6 +5,7 @@ run; one that runs writes its part, its other files, its log and its benchmark a
 did, with take isolation (:func:`scan2morph.stages.failure.run_take_job`).
 """
 
+import functools
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -48,9 +49,8 @@ def _take(j, data, attrs=None):
 
 def run_ingest(j):
     """Read the take's files onto its pixel grid (the subject's check may have refused it)."""
-    problem = check.take_problem(json.loads(Path(j.inp.check).read_text()), j.w.take)
-    if problem:  # found by the subject's check job: the take is left out
-        raise InputError(f"{j.w.subject}/{j.w.take}", problem)
+    if j.problem:  # found by the subject's check job: the take is left out
+        raise InputError(f"{j.w.subject}/{j.w.take}", j.problem)
     files = {role: _value(j.inp[role]) for role in j.p.roles}
     take = Take.from_row(j.p.row, files=files)
     part = ingest.run(None, take, j.params("ingest"))
@@ -162,23 +162,18 @@ def job_context(snakemake):
         + ([neutral(s) for s in neutral_reads(own, stage)] if has_neutral else [])
         for stage, (mine, _) in READS.items()
     }
-    templates = {}
-
-    def template():
-        if "t" not in templates:
-            templates["t"] = load_template(inp.template)
-        return templates["t"]
-
     return SimpleNamespace(
         w=w,
         p=snakemake.params,
         inp=inp,
         out=out,
         own=own,
-        params=lambda stage: MODULES[stage].Params.from_config(snakemake.config),
+        # the subject's check job's verdict on the take ('': none)
+        problem=check.take_problem(json.loads(Path(inp.check).read_text()), w.take),
+        params=functools.cache(lambda stage: MODULES[stage].Params.from_config(snakemake.config)),
         config=snakemake.config,
         reads=reads,
-        template=template,
+        template=functools.cache(lambda: load_template(inp.template)),
     )
 
 
@@ -190,9 +185,8 @@ def stage_reads(j, stage, prints, neutral_prints, sources):
     reads |= {s: prints.get(s) for s in READS[stage][0]}
     reads |= {f"neutral_{s}": neutral_prints.get(s) for s in neutral_reads(j.own, stage)}
     if stage == "ingest":
-        check_json = json.loads(Path(j.inp.check).read_text())
         reads |= {"row": j.p.row, "roles": j.p.roles, "files": sources["files"]}
-        reads["problem"] = check.take_problem(check_json, j.w.take)
+        reads["problem"] = j.problem
     if stage in ("fit", "align", "refine"):
         reads["template"] = sources["template"]
     return reads

@@ -182,16 +182,10 @@ _CLOSED_ALONG = (-14.0, -14.0 + 27.2 / 3, -14.0 + 2 * 27.2 / 3, 13.2)
 def _closed_eyes(mesh: _RestMesh, front: _Front) -> np.ndarray:
     """Landmarks 37-48 of closed eyes: on the lid line, the upper and the lower lid points
     together (iBUG's convention; see :data:`_CLOSED_ALONG`)."""
-    shape = mesh.shape
-    ec = shape.eye_centre
-    c, s = np.cos(0.07), np.sin(0.07)
     left = np.zeros(6, np.int64)
     c0, c1, c2, c3 = _CLOSED_ALONG
     for k, a in enumerate((c0, c1, c2, c3, c2, c1)):
-        # the lid line's height at ``a`` along the axis (shape.lid_line's curve)
-        u = 1.0 - 2.5 * (1.0 - min(abs(a) / 13.6, 1.0) ** 2)
-        x, y = ec[0] + a * c - u * s, ec[1] - 0.8 + a * s + u * c
-        left[k] = front.visible(x, y)
+        left[k] = front.visible(*mesh.shape.lid_point(a))
     verts = mesh.vertices
     right = [front.visible(-verts[left[k], 0], verts[left[k], 1]) for k in (3, 2, 1, 0, 5, 4)]
     return np.concatenate([right, left])

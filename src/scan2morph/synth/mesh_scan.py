@@ -98,19 +98,19 @@ def make_mesh_take(
     """Simulate one mesh scan of a synthetic subject.
 
     Parameters
-        ----------
-        subject, label, kind, take, seed
-            As in :func:`~scan2morph.synth.cohort.make_take`.
-        params : dict, optional
-            Overrides of the mesh scan's parameters.
-        identity : Identity, optional
-            The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
+    ----------
+    subject, label, kind, take, seed
+        As in :func:`~scan2morph.synth.cohort.make_take`.
+    params : dict, optional
+        Overrides of the mesh scan's parameters.
+    identity : Identity, optional
+        The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
 
-            Returns
-        -------
-        dict
-            ``vertices`` (n, 3) mm, ``faces`` (m, 3), ``colors`` (n, 3) uint8 in the mesh's frame;
-            ``landmarks`` (68, 3) mm with click noise; ``truth``; ids.
+    Returns
+    -------
+    dict
+        ``vertices`` (n, 3) mm, ``faces`` (m, 3), ``colors`` (n, 3) uint8 in the mesh's frame;
+        ``landmarks`` (68, 3) mm with click noise; ``truth``; ids.
     """
     p = mesh_scan_params(params, check_take(subject, label, kind, take, seed))
     head, vertices, rng = articulated_head(subject, label, kind, take, seed, identity)

@@ -16,6 +16,8 @@ from scan2morph.synth.identity import Identity
 
 #: Thickness of a closed lid over the eyeball, mm.
 _LID_MM = 1.2
+#: Tilt of the eye's axis (its opening and its closed lid line), up at the outer corner, radians.
+_EYE_TILT = 0.07
 
 
 def _smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
@@ -198,7 +200,7 @@ class _Shape:
         ecx, ecy = self.eye_centre[0], self.eye_centre[1]
         self.sockets = [_Ellipsoid((ecx, ecy + 2, 92 * sz), (19, 13, 12))]
         # the eye opening: an almond tilted up at the outer corner, carved deep behind the eyeball
-        self.almond = _Ellipsoid((ecx, ecy - 0.8, 86.0 * sz), (16.0, 4.7, 13.0), _rot_z(0.07))
+        self.almond = _Ellipsoid((ecx, ecy - 0.8, 86.0 * sz), (16.0, 4.7, 13.0), _rot_z(_EYE_TILT))
         self.almonds = [self.almond]
         # closed eyes: a lid over each eyeball with a shallow groove along the lid line
         self.lids = []
@@ -314,9 +316,17 @@ class _Shape:
         """
         ec = self.eye_centre
         rx, ry = np.abs(p[:, 0]) - ec[0], p[:, 1] - (ec[1] - 0.8)
-        c, s = np.cos(0.07), np.sin(0.07)
+        c, s = np.cos(_EYE_TILT), np.sin(_EYE_TILT)
         along, up = rx * c + ry * s, -rx * s + ry * c
-        return along, up - (1.0 - 2.5 * (1.0 - np.clip(along / 13.6, -1.0, 1.0) ** 2))
+        return along, up - _lid_height(along)
+
+    def lid_point(self, along: float) -> tuple[float, float]:
+        """The left eye's closed lid line at ``along`` mm along the eye's axis (the inverse of
+        :meth:`lid_line`): its (x, y) in the head frame, mm."""
+        ec = self.eye_centre
+        c, s = np.cos(_EYE_TILT), np.sin(_EYE_TILT)
+        up = _lid_height(along)
+        return ec[0] + along * c - up * s, ec[1] - 0.8 + along * s + up * c
 
     def _lid_groove(self, p: np.ndarray) -> np.ndarray:
         """Signed distance (N,) to the groove along the closed lids (0.5 mm deep), mm."""
@@ -327,6 +337,12 @@ class _Shape:
             np.abs(np.linalg.norm(q - self.eye_centre, axis=1) - (_LID_MM + self.eye_radius)) - 0.5
         )
         return np.maximum(across, shell)
+
+
+def _lid_height(along):
+    """Height of the closed lid line above the eye's axis at ``along`` mm along it, mm: 1 mm at
+    the corners (``along`` +-13.6 and beyond), sagging 2.5 mm in the middle."""
+    return 1.0 - 2.5 * (1.0 - np.clip(along / 13.6, -1.0, 1.0) ** 2)
 
 
 def _trace(
