@@ -212,6 +212,31 @@ def render(
     return np.ascontiguousarray(color), depth, seg
 
 
+class _OrderedScene(pyrender.Scene):
+    """A pyrender scene that draws its meshes in the order they were added.
+
+    pyrender draws the mesh nodes in the iteration order of a set (the nodes' ids, that is their
+    memory addresses), sorted by the distance of each node's origin to the camera. The
+    segments' nodes all sit at the origin, so where surfaces of two segments lie at the same
+    depth the segment a pixel showed depended on where Python had put the nodes: the same take
+    rendered twice in one process could differ in a few pixels. Listed in the order added, the
+    first-added surface wins a tie of depths every time.
+    """
+
+    def __init__(self, **kwargs):
+        self._order: list = []
+        super().__init__(**kwargs)
+
+    def add_node(self, node, parent_node=None):
+        super().add_node(node, parent_node)
+        self._order.append(node)
+
+    @property
+    def mesh_nodes(self) -> list:
+        """The mesh nodes, in the order added."""
+        return [n for n in self._order if n in self._mesh_nodes]
+
+
 def render_colors(
     head: HeadModel,
     v_cam: np.ndarray,
@@ -243,7 +268,7 @@ def render_colors(
     segment : (H, W) int8
         ``SEG_*`` code of the surface each pixel's centre ray meets; -1 on the background.
     """
-    scene = pyrender.Scene(
+    scene = _OrderedScene(
         bg_color=np.array([*BACKGROUND_RGB, 255]) / 255.0, ambient_light=np.ones(3)
     )
     seg_map = {}
