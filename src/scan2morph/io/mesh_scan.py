@@ -370,9 +370,6 @@ def shade(mesh, pose: np.ndarray):
     return out
 
 
-_RENDERERS: dict = {}
-
-
 def render_mesh(mesh, K: np.ndarray, pose: np.ndarray, size: tuple[int, int]):
     """Render a mesh's colour (unlit) and depth through a pinhole camera.
 
@@ -383,6 +380,8 @@ def render_mesh(mesh, K: np.ndarray, pose: np.ndarray, size: tuple[int, int]):
         Camera Z at each pixel centre, mm; NaN where the mesh is not seen.
     """
     import pyrender
+
+    from scan2morph.offscreen import offscreen_renderer
 
     v_cam = np.asarray(mesh.vertices) @ pose[:3, :3].T + pose[:3, 3]
     posed = mesh.copy()
@@ -401,11 +400,8 @@ def render_mesh(mesh, K: np.ndarray, pose: np.ndarray, size: tuple[int, int]):
         zfar=float(z.max()) + 10.0,
     )
     scene.add(cam, pose=np.diag([1.0, -1.0, -1.0, 1.0]))  # OpenCV camera -> OpenGL camera
-    key = tuple(int(s) for s in size)
-    if key not in _RENDERERS:
-        _RENDERERS[key] = pyrender.OffscreenRenderer(*key)
     flags = pyrender.RenderFlags.SKIP_CULL_FACES | pyrender.RenderFlags.FLAT
-    color, depth = _RENDERERS[key].render(scene, flags=flags)
+    color, depth = offscreen_renderer(*size).render(scene, flags=flags)
     depth = np.where(depth > 0, depth.astype(np.float64), np.nan)
     return np.ascontiguousarray(color[..., :3]), depth
 
