@@ -2,13 +2,17 @@
 with the number of subjects.
 
 ``.venv/bin/python benchmarks/bench_scaling.py [--subjects 1 2 4 8] [--width 320 --height 240]
-[--cores 2] [--keep DIR]`` runs the default workflow target (stores, figures, reports, accuracy,
-cohort summary) on a synthetic cohort of each size, locally, each in a fresh working directory,
+[--cores 2] [--slurm] [--keep DIR]`` runs the default workflow target (stores, figures, reports,
+accuracy, cohort summary) on a synthetic cohort of each size, each in a fresh working directory,
+locally or (``--slurm``) with ``profiles/slurm`` on the throw-away single-node SLURM cluster of
+the tests (``tests/support/slurm_cluster.py``, started for each size; needs root, ``slurm-wlm``
+and ``munge`` as the SLURM test does),
 with the default config's takes (one neutral, five visemes, four expressions: 10 per subject), all
 range scans (no stereo, mesh or RGB-D takes, so that every subject costs the same) at a reduced image size
 (``--width/--height``, the focal length scaled with them; the default config scans 640 x 480). It
-prints per cohort size the wall time, the CPU time of all jobs (user + system of every process
-Snakemake waited for), the largest job's peak memory, the store sizes, and the per-subject and
+prints per cohort size the wall time, the CPU time of the whole run (:class:`CpuMeter`: every
+process the run started, Snakemake's scheduler and, under SLURM, the daemons, the job scripts
+and the Snakemake each job starts), the largest job's peak memory, the store sizes, and the per-subject and
 per-take figures; then the job time per rule (Snakemake's benchmark files) split into per-take
 rules and per-subject rules, and the extrapolation to ``--database`` subjects/scans on
 ``--extrapolate-cores`` cores. Nothing is asserted; the printed tables are the measurement.
@@ -18,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import subprocess
@@ -31,6 +36,7 @@ import pandas as pd
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT)]  # the test support: the SLURM cluster and its run's arguments
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 #: Rules that run once per take (the stages of one job per take, rule ``take``, since issue #35);
 #: every other rule runs once per subject (template, cohort: once;
@@ -62,29 +68,91 @@ def write_config(work: Path, subjects: int, width: int, height: int) -> Path:
     return path
 
 
-def run(work: Path, subjects: int, args) -> dict:
-    """One local run of the default target; returns its measurements."""
+class CpuMeter:
+    """CPU time (user + system, s) of every process this one starts from now on.
+
+    The process moves itself into a cgroup of its own (cgroup v2 ``cpu.stat``, or v1
+    ``cpuacct``) when it may, so that everything a run starts counts, the SLURM daemons and the
+    jobs they run included (slurmd's job steps are not processes this one waits for);
+    otherwise the CPU of the children this process waited for (``RUSAGE_CHILDREN``), which
+    misses what a SLURM cluster runs. ``kind`` says which.
+    """
+
+    def __init__(self):
+        self.kind, self._file, self._group = "rusage", None, None
+        v2 = Path("/sys/fs/cgroup/cgroup.controllers").is_file()
+        base, name = (
+            (Path("/sys/fs/cgroup"), "cpu.stat")
+            if v2
+            else (Path("/sys/fs/cgroup/cpuacct"), "cpuacct.usage")
+        )
+        if not (base / name).is_file():
+            return
+        group = base / f"bench_scaling-{os.getpid()}"
+        try:
+            group.mkdir()
+            (group / "cgroup.procs").write_text(str(os.getpid()))
+        except OSError:
+            return
+        self.kind, self._file, self._group = f"cgroup ({group})", group / name, group
+
+    def close(self) -> None:
+        """Move this process back to the parent cgroup and remove its own (when empty)."""
+        if self._group is not None:
+            try:
+                (self._group.parent / "cgroup.procs").write_text(str(os.getpid()))
+                self._group.rmdir()
+            except OSError:
+                pass
+
+    def seconds(self) -> float:
+        """CPU seconds so far (a running total: take differences)."""
+        if self._file is None:
+            r = resource.getrusage(resource.RUSAGE_CHILDREN)
+            return r.ru_utime + r.ru_stime
+        text = self._file.read_text()
+        if self._file.name == "cpu.stat":  # v2: usage_usec
+            return int(text.split("usage_usec")[1].split()[0]) / 1e6
+        return int(text) / 1e9  # v1 cpuacct.usage: ns
+
+
+def snakemake_command(config: Path, args) -> list[str]:
+    """The run's Snakemake command: local on ``args.cores`` cores, or with the SLURM profile."""
+    common = ["-s", str(ROOT / "Snakefile"), "--configfile", str(ROOT / "config" / "config.yaml")]
+    if not args.slurm:
+        return [str(SNAKEMAKE), "--cores", str(args.cores), *common, str(config), "--quiet"]
+    from tests.support.slurm_run import CLUSTER_ARGS
+
+    profile = ["--workflow-profile", str(ROOT / "profiles" / "slurm"), *CLUSTER_ARGS]
+    return [str(SNAKEMAKE), *profile, *common, str(config), "--quiet"]
+
+
+def run(work: Path, subjects: int, args, meter: CpuMeter) -> dict:
+    """One run of the default target (locally or under SLURM); returns its measurements."""
     config = write_config(work, subjects, args.width, args.height)
-    cmd = [
-        str(SNAKEMAKE),
-        "--cores",
-        str(args.cores),
-        "-s",
-        str(ROOT / "Snakefile"),
-        "--configfile",
-        str(ROOT / "config" / "config.yaml"),
-        str(config),
-        "--quiet",
-    ]
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cmd = snakemake_command(config, args)
+    env, cluster = dict(os.environ), None
+    before = meter.seconds()
     t0 = time.perf_counter()
-    with open(work / "snakemake.out", "w") as out:
-        code = subprocess.run(cmd, cwd=work, stdout=out, stderr=subprocess.STDOUT).returncode
+    if args.slurm:  # started and stopped within the measurement: the daemons' CPU counts too
+        from tests.support.slurm_cluster import SlurmCluster
+
+        cluster = SlurmCluster(work / "cluster")
+        cluster.start()
+        env = {**cluster.env, "PYOPENGL_PLATFORM": "osmesa"}
+    try:
+        with open(work / "snakemake.out", "w") as out:
+            code = subprocess.run(
+                cmd, cwd=work, env=env, stdout=out, stderr=subprocess.STDOUT
+            ).returncode
+    finally:
+        if cluster is not None:
+            cluster.stop()
     wall = time.perf_counter() - t0
+    cpu = meter.seconds() - before
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if code:
         sys.exit(f"snakemake failed ({code}): see {work / 'snakemake.out'}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     lines = job_benchmarks(work)
     jobs = lines[lines.job]
     takes = len(yaml.safe_load(config.read_text()).get("synthetic", {}).get("takes", [])) or len(
@@ -93,6 +161,7 @@ def run(work: Path, subjects: int, args) -> dict:
     stores = [work / "results" / s / f"{s}.h5" for s in synthetic_ids(subjects)]
     results = sum(f.stat().st_size for f in (work / "results").rglob("*") if f.is_file())
     return dict(
+        slurm=bool(args.slurm),
         subjects=subjects,
         takes=subjects * takes,
         jobs=len(jobs),
@@ -136,6 +205,11 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=320)
     ap.add_argument("--height", type=int, default=240)
     ap.add_argument("--cores", type=int, default=2)
+    ap.add_argument(
+        "--slurm",
+        action="store_true",
+        help="run under profiles/slurm on the tests' throw-away SLURM cluster (needs root)",
+    )
     ap.add_argument("--keep", type=Path, help="keep the working directories under DIR")
     ap.add_argument(
         "--summarize",
@@ -152,12 +226,16 @@ def main(argv=None) -> int:
         summarize(runs, args)
         return 0
     root = Path(args.keep or tempfile.mkdtemp(prefix="bench_scaling-"))
+    meter = CpuMeter()
+    if args.slurm and meter.kind == "rusage":
+        sys.exit("--slurm needs a cgroup of its own to count the jobs' CPU (run as root)")
+    print(f"CPU measured by {meter.kind}", flush=True)
     runs = []
     for n in args.subjects:
         work = root / f"subjects_{n}"
         shutil.rmtree(work, ignore_errors=True)
         work.mkdir(parents=True)
-        r = run(work, n, args)
+        r = run(work, n, args, meter)
         runs.append(r)
         print(
             f"{n} subjects: {r['wall_s']:.0f} s wall, {r['cpu_s']:.0f} s CPU, {r['jobs']} jobs",
@@ -167,6 +245,7 @@ def main(argv=None) -> int:
         with open(root / "scaling.jsonl", "a") as out:
             out.write(json.dumps({k: float(v) for k, v in r.items() if k != "rules"}) + "\n")
 
+    meter.close()
     summarize(runs, args)
     print(f"working directories: {root}")
     return 0
@@ -201,13 +280,18 @@ def linear_fit(table: pd.DataFrame) -> None:
 
 def summarize(runs: list[dict], args) -> None:
     """Print the per-size table, the job time per rule and the extrapolation."""
-    print(f"\n{args.width} x {args.height} px, {args.cores} cores, default takes (range scans)")
+    where = "SLURM (profiles/slurm)" if runs[0].get("slurm") else f"{args.cores} cores, local"
+    print(f"\n{args.width} x {args.height} px, {where}, default takes (range scans)")
     table = pd.DataFrame([{k: v for k, v in r.items() if k != "rules"} for r in runs])
     for col in ("wall_s", "cpu_s", "job_s", "store_mb"):
         table[f"{col}/subject"] = table[col] / table.subjects
     table["cpu_s/take"] = table.cpu_s / table.takes
     table["wall_s/take"] = table.wall_s / table.takes
     print(table.round(1).to_string(index=False))
+    # under SLURM each job also runs a Snakemake of its own: compare with a local run's figure
+    extra = ", the SLURM daemons and each job's own Snakemake" if runs[0].get("slurm") else ""
+    per_job = ", ".join(f"{c:.1f} s" for c in table.cpu_s / table.jobs)
+    print(f"CPU per job (the run's CPU, Snakemake's scheduler{extra} included): {per_job}")
     linear_fit(table)
 
     # per rule, from the largest run: job seconds per take (per-take rules: a take job's stages)
