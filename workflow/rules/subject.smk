@@ -32,9 +32,11 @@ rule subject:
         "benchmarks/subjects/{subject}.tsv"
     wildcard_constraints:
         subject="|".join(measured_subjects()) or "^$",
+    # measured (docs/cluster.md): 1.5 x the figures' 872 MB + 400 for Snakemake; 3 x 164 s + 30 s
+    # on a loaded machine, rounded up
     resources:
-        mem_mb=2000,
-        runtime=25,
+        mem_mb=1800,
+        runtime=15,
     params:
         kinds=get_take_kinds,
         labels=get_take_labels,
