@@ -1,6 +1,7 @@
 # scan2morph: 3D face scans -> subject-specific morphable face models.
 # Stages (rule files under workflow/rules/): synth, template, take (one job per take: ingest, repair, landmarks, fit,
-# align, refine), motion, morph, modal, store, accuracy, figures, report, cohort; sweeps (on demand: `snakemake sweep_all`).
+# align, refine), subject (one job per subject: its template part, motion, motion_noise, morph, modal, store,
+# head_meshes, accuracy, figures, report), cohort; sweeps (on demand: `snakemake sweep_all`).
 
 
 from snakemake.utils import min_version
@@ -30,13 +31,7 @@ wildcard_constraints:
 include: "workflow/rules/synth.smk"
 include: "workflow/rules/template.smk"
 include: "workflow/rules/take.smk"
-include: "workflow/rules/motion.smk"
-include: "workflow/rules/morph.smk"
-include: "workflow/rules/modal.smk"
-include: "workflow/rules/store.smk"
-include: "workflow/rules/accuracy.smk"
-include: "workflow/rules/figures.smk"
-include: "workflow/rules/report.smk"
+include: "workflow/rules/subject.smk"
 include: "workflow/rules/cohort.smk"
 include: "workflow/rules/sweeps.smk"
 

@@ -35,13 +35,18 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from scan2morph.stages.stage_job import SUBJECT_STAGES, TAKE_STAGES
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]  # the test support: the SLURM cluster and its run's arguments
 SNAKEMAKE = Path(sys.executable).with_name("snakemake")
 #: Rules that run once per take (the stages of one job per take, rule ``take``, since issue #35);
 #: every other rule runs once per subject (template, cohort: once;
 #: the synthetic subjects' generators are left out of the extrapolation: real scans are read).
-PER_TAKE = ("ingest", "repair", "landmarks", "fit", "align", "refine")
+PER_TAKE = TAKE_STAGES
+#: The jobs that run several stages (issue #35): the folder of their benchmark files under
+#: ``benchmarks/``, their rule and their stages (each stage's line under benchmarks/rules/).
+MULTI_STAGE = {"takes": ("take", TAKE_STAGES), "subjects": ("subject", SUBJECT_STAGES)}
 ONCE = ("template", "cohort")
 
 
@@ -183,19 +188,23 @@ def synthetic_ids(n: int) -> list[str]:
 
 def job_benchmarks(work: Path) -> pd.DataFrame:
     """Every benchmark line (benchmarks/rules/<rule>/...tsv) with its rule, and whether it is a
-    job's (column ``job``): where a take's stages run in one job (rule ``take``, its lines under
-    benchmarks/takes/), the stages' lines are not jobs, the take jobs' are (rule ``take``)."""
+    job's (column ``job``): where a take's or a subject's stages run in one job (rules ``take``
+    and ``subject``, their lines under benchmarks/takes/ and benchmarks/subjects/), the stages'
+    lines are not jobs, the multi-stage jobs' are (rule ``take`` or ``subject``)."""
     rows = []
-    takes = work / "benchmarks" / "takes"
-    for f in (work / "benchmarks" / "rules").rglob("*.tsv"):
+    bench = work / "benchmarks"
+    jobs = {f: job for f, job in MULTI_STAGE.items() if (bench / f).is_dir()}
+    inside = {stage for _, stages in jobs.values() for stage in stages}
+    for f in (bench / "rules").rglob("*.tsv"):
         d = pd.read_csv(f, sep="\t")
-        d["rule"] = f.relative_to(work / "benchmarks" / "rules").parts[0]
-        d["job"] = not (takes.is_dir() and d["rule"].iloc[0] in PER_TAKE)
+        d["rule"] = f.relative_to(bench / "rules").parts[0]
+        d["job"] = d["rule"].iloc[0] not in inside
         rows.append(d)
-    for f in takes.rglob("*.tsv"):
-        d = pd.read_csv(f, sep="\t")
-        d["rule"], d["job"] = "take", True
-        rows.append(d)
+    for folder, (rule, _) in jobs.items():
+        for f in (bench / folder).rglob("*.tsv"):
+            d = pd.read_csv(f, sep="\t")
+            d["rule"], d["job"] = rule, True
+            rows.append(d)
     return pd.concat(rows, ignore_index=True)
 
 
@@ -295,9 +304,9 @@ def summarize(runs: list[dict], args) -> None:
     linear_fit(table)
 
     # per rule, from the largest run: job seconds per take (per-take rules: a take job's stages)
-    # or per subject
+    # or per subject (a subject job's stages)
     big = runs[-1]
-    jobs = big["rules"][big["rules"].rule != "take"]
+    jobs = big["rules"][~big["rules"].rule.isin([rule for rule, _ in MULTI_STAGE.values()])]
     per = jobs.groupby("rule").agg(
         jobs=("s", "size"),
         job_s=("s", "sum"),

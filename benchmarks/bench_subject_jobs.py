@@ -6,11 +6,13 @@
 times kept) into a scratch folder per tree and re-runs there, with each tree's own Snakefile,
 rules and ``src`` (a checkout, e.g. ``git archive <commit> | tar -x -C OLD``), the subject's own
 jobs: motion, motion_noise, morph, modal, store, head_meshes, accuracy, the figures and the
-report (``--forcerun``; the takes' parts are kept: ``--rerun-triggers mtime``). Trees
-alternate, each repeat in a fresh copy.
+report, or the one job that runs them all (rule ``subject``, since issue #35; its record of
+up-to-date stages, ``stages.json``, is removed so that every stage runs) (``--forcerun``; the
+takes' parts are kept: ``--rerun-triggers mtime``). Trees alternate, each repeat in a fresh
+copy.
 
-It prints, per tree and repeat: each rule's job wall time (Snakemake's benchmark file, ``s``),
-their sum and the CPU seconds of the whole Snakemake run (its children: every job, Snakemake's
+It prints, per tree and repeat: each rule's job wall time (Snakemake's benchmark file, ``s``;
+inside a subject's job, each stage's), the jobs' sum and the CPU seconds of the whole Snakemake run (its children: every job, Snakemake's
 own start-up and scheduling included; the benchmark files' sampled ``cpu_time`` misses most of
 a short job). Then one more run per tree with every job profiling itself
 (``SCAN2MORPH_PROFILE``, :func:`scan2morph.jobs.run_job`): each rule's start-up CPU
@@ -42,22 +44,15 @@ from bench_profile import top_functions
 from bench_scaling import SNAKEMAKE, job_benchmarks
 
 from scan2morph.jobs import PROFILE_ENV
+from scan2morph.stages.stage_job import SUBJECT_STAGES
 
-#: The subject's own rules re-run (a tree without one of them simply has no such job).
+#: The subject's own rules re-run (a tree without one of them simply has no such job): a rule
+#: per stage (the figures once a rule per stage) before issue #35, one job after.
 RULES = [
-    "motion",
-    "motion_noise",
-    "morph",
-    "modal",
-    "store",
-    "head_meshes",
-    "accuracy",
-    "figures",
-    "figures_fit",
-    "figures_motion",
-    "figures_morph",
-    "figures_modal",
-    "report_subject",
+    *(s for s in SUBJECT_STAGES if s != "template_part"),
+    *(f"figures_{stage}" for stage in ("fit", "motion", "morph", "modal")),
+    "subject",
+    "subject_synthetic",
 ]
 
 
@@ -66,6 +61,8 @@ def copy_subject(run: Path, work: Path, subject: str) -> None:
     for part in (Path("results") / subject, Path("results") / "synthetic" / subject):
         if (run / part).exists():
             shutil.copytree(run / part, work / part, symlinks=True)
+    # a subject's job runs only its out-of-date stages: without its record, all of them
+    (work / "results" / subject / "stages.json").unlink(missing_ok=True)
     shutil.copytree(run / "resources", work / "resources", symlinks=True)
 
 
@@ -73,6 +70,7 @@ def tree_rules(tree: Path) -> list[str]:
     """The rules of :data:`RULES` that ``tree``'s workflow defines."""
     text = "\n".join(f.read_text() for f in (tree / "workflow" / "rules").glob("*.smk"))
     defined = set(re.findall(r"^rule (\w+):", text, flags=re.MULTILINE))
+    defined |= set(re.findall(r"^use rule \w+ as (\w+)", text, flags=re.MULTILINE))
     return [r for r in RULES if r in defined]
 
 
@@ -102,9 +100,10 @@ def run_tree(tree: Path, run: Path, work: Path, args, profiled: bool = False) ->
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if code.returncode:
         sys.exit(f"snakemake failed ({code.returncode}): see {work / 'snakemake.out'}")
-    jobs = job_benchmarks(work).groupby("rule")["s"].sum()
+    bench = job_benchmarks(work)
+    jobs = bench.groupby("rule")["s"].sum()
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"jobs": jobs, "run_wall_s": wall, "run_cpu_s": cpu}
+    return {"jobs": jobs, "job_s": bench.s[bench.job].sum(), "run_wall_s": wall, "run_cpu_s": cpu}
 
 
 def job_cpu_table(work: Path) -> pd.DataFrame:
@@ -182,22 +181,22 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     trees = [t.resolve() for t in args.trees]
     scratch = args.keep or Path(tempfile.mkdtemp(prefix="bench_subject_jobs_"))
-    last, table = {}, {}
+    last, table, job_s = {}, {}, {}
     for k in range(args.repeat):
         for i, tree in enumerate(trees):
             work = scratch / f"tree{i}-run{k}"
             shutil.rmtree(work, ignore_errors=True)
             m = run_tree(tree, args.run.resolve(), work, args)
             last[i] = work
-            table[(f"tree{i}", k)] = m["jobs"]
+            table[(f"tree{i}", k)], job_s[(f"tree{i}", k)] = m["jobs"], m["job_s"]
             print(
-                f"tree{i} ({tree}) run {k + 1}: jobs {m['jobs'].sum():6.1f} s wall, "
+                f"tree{i} ({tree}) run {k + 1}: jobs {m['job_s']:6.1f} s wall, "
                 f"Snakemake run {m['run_wall_s']:6.1f} s wall, {m['run_cpu_s']:6.1f} CPU-s"
             )
     pd.set_option("display.width", 160)
     jobs = pd.DataFrame(table).fillna(0.0)
-    jobs.loc["sum"] = jobs.sum()
-    print(f"\n== job wall time per rule, s ({args.subject}; Snakemake's benchmark files)")
+    jobs.loc["jobs"] = pd.Series(job_s)  # the jobs' sum (a subject job's stages are in it)
+    print(f"\n== job wall time per rule or stage, s ({args.subject}; the benchmark files)")
     print(jobs.round(2).to_string())
     for i, tree in enumerate(trees):
         work = scratch / f"tree{i}-profiled"

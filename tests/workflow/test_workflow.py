@@ -404,7 +404,7 @@ def test_a_take_refused_at_one_stage_hands_the_record_through_its_job(cohort):
     same record (the job's other takes and the subject's other jobs are untouched: see
     test_broken_takes_are_left_out_and_the_subject_built_from_the_rest)."""
     from scan2morph.stages.failure import part_failures
-    from scan2morph.stages.take_job import read_fingerprints
+    from scan2morph.stages.stage_job import read_fingerprints
 
     work, _, _ = cohort
     folder = work / "results" / "broken" / "takes"
@@ -469,3 +469,86 @@ def test_a_config_change_reruns_only_the_stages_it_reaches(cohort, tmp_path):
         assert (
             "left out at fit" in (copy / "results" / "alice" / "meshes" / f"{take}.obj").read_text()
         )
+
+
+# --- one job per subject: its stages' files, logs and benchmarks; re-runs; a failed stage ---
+def test_each_stage_of_a_subject_job_keeps_its_log_and_benchmark(cohort):
+    """A subject's own stages run in one job (rule subject; subject_synthetic with its
+    accuracy), each still with its own log and benchmark file (but the report: its page lists
+    the others), which the report's run-time table reads per stage."""
+    import pandas as pd
+
+    from scan2morph.report.provenance import stage_timings
+    from scan2morph.stages.stage_job import SUBJECT_STAGES, read_fingerprints
+
+    work, _, _ = cohort
+    measured = tuple(s for s in SUBJECT_STAGES if s != "accuracy")  # accuracy: synthetic only
+    for subject, stages in (("alice", measured), ("synth01", SUBJECT_STAGES)):
+        job = pd.read_csv(work / "benchmarks" / "subjects" / f"{subject}.tsv", sep="\t")
+        wall = 0.0
+        for stage in stages:
+            log = (work / "logs" / stage / f"{subject}.log").read_text()
+            assert "Traceback" not in log
+            if stage == "report_subject":
+                continue
+            row = pd.read_csv(work / "benchmarks" / "rules" / stage / f"{subject}.tsv", sep="\t")
+            assert row["s"].iloc[0] > 0 and row["max_rss"].iloc[0] > 10, (subject, stage)
+            wall += row["s"].iloc[0]
+        assert wall <= job["s"].iloc[0] + 1e-3  # the stages within their job's time
+        assert set(read_fingerprints(work / "results" / subject / "stages.json")) == set(stages)
+        summary = (work / "logs" / "subject" / f"{subject}.log").read_text().splitlines()
+        assert summary == [f"{s}: run" for s in stages]
+    assert not (work / "results" / "alice" / "accuracy.json").exists()
+    rows = {r["stage"]: r for r in stage_timings(work / "benchmarks" / "rules", "alice")}
+    assert all(rows[s]["jobs"] == 1 for s in measured if s != "report_subject")
+    assert "subject" not in rows
+
+
+def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path):
+    """A morph setting changed: the subject's job runs morph and what reads it (the store and
+    what reads the store), its other stages' files stay as they were (same file, same bytes).
+    Then a stage that fails (a truth file without its arrays) stops the job with a line naming
+    the subject and the stage, and every file of the job is as it was before the job."""
+    work, _, _ = cohort
+    copy = tmp_path / "wf"
+    shutil.copytree(work, copy, symlinks=True)
+    folder = copy / "results" / "alice"
+    kept = ("template", "motion", "motion_noise", "modal")
+    before = {
+        n: ((folder / f"{n}.h5").stat().st_ino, (folder / f"{n}.h5").read_bytes()) for n in kept
+    }
+    store = (folder / "alice.h5").stat().st_ino
+    cfg = yaml.safe_load((copy / "tiny.yaml").read_text())
+    cfg["morph"] = {"alpha_limit": 2.5}
+    (copy / "tiny2.yaml").write_text(yaml.safe_dump(cfg))
+    assert run_workflow(copy, copy / "tiny2.yaml", targets=["results/alice/alice.h5"])
+    summary = (copy / "logs" / "subject" / "alice.log").read_text().splitlines()
+    assert summary == [
+        "template_part: up to date, not run",
+        "motion: up to date, not run",
+        "motion_noise: up to date, not run",
+        "morph: run",
+        "modal: up to date, not run",
+        "store: run",
+        "head_meshes: run",
+        "figures: run",
+        "report_subject: run",
+    ]
+    for name, (inode, data) in before.items():
+        part = folder / f"{name}.h5"
+        assert (part.stat().st_ino, part.read_bytes()) == (inode, data), name
+    assert (folder / "alice.h5").stat().st_ino != store
+    # a failed stage: the job stops there, the subject's files are put back as they were
+    synth = copy / "results" / "synth01"
+    files = {
+        p: p.read_bytes()
+        for p in (synth / "synth01.h5", synth / "accuracy.json", synth / "stages.json")
+    }
+    np.savez(copy / "results" / "synthetic" / "synth01" / "truth" / "car.npz", nothing=np.zeros(1))
+    assert not run_workflow(copy, copy / "tiny2.yaml", targets=["results/synth01/accuracy.json"])
+    summary = (copy / "logs" / "subject" / "synth01.log").read_text().splitlines()
+    assert summary[-2:] == ["head_meshes: run", "accuracy: failed"]
+    log = (copy / "logs" / "accuracy" / "synth01.log").read_text()
+    assert "car.npz" in log and "Traceback" not in log
+    for path, data in files.items():
+        assert path.read_bytes() == data, path

@@ -15,6 +15,7 @@ from scan2morph.sheet import (
     take_table,
     validate_config,
 )
+from scan2morph.stages.stage_job import SUBJECT_STAGES
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
 SCHEMAS = Path(workflow.basedir) / "schemas"
@@ -61,6 +62,11 @@ CONFIG_SHA256 = config_sha256(config)
 # --- lookups in the take table ---
 def synthetic_subjects():
     return [s for s in SUBJECTS if TAKES.loc[s, "synthetic"].all()]
+
+
+def measured_subjects():
+    """The subjects without ground truth (every one not synthetic)."""
+    return [s for s in SUBJECTS if s not in synthetic_subjects()]
 
 
 def takes_of(subject):

@@ -196,22 +196,45 @@ def get_viseme_aligns(wildcards):
     )
 
 
-def get_subject_parts(wildcards):
-    """Every part merged into the subject's store."""
+def get_subject_take_parts(wildcards):
+    """Every take part the subject's job reads (the store merges them all)."""
     takes = takes_of(wildcards.subject)
-    per_take = [
-        _take_files(
-            f"results/{{subject}}/takes/{{take}}/{stage}.h5", wildcards.subject, takes
-        )
-        for stage in ("repair", "landmarks", "fit", "align", "refine")[
-            : 5 if REFINE else 4
-        ]
-    ]
-    per_subject = [
-        f"results/{wildcards.subject}/{stage}.h5"
-        for stage in ("template", "motion", "motion_noise", "morph", "modal")
-    ]
-    return sum(per_take, []) + per_subject
+    return sum(
+        (
+            _take_files(
+                f"results/{{subject}}/takes/{{take}}/{stage}.h5",
+                wildcards.subject,
+                takes,
+            )
+            for stage in ("repair", "landmarks", "fit", "align", "refine")[
+                : 5 if REFINE else 4
+            ]
+        ),
+        [],
+    )
+
+
+def get_subject_take_records(wildcards):
+    """The take jobs' records of their parts' fingerprints (``stages.json``)."""
+    return _take_files(
+        "results/{subject}/takes/{take}/stages.json",
+        wildcards.subject,
+        takes_of(wildcards.subject),
+    )
+
+
+def get_subject_stage_reads(wildcards):
+    """The take parts each stage of the subject's job reads (stage -> paths), in the order the
+    stage reads them."""
+    neutral = [get_neutral_fit(wildcards), get_neutral_repair(wildcards)]
+    return {
+        "motion": get_take_parts("fit")(wildcards)
+        + get_take_parts("align")(wildcards)
+        + (get_take_parts("refine")(wildcards) if REFINE else []),
+        "motion_noise": get_noise_repairs(wildcards) + get_viseme_aligns(wildcards),
+        "morph": [f for f in neutral if f],
+        "store": get_subject_take_parts(wildcards),
+    }
 
 
 def get_truth_files(wildcards):
@@ -236,14 +259,12 @@ def get_take_job_inputs(wildcards):
     return files | parts | {"neutral_stages": f"{folder}/stages.json"}
 
 
-def take_stage_files(pattern):
-    """A params function: ``pattern`` (with ``{stage}``, ``{subject}``, ``{take}``) for each of
-    the take's stages, stage -> path (the stages' logs and benchmark files)."""
+def stage_files(pattern, stages):
+    """A params function: ``pattern`` (with ``{stage}``, ``{subject}`` and ``{take}`` where a
+    job has one) for each of ``stages``, stage -> path (the stages' logs and benchmark files).
+    """
 
     def files(wildcards):
-        return {
-            s: pattern.format(stage=s, subject=wildcards.subject, take=wildcards.take)
-            for s in TAKE_STAGES
-        }
+        return {s: pattern.format(stage=s, **dict(wildcards.items())) for s in stages}
 
     return files

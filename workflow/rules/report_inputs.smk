@@ -1,24 +1,17 @@
-# Input and params functions of the per-subject report page (report.smk).
-from glob import glob
+# Input and params functions of the per-subject report page (report_subject, a stage of the
+# subject's job: subject.smk).
 from pathlib import Path
 
 from scan2morph.render.names import FIGURE_NAMES, figure_names
 
 
 def get_subject_figures(wildcards):
-    """Every figure of the subject that the figures rule draws (without that rule in the
-    workflow, the PNGs already in the figures folder)."""
-    files = []
-    for stage in FIGURE_NAMES:
-        if rules.has("figures"):
-            files += expand(
-                "results/{subject}/figures/{stem}.png",
-                subject=wildcards.subject,
-                stem=figure_names(stage),
-            )
-        else:
-            files += sorted(glob(f"results/{wildcards.subject}/figures/{stage}_*.png"))
-    return files
+    """Every figure of the subject that its job's figures stage draws, in stage order."""
+    return expand(
+        "results/{subject}/figures/{stem}.png",
+        subject=wildcards.subject,
+        stem=[stem for stage in FIGURE_NAMES for stem in figure_names(stage)],
+    )
 
 
 def get_figure_captions(wildcards):
@@ -37,6 +30,7 @@ def get_subject_accuracy(wildcards):
 
 def get_rule_order(wildcards):
     """Rule names in the order the workflow defines them (the stage order of the timings), a
-    take job's stages in its place."""
+    take job's and a subject job's stages in their place."""
+    jobs = {"take": TAKE_STAGES, "subject": SUBJECT_STAGES, "subject_synthetic": ()}
     names = [r.name for r in workflow.rules]
-    return [n for name in names for n in (TAKE_STAGES if name == "take" else (name,))]
+    return [n for name in names for n in jobs.get(name, (name,))]

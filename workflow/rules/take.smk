@@ -71,7 +71,9 @@ rule take:
         template=config["template"],
         align=config["align"],
         refine=config["refine"],
-        logs=take_stage_files("logs/{stage}/{subject}/{take}.log"),
-        benchmarks=take_stage_files("benchmarks/rules/{stage}/{subject}/{take}.tsv"),
+        logs=stage_files("logs/{stage}/{subject}/{take}.log", TAKE_STAGES),
+        benchmarks=stage_files(
+            "benchmarks/rules/{stage}/{subject}/{take}.tsv", TAKE_STAGES
+        ),
     script:
         "../scripts/take.py"

@@ -1,4 +1,5 @@
-# The 2D template mesh the takes are fitted with (Yano-Harada 3.1), and each subject's copy of it.
+# The 2D template mesh the takes are fitted with (Yano-Harada 3.1); each subject's copy of it is
+# written by the subject's job (subject.smk).
 
 
 rule template:
@@ -17,22 +18,3 @@ rule template:
         fiducial_sets=FIDUCIAL_SETS,
     script:
         "../scripts/template.py"
-
-
-rule template_part:
-    """Write the faces and fiducials of the subject's subdivided template as a store part."""
-    input:
-        template="resources/template.npz",
-    output:
-        part="results/{subject}/template.h5",
-    log:
-        "logs/template_part/{subject}.log",
-    benchmark:
-        "benchmarks/rules/template_part/{subject}.tsv"
-    resources:
-        mem_mb=600,
-        runtime=1,
-    params:
-        template=config["template"],
-    script:
-        "../scripts/template_part.py"

@@ -1,6 +1,6 @@
 """Run one take's stages in one process: ingest, repair, landmarks, fit, align, refine.
 
-A stage whose part is up to date (its fingerprint, :mod:`scan2morph.stages.take_job`) is not
+A stage whose part is up to date (its fingerprint, :mod:`scan2morph.stages.stage_job`) is not
 run; one that runs writes its part, its other files, its log and its benchmark as its own job
 did, with take isolation (:func:`scan2morph.stages.failure.run_take_job`).
 """
@@ -17,14 +17,7 @@ from scan2morph.jobs import sha256_file, write_json
 from scan2morph.sheet import PATH_SEPARATOR
 from scan2morph.stages import Take, align, check, fit, ingest, landmarks, refine, repair
 from scan2morph.stages.failure import run_take_job
-from scan2morph.stages.take_job import (
-    STAGES,
-    benchmarked,
-    fingerprint,
-    read_fingerprints,
-    up_to_date,
-    write_fingerprints,
-)
+from scan2morph.stages.stage_job import TAKE_STAGES, fingerprint, read_fingerprints, run_stages
 from scan2morph.store import paths, read_attrs, read_part, read_parts, write_part
 from scan2morph.template import load_template
 
@@ -226,41 +219,37 @@ def file_checksums(j, scriptdir):
     }
 
 
-def run_stage(j, stage, recorded, print_):
-    """Run one stage with take isolation, timed into its benchmark file; record its
-    fingerprint once its outputs are written (a stage cut short leaves none)."""
-    recorded.pop(stage, None)
-    write_fingerprints(j.out.stages, recorded)
-    with benchmarked(j.p.benchmarks[stage]):
-        run_take_job(
-            j.p.logs[stage],
-            lambda: RUN[stage](j),
-            take=j.w.take,
-            stage=stage,
-            inputs=j.reads[stage],
-            part=j.out[stage],
-            on_failure=on_failure(j, stage),
-        )
-    recorded[stage] = print_
-    write_fingerprints(j.out.stages, recorded)
+def run_stage(j, stage):
+    """Run one stage with take isolation."""
+    run_take_job(
+        j.p.logs[stage],
+        lambda: RUN[stage](j),
+        take=j.w.take,
+        stage=stage,
+        inputs=j.reads[stage],
+        part=j.out[stage],
+        on_failure=on_failure(j, stage),
+    )
 
 
 def main(snakemake):
     j = job_context(snakemake)
     sources = file_checksums(j, snakemake.scriptdir)
-    recorded = read_fingerprints(j.out.stages)
-    prints, summary = {}, []
-    for stage in (s for s in STAGES if hasattr(j.out, s)):  # refine.method none: no refine
-        # the neutral's fingerprints: this job's own for the neutral, its job's record otherwise
-        neutral_prints = prints if j.own else read_fingerprints(j.inp.get("neutral_stages", ""))
-        reads = stage_reads(j, stage, prints, neutral_prints, sources)
-        prints[stage] = fingerprint(stage, print_params(j, stage), reads)
-        if up_to_date(recorded, stage, prints[stage], outputs(j, stage)):
-            summary.append(f"{stage}: up to date, not run")
-        else:
-            run_stage(j, stage, recorded, prints[stage])
-            summary.append(f"{stage}: run")
-        Path(snakemake.log[0]).write_text("\n".join(summary) + "\n")
+    # the neutral's fingerprints: its job's record (for the neutral: this job's own, as it goes)
+    neutral_prints = {} if j.own else read_fingerprints(j.inp.get("neutral_stages", ""))
+
+    def plan(stage, prints):
+        reads = stage_reads(j, stage, prints, prints if j.own else neutral_prints, sources)
+        return fingerprint(stage, print_params(j, stage), reads), outputs(j, stage)
+
+    run_stages(
+        [s for s in TAKE_STAGES if hasattr(j.out, s)],  # refine.method none: no refine
+        plan,
+        lambda stage: run_stage(j, stage),
+        j.out.stages,
+        snakemake.log[0],
+        benchmarks=j.p.benchmarks,
+    )
 
 
 if __name__ == "__main__":

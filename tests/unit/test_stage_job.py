@@ -1,7 +1,8 @@
-"""One job per take: the stages' fingerprints (which of them re-run) and their benchmark files.
+"""Several stages in one job (one per take, one per subject): the stages' fingerprints (which of
+them re-run), the job's run of its stages and their benchmark files.
 
-The job itself (a config change re-running only the stages it reaches, take isolation, the
-per-stage benchmark files of a run) is tested end to end in ``tests/workflow/test_workflow.py``.
+The jobs themselves (a config change re-running only the stages it reaches, take isolation, the
+per-stage benchmark files of a run) are tested end to end in ``tests/workflow/test_workflow.py``.
 """
 
 from __future__ import annotations
@@ -13,14 +14,31 @@ import pandas as pd
 import pytest
 import yaml
 
+from scan2morph.jobs import sha256_file
 from scan2morph.report.provenance import stage_timings
 from scan2morph.sheet import validate_config
-from scan2morph.stages import align, fit, ingest, landmarks, refine, repair
-from scan2morph.stages.take_job import (
+from scan2morph.stages import (
+    accuracy,
+    align,
+    fit,
+    ingest,
+    landmarks,
+    modal,
+    morph,
+    motion,
+    motion_noise,
+    refine,
+    repair,
+    report,
+    store,
+)
+from scan2morph.stages.stage_job import (
     BENCHMARK_COLUMNS,
     benchmarked,
     fingerprint,
+    part_fingerprint,
     read_fingerprints,
+    run_stages,
     up_to_date,
     write_benchmark,
     write_fingerprints,
@@ -28,6 +46,7 @@ from scan2morph.stages.take_job import (
 
 ROOT = Path(__file__).resolve().parents[2]
 MODULES = (ingest, repair, landmarks, fit, align, refine)
+SUBJECT_MODULES = (motion, motion_noise, morph, modal, store, accuracy, report)
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +72,7 @@ def test_a_fingerprint_depends_on_the_params_and_the_reads_not_on_their_order(co
 def test_every_stage_params_has_a_stable_fingerprint(config):
     """Nested dataclasses, tuples and numbers are taken apart: no object address (a repr of an
     object) reaches the fingerprint, so two builds of the Params agree."""
-    for module in MODULES:
+    for module in MODULES + SUBJECT_MODULES:
         a = fingerprint(module.__name__, module.Params.from_config(config), {})
         b = fingerprint(module.__name__, module.Params.from_config(dict(config)), {})
         assert a == b, module.__name__
@@ -71,8 +90,74 @@ def test_a_stage_is_up_to_date_only_with_its_fingerprint_and_all_its_files(tmp_p
     assert up_to_date(read_fingerprints(record), "repair", "b", [part, report])
     assert not up_to_date(read_fingerprints(record), "repair", "c", [part, report])
     assert not up_to_date(read_fingerprints(record), "fit", "b", [part])
+    folder = tmp_path / "models"  # an output folder counts as a file
+    folder.mkdir()
+    assert up_to_date(read_fingerprints(record), "repair", "b", [part, folder])
     record.write_text("not json")
     assert read_fingerprints(record) == {}
+
+
+def test_a_part_of_another_job_is_known_by_its_recorded_fingerprint_or_its_bytes(tmp_path):
+    part = tmp_path / "takes" / "car" / "fit.h5"
+    part.parent.mkdir(parents=True)
+    part.write_bytes(b"fitted")
+    assert part_fingerprint(part) == sha256_file(part)  # no record: the bytes
+    write_fingerprints(part.parent / "stages.json", {"fit": "f" * 64, "align": "a" * 64})
+    assert part_fingerprint(part) == "f" * 64
+    assert part_fingerprint(part.with_name("align.h5")) == "a" * 64
+
+
+def _job(tmp_path, prints, fail=None):
+    """A job of three stages, a -> b -> c (each one's print: its own setting and what it
+    reads); returns the stages it ran and the job's log."""
+    ran = []
+
+    def plan(stage, done):
+        reads = {"a": {}, "b": {"a": done.get("a")}, "c": {"b": done.get("b")}}[stage]
+        return fingerprint(stage, {"setting": prints[stage]}, reads), [tmp_path / f"{stage}.out"]
+
+    def run(stage):
+        if stage == fail:
+            raise SystemExit(1)  # a stage's bad input (scan2morph.jobs.run_job)
+        (tmp_path / f"{stage}.out").write_text(stage)
+        ran.append(stage)
+
+    log = tmp_path / "job.log"
+    benchmarks = {s: tmp_path / "bench" / f"{s}.tsv" for s in ("a", "b")}
+    run_stages("abc", plan, run, tmp_path / "stages.json", log, benchmarks=benchmarks)
+    return ran, log.read_text().splitlines()
+
+
+def test_a_job_runs_only_the_stages_a_change_reaches(tmp_path):
+    prints = {"a": 1, "b": 1, "c": 1}
+    assert _job(tmp_path, prints)[0] == ["a", "b", "c"]
+    assert set(read_fingerprints(tmp_path / "stages.json")) == {"a", "b", "c"}
+    # benchmark files where given (c has none)
+    assert sorted(p.name for p in (tmp_path / "bench").iterdir()) == ["a.tsv", "b.tsv"]
+    ran, log = _job(tmp_path, prints)
+    assert ran == [] and log == [f"{s}: up to date, not run" for s in "abc"]
+    # b's setting: b and what reads it (c) run, a is kept
+    ran, log = _job(tmp_path, prints | {"b": 2})
+    assert ran == ["b", "c"]
+    assert log == ["a: up to date, not run", "b: run", "c: run"]
+    # c's setting: c alone; an output gone: its stage alone (made from the same, it has the
+    # same fingerprint: what reads it is kept)
+    assert _job(tmp_path, prints | {"b": 2, "c": 2})[0] == ["c"]
+    (tmp_path / "b.out").unlink()
+    assert _job(tmp_path, prints | {"b": 2, "c": 2})[0] == ["b"]
+
+
+def test_a_failed_stage_stops_the_job_and_runs_again_next_time(tmp_path):
+    prints = {"a": 1, "b": 1, "c": 1}
+    _job(tmp_path, prints)
+    with pytest.raises(SystemExit):
+        _job(tmp_path, prints | {"a": 2}, fail="b")
+    log = (tmp_path / "job.log").read_text().splitlines()
+    assert log == ["a: run", "b: failed"]  # c after it not run
+    # b's record is gone (its old output is not taken for the new one), a's is the new one
+    recorded = read_fingerprints(tmp_path / "stages.json")
+    assert "b" not in recorded and set(recorded) == {"a", "c"}
+    assert _job(tmp_path, prints | {"a": 2})[0] == ["b", "c"]
 
 
 def test_benchmark_files_read_as_snakemake_s(tmp_path):

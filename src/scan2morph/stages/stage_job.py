@@ -1,0 +1,292 @@
+"""Several stages in one job: which of them to re-run, and each one's time on record.
+
+A take's stages (ingest, repair, landmarks, fit, align, refine: :data:`TAKE_STAGES`) run in one
+job per take, and a subject's own stages after its takes (:data:`SUBJECT_STAGES`: its template
+part, motion, click noise, morphable and modal models, store, head meshes, accuracy, figures and
+report) in one job per subject, each in one process, so that the interpreter and the imports are
+paid once a job instead of once a stage. A config change still re-runs only the stages it
+reaches: every stage's outputs are recorded with a *fingerprint*, the SHA-256 of the stage's
+name, its ``Params`` and what it reads (the fingerprints of the parts it reads, the checksums of
+the input files, the template's). A stage whose outputs exist with the fingerprint it would have
+now is not run: they are kept as they are, byte for byte. The fingerprints of a job's stages are
+kept beside its parts in ``stages.json`` (:func:`read_fingerprints`, :func:`write_fingerprints`;
+another job reads a part's with :func:`part_fingerprint`); :func:`run_stages` runs a job's
+stages in order, each only when it is out of date.
+
+Each stage that runs writes its own wall and CPU time to its own benchmark file, in Snakemake's
+benchmark format (:func:`write_benchmark`), where the run-time tables read them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import hashlib
+import json
+import resource
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager, nullcontext
+from pathlib import Path
+
+from scan2morph.jobs import sha256_file, write_json
+
+#: The per-take stages in the order a take's job runs them.
+TAKE_STAGES = ("ingest", "repair", "landmarks", "fit", "align", "refine")
+
+#: A subject's own stages after its takes, in the order its job runs them (a subject without
+#: ground truth has no ``accuracy``).
+SUBJECT_STAGES = (
+    "template_part",
+    "motion",
+    "motion_noise",
+    "morph",
+    "modal",
+    "store",
+    "head_meshes",
+    "accuracy",
+    "figures",
+    "report_subject",
+)
+
+#: Columns of Snakemake's benchmark files (``benchmark:`` of a rule), in its order.
+BENCHMARK_COLUMNS = (
+    "s",
+    "h:m:s",
+    "max_rss",
+    "max_vms",
+    "max_uss",
+    "max_pss",
+    "io_in",
+    "io_out",
+    "mean_load",
+    "cpu_time",
+)
+
+
+def _plain(value: object) -> object:
+    """``value`` as JSON-able data: dataclasses as dicts, tuples as lists."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if hasattr(value, "item") and callable(value.item):  # a numpy scalar
+        return value.item()
+    return value
+
+
+def fingerprint(stage: str, params: object, reads: Mapping[str, object]) -> str:
+    """The fingerprint of a stage's part: what it was computed from.
+
+    Parameters
+    ----------
+    stage : str
+        The stage's name.
+    params : object
+        The stage's ``Params`` (a dataclass; nested ones and tuples are taken apart) or any JSON-
+        able data.
+    reads : mapping str -> object
+        What else the stage's result depends on, by name: the fingerprints of the parts it reads,
+        the checksums of its input files, the take's ids (JSON-able).
+
+    Returns
+    -------
+    str
+        Hex SHA-256 (64 characters) of the canonical JSON of the three (keys sorted): equal
+        inputs give equal fingerprints in any process.
+    """
+    text = json.dumps(
+        {"stage": stage, "params": _plain(params), "reads": _plain(reads)},
+        sort_keys=True,
+        default=repr,
+    )
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def read_fingerprints(path: str | Path) -> dict[str, str]:
+    """The fingerprints recorded for a job's stages (stage -> fingerprint); ``{}`` when the file
+    is missing or unreadable (every stage then runs)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+
+def write_fingerprints(path: str | Path, fingerprints: Mapping[str, str]) -> None:
+    """Record the fingerprints of a job's stages (stage -> fingerprint), replacing the file."""
+    write_json(path, dict(fingerprints))
+
+
+def up_to_date(
+    recorded: Mapping[str, str], stage: str, print_: str, outputs: Iterable[str | Path]
+) -> bool:
+    """Whether a stage need not run: its recorded fingerprint is ``print_`` and every one of its
+    ``outputs`` (its part and its other files and folders) exists."""
+    return recorded.get(stage) == print_ and all(Path(f).exists() for f in outputs)
+
+
+def part_fingerprint(part: str | Path) -> str:
+    """The fingerprint of a part another job wrote: the one its job recorded for it (the
+    ``stages.json`` beside it, under the part's stem: ``takes/{take}/fit.h5`` -> ``fit``), or
+    the SHA-256 of its bytes where none is recorded.
+
+    Parameters
+    ----------
+    part : str or Path
+        The part's file.
+
+    Returns
+    -------
+    str
+        Hex SHA-256 (64 characters).
+    """
+    part = Path(part)
+    recorded = read_fingerprints(part.parent / "stages.json").get(part.stem)
+    return recorded or sha256_file(part)
+
+
+def run_stages(
+    stages: Iterable[str],
+    plan: Callable[[str, Mapping[str, str]], tuple[str, Sequence[str | Path]]],
+    run: Callable[[str], None],
+    record: str | Path,
+    summary: str | Path,
+    benchmarks: Mapping[str, str | Path] | None = None,
+) -> dict[str, str]:
+    """Run a job's stages in order, each only when it is out of date (:func:`up_to_date`).
+
+    Parameters
+    ----------
+    stages : iterable of str
+        The job's stages, each after the stages it reads.
+    plan : callable
+        ``plan(stage, prints)``: the stage's fingerprint (:func:`fingerprint`) and its outputs,
+        given the fingerprints of the stages before it (``prints``, stage -> fingerprint).
+    run : callable
+        ``run(stage)`` writes the stage's outputs and its log.
+    record : str or Path
+        The job's ``stages.json``. A stage's fingerprint is taken out of it before the stage
+        runs and put in once its outputs are written, so a stage cut short runs again.
+    summary : str or Path
+        The job's log: one line a stage, ``{stage}: run``, ``{stage}: up to date, not run`` or
+        ``{stage}: failed`` (the job then stops: the stages after it are not run; the error is
+        raised again).
+    benchmarks : mapping str -> path, optional
+        A stage's benchmark file (:func:`benchmarked`), written when it runs; a stage without
+        one has none.
+
+    Returns
+    -------
+    dict of str to str
+        Every stage's fingerprint.
+    """
+    recorded = read_fingerprints(record)
+    prints: dict[str, str] = {}
+    lines: list[str] = []
+    for stage in stages:
+        prints[stage], outputs = plan(stage, prints)
+        if up_to_date(recorded, stage, prints[stage], outputs):
+            lines.append(f"{stage}: up to date, not run")
+        else:
+            recorded.pop(stage, None)
+            write_fingerprints(record, recorded)
+            bench = (benchmarks or {}).get(stage)
+            try:
+                with benchmarked(bench) if bench else nullcontext():
+                    run(stage)
+            except BaseException:  # SystemExit too: a job's bad input (scan2morph.jobs.run_job)
+                _write_lines(summary, [*lines, f"{stage}: failed"])
+                raise
+            recorded[stage] = prints[stage]
+            write_fingerprints(record, recorded)
+            lines.append(f"{stage}: run")
+        _write_lines(summary, lines)
+    return prints
+
+
+def _write_lines(path: str | Path, lines: Sequence[str]) -> None:
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text("".join(f"{line}\n" for line in lines))
+
+
+def _reset_peak_rss() -> bool:
+    """Reset this process's peak resident set (Linux ``clear_refs``); False where it cannot."""
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        return False
+    return True
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident set (MB) since the last reset (``VmHWM``), or since it
+    started (``getrusage``) where ``/proc`` does not say."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def write_benchmark(path: str | Path, wall_s: float, cpu_s: float, max_rss_mb: float) -> None:
+    """Write one job's benchmark line in Snakemake's format (tab-separated, its columns).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.tsv`` file (replaced).
+    wall_s, cpu_s : float
+        Wall-clock and CPU time (s).
+    max_rss_mb : float
+        Peak resident set size (MB).
+
+    Notes
+    -----
+    Columns the process does not measure (``max_vms``, ``max_uss``, ``max_pss``, ``io_in``,
+    ``io_out``) are ``NA``; ``mean_load`` is the CPU time over the wall time (%).
+    """
+    hms = str(datetime.timedelta(seconds=int(wall_s)))
+    load = 100.0 * cpu_s / wall_s if wall_s > 0 else 0.0
+    values = {
+        "s": f"{wall_s:.4f}",
+        "h:m:s": hms,
+        "max_rss": f"{max_rss_mb:.2f}",
+        "mean_load": f"{load:.2f}",
+        "cpu_time": f"{cpu_s:.4f}",
+    }
+    row = [values.get(c, "NA") for c in BENCHMARK_COLUMNS]
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text("\t".join(BENCHMARK_COLUMNS) + "\n" + "\t".join(row) + "\n")
+
+
+@contextmanager
+def benchmarked(path: str | Path) -> Iterator[None]:
+    """Time the block (wall, CPU and peak memory of this process) into a benchmark file
+    (:func:`write_benchmark`), written when the block ends, with or without an error."""
+    _reset_peak_rss()
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        yield
+    finally:
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        write_benchmark(path, wall, cpu, _peak_rss_mb())
+
+
+__all__ = [
+    "BENCHMARK_COLUMNS",
+    "SUBJECT_STAGES",
+    "TAKE_STAGES",
+    "benchmarked",
+    "fingerprint",
+    "part_fingerprint",
+    "read_fingerprints",
+    "run_stages",
+    "up_to_date",
+    "write_benchmark",
+    "write_fingerprints",
+]
