@@ -44,7 +44,6 @@ import numpy as np
 sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
 from scan2morph.align.carry import carry_stable  # noqa: E402
 from scan2morph.align.rigid import transform_points  # noqa: E402
-from scan2morph.landmarks import detect as detect_module  # noqa: E402
 from scan2morph.landmarks.canonical import canonical  # noqa: E402
 from scan2morph.landmarks.cascade import run  # noqa: E402
 from scan2morph.landmarks.detect import cached_model, detect, ensemble_shapes  # noqa: E402
@@ -197,8 +196,9 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=None, help="npz of the cohort's grids")
     parser.add_argument("--model", type=Path, default=None, help="a cascade to measure instead")
     args = parser.parse_args()
-    if args.model is not None:
-        detect_module.MODEL_PATH = args.model  # every detection's default model
+    if args.model is not None:  # every detection's default model (the package exports the
+        # function ``detect`` under the module's name: the module itself from sys.modules)
+        sys.modules["scan2morph.landmarks.detect"].MODEL_PATH = args.model
     cached_model()
     takes = [
         _Named(f"{t.subject}/{t.take}", t.color, t.xyz, t.truth, t.modality)

@@ -4,6 +4,9 @@ Usage::
 
     python -m scan2morph.landmarks.train --seed 1 --out src/scan2morph/landmarks/model.npz
 
+and with ``--extra-subjects N`` (docs/landmarks.md) N more training subjects with wider faces
+(closed eyes, other proportions) on top of the committed ones.
+
 The same seed and settings give identical weights. ``make detector`` runs it with the
 committed model's settings. ``--cache DIR`` keeps the simulated takes so that retraining with
 other cascade settings skips the simulation.
