@@ -24,7 +24,10 @@ correlation; per modality against the truth, the takes' error relative to their 
 (what a motion sees: ``(take - truth) - (neutral - truth)`` per point, px) and how well the
 stable points agree with the neutral's after the rigid alignment.
 
-Run: ``PYOPENGL_PLATFORM=osmesa .venv/bin/python benchmarks/bench_landmarks.py [--cache F]``
+Per region (the detector, median px): jawline, brows, nose, eyes and mouth of each group.
+
+Run: ``PYOPENGL_PLATFORM=osmesa .venv/bin/python benchmarks/bench_landmarks.py [--cache F]
+[--model M]`` (``--model``: a trained cascade instead of the committed one, e.g. a retrain's).
 """
 
 from __future__ import annotations
@@ -122,12 +125,27 @@ HEADER = (
 )
 
 
+#: iBUG-68 regions (0-based point ranges) of the per-region rows.
+REGIONS = {
+    "jaw": slice(0, 17),
+    "brows": slice(17, 27),
+    "nose": slice(27, 36),
+    "eyes": slice(36, 48),
+    "mouth": slice(48, 68),
+}
+
+
+def _region_row(name: str, errs: list[np.ndarray]) -> str:
+    e = np.stack(errs)
+    return f"{name:<28} " + " ".join(f"{k} {np.median(e[:, s]):5.2f}" for k, s in REGIONS.items())
+
+
 def evaluate(takes, groups) -> None:
     """Print one row per candidate and group of takes (objects with ``color``, ``xyz``,
-    ``truth`` and ``name``)."""
+    ``truth`` and ``name``), then the last candidate's (the detector's) median per region."""
     print(HEADER)
     for name, fn in CANDIDATES.items():
-        results = []
+        results, regions = [], []
         for t in takes:
             t0 = time.process_time()  # CPU time: the machine may be shared
             pts = fn(t.color, t.xyz, t.name)
@@ -137,6 +155,9 @@ def evaluate(takes, groups) -> None:
             sel = [r for t, r in zip(takes, results, strict=True) if pick(t)]
             if sel:
                 print(_row(f"{name} {gname}", [s[0] for s in sel], [s[1] for s in sel]))
+                regions.append(_region_row(f"{name} {gname}", [s[0] for s in sel]))
+    print("median per region (px)")
+    print("\n".join(regions))
 
 
 #: Poses (yaw, pitch; degrees) of the real head's renders.
@@ -173,7 +194,11 @@ def real_head_takes() -> list[_Named]:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--cache", type=Path, default=None, help="npz of the cohort's grids")
+    parser.add_argument("--model", type=Path, default=None, help="a cascade to measure instead")
     args = parser.parse_args()
+    if args.model is not None:  # every detection's default model (the package exports the
+        # function ``detect`` under the module's name: the module itself from sys.modules)
+        sys.modules["scan2morph.landmarks.detect"].MODEL_PATH = args.model
     cached_model()
     takes = [
         _Named(f"{t.subject}/{t.take}", t.color, t.xyz, t.truth, t.modality)

@@ -55,6 +55,84 @@ def test_stereo_training_take_has_its_truth_on_its_grid():
     assert np.isfinite(inner).all(axis=1).mean() > 0.75  # measured 0.86 (eyes, nostrils: holes)
 
 
+def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_when_asked(
+    monkeypatch,
+):
+    """The trainer's takes at the committed settings are those of the committed subjects (40
+    range/RGB-D ``train`` identities x 8 takes, 10 mesh x 4, 15 stereo x 4), nothing else;
+    ``extra_subjects`` adds exactly that many ``wide`` identities' takes, drawn with the
+    requested shares, the committed calls unchanged."""
+    from scan2morph.landmarks import data
+    from scan2morph.landmarks import train as train_mod
+
+    calls = []
+
+    def fake(kind):
+        def make(seed, n, k, extra=None):
+            calls.append((kind, seed, n, k, extra))
+            prefix = {"range": "train" if extra is None else "wide"}.get(kind, kind)
+            return [f"{prefix}{i:03d}/t{j:02d}" for i in range(n) for j in range(k)]
+
+        return make
+
+    monkeypatch.setattr(train_mod, "make_samples", fake("range"))
+    monkeypatch.setattr(train_mod, "make_mesh_samples", fake("mesh"))
+    monkeypatch.setattr(train_mod, "make_stereo_samples", fake("stereo"))
+    committed = [
+        ("range", 1, 40, 8, None),
+        ("mesh", 1, 10, 4, None),
+        ("stereo", 1, 15, 4, None),
+    ]
+    names = train_mod._cached_samples(1, train_mod.DEFAULTS, None)
+    assert calls == committed and len(names) == 320 + 40 + 60
+    calls.clear()
+    config = train_mod.DEFAULTS | {
+        "extra_subjects": 3,
+        "extra_wide_share": 0.65,
+        "extra_knobs": ["width", "chin"],
+    }
+    more = train_mod._cached_samples(1, config, None)
+    assert calls == [*committed, ("range", 1, 3, 8, data.FaceShares(1.0, 0.65, ("width", "chin")))]
+    assert more[:420] == names and more[420:] == [
+        f"wide{i:03d}/t{j:02d}" for i in range(3) for j in range(8)
+    ]
+    assert {train_mod._identity(n) for n in more[420:]} == {3000, 3001, 3002}
+    with pytest.raises(InputError, match="extra_knobs: unknown"):
+        train_mod.extra_shares(config | {"extra_knobs": ["ears"]})
+
+
+def test_extra_subjects_leave_the_committed_takes_as_they_were():
+    """``make_samples`` without ``extra`` gives the committed recipe's takes (names and truth
+    recorded from the code before the option existed, seed 1, 1 subject x 3 takes: the same
+    random stream); with ``extra`` the takes are of other identities (``wide000``), with
+    closed eyes at a closed-eye share of 1."""
+    from scan2morph.landmarks.data import FaceShares, make_samples, wide_identity
+    from scan2morph.synth.cohort import subject_identity
+
+    takes = make_samples(1, 1, 3)
+    assert [t.name for t in takes] == [
+        "train000/t00/neutral/colour",
+        "train000/t01/too/colour",
+        "train000/t02/car/rgbd",
+    ]
+    recorded = [  # points 31, 37, 46, 49 (px), before the option
+        [[257.1612, 240.7612], [195.524, 162.7048], [388.2137, 157.4122], [231.9704, 311.1007]],
+        [[412.7959, 308.8673], [265.4409, 202.5848], [481.7921, 214.9995], [335.7187, 384.8792]],
+        [[332.0241, 227.2917], [285.2921, 207.0264], [358.0361, 201.7713], [307.5737, 266.604]],
+    ]
+    for t, r in zip(takes, recorded, strict=True):
+        np.testing.assert_allclose(t.truth[[30, 36, 45, 48]], r, atol=1e-3)
+    shares = FaceShares(1.0, 1.0, ("chin",))
+    face = wide_identity("wide000", 1, shares)
+    own = subject_identity("wide000", 1)
+    assert face.eyes_closed and face.chin != own.chin and face.nose == own.nose
+    (extra,) = make_samples(1, 1, 1, shares)
+    assert extra.name.startswith("wide000/t00/")
+    lids = [37, 38, 43, 44], [41, 40, 47, 46]  # upper and lower lid points of both eyes
+    np.testing.assert_allclose(extra.truth[lids[0]], extra.truth[lids[1]], atol=1e-6)
+    assert (np.linalg.norm(takes[0].truth[lids[0]] - takes[0].truth[lids[1]], axis=1) > 10).all()
+
+
 def test_missing_model_is_named(tmp_path):
     with pytest.raises(InputError, match="landmark model not found"):
         load(tmp_path / "none.npz")

@@ -65,29 +65,52 @@ WIDE_RANGE = {
 }
 
 
-def wide_identity(subject: str, seed: int) -> Identity:
-    """A training face: the subject's own identity, with closed eyes in a share
-    :data:`CLOSED_EYES` of the subjects and its proportions redrawn more widely than a
-    cohort's (the ranges of :data:`WIDE_RANGE`: bald heads and faint brows among them) in a
-    share :data:`WIDE_SHARE`, the two drawn independently. With both shares 0 (the committed
-    model's) it is the subject's own identity, and the training takes are those from before
-    the knobs existed.
+@dataclass(frozen=True)
+class FaceShares:
+    """How :func:`wide_identity` draws a set of training faces.
+
+    Attributes
+    ----------
+    closed_eyes : float
+        Share of the subjects with closed eyes, in [0, 1].
+    wide : float
+        Share of the subjects whose proportions are redrawn, in [0, 1].
+    knobs : tuple of str
+        The :data:`WIDE_RANGE` knobs redrawn for those; the others keep the subject's own.
+    """
+
+    closed_eyes: float = 0.0
+    wide: float = 0.0
+    knobs: tuple[str, ...] = tuple(WIDE_RANGE)
+
+
+def wide_identity(subject: str, seed: int, shares: FaceShares | None = None) -> Identity:
+    """A training face: the subject's own identity, with closed eyes in a share of the subjects
+    and its proportions redrawn more widely than a cohort's (the ranges of :data:`WIDE_RANGE`:
+    bald heads and faint brows among them) in another, the two drawn independently. With both
+    shares 0 (the committed model's) it is the subject's own identity, and the training takes
+    are those from before the knobs existed.
 
     Parameters
     ----------
     subject : str
     seed : int
         Training seed; with ``subject`` it fixes the face.
+    shares : FaceShares, optional
+        Default: :data:`CLOSED_EYES`, :data:`WIDE_SHARE` and every knob (the committed
+        training subjects').
 
     Returns
     -------
     Identity
     """
+    if shares is None:
+        shares = FaceShares(CLOSED_EYES, WIDE_SHARE)
     rng = np.random.default_rng([int(seed), _key(subject), 0x51DE])
-    knobs = {k: float(rng.uniform(*r)) for k, r in WIDE_RANGE.items()}
-    closed = bool(rng.uniform() < CLOSED_EYES)
-    if rng.uniform() >= WIDE_SHARE:
-        knobs = {}
+    knobs = {k: float(rng.uniform(*r)) for k, r in WIDE_RANGE.items()}  # all drawn: one stream
+    closed = bool(rng.uniform() < shares.closed_eyes)
+    redrawn = rng.uniform() < shares.wide
+    knobs = {k: v for k, v in knobs.items() if redrawn and k in shares.knobs}
     return replace(subject_identity(subject, seed), eyes_closed=closed, **knobs)
 
 
@@ -131,9 +154,8 @@ def _draw_label(rng: np.random.Generator) -> str:
     return labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
 
 
-def _range_take(subject: str, label: str, take: str, seed: int, rng: np.random.Generator):
-    """A posed range take: (colour, xyz, truth px)."""
-    face = wide_identity(subject, seed)
+def _range_take(subject: str, label: str, take: str, seed: int, rng, face: Identity):
+    """A posed range take of ``face``: (colour, xyz, truth px)."""
     head, vertices, take_rng = articulated_head(subject, label, LABEL_KIND[label], take, seed, face)
     angles = [rng.uniform(*POSE_RANGE[k]) for k in ("yaw", "pitch", "roll")]
     dist, focal = (rng.uniform(*POSE_RANGE[k]) for k in ("distance", "focal"))
@@ -163,12 +185,10 @@ def _range_take(subject: str, label: str, take: str, seed: int, rng: np.random.G
     return out["color"], xyz, project(K, lm3)
 
 
-def _rgbd_take(subject: str, label: str, take: str, seed: int, rng: np.random.Generator):
-    """An RGB-D take resampled onto its colour camera: (colour, xyz, truth px)."""
+def _rgbd_take(subject: str, label: str, take: str, seed: int, rng, face: Identity):
+    """An RGB-D take of ``face`` resampled onto its colour camera: (colour, xyz, truth px)."""
     params = {"pose_sigma_deg": 6.0, "distance_mm": float(rng.uniform(500.0, 800.0))}
-    r = make_rgbd_take(
-        subject, label, LABEL_KIND[label], take, seed, params, wide_identity(subject, seed)
-    )
+    r = make_rgbd_take(subject, label, LABEL_KIND[label], take, seed, params, face)
     intr = r["intrinsics"]
     depth = r["depth"].astype(np.float64) * intr.depth_scale_mm
     xyz = depth_to_color_grid(np.where(depth > 0, depth, np.nan), intr)
@@ -176,7 +196,15 @@ def _rgbd_take(subject: str, label: str, take: str, seed: int, rng: np.random.Ge
     return r["color"], xyz, r["truth"]["landmarks2d"]
 
 
-def make_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+#: Random streams of the range and RGB-D training takes: the committed subjects' and the
+#: extra subjects' (:func:`make_samples`' ``extra``), so that adding the latter leaves the
+#: former's takes as they were.
+SUBJECT_STREAMS = {"train": 0x1A4D, "wide": 0x1A4E}
+
+
+def make_samples(
+    seed: int, subjects: int, takes: int, extra: FaceShares | None = None
+) -> list[Sample]:
     """Simulate the training takes.
 
     Parameters
@@ -187,24 +215,29 @@ def make_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
         Number of training identities (``train000``, ...).
     takes : int
         Takes per identity.
+    extra : FaceShares, optional
+        Simulate instead extra identities ``wide000``, ... of the seed, faces drawn by
+        :func:`wide_identity` with these shares, from a random stream of their own.
 
     Returns
     -------
     list of Sample
         ``subjects * takes`` takes, in a fixed order.
     """
-    rng = np.random.default_rng([int(seed), 0x1A4D])
+    prefix = "train" if extra is None else "wide"
+    rng = np.random.default_rng([int(seed), SUBJECT_STREAMS[prefix]])
     out = []
     for i in range(subjects):
-        subject = f"train{i:03d}"
+        subject = f"{prefix}{i:03d}"
+        face = wide_identity(subject, seed, extra)
         for j in range(takes):
             label = _draw_label(rng)
             take = f"t{j:02d}"
             if rng.uniform() < RGBD_SHARE:
-                color, xyz, truth = _rgbd_take(subject, label, take, seed, rng)
+                color, xyz, truth = _rgbd_take(subject, label, take, seed, rng, face)
                 look = "rgbd"
             else:
-                color, xyz, truth = _range_take(subject, label, take, seed, rng)
+                color, xyz, truth = _range_take(subject, label, take, seed, rng, face)
                 look = str(rng.choice(list(LOOKS), p=list(LOOKS.values())))
                 if look == "shaded":
                     color = shaded_image(xyz)

@@ -4,6 +4,9 @@ Usage::
 
     python -m scan2morph.landmarks.train --seed 1 --out src/scan2morph/landmarks/model.npz
 
+and with ``--extra-subjects N`` (docs/landmarks.md) N more training subjects with wider faces
+(closed eyes, other proportions) on top of the committed ones.
+
 The same seed and settings give identical weights. ``make detector`` runs it with the
 committed model's settings. ``--cache DIR`` keeps the simulated takes so that retraining with
 other cascade settings skips the simulation.
@@ -31,6 +34,8 @@ from scan2morph.landmarks.cascade import (
     save,
 )
 from scan2morph.landmarks.data import (
+    WIDE_RANGE,
+    FaceShares,
     Sample,
     make_mesh_samples,
     make_samples,
@@ -61,7 +66,15 @@ DEFAULTS = {
     "stretch_x": [0.8, 1.15],
     "stretch_up": [0.55, 1.1],
     "stretch_down": [0.8, 1.15],
+    "extra_subjects": 0,
+    "extra_closed_eyes": 1.0,
+    "extra_wide_share": 0.0,
+    "extra_knobs": list(WIDE_RANGE),
 }
+#: ``extra_*``: extra range and RGB-D training subjects (``wide000``, ...; ``takes`` each) added
+#: to the committed ones, their faces drawn by ``landmarks.data.wide_identity`` with closed
+#: eyes in a share ``extra_closed_eyes`` of them and the knobs ``extra_knobs`` redrawn in a share
+#: ``extra_wide_share``; none for the committed model.
 #: Every this many-th training identity is held out to choose each stage's ridge penalty.
 HOLDOUT_EVERY = 5
 log = logging.getLogger("scan2morph")
@@ -94,8 +107,10 @@ def _stretched(
 
 def _identity(name: str) -> int:
     """A training take's identity number (``train007/...`` -> 7, ``mesh003/...`` -> 1003,
-    ``stereo002/...`` -> 2002)."""
+    ``stereo002/...`` -> 2002, ``wide004/...`` -> 3004)."""
     subject = name.split("/")[0]
+    if subject.startswith("wide"):
+        return 3000 + int(subject.removeprefix("wide"))
     if subject.startswith("mesh"):
         return 1000 + int(subject.removeprefix("mesh"))
     if subject.startswith("stereo"):
@@ -276,7 +291,29 @@ def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]
             cache / f"stereo-{seed}-{ns}x{ks}.npz" if cache else None,
             lambda: make_stereo_samples(seed, ns, ks),
         )
+    ne = int(config["extra_subjects"])
+    if ne and k:
+        extra = extra_shares(config)
+        tag = f"c{extra.closed_eyes:g}-w{extra.wide:g}-{'+'.join(extra.knobs)}"
+        out += _cached(
+            cache / f"extra-{seed}-{ne}x{k}-{tag}.npz" if cache else None,
+            lambda: make_samples(seed, ne, k, extra),
+        )
     return out
+
+
+def extra_shares(config: dict) -> FaceShares:
+    """How the extra training subjects' faces are drawn (``config``'s ``extra_*`` keys)."""
+    knobs = tuple(config["extra_knobs"])
+    unknown = sorted(set(knobs) - set(WIDE_RANGE))
+    if unknown:
+        raise InputError(
+            "training config", f"extra_knobs: unknown {unknown}; known {list(WIDE_RANGE)}"
+        )
+    shares = (float(config["extra_closed_eyes"]), float(config["extra_wide_share"]))
+    if not all(0.0 <= v <= 1.0 for v in shares):
+        raise InputError("training config", f"extra shares: expected 0-1, got {shares}")
+    return FaceShares(*shares, knobs)
 
 
 def train(seed: int, config: dict | None = None, cache: Path | None = None) -> Cascade:
@@ -303,19 +340,44 @@ def train(seed: int, config: dict | None = None, cache: Path | None = None) -> C
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command line: ``--seed N --out PATH [--subjects N] [--takes N] [--cache DIR]``."""
+    """Command line: ``--seed N --out PATH [--subjects N] [--takes N] [--cache DIR]
+    [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
     parser = argparse.ArgumentParser(prog="python -m scan2morph.landmarks.train")
     parser.add_argument("--seed", type=int, required=True)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--subjects", type=int, default=DEFAULTS["subjects"])
     parser.add_argument("--takes", type=int, default=DEFAULTS["takes"])
     parser.add_argument("--cache", type=Path, default=None)
+    parser.add_argument(
+        "--extra-subjects",
+        type=int,
+        default=0,
+        help="extra range/RGB-D subjects with wider faces, added to the committed ones",
+    )
+    parser.add_argument("--extra-closed-eyes", type=float, default=DEFAULTS["extra_closed_eyes"])
+    parser.add_argument("--extra-wide-share", type=float, default=DEFAULTS["extra_wide_share"])
+    parser.add_argument(
+        "--extra-knobs",
+        default=",".join(DEFAULTS["extra_knobs"]),
+        help=f"comma-separated knobs redrawn, of {','.join(WIDE_RANGE)}",
+    )
     args = parser.parse_args(argv)
     if args.seed == 2009:
         parser.error("seed 2009 is the default cohort's: train on other identities")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     t0 = time.perf_counter()
-    config = {"subjects": args.subjects, "takes": args.takes}
+    config = {
+        "subjects": args.subjects,
+        "takes": args.takes,
+        "extra_subjects": args.extra_subjects,
+        "extra_closed_eyes": args.extra_closed_eyes,
+        "extra_wide_share": args.extra_wide_share,
+        "extra_knobs": [k for k in args.extra_knobs.split(",") if k],
+    }
+    try:
+        extra_shares(config)
+    except InputError as exc:
+        parser.error(str(exc))
     model = train(args.seed, config, args.cache)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save(model, args.out)
