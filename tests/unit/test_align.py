@@ -441,6 +441,35 @@ def test_growing_into_the_whole_face_levers_a_brow_raise(seed):
             assert rot < 0.03 and t < 0.03, (rot, t)
 
 
+def test_no_still_skin_agreeing_keeps_the_regions_pose(monkeypatch):
+    """When no candidate skin agrees with the best still-skin hypothesis (the whole region
+    moved), the region's trimmed pose is kept, with a note, as when no hypothesis gives a pose:
+    the same pose as without the still-skin search (its refinement on no points divided by
+    zero and stopped the whole run)."""
+    from scan2morph.align import icp as icp_module
+    from scan2morph.align.still import StillSkin
+
+    s = _scene(seed=0, mouth_mm=10.0)
+    valid = np.ones(len(s["take"]), dtype=bool)
+    meshes = AlignMeshes(s["take"], valid, s["neutral"], valid, s["faces"])
+    everywhere = np.arange(len(s["take"]))
+    plain = align_take(
+        meshes, s["pairs"], s["upper"], IcpParams(kernel_k_mm=0.3), "s01/man", everywhere
+    )
+
+    def nobody_agrees(points, t, refine, plane, prm):
+        n = len(points)
+        return StillSkin(
+            np.zeros(n, bool), t, True, 0, (), np.zeros(n, np.int64), np.array([0]), []
+        )
+
+    monkeypatch.setattr(icp_module, "still_skin", nobody_agrees)
+    params = IcpParams(kernel_k_mm=0.3, still_groups=6)
+    got = align_take(meshes, s["pairs"], s["upper"], params, "s01/man", everywhere)
+    assert any("no skin agrees" in note for note in got.recovery)
+    np.testing.assert_array_equal(got.transform, plain.transform)
+
+
 def test_align_take_shifted_take_with_random_pairs_is_flagged():
     # a take 50 mm off whose point pairs were clicked at random: the initial pose is far off
     s = _scene(seed=4)

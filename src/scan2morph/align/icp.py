@@ -395,11 +395,13 @@ def _found_still(s: _IcpProblem, trimmed: tuple, refine, prm) -> tuple:
     from the region's trimmed ``(keep, t, converged)``), refined on, then trimmed with every
     candidate free to join or leave: ``(keep, t, converged, iterations, notes)`` as
     :func:`~scan2morph.align.trim.trim_moving` returns them. When no set of patches gives a
-    pose, the region's trimmed pose is kept."""
+    pose, or no candidate agrees with the best one (the whole region moved), the region's
+    trimmed pose is kept (and the RMSE gate judges it)."""
     keep, t, conv = trimmed
     found = still_skin(s.p, t, refine, s.plane, prm)
-    if len(found.agree) == 0:
-        note = "still skin: no set of patches gave a pose; the region's trimmed pose is kept"
+    if len(found.agree) == 0 or not found.keep.any():
+        why = "no set of patches gave a pose" if len(found.agree) == 0 else "no skin agrees"
+        note = f"still skin: {why}; the region's trimmed pose is kept"
         return keep, t, conv, found.iterations, [*found.notes, note]
     t_new, _, _, iterations, conv = refine(found.keep, found.transform)
     t = t_new if np.isfinite(t_new).all() else found.transform

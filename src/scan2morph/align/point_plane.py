@@ -13,7 +13,15 @@ one scipy k-d tree, with sums in a fixed order:
    kernel at ``|r|`` (:func:`~scan2morph.align.settings.kernel_weights`);
 3. the Gauss-Newton step solves ``(sum w J J^T) x = -sum w J r`` with ``J = (p x n_q, n_q)``;
    ``x`` holds small rotations about x, y and z (radians) and a translation (mm), the rotation
-   ``Rz Ry Rx`` (open3d's parametrisation), applied on the left of the pose.
+   ``Rz Ry Rx`` (open3d's parametrisation), applied on the left of the pose;
+4. a step that would move a paired point farther than :data:`TRUST_FACTOR` times ``max_d``
+   (every pair lies within ``max_d``: a step far beyond it leaves the pairs it was computed
+   from) is damped instead (Levenberg-Marquardt: ``lambda I`` added to the normal equations,
+   ``lambda`` doubled until no paired point moves farther than that). The rotation about the
+   frame's origin, far from the face (a scanner frame puts it a metre away), makes the normal
+   equations ill-conditioned (condition numbers of 1e9 and more); from a start a few mm off on
+   skin that slides along itself, open3d's undamped step went hundreds of mm astray. Any other
+   step is taken as open3d takes it.
 
 The fitness and inlier RMSE are open3d's: the share of source points with a pair, and the RMS
 distance (not point-to-plane) of the pairs, mm.
@@ -28,6 +36,11 @@ from scipy.spatial import cKDTree
 
 from scan2morph.align.rigid import transform_points
 from scan2morph.align.settings import kernel_weights
+
+#: A step may move a paired point at most this many pairing distances (``max_d``) before it is
+#: damped: right steps of the default cohort move points up to 1.2 ``max_d``, the diverging ones
+#: 15-80.
+TRUST_FACTOR = 2.0
 
 
 def _rotation_zyx(angles: np.ndarray) -> np.ndarray:
@@ -91,7 +104,8 @@ class PointToPlane:
         ok = np.isfinite(d)
         d = d[ok]
         rmse = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
-        return Pairs(moved, np.flatnonzero(ok), j[ok], d, d.size / len(source), rmse)
+        fitness = d.size / len(source) if len(source) else 0.0
+        return Pairs(moved, np.flatnonzero(ok), j[ok], d, fitness, rmse)
 
     def step(self, pairs: Pairs, kernel: str, k: float, pose: np.ndarray) -> np.ndarray:
         """One Gauss-Newton step from ``pose`` (4, 4), whose pairs are ``pairs``: the next pose,
@@ -109,10 +123,42 @@ class PointToPlane:
             x = np.linalg.solve(jtj, -jtr)
         except np.linalg.LinAlgError:  # too few pairs to fix every degree of freedom
             x = np.linalg.lstsq(jtj, -jtr, rcond=None)[0]
-        update = np.eye(4)
-        update[:3, :3] = _rotation_zyx(x[:3])
-        update[:3, 3] = x[3:]
-        return update @ pose
+        if _largest_move(x, p) > TRUST_FACTOR * self.max_d:
+            x = self._damped(jtj, jtr, p)
+        return _update(x) @ pose
+
+    def _damped(self, jtj: np.ndarray, jtr: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The Levenberg-Marquardt step ``(jtj + lambda I) x = -jtr`` with the smallest
+        ``lambda`` (doubling from 1e-9 of ``jtj``'s trace) that moves no point of ``p`` farther
+        than ``TRUST_FACTOR * max_d``; no step when none does within 200 doublings."""
+        eye = np.eye(len(jtj))
+        lam = 1e-9 * max(float(np.trace(jtj)), 1e-12)
+        for _ in range(200):
+            x = np.linalg.solve(jtj + lam * eye, -jtr)
+            if _largest_move(x, p) <= TRUST_FACTOR * self.max_d:
+                return x
+            lam *= 2.0
+        return np.zeros(len(jtj))
+
+
+def _update(x: np.ndarray) -> np.ndarray:
+    """(4, 4) rigid motion of a step ``x`` (three rotations about x, y, z, radians, and a
+    translation, mm)."""
+    update = np.eye(4)
+    update[:3, :3] = _rotation_zyx(x[:3])
+    update[:3, 3] = x[3:]
+    return update
+
+
+def _largest_move(x: np.ndarray, p: np.ndarray) -> float:
+    """The farthest any point of ``p`` (n, 3) mm moves under the step ``x``, mm (inf for a
+    non-finite step)."""
+    if not np.isfinite(x).all():
+        return float("inf")
+    if len(p) == 0:
+        return 0.0
+    u = _update(x)
+    return float(np.max(np.linalg.norm(p @ (u[:3, :3] - np.eye(3)).T + u[:3, 3], axis=1)))
 
 
 __all__ = ["Pairs", "PointToPlane"]
