@@ -95,6 +95,9 @@ class PointToPlane:
         self.n = np.asarray(normals, dtype=np.float64)
         self.max_d = float(max_d)
         self.tree = cKDTree(self.q)
+        # a paired source point lies within max_d of its target: no farther from the origin
+        far = float(np.max(np.linalg.norm(self.q, axis=1))) if len(self.q) else 0.0
+        self.radius = far + self.max_d
 
     def at(self, source: np.ndarray, pose: np.ndarray) -> Pairs:
         """The pairs of ``source`` (n, 3) mm moved by ``pose`` (4, 4), with their fitness and
@@ -123,7 +126,7 @@ class PointToPlane:
             x = np.linalg.solve(jtj, -jtr)
         except np.linalg.LinAlgError:  # too few pairs to fix every degree of freedom
             x = np.linalg.lstsq(jtj, -jtr, rcond=None)[0]
-        if _largest_move(x, p) > TRUST_FACTOR * self.max_d:
+        if _moves_beyond(x, p, self.radius, TRUST_FACTOR * self.max_d):
             x = self._damped(jtj, jtr, p)
         return _update(x) @ pose
 
@@ -135,7 +138,7 @@ class PointToPlane:
         lam = 1e-9 * max(float(np.trace(jtj)), 1e-12)
         for _ in range(200):
             x = np.linalg.solve(jtj + lam * eye, -jtr)
-            if _largest_move(x, p) <= TRUST_FACTOR * self.max_d:
+            if not _moves_beyond(x, p, self.radius, TRUST_FACTOR * self.max_d):
                 return x
             lam *= 2.0
         return np.zeros(len(jtj))
@@ -150,15 +153,16 @@ def _update(x: np.ndarray) -> np.ndarray:
     return update
 
 
-def _largest_move(x: np.ndarray, p: np.ndarray) -> float:
-    """The farthest any point of ``p`` (n, 3) mm moves under the step ``x``, mm (inf for a
-    non-finite step)."""
+def _moves_beyond(x: np.ndarray, p: np.ndarray, radius: float, limit: float) -> bool:
+    """Whether the step ``x`` moves a point of ``p`` (n, 3) mm, none farther than ``radius`` mm
+    from the origin, farther than ``limit`` mm (a non-finite step does). A rotation by angles
+    (a, b, c) turns by at most |a| + |b| + |c|, so no point moves farther than that times
+    ``radius`` plus the translation: the exact check runs only when that bound exceeds ``limit``
+    (it costs more than the step)."""
     if not np.isfinite(x).all():
-        return float("inf")
-    if len(p) == 0:
-        return 0.0
+        return True
+    if len(p) == 0 or np.sum(np.abs(x[:3])) * radius + np.linalg.norm(x[3:]) <= limit:
+        return False
     u = _update(x)
-    return float(np.max(np.linalg.norm(p @ (u[:3, :3] - np.eye(3)).T + u[:3, 3], axis=1)))
-
-
-__all__ = ["Pairs", "PointToPlane"]
+    moved = p @ (u[:3, :3] - np.eye(3)).T + u[:3, 3]
+    return float(np.max(np.linalg.norm(moved, axis=1))) > limit
