@@ -21,7 +21,7 @@ from scan2morph.errors import InputError
 from scan2morph.io.rgbd import depth_to_color_grid
 from scan2morph.scan import repair_range
 from scan2morph.scan.view import shaded_image
-from scan2morph.synth.cohort import AIM, _key, articulated_head, subject_identity
+from scan2morph.synth.cohort import AIM, articulated_head, subject_identity, text_seed
 from scan2morph.synth.head import LABEL_KIND
 from scan2morph.synth.identity import Identity
 from scan2morph.synth.rgbd import make_rgbd_take
@@ -106,7 +106,7 @@ def wide_identity(subject: str, seed: int, shares: FaceShares | None = None) -> 
     """
     if shares is None:
         shares = FaceShares(CLOSED_EYES, WIDE_SHARE)
-    rng = np.random.default_rng([int(seed), _key(subject), 0x51DE])
+    rng = np.random.default_rng([int(seed), text_seed(subject), 0x51DE])
     knobs = {k: float(rng.uniform(*r)) for k, r in WIDE_RANGE.items()}  # all drawn: one stream
     closed = bool(rng.uniform() < shares.closed_eyes)
     redrawn = rng.uniform() < shares.wide

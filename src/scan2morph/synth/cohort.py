@@ -70,7 +70,9 @@ def default_takes() -> list[tuple[str, str, str]]:
     return takes
 
 
-def _key(text: str) -> int:
+def text_seed(text: str) -> int:
+    """A 64-bit seed (int) fixed by ``text`` (its SHA-256): the same in every process, unlike
+    ``hash``."""
     return int.from_bytes(hashlib.sha256(text.encode("utf-8")).digest()[:8], "little")
 
 
@@ -87,7 +89,7 @@ def subject_identity(subject: str, seed: int) -> Identity:
     -------
     Identity
     """
-    return sample_identity(np.random.default_rng([int(seed), _key(subject)]))
+    return sample_identity(np.random.default_rng([int(seed), text_seed(subject)]))
 
 
 def numeric_params(
@@ -233,7 +235,7 @@ def articulated_head(
     """
     check_take(subject, label, kind, take, seed)
     head = build_head(subject_identity(subject, seed) if identity is None else identity)
-    rng = np.random.default_rng([int(seed), _key(subject), _key(take)])
+    rng = np.random.default_rng([int(seed), text_seed(subject), text_seed(take)])
     coeffs = label_coefficients(label, rng if label != "neutral" else None)
     return head, articulate(head, coeffs), rng
 

@@ -42,12 +42,12 @@ from scan2morph.open3d_light import open3d  # noqa: E402
 from scan2morph.synth.cohort import (  # noqa: E402
     AIM,
     _check_result,
-    _key,
     _take_result,
     _take_truth,
     articulated_head,
     check_take,
     numeric_params,
+    text_seed,
     write_npz,
 )
 from scan2morph.synth.head import SEG_SKIN, HeadModel, Identity  # noqa: E402
@@ -371,7 +371,7 @@ def make_stereo_take(
     v_rig = vertices @ rig_from_head[:3, :3].T + rig_from_head[:3, 3]
     # lights fixed in the rig: both cameras see the same shading
     colors = shade(head.albedo, v_rig, vertex_normals(v_rig, head.faces, fill=0.0))
-    seeds = ((_key(subject) ^ int(seed)) & 0xFFFFFFFFFFFFFFFF, texture_seed(subject, seed))
+    seeds = ((text_seed(subject) ^ int(seed)) & 0xFFFFFFFFFFFFFFFF, texture_seed(subject, seed))
     left, right = (_view(head, v_rig, colors, cam, p, seeds, rng) for cam in cams)
 
     cam1 = cams[0]
