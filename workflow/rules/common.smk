@@ -60,13 +60,19 @@ CONFIG_SHA256 = config_sha256(config)
 
 
 # --- lookups in the take table ---
+# the subjects whose every take is synthetic (they have ground truth), found once: jobs' params
+# and wildcard constraints ask for them, and every Snakemake a SLURM job starts parses them
+_ALL_SYNTHETIC = TAKES.groupby(level=0, sort=False)["synthetic"].all()
+_SYNTHETIC = [s for s in SUBJECTS if _ALL_SYNTHETIC[s]]
+
+
 def synthetic_subjects():
-    return [s for s in SUBJECTS if TAKES.loc[s, "synthetic"].all()]
+    return _SYNTHETIC
 
 
 def measured_subjects():
     """The subjects without ground truth (every one not synthetic)."""
-    return [s for s in SUBJECTS if s not in synthetic_subjects()]
+    return [s for s in SUBJECTS if not _ALL_SYNTHETIC[s]]
 
 
 def takes_of(subject):
