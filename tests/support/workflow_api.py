@@ -4,15 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from snakemake.api import SnakemakeApi
-from snakemake.settings.types import (
-    ConfigSettings,
-    DAGSettings,
-    ExecutionSettings,
-    OutputSettings,
-    ResourceSettings,
-)
-
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -20,6 +11,17 @@ def run_workflow(
     workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False
 ):
     """Run the repo's Snakefile in ``workdir`` with ``configfile``; returns True on success."""
+    # imported here: the unit tests import REPO from this module, and snakemake's API costs
+    # every test worker about 0.8 s to import at collection
+    from snakemake.api import SnakemakeApi
+    from snakemake.settings.types import (
+        ConfigSettings,
+        DAGSettings,
+        ExecutionSettings,
+        OutputSettings,
+        ResourceSettings,
+    )
+
     with SnakemakeApi(OutputSettings(quiet=None, dryrun=dryrun, show_failed_logs=True)) as api:
         workflow = api.workflow(
             resource_settings=ResourceSettings(cores=cores),
