@@ -20,7 +20,14 @@ from scan2morph.render.source import (
     source_of,
     template_faces,
 )
-from scan2morph.render.views import Panel, face_view, panel_figure, render_view, subplots
+from scan2morph.render.views import (
+    Panel,
+    axes_off,
+    face_view,
+    panel_figure,
+    render_view,
+    subplots,
+)
 from scan2morph.store import paths
 from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIP_CORNERS, INNER_LIPS
 
@@ -249,7 +256,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
     nrows = -(-len(takes) // ncols)
     fig, axes = subplots(nrows, ncols, figsize=(2.3 * ncols, 2.7 * nrows), squeeze=False)
     for ax in axes.flat:
-        ax.set_axis_off()
+        axes_off(ax)
     for ax, take in zip(axes.flat, takes, strict=False):
         what = f"the takes figure of take {take}"
         color = need(store, paths.range_image(take, "color"), what)
