@@ -568,8 +568,8 @@ def test_one_job_draws_every_stage_as_the_stages_alone(tmp_path, store):
     """write_figures draws every stage from one opening of the store, each figure once: each
     figure drawn (not an empty canvas) at its figure's size, the same pixels as matplotlib's
     savefig (checked for two stages), and a stage's the same as write_stage_figures of that
-    stage alone (nothing of the stages drawn before leaks into it); the PNGs are written at the
-    set zlib level."""
+    stage alone (nothing of the stages drawn before leaks into it); the PNGs are RGB (savefig's
+    alpha is opaque everywhere) written at the set zlib level."""
     path = tmp_path / "s01.h5"
     _write_store(path, store)
     stages = list(STAGE_FIGURES)
@@ -586,20 +586,22 @@ def test_one_job_draws_every_stage_as_the_stages_alone(tmp_path, store):
             sizes[stem] = fig.get_size_inches() * DPI
     for a in together:
         image = np.asarray(Image.open(a))
-        assert image.ndim == 3 and image.shape[2] in (3, 4), a.name
+        assert image.ndim == 3 and image.shape[2] == 3, a.name
         assert image[..., :3].std() > 20, a.name  # drawn, not an empty canvas
         if a.stem in sizes:
             w, h = sizes[a.stem]
             assert abs(image.shape[0] - h) <= 1 and abs(image.shape[1] - w) <= 1, a.name
-            np.testing.assert_array_equal(image, np.asarray(Image.open(tmp_path / a.name)))
+            oracle = np.asarray(Image.open(tmp_path / a.name))
+            assert (oracle[..., 3] == 255).all(), a.name
+            np.testing.assert_array_equal(image, oracle[..., :3])
     alone = write_stage_figures(path, tmp_path / "morph", "morph")
     assert [p.name for p in alone] == [p.name for p in declared if p.name.startswith("morph_")]
     for b in alone:
         np.testing.assert_array_equal(
-            np.asarray(Image.open(b)), np.asarray(Image.open(tmp_path / b.name))
+            np.asarray(Image.open(b)), np.asarray(Image.open(tmp_path / b.name))[..., :3]
         )
-    # level 3, not Pillow's default 6: the zlib header's FLEVEL is 1 (levels 2-5), not 2
-    assert {_zlib_flevel(p) for p in together} == {1}
+    # level 1, not Pillow's default 6: the zlib header's FLEVEL is 0 (levels 0-1), not 2
+    assert {_zlib_flevel(p) for p in together} == {0}
     with pytest.raises(InputError, match="differ from the figures drawn"):
         write_figures(path, tmp_path / "all", stages, declared[:-1])
 
