@@ -42,6 +42,7 @@ from scan2morph.render.views import (
     figure_panels,
     figure_to_array,
     grid_layout,
+    opaque_rgba,
     panel_figure,
     render_view,
     subplots,
@@ -765,3 +766,21 @@ def test_bars_draw_what_axes_bar_draws():
     assert ax.get_ylim()[0] == 0.0  # stops at 0 as bar's does
     axes_off(ax)
     assert len(ax.xaxis.get_majorticklocs()) == 0 and len(ax.yaxis.get_majorticklocs()) == 0
+
+
+def test_opaque_rgba_draws_as_the_rgb_image_within_a_level():
+    rng = np.random.default_rng(5)
+    rgb = rng.integers(0, 256, (48, 64, 3)).astype(np.uint8)
+    rgba = opaque_rgba(rgb)
+    assert rgba.shape == (48, 64, 4) and (rgba[..., 3] == 255).all()
+    np.testing.assert_array_equal(rgba[..., :3], rgb)
+    grey = rng.random((8, 8))
+    assert opaque_rgba(grey) is grey or np.shares_memory(opaque_rgba(grey), grey)
+    drawn = []
+    for image in (rgb, rgba):
+        fig, ax = subplots(figsize=(2.0, 1.6))
+        ax.imshow(image, interpolation="bilinear")
+        ax.set_xlim(5.3, 50.7)
+        ax.set_ylim(40.2, 3.9)
+        drawn.append(figure_to_array(fig).astype(int))
+    assert np.abs(drawn[0] - drawn[1]).max() <= 1

@@ -24,6 +24,7 @@ from scan2morph.render.views import (
     Panel,
     axes_off,
     face_view,
+    opaque_rgba,
     panel_figure,
     render_view,
     subplots,
@@ -196,8 +197,9 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
                 f"{paths.take(take)}: points2d, valid or landmarks have the wrong shape",
             )
         x0, x1, y0, y1 = _crop_box(np.vstack([pts, marks]), color.shape)
+        shown = opaque_rgba(color)
         for ax in axes[row]:
-            ax.imshow(color, interpolation="bilinear")
+            ax.imshow(shown, interpolation="bilinear")
             ax.set_xlim(x0, x1)
             ax.set_ylim(y1, y0)
             ax.set_xticks([])
@@ -264,7 +266,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         modality = _text(store, paths.camera(take, "modality"), "range")
         shown = _text(store, paths.camera(take, "color_source"), "")
         x0, x1, y0, y1 = _crop_box(marks, color.shape)
-        ax.imshow(color, interpolation="bilinear")
+        ax.imshow(opaque_rgba(color), interpolation="bilinear")
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
         _landmark_dots(ax, marks, store.get(paths.landmark_confidence(take)))
