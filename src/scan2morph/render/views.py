@@ -485,7 +485,12 @@ def crop_panels(panels: Sequence[Panel], margin_px: int = 6) -> list[Panel]:
     images = [p.image for p in panels if p.image is not None]
     if not images or len({im.shape for im in images}) != 1:
         return list(panels)
-    drawn = np.any(np.stack(images) < 250, axis=(0, 3))
+    # a pixel is drawn where any image has a channel below 250: the images' darkest value is
+    # (one running minimum, instead of comparing and reducing a stack of all of them)
+    darkest = np.array(images[0], copy=True)
+    for image in images[1:]:
+        np.minimum(darkest, image, out=darkest)
+    drawn = darkest.min(axis=2) < 250
     if not drawn.any():
         return list(panels)
     rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
