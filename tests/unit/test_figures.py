@@ -680,13 +680,15 @@ def test_the_workflow_names_figures_without_loading_the_renderer():
     assert {s: tuple(f) for s, f in STAGE_FIGURES.items()} == FIGURE_NAMES
 
 
-def test_panel_figure_puts_each_panel_pixel_for_pixel_in_its_own_box():
+@pytest.mark.parametrize("n_panels", [5, 18])
+def test_panel_figure_puts_each_panel_pixel_for_pixel_in_its_own_box(n_panels):
     """The grid laid out without a layout engine: every image is the input cropped and resized
     (Lanczos, aspect kept), drawn unresampled where figure_panels says, inside the figure, in
-    boxes that do not overlap, one size for all, each under its title."""
+    boxes that do not overlap, one size for all, each under its title, all below the figure's
+    title (a short grid and a tall one)."""
     rng = np.random.default_rng(3)
     images = []
-    for _ in range(5):
+    for _ in range(n_panels):
         image = np.full((PANEL_PX, PANEL_PX, 3), 255, np.uint8)
         image[60:300, 100:260] = rng.integers(0, 250, (240, 160, 3))
         images.append(image)
@@ -697,7 +699,7 @@ def test_panel_figure_puts_each_panel_pixel_for_pixel_in_its_own_box():
         title="A grid",
         scale=ColorScale(0.0, 1.0, "value (mm)"),
         legend=[((1.0, 0.0, 0.0), "red")],
-        row_labels=["row one", "row two"],
+        row_labels=[f"row {i}" for i in range(-(-n_panels // 3))],
     )
     drawn = figure_to_array(fig)
     found = figure_panels(fig)
@@ -721,6 +723,7 @@ def test_panel_figure_puts_each_panel_pixel_for_pixel_in_its_own_box():
             assert not (overlap_r and overlap_c)
     renderer = fig.canvas.get_renderer()
     height = drawn.shape[0]
+    top = next(t for t in fig.texts if t.get_text() == "A grid").get_window_extent(renderer)
     for (title, _, (rows, cols)), text in zip(
         found, [t for t in fig.texts if t.get_text().startswith("panel")], strict=True
     ):
@@ -728,6 +731,7 @@ def test_panel_figure_puts_each_panel_pixel_for_pixel_in_its_own_box():
         assert text.get_text() == title
         assert height - box.y0 <= rows.start  # the title's bottom above its image's top
         assert box.y1 <= height and cols.start <= (box.x0 + box.x1) / 2 <= cols.stop
+        assert box.y1 < top.y0  # under the figure's title
 
 
 def test_grid_layout_gives_one_size_and_leaves_the_margins():

@@ -320,12 +320,14 @@ def panel_figure(
         fig.text(
             ROW_LABEL_IN / 2 / width, y, label, rotation=90, ha="center", va="center", fontsize=9
         )
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title, fontsize=10, y=1.0 - GAP_IN / height, va="top")
     if scale is not None:
         bottom, top = layout.grid_y
         span = 0.8 * (top - bottom)
+        # matplotlib's colour bar is 1/20 as wide as long; here no wider than its band allows
+        bar_w = min(span * height / 20, COLORBAR_MAX_WIDTH_IN) / width
         x = layout.grid_right + COLORBAR_GAP_IN / width
-        cax = fig.add_axes((x, (top + bottom - span) / 2, COLORBAR_WIDTH_IN / width, span))
+        cax = fig.add_axes((x, (top + bottom - span) / 2, bar_w, span))
         fig.colorbar(scale.mappable(), cax=cax, label=scale.label)
     if legend:
         handles = [Patch(facecolor=c, edgecolor="0.3", label=lab) for c, lab in legend]
@@ -345,8 +347,8 @@ GAP_IN = 0.04
 #: Band of the figure title above a grid, of a legend row below it, of the row labels left of
 #: it and of the colour bar (with its ticks and label) right of it, inches.
 SUPTITLE_IN, LEGEND_ROW_IN, ROW_LABEL_IN, COLORBAR_IN = 0.28, 0.22, 0.4, 1.0
-#: The colour bar's gap to the grid and its width, inches.
-COLORBAR_GAP_IN, COLORBAR_WIDTH_IN = 0.15, 0.15
+#: The colour bar's gap to the grid and its largest width, inches.
+COLORBAR_GAP_IN, COLORBAR_MAX_WIDTH_IN = 0.15, 0.25
 #: Height of one line of an 8 pt panel title, and the title's gap to its image (matplotlib's
 #: ``axes.titlepad``, 6 pt), inches.
 TITLE_LINE_IN, TITLE_PAD_IN = 8 * 1.2 / 72, 6 / 72
