@@ -248,6 +248,18 @@ class Panel:
     title: str = ""
 
 
+#: Gap around each panel of a grid, inches.
+GAP_IN = 0.04
+#: Band of the figure title above a grid, of a legend row below it, of the row labels left of
+#: it and of the colour bar (with its ticks and label) right of it, inches.
+SUPTITLE_IN, LEGEND_ROW_IN, ROW_LABEL_IN, COLORBAR_IN = 0.28, 0.22, 0.4, 1.0
+#: The colour bar's gap to the grid and its largest width, inches.
+COLORBAR_GAP_IN, COLORBAR_MAX_WIDTH_IN = 0.15, 0.25
+#: Height of one line of an 8 pt panel title, and the title's gap to its image (matplotlib's
+#: ``axes.titlepad``, 6 pt), inches.
+TITLE_LINE_IN, TITLE_PAD_IN = 8 * 1.2 / 72, 6 / 72
+
+
 def panel_figure(
     panels: Sequence[Panel],
     *,
@@ -260,9 +272,10 @@ def panel_figure(
 ) -> Figure:
     """A grid of images with titles, an optional colour bar and legend.
 
-    The grid is laid out here, not by a layout engine (see :func:`grid_layout`): every panel
-    gets one axes of exactly its image's size on the figure's pixel grid, the image resampled
-    once beforehand (Lanczos) and drawn pixel for pixel, and no axes has ticks to measure.
+    The grid is laid out here, not by a layout engine (see :func:`grid_layout`): every panel is
+    its image resized once (PIL's Lanczos) to its box on the figure's pixel grid and put there
+    pixel for pixel (a :class:`~matplotlib.image.FigureImage`, see :func:`figure_panels`), its
+    title a text above it; no axes, so no ticks to measure.
 
     Parameters
     ----------
@@ -342,32 +355,21 @@ def panel_figure(
     return fig
 
 
-#: Gap around each panel of a grid, inches.
-GAP_IN = 0.04
-#: Band of the figure title above a grid, of a legend row below it, of the row labels left of
-#: it and of the colour bar (with its ticks and label) right of it, inches.
-SUPTITLE_IN, LEGEND_ROW_IN, ROW_LABEL_IN, COLORBAR_IN = 0.28, 0.22, 0.4, 1.0
-#: The colour bar's gap to the grid and its largest width, inches.
-COLORBAR_GAP_IN, COLORBAR_MAX_WIDTH_IN = 0.15, 0.25
-#: Height of one line of an 8 pt panel title, and the title's gap to its image (matplotlib's
-#: ``axes.titlepad``, 6 pt), inches.
-TITLE_LINE_IN, TITLE_PAD_IN = 8 * 1.2 / 72, 6 / 72
-
-
 @dataclass(frozen=True)
 class GridLayout:
-    """Where a panel grid's parts go, in figure fractions (0-1, from the bottom left).
+    """Where a panel grid's parts go: the panels in the figure's pixels, the rest in figure
+    fractions (0-1), both from the bottom left.
 
     Attributes
     ----------
     rects : list of (left, bottom, width, height) int or None
-        Each panel's image (None: an empty cell), in the figure's pixels from its bottom left.
+        Each panel's image (None: an empty cell), pixels.
     row_centers : list of float
-        The height of each row's images' middle.
+        The height of each row's images' middle, fraction.
     grid_y : (float, float)
-        Bottom and top of the grid (titles included).
+        Bottom and top of the grid (titles included), fractions.
     grid_right : float
-        Right edge of the grid.
+        Right edge of the grid, fraction.
     """
 
     rects: list[tuple[int, int, int, int] | None]
