@@ -19,8 +19,8 @@ a short job). Then one more run per tree with every job profiling itself
 (interpreter, Snakemake's script wrapper, imports), its body's CPU (cProfile adds to it) and
 the functions with the most time of their own. Last, whether the trees' outputs agree: the
 largest absolute difference of every float dataset of the subject's store and
-``motion_noise.h5``, ``accuracy.json`` byte for byte, and the figures pixel for pixel. Nothing
-is asserted; the printed tables are the measurement. Run it on a quiet machine.
+``motion_noise.h5``, ``accuracy.json`` byte for byte, and the figures pixel for pixel (RGB).
+Nothing is asserted; the printed tables are the measurement. Run it on a quiet machine.
 """
 
 from __future__ import annotations
@@ -157,11 +157,13 @@ def compare(a: Path, b: Path, subject: str) -> list[str]:
     from PIL import Image
 
     figures = sorted((res_a / "figures").glob("*.png"))
+    # compared as RGB: an opaque figure written as RGBA (before 2026-12-05) or RGB shows the same
     differ = [
         p.name
         for p in figures
         if not np.array_equal(
-            np.asarray(Image.open(p)), np.asarray(Image.open(res_b / "figures" / p.name))
+            np.asarray(Image.open(p).convert("RGB")),
+            np.asarray(Image.open(res_b / "figures" / p.name).convert("RGB")),
         )
     ]
     lines.append(f"figures: {len(figures) - len(differ)} of {len(figures)} equal pixel for pixel")

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import TexturedMesh
+from scan2morph.render.charts import bars
 from scan2morph.render.figures import (
     STAGE_FIGURES,
     figure_names,
@@ -35,10 +36,16 @@ from scan2morph.render.views import (
     DPI,
     PANEL_PX,
     ColorScale,
-    axes_pixels,
+    Panel,
+    axes_off,
     face_view,
+    figure_panels,
     figure_to_array,
+    grid_layout,
+    opaque_rgba,
+    panel_figure,
     render_view,
+    subplots,
 )
 from scan2morph.store import merge_parts, paths, write_part
 
@@ -437,14 +444,13 @@ def test_blend_titles():
 # --------------------------------------------------------------------------------------------
 def test_model_figure_has_three_panels_of_the_face(store):
     fig = fig_model(store)
-    panels = [ax for ax in fig.axes if ax.images]
-    assert [ax.get_title() for ax in panels] == ["(a) shaded", "(b) textured", "(c) wireframe"]
-    shapes = {np.asarray(ax.images[0].get_array()).shape for ax in panels}
+    panels = figure_panels(fig)
+    assert [title for title, _, _ in panels] == ["(a) shaded", "(b) textured", "(c) wireframe"]
+    shapes = {image.shape for _, image, _ in panels}
     assert len(shapes) == 1  # cropped alike: one scale
     (shape,) = shapes
     assert 0.5 * PANEL_PX < max(shape[:2]) <= PANEL_PX
-    for ax, fill in zip(panels, (0.5, 0.5, 0.05), strict=True):
-        image = np.asarray(ax.images[0].get_array())
+    for (_, image, _), fill in zip(panels, (0.5, 0.5, 0.05), strict=True):
         assert _surface(image).mean() > fill  # the face fills the panel (the wireframe: its edges)
 
 
@@ -459,9 +465,7 @@ def test_expression_figure_maps_a_known_field_to_its_colours(store):
     scale_max = 8.0
     fig = fig_expressions(known)
     image = figure_to_array(fig)
-    ax = next(ax for ax in fig.axes if ax.images)
-    rows, cols = axes_pixels(fig, ax)
-    panel = image[rows, cols]
+    panel = image[figure_panels(fig)[0][2]]
     r, c = np.nonzero(_surface(panel) & (panel.std(axis=-1) > 12))  # coloured face pixels
     mid = (c.min() + c.max()) / 2
     scale = ColorScale(0.0, scale_max, "")
@@ -475,13 +479,13 @@ def _car_panel(fig, scale_max):
     """Title of the figure's "car" panel and the median decoded value over the top 30% and the
     bottom 15% of its coloured face pixels."""
     image = figure_to_array(fig)
-    ax = next(ax for ax in fig.axes if ax.images and ax.get_title().startswith("car"))
-    panel = image[axes_pixels(fig, ax)]
+    title, _, box = next(p for p in figure_panels(fig) if p[0].startswith("car"))
+    panel = image[box]
     r, c = np.nonzero(_surface(panel) & (panel.std(axis=-1) > 12))
     top, bottom = r < np.percentile(r, 30), r > np.percentile(r, 85)
     scale = ColorScale(0.0, scale_max, "")
     values = [float(np.median(_decode(panel[r[m], c[m]], scale))) for m in (top, bottom)]
-    return ax.get_title(), *values
+    return title, *values
 
 
 def test_distance_figure_colours_a_vertex_by_its_distance(store):
@@ -518,8 +522,7 @@ def test_click_noise_figure_colours_each_viseme_by_its_error_bar(store):
 def test_mask_figure_shows_the_mask_in_orange(store):
     fig = fig_mask(store)
     image = figure_to_array(fig)
-    ax = [ax for ax in fig.axes if ax.images][1]
-    panel = image[axes_pixels(fig, ax)]
+    panel = image[figure_panels(fig)[1][2]]
     r, c = np.nonzero(_surface(panel))
     orange = (panel[r, c, 0] > 150) & (panel[r, c, 2] < 60)
     # the suppressed part is the upper face (template y < 0.3): orange pixels lie above the rest
@@ -566,8 +569,8 @@ def test_one_job_draws_every_stage_as_the_stages_alone(tmp_path, store):
     """write_figures draws every stage from one opening of the store, each figure once: each
     figure drawn (not an empty canvas) at its figure's size, the same pixels as matplotlib's
     savefig (checked for two stages), and a stage's the same as write_stage_figures of that
-    stage alone (nothing of the stages drawn before leaks into it); the PNGs are written at the
-    set zlib level."""
+    stage alone (nothing of the stages drawn before leaks into it); the PNGs are RGB (savefig's
+    alpha is opaque everywhere) written at the set zlib level."""
     path = tmp_path / "s01.h5"
     _write_store(path, store)
     stages = list(STAGE_FIGURES)
@@ -584,20 +587,22 @@ def test_one_job_draws_every_stage_as_the_stages_alone(tmp_path, store):
             sizes[stem] = fig.get_size_inches() * DPI
     for a in together:
         image = np.asarray(Image.open(a))
-        assert image.ndim == 3 and image.shape[2] in (3, 4), a.name
+        assert image.ndim == 3 and image.shape[2] == 3, a.name
         assert image[..., :3].std() > 20, a.name  # drawn, not an empty canvas
         if a.stem in sizes:
             w, h = sizes[a.stem]
             assert abs(image.shape[0] - h) <= 1 and abs(image.shape[1] - w) <= 1, a.name
-            np.testing.assert_array_equal(image, np.asarray(Image.open(tmp_path / a.name)))
+            oracle = np.asarray(Image.open(tmp_path / a.name))
+            assert (oracle[..., 3] == 255).all(), a.name
+            np.testing.assert_array_equal(image, oracle[..., :3])
     alone = write_stage_figures(path, tmp_path / "morph", "morph")
     assert [p.name for p in alone] == [p.name for p in declared if p.name.startswith("morph_")]
     for b in alone:
         np.testing.assert_array_equal(
-            np.asarray(Image.open(b)), np.asarray(Image.open(tmp_path / b.name))
+            np.asarray(Image.open(b)), np.asarray(Image.open(tmp_path / b.name))[..., :3]
         )
-    # level 3, not Pillow's default 6: the zlib header's FLEVEL is 1 (levels 2-5), not 2
-    assert {_zlib_flevel(p) for p in together} == {1}
+    # level 1, not Pillow's default 6: the zlib header's FLEVEL is 0 (levels 0-1), not 2
+    assert {_zlib_flevel(p) for p in together} == {0}
     with pytest.raises(InputError, match="differ from the figures drawn"):
         write_figures(path, tmp_path / "all", stages, declared[:-1])
 
@@ -673,3 +678,113 @@ def test_the_workflow_names_figures_without_loading_the_renderer():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
     assert {s: tuple(f) for s, f in STAGE_FIGURES.items()} == FIGURE_NAMES
+
+
+@pytest.mark.parametrize("n_panels", [5, 18])
+def test_panel_figure_puts_each_panel_pixel_for_pixel_in_its_own_box(n_panels):
+    """The grid laid out without a layout engine: every image is the input cropped and resized
+    (Lanczos, aspect kept), drawn unresampled where figure_panels says, inside the figure, in
+    boxes that do not overlap, one size for all, each under its title, all below the figure's
+    title (a short grid and a tall one)."""
+    rng = np.random.default_rng(3)
+    images = []
+    for _ in range(n_panels):
+        image = np.full((PANEL_PX, PANEL_PX, 3), 255, np.uint8)
+        image[60:300, 100:260] = rng.integers(0, 250, (240, 160, 3))
+        images.append(image)
+    panels = [Panel(im, f"panel {i}\nsecond line") for i, im in enumerate(images)]
+    fig = panel_figure(
+        panels,
+        ncols=3,
+        title="A grid",
+        scale=ColorScale(0.0, 1.0, "value (mm)"),
+        legend=[((1.0, 0.0, 0.0), "red")],
+        row_labels=[f"row {i}" for i in range(-(-n_panels // 3))],
+    )
+    drawn = figure_to_array(fig)
+    found = figure_panels(fig)
+    assert [t for t, _, _ in found] == [p.title for p in panels]
+    assert len({im.shape for _, im, _ in found}) == 1
+    boxes = []
+    for (_, image, (rows, cols)), source in zip(found, images, strict=True):
+        assert 0 <= rows.start and rows.stop <= drawn.shape[0]
+        assert 0 <= cols.start and cols.stop <= drawn.shape[1]
+        np.testing.assert_array_equal(drawn[rows, cols], image)  # drawn unresampled
+        crop = source[54:306, 94:266]  # crop_panels: the drawn part and its 6-pixel margin
+        h, w = image.shape[:2]
+        assert abs(w / h - crop.shape[1] / crop.shape[0]) < 0.02
+        oracle = np.asarray(Image.fromarray(crop).resize((w, h), Image.Resampling.LANCZOS))
+        np.testing.assert_array_equal(image, oracle)
+        boxes.append((rows, cols))
+    for i, (r1, c1) in enumerate(boxes):
+        for r2, c2 in boxes[i + 1 :]:
+            overlap_r = min(r1.stop, r2.stop) > max(r1.start, r2.start)
+            overlap_c = min(c1.stop, c2.stop) > max(c1.start, c2.start)
+            assert not (overlap_r and overlap_c)
+    renderer = fig.canvas.get_renderer()
+    height = drawn.shape[0]
+    top = next(t for t in fig.texts if t.get_text() == "A grid").get_window_extent(renderer)
+    for (title, _, (rows, cols)), text in zip(
+        found, [t for t in fig.texts if t.get_text().startswith("panel")], strict=True
+    ):
+        box = text.get_window_extent(renderer)
+        assert text.get_text() == title
+        assert height - box.y0 <= rows.start  # the title's bottom above its image's top
+        assert box.y1 <= height and cols.start <= (box.x0 + box.x1) / 2 <= cols.stop
+        assert box.y1 < top.y0  # under the figure's title
+
+
+def test_grid_layout_gives_one_size_and_leaves_the_margins():
+    panels = [Panel(np.zeros((200, 100, 3), np.uint8), "t")] * 4 + [Panel(None)]
+    layout = grid_layout(panels, (2, 3), (6.0, 5.0), margins=(0.4, 1.0, 0.3))
+    rects = [r for r in layout.rects if r is not None]
+    assert layout.rects[-1] is None and len(rects) == 4
+    assert {(w, h) for _, _, w, h in rects} == {rects[0][2:]}
+    w, h = rects[0][2:]
+    assert abs(w / h - 0.5) < 0.01
+    assert min(x for x, _, _, _ in rects) >= 0.4 * DPI  # the row labels' band
+    assert max(x + w for x, _, _, _ in rects) <= (6.0 - 1.0) * DPI  # the colour bar's
+    assert min(y for _, y, _, _ in rects) >= 0.3 * DPI  # the legend's
+    assert layout.grid_right <= 5.0 / 6.0
+
+
+def test_bars_draw_what_axes_bar_draws():
+    """One collection for many bars: the same pixels as a bar per patch, NaN bars left out."""
+    x = np.arange(1, 41)
+    heights = np.sin(x / 3.0) * 2.0
+    heights[7] = np.nan
+    pictures = []
+    for draw in ("bar", "bars"):
+        fig, ax = subplots(figsize=(4.0, 2.0))
+        if draw == "bar":
+            ax.bar(x, heights, width=0.8, color="tab:blue")
+        else:
+            bars(ax, x, heights, width=0.8, color="tab:blue")
+        ax.axhline(0, color="0.3", lw=0.5)
+        pictures.append(figure_to_array(fig))
+        limits = ax.get_ylim()
+    np.testing.assert_array_equal(*pictures)
+    assert limits[0] < -1.9 and limits[1] > 1.9
+    fig, ax = subplots(figsize=(2.0, 2.0))
+    bars(ax, [1, 2], [1.0, 3.0])
+    assert ax.get_ylim()[0] == 0.0  # stops at 0 as bar's does
+    axes_off(ax)
+    assert len(ax.xaxis.get_majorticklocs()) == 0 and len(ax.yaxis.get_majorticklocs()) == 0
+
+
+def test_opaque_rgba_draws_as_the_rgb_image_within_a_level():
+    rng = np.random.default_rng(5)
+    rgb = rng.integers(0, 256, (48, 64, 3)).astype(np.uint8)
+    rgba = opaque_rgba(rgb)
+    assert rgba.shape == (48, 64, 4) and (rgba[..., 3] == 255).all()
+    np.testing.assert_array_equal(rgba[..., :3], rgb)
+    grey = rng.random((8, 8))
+    assert opaque_rgba(grey) is grey or np.shares_memory(opaque_rgba(grey), grey)
+    drawn = []
+    for image in (rgb, rgba):
+        fig, ax = subplots(figsize=(2.0, 1.6))
+        ax.imshow(image, interpolation="bilinear")
+        ax.set_xlim(5.3, 50.7)
+        ax.set_ylim(40.2, 3.9)
+        drawn.append(figure_to_array(fig).astype(int))
+    assert np.abs(drawn[0] - drawn[1]).max() <= 1

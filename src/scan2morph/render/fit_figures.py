@@ -20,7 +20,15 @@ from scan2morph.render.source import (
     source_of,
     template_faces,
 )
-from scan2morph.render.views import Panel, face_view, panel_figure, render_view, subplots
+from scan2morph.render.views import (
+    Panel,
+    axes_off,
+    face_view,
+    opaque_rgba,
+    panel_figure,
+    render_view,
+    subplots,
+)
 from scan2morph.store import paths
 from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIP_CORNERS, INNER_LIPS
 
@@ -189,8 +197,9 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
                 f"{paths.take(take)}: points2d, valid or landmarks have the wrong shape",
             )
         x0, x1, y0, y1 = _crop_box(np.vstack([pts, marks]), color.shape)
+        shown = opaque_rgba(color)
         for ax in axes[row]:
-            ax.imshow(color, interpolation="bilinear")
+            ax.imshow(shown, interpolation="bilinear")
             ax.set_xlim(x0, x1)
             ax.set_ylim(y1, y0)
             ax.set_xticks([])
@@ -249,7 +258,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
     nrows = -(-len(takes) // ncols)
     fig, axes = subplots(nrows, ncols, figsize=(2.3 * ncols, 2.7 * nrows), squeeze=False)
     for ax in axes.flat:
-        ax.set_axis_off()
+        axes_off(ax)
     for ax, take in zip(axes.flat, takes, strict=False):
         what = f"the takes figure of take {take}"
         color = need(store, paths.range_image(take, "color"), what)
@@ -257,7 +266,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         modality = _text(store, paths.camera(take, "modality"), "range")
         shown = _text(store, paths.camera(take, "color_source"), "")
         x0, x1, y0, y1 = _crop_box(marks, color.shape)
-        ax.imshow(color, interpolation="bilinear")
+        ax.imshow(opaque_rgba(color), interpolation="bilinear")
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
         _landmark_dots(ax, marks, store.get(paths.landmark_confidence(take)))

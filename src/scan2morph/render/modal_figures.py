@@ -9,6 +9,7 @@ from matplotlib.figure import Figure
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import TexturedMesh
+from scan2morph.render.charts import bars
 from scan2morph.render.source import (
     expression_takes,
     groups,
@@ -132,7 +133,7 @@ def fig_coordinates(store: Mapping[str, np.ndarray]) -> Figure:
     fig, axes = _bar_grid(len(takes))
     for ax, take in zip(axes, takes, strict=True):
         q = need(store, paths.expression(take, "coordinates"), what).astype(float)
-        ax.bar(np.arange(1, len(q) + 1), q, width=0.8, color="tab:blue")
+        bars(ax, np.arange(1, len(q) + 1), q, width=0.8, color="tab:blue")
         ax.axhline(0, color="0.3", lw=0.5)
         ax.set_ylabel(f"q ({Q_UNITS})", fontsize=7)
         ax.set_title(take, fontsize=8, loc="left")
@@ -193,9 +194,8 @@ def fig_statistics(store: Mapping[str, np.ndarray]) -> Figure:
         n = len(np.atleast_1d(store[key])) if key in store else None
         x = np.arange(1, len(mean) + 1)
         err = np.where(np.isfinite(std), std, 0.0)
-        ax.bar(
-            x, mean, width=0.8, color="tab:green", yerr=err, error_kw={"lw": 0.6, "capsize": 1.2}
-        )
+        bars(ax, x, mean, width=0.8, color="tab:green")
+        ax.errorbar(x, mean, yerr=err, fmt="none", ecolor="k", lw=0.6, capsize=1.2)
         ax.axhline(0, color="0.3", lw=0.5)
         ax.set_ylabel(f"q ({Q_UNITS})", fontsize=7)
         single = " (one take: no std)" if not np.isfinite(std).any() else ""

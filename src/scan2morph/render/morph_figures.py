@@ -161,16 +161,18 @@ def fig_eigen(store: Mapping[str, np.ndarray]) -> Figure:
         return message_figure(
             "Eigen face models", "the PCA has no component with a positive eigenvalue"
         )
-    shapes = {}
-    for i in range(n):
-        for a in EIGEN_ALPHAS:
-            shapes[(i, a)] = mean + a * sigmas[i] * comps[i]
+    # the mean column is one shape (mean + 0 sigma): rendered once for every row
+    shapes = {
+        (i, a) if a else "mean": mean + a * sigmas[i] * comps[i]
+        for i in range(n)
+        for a in EIGEN_ALPHAS
+    }
     images = _render_shapes(store, shapes, what)
     panels = []
     for i in range(n):
         for a in EIGEN_ALPHAS:
             label = "mean" if a == 0 else f"mean {'+' if a > 0 else '−'} {abs(a):g}σ"
-            panels.append(Panel(images[(i, a)], f"PC{i + 1}: {label}"))
+            panels.append(Panel(images[(i, a) if a else "mean"], f"PC{i + 1}: {label}"))
     rows = [f"PC{i + 1}: σ = {sigmas[i]:.1f} mm" for i in range(n)]
     return panel_figure(
         panels,
