@@ -138,3 +138,30 @@ def test_lip_priors_sharing_the_neutrals_profiles_give_the_straightforward_numbe
         assert_array_equal(a.points, b.points)
         assert_array_equal(a.weight, b.weight)
         assert (a.measured, a.contrast) == (b.measured, b.contrast)
+
+
+def test_refine_stage_shares_in_its_own_scope_or_in_the_callers(monkeypatch):
+    """The refine stage runs a take in a sharing scope of its own (the reference's high-pass
+    of every round computed once), and in its caller's when one is open (a click-noise draw's,
+    shared across the takes)."""
+    from scan2morph.refine import memo
+    from scan2morph.stages import refine as refine_stage
+    from scan2morph.stages.part import Take
+    from scan2morph.store import paths
+
+    scopes = []
+    monkeypatch.setattr(
+        refine_stage, "_refine", lambda template, take, params: scopes.append(list(memo._SCOPES))
+    )
+    data = {
+        paths.align("car", "vertices"): np.zeros((3, 3)),
+        paths.mesh("car", "valid"): np.ones(3, bool),
+        paths.mesh("car", "points2d"): np.zeros((3, 2)),
+    }
+    take = Take("s", "car", "viseme", "car", "neutral", data=data)
+    refine_stage.run(None, take, None)
+    assert len(scopes[0]) == 1 and not active()  # its own, closed after
+    with sharing():
+        outer = list(memo._SCOPES)
+        refine_stage.run(None, take, None)
+    assert scopes[1] == outer  # the caller's, no other

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError, writing
+from scan2morph.io.decimal_text import parse_decimals
 
 #: The placeholder FRGC writes for the coordinates of a pixel without data.
 ABS_INVALID = -999999.0
@@ -98,6 +99,10 @@ def read_abs(path: str | Path) -> np.ndarray:
         raise InputError(path, f"expected 4 data lines (flag X Y Z), found {len(data_lines)}")
     arrays = []
     for name, line in zip(names, data_lines, strict=True):
+        values = parse_decimals(line)  # plain decimals at once; else token by token, below
+        if values is not None and len(values) == n:
+            arrays.append(values)
+            continue
         tokens = line.split()
         if len(tokens) != n:
             hint = " (truncated file?)" if name == "Z" and len(tokens) < n else ""

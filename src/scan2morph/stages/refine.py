@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from contextlib import nullcontext
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -27,6 +28,7 @@ from scan2morph.refine import (
 )
 from scan2morph.refine.jaw import ChinMeshes, JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipImages, LipParams, LipPrior, lip_prior
+from scan2morph.refine.memo import active, sharing
 from scan2morph.refine.shape import ShapeParams, shape_image
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
@@ -216,7 +218,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
         and those placed (``lip_vertices``, ``lip_measured``) and the median redness step at
         its border (``lip_contrast``).
     """
-    name, kind, neutral, data, source = take.take, take.kind, take.neutral, take.data, take.source
+    name, neutral, data, source = take.take, take.neutral, take.data, take.source
     aligned = need(data, paths.align(name, "vertices"), source)
     valid = np.asarray(need(data, paths.mesh(name, "valid"), source), dtype=bool)
     points = np.asarray(need(data, paths.mesh(name, "points2d"), source), dtype=np.float64)
@@ -228,6 +230,17 @@ def run(template: Template, take: Take, params: Params) -> Part:
             "confidence": np.ones(len(valid)),
         }
         return Part({paths.refine(name, k): v for k, v in out.items()})
+    # the steps a refinement repeats on the same data (the reference's high-pass in every
+    # round, the splines' warps) computed once, bit for bit (a click-noise draw's scope is
+    # kept: it shares them across the takes)
+    with nullcontext() if active() else sharing():
+        return _refine(template, take, params)
+
+
+def _refine(template: Template, take: Take, params: Params) -> Part:
+    """:func:`run` for a take other than the neutral."""
+    name, kind, neutral, data, source = take.take, take.kind, take.neutral, take.data, take.source
+    points = np.asarray(need(data, paths.mesh(name, "points2d"), source), dtype=np.float64)
     fine = subdivide_template(template, params.levels)
     sets = {t: params.fit.fiducial_set(k) for t, k in ((neutral, "neutral"), (name, kind))}
     maps = [
