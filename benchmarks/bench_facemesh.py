@@ -30,7 +30,9 @@ take), the candidate on the default cohort's takes per modality (held out) and o
 head's renders, the median per region, the takes whose face MediaPipe does not find (presence
 below 0.5), and a bound: the real head's points through a map fitted on the real head's other
 poses (leave one pose out), i.e. what MediaPipe's own points would give if the map knew the
-annotation's conventions. Nothing is asserted; the printed tables are the measurement.
+annotation's conventions. ``--train-convention ibug`` fits the map on the same takes with
+their truth under the iBUG annotation's conventions (:mod:`scan2morph.synth.convention`).
+Nothing is asserted; the printed tables are the measurement.
 """
 
 from __future__ import annotations
@@ -162,8 +164,9 @@ def apply_map(mapping, mesh):
     return np.stack([w @ mesh[idx] for idx, w in mapping])
 
 
-def training_takes(cache: Path | None):
-    """The map's training takes (seed 1; from ``cache`` when it exists)."""
+def training_takes(cache: Path | None, convention: str = "synth"):
+    """The map's training takes (seed 1; from ``cache`` when it exists), their truth under the
+    landmark ``convention`` (:data:`scan2morph.synth.convention.CONVENTIONS`)."""
     from scan2morph.landmarks.data import make_mesh_samples, make_samples, make_stereo_samples
 
     if cache is not None and cache.is_file():
@@ -172,7 +175,11 @@ def training_takes(cache: Path | None):
                 _Named(str(n), z[f"c{i}"], z[f"x{i}"], z[f"t{i}"], str(n).split("/")[-1])
                 for i, n in enumerate(z["names"])
             ]
-    samples = make_samples(1, 20, 4) + make_mesh_samples(1, 6, 3) + make_stereo_samples(1, 6, 2)
+    samples = (
+        make_samples(1, 20, 4, convention=convention)
+        + make_mesh_samples(1, 6, 3, convention)
+        + make_stereo_samples(1, 6, 2, convention)
+    )
     if cache is not None:
         arrays = {"names": np.array([s.name for s in samples])}
         for i, s in enumerate(samples):
@@ -210,11 +217,17 @@ def main() -> None:
     parser.add_argument("--tflite", type=Path, required=True, help="face_landmark.tflite")
     parser.add_argument("--cache", type=Path, default=None, help="npz of the cohort's grids")
     parser.add_argument("--train-cache", type=Path, default=None, help="npz of the map's takes")
+    parser.add_argument(
+        "--train-convention",
+        default="synth",
+        choices=("synth", "ibug"),
+        help="landmark conventions of the map's training truth (a cache holds one)",
+    )
     parser.add_argument("--neighbours", type=int, default=8)
     parser.add_argument("--ridge", type=float, default=1e-3)
     args = parser.parse_args()
     net = FaceMesh(args.tflite)
-    train = training_takes(args.train_cache)
+    train = training_takes(args.train_cache, args.train_convention)
     fitted = run_all(net, train)
     found = [r[1] >= MIN_PRESENCE for r in fitted]
     print(f"map: {sum(found)} of {len(train)} training takes; face not found in", end=" ")

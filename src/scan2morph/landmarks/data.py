@@ -22,6 +22,7 @@ from scan2morph.io.rgbd import depth_to_color_grid
 from scan2morph.scan import repair_range
 from scan2morph.scan.view import shaded_image
 from scan2morph.synth.cohort import AIM, articulated_head, subject_identity, text_seed
+from scan2morph.synth.convention import landmark_vertices
 from scan2morph.synth.head import LABEL_KIND
 from scan2morph.synth.identity import Identity
 from scan2morph.synth.rgbd import make_rgbd_take
@@ -154,7 +155,9 @@ def _draw_label(rng: np.random.Generator) -> str:
     return labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
 
 
-def _range_take(subject: str, label: str, take: str, seed: int, rng, face: Identity):
+def _range_take(
+    subject: str, label: str, take: str, seed: int, rng, face: Identity, convention: str = "synth"
+):
     """A posed range take of ``face``: (colour, xyz, truth px)."""
     head, vertices, take_rng = articulated_head(subject, label, LABEL_KIND[label], take, seed, face)
     angles = [rng.uniform(*POSE_RANGE[k]) for k in ("yaw", "pitch", "roll")]
@@ -180,15 +183,18 @@ def _range_take(subject: str, label: str, take: str, seed: int, rng, face: Ident
             texture_seed=texture_seed(subject, seed),
         ),
     )
-    lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
+    lm3 = vertices[landmark_vertices(head, vertices, pose, convention)] @ pose[:3, :3].T
+    lm3 = lm3 + pose[:3, 3]
     xyz, _ = repair_range(out["xyz"], source=f"{subject}/{take}")
     return out["color"], xyz, project(K, lm3)
 
 
-def _rgbd_take(subject: str, label: str, take: str, seed: int, rng, face: Identity):
+def _rgbd_take(
+    subject: str, label: str, take: str, seed: int, rng, face: Identity, convention: str = "synth"
+):
     """An RGB-D take of ``face`` resampled onto its colour camera: (colour, xyz, truth px)."""
     params = {"pose_sigma_deg": 6.0, "distance_mm": float(rng.uniform(500.0, 800.0))}
-    r = make_rgbd_take(subject, label, LABEL_KIND[label], take, seed, params, face)
+    r = make_rgbd_take(subject, label, LABEL_KIND[label], take, seed, params, face, convention)
     intr = r["intrinsics"]
     depth = r["depth"].astype(np.float64) * intr.depth_scale_mm
     xyz = depth_to_color_grid(np.where(depth > 0, depth, np.nan), intr)
@@ -203,7 +209,11 @@ SUBJECT_STREAMS = {"train": 0x1A4D, "wide": 0x1A4E}
 
 
 def make_samples(
-    seed: int, subjects: int, takes: int, extra: FaceShares | None = None
+    seed: int,
+    subjects: int,
+    takes: int,
+    extra: FaceShares | None = None,
+    convention: str = "synth",
 ) -> list[Sample]:
     """Simulate the training takes.
 
@@ -218,6 +228,8 @@ def make_samples(
     extra : FaceShares, optional
         Simulate instead extra identities ``wide000``, ... of the seed, faces drawn by
         :func:`wide_identity` with these shares, from a random stream of their own.
+    convention : str
+        The truth's landmark conventions (:data:`scan2morph.synth.convention.CONVENTIONS`).
 
     Returns
     -------
@@ -234,10 +246,10 @@ def make_samples(
             label = _draw_label(rng)
             take = f"t{j:02d}"
             if rng.uniform() < RGBD_SHARE:
-                color, xyz, truth = _rgbd_take(subject, label, take, seed, rng, face)
+                color, xyz, truth = _rgbd_take(subject, label, take, seed, rng, face, convention)
                 look = "rgbd"
             else:
-                color, xyz, truth = _range_take(subject, label, take, seed, rng, face)
+                color, xyz, truth = _range_take(subject, label, take, seed, rng, face, convention)
                 look = str(rng.choice(list(LOOKS), p=list(LOOKS.values())))
                 if look == "shaded":
                     color = shaded_image(xyz)
@@ -259,7 +271,9 @@ STEREO_RANGE = {
 }
 
 
-def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+def make_stereo_samples(
+    seed: int, subjects: int, takes: int, convention: str = "synth"
+) -> list[Sample]:
     """Simulated stereo takes reconstructed as the ingest stage does (the stereo modality's
     look: a projected speckle on a grey face, the reconstruction's coverage and noise, the raw
     left camera's distortion), identities ``stereo000``, ... of the training seed.
@@ -269,6 +283,8 @@ def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
     seed : int
     subjects, takes : int
         Identities and takes per identity.
+    convention : str
+        The truth's landmark conventions (:data:`scan2morph.synth.convention.CONVENTIONS`).
 
     Returns
     -------
@@ -288,7 +304,8 @@ def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
             rig["pose_sigma_deg"] = 6.0
             take = f"t{j:02d}"
             face = wide_identity(subject, seed)
-            r = make_stereo_take(subject, label, LABEL_KIND[label], take, seed, rig, face)
+            kind = LABEL_KIND[label]
+            r = make_stereo_take(subject, label, kind, take, seed, rig, face, convention)
             name = f"{subject}/{take}/{label}/stereo"
             try:
                 xyz, _ = reconstruct_stereo(r["left"], r["right"], r["calib"], {}, source=name)
@@ -301,7 +318,9 @@ def make_stereo_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
     return out
 
 
-def _mesh_take(subject: str, label: str, take: str, seed: int, folder: str):
+def _mesh_take(
+    subject: str, label: str, take: str, seed: int, folder: str, convention: str = "synth"
+):
     """A mesh scan read and rendered by the mesh reader (the virtual camera): (colour, xyz,
     truth px)."""
     from pathlib import Path
@@ -309,9 +328,8 @@ def _mesh_take(subject: str, label: str, take: str, seed: int, folder: str):
     from scan2morph.io.mesh_scan import read_mesh_take
     from scan2morph.synth.mesh_scan import make_mesh_take, write_mesh_take
 
-    r = make_mesh_take(
-        subject, label, LABEL_KIND[label], take, seed, None, wide_identity(subject, seed)
-    )
+    face = wide_identity(subject, seed)
+    r = make_mesh_take(subject, label, LABEL_KIND[label], take, seed, None, face, convention)
     stem = Path(folder) / f"{subject}_{take}"
     write_mesh_take(r, f"{stem}.ply", f"{stem}.txt", f"{stem}.npz")
     scan = read_mesh_take(f"{stem}.ply", None, f"{stem}.txt")
@@ -320,7 +338,9 @@ def _mesh_take(subject: str, label: str, take: str, seed: int, folder: str):
     return scan.color, scan.xyz, truth
 
 
-def make_mesh_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
+def make_mesh_samples(
+    seed: int, subjects: int, takes: int, convention: str = "synth"
+) -> list[Sample]:
     """Simulated mesh scans (the mesh modality's look: no neck below the jaw's cut, unlit
     vertex colours, a larger face), identities ``mesh000``, ... of the training seed.
 
@@ -329,6 +349,8 @@ def make_mesh_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
     seed : int
     subjects, takes : int
         Identities and takes per identity.
+    convention : str
+        The truth's landmark conventions (:data:`scan2morph.synth.convention.CONVENTIONS`).
 
     Returns
     -------
@@ -343,7 +365,8 @@ def make_mesh_samples(seed: int, subjects: int, takes: int) -> list[Sample]:
             subject = f"mesh{i:03d}"
             for j in range(takes):
                 label = _draw_label(rng)
-                color, xyz, truth = _mesh_take(subject, label, f"t{j:02d}", seed, folder)
+                take = f"t{j:02d}"
+                color, xyz, truth = _mesh_take(subject, label, take, seed, folder, convention)
                 name = f"{subject}/t{j:02d}/{label}/mesh"
                 out.append(Sample(color, xyz.astype(np.float32), np.asarray(truth, float), name))
     return out

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.synth.convention import landmark_vertices
 from scan2morph.synth.head import (
     LABEL_KIND,
     HeadModel,
@@ -247,6 +248,7 @@ def make_take(
     take: str,
     seed: int,
     params: dict | None = None,
+    convention: str = "synth",
 ) -> dict:
     """Simulate one scan of a synthetic subject.
 
@@ -265,6 +267,9 @@ def make_take(
         Non-negative cohort seed.
     params : dict, optional
         Overrides of :data:`DEFAULT_PARAMS`.
+    convention : str
+        Landmark conventions of the truth (``landmarks``, ``landmarks3d``, ``landmarks2d``): one
+        of :data:`~scan2morph.synth.convention.CONVENTIONS`, the generator's own by default.
 
     Returns
     -------
@@ -292,7 +297,8 @@ def make_take(
         texture_seed(subject, seed),
     )
     out = scan(head, vertices, pose, K, p["width"], p["height"], rng, defects)
-    lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
+    lm_index = landmark_vertices(head, vertices, pose, convention)
+    lm3 = vertices[lm_index] @ pose[:3, :3].T + pose[:3, 3]
     lm2 = project(K, lm3)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)
     truth = _take_truth(head, vertices, pose, {"K": K}, lm3, lm2)

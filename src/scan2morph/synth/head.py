@@ -44,6 +44,7 @@ from scan2morph.synth.features import (
     SKIN_SEGMENTS,
     _add_features,
 )
+from scan2morph.synth.ibug import IbugRest, ibug_rest
 from scan2morph.synth.identity import Identity, sample_identity
 from scan2morph.synth.landmarks import _landmarks
 from scan2morph.synth.shape import _Shape
@@ -97,6 +98,9 @@ class HeadModel:
     mouth : dict
         Mouth geometry at rest, mm: ``corner_x`` (half-width), ``y`` and ``z`` of the centre,
         ``corner_y`` (mean height of the corners).
+    ibug : IbugRest
+        The rest points under the iBUG annotation's conventions (see
+        :mod:`~scan2morph.synth.convention`).
     """
 
     identity: Identity
@@ -111,6 +115,7 @@ class HeadModel:
     slit_upper: np.ndarray = field(repr=False)
     slit_lower: np.ndarray = field(repr=False)
     mouth: dict = field(repr=False)
+    ibug: IbugRest | None = field(default=None, repr=False)
 
     @property
     def skin_faces(self) -> np.ndarray:
@@ -150,7 +155,10 @@ def build_head(identity: Identity) -> HeadModel:
     )
     for v in list(arrays.values()) + list(fields.values()):
         v.setflags(write=False)
-    return HeadModel(identity=identity, fields=fields, mouth=mesh.mouth.as_dict(), **arrays)
+    ibug = ibug_rest(mesh, segment, arrays["landmarks"])
+    return HeadModel(
+        identity=identity, fields=fields, mouth=mesh.mouth.as_dict(), ibug=ibug, **arrays
+    )
 
 
 def articulate(head: HeadModel, coeffs: dict[str, float]) -> np.ndarray:

@@ -94,15 +94,20 @@ def _brows(mesh: _RestMesh, front: _Front) -> np.ndarray:
     return out
 
 
-def _nose(mesh: _RestMesh, front: _Front) -> np.ndarray:
-    """Landmarks 28-36: the bridge down to the tip, then the bottom of the nose."""
+def _nose(mesh: _RestMesh, front: _Front, y28: float | None = None) -> np.ndarray:
+    """Landmarks 28-36: the bridge down to the tip, then the bottom of the nose.
+
+    ``y28`` is the height of landmark 28 on the midline, mm (default: 3 mm above the eyes'
+    centres); 29 and 30 lie evenly between it and the tip.
+    """
     shape, verts, cand, cxy = mesh.shape, mesh.vertices, front.index, front.xy
     idt, mouth_y = shape.idt, mesh.mouth.y
     mid = cand[np.abs(cxy[:, 0]) < 0.5]
     ny = verts[mid, 1]
     nose_zone = mid[(ny < shape.nose_tip[1] + 15.0) & (ny > shape.nose_tip[1] - 15.0)]
     tip_i = int(nose_zone[np.argmax(verts[nose_zone, 2])])
-    y28 = shape.eye_centre[1] + 3.0
+    if y28 is None:
+        y28 = shape.eye_centre[1] + 3.0
     ytip = verts[tip_i, 1]
     bridge = [
         front.visible(0.0, y28),
@@ -138,17 +143,12 @@ def _eyes(mesh: _RestMesh, front: _Front) -> np.ndarray:
     lower-inner) is found first; the right eye (37 outer, 38 upper-outer, 39 upper-inner,
     40 inner, 41 lower-inner, 42 lower-outer) mirrors it.
     """
-    shape, verts, cand, cxy, cz = mesh.shape, mesh.vertices, front.index, front.xy, front.z
-    if shape.lids:
+    verts, cxy = mesh.vertices, front.xy
+    if mesh.shape.lids:
         return _closed_eyes(mesh, front)
-    ec, er = shape.eye_centre, shape.eye_radius
-    e = shape.almond
+    e = mesh.shape.almond
     tilt = np.arctan2(e.rot[1, 0], e.rot[0, 0]) if e.rot is not None else 0.0
-    rel = cxy - ec[:2]
-    rho = np.hypot(rel[:, 0], rel[:, 1])
-    ez = ec[2] + np.sqrt(np.clip(er**2 - rho**2, 0.0, None))
-    lid = shape(verts[cand], carve=False) > -0.3  # not carved by the eye opening
-    covering = (rho < 1.6 * e.radii[0]) & lid & ((cz >= ez - 0.05) | (rho >= er))
+    rel, rho, covering = _lid_cover(mesh, front)
     ang = np.arctan2(rel[:, 1], rel[:, 0])
     left = np.zeros(6, np.int64)
     for k, tau in enumerate(np.deg2rad([180.0, 120.0, 60.0, 0.0, -60.0, -120.0])):
@@ -170,6 +170,28 @@ def _eyes(mesh: _RestMesh, front: _Front) -> np.ndarray:
         left[k] = front.visible(*cxy[best])
     right = [front.visible(-verts[left[k], 0], verts[left[k], 1]) for k in (3, 2, 1, 0, 5, 4)]
     return np.concatenate([right, left])
+
+
+def _lid_cover(mesh: _RestMesh, front: _Front) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the lids of the subject's left open eye cover the eyeball, seen from the front.
+
+    Returns
+    -------
+    rel : (C, 2) float64
+        The candidates' x and y relative to the eye's centre, mm.
+    rho : (C,) float64
+        Their distance from it, mm.
+    covering : (C,) bool
+        Lid skin at or in front of the eyeball (or beyond its radius), near the opening.
+    """
+    shape, cz = mesh.shape, front.z
+    ec, er = shape.eye_centre, shape.eye_radius
+    rel = front.xy - ec[:2]
+    rho = np.hypot(rel[:, 0], rel[:, 1])
+    ez = ec[2] + np.sqrt(np.clip(er**2 - rho**2, 0.0, None))
+    lid = shape(mesh.vertices[front.index], carve=False) > -0.3  # not carved by the opening
+    covering = (rho < 1.6 * shape.almond.radii[0]) & lid & ((cz >= ez - 0.05) | (rho >= er))
+    return rel, rho, covering
 
 
 #: Closed eyes: where the six points of an eye lie along its axis, mm (inner corner,

@@ -34,6 +34,7 @@ from scan2morph.synth.cohort import (
     numeric_params,
     write_npz,
 )
+from scan2morph.synth.convention import landmark_vertices
 from scan2morph.synth.features import SEG_BROW, SEG_EYE, SEG_HAIR, SEG_SKIN
 from scan2morph.synth.identity import Identity
 from scan2morph.synth.scanner import head_pose, shade
@@ -94,6 +95,7 @@ def make_mesh_take(
     seed: int,
     params: dict | None = None,
     identity: Identity | None = None,
+    convention: str = "synth",
 ) -> dict:
     """Simulate one mesh scan of a synthetic subject.
 
@@ -105,6 +107,11 @@ def make_mesh_take(
         Overrides of the mesh scan's parameters.
     identity : Identity, optional
         The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
+    convention : str
+        Landmark conventions of the truth (``landmarks``, ``landmarks3d``, ``landmarks2d``): one
+        of :data:`~scan2morph.synth.convention.CONVENTIONS`, the generator's own by default.
+        A mesh has no camera: the ``ibug`` jawline is the silhouette seen from the scanner's
+        lamp (in front of the face).
 
     Returns
     -------
@@ -129,7 +136,8 @@ def make_mesh_take(
     normals = vertex_normals(vertices, head.faces, fill=0.0)[used]
     noisy = vertices[used] + p["noise_mm"] * rng.standard_normal(len(used))[:, None] * normals
     v_mesh = noisy @ pose[:3, :3].T + pose[:3, 3]
-    lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
+    lm3 = vertices[landmark_vertices(head, vertices, lamp, convention)] @ pose[:3, :3].T
+    lm3 = lm3 + pose[:3, 3]
     clicked = lm3 + p["click_noise_mm"] * rng.standard_normal(lm3.shape)
     camera = {"K": np.full((3, 3), np.nan)}
     truth = _take_truth(head, vertices, pose, camera, lm3, np.full((len(lm3), 2), np.nan))

@@ -42,6 +42,7 @@ from scan2morph.synth.cohort import (
     numeric_params,
     write_npz,
 )
+from scan2morph.synth.convention import landmark_vertices
 from scan2morph.synth.features import SEG_BROW, SEG_EYE, SEG_HAIR, SEG_SKIN
 from scan2morph.synth.identity import Identity
 from scan2morph.synth.scanner import backproject, camera_matrix, head_pose, project, render
@@ -169,6 +170,7 @@ def make_rgbd_take(
     seed: int,
     params: dict | None = None,
     identity: Identity | None = None,
+    convention: str = "synth",
 ) -> dict:
     """Simulate one RGB-D take of a synthetic subject.
 
@@ -183,6 +185,10 @@ def make_rgbd_take(
         Overrides of :data:`DEFAULT_RGBD`.
     identity : Identity, optional
         The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
+    convention : str
+        Landmark conventions of the truth (``landmarks``, ``landmarks3d``, ``landmarks2d``): one
+        of :data:`~scan2morph.synth.convention.CONVENTIONS`, the generator's own by default.
+        The ``ibug`` jawline is the colour camera's silhouette.
 
     Returns
     -------
@@ -213,7 +219,8 @@ def make_rgbd_take(
 
     xyz_c = backproject(intr.color.K, depth_c)
     xyz_true = (xyz_c - intr.T) @ intr.R  # colour frame -> depth frame
-    lm3 = vertices[head.landmarks] @ pose[:3, :3].T + pose[:3, 3]
+    lm_index = landmark_vertices(head, vertices, pose_color, convention)
+    lm3 = vertices[lm_index] @ pose[:3, :3].T + pose[:3, 3]
     lm2 = project(intr.color.K, lm3 @ intr.R.T + intr.T)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)
     camera = {"K": intr.color.K, "D": intr.color.D}

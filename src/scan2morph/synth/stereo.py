@@ -50,6 +50,7 @@ from scan2morph.synth.cohort import (  # noqa: E402
     text_seed,
     write_npz,
 )
+from scan2morph.synth.convention import landmark_vertices  # noqa: E402
 from scan2morph.synth.head import SEG_SKIN, HeadModel, Identity  # noqa: E402
 from scan2morph.synth.scanner import (  # noqa: E402
     BACKGROUND_RGB,
@@ -335,6 +336,7 @@ def make_stereo_take(
     seed: int,
     params: dict | None = None,
     identity: Identity | None = None,
+    convention: str = "synth",
 ) -> dict:
     """Simulate one stereo take of a synthetic subject.
 
@@ -350,6 +352,9 @@ def make_stereo_take(
         Overrides of :data:`DEFAULT_RIG`.
     identity : Identity, optional
         The face instead of the subject's own (``(seed, subject)``'s); the trainer's.
+    convention : str
+        Landmark conventions of the truth (``landmarks``, ``landmarks3d``, ``landmarks2d``): one
+        of :data:`~scan2morph.synth.convention.CONVENTIONS`, the generator's own by default.
 
     Returns
     -------
@@ -381,7 +386,7 @@ def make_stereo_take(
     pose = left_from_rig @ rig_from_head
     v_left = vertices @ pose[:3, :3].T + pose[:3, 3]
     xyz_true, segment = _left_truth(head, v_left, cam1["K"], cam1["D"], p["width"], p["height"])
-    lm3 = v_left[head.landmarks]
+    lm3 = v_left[landmark_vertices(head, vertices, pose, convention)]
     lm2 = cv2.projectPoints(lm3, np.zeros(3), np.zeros(3), cam1["K"], cam1["D"])[0].reshape(-1, 2)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)
     camera = {"K": cam1["K"], "D": cam1["D"]}
