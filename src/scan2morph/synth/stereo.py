@@ -224,8 +224,10 @@ def _remap_tables(K: np.ndarray, D: np.ndarray, width: int, height: int, s: int)
     """Where the distorted image's sub-pixels fall in an undistorted pinhole render.
 
     Returns the render's intrinsics ``K_u`` (focal lengths ``s`` times ``K``'s), its size
-    ``(w_u, h_u)`` covering every sub-pixel with a margin, and the remap tables
-    ``(map_x, map_y)`` of shape (height s, width s), float32, render pixel coordinates.
+    ``(w_u, h_u)`` covering every sub-pixel with a margin, the remap tables
+    ``(map_x, map_y)`` of shape (height s, width s), float32, render pixel coordinates, and the
+    undistorted normalised coordinates (height width, 2) float64 of the pixel centres (the
+    middle sub-pixels: ``s`` is odd), rows first.
     """
     key = np.concatenate([K.ravel(), D.ravel(), [width, height, s]]).tobytes()
     if key in _TABLES:
@@ -249,9 +251,10 @@ def _remap_tables(K: np.ndarray, D: np.ndarray, width: int, height: int, s: int)
     )
     map_x = (norm[:, 0] * fx + K_u[0, 2]).astype(np.float32).reshape(len(ys), len(xs))
     map_y = (norm[:, 1] * fy + K_u[1, 2]).astype(np.float32).reshape(len(ys), len(xs))
+    centres = norm.reshape(height, s, width, s, 2)[:, s // 2, :, s // 2].reshape(-1, 2).copy()
     if len(_TABLES) >= 4:  # one rig per job: a few cameras' tables are all we need
         _TABLES.pop(next(iter(_TABLES)))
-    _TABLES[key] = (K_u, size, map_x, map_y)
+    _TABLES[key] = (K_u, size, map_x, map_y, centres)
     return _TABLES[key]
 
 
@@ -268,7 +271,7 @@ def _view(
 
     ``seeds`` are the speckle's and the skin detail's."""
     s = int(p["supersample"])
-    K_u, size, map_x, map_y = _remap_tables(cam["K"], cam["D"], p["width"], p["height"], s)
+    K_u, size, map_x, map_y, _ = _remap_tables(cam["K"], cam["D"], p["width"], p["height"], s)
     v_cam = (v_rig - cam["C"]) @ cam["R"]
     color, depth, seg = render_colors(head, v_cam, colors, K_u, size)
     image = color.astype(np.float32)
@@ -302,15 +305,16 @@ def _view(
 
 
 def _left_truth(
-    head: HeadModel, v_left: np.ndarray, K: np.ndarray, D: np.ndarray, width: int, height: int
+    head: HeadModel, v_left: np.ndarray, cam: dict, p: dict
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Exact surface point and segment of every left pixel centre (ray cast with Open3D)."""
+    """Exact surface point and segment of every left pixel centre (ray cast with Open3D).
+
+    The centres' undistorted rays are those of the left view's remap tables (its middle
+    sub-pixels, the same :func:`cv2.undistortPoints` of the same points)."""
     o3d = open3d()
 
-    ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
-    pix = np.stack([xs.ravel(), ys.ravel()], axis=-1).reshape(-1, 1, 2)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
-    norm = cv2.undistortPoints(pix, K, D, criteria=criteria).reshape(-1, 2)
+    width, height = p["width"], p["height"]
+    norm = _remap_tables(cam["K"], cam["D"], width, height, int(p["supersample"]))[4]
     dirs = np.concatenate([norm, np.ones((len(norm), 1))], axis=1)  # ray (x, y, 1): t = Z
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
@@ -385,7 +389,7 @@ def make_stereo_take(
     left_from_rig[:3, 3] = -cam1["R"].T @ cam1["C"]
     pose = left_from_rig @ rig_from_head
     v_left = vertices @ pose[:3, :3].T + pose[:3, 3]
-    xyz_true, segment = _left_truth(head, v_left, cam1["K"], cam1["D"], p["width"], p["height"])
+    xyz_true, segment = _left_truth(head, v_left, cam1, p)
     lm3 = v_left[landmark_vertices(head, vertices, pose, convention)]
     lm2 = cv2.projectPoints(lm3, np.zeros(3), np.zeros(3), cam1["K"], cam1["D"])[0].reshape(-1, 2)
     clicked = lm2 + p["click_noise_px"] * rng.standard_normal(lm2.shape)

@@ -10,6 +10,33 @@ import numpy as np
 
 from scan2morph.io.calibration import StereoCalibration
 
+#: Rectified positions of the left pixels per rig (intrinsics, distortion, rectification, image
+#: size): a rig's pairs share them, and a job reconstructs one rig.
+_GRIDS: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _rectified_grid(
+    calib: StereoCalibration, rect: Mapping[str, Any], size: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rectified positions ``(u, v)``, each (H W,) float64, of the left image's pixels, rows
+    first (:func:`cv2.undistortPoints` with ``R=R1, P=P1``), kept for the last few rigs."""
+    width, height = size
+    parts = (calib.K1, calib.D1, rect["R1"], rect["P1"], np.array([width, height], np.float64))
+    key = b"".join(np.ascontiguousarray(a, dtype=np.float64).tobytes() for a in parts)
+    if key not in _GRIDS:
+        ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
+        pix = np.stack([xs.ravel(), ys.ravel()], axis=-1).reshape(-1, 1, 2)
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
+        uv = cv2.undistortPoints(
+            pix, calib.K1, calib.D1, R=rect["R1"], P=rect["P1"], criteria=criteria
+        )
+        if len(_GRIDS) >= 4:
+            _GRIDS.pop(next(iter(_GRIDS)))
+        u, v = uv[:, 0, 0].copy(), uv[:, 0, 1].copy()
+        u.flags.writeable = v.flags.writeable = False
+        _GRIDS[key] = (u, v)
+    return _GRIDS[key]
+
 
 def _resample_left(
     disparity: np.ndarray,
@@ -46,11 +73,7 @@ def _resample_left(
         NaN where there is no point.
     """
     width, height = size
-    ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
-    pix = np.stack([xs.ravel(), ys.ravel()], axis=-1).reshape(-1, 1, 2)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
-    uv = cv2.undistortPoints(pix, calib.K1, calib.D1, R=rect["R1"], P=rect["P1"], criteria=criteria)
-    u, v = uv[:, 0, 0], uv[:, 0, 1]
+    u, v = _rectified_grid(calib, rect, size)
 
     hr, wr = disparity.shape
     u0 = np.floor(u).astype(np.int64)
