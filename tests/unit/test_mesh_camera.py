@@ -194,3 +194,24 @@ def test_first_in_each_cell_is_numpys_unique_rows():
     cells[:3] = [[-(2**40), 0, 0], [2**40, 2**40, 0], [0, -(2**40), 2**40]]
     expected = np.unique(cells, axis=0, return_index=True)[1]
     np.testing.assert_array_equal(_first_in_each_cell(cells), expected)
+
+
+def test_a_mesh_seen_again_gets_the_view_found_before_and_another_mesh_its_own():
+    """face_view keeps its answers per input (io.mesh_view's memo): the same mesh again, even as
+    another Trimesh object, is the same answer without a search (read-only arrays, equal to the
+    search's own); a mesh moved by 5 mm, or another nose tip, gets a search of its own."""
+    from scan2morph.io import mesh_view
+
+    r = _synth03_take("car")
+    mesh = trimesh.Trimesh(r["vertices"], r["faces"], process=False)
+    first = face_view(mesh)
+    again = face_view(trimesh.Trimesh(r["vertices"].copy(), r["faces"].copy(), process=False))
+    assert again is first and not first.direction.flags.writeable
+    searched = mesh_view._find_view(mesh, None, "car")
+    np.testing.assert_array_equal(searched.direction, first.direction)
+    np.testing.assert_array_equal(searched.tip, first.tip)
+    moved = face_view(trimesh.Trimesh(r["vertices"] + [5.0, 0.0, 0.0], r["faces"], process=False))
+    np.testing.assert_allclose(moved.tip, first.tip + [5.0, 0.0, 0.0], atol=1e-9)
+    seeded = face_view(mesh, r["landmarks"][30])
+    assert seeded is not first
+    np.testing.assert_array_equal(seeded.tip, r["landmarks"][30])

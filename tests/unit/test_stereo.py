@@ -475,3 +475,26 @@ def test_images_that_do_not_overlap_give_no_depth_range(scene, case):
         reconstruct_stereo(left, right, scene.calib, source="s1/t3")
     if case != "other_scene":
         assert "no depth range could be derived" in str(info.value)
+
+
+def test_a_rigs_rectified_grid_is_kept_and_another_rigs_is_its_own(scene):
+    """The left pixels' rectified positions are computed once per rig (resample's memo): the
+    same rig again gives the kept arrays (read-only), equal to cv2.undistortPoints run afresh;
+    a rig with other distortion gets its own."""
+    from dataclasses import replace
+
+    from scan2morph.scan.stereo.resample import _rectified_grid
+
+    rect = _rectify(scene.calib, (640, 480), stereo_params(DEPTHS), "test")
+    u, v = _rectified_grid(scene.calib, rect, (640, 480))
+    assert _rectified_grid(scene.calib, rect, (640, 480))[0] is u and not u.flags.writeable
+    pix = np.stack(np.meshgrid(np.arange(640.0), np.arange(480.0)), axis=-1).reshape(-1, 1, 2)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
+    fresh = cv2.undistortPoints(
+        pix, scene.calib.K1, scene.calib.D1, R=rect["R1"], P=rect["P1"], criteria=criteria
+    )
+    np.testing.assert_array_equal(u, fresh[:, 0, 0])
+    np.testing.assert_array_equal(v, fresh[:, 0, 1])
+    other = replace(scene.calib, D1=np.asarray(scene.calib.D1) + 0.01)
+    u2, _ = _rectified_grid(other, rect, (640, 480))
+    assert u2 is not u and np.abs(u2 - u).max() > 0.1

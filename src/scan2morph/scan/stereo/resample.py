@@ -22,7 +22,8 @@ def _rectified_grid(
     first (:func:`cv2.undistortPoints` with ``R=R1, P=P1``), kept for the last few rigs."""
     width, height = size
     parts = (calib.K1, calib.D1, rect["R1"], rect["P1"], np.array([width, height], np.float64))
-    key = b"".join(np.ascontiguousarray(a, dtype=np.float64).tobytes() for a in parts)
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in parts]
+    key = b"".join(f"{a.shape};".encode() + a.tobytes() for a in arrays)
     if key not in _GRIDS:
         ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
         pix = np.stack([xs.ravel(), ys.ravel()], axis=-1).reshape(-1, 1, 2)
