@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter, map_coordinates
 
-from scan2morph.refine import RefineParams, refine_points
-from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.refine import Channel, RefineParams, SurfaceChannel, _sampled_take, refine_points
+from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
@@ -52,6 +52,31 @@ def test_pull_back_matches_bilinear_sampling_and_marks_outside():
     ref = map_coordinates(img, [px[0, :, 1], px[0, :, 0]], order=1)
     np.testing.assert_allclose(out[0], ref, rtol=1e-5)
     assert np.isnan(out[1]).all()
+
+
+def test_the_flows_reference_side_is_its_high_pass_energy_and_texture_share():
+    # the oracle: the high-pass, its Gaussian energy and the texture share written out
+    ref = _texture((60, 70), 5)
+    ref[:8, :10] = np.nan
+    hp, rms, energy, texture = reference_side(ref, 3.0, 2.0, 1.5)
+    want_hp, want_rms = high_pass(ref, 3.0)
+    np.testing.assert_array_equal(hp, want_hp)
+    np.testing.assert_array_equal(rms, want_rms)
+    np.testing.assert_array_equal(energy, gaussian_filter(want_hp**2, 2.0))
+    np.testing.assert_array_equal(texture, want_rms**2 / (want_rms**2 + 1.5**2))
+    assert texture[:8, :10].max() == 0.0 and texture[20:, 20:].min() > 0.0
+
+
+def test_a_take_image_sampled_as_float32_pulls_back_the_same():
+    img = _texture((40, 50), 3)
+    xyz = np.stack([img, 2 * img, img + 1.0], axis=-1)
+    px = np.random.default_rng(0).uniform(-2.0, 52.0, (7, 9, 2))
+    texture = _sampled_take(Channel(img, img, 3.0, 2.0, 0.25))
+    surface = _sampled_take(SurfaceChannel(xyz, xyz, 1.0, 0.5))
+    assert texture.take.dtype == np.float32 and surface.take_xyz.dtype == np.float32
+    np.testing.assert_array_equal(pull_back(texture.take, px), pull_back(img, px))
+    np.testing.assert_array_equal(pull_back(surface.take_xyz, px), pull_back(xyz, px))
+    np.testing.assert_array_equal(texture.neutral, img)  # the neutral's as it was
 
 
 def test_flow_recovers_a_known_smooth_displacement():

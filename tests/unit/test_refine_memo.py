@@ -115,9 +115,9 @@ def test_refinements_sharing_the_neutral_give_the_straightforward_numbers(refine
     plain = refinements()
     with sharing() as counts:
         shared_ = refinements()
-    # the neutral's side and its high-pass were computed once for both takes and both rounds
+    # the neutral's side and its flow side were computed once for both takes and both rounds
     assert counts["neutral"] == [1, 1]
-    assert counts["high_pass"] == [3, 1]
+    assert counts["flow_reference"] == [3, 1]
     for (p, report), (q, again) in zip(plain, shared_, strict=True):
         assert_array_equal(p, q)
         for key in ("correction", "confidence"):

@@ -17,7 +17,7 @@ paper's image correlation does) and moves the take's vertices there, on the take
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -245,6 +245,7 @@ def refine_channels(
     prior = smooth / params.fade_px**2
     anchor_w = 1.0 / (2.0 * params.click_precision_px**2)
     conf = measured = np.zeros(grid.shape)
+    channels = [_sampled_take(c) for c in channels]
     for _ in range(int(params.iterations)):
         flow, weight, conf, measured = _measure(channels, references, mapped, inside, params)
         f = fuse(flow, weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
@@ -260,6 +261,14 @@ def refine_channels(
         "confident_share": float(np.mean(vmeasured > 0.5)),
         "median_correction_px": float(np.median(np.linalg.norm(corr, axis=1))),
     }
+
+
+def _sampled_take(channel):
+    """``channel`` with its take's image as float32, what :func:`pull_back` samples (so that
+    the rounds do not convert it again each; the same samples)."""
+    if isinstance(channel, SurfaceChannel):
+        return replace(channel, take_xyz=np.asarray(channel.take_xyz, dtype=np.float32))
+    return replace(channel, take=np.asarray(channel.take, dtype=np.float32))
 
 
 def _warped(fit_map: Callable, points: np.ndarray) -> np.ndarray:

@@ -62,6 +62,15 @@ def high_pass(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     return hp, np.where(mask, np.nan_to_num(rms), 0.0)
 
 
+def reference_side(reference: np.ndarray, sigma: float, patch: float, noise: float) -> tuple:
+    """What :func:`measure_flow` computes from its reference image alone (the same in every
+    round of a refinement): its :func:`high_pass` ``hp`` and ``rms`` (rows, columns), the
+    Gaussian (``patch`` px) of ``hp^2`` (the ZNCC's reference energy) and the texture share
+    ``rms^2 / (rms^2 + noise^2)`` (``noise`` in grey levels), all float64."""
+    hp, rms = high_pass(reference, sigma)
+    return hp, rms, gaussian_filter(hp**2, patch), rms**2 / (rms**2 + noise**2)
+
+
 def _to_u8(hp: np.ndarray, scale: float) -> np.ndarray:
     return np.clip(np.rint(128.0 + hp * scale), 0, 255).astype(np.uint8)
 
@@ -121,9 +130,13 @@ def measure_flow(
         raise InputError(
             "refine", f"refine.flow_level: expected an integer 0..{MAX_LEVEL}, got {level!r}"
         )
-    # the reference is the same in every round of a refinement (and, in a sharing scope, for
-    # every take refined against one fit of the neutral)
-    hp_r, rms_r = shared("high_pass", (reference, sigma), lambda: high_pass(reference, sigma))
+    # the reference's side is the same in every round of a refinement (and, in a sharing
+    # scope, for every take refined against one fit of the neutral)
+    hp_r, rms_r, g_rr, texture = shared(
+        "flow_reference",
+        (reference, sigma, patch, noise),
+        lambda: reference_side(reference, sigma, patch, noise),
+    )
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
     contrast = float(np.median(rms_r[both])) if both.any() else 0.0
@@ -139,11 +152,9 @@ def measure_flow(
     fb = np.linalg.norm(fw + _warp(bw, fw), axis=-1)
     # ZNCC of the two high-passes over a Gaussian window, after the displacement
     mw = _warp(hp_m, fw).astype(np.float64)
-    g = lambda a: gaussian_filter(a, patch)  # noqa: E731
-    num = g(hp_r * mw)
-    den = np.sqrt(np.maximum(g(hp_r**2) * g(mw**2), 1e-12))
+    num = gaussian_filter(hp_r * mw, patch)
+    den = np.sqrt(np.maximum(g_rr * gaussian_filter(mw**2, patch), 1e-12))
     zncc = num / den
-    texture = rms_r**2 / (rms_r**2 + noise**2)
     ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & np.isfinite(fw).all(axis=-1)
     conf = np.where(ok, texture * np.clip((zncc - min_zncc) / (1 - min_zncc), 0, 1), 0.0)
     return np.where(ok[..., None], fw, 0.0), conf
