@@ -5,7 +5,15 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter, map_coordinates
 
-from scan2morph.refine import Channel, RefineParams, SurfaceChannel, _sampled_take, refine_points
+from scan2morph.geometry import finite_points
+from scan2morph.refine import (
+    Channel,
+    RefineParams,
+    SurfaceChannel,
+    _sampled_take,
+    pull_back_field,
+    refine_points,
+)
 from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
@@ -77,6 +85,43 @@ def test_a_take_image_sampled_as_float32_pulls_back_the_same():
     np.testing.assert_array_equal(pull_back(texture.take, px), pull_back(img, px))
     np.testing.assert_array_equal(pull_back(surface.take_xyz, px), pull_back(xyz, px))
     np.testing.assert_array_equal(texture.neutral, img)  # the neutral's as it was
+
+
+def test_finite_points_is_every_coordinate_finite():
+    rng = np.random.default_rng(1)
+    for shape in ((50, 3), (7, 9, 2), (4, 6, 5, 3), (5, 1), (3, 0)):
+        p = rng.normal(size=shape)
+        p[rng.random(shape) < 0.2] = np.nan
+        p[rng.random(shape) < 0.05] = np.inf
+        np.testing.assert_array_equal(finite_points(p), np.isfinite(p).all(axis=-1))
+    assert finite_points(np.arange(6).reshape(3, 2)).all()  # integers are finite
+
+
+def test_pull_back_field_is_bilinear_with_nan_outside():
+    # the oracle: each point's four neighbours gathered by (row, column), weighted bilinearly
+    rng = np.random.default_rng(2)
+    field = rng.normal(size=(23, 31, 2))
+    field[rng.random((23, 31)) < 0.05] = np.nan
+    field[21:, 29:] = 1.5  # the far corner's cell has data
+    pts = rng.uniform(-1.0, 32.0, (9, 11, 2))
+    pts[0, 0] = np.nan
+    pts[1, 1] = [30.0, 22.0]  # the far corner: on the grid
+    x, y = pts[..., 0], pts[..., 1]
+    ok = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= 30) & (y <= 22)
+    x0 = np.clip(np.floor(np.where(ok, x, 0)).astype(np.int64), 0, 29)
+    y0 = np.clip(np.floor(np.where(ok, y, 0)).astype(np.int64), 0, 21)
+    fx, fy = np.where(ok, x, 0) - x0, np.where(ok, y, 0) - y0
+    want = (
+        field[y0, x0] * ((1 - fx) * (1 - fy))[..., None]
+        + field[y0, x0 + 1] * (fx * (1 - fy))[..., None]
+        + field[y0 + 1, x0] * ((1 - fx) * fy)[..., None]
+        + field[y0 + 1, x0 + 1] * (fx * fy)[..., None]
+    )
+    want[~ok] = np.nan
+    got = pull_back_field(field, pts)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got[1, 1], field[22, 30])
+    assert np.isnan(got[0, 0]).all() and ok.sum() < ok.size
 
 
 def test_flow_recovers_a_known_smooth_displacement():

@@ -28,6 +28,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.sparse.linalg import splu
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import finite_points
 from scan2morph.refine.memo import shared
 
 #: Coarsest finest-level of the flow's search (:func:`measure_flow`'s ``level``): 2 is a quarter
@@ -155,7 +156,7 @@ def measure_flow(
     num = gaussian_filter(hp_r * mw, patch)
     den = np.sqrt(np.maximum(g_rr * gaussian_filter(mw**2, patch), 1e-12))
     zncc = num / den
-    ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & np.isfinite(fw).all(axis=-1)
+    ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & finite_points(fw)
     conf = np.where(ok, texture * np.clip((zncc - min_zncc) / (1 - min_zncc), 0, 1), 0.0)
     return np.where(ok[..., None], fw, 0.0), conf
 
