@@ -14,7 +14,7 @@ from scan2morph.refine import (
     pull_back_field,
     refine_points,
 )
-from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
+from scan2morph.refine.flow import _length, fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
@@ -95,6 +95,16 @@ def test_finite_points_is_every_coordinate_finite():
         p[rng.random(shape) < 0.05] = np.inf
         np.testing.assert_array_equal(finite_points(p), np.isfinite(p).all(axis=-1))
     assert finite_points(np.arange(6).reshape(3, 2)).all()  # integers are finite
+
+
+def test_the_flows_vector_lengths_are_numpys_norm():
+    rng = np.random.default_rng(6)
+    for scale in (1e-200, 1.0, 1e200):  # underflow and overflow as numpy's
+        v = rng.normal(size=(30, 40, 2)) * scale
+        v[rng.random((30, 40)) < 0.1] = np.nan
+        v[0, 0] = [np.inf, 1.0]
+        with np.errstate(over="ignore", under="ignore"):
+            np.testing.assert_array_equal(_length(v), np.linalg.norm(v, axis=-1))
 
 
 def test_pull_back_field_is_bilinear_with_nan_outside():

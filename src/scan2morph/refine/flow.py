@@ -72,6 +72,14 @@ def reference_side(reference: np.ndarray, sigma: float, patch: float, noise: flo
     return hp, rms, gaussian_filter(hp**2, patch), rms**2 / (rms**2 + noise**2)
 
 
+def _length(v: np.ndarray) -> np.ndarray:
+    """(rows, columns) lengths of a field of 2-D vectors (rows, columns, 2): ``np.linalg.norm(v,
+    axis=-1)``, the same numbers (the sum of two squares has one order), without numpy's slow
+    reduction over a 2-long axis."""
+    x, y = v[..., 0], v[..., 1]
+    return np.sqrt(x * x + y * y)
+
+
 def _to_u8(hp: np.ndarray, scale: float) -> np.ndarray:
     return np.clip(np.rint(128.0 + hp * scale), 0, 255).astype(np.uint8)
 
@@ -150,7 +158,7 @@ def measure_flow(
     dis.setFinestScale(int(level))
     fw = dis.calc(r8, m8, None).astype(np.float64)
     bw = dis.calc(m8, r8, None)
-    fb = np.linalg.norm(fw + _warp(bw, fw), axis=-1)
+    fb = _length(fw + _warp(bw, fw))
     # ZNCC of the two high-passes over a Gaussian window, after the displacement
     mw = _warp(hp_m, fw).astype(np.float64)
     num = gaussian_filter(hp_r * mw, patch)
@@ -244,7 +252,10 @@ def _fuse_coarse(measured, weight, inside, smooth, prior, anchors, anchor_weight
     with np.errstate(invalid="ignore", divide="ignore"):
         m_c = (w[..., None] * m).reshape(rc, k, cc, k, 2).sum(axis=(1, 3)) / w_c[..., None]
     m_c = np.nan_to_num(m_c)
-    inside_c = np.pad(inside, pad).reshape(rc, k, cc, k).any(axis=(1, 3))
+    padded, inside_c = np.pad(inside, pad), np.zeros((rc, cc), dtype=bool)
+    for i in range(k):  # any of the cell's k x k points (numpy's any over two short axes is slow)
+        for j in range(k):
+            inside_c |= padded[i::k, j::k]
     a = None if anchors is None else np.asarray(anchors, dtype=np.int64) // k
     f_c = fuse(m_c, w_c, inside_c, smooth, prior * k * k, a, anchor_weight)
     f = cv2.resize(f_c.astype(np.float32), (cc * k, rc * k), interpolation=cv2.INTER_LINEAR)
