@@ -440,8 +440,10 @@ def _margin(icp: IcpParams | None) -> float:
 def _scan_surface(xyz, mapped, transform, placed, reach, source):
     """:func:`scan_surface` on checked inputs, with the image already mapped by ``transform``."""
     lo, hi = placed.min(axis=0) - reach, placed.max(axis=0) + reach
-    with np.errstate(invalid="ignore"):
-        inside = ((mapped >= lo) & (mapped <= hi)).all(axis=2)
+    inside = np.ones(mapped.shape[:2], dtype=bool)
+    with np.errstate(invalid="ignore"):  # each coordinate on its own: a 3-long .all is slow
+        for k in range(3):
+            inside &= (mapped[..., k] >= lo[k]) & (mapped[..., k] <= hi[k])
     rows, cols = np.nonzero(inside)
     if not len(rows):
         return None, None, None
