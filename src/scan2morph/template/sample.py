@@ -58,7 +58,7 @@ def _partial_weights(fx: np.ndarray, fy: np.ndarray, have: np.ndarray) -> np.nda
         if not len(used):
             continue
         at = np.column_stack([np.ones(len(rows)), fx[rows] - centre[0], fy[rows] - centre[1]])
-        out[np.ix_(used, rows)] = (at @ solve).T
+        out[used[:, None], rows] = (at @ solve).T  # np.ix_ costs more than the assignment
     return out
 
 
