@@ -30,7 +30,10 @@ Measured (2026-12-04, the default config's run, 2 cores shared with other jobs a
 and OpenCV kept to the job's one thread): synth01 17.4, 17.8 -> 15.0, 15.6 (wall 23.7, 24.0 ->
 18.7, 19.5); synth02 47.0, 48.3 -> 38.7, 39.2 (56.6, 68.3 -> 45.5, 46.6); synth03 25.3, 23.5 ->
 22.5, 21.3 (36.3, 31.9 -> 28.4, 26.3); synth04 12.2, 11.7 -> 9.8, 9.8 (17.6, 15.8 -> 12.7,
-11.3). Every output identical, bit for bit.
+11.3). Every output identical, bit for bit. 2026-12-05, at a load of 1.6-1.9, before -> after
+the flow's reference side was shared and short-axis reductions and repeated float32 conversions
+went (CHANGELOG): synth01 14.4, 14.9 -> 12.7, 12.5; synth02 30.9, 29.8 -> 27.4, 27.6; synth03
+21.5, 22.4 -> 19.4, 19.6; synth04 9.9, 9.8 -> 8.2, 8.5; every output identical.
 """
 
 from __future__ import annotations

@@ -338,3 +338,33 @@ def test_jaw_prior_names_bad_input():
     found = range_pixels(xyz, np.array([good, [np.nan, 0.0, 0.0]]))
     np.testing.assert_allclose(found[0], [160, 120], atol=1e-6)
     assert np.isnan(found[1]).all()
+
+
+def test_smooth_depth_gives_the_straightforward_loops_numbers():
+    # the oracle: the neighbours' loop as first written (a new weighted array each step)
+    from scan2morph.scan.depth_cleanup import _ranges, smooth_depth
+
+    rng_ = np.random.default_rng(4)
+    yy, xx = np.mgrid[0:40, 0:50].astype(np.float64)
+    xyz = np.stack([xx - 25, yy - 20, 600 + 0.01 * xx**2 + rng_.normal(0, 0.3, xx.shape)], -1)
+    xyz[15:20, 10:40, 2] += 25.0  # a step
+    xyz[rng_.random(xx.shape) < 0.05] = np.nan
+    sigma, jump = 1.5, 3.0
+    rng, centre = _ranges(xyz)
+    r, (h, w) = int(np.ceil(3 * sigma)), rng.shape
+    pad = np.pad(rng, r, constant_values=np.nan)
+    num, den = np.zeros_like(rng), np.zeros_like(rng)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            nb = pad[r + dy : r + dy + h, r + dx : r + dx + w]
+            with np.errstate(invalid="ignore"):
+                same = np.abs(nb - rng) <= jump
+            wgt = np.exp(-(dx * dx + dy * dy) / (2 * sigma**2)) * same
+            num += np.where(same, nb, 0.0) * wgt
+            den += wgt
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(den > 0, num / den / rng, np.nan)
+    want = centre + (xyz - centre) * scale[..., None]
+    got = smooth_depth(xyz, sigma, jump)
+    np.testing.assert_array_equal(got, want)
+    assert np.isnan(got).any() and np.isfinite(got).mean() > 0.9

@@ -5,8 +5,16 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter, map_coordinates
 
-from scan2morph.refine import RefineParams, refine_points
-from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.geometry import finite_points
+from scan2morph.refine import (
+    Channel,
+    RefineParams,
+    SurfaceChannel,
+    _sampled_take,
+    pull_back_field,
+    refine_points,
+)
+from scan2morph.refine.flow import _length, fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
@@ -52,6 +60,78 @@ def test_pull_back_matches_bilinear_sampling_and_marks_outside():
     ref = map_coordinates(img, [px[0, :, 1], px[0, :, 0]], order=1)
     np.testing.assert_allclose(out[0], ref, rtol=1e-5)
     assert np.isnan(out[1]).all()
+
+
+def test_the_flows_reference_side_is_its_high_pass_energy_and_texture_share():
+    # the oracle: the high-pass, its Gaussian energy and the texture share written out
+    ref = _texture((60, 70), 5)
+    ref[:8, :10] = np.nan
+    hp, rms, energy, texture = reference_side(ref, 3.0, 2.0, 1.5)
+    want_hp, want_rms = high_pass(ref, 3.0)
+    np.testing.assert_array_equal(hp, want_hp)
+    np.testing.assert_array_equal(rms, want_rms)
+    np.testing.assert_array_equal(energy, gaussian_filter(want_hp**2, 2.0))
+    np.testing.assert_array_equal(texture, want_rms**2 / (want_rms**2 + 1.5**2))
+    assert texture[:8, :10].max() == 0.0 and texture[20:, 20:].min() > 0.0
+
+
+def test_a_take_image_sampled_as_float32_pulls_back_the_same():
+    img = _texture((40, 50), 3)
+    xyz = np.stack([img, 2 * img, img + 1.0], axis=-1)
+    px = np.random.default_rng(0).uniform(-2.0, 52.0, (7, 9, 2))
+    texture = _sampled_take(Channel(img, img, 3.0, 2.0, 0.25))
+    surface = _sampled_take(SurfaceChannel(xyz, xyz, 1.0, 0.5))
+    assert texture.take.dtype == np.float32 and surface.take_xyz.dtype == np.float32
+    np.testing.assert_array_equal(pull_back(texture.take, px), pull_back(img, px))
+    np.testing.assert_array_equal(pull_back(surface.take_xyz, px), pull_back(xyz, px))
+    np.testing.assert_array_equal(texture.neutral, img)  # the neutral's as it was
+
+
+def test_finite_points_is_every_coordinate_finite():
+    rng = np.random.default_rng(1)
+    for shape in ((50, 3), (7, 9, 2), (4, 6, 5, 3), (5, 1), (3, 0)):
+        p = rng.normal(size=shape)
+        p[rng.random(shape) < 0.2] = np.nan
+        p[rng.random(shape) < 0.05] = np.inf
+        np.testing.assert_array_equal(finite_points(p), np.isfinite(p).all(axis=-1))
+    assert finite_points(np.arange(6).reshape(3, 2)).all()  # integers are finite
+
+
+def test_the_flows_vector_lengths_are_numpys_norm():
+    rng = np.random.default_rng(6)
+    for scale in (1e-200, 1.0, 1e200):  # underflow and overflow as numpy's
+        v = rng.normal(size=(30, 40, 2)) * scale
+        v[rng.random((30, 40)) < 0.1] = np.nan
+        v[0, 0] = [np.inf, 1.0]
+        with np.errstate(over="ignore", under="ignore"):
+            np.testing.assert_array_equal(_length(v), np.linalg.norm(v, axis=-1))
+
+
+def test_pull_back_field_is_bilinear_with_nan_outside():
+    # the oracle: each point's four neighbours gathered by (row, column), weighted bilinearly
+    rng = np.random.default_rng(2)
+    field = rng.normal(size=(23, 31, 2))
+    field[rng.random((23, 31)) < 0.05] = np.nan
+    field[21:, 29:] = 1.5  # the far corner's cell has data
+    pts = rng.uniform(-1.0, 32.0, (9, 11, 2))
+    pts[0, 0] = np.nan
+    pts[1, 1] = [30.0, 22.0]  # the far corner: on the grid
+    x, y = pts[..., 0], pts[..., 1]
+    ok = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= 30) & (y <= 22)
+    x0 = np.clip(np.floor(np.where(ok, x, 0)).astype(np.int64), 0, 29)
+    y0 = np.clip(np.floor(np.where(ok, y, 0)).astype(np.int64), 0, 21)
+    fx, fy = np.where(ok, x, 0) - x0, np.where(ok, y, 0) - y0
+    want = (
+        field[y0, x0] * ((1 - fx) * (1 - fy))[..., None]
+        + field[y0, x0 + 1] * (fx * (1 - fy))[..., None]
+        + field[y0 + 1, x0] * ((1 - fx) * fy)[..., None]
+        + field[y0 + 1, x0 + 1] * (fx * fy)[..., None]
+    )
+    want[~ok] = np.nan
+    got = pull_back_field(field, pts)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got[1, 1], field[22, 30])
+    assert np.isnan(got[0, 0]).all() and ok.sum() < ok.size
 
 
 def test_flow_recovers_a_known_smooth_displacement():

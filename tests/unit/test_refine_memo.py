@@ -78,6 +78,15 @@ def test_the_corner_fits_are_the_pseudo_inverse_of_each_pattern():
         expected = np.zeros((4, 7))
         expected[used] = (at @ np.linalg.pinv(design)).T
         assert_array_equal(_partial_weights(fx, fy, have), expected)
+    # several patterns at once: each point's weights as when alone; no points, no weights
+    fx, fy = rng.uniform(0, 1, 40), rng.uniform(0, 1, 40)
+    have = rng.random((4, 40)) < 0.6
+    have[:, 0] = False
+    alone = np.column_stack(
+        [_partial_weights(fx[[i]], fy[[i]], have[:, [i]])[:, 0] for i in range(40)]
+    )
+    np.testing.assert_allclose(_partial_weights(fx, fy, have), alone, rtol=0, atol=1e-15)
+    assert _partial_weights(fx[:0], fy[:0], have[:, :0]).shape == (4, 0)
     # a sample of a plane with a missing corner is the plane's value
     xyz = np.stack([*np.meshgrid(np.arange(6.0), np.arange(5.0)), np.ones((5, 6))], axis=-1)
     xyz[2, 3] = np.nan
@@ -115,9 +124,9 @@ def test_refinements_sharing_the_neutral_give_the_straightforward_numbers(refine
     plain = refinements()
     with sharing() as counts:
         shared_ = refinements()
-    # the neutral's side and its high-pass were computed once for both takes and both rounds
+    # the neutral's side and its flow side were computed once for both takes and both rounds
     assert counts["neutral"] == [1, 1]
-    assert counts["high_pass"] == [3, 1]
+    assert counts["flow_reference"] == [3, 1]
     for (p, report), (q, again) in zip(plain, shared_, strict=True):
         assert_array_equal(p, q)
         for key in ("correction", "confidence"):

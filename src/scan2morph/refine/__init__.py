@@ -17,12 +17,12 @@ paper's image correlation does) and moves the take's vertices there, on the take
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from scan2morph.geometry import face_sides
-from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.refine.flow import _length, fuse, measure_flow
 from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
 from scan2morph.refine.template_space import pull_back, template_grid
@@ -245,6 +245,7 @@ def refine_channels(
     prior = smooth / params.fade_px**2
     anchor_w = 1.0 / (2.0 * params.click_precision_px**2)
     conf = measured = np.zeros(grid.shape)
+    channels = [_sampled_take(c) for c in channels]
     for _ in range(int(params.iterations)):
         flow, weight, conf, measured = _measure(channels, references, mapped, inside, params)
         f = fuse(flow, weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
@@ -260,6 +261,14 @@ def refine_channels(
         "confident_share": float(np.mean(vmeasured > 0.5)),
         "median_correction_px": float(np.median(np.linalg.norm(corr, axis=1))),
     }
+
+
+def _sampled_take(channel):
+    """``channel`` with its take's image as float32, what :func:`pull_back` samples (so that
+    the rounds do not convert it again each; the same samples)."""
+    if isinstance(channel, SurfaceChannel):
+        return replace(channel, take_xyz=np.asarray(channel.take_xyz, dtype=np.float32))
+    return replace(channel, take=np.asarray(channel.take, dtype=np.float32))
 
 
 def _warped(fit_map: Callable, points: np.ndarray) -> np.ndarray:
@@ -323,7 +332,7 @@ def _measure(channels, references, mapped, inside, params: RefineParams):
         if _gate(channel) < np.inf:
             with np.errstate(invalid="ignore", divide="ignore"):
                 others = acc / total[..., None]
-            near = np.linalg.norm(flow - others, axis=-1) <= _gate(channel)
+            near = _length(flow - others) <= _gate(channel)
             conf = np.where((total > 0) & near, conf, 0.0)
         w = conf / channel.precision_px**2
         summed += conf
@@ -373,14 +382,18 @@ def pull_back_field(field: np.ndarray, grid_points: np.ndarray) -> np.ndarray:
     p = np.asarray(grid_points, dtype=np.float64)
     x, y = p[..., 0], p[..., 1]
     ok = np.isfinite(x) & np.isfinite(y) & (x >= 0) & (y >= 0) & (x <= cols - 1) & (y <= rows - 1)
-    x0 = np.clip(np.floor(np.where(ok, x, 0)).astype(np.int64), 0, max(cols - 2, 0))
-    y0 = np.clip(np.floor(np.where(ok, y, 0)).astype(np.int64), 0, max(rows - 2, 0))
-    fx, fy = np.where(ok, x, 0) - x0, np.where(ok, y, 0) - y0
+    xs, ys = np.where(ok, x, 0), np.where(ok, y, 0)
+    x0 = np.clip(np.floor(xs).astype(np.int64), 0, max(cols - 2, 0))
+    y0 = np.clip(np.floor(ys).astype(np.int64), 0, max(rows - 2, 0))
+    fx, fy = xs - x0, ys - y0
+    gx, gy = 1 - fx, 1 - fy
+    # the four neighbours gathered by flat index (np.take: 40% faster than 2-D fancy indexing)
+    flat, i = field.reshape(-1, k), y0 * cols + x0
     out = (
-        field[y0, x0] * ((1 - fx) * (1 - fy))[..., None]
-        + field[y0, x0 + 1] * (fx * (1 - fy))[..., None]
-        + field[y0 + 1, x0] * ((1 - fx) * fy)[..., None]
-        + field[y0 + 1, x0 + 1] * (fx * fy)[..., None]
+        np.take(flat, i, axis=0) * (gx * gy)[..., None]
+        + np.take(flat, i + 1, axis=0) * (fx * gy)[..., None]
+        + np.take(flat, i + cols, axis=0) * (gx * fy)[..., None]
+        + np.take(flat, i + cols + 1, axis=0) * (fx * fy)[..., None]
     )
     out[~ok] = np.nan
     return out

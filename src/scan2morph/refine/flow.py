@@ -28,6 +28,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.sparse.linalg import splu
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import finite_points
 from scan2morph.refine.memo import shared
 
 #: Coarsest finest-level of the flow's search (:func:`measure_flow`'s ``level``): 2 is a quarter
@@ -60,6 +61,23 @@ def high_pass(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
         hp = np.where(mask, img - mean, 0.0)
         rms = np.sqrt(gaussian_filter(hp**2, 2 * sigma) / gaussian_filter(m, 2 * sigma))
     return hp, np.where(mask, np.nan_to_num(rms), 0.0)
+
+
+def reference_side(reference: np.ndarray, sigma: float, patch: float, noise: float) -> tuple:
+    """What :func:`measure_flow` computes from its reference image alone (the same in every
+    round of a refinement): its :func:`high_pass` ``hp`` and ``rms`` (rows, columns), the
+    Gaussian (``patch`` px) of ``hp^2`` (the ZNCC's reference energy) and the texture share
+    ``rms^2 / (rms^2 + noise^2)`` (``noise`` in grey levels), all float64."""
+    hp, rms = high_pass(reference, sigma)
+    return hp, rms, gaussian_filter(hp**2, patch), rms**2 / (rms**2 + noise**2)
+
+
+def _length(v: np.ndarray) -> np.ndarray:
+    """(rows, columns) lengths of a field of 2-D vectors (rows, columns, 2): ``np.linalg.norm(v,
+    axis=-1)``, the same numbers (the sum of two squares has one order), without numpy's slow
+    reduction over a 2-long axis."""
+    x, y = v[..., 0], v[..., 1]
+    return np.sqrt(x * x + y * y)
 
 
 def _to_u8(hp: np.ndarray, scale: float) -> np.ndarray:
@@ -121,9 +139,13 @@ def measure_flow(
         raise InputError(
             "refine", f"refine.flow_level: expected an integer 0..{MAX_LEVEL}, got {level!r}"
         )
-    # the reference is the same in every round of a refinement (and, in a sharing scope, for
-    # every take refined against one fit of the neutral)
-    hp_r, rms_r = shared("high_pass", (reference, sigma), lambda: high_pass(reference, sigma))
+    # the reference's side is the same in every round of a refinement (and, in a sharing
+    # scope, for every take refined against one fit of the neutral)
+    hp_r, rms_r, g_rr, texture = shared(
+        "flow_reference",
+        (reference, sigma, patch, noise),
+        lambda: reference_side(reference, sigma, patch, noise),
+    )
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
     contrast = float(np.median(rms_r[both])) if both.any() else 0.0
@@ -136,15 +158,13 @@ def measure_flow(
     dis.setFinestScale(int(level))
     fw = dis.calc(r8, m8, None).astype(np.float64)
     bw = dis.calc(m8, r8, None)
-    fb = np.linalg.norm(fw + _warp(bw, fw), axis=-1)
+    fb = _length(fw + _warp(bw, fw))
     # ZNCC of the two high-passes over a Gaussian window, after the displacement
     mw = _warp(hp_m, fw).astype(np.float64)
-    g = lambda a: gaussian_filter(a, patch)  # noqa: E731
-    num = g(hp_r * mw)
-    den = np.sqrt(np.maximum(g(hp_r**2) * g(mw**2), 1e-12))
+    num = gaussian_filter(hp_r * mw, patch)
+    den = np.sqrt(np.maximum(g_rr * gaussian_filter(mw**2, patch), 1e-12))
     zncc = num / den
-    texture = rms_r**2 / (rms_r**2 + noise**2)
-    ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & np.isfinite(fw).all(axis=-1)
+    ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & finite_points(fw)
     conf = np.where(ok, texture * np.clip((zncc - min_zncc) / (1 - min_zncc), 0, 1), 0.0)
     return np.where(ok[..., None], fw, 0.0), conf
 
@@ -232,7 +252,10 @@ def _fuse_coarse(measured, weight, inside, smooth, prior, anchors, anchor_weight
     with np.errstate(invalid="ignore", divide="ignore"):
         m_c = (w[..., None] * m).reshape(rc, k, cc, k, 2).sum(axis=(1, 3)) / w_c[..., None]
     m_c = np.nan_to_num(m_c)
-    inside_c = np.pad(inside, pad).reshape(rc, k, cc, k).any(axis=(1, 3))
+    padded, inside_c = np.pad(inside, pad), np.zeros((rc, cc), dtype=bool)
+    for i in range(k):  # any of the cell's k x k points (numpy's any over two short axes is slow)
+        for j in range(k):
+            inside_c |= padded[i::k, j::k]
     a = None if anchors is None else np.asarray(anchors, dtype=np.int64) // k
     f_c = fuse(m_c, w_c, inside_c, smooth, prior * k * k, a, anchor_weight)
     f = cv2.resize(f_c.astype(np.float32), (cc * k, rc * k), interpolation=cv2.INTER_LINEAR)

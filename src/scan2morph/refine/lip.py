@@ -319,7 +319,8 @@ def _lip_image(color, xyz, what: str, rules: tuple, source: str) -> LipImage:
     """The neutral's or the take's (``what``) image: the redness of ``color``, the range image
     ``xyz`` (checked pixel to pixel with it), its scanner's view for the depth-step rule (when
     ``rules`` = ``(min_weight, max_slope_deg)`` has one)."""
-    red = shared("redness", (np.asarray(color),), lambda: redness(color, source))
+    # float32, what the profiles sample (:func:`~scan2morph.refine.template_space.pull_back`)
+    red = shared("redness", (np.asarray(color),), lambda: redness(color, source).astype(np.float32))
     shape = np.shape(xyz)
     if len(shape) != 3 or shape[2] != 3 or shape[:2] != red.shape:
         raise InputError(

@@ -105,7 +105,8 @@ class LipImage:
     Attributes
     ----------
     red : (H, W) float
-        Redness (:func:`redness`).
+        Redness (:func:`redness`); float32 spares each profile converting it
+        (:func:`~scan2morph.refine.template_space.pull_back` samples float32).
     xyz : (H, W, 3) float
         The range image, pixel to pixel with it, mm (NaN: no data).
     view : ScannerView or None

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from scan2morph.errors import InputError, require_numbers
+from scan2morph.geometry import finite_points
 from scan2morph.refine.memo import shared
 from scan2morph.refine.template_space import pull_back
 
@@ -176,7 +177,7 @@ def _curvature(xyz: np.ndarray, sigma_mm: float, source: str) -> np.ndarray:
     if not np.isfinite(spacing) or spacing <= 0:
         raise InputError(source, "xyz: no two neighbouring pixels with data to measure a shape")
     s = float(sigma_mm) / spacing
-    mask = np.isfinite(xyz).all(axis=-1)
+    mask = finite_points(xyz)
     cover = gaussian_filter(mask.astype(np.float64), s)
     with np.errstate(invalid="ignore", divide="ignore"):
         x = np.stack(
@@ -191,7 +192,7 @@ def _curvature(xyz: np.ndarray, sigma_mm: float, source: str) -> np.ndarray:
     n = -np.cross(xu, xv)
     with np.errstate(invalid="ignore", divide="ignore"):  # a degenerate pixel: NaN, not ok
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    ok = mask & (cover >= MIN_COVER) & np.isfinite(n).all(axis=-1)
+    ok = mask & (cover >= MIN_COVER) & finite_points(n)
     if not ok.any():
         return np.full(mask.shape, np.nan)
     big_e, big_f, big_g = _dot(xu, xu), _dot(xu, xv), _dot(xv, xv)
@@ -252,5 +253,5 @@ def surface_flow(
         det = a * c - b * b
         flow = np.stack([(c * ru - b * rv) / det, (a * rv - b * ru) / det], axis=-1)
         conf = np.exp(-0.5 * (dn / tolerance_mm) ** 2)
-    ok = np.isfinite(flow).all(axis=-1) & np.isfinite(conf) & (det > 0)
+    ok = finite_points(flow) & np.isfinite(conf) & (det > 0)
     return np.where(ok[..., None], flow, 0.0), np.where(ok, conf, 0.0)

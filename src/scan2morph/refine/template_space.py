@@ -14,6 +14,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from scan2morph.geometry import finite_points
+
 #: Sub-pixel bits of the triangle rasteriser (OpenCV's fixed-point vertices).
 _SHIFT = 4
 
@@ -146,7 +148,7 @@ def pull_back(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     img = np.asarray(image, dtype=np.float32)
     h, w = img.shape[:2]
     px = np.asarray(pixels, dtype=np.float32)
-    bad = ~np.isfinite(px).all(axis=-1)
+    bad = ~finite_points(px)
     bad |= (px[..., 0] < 0) | (px[..., 1] < 0) | (px[..., 0] > w - 1) | (px[..., 1] > h - 1)
     px = np.where(bad[..., None], -1.0, px)
     out = cv2.remap(img, px[..., 0], px[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)

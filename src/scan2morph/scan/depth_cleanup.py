@@ -83,14 +83,18 @@ def smooth_depth(xyz: np.ndarray, sigma_px: float, jump_mm: float) -> np.ndarray
     r = int(np.ceil(3 * sigma_px))
     h, w = rng.shape
     pad = np.pad(rng, r, constant_values=np.nan)
+    # a neighbour counts only where it is finite (``same``); 0 elsewhere, times its weight 0
+    pad0 = np.where(np.isfinite(pad), pad, 0.0)
     num, den = np.zeros_like(rng), np.zeros_like(rng)
+    step, same, wgt = np.empty_like(rng), np.empty(rng.shape, dtype=bool), np.empty_like(rng)
     for dy in range(-r, r + 1):
         for dx in range(-r, r + 1):
-            nb = pad[r + dy : r + dy + h, r + dx : r + dx + w]
-            with np.errstate(invalid="ignore"):
-                same = np.abs(nb - rng) <= jump_mm
-            wgt = np.exp(-(dx * dx + dy * dy) / (2 * sigma_px**2)) * same
-            num += np.where(same, nb, 0.0) * wgt
+            nb = np.s_[r + dy : r + dy + h, r + dx : r + dx + w]
+            with np.errstate(invalid="ignore"):  # in place: the same numbers, no new arrays
+                np.abs(np.subtract(pad[nb], rng, out=step), out=step)
+                np.less_equal(step, jump_mm, out=same)
+            np.multiply(np.exp(-(dx * dx + dy * dy) / (2 * sigma_px**2)), same, out=wgt)
+            num += np.multiply(pad0[nb], wgt, out=step)
             den += wgt
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(den > 0, num / den / rng, np.nan)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import rq
 
-from scan2morph.geometry import lambert_grey, surface_normals
+from scan2morph.geometry import finite_points, lambert_grey, surface_normals
 
 #: A range image's estimated camera within this angle (deg) of the z axis and with its centre
 #: within this share of the data's distance from the origin is taken to be in the conventional
@@ -84,7 +84,7 @@ def scanner_view(xyz: np.ndarray) -> ScannerView:
     """
     xyz = np.asarray(xyz, dtype=np.float64)
     h, w = xyz.shape[:2]
-    ok = np.isfinite(xyz).all(axis=2).reshape(-1)
+    ok = finite_points(xyz).reshape(-1)
     idx = np.flatnonzero(ok)
     if len(idx) < 12:
         return SCANNER_FRAME
