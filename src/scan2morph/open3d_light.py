@@ -7,7 +7,8 @@ a take although the pipeline never draws with plotly. :func:`open3d` imports ope
 submodule stood in for: its three functions (``get_plotly_fig``, ``draw_plotly``,
 ``draw_plotly_server``) import the real module on their first call and then behave as open3d's
 own, so ``open3d.visualization.draw_plotly(...)`` still works in a process that imported open3d
-here.
+here. :func:`triangle_scene` is the ray-casting scene of a triangle surface every layer builds
+(closest points, first hits along rays).
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import importlib.machinery
 import importlib.util
 import sys
 import types
+
+import numpy as np
 
 #: The submodule left out of the import, and the names ``open3d.visualization`` takes from it.
 PLOTLY_MODULE = "open3d.visualization.draw_plotly"
@@ -44,6 +47,29 @@ def open3d() -> types.ModuleType:
         del sys.modules[PLOTLY_MODULE]
         raise
     return o3d
+
+
+def triangle_scene(vertices: np.ndarray, faces: np.ndarray):
+    """An open3d ray-casting scene of a triangle surface (closest points, rays' first hits).
+
+    Parameters
+    ----------
+    vertices : (N, 3) float
+        The surface's vertices, mm (cast to float32, open3d's precision).
+    faces : (F, 3) int
+        Vertex indices of its triangles.
+
+    Returns
+    -------
+    open3d.t.geometry.RaycastingScene
+    """
+    o3d = open3d()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
+        o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)),
+    )
+    return scene
 
 
 def _real_plotly() -> types.ModuleType:

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter, map_coordinates
 
-from scan2morph.geometry import finite_points
+from scan2morph.geometry import finite_points, lengths_2d
 from scan2morph.refine import (
     Channel,
     RefineParams,
@@ -14,7 +14,7 @@ from scan2morph.refine import (
     pull_back_field,
     refine_points,
 )
-from scan2morph.refine.flow import _length, fuse, high_pass, measure_flow, reference_side
+from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
@@ -104,7 +104,7 @@ def test_the_flows_vector_lengths_are_numpys_norm():
         v[rng.random((30, 40)) < 0.1] = np.nan
         v[0, 0] = [np.inf, 1.0]
         with np.errstate(over="ignore", under="ignore"):
-            np.testing.assert_array_equal(_length(v), np.linalg.norm(v, axis=-1))
+            np.testing.assert_array_equal(lengths_2d(v), np.linalg.norm(v, axis=-1))
 
 
 def test_pull_back_field_is_bilinear_with_nan_outside():

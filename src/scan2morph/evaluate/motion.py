@@ -22,8 +22,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scan2morph.errors import InputError
-from scan2morph.evaluate.truth import Truth, closest_points, surface_scene
-from scan2morph.open3d_light import open3d
+from scan2morph.evaluate.truth import Truth, closest_points
+from scan2morph.open3d_light import open3d, triangle_scene
 from scan2morph.template.mesh import IBUG_CANONICAL, INNER_LIPS
 from scan2morph.template.regions import inner_lip_midline, lip_side
 from scan2morph.template.sample import behind_steps
@@ -61,7 +61,7 @@ def ideal_points(
     rays[:, 3:] /= np.linalg.norm(rays[:, 3:], axis=1, keepdims=True)
     o3d = open3d()
 
-    hit = surface_scene(truth.posed_vertices(), truth.faces).cast_rays(o3d.core.Tensor(rays))
+    hit = triangle_scene(truth.posed_vertices(), truth.faces).cast_rays(o3d.core.Tensor(rays))
     t = hit["t_hit"].numpy().astype(np.float64).reshape(len(offsets), -1)
     face = hit["primitive_ids"].numpy().astype(np.int64).reshape(len(offsets), -1)
     out = rays[: len(pts), 3:].astype(np.float64) * t[0][:, None]

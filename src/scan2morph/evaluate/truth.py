@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.open3d_light import open3d
+from scan2morph.open3d_light import open3d, triangle_scene
 
 _KEYS = (
     "vertices",
@@ -66,18 +66,6 @@ def read_truth(path: str | Path) -> Truth:
         return Truth.from_arrays({k: data[k] for k in data.files}, source=path)
 
 
-def surface_scene(vertices: np.ndarray, faces: np.ndarray):
-    """An open3d ray-casting scene of a triangle surface (for distances and closest points)."""
-    o3d = open3d()
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
-        o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)),
-    )
-    return scene
-
-
 def closest_points(vertices: np.ndarray, faces: np.ndarray, queries: np.ndarray):
     """Closest points of ``queries`` (Q, 3) on a surface.
 
@@ -89,7 +77,7 @@ def closest_points(vertices: np.ndarray, faces: np.ndarray, queries: np.ndarray)
     """
     o3d = open3d()
 
-    scene = surface_scene(vertices, faces)
+    scene = triangle_scene(vertices, faces)
     res = scene.compute_closest_points(
         o3d.core.Tensor(np.ascontiguousarray(queries, dtype=np.float32))
     )

@@ -21,8 +21,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from scan2morph.geometry import face_sides
-from scan2morph.refine.flow import _length, fuse, measure_flow
+from scan2morph.geometry import face_sides, lengths_2d
+from scan2morph.refine.flow import fuse, measure_flow
 from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
 from scan2morph.refine.template_space import pull_back, template_grid
@@ -332,7 +332,7 @@ def _measure(channels, references, mapped, inside, params: RefineParams):
         if _gate(channel) < np.inf:
             with np.errstate(invalid="ignore", divide="ignore"):
                 others = acc / total[..., None]
-            near = _length(flow - others) <= _gate(channel)
+            near = lengths_2d(flow - others) <= _gate(channel)
             conf = np.where((total > 0) & near, conf, 0.0)
         w = conf / channel.precision_px**2
         summed += conf

@@ -28,7 +28,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.sparse.linalg import splu
 
 from scan2morph.errors import InputError
-from scan2morph.geometry import finite_points
+from scan2morph.geometry import finite_points, lengths_2d
 from scan2morph.refine.memo import shared
 
 #: Coarsest finest-level of the flow's search (:func:`measure_flow`'s ``level``): 2 is a quarter
@@ -70,14 +70,6 @@ def reference_side(reference: np.ndarray, sigma: float, patch: float, noise: flo
     ``rms^2 / (rms^2 + noise^2)`` (``noise`` in grey levels), all float64."""
     hp, rms = high_pass(reference, sigma)
     return hp, rms, gaussian_filter(hp**2, patch), rms**2 / (rms**2 + noise**2)
-
-
-def _length(v: np.ndarray) -> np.ndarray:
-    """(rows, columns) lengths of a field of 2-D vectors (rows, columns, 2): ``np.linalg.norm(v,
-    axis=-1)``, the same numbers (the sum of two squares has one order), without numpy's slow
-    reduction over a 2-long axis."""
-    x, y = v[..., 0], v[..., 1]
-    return np.sqrt(x * x + y * y)
 
 
 def _to_u8(hp: np.ndarray, scale: float) -> np.ndarray:
@@ -158,7 +150,7 @@ def measure_flow(
     dis.setFinestScale(int(level))
     fw = dis.calc(r8, m8, None).astype(np.float64)
     bw = dis.calc(m8, r8, None)
-    fb = _length(fw + _warp(bw, fw))
+    fb = lengths_2d(fw + _warp(bw, fw))
     # ZNCC of the two high-passes over a Gaussian window, after the displacement
     mw = _warp(hp_m, fw).astype(np.float64)
     num = gaussian_filter(hp_r * mw, patch)

@@ -20,7 +20,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
-from scan2morph.open3d_light import open3d
+from scan2morph.open3d_light import open3d, triangle_scene
 
 #: The conventions a take's truth can follow; the first is the default.
 CONVENTIONS = ("synth", "ibug")
@@ -89,11 +89,7 @@ def visible(cam_vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> 
         No surface nearer than the point by more than :data:`_VISIBLE_MM` along its ray.
     """
     o3d = open3d()
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(cam_vertices.astype(np.float32)),
-        o3d.core.Tensor(np.asarray(faces, dtype=np.uint32)),
-    )
+    scene = triangle_scene(cam_vertices, faces)
     dist = np.linalg.norm(points, axis=1)
     rays = np.concatenate([np.zeros_like(points), points / dist[:, None]], axis=1)
     hit = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()

@@ -98,9 +98,8 @@ class HeadModel:
     mouth : dict
         Mouth geometry at rest, mm: ``corner_x`` (half-width), ``y`` and ``z`` of the centre,
         ``corner_y`` (mean height of the corners).
-    ibug : IbugRest
-        The rest points under the iBUG annotation's conventions (see
-        :mod:`~scan2morph.synth.convention`).
+    rest_mesh : _RestMesh
+        The rest mesh the head was built from (its implicit shape; for :attr:`ibug`).
     """
 
     identity: Identity
@@ -115,7 +114,14 @@ class HeadModel:
     slit_upper: np.ndarray = field(repr=False)
     slit_lower: np.ndarray = field(repr=False)
     mouth: dict = field(repr=False)
-    ibug: IbugRest | None = field(default=None, repr=False)
+    rest_mesh: object = field(default=None, repr=False)
+
+    @functools.cached_property
+    def ibug(self) -> IbugRest:
+        """The rest points under the iBUG annotation's conventions (see
+        :mod:`~scan2morph.synth.convention`), found on first use: only the ``ibug`` truth
+        needs them, not every head built."""
+        return ibug_rest(self.rest_mesh, self.segment, self.landmarks)
 
     @property
     def skin_faces(self) -> np.ndarray:
@@ -155,9 +161,8 @@ def build_head(identity: Identity) -> HeadModel:
     )
     for v in list(arrays.values()) + list(fields.values()):
         v.setflags(write=False)
-    ibug = ibug_rest(mesh, segment, arrays["landmarks"])
     return HeadModel(
-        identity=identity, fields=fields, mouth=mesh.mouth.as_dict(), ibug=ibug, **arrays
+        identity=identity, fields=fields, mouth=mesh.mouth.as_dict(), rest_mesh=mesh, **arrays
     )
 
 

@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import vertex_normals  # noqa: E402
 from scan2morph.io.calibration import StereoCalibration  # noqa: E402
-from scan2morph.open3d_light import open3d  # noqa: E402
+from scan2morph.open3d_light import open3d, triangle_scene  # noqa: E402
 from scan2morph.synth.cohort import (  # noqa: E402
     AIM,
     _check_result,
@@ -316,11 +316,7 @@ def _left_truth(
     width, height = p["width"], p["height"]
     norm = _remap_tables(cam["K"], cam["D"], width, height, int(p["supersample"]))[4]
     dirs = np.concatenate([norm, np.ones((len(norm), 1))], axis=1)  # ray (x, y, 1): t = Z
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(v_left.astype(np.float32)),
-        o3d.core.Tensor(np.asarray(head.faces, dtype=np.uint32)),
-    )
+    scene = triangle_scene(v_left, head.faces)
     rays = np.concatenate([np.zeros_like(dirs), dirs], axis=1).astype(np.float32)
     hit = scene.cast_rays(o3d.core.Tensor(rays))
     z = hit["t_hit"].numpy().astype(np.float64)

@@ -16,7 +16,7 @@ import hashlib
 
 import numpy as np
 
-from scan2morph.open3d_light import open3d
+from scan2morph.open3d_light import open3d, triangle_scene
 
 #: Odd 64-bit multipliers combining the three lattice coordinates into one hash key.
 _HASH_MUL = (
@@ -173,12 +173,7 @@ def rest_positions(
         Rest positions, NaN where a ray misses the mesh.
     """
     o3d = open3d()
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.ascontiguousarray(vertices_cam, dtype=np.float32)),
-        o3d.core.Tensor(np.ascontiguousarray(faces, dtype=np.uint32)),
-    )
+    scene = triangle_scene(vertices_cam, faces)
     r = np.concatenate([np.zeros_like(rays), rays], axis=1).astype(np.float32)
     hit = scene.cast_rays(o3d.core.Tensor(r))
     found = np.isfinite(hit["t_hit"].numpy())
