@@ -57,13 +57,23 @@ brows, raised medially and pulled down and in at once: features 8-14 mm wide) an
 the mouth. The normal part of what K = 50 leaves of the true motion is 0.34-0.71 of its K = 1
 value (measured: 0.36-0.81).
 
-Tried on that evidence (synth01-02, prototype, not adopted): the clamped outline replaced by the
-skin beyond the cut, a strip of width l under the same tension held at its far edge (a Robin
-boundary: springs ``T L_i / l`` on the translations of each clamped outline vertex, ``L_i`` its
-share of the outline's length). Smiles and brows gain (true, K = 50, l = 10 mm: synth01 smile1
-0.344 -> 0.267, brows1 0.284 -> 0.223), the sad faces and frown lose (synth01 sad1 0.357 ->
-0.435, frown1 0.255 -> 0.291; l = 3 mm: 0.411, 0.281; l = 30 mm: 0.478, 0.307): the freed outline
-takes low modes that the sad faces need elsewhere, as the free outline does (``skin_free_outline``).
+Tried on that evidence, not adopted: the clamp replaced by the skin beyond the cut, a strip l
+wide under the same tension held at its far edge (a Robin edge: springs ``T L_i / l`` on the
+translations of each clamped outline vertex, ``L_i`` its share of the outline's length;
+:func:`scan2morph.modal.skin.edge_springs`, ``ModalParams.clamp_strip_mm``, configurations
+``skin_strip_3`` and ``skin_strip_10``). Share left, measured, synth03-04 (held out), ``skin``
+-> ``skin_strip_3``: smiles 0.39-0.41 -> 0.34-0.38 at K = 50, 0.28-0.33 -> 0.22-0.27 at
+K = 100; brows1 0.18-0.29 -> 0.18-0.23 and frown1 0.24-0.33 -> 0.24-0.27 at K = 100; the sad
+faces 0.60-0.66 -> 0.60-0.68 at K = 25, 0.45-0.47 -> 0.46-0.47 at K = 50; the real smile
+0.55 / 0.44 / 0.35 -> 0.53 / 0.42 / 0.32 at K = 25 / 50 / 100. It leaves less than the anchor
+on every expression at K = 25 and 50 (and on the truth at every K; ``skin`` not at K = 100),
+measured at K = 100 on all but synth03 brows1 (+0.026; ``skin`` +0.079). But it costs the sad
+faces: up to +0.014 on held-out ones (synth04 sad1, K = 25), +0.055 on synth01's (K = 50,
+0.34 -> 0.39), the freed outline taking low modes that they need on the brows and round the
+mouth, as the free outline does (``skin_free_outline``); l = 10 mm gains more on the smiles
+(held out 0.33-0.38 at K = 50, 0.18-0.24 at K = 100) and costs more (sad faces up to +0.039
+held out, +0.081 on synth01). The rule for a default (no expression worse by more than 0.005)
+keeps ``skin``.
 
 A synthetic run to measure on (four subjects, four expressions each, 320 x 240 range scans,
 about 10 minutes on one core)::
@@ -159,7 +169,24 @@ VARIANTS: dict[str, dict] = {
     "skin_still_2": {"preset": "skin", "still_mm": 2.0},  # more skin
     "skin_foundation_0.003": {"preset": "skin", "foundation_n_per_mm3": 0.003},
     "skin_foundation_0.03": {"preset": "skin", "foundation_n_per_mm3": 0.03},
+    # the clamp replaced by the skin beyond the cut, a strip l mm wide held at its far edge
+    # (ModalParams.clamp_strip_mm, a library parameter, no config key; see the docstring)
+    "skin_strip_3": {"preset": "skin", "clamp_strip_mm": 3.0},
+    "skin_strip_10": {"preset": "skin", "clamp_strip_mm": 10.0},
 }
+
+
+def variant_params(cfg: dict, variant: dict):
+    """The modal stage's parameters for a configuration (its ``clamp_strip_mm`` set on the
+    :class:`~scan2morph.modal.ModalParams`: no config key), two eigensolver threads."""
+    from dataclasses import replace
+
+    from scan2morph.stages import modal
+
+    keys = dict(variant)
+    strip = float(keys.pop("clamp_strip_mm", 0.0))
+    params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | keys}).with_threads(2)
+    return replace(params, modal=replace(params.modal, clamp_strip_mm=strip))
 
 
 def subject_case(run: Path, subject: str, cfg: dict, truth: bool = False) -> dict:
@@ -224,8 +251,7 @@ def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
     from scan2morph.stages import modal
     from scan2morph.store import paths
 
-    section = dict(cfg["modal"]) | variant
-    params = modal.Params.from_config(cfg | {"modal": section}).with_threads(2)
+    params = variant_params(cfg, variant)
     t0 = time.perf_counter()
     basis, outline = modal.natural_basis(
         case["fine"], case["subject"], case["data"], case["fields"], params
@@ -351,9 +377,8 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     from scan2morph.modal import modal_basis, project, reconstruct
     from scan2morph.modal.fem import boundary_vertices
     from scan2morph.modal.span import residual_split, span_curve
-    from scan2morph.stages import modal
 
-    params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | variant}).with_threads(2)
+    params = variant_params(cfg, variant)
     v, f = real["vertices"], real["faces"]
     rim = boundary_vertices(f, len(v))
     fixed = rim if params.fixed_outline != "none" else np.zeros(len(v), bool)
