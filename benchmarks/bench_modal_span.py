@@ -16,6 +16,65 @@ tried on the way, :data:`VARIANTS`), the table gives what is left of the express
   Laplace-Beltrami operator (free boundary), at K = 25, 50, 100.
 
 Subjects given with ``--tune`` chose the physics; ``--held`` ones are reported as held out.
+
+``--truth`` (synthetic subjects) adds, over the same valid vertices (those with a finite truth
+too), the span of each expression's TRUE material displacement of the neutral's template
+vertices (the motion of the skin point each vertex sits on, from
+``RUN/results/synthetic/{subject}/truth/{take}.npz``, made as the accuracy stage makes it:
+:func:`scan2morph.evaluate.motion.true_motions` with the template's lip sides) and of the
+correspondence's error (measured - true), rows ``field`` = ``true`` / ``error`` beside
+``measured``, each share of its own field's RMS; the anchor then at every K (round(K/3)
+functions per axis, at least one: K = 1 is the three translations, K = 5 six fields, K = 10
+nine). On the default run (/work/ci33, synth01-02 tune / synth03-04 held out; ``--configs skin
+paper``), least squares, the share left as ranges over the six expressions of each group::
+
+    K                  1          5          10         25         50         100
+    skin   measured  .98-1/.98-1 .76-1/.79-1 .40-.93/.42-.75 .32-.85/.30-.66 .26-.72/.24-.47 .17-.51/.18-.35
+           true      .99-1/1-1   .76-1/.81-1 .40-.77/.42-.75 .31-.64/.30-.65 .25-.47/.23-.44 .16-.26/.15-.25
+           error     .96-1/.94-1 .91-1/.93-1 .76-.99/.88-.99 .65-.98/.75-.96 .51-.96/.69-.92 .42-.93/.59-.84
+    paper  measured  1-1/1-1     .91-1/.92-.99 .90-.98/.91-.97 .85-.94/.85-.94 .76-.88/.76-.89 .55-.78/.47-.75
+           true      1-1/1-1     .93-1/.91-.99 .92-.98/.91-.97 .85-.95/.86-.93 .76-.92/.77-.88 .51-.70/.46-.71
+           error     .99-1/1-1   .98-1/.99-1 .96-1/.98-1 .92-.99/.95-1 .85-.97/.92-.99 .68-.95/.90-.95
+    anchor measured  .84-1/.83-1 .72-.97/.68-.94 .72-.96/.67-.94 .44-.89/.49-.79 .38-.80/.36-.69 .21-.64/.21-.45
+           true      .84-1/.85-1 .71-.94/.70-.94 .71-.93/.70-.93 .45-.83/.51-.79 .38-.71/.40-.70 .19-.45/.20-.45
+           error     .89-1/.94-.99 .86-.98/.91-.98 .85-.98/.89-.96 .72-.97/.74-.94 .65-.92/.59-.88 .48-.88/.38-.79
+
+The error is 10-12% of the measured RMS on synth01, 19-34% on synth04, 27-52% on synth03 and
+58-130% on synth02 (whose measured sad faces and frown have 0.57-0.63 of the true motion's
+RMS). No basis spans it (``skin`` leaves 0.51-0.96 of it at K = 50), so where it is large the
+measured expression is spanned worse than the truth: synth02 at K = 50 0.43-0.72 measured,
+0.28-0.47 true; synth03's brows1, frown1 and smiles, which ``skin`` leaves more of than the
+anchor at K = 100 when measured (+0.015 to +0.079), it leaves less of in truth. On the truth
+``skin`` leaves less than the anchor on every expression at K = 25 (by 0.036 or more) and K = 50
+(by 0.067 or more), at K = 100 on all but brows1 of synth01 (+0.005) and synth02 (+0.028). But
+the truth itself is not spanned to the goal: at K = 50 ``skin`` leaves 0.23-0.28 of brows1,
+0.23-0.34 of frown1, 0.34-0.39 of the smiles and 0.36-0.47 of the sad faces (the real head's
+noise-free test smile: 0.44). Of the energy K = 50 leaves of the true smiles and sad faces
+74-82% is tangential. Of the smiles' residual 15-19% lies on the clamped outline (which holds
+2-3% of the smile: the cheeks' sides move 1.5-2 mm where the median take leaves the outline
+still), 17-27% on the lips and round the mouth; of the sad faces' 42-70% on the upper face (the
+brows, raised medially and pulled down and in at once: features 8-14 mm wide) and 13-30% round
+the mouth. The normal part of what K = 50 leaves of the true motion is 0.34-0.71 of its K = 1
+value (measured: 0.36-0.81).
+
+Tried on that evidence, not adopted: the clamp replaced by the skin beyond the cut, a strip l
+wide under the same tension held at its far edge (a Robin edge: springs ``T L_i / l`` on the
+translations of each clamped outline vertex, ``L_i`` its share of the outline's length;
+:func:`scan2morph.modal.skin.edge_springs`, ``ModalParams.clamp_strip_mm``, configurations
+``skin_strip_3`` and ``skin_strip_10``). Share left, measured, synth03-04 (held out), ``skin``
+-> ``skin_strip_3``: smiles 0.39-0.41 -> 0.34-0.38 at K = 50, 0.28-0.33 -> 0.22-0.27 at
+K = 100; brows1 0.18-0.29 -> 0.18-0.23 and frown1 0.24-0.33 -> 0.24-0.27 at K = 100; the sad
+faces 0.60-0.66 -> 0.60-0.68 at K = 25, 0.45-0.47 -> 0.46-0.47 at K = 50; the real smile
+0.55 / 0.44 / 0.35 -> 0.53 / 0.42 / 0.32 at K = 25 / 50 / 100. It leaves less than the anchor
+on every expression at K = 25 and 50 (and on the truth at every K; ``skin`` not at K = 100),
+measured at K = 100 on all but synth03 brows1 (+0.026; ``skin`` +0.079). But it costs the sad
+faces: up to +0.014 on held-out ones (synth04 sad1, K = 25), +0.055 on synth01's (K = 50,
+0.34 -> 0.39), the freed outline taking low modes that they need on the brows and round the
+mouth, as the free outline does (``skin_free_outline``); l = 10 mm gains more on the smiles
+(held out 0.33-0.38 at K = 50, 0.18-0.24 at K = 100) and costs more (sad faces up to +0.039
+held out, +0.081 on synth01). The rule for a default (no expression worse by more than 0.005)
+keeps ``skin``.
+
 A synthetic run to measure on (four subjects, four expressions each, 320 x 240 range scans,
 about 10 minutes on one core)::
 
@@ -25,7 +84,8 @@ about 10 minutes on one core)::
 Usage::
 
     .venv/bin/python benchmarks/bench_modal_span.py RUN --tune synth01 synth02 \\
-        --held synth03 synth04 --realdata [--configs skin paper clamped_still] [--tsv out.tsv]
+        --held synth03 synth04 --realdata [--configs skin paper clamped_still] [--truth] \\
+        [--tsv out.tsv]
 """
 
 from __future__ import annotations
@@ -109,11 +169,31 @@ VARIANTS: dict[str, dict] = {
     "skin_still_2": {"preset": "skin", "still_mm": 2.0},  # more skin
     "skin_foundation_0.003": {"preset": "skin", "foundation_n_per_mm3": 0.003},
     "skin_foundation_0.03": {"preset": "skin", "foundation_n_per_mm3": 0.03},
+    # the clamp replaced by the skin beyond the cut, a strip l mm wide held at its far edge
+    # (ModalParams.clamp_strip_mm, a library parameter, no config key; see the docstring)
+    "skin_strip_3": {"preset": "skin", "clamp_strip_mm": 3.0},
+    "skin_strip_10": {"preset": "skin", "clamp_strip_mm": 10.0},
 }
 
 
-def subject_case(run: Path, subject: str, cfg: dict) -> dict:
-    """A synthetic subject's neutral, template, expressions and validity masks."""
+def variant_params(cfg: dict, variant: dict):
+    """The modal stage's parameters for a configuration (its ``clamp_strip_mm`` set on the
+    :class:`~scan2morph.modal.ModalParams`: no config key), two eigensolver threads."""
+    from dataclasses import replace
+
+    from scan2morph.stages import modal
+
+    keys = dict(variant)
+    strip = float(keys.pop("clamp_strip_mm", 0.0))
+    params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | keys}).with_threads(2)
+    return replace(params, modal=replace(params.modal, clamp_strip_mm=strip))
+
+
+def subject_case(run: Path, subject: str, cfg: dict, truth: bool = False) -> dict:
+    """A synthetic subject's neutral, template, expressions and validity masks; with ``truth``
+    also each expression's true material displacement (:func:`true_fields`) and the error of
+    the measured one against it, under ``fields_by`` (``measured``, ``true``, ``error``), the
+    validity masks then limited to the vertices with a finite truth."""
     import h5py
 
     from scan2morph.stages import Subject
@@ -139,7 +219,28 @@ def subject_case(run: Path, subject: str, cfg: dict) -> dict:
                 ok = h5[f"takes/{t}/mesh/valid"][()]
         valid[t] = ok & ~filled
     subj = Subject(subject, kinds, labels)
-    return {"fine": fine, "subject": subj, "data": data, "fields": fields, "valid": valid}
+    fields_by = {"measured": fields}
+    if truth:
+        true = true_fields(run, subject, data[paths.neutral("vertices")], fine, exprs)
+        fields_by |= {"true": true, "error": {t: fields[t] - true[t] for t in exprs}}
+        valid = {t: valid[t] & np.isfinite(true[t]).all(axis=1) for t in exprs}
+    case = {"fine": fine, "subject": subj, "data": data, "fields": fields, "valid": valid}
+    return case | {"fields_by": fields_by}
+
+
+def true_fields(run: Path, subject: str, neutral, fine, takes) -> dict:
+    """Each take's true material displacement of the neutral's template vertices (mm, neutral
+    frame; NaN where the neutral vertex is not valid): the motion of the skin point each vertex
+    sits on, from ``RUN/results/synthetic/{subject}/truth/{take}.npz``, made as the accuracy
+    stage makes the expressions' (:func:`scan2morph.evaluate.motion.true_motions`, lip sides
+    from the template)."""
+    from scan2morph.evaluate.motion import template_lip_sides, true_motions
+    from scan2morph.evaluate.truth import read_truth
+
+    folder = run / "results" / "synthetic" / subject / "truth"
+    rest = read_truth(folder / "neutral.npz")
+    truths = {t: read_truth(folder / f"{t}.npz") for t in takes}
+    return true_motions(neutral, rest, truths, template_lip_sides(fine.vertices))
 
 
 def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
@@ -150,8 +251,7 @@ def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
     from scan2morph.stages import modal
     from scan2morph.store import paths
 
-    section = dict(cfg["modal"]) | variant
-    params = modal.Params.from_config(cfg | {"modal": section}).with_threads(2)
+    params = variant_params(cfg, variant)
     t0 = time.perf_counter()
     basis, outline = modal.natural_basis(
         case["fine"], case["subject"], case["data"], case["fields"], params
@@ -160,15 +260,17 @@ def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
     neutral = case["data"][paths.neutral("vertices")]
     normals = vertex_normals(neutral, case["fine"].faces)
     rows = []
-    for take, field in case["fields"].items():
-        where = case["valid"][take]
-        ls = span_curve(basis.modes, field, KS, normals, where, outline.outline)
-        q = project(basis, field)
-        for i, k in enumerate(KS):
-            stored = residual_split(
-                field - reconstruct(basis, q, k), normals, where, outline.outline
-            )
-            rows.append(_row(case["subject"].name, take, name, k, ls, i, stored, seconds))
+    for kind, fields in case["fields_by"].items():
+        for take, field in fields.items():
+            where = case["valid"][take]
+            ls = span_curve(basis.modes, field, KS, normals, where, outline.outline)
+            q = project(basis, np.where(np.isfinite(field), field, 0.0))
+            for i, k in enumerate(KS):
+                stored = residual_split(
+                    field - reconstruct(basis, q, k), normals, where, outline.outline
+                )
+                row = _row(case["subject"].name, take, name, k, ls, i, stored, seconds)
+                rows.append(row | {"field": kind})
     return rows
 
 
@@ -176,6 +278,7 @@ def _row(subject, take, config, k, ls, i, stored, seconds) -> dict:
     return {
         "subject": subject,
         "take": take,
+        "field": "measured",
         "config": config,
         "K": k,
         "rms_mm": ls.field_mm,
@@ -191,23 +294,26 @@ def _row(subject, take, config, k, ls, i, stored, seconds) -> dict:
     }
 
 
-def anchor_rows(subject: str, fields, valid, vertices, faces, outline) -> list[dict]:
-    """The anchor's rows (config ``anchor``): round(K/3) Laplace-Beltrami functions per axis."""
+def anchor_rows(
+    subject: str, fields, valid, mesh: tuple, outline, ks=tuple(ANCHOR_KS), kind="measured"
+) -> list[dict]:
+    """The anchor's rows (config ``anchor``): round(K/3) Laplace-Beltrami functions per axis
+    (at least one: K = 1 is the three translations) of the mesh ``(vertices, faces)``."""
     from scan2morph.geometry import vertex_normals
     from scan2morph.modal.span import laplace_beltrami, per_axis_fields, span_curve
 
-    n = max(round(k / 3) for k in ANCHOR_KS)
-    _, phi = laplace_beltrami(vertices, faces, n)
+    vertices, faces = mesh
+    n_fields = [3 * max(1, round(k / 3)) for k in ks]
+    _, phi = laplace_beltrami(vertices, faces, max(n_fields) // 3)
     basis = per_axis_fields(phi)
     normals = vertex_normals(vertices, faces)
     rows = []
     for take, field in fields.items():
-        c = span_curve(
-            basis, field, [3 * round(k / 3) for k in ANCHOR_KS], normals, valid[take], outline
-        )
-        for i, k in enumerate(ANCHOR_KS):
+        c = span_curve(basis, field, n_fields, normals, valid[take], outline)
+        for i, k in enumerate(ks):
             stored = (c.total_mm[i], c.normal_mm[i], c.tangential_mm[i], c.inner_mm[i])
-            rows.append(_row(subject, take, "anchor", k, c, i, stored, float("nan")))
+            row = _row(subject, take, "anchor", k, c, i, stored, float("nan"))
+            rows.append(row | {"field": kind})
     return rows
 
 
@@ -271,9 +377,8 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     from scan2morph.modal import modal_basis, project, reconstruct
     from scan2morph.modal.fem import boundary_vertices
     from scan2morph.modal.span import residual_split, span_curve
-    from scan2morph.stages import modal
 
-    params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | variant}).with_threads(2)
+    params = variant_params(cfg, variant)
     v, f = real["vertices"], real["faces"]
     rim = boundary_vertices(f, len(v))
     fixed = rim if params.fixed_outline != "none" else np.zeros(len(v), bool)
@@ -329,6 +434,39 @@ def summary(table, held: set[str]) -> None:
         print("\n    ".join(line))
 
 
+def truth_tables(table, configs: list[str], held: set[str]) -> None:
+    """Per configuration, the share left of the measured displacement, of the true material
+    one and of the error (measured - true), each of its own RMS, per expression and K; then
+    per subject group and K their ranges, the error's RMS in mm and its share of the measured
+    RMS."""
+    import pandas as pd
+
+    t = table[table.subject != "lee-perry-smith"]
+    for name in configs:
+        wide = t[t.config == name].pivot_table(
+            index=["subject", "take"], columns=["field", "K"], values="left", sort=False
+        )
+        print(f"\n== {name}: share left of the measured / true / error field (least squares)")
+        print(wide.round(3).to_string())
+    rms = t[(t.config == "anchor") & (t.K == t.K.min())].pivot_table(
+        index=["subject", "take"], columns="field", values="rms_mm", sort=False
+    )
+    print("\n== RMS over the valid vertices, mm; error / measured")
+    print(pd.concat([rms, (rms.error / rms.measured).rename("error_share")], axis=1).round(3))
+    groups = {"tune": ~t.subject.isin(held), "held": t.subject.isin(held)}
+    print("\n== ranges of the share left (tune / held out)")
+    for name in configs:
+        for kind in ("measured", "true", "error"):
+            line = [f"{name:>8} {kind:>8}"]
+            for k in sorted(t.K.unique()):
+                parts = []
+                for mask in groups.values():
+                    x = t[mask & (t.config == name) & (t.field == kind) & (t.K == k)].left
+                    parts.append(f"{x.min():.2f}-{x.max():.2f}" if len(x) else "-")
+                line.append(f"K={k}: " + " / ".join(parts))
+            print("  ".join(line))
+
+
 def main() -> None:
     import pandas as pd
 
@@ -341,6 +479,12 @@ def main() -> None:
         "--extra", help='more configurations, JSON: {"name": {"preset": ..., key: value}}'
     )
     ap.add_argument("--realdata", action="store_true", help="also the real head's test smile")
+    ap.add_argument(
+        "--truth",
+        action="store_true",
+        help="also the true material displacement and the error (measured - true); the anchor "
+        "at every K",
+    )
     ap.add_argument(
         "--data", help="folder of LeePerrySmith.glb (default: tests/unit/test_realdata.py's)"
     )
@@ -356,13 +500,15 @@ def main() -> None:
     from scan2morph.store import paths
 
     rows = []
+    anchor_ks = KS if args.truth else ANCHOR_KS
     for subject in [*args.tune, *args.held]:
-        case = subject_case(Path(args.run), subject, cfg)
+        case = subject_case(Path(args.run), subject, cfg, args.truth)
         fine = case["fine"]
         outline = np.zeros(fine.n_vertices, bool)
         outline[fine.boundary] = True
-        neutral = case["data"][paths.neutral("vertices")]
-        rows += anchor_rows(subject, case["fields"], case["valid"], neutral, fine.faces, outline)
+        mesh = (case["data"][paths.neutral("vertices")], fine.faces)
+        for kind, fields in case["fields_by"].items():
+            rows += anchor_rows(subject, fields, case["valid"], mesh, outline, anchor_ks, kind)
         for name in args.configs:
             rows += subject_rows(case, cfg, name, VARIANTS[name])
     if args.realdata:
@@ -376,9 +522,8 @@ def main() -> None:
 
         rim = boundary_vertices(real["faces"], len(real["vertices"]))
         valid = {"smile": np.ones(len(real["vertices"]), bool)}
-        rows += anchor_rows(
-            "lee-perry-smith", rim_fields, valid, real["vertices"], real["faces"], rim
-        )
+        mesh = (real["vertices"], real["faces"])
+        rows += anchor_rows("lee-perry-smith", rim_fields, valid, mesh, rim, anchor_ks)
         for name in args.configs:
             rows += realdata_rows(real, cfg, name, VARIANTS[name])
     table = pd.DataFrame(rows)
@@ -386,6 +531,9 @@ def main() -> None:
         table.to_csv(args.tsv, sep="\t", index=False, float_format="%.4f")
     table["left"] = table.ls_total / table.rms_mm
     table["stored_left"] = table.stored_total / table.rms_mm
+    if args.truth:
+        truth_tables(table, ["anchor", *args.configs], set(args.held))
+    table = table[table.field == "measured"]
     wide = table.pivot_table(
         index=["subject", "take"], columns=["config", "K"], values="left", sort=False
     )

@@ -4,7 +4,8 @@ Analytic oracles: the Neumann spectrum of a rectangle (Laplace-Beltrami anchor);
 flat square membrane under isotropic tension with a free edge, in plane and out of plane, with and
 without a foundation under it (the ``skin`` physics); a simply supported steel plate whose first
 mode is the bending mode sin(pi x / a) sin(pi y / a) (the ``paper`` physics spans it and not the
-same shape in plane). Least squares against numpy's.
+same shape in plane); a square membrane whose edge the skin beyond the cut holds (a Robin edge:
+the wavenumbers of a string with spring-held ends). Least squares against numpy's.
 """
 
 from __future__ import annotations
@@ -477,3 +478,64 @@ def test_report_names_the_preset():
         assert "preset" not in str(blocks[0])
         h5.create_dataset(paths.modal("preset"), data="paper", dtype=h5py.string_dtype())
         assert "physics: preset paper" in str(sections.modal(h5, 2)[0])
+
+
+def robin_wavenumbers(strip_mm: float, a: float = A_MM) -> tuple[float, float]:
+    """The two lowest wavenumbers (1/mm) of a string of length a whose ends are held by springs
+    T / l (per unit length of the cut): X'' + k^2 X = 0, X' = X / l at x = 0 and X' = -X / l at
+    x = a. Symmetric X = cos(k (x - a/2)): k l tan(k a / 2) = 1; antisymmetric
+    X = sin(k (x - a/2)): tan(k a / 2) = -k l."""
+    from scipy.optimize import brentq
+
+    sym = brentq(lambda k: k * strip_mm * np.tan(k * a / 2) - 1.0, 1e-12, np.pi / a - 1e-12)
+    anti = brentq(lambda k: np.tan(k * a / 2) + k * strip_mm, np.pi / a + 1e-9, 2 * np.pi / a)
+    return float(sym), float(anti)
+
+
+@pytest.mark.parametrize("strip_mm", [3.0, 10.0, 30.0])
+def test_the_skin_beyond_the_cut_is_a_robin_edge(strip_mm):
+    """A 100 mm square membrane (no shell) under T whose whole edge is held by a strip l wide
+    (springs T L_i / l): its modes are products of the Robin strings' (k_x, k_y), omega^2 rho h
+    = T (k_x^2 + k_y^2), each along x, y and z alike: the first three at (sym, sym), the next
+    six at (sym, anti) and (anti, sym), within 1 % on a 24 x 24 grid. Between the clamp
+    (l -> 0) and the free edge (l -> inf); the edge vertices move and are not fixed."""
+    from scan2morph.modal.skin import edge_springs
+
+    v, f = plate_mesh(24)
+    params = ModalParams(
+        n_modes=9,
+        thickness_mm=H_MM,
+        upper_thickness_factor=1.0,
+        material=ShellMaterial(0.0, 0.3, RHO),
+        tension_n_per_mm=T_N_PER_MM,
+        method="dense",
+        clamp_strip_mm=strip_mm,
+    )
+    basis = modal_basis(v, f, params)
+    sym, anti = robin_wavenumbers(strip_mm)
+    speed = np.sqrt(T_N_PER_MM / (RHO * H_MM)) / (2 * np.pi)
+    exact = speed * np.array([np.hypot(sym, sym)] * 3 + [np.hypot(sym, anti)] * 6)
+    assert_allclose(basis.frequencies_hz, exact, rtol=0.01)
+    clamped = speed * np.pi / A_MM * np.sqrt(2)
+    assert 0 < basis.frequencies_hz[0] < clamped
+    rim = boundary_vertices(f, len(v))
+    assert not basis.fixed_vertices.any()
+    assert np.abs(basis.modes[:3, rim]).max() > 0.05 * np.abs(basis.modes[:3]).max()
+    # the springs: T L_i / l on each translation, L_i half the rim edges at vertex i
+    k = edge_springs(v, f, rim, T_N_PER_MM, strip_mm).diagonal().reshape(-1, 6)
+    assert_allclose(k[:, 3:], 0.0)
+    assert_allclose(k[:, :3].sum() / 3, T_N_PER_MM * 4 * A_MM / strip_mm)
+    assert_allclose(k[0, :3], T_N_PER_MM * A_MM / 24 / strip_mm)  # a corner: two half edges
+
+
+def test_the_strip_needs_a_tension_and_a_positive_width(plate):
+    """Bad strips are refused; a strip 1e-4 mm wide holds the edge as the clamp does."""
+    v, f = plate
+    with pytest.raises(InputError, match="clamp_strip_mm"):
+        modal_basis(v, f, replace(membrane_params(3), tension_n_per_mm=0.0, clamp_strip_mm=5.0))
+    with pytest.raises(InputError, match="clamp_strip_mm"):
+        modal_basis(v, f, replace(membrane_params(3), clamp_strip_mm=-1.0))
+    # a vanishing strip is the clamp
+    clamp = modal_basis(v, f, membrane_params(3))
+    stiff = modal_basis(v, f, replace(membrane_params(3), clamp_strip_mm=1e-4))
+    assert_allclose(stiff.frequencies_hz, clamp.frequencies_hz, rtol=1e-3)

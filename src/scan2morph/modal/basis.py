@@ -68,6 +68,12 @@ class ModalParams:
         The same for the foundation (:func:`skin.vertex_field`).
     mimic_mass_factor : float
         The same for a membrane's mass (its thickness); only without shell.
+    clamp_strip_mm : float
+        0 (default): the ``fixed`` vertices of :func:`modal_basis` are clamped. > 0: they are
+        held instead by the skin beyond the cut, a strip this wide (mm) under the tension
+        ``tension_n_per_mm`` held at its far edge (:func:`skin.edge_springs`, on the fixed
+        vertices of the mesh's boundary; needs a tension), and move; fixed vertices inside the
+        mesh stay clamped.
     coordinates : {"mass", "vertex"}
         The inner product the returned basis is orthonormal in, hence what the coordinates
         ``q = Q^T M v`` (:func:`~scan2morph.modal.project`) are: ``"mass"`` (the paper, Eq. 7)
@@ -93,6 +99,7 @@ class ModalParams:
     mimic_tension_factor: float = 1.0
     mimic_foundation_factor: float = 1.0
     mimic_mass_factor: float = 1.0
+    clamp_strip_mm: float = 0.0
     coordinates: str = "mass"
 
     @property
@@ -184,7 +191,8 @@ def modal_basis(
         loops, the outline and the mouth: the paper fixes the outline, and the lips must stay
         free (fixing the mouth loop clamps the lips, and no mode can then move them). An
         all-False mask leaves the model free: its rigid-body motion, unless a skin term holds
-        it, comes first as modes of (numerically) zero frequency.
+        it, comes first as modes of (numerically) zero frequency. ``params.clamp_strip_mm``
+        holds those on the mesh's boundary elastically instead (not in ``fixed_vertices``).
     tethered : (V,) bool, optional
         Vertices whose skin is tied tangentially (``params.tether_n_per_mm3``).
     mimic : (V,) float in [0, 1], optional
@@ -230,6 +238,8 @@ def modal_basis(
         _check_every_part_held(f, n_v, boundary, source)
     thickness = fem.thickness_map(f, p.thickness_mm, upper_face, p.upper_thickness_factor, source)
     k_mat, m_mat = _matrices(v, f, thickness, p, (tethered, mimic), source)
+    if p.clamp_strip_mm and not free_model:  # the skin beyond the cut holds them, elastically
+        k_mat, boundary = _strip(v, f, boundary, k_mat, p, source)
     unused = np.ones(n_v, dtype=bool)
     unused[f.ravel()] = False
     fixed = boundary | unused
@@ -354,6 +364,18 @@ def _matrices(v, f, thickness, p: ModalParams, regions, source: str):
         )
         k_mat = (k_mat + terms).tocsc()
     return k_mat, m_mat
+
+
+def _strip(v, f, fixed, k_mat, p: ModalParams, source: str):
+    """The stiffness with :func:`skin.edge_springs` (``p.clamp_strip_mm`` > 0) on the fixed
+    vertices of the mesh's boundary, and the fixed vertices left clamped (those inside)."""
+    if not (np.isfinite(p.clamp_strip_mm) and p.clamp_strip_mm > 0):
+        raise InputError(source, f"clamp_strip_mm: expected >= 0, got {p.clamp_strip_mm}")
+    if not p.tension_n_per_mm > 0:
+        raise InputError(source, "clamp_strip_mm: the strip needs a tension_n_per_mm > 0")
+    on_cut = fixed & fem.boundary_vertices(f, len(v))
+    springs = skin.edge_springs(v, f, on_cut, p.tension_n_per_mm, p.clamp_strip_mm, source)
+    return (k_mat + springs).tocsc(), fixed & ~on_cut
 
 
 def _free_shift(k_mat: sp.spmatrix, m_mat: sp.spmatrix) -> float:

@@ -263,3 +263,56 @@ def skin_stiffness(
     return _symmetric_csc(
         np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), DOF * n_v
     )
+
+
+def edge_springs(
+    vertices: ArrayLike,
+    faces: ArrayLike,
+    held: ArrayLike,
+    tension_n_per_mm: float,
+    strip_mm: float,
+    source: str = "mesh",
+) -> sp.csc_matrix:
+    """The skin beyond a cut edge: a strip ``l`` wide under the tension ``T``, held at its far
+    edge, seen from the cut (a Robin boundary condition ``T du/dn + (T / l) u = 0``).
+
+    The strip's energy ``T * integral over the strip of |grad u|^2`` is ``(T / l) * integral
+    along the cut of |u|^2`` when the motion falls linearly across it; lumped on the held
+    vertices of the mesh's boundary, vertex ``i`` gets a spring ``T L_i / l`` (N/mm) on each of
+    its three translations, ``L_i`` half the length of the boundary edges at it. ``l -> 0`` is a
+    clamp, ``l -> inf`` a free edge.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, mm
+    faces : (F, 3) int
+    held : (V,) bool
+        The boundary vertices the strip holds (others, and interior vertices, get nothing).
+    tension_n_per_mm : float
+        ``T`` > 0, N/mm.
+    strip_mm : float
+        ``l`` > 0, mm.
+    source : str
+        Label for error messages.
+
+    Returns
+    -------
+    (6V, 6V) scipy.sparse.csc_matrix, diagonal, N/mm
+    """
+    v, f = check_mesh(vertices, faces, source)
+    n_v = v.shape[0]
+    mask = np.asarray(held)
+    if mask.shape != (n_v,) or mask.dtype != np.bool_:
+        raise InputError(source, f"held: expected a ({n_v},) bool mask, got {mask.shape}")
+    for name, value in (("tension_n_per_mm", tension_n_per_mm), ("strip_mm", strip_mm)):
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(source, f"{name}: expected a number > 0, got {value}")
+    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    cut = unique[counts == 1]
+    half = 0.5 * np.linalg.norm(v[cut[:, 0]] - v[cut[:, 1]], axis=1)
+    length = np.zeros(n_v)
+    np.add.at(length, cut.ravel(), np.repeat(half, 2))
+    k = float(tension_n_per_mm) / float(strip_mm) * np.where(mask, length, 0.0)
+    idx = (DOF * np.arange(n_v)[:, None] + np.arange(3)).ravel()
+    return sp.csc_matrix((np.repeat(k, 3), (idx, idx)), shape=(DOF * n_v, DOF * n_v))
