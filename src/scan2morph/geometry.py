@@ -262,6 +262,23 @@ def check_vertex_array(
     return arr
 
 
+def boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """The edges of a triangle list that only one face uses (the mesh's boundary).
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+
+    Returns
+    -------
+    (B, 2) int64
+        ``(i, j)`` with ``i < j``, sorted lexicographically (as :func:`unique_edges`).
+    """
+    edges, inverse = unique_edges(faces, return_inverse=True)
+    uses = np.bincount(inverse[inverse >= 0], minlength=len(edges))
+    return edges[uses == 1]
+
+
 def edge_adjacency(edges: np.ndarray, n: int) -> sp.csr_array:
     """Symmetric 0/1 vertex adjacency (n, n) of undirected edges (E, 2) int (each once, as
     :func:`unique_edges` gives them)."""

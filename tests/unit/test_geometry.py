@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import (
+    boundary_edges,
     face_normals,
     face_sides,
     harmonic_fill,
@@ -114,6 +115,22 @@ def test_unique_edges_inverse_names_each_side():
             if inverse[k, s] >= 0:
                 a, b = face[s], face[(s + 1) % 3]
                 assert_array_equal(edges[inverse[k, s]], [min(a, b), max(a, b)])
+
+
+def test_boundary_edges_of_a_grid_and_of_a_closed_surface():
+    """A (9 x 6) vertex grid's boundary is its 2 (8 + 5) = 26 outer edges, every one joining two
+    vertices on the grid's rim; a closed tetrahedron has none."""
+    _, f = _grid(9, 6)
+    rim = (
+        set(range(9))
+        | set(range(45, 54))
+        | {9 * r for r in range(6)}
+        | {9 * r + 8 for r in range(6)}
+    )
+    edges = boundary_edges(f)
+    assert edges.shape == (26, 2) and edges.dtype == np.int64
+    assert all(a in rim and b in rim and a < b for a, b in edges.tolist())
+    assert boundary_edges(np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [0, 2, 3]])).shape == (0, 2)
 
 
 def test_unique_edges_match_an_independent_set_on_a_grid():

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from scan2morph import tol
 from scan2morph.errors import InputError
+from scan2morph.geometry import boundary_edges
 
 #: Degrees of freedom per node: u, v, w, r_x, r_y, r_z.
 DOF = 6
@@ -158,13 +159,8 @@ def boundary_vertices(faces: ArrayLike, n_vertices: int | None = None) -> NDArra
     """
     f = np.asarray(faces, dtype=np.int64)
     n = int(f.max()) + 1 if n_vertices is None else int(n_vertices)
-    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    key = edges[:, 0] * n + edges[:, 1]
-    uniq, counts = np.unique(key, return_counts=True)
-    once = uniq[counts == 1]
     mask = np.zeros(n, dtype=bool)
-    mask[once // n] = True
-    mask[once % n] = True
+    mask[boundary_edges(f).ravel()] = True
     return mask
 
 

@@ -18,6 +18,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import boundary_edges, vertex_normals
 from scan2morph.modal.fem import DOF, _symmetric_csc, check_mesh, face_areas
 
 #: The mimic skin of a face template (canonical frame: the outer eye corners at x = -1 and 1,
@@ -220,8 +221,6 @@ def skin_stiffness(
     -------
     (6V, 6V) scipy.sparse.csc_matrix, symmetric positive semi-definite, N/mm
     """
-    from scan2morph.geometry import vertex_normals
-
     v, f = check_mesh(vertices, faces, source)
     values = {"tension_n_per_mm": tension_n_per_mm, "foundation_n_per_mm3": foundation_n_per_mm3}
     values["tether_n_per_mm3"] = tether_n_per_mm3
@@ -307,9 +306,7 @@ def edge_springs(
     for name, value in (("tension_n_per_mm", tension_n_per_mm), ("strip_mm", strip_mm)):
         if not (np.isfinite(value) and value > 0):
             raise InputError(source, f"{name}: expected a number > 0, got {value}")
-    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    unique, counts = np.unique(edges, axis=0, return_counts=True)
-    cut = unique[counts == 1]
+    cut = boundary_edges(f)
     half = 0.5 * np.linalg.norm(v[cut[:, 0]] - v[cut[:, 1]], axis=1)
     length = np.zeros(n_v)
     np.add.at(length, cut.ravel(), np.repeat(half, 2))
