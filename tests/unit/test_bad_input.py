@@ -638,6 +638,47 @@ def test_mesh_landmarks_off_the_mesh_or_in_metres(mesh_files, tmp_path):
         _mesh(mesh_files, landmarks=tmp_path / "short.txt")
 
 
+def test_mesh_without_landmarks_in_cm_is_refused_before_its_surface_is_searched(
+    mesh_files, tmp_path
+):
+    """Without landmarks only the mesh's own size tells its unit: a head in cm is refused by the
+    subject's check and by the ingest, naming its size and the unit (before the nose-tip search,
+    whose 35 mm neighbourhoods would hold the whole 10x smaller mesh: a real head in its own unit
+    took 17 GB there), and reads once the sheet gives the unit."""
+    import trimesh
+
+    from scan2morph.io.check import take_file_problems
+
+    scan = mesh_files["scan"]
+    mesh = trimesh.Trimesh(scan["vertices"] / 10.0, scan["faces"], process=False)
+    mesh.export(tmp_path / "cm.ply")
+    files = {"mesh": tmp_path / "cm.ply"}
+    match = (
+        r"cm.ply: mesh size: \d+(\.\d+)? x .* mm across as read, expected a face or head "
+        r"60-1000 mm across at its largest \(it looks like cm: give its unit in the sheet's "
+        r"units column"
+    )
+    (problem,) = take_file_problems("mesh", files)
+    assert re.search(match, problem), problem
+    assert take_file_problems("mesh", files, 10.0) == []
+    with pytest.raises(InputError, match=match):
+        _run_ingest(
+            dict(ROW, modality="mesh"), {"mesh": str(files["mesh"])}, {"width": 160, "height": 120}
+        )
+    part = _run_ingest(
+        dict(ROW, modality="mesh", units="cm"),
+        {"mesh": str(files["mesh"])},
+        {"width": 160, "height": 120},
+    )
+    from scan2morph.store import paths
+
+    assert part.datasets[paths.camera("neutral", "size")].tolist() == [160, 120]
+    tiny = trimesh.Trimesh(scan["vertices"] / 1000.0, scan["faces"], process=False)
+    tiny.export(tmp_path / "tiny.ply")
+    (problem,) = take_file_problems("mesh", {"mesh": tmp_path / "tiny.ply"})
+    assert "it looks like metres: give its unit in the sheet's units column" in problem
+
+
 def test_mesh_landmarks_mirrored(mesh_files, tmp_path):
     from scan2morph.synth.mesh_scan import write_landmarks3d
 

@@ -182,6 +182,36 @@ def test_camera_faces_a_face_only_scan():
     assert _angle_deg(view.direction, -pose[:3, 2]) < MAX_ERROR_DEG  # measured 2.0
 
 
+def test_the_tip_search_scores_a_bounded_stride_of_a_dense_surface(monkeypatch):
+    """On a dense scan the tip search scores an even stride of the surface points round each
+    candidate (about MAX_TIP_POINTS to twice that, bounding its memory): with the bound lowered
+    to 60 on a synthetic mesh scan (up to about 400 points there), the tip is where the search
+    of every point puts it, within the 1-2 mm between neighbouring triangle centres (measured:
+    the same point)."""
+    from scan2morph.io import mesh_view
+
+    r = _synth03_take("neutral")
+    mesh = trimesh.Trimesh(r["vertices"], r["faces"], process=False)
+    centres, areas, normals, _ = mesh_view.outward_normals(mesh)
+    every = mesh_view.nose_tip(centres, areas, normals)
+    scored = []
+    protrusion = mesh_view._protrusion
+
+    def spy(tree, a, n, points, radius):
+        scored.append(len(points))
+        return protrusion(tree, a, n, points, radius)
+
+    monkeypatch.setattr(mesh_view, "_protrusion", spy)
+    mesh_view.nose_tip(centres, areas, normals)
+    assert max(scored[1:]) > 240  # the first call scores the coarse grid, the others a candidate
+    scored.clear()
+    monkeypatch.setattr(mesh_view, "MAX_TIP_POINTS", 60)
+    strided = mesh_view.nose_tip(centres, areas, normals)
+    assert max(scored[1:]) < 120
+    print(f"tip moved {np.linalg.norm(strided - every):.2f} mm")
+    assert np.linalg.norm(strided - every) < 2.0
+
+
 def test_first_in_each_cell_is_numpys_unique_rows():
     """The one-key unique of the nose-tip search's grid cells against numpy's unique of rows
     (negative cells and repeats included)."""

@@ -18,7 +18,7 @@ from scan2morph.io.calibration import read_stereo_calibration
 from scan2morph.io.depth_image import read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
-from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh
+from scan2morph.io.mesh_scan import check_mesh_size, read_landmarks3d, read_mesh
 from scan2morph.io.range_image import read_range
 from scan2morph.io.rgbd import read_rgbd_intrinsics
 from scan2morph.io.take import check_face, check_handedness, read_range_take, read_stereo_take
@@ -43,7 +43,9 @@ READERS: dict[str, dict[str, Callable]] = {
 }
 
 
-def take_file_problems(modality: str, files: Mapping[str, str | Path]) -> list[str]:
+def take_file_problems(
+    modality: str, files: Mapping[str, str | Path], mm_per_unit: float = 1.0
+) -> list[str]:
     """Every problem of one take's files, one line each (empty: the files are fine).
 
     Parameters
@@ -52,6 +54,9 @@ def take_file_problems(modality: str, files: Mapping[str, str | Path]) -> list[s
         ``range``, ``stereo``, ``rgbd`` or ``mesh``.
     files : mapping sheet column -> path
         The take's files (a column left out is reported by the sheet check, not here).
+    mm_per_unit : float
+        The take's unit (the sheet's ``units`` column), mm: a mesh must be face- or head-sized
+        in mm once scaled (:func:`~scan2morph.io.mesh_scan.check_mesh_size`).
 
     Returns
     -------
@@ -66,6 +71,8 @@ def take_file_problems(modality: str, files: Mapping[str, str | Path]) -> list[s
         extra = [files.get("texture")] if role == "mesh" else []  # the sheet's optional texture
         try:
             loaded[role] = reader(files[role], *extra)
+            if role == "mesh":
+                check_mesh_size(loaded[role], mm_per_unit, files[role])
         except InputError as exc:
             problems.append(str(exc))
     required = set(readers) - set(OPTIONAL_FILES.get(modality, ()))

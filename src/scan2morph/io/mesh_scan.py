@@ -59,6 +59,8 @@ DEFAULT_MESH_CAMERA = {
 }
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
+#: The largest extent of a face or head scan (a face-only crop to head and shoulders), mm.
+MESH_EXTENT_MM = (60.0, 1000.0)
 #: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
 #: is the surface's shading, no skin texture.
 SHADED = "shading"
@@ -260,6 +262,47 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
         )
 
 
+def check_mesh_size(mesh, mm_per_unit: float = 1.0, source: str | Path = "mesh") -> None:
+    """Refuse a mesh that is not face- or head-sized in mm (:data:`MESH_EXTENT_MM` at its
+    largest), naming the unit it looks like.
+
+    Without landmarks nothing else checks the unit before the surface searches, which assume mm
+    (a head in cm or inches makes their neighbourhoods hold the whole mesh).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        As read, in its own unit.
+    mm_per_unit : float
+        The sheet's unit (``units`` column), mm.
+    source : str or path-like
+        The mesh file, for messages.
+
+    Raises
+    ------
+    InputError
+        Naming the mesh's size in mm and the unit it looks like.
+    """
+    extents = np.asarray(mesh.extents, dtype=np.float64) * mm_per_unit
+    largest = float(extents.max())
+    lo, hi = MESH_EXTENT_MM
+    if lo <= largest <= hi:
+        return
+    unit = next((name for name, f in _UNITS if lo <= largest * f <= hi), None)
+    if unit in ("metres", "cm"):
+        likely = f"it looks like {unit}: give its unit in the sheet's units column (mm, cm or m)"
+    elif unit:
+        likely = f"it looks like {unit}: scale it to mm"
+    else:
+        likely = "not a face or head in mm"
+    size = " x ".join(f"{e:.4g}" for e in extents)
+    raise InputError(
+        source,
+        f"mesh size: {size} mm across as read, expected a face or head {lo:g}-{hi:g} mm across at its "
+        f"largest ({likely})",
+    )
+
+
 def view_direction(mesh, lm3: np.ndarray | None = None, source: str = "mesh") -> np.ndarray:
     """The direction a frontal camera looks at the face from (:func:`~.mesh_view.face_view`).
 
@@ -439,7 +482,8 @@ def read_mesh_take(
     ------
     InputError
         From :func:`read_mesh` and :func:`read_landmarks3d`; a face not 70-130 mm across the
-        outer eye corners (names the unit it looks like); landmarks off the mesh; landmarks
+        outer eye corners, or a mesh not 60-1000 mm across (names the unit it looks like);
+        landmarks off the mesh; landmarks
         whose surface faces away from the camera (mirrored: iBUG 37 must be the subject's right
         eye's outer corner); the face checks of :func:`~scan2morph.io.check_face`.
     """
@@ -451,6 +495,7 @@ def read_mesh_take(
     if lm3 is not None:
         _check_units(lm3, mesh_path)
         _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
+    check_mesh_size(mesh, 1.0, mesh_path)  # scaled to mm above
     view = face_view(mesh, None if lm3 is None else lm3[30], str(mesh_path))
     if complete(lm3):
         K, pose = virtual_camera(lm3, view.direction, cfg)
@@ -493,6 +538,7 @@ def read_mesh_take(
 __all__ = [
     "DEFAULT_MESH_CAMERA",
     "MeshTake",
+    "check_mesh_size",
     "read_landmarks3d",
     "read_mesh",
     "read_mesh_take",

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 from scan2morph.errors import InputError
 from scan2morph.io.check import take_file_problems
+from scan2morph.sheet import mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.template import Template
 
@@ -50,7 +51,8 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
     Part
         No datasets; ``files["problems"]`` lists the take's problems, one line each.
     """
-    return Part(files={"problems": take_file_problems(take.row["modality"], take.files)})
+    problems = take_file_problems(take.row["modality"], take.files, mm_per_unit(take.row))
+    return Part(files={"problems": problems})
 
 
 def check_subject(subject: str, takes: Sequence[Take], sheet: Sequence[tuple[str, str]]) -> dict:
