@@ -187,3 +187,42 @@ def test_frontal_scene_is_accepted():
     1 m is detected."""
     color, xyz = _scene()
     assert detect(color, xyz, "s/front").points.shape == (68, 2)
+
+
+def test_a_detection_is_held_to_a_wider_face_size_than_clicks(takes, monkeypatch):
+    """Clicked landmarks must put the outer eye corners 70-130 mm apart (a wrong unit shows
+    there); a detection has found its face at a metric scale already, so it goes on with them
+    50-150 mm apart (the real head's doubtful detection: 68 mm) and is refused below that with a
+    line saying the landmarks were detected and how to give them instead."""
+    import types
+
+    from scan2morph import landmarks
+    from scan2morph.io import check_face
+    from scan2morph.stages.landmarks import DETECTED, settle
+
+    t = takes[0]
+    xyz = t.xyz.astype(np.float64)
+    tip = t.truth[30]
+
+    def shrunk(factor: float) -> np.ndarray:
+        return tip + factor * (t.truth - tip)
+
+    def fake(points):
+        found = types.SimpleNamespace(points=points, confidence=np.full(68, 0.1))
+        return lambda *a, **k: types.SimpleNamespace(**vars(found), detector="d", version="1")
+
+    span = check_face(xyz, t.truth, "xyz", "pts")
+    narrow = shrunk(62.0 / span)  # about 62 mm apart: a click of it is refused, a detection not
+    with pytest.raises(InputError, match=r"face size: .* 6\d\.\d+ mm apart in 3D, expected 70-130"):
+        check_face(xyz, narrow, "xyz", "pts")
+    monkeypatch.setattr(landmarks, "detect", fake(narrow))
+    found = settle(None, t.color, xyz, f"{t.subject}/{t.take}")
+    assert found.source == DETECTED and found.doubtful(0.5)
+    np.testing.assert_array_equal(found.points, narrow)
+    monkeypatch.setattr(landmarks, "detect", fake(shrunk(40.0 / span)))
+    with pytest.raises(
+        InputError,
+        match=r"expected 50-150 mm .*these landmarks were detected: a detection this far off is "
+        r"wrong, give the take's landmarks in the sheet's landmarks column",
+    ):
+        settle(None, t.color, xyz, f"{t.subject}/{t.take}")

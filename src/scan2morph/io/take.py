@@ -249,6 +249,7 @@ def check_face(
     xyz_source: str | Path,
     landmarks_source: str | Path,
     unit_hint: str = "",
+    eye_span_mm: tuple[float, float] = EYE_SPAN_MM,
 ) -> float:
     """Check that the landmarks mark a plausible, roughly frontal face on range data in mm.
 
@@ -262,6 +263,8 @@ def check_face(
         Named in the landmark errors: the ``.pts`` file.
     unit_hint : str
         Appended to a size error (e.g. what to check in a stereo calibration).
+    eye_span_mm : (float, float)
+        The outer eye corners' accepted 3D distance, mm (default :data:`EYE_SPAN_MM`).
 
     Returns
     -------
@@ -275,7 +278,8 @@ def check_face(
         against the nose-bridge to chin distance (a profile view); the landmarks are mirrored
         left/right (eye corners and chin wind the wrong way); an outer eye corner has no range
         data around it (landmarks on the background, or of another scan); the outer eye
-        corners are not 70-130 mm apart in 3D (names the value and the unit it suggests).
+        corners are not ``eye_span_mm`` (70-130 mm) apart in 3D (names the value and the unit
+        it suggests).
     """
     lm = np.asarray(landmarks, dtype=np.float64)
     spread = float(np.ptp(lm, axis=0).max())
@@ -311,7 +315,7 @@ def check_face(
                 "scan?",
             )
     span = float(np.linalg.norm(lifted[1] - lifted[0]))
-    lo, hi = EYE_SPAN_MM
+    lo, hi = eye_span_mm
     if not lo <= span <= hi:
         unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
         if unit is not None:
