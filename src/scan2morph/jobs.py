@@ -8,10 +8,11 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import os
 import secrets
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -138,6 +139,44 @@ def _profiled(func: Callable[[], object], log_path: str | Path | None) -> None:
         profile.dump_stats(out / f"{name}.prof")
         times = {"startup_cpu_s": startup, "body_wall_s": wall, "body_cpu_s": cpu}
         write_json(out / f"{name}.json", times)
+
+
+#: Memory of reading a mesh scan and building its view, MB per MB of the file, binary (PLY, GLB)
+#: and text (OBJ, glTF) formats: 1.5 times the measured (as every rule's request,
+#: docs/cluster.md). Measured on the real head subdivided to 1.1 million triangles: PLY 23.8 MB,
+#: 1.22 GB peak (about 33 MB per MB above a take job's 0.45 GB); OBJ 84.7 MB, the whole take job
+#: 1.01 GB (about 6.5); a synthetic 108,000-triangle PLY of 2.3 MB: the whole take job 0.48 GB.
+MESH_MB_PER_FILE_MB = {".ply": 50.0, ".glb": 50.0, ".obj": 10.0, ".gltf": 10.0}
+
+
+def memory_mb(files: Iterable, base_mb: int) -> int:
+    """A job's memory request: ``base_mb`` plus what reading the largest of its mesh scans takes.
+
+    Parameters
+    ----------
+    files : iterable of path or of lists of paths
+        The job's input files (a Snakemake job's ``input``); a file that does not exist yet (a
+        synthetic take, made by the run) counts as empty.
+    base_mb : int
+        The job's memory without mesh scans, MB.
+
+    Returns
+    -------
+    int
+        MB (:data:`MESH_MB_PER_FILE_MB` times the largest mesh file's size, added).
+    """
+    largest = 0.0
+    stack = list(files)
+    while stack:
+        item = stack.pop()
+        if isinstance(item, (list, tuple)):
+            stack.extend(item)
+            continue
+        path = Path(item)
+        factor = MESH_MB_PER_FILE_MB.get(path.suffix.lower())
+        if factor and path.is_file():
+            largest = max(largest, factor * path.stat().st_size / 2**20)
+    return int(base_mb + math.ceil(largest))
 
 
 def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:

@@ -1,4 +1,4 @@
-"""A job's logging: everything in its log file, only problems on the console (one line each)."""
+"""A job's logging (everything in its log file, only problems on the console, one line each) and its memory request."""
 
 from __future__ import annotations
 
@@ -132,3 +132,20 @@ def test_a_job_runs_opencv_on_its_own_threads_for_the_same_flow(tmp_path, monkey
     assert (plain[1] > 0).mean() > 0.5  # the flow measured something
     monkeypatch.delenv("OMP_NUM_THREADS")
     assert job_threads() is None
+
+
+def test_a_jobs_memory_grows_with_its_largest_mesh_scan(tmp_path):
+    """The request is the base plus 50 MB per MB of the largest PLY or GLB (10 of an OBJ or
+    glTF) among the job's inputs, nested lists included; other files, and a file the run has not
+    made yet, add nothing."""
+    from scan2morph.jobs import memory_mb
+
+    mb = 2**20
+    (tmp_path / "dense.ply").write_bytes(b"\0" * (4 * mb))
+    (tmp_path / "text.OBJ").write_bytes(b"\0" * (10 * mb))
+    (tmp_path / "big.abs").write_bytes(b"\0" * (30 * mb))
+    files = [str(tmp_path / "big.abs"), [str(tmp_path / "text.OBJ"), str(tmp_path / "dense.ply")]]
+    assert memory_mb(files, 900) == 900 + 200  # the PLY: 4 x 50 > 10 x 10
+    assert memory_mb([str(tmp_path / "text.OBJ")], 500) == 500 + 100
+    assert memory_mb([str(tmp_path / "big.abs"), str(tmp_path / "later.glb")], 900) == 900
+    assert memory_mb([], 500) == 500

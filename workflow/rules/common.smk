@@ -7,7 +7,7 @@ import sys
 import pandas as pd
 
 from scan2morph.errors import InputError
-from scan2morph.jobs import config_sha256
+from scan2morph.jobs import config_sha256, memory_mb
 from scan2morph.sheet import (
     read_sheet,
     sheet_problems,

@@ -28,7 +28,8 @@ rule check_subject:
     benchmark:
         "benchmarks/rules/check_subject/{subject}.tsv"
     resources:
-        mem_mb=500,
+        # a mesh scan adds what reading it takes (50 MB per MB of a PLY or GLB, docs/cluster.md)
+        mem_mb=lambda wildcards, input: memory_mb(input, 500),
         runtime=1,
     params:
         problems=get_subject_problems,
@@ -58,7 +59,7 @@ rule take:
     benchmark:
         "benchmarks/takes/{subject}/{take}.tsv"
     resources:
-        mem_mb=900,
+        mem_mb=lambda wildcards, input: memory_mb(input, 900),
         runtime=12,
     params:
         row=take_row,
