@@ -68,11 +68,19 @@ class Params:
         return cls(dict(config["motion_noise"]), dict(config["smoothing"]), fit, refine)
 
 
-def _refiner(template: Template, subject: Subject, data, params: refine_stage.Params):
+def _refiner(
+    template: Template,
+    subject: Subject,
+    data,
+    params: refine_stage.Params,
+    by_shape: Mapping[str, bool] | None = None,
+):
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
-    draw): the take's fit to its clicks refined against the neutral seen through its clicks."""
+    draw): the take's fit to its clicks refined against the neutral seen through its clicks.
+    ``by_shape``: take -> whether the pipeline refined it by the surface's shape (its texture
+    did not correlate); a take it does not name takes its first draw's verdict."""
     neutral = subject.neutral
-    by_shape: dict[str, bool] = {}  # take -> its first draw was refined by the shape
+    by_shape = dict(by_shape or {})  # take -> its draws go to the shape straight away
 
     def refiner(take, mesh, take_landmarks, neutral_landmarks):
         source = subject.source(take)
@@ -84,9 +92,9 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
             paths.mesh(take, "points2d"): mesh["points2d"],
             paths.align(take, "vertices"): transform_points(transform, mesh["vertices"]),
         }
-        # a take whose texture did not correlate in its first draw is refined by the shape
-        # straight away in the others (the same numbers; the texture pass is a quarter of
-        # a texture-mismatched subject's draws)
+        # a take whose texture did not correlate (in the pipeline's refinement, else in its
+        # first draw) is refined by the shape straight away (the same numbers; the texture
+        # pass is a quarter of a texture-mismatched subject's draws)
         p = replace(params, texture_unmatched=True) if by_shape.get(take) else params
         part = refine_stage.run(template, Take.of(subject, take, data=draw), p)
         by_shape.setdefault(take, bool(part.attrs[paths.refine_group(take)]["shape_used"]))
@@ -101,7 +109,11 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
 
 
 def run(
-    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
+    template: Template,
+    subject: Subject,
+    data: Mapping[str, np.ndarray],
+    params: Params,
+    refined_by_shape: Mapping[str, bool] | None = None,
 ) -> Part:
     """The error bar of one subject.
 
@@ -115,6 +127,12 @@ def run(
     params : Params
         (With ``params.refine``, each draw refines the visemes too:
         ``motion_noise.refine_draws`` draws.)
+    refined_by_shape : mapping take -> bool, optional
+        The pipeline's refinement of each viseme: whether its texture did not correlate and
+        the surface's shape refined it (the refine part's attribute ``shape_used``,
+        :func:`shape_verdicts`). Such a viseme's draws go straight to the shape; the others
+        try the texture first, as the pipeline did. A viseme not named takes its first draw's
+        verdict.
 
     Returns
     -------
@@ -129,7 +147,7 @@ def run(
     fiducials = {t: params.fit.fiducial_set(k) for t, k in subject.kinds.items()}
     refiner = None
     if params.refine is not None:
-        refiner = _refiner(template, subject, data, params.refine)
+        refiner = _refiner(template, subject, data, params.refine, refined_by_shape)
     recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
     # the draws' common work (the neutral's side, each take's) once
     with sharing() as counts:
@@ -161,6 +179,12 @@ def run(
     if not subject.visemes:
         attrs[paths.SKIPPED] = {"motion_noise": "no viseme takes: no click-noise error bar"}
     return Part(datasets, attrs=attrs, files={"table": table})
+
+
+def shape_verdicts(attrs: Mapping[str, Mapping]) -> dict[str, bool]:
+    """:func:`run`'s ``refined_by_shape`` from the visemes' refine part attributes (take ->
+    the attributes of its group ``paths.refine_group(take)``)."""
+    return {take: bool(a["shape_used"]) for take, a in attrs.items() if "shape_used" in a}
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
