@@ -19,7 +19,7 @@ The stage's own cost (issue #35): ``bench_motion_noise.py --stage RUN [--trees O
 [--repeat 2] [--profile N] [subject ...]`` runs the ``motion_noise`` stage (``motion_noise.run``)
 of each subject on a finished run's parts (``RUN/results/{subject}``: the neutral's and the
 visemes' repair, landmarks and align parts, the visemes' refine attributes and ``motion.h5``, as
-the job reads them; a tree whose stage takes no refine verdicts runs without them), once per
+the job reads them), once per
 tree, subject and repeat, each in a fresh interpreter with one BLAS thread (as Snakemake runs a
 job), trees alternating. It prints each run's CPU and wall seconds, the work the draws shared
 (``scan2morph.refine.memo``: step -> reused, computed), and, with two trees, the largest
@@ -175,12 +175,11 @@ profile = cProfile.Profile(time.process_time) if top else None
 c0, w0 = time.process_time(), time.perf_counter()
 if profile:
     profile.enable()
-extra = ()
-if params.refine is not None and hasattr(motion_noise, "shape_verdicts"):  # as the job reads
+if params.refine is not None:  # the refine groups' attributes, as the job reads them
     refines = {t: res / "takes" / t / "refine.h5" for t in takes if kinds[t] == "viseme"}
-    attrs = {t: read_attrs(f, paths.refine_group(t)) for t, f in refines.items()}
-    extra = (motion_noise.shape_verdicts(attrs),)
-part = motion_noise.run(template, Subject(subject, kinds, labels), data, params, *extra)
+    data |= {paths.refine_group(t): read_attrs(f, paths.refine_group(t)) for t, f in
+             refines.items()}
+part = motion_noise.run(template, Subject(subject, kinds, labels), data, params)
 if profile:
     profile.disable()
 cpu, wall = time.process_time() - c0, time.perf_counter() - w0

@@ -313,6 +313,7 @@ def test_the_draws_follow_the_pipelines_verdict_on_the_texture(monkeypatch, verd
     for _ in range(3):
         refiner("she", mesh, np.zeros((68, 2)), np.zeros((68, 2)))
     assert skipped == expected
-    assert motion_noise.shape_verdicts(
-        {"she": {"shape_used": np.True_}, "car": {"shape_used": False}, "eel": {}}
-    ) == {"she": True, "car": False}
+    attrs = {"she": {"shape_used": np.True_}, "car": {"shape_used": False}, "eel": {}}
+    data = {paths.refine_group(t): a for t, a in attrs.items()}
+    verdicts = motion_noise.shape_verdicts(data, ["she", "car", "eel", "man"])
+    assert verdicts == {"she": True, "car": False}

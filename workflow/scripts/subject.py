@@ -70,11 +70,12 @@ def run_motion_noise(j):
     reads = j.p.reads["motion_noise"]
     refines = {Path(f).parent.name: f for f in reads if Path(f).name == "refine.h5"}
     data = read_parts([f for f in reads if f not in refines.values()]) | read_part(j.out.motion)
+    # the pipeline's verdict on each viseme's texture (refined by it, or by the shape)
+    data |= {
+        paths.refine_group(t): read_attrs(f, paths.refine_group(t)) for t, f in refines.items()
+    }
     module = stage_module("motion_noise")
-    # the pipeline's verdict of each viseme's refinement (texture or shape) for its draws
-    attrs = {t: read_attrs(f, paths.refine_group(t)) for t, f in refines.items()}
-    by_shape = module.shape_verdicts(attrs)
-    part = module.run(j.template(), j.subject, data, j.params("motion_noise"), by_shape)
+    part = module.run(j.template(), j.subject, data, j.params("motion_noise"))
     write_part(j.out.motion_noise, part.datasets, attrs=part.attrs)
     write_table(j.out.motion_noise_table, part.files["table"], MOTION_NOISE)
 

@@ -109,11 +109,7 @@ def _refiner(
 
 
 def run(
-    template: Template,
-    subject: Subject,
-    data: Mapping[str, np.ndarray],
-    params: Params,
-    refined_by_shape: Mapping[str, bool] | None = None,
+    template: Template, subject: Subject, data: Mapping[str, np.ndarray], params: Params
 ) -> Part:
     """The error bar of one subject.
 
@@ -123,16 +119,14 @@ def run(
         The base template and the subject (the contract of :mod:`scan2morph.stages`).
     data : mapping store path -> array
         The repair parts of the neutral and the visemes, their align parts and the motion
-        part (the visemes it modelled, ``/mask``).
+        part (the visemes it modelled, ``/mask``); when the run refines, each viseme's refine
+        group attributes too (``paths.refine_group(take)`` -> mapping, :func:`shape_verdicts`):
+        a viseme whose texture the pipeline found not correlating (``shape_used``) is refined
+        by the surface's shape straight away in every draw, one it refined by its texture
+        tries the texture in every draw, and one without them takes its first draw's verdict.
     params : Params
         (With ``params.refine``, each draw refines the visemes too:
         ``motion_noise.refine_draws`` draws.)
-    refined_by_shape : mapping take -> bool, optional
-        The pipeline's refinement of each viseme: whether its texture did not correlate and
-        the surface's shape refined it (the refine part's attribute ``shape_used``,
-        :func:`shape_verdicts`). Such a viseme's draws go straight to the shape; the others
-        try the texture first, as the pipeline did. A viseme not named takes its first draw's
-        verdict.
 
     Returns
     -------
@@ -147,7 +141,8 @@ def run(
     fiducials = {t: params.fit.fiducial_set(k) for t, k in subject.kinds.items()}
     refiner = None
     if params.refine is not None:
-        refiner = _refiner(template, subject, data, params.refine, refined_by_shape)
+        verdicts = shape_verdicts(data, subject.visemes)
+        refiner = _refiner(template, subject, data, params.refine, verdicts)
     recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
     # the draws' common work (the neutral's side, each take's) once
     with sharing() as counts:
@@ -181,10 +176,16 @@ def run(
     return Part(datasets, attrs=attrs, files={"table": table})
 
 
-def shape_verdicts(attrs: Mapping[str, Mapping]) -> dict[str, bool]:
-    """:func:`run`'s ``refined_by_shape`` from the visemes' refine part attributes (take ->
-    the attributes of its group ``paths.refine_group(take)``)."""
-    return {take: bool(a["shape_used"]) for take, a in attrs.items() if "shape_used" in a}
+def shape_verdicts(data: Mapping, visemes) -> dict[str, bool]:
+    """The pipeline's refinement of each viseme in ``data`` (its refine group's attributes,
+    a mapping under ``paths.refine_group(take)``): whether its texture did not correlate and
+    the surface's shape refined it (``shape_used``); a viseme without them is not named."""
+    out = {}
+    for take in visemes:
+        attrs = data.get(paths.refine_group(take))
+        if isinstance(attrs, Mapping) and "shape_used" in attrs:
+            out[take] = bool(attrs["shape_used"])
+    return out
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
