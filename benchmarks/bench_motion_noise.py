@@ -34,7 +34,13 @@ and OpenCV kept to the job's one thread): synth01 17.4, 17.8 -> 15.0, 15.6 (wall
 11.3). Every output identical, bit for bit. 2026-12-05, at a load of 1.6-1.9, before -> after
 the flow's reference side was shared and short-axis reductions and repeated float32 conversions
 went (CHANGELOG): synth01 14.4, 14.9 -> 12.7, 12.5; synth02 30.9, 29.8 -> 27.4, 27.6; synth03
-21.5, 22.4 -> 19.4, 19.6; synth04 9.9, 9.8 -> 8.2, 8.5; every output identical.
+21.5, 22.4 -> 19.4, 19.6; synth04 9.9, 9.8 -> 8.2, 8.5; every output identical. 2026-12-05
+again (``--trees`` main at 374b33b, this tree; a load of 0.8-3.7 from other jobs), before ->
+after each grid's membrane and fill-reducing order were kept, the draws followed the
+pipeline's verdict on a viseme's texture and the splines' kernels were filled a chunk at a
+time: CPU s synth01 13.1, 12.7 -> 12.6, 12.2 (wall 13.1, 12.8 -> 12.6, 12.2); synth02 28.4,
+28.3 -> 25.2, 25.5 (28.4, 28.5 -> 25.4, 25.5); synth03 19.5, 19.4 -> 18.1, 18.0 (19.5, 19.4 ->
+18.1, 18.0); synth04 8.4, 8.1 -> 7.7, 8.0 (8.4, 8.1 -> 7.7, 8.0); every output identical.
 """
 
 from __future__ import annotations
