@@ -18,7 +18,8 @@ the measurement.
 The stage's own cost (issue #35): ``bench_motion_noise.py --stage RUN [--trees OLD NEW]
 [--repeat 2] [--profile N] [subject ...]`` runs the ``motion_noise`` stage (``motion_noise.run``)
 of each subject on a finished run's parts (``RUN/results/{subject}``: the neutral's and the
-visemes' repair, landmarks and align parts and ``motion.h5``, as the rule reads them), once per
+visemes' repair, landmarks and align parts, the visemes' refine attributes and ``motion.h5``, as
+the job reads them), once per
 tree, subject and repeat, each in a fresh interpreter with one BLAS thread (as Snakemake runs a
 job), trees alternating. It prints each run's CPU and wall seconds, the work the draws shared
 (``scan2morph.refine.memo``: step -> reused, computed), and, with two trees, the largest
@@ -33,7 +34,13 @@ and OpenCV kept to the job's one thread): synth01 17.4, 17.8 -> 15.0, 15.6 (wall
 11.3). Every output identical, bit for bit. 2026-12-05, at a load of 1.6-1.9, before -> after
 the flow's reference side was shared and short-axis reductions and repeated float32 conversions
 went (CHANGELOG): synth01 14.4, 14.9 -> 12.7, 12.5; synth02 30.9, 29.8 -> 27.4, 27.6; synth03
-21.5, 22.4 -> 19.4, 19.6; synth04 9.9, 9.8 -> 8.2, 8.5; every output identical.
+21.5, 22.4 -> 19.4, 19.6; synth04 9.9, 9.8 -> 8.2, 8.5; every output identical. 2026-12-05
+again (``--trees`` main at 374b33b, this tree; a load of 0.8-3.7 from other jobs), before ->
+after each grid's membrane and fill-reducing order were kept, the draws followed the
+pipeline's verdict on a viseme's texture and the splines' kernels were filled a chunk at a
+time: CPU s synth01 13.1, 12.7 -> 12.6, 12.2 (wall 13.1, 12.8 -> 12.6, 12.2); synth02 28.4,
+28.3 -> 25.2, 25.5 (28.4, 28.5 -> 25.4, 25.5); synth03 19.5, 19.4 -> 18.1, 18.0 (19.5, 19.4 ->
+18.1, 18.0); synth04 8.4, 8.1 -> 7.7, 8.0 (8.4, 8.1 -> 7.7, 8.0); every output identical.
 """
 
 from __future__ import annotations
@@ -149,7 +156,7 @@ import cProfile, io, json, logging, pickle, pstats, sys, time
 from pathlib import Path
 import yaml
 from scan2morph.stages import Subject, motion_noise
-from scan2morph.store import read_part, read_parts
+from scan2morph.store import paths, read_attrs, read_part, read_parts
 from scan2morph.template import load_template
 
 run, subject, out, top = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3]), int(sys.argv[4])
@@ -174,6 +181,10 @@ profile = cProfile.Profile(time.process_time) if top else None
 c0, w0 = time.process_time(), time.perf_counter()
 if profile:
     profile.enable()
+if params.refine is not None:  # the refine groups' attributes, as the job reads them
+    refines = {t: res / "takes" / t / "refine.h5" for t in takes if kinds[t] == "viseme"}
+    data |= {paths.refine_group(t): read_attrs(f, paths.refine_group(t)) for t, f in
+             refines.items()}
 part = motion_noise.run(template, Subject(subject, kinds, labels), data, params)
 if profile:
     profile.disable()

@@ -277,3 +277,43 @@ def test_a_refiners_confidence_shortens_the_smoothing_of_the_draws(template, tak
     assert_allclose(sure["motion"], unsmoothed, atol=1e-12)
     assert np.abs(unsure["motion"] - unsmoothed).max() > 0.01  # mm: smoothed
 
+
+@pytest.mark.parametrize(
+    ("verdict", "expected"),
+    [({}, [False, True, True]), ({"she": True}, [True, True, True]), ({"she": False}, [False] * 3)],
+)
+def test_the_draws_follow_the_pipelines_verdict_on_the_texture(monkeypatch, verdict, expected):
+    """A viseme the pipeline refined by the surface's shape (its texture did not correlate:
+    the refine part's ``shape_used``) is refined by the shape straight away in every draw, the
+    first too; one it refined by the texture tries the texture in every draw (whatever a draw
+    finds); without the pipeline's verdict the first draw's decides for the others."""
+    import yaml
+
+    from scan2morph.stages import motion_noise
+    from scan2morph.stages import refine as refine_stage
+    from scan2morph.stages.part import Part, Subject
+    from scan2morph.store import paths
+    from tests.support.workflow_api import REPO
+
+    skipped = []
+
+    def run(template, take, params):
+        skipped.append(params.texture_unmatched)
+        out = {paths.refine("she", k): np.zeros(3) for k in ("vertices", "valid", "confidence")}
+        # the texture does not correlate in any draw
+        return Part(out, attrs={paths.refine_group("she"): {"shape_used": True}})
+
+    monkeypatch.setattr(refine_stage, "run", run)
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    params = refine_stage.Params.from_config(config)
+    subject = Subject("s", {"neutral": "neutral", "she": "viseme"}, {"neutral": "n", "she": "s"})
+    data = {paths.align("she", "transform"): np.eye(4)}
+    refiner = motion_noise._refiner(None, subject, data, params, verdict)
+    mesh = {"valid": np.ones(3, bool), "points2d": np.zeros((3, 2)), "vertices": np.zeros((3, 3))}
+    for _ in range(3):
+        refiner("she", mesh, np.zeros((68, 2)), np.zeros((68, 2)))
+    assert skipped == expected
+    attrs = {"she": {"shape_used": np.True_}, "car": {"shape_used": False}, "eel": {}}
+    data = {paths.refine_group(t): a for t, a in attrs.items()}
+    verdicts = motion_noise.shape_verdicts(data, ["she", "car", "eel", "man"])
+    assert verdicts == {"she": True, "car": False}

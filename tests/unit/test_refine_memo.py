@@ -174,3 +174,61 @@ def test_refine_stage_shares_in_its_own_scope_or_in_the_callers(monkeypatch):
         outer = list(memo._SCOPES)
         refine_stage.run(None, take, None)
     assert scopes[1] == outer  # the caller's, no other
+
+
+def _fuse_oracle(measured, weight, inside, smooth, prior, anchors, anchor_weight):
+    """The fusion's system built otherwise (the grid's neighbours as a Kronecker sum, cut to
+    ``inside``) and solved from scratch (COLAMD's own order, every time)."""
+    from scipy import sparse
+    from scipy.sparse.linalg import splu
+
+    def path(n):  # neighbours along one axis
+        return sparse.diags([np.ones(n - 1), np.ones(n - 1)], [-1, 1])
+
+    rows, cols = inside.shape
+    grid = sparse.kron(sparse.eye(rows), path(cols)) + sparse.kron(path(rows), sparse.eye(cols))
+    keep = np.flatnonzero(inside.ravel())
+    adjacent = grid.tocsr()[keep][:, keep]
+    deg = np.asarray(adjacent.sum(axis=1)).ravel()
+    w = weight[inside]
+    diag = w + prior**2 / (w + prior)
+    number = np.full(inside.size, -1)
+    number[keep] = np.arange(len(keep))
+    at = number[anchors[:, 0] * cols + anchors[:, 1]]
+    np.add.at(diag, at[at >= 0], anchor_weight)
+    system = (sparse.diags(diag + smooth * deg) - smooth * adjacent).tocsc()
+    system.eliminate_zeros()
+    system.sort_indices()
+    lu = splu(system)
+    out = np.zeros((rows, cols, 2))
+    for k in range(2):
+        out[..., k][inside] = lu.solve(w * measured[..., k][inside])
+    return out
+
+
+@pytest.mark.parametrize("smooth", [256.0, 0.0])
+def test_fusions_sharing_a_grid_give_the_straightforward_numbers(smooth):
+    """:func:`fuse` keeps each grid's membrane and fill-reducing order in a sharing scope: the
+    rounds of a refinement (other weights on one grid) solve as the system built afresh does,
+    bit for bit, in the scope and out of it; without a membrane (``smooth`` 0, whose terms
+    would leave the sum) the system is built as it is."""
+    from scan2morph.refine.flow import fuse
+
+    rng, prior = np.random.default_rng(11), 2.5
+    yy, xx = np.mgrid[0:70, 0:90]
+    inside = ((xx - 45) / 40.0) ** 2 + ((yy - 35) / 30.0) ** 2 < 1.0  # an irregular domain
+    anchors = np.array([[35, 45], [20, 30], [50, 60], [0, 0]])  # the last one outside
+    cases = []
+    for _ in range(3):
+        measured = rng.normal(0.0, 1.0, (70, 90, 2))
+        weight = np.where(rng.random((70, 90)) < 0.6, rng.uniform(0.0, 16.0, (70, 90)), 0.0)
+        cases.append((measured, weight))
+    expected = [_fuse_oracle(m, w, inside, smooth, prior, anchors, 2.0) for m, w in cases]
+    plain = [fuse(m, w, inside, smooth, prior, anchors, 2.0) for m, w in cases]
+    with sharing() as counts:
+        again = [fuse(m, w, inside, smooth, prior, anchors, 2.0) for m, w in cases]
+    for e, p, q in zip(expected, plain, again, strict=True):
+        assert_array_equal(p, e)
+        assert_array_equal(q, e)
+    assert counts["membrane"] == [2, 1] and counts["fill_order"] == [2, 1]  # found once
+    assert np.abs(expected[0]).max() > 0.1  # something was fused

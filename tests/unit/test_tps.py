@@ -74,6 +74,28 @@ def test_blocked_evaluation_and_function_form_agree():
     np.testing.assert_array_equal(tps_warp(src, dst, pts[:100]), spline(pts[:100]))
 
 
+@pytest.mark.parametrize("n", [1, 4095, 4097, 70_000, 140_000])
+def test_the_kernel_in_chunks_gives_the_one_pass_numbers(n):
+    """A block's kernel values computed a chunk at a time (:data:`CHUNK`) are those of one
+    pass over the block, and the product with the weights stays one per block: the warp is
+    bit for bit the formula evaluated block by block."""
+    from scan2morph.template.tps import BLOCK, _pairwise, _phi
+
+    rng = np.random.default_rng(n)
+    src = rng.uniform(-1.0, 1.0, (68, 2))
+    spline = TPS.fit(src, rng.uniform(0.0, 600.0, (68, 2)))
+    pts = rng.uniform(-1.2, 1.2, (n, 2))
+    expected = np.concatenate(
+        [
+            spline.affine[0]
+            + b @ spline.affine[1:]
+            + _phi(_pairwise(b, spline.centres)) @ spline.weights
+            for b in (pts[s : s + BLOCK] for s in range(0, n, BLOCK))
+        ]
+    )
+    np.testing.assert_array_equal(spline(pts), expected)
+
+
 @pytest.mark.parametrize(
     "src, dst, size, match",
     [

@@ -196,6 +196,16 @@ def get_viseme_aligns(wildcards):
     )
 
 
+def get_viseme_refines(wildcards):
+    """The visemes' refine parts (motion_noise reads their attributes: which were refined by
+    the surface's shape)."""
+    return _take_files(
+        "results/{subject}/takes/{take}/refine.h5",
+        wildcards.subject,
+        get_viseme_takes(wildcards),
+    )
+
+
 def get_subject_take_parts(wildcards):
     """Every take part the subject's job reads (the store merges them all)."""
     takes = takes_of(wildcards.subject)
@@ -231,7 +241,9 @@ def get_subject_stage_reads(wildcards):
         "motion": get_take_parts("fit")(wildcards)
         + get_take_parts("align")(wildcards)
         + (get_take_parts("refine")(wildcards) if REFINE else []),
-        "motion_noise": get_noise_repairs(wildcards) + get_viseme_aligns(wildcards),
+        "motion_noise": get_noise_repairs(wildcards)
+        + get_viseme_aligns(wildcards)
+        + (get_viseme_refines(wildcards) if REFINE else []),
         "morph": [f for f in neutral if f],
         "store": get_subject_take_parts(wildcards),
     }

@@ -19,7 +19,7 @@ from scan2morph.errors import InputError
 from scan2morph.jobs import run_job, sha256_file, write_json
 from scan2morph.stages import Subject
 from scan2morph.stages.stage_job import fingerprint, part_fingerprint, run_stages
-from scan2morph.store import read_part, read_parts, write_part
+from scan2morph.store import read_attrs, read_part, read_parts, write_part
 from scan2morph.template import load_template
 
 #: The subject's own stages each stage reads (besides the take parts it reads: params.reads).
@@ -64,9 +64,16 @@ def run_motion(j):
 
 def run_motion_noise(j):
     """Click precision and the click-noise error bar of each viseme's motion."""
+    from scan2morph.store import paths
     from scan2morph.tables import MOTION_NOISE, write_table
 
-    data = read_parts(j.p.reads["motion_noise"]) | read_part(j.out.motion)
+    reads = j.p.reads["motion_noise"]
+    refines = {Path(f).parent.name: f for f in reads if Path(f).name == "refine.h5"}
+    data = read_parts([f for f in reads if f not in refines.values()]) | read_part(j.out.motion)
+    # the pipeline's verdict on each viseme's texture (refined by it, or by the shape)
+    data |= {
+        paths.refine_group(t): read_attrs(f, paths.refine_group(t)) for t, f in refines.items()
+    }
     module = stage_module("motion_noise")
     part = module.run(j.template(), j.subject, data, j.params("motion_noise"))
     write_part(j.out.motion_noise, part.datasets, attrs=part.attrs)

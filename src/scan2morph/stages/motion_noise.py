@@ -68,11 +68,19 @@ class Params:
         return cls(dict(config["motion_noise"]), dict(config["smoothing"]), fit, refine)
 
 
-def _refiner(template: Template, subject: Subject, data, params: refine_stage.Params):
+def _refiner(
+    template: Template,
+    subject: Subject,
+    data,
+    params: refine_stage.Params,
+    by_shape: Mapping[str, bool] | None = None,
+):
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
-    draw): the take's fit to its clicks refined against the neutral seen through its clicks."""
+    draw): the take's fit to its clicks refined against the neutral seen through its clicks.
+    ``by_shape``: take -> whether the pipeline refined it by the surface's shape (its texture
+    did not correlate); a take it does not name takes its first draw's verdict."""
     neutral = subject.neutral
-    by_shape: dict[str, bool] = {}  # take -> its first draw was refined by the shape
+    by_shape = dict(by_shape or {})  # take -> its draws go to the shape straight away
 
     def refiner(take, mesh, take_landmarks, neutral_landmarks):
         source = subject.source(take)
@@ -84,9 +92,9 @@ def _refiner(template: Template, subject: Subject, data, params: refine_stage.Pa
             paths.mesh(take, "points2d"): mesh["points2d"],
             paths.align(take, "vertices"): transform_points(transform, mesh["vertices"]),
         }
-        # a take whose texture did not correlate in its first draw is refined by the shape
-        # straight away in the others (the same numbers; the texture pass is a quarter of
-        # a texture-mismatched subject's draws)
+        # a take whose texture did not correlate (in the pipeline's refinement, else in its
+        # first draw) is refined by the shape straight away (the same numbers; the texture
+        # pass is a quarter of a texture-mismatched subject's draws)
         p = replace(params, texture_unmatched=True) if by_shape.get(take) else params
         part = refine_stage.run(template, Take.of(subject, take, data=draw), p)
         by_shape.setdefault(take, bool(part.attrs[paths.refine_group(take)]["shape_used"]))
@@ -111,7 +119,11 @@ def run(
         The base template and the subject (the contract of :mod:`scan2morph.stages`).
     data : mapping store path -> array
         The repair parts of the neutral and the visemes, their align parts and the motion
-        part (the visemes it modelled, ``/mask``).
+        part (the visemes it modelled, ``/mask``); when the run refines, each viseme's refine
+        group attributes too (``paths.refine_group(take)`` -> mapping, :func:`shape_verdicts`):
+        a viseme whose texture the pipeline found not correlating (``shape_used``) is refined
+        by the surface's shape straight away in every draw, one it refined by its texture
+        tries the texture in every draw, and one without them takes its first draw's verdict.
     params : Params
         (With ``params.refine``, each draw refines the visemes too:
         ``motion_noise.refine_draws`` draws.)
@@ -129,7 +141,8 @@ def run(
     fiducials = {t: params.fit.fiducial_set(k) for t, k in subject.kinds.items()}
     refiner = None
     if params.refine is not None:
-        refiner = _refiner(template, subject, data, params.refine)
+        verdicts = shape_verdicts(data, subject.visemes)
+        refiner = _refiner(template, subject, data, params.refine, verdicts)
     recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
     # the draws' common work (the neutral's side, each take's) once
     with sharing() as counts:
@@ -161,6 +174,18 @@ def run(
     if not subject.visemes:
         attrs[paths.SKIPPED] = {"motion_noise": "no viseme takes: no click-noise error bar"}
     return Part(datasets, attrs=attrs, files={"table": table})
+
+
+def shape_verdicts(data: Mapping, visemes) -> dict[str, bool]:
+    """The pipeline's refinement of each viseme in ``data`` (its refine group's attributes,
+    a mapping under ``paths.refine_group(take)``): whether its texture did not correlate and
+    the surface's shape refined it (``shape_used``); a viseme without them is not named."""
+    out = {}
+    for take in visemes:
+        attrs = data.get(paths.refine_group(take))
+        if isinstance(attrs, Mapping) and "shape_used" in attrs:
+            out[take] = bool(attrs["shape_used"])
+    return out
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:

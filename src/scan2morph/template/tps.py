@@ -19,6 +19,11 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.tol import RCOND
 
+#: Points a warp's product with the weights takes at once (its rounding depends on them).
+BLOCK = 65536
+#: Points whose kernel values are computed at once (temporaries of a few MB).
+CHUNK = 4096
+
 
 def _phi(r: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -144,16 +149,19 @@ class TPS:
         return cls(centres=src, weights=x[:m], affine=x[m:])
 
     def __call__(self, points) -> np.ndarray:
-        """Warp points (n, 2) -> (n, 2); vectorised in blocks to bound memory."""
+        """Warp points (n, 2) -> (n, 2); vectorised in blocks of :data:`BLOCK` points to bound
+        memory, each block's kernel values computed :data:`CHUNK` points at a time (their
+        temporaries stay in the cache: twice as fast on a refinement's grid, and the same
+        values; the product with the weights stays one per block, whose rounding depends on
+        the block's rows)."""
         pts = np.asarray(points, dtype=np.float64)
         out = np.empty_like(pts)
-        for s in range(0, len(pts), 65536):
-            blk = pts[s : s + 65536]
-            out[s : s + 65536] = (
-                self.affine[0]
-                + blk @ self.affine[1:]
-                + _phi(_pairwise(blk, self.centres)) @ self.weights
-            )
+        for s in range(0, len(pts), BLOCK):
+            blk = pts[s : s + BLOCK]
+            kernel = np.empty((len(blk), len(self.centres)))
+            for c in range(0, len(blk), CHUNK):
+                kernel[c : c + CHUNK] = _phi(_pairwise(blk[c : c + CHUNK], self.centres))
+            out[s : s + BLOCK] = self.affine[0] + blk @ self.affine[1:] + kernel @ self.weights
         return out
 
 
