@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from scan2morph.errors import InputError
+from scan2morph.units import unit_scale, units_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is made: a take's ingest needs none (0.3 s)
     import pandas as pd
@@ -65,11 +66,6 @@ PATH_COLUMNS = tuple(c for c in COLUMNS if c not in REQUIRED and c != "units")
 MULTI_PATH_COLUMNS = ("depth",)
 #: The separator of several files in one cell.
 PATH_SEPARATOR = ";"
-#: The ``units`` column: the unit of a take's coordinates -> mm per unit (empty: mm).
-UNITS = {"": 1.0, "mm": 1.0, "cm": 10.0, "m": 1000.0}
-#: Modalities whose coordinates the ``units`` column scales (the others carry their unit in
-#: their own files: a stereo calibration's T, an RGB-D sensor's depth_scale_mm).
-UNITS_MODALITIES = ("mesh", "range")
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
@@ -132,8 +128,9 @@ def mm_per_unit(row) -> float:
     Raises
     ------
     InputError
-        Naming the sheet row and the column: a value other than ``mm``, ``cm`` or ``m``, or a
-        unit for a modality the column does not scale (:data:`UNITS_MODALITIES`).
+        Naming the sheet row and the column: a value other than ``mm``, ``cm``, ``m`` or a
+        positive number (:func:`unit_scale`), or a unit for a modality the column does not scale
+        (:data:`~scan2morph.units.UNITS_MODALITIES`).
     """
     problem = units_problem(row.get("units", ""), row.get("modality", ""))
     if problem:
@@ -142,20 +139,7 @@ def mm_per_unit(row) -> float:
             f"({row.get('subject')}/{row.get('take')})"
         )
         raise InputError(where, problem)
-    return UNITS[str(row.get("units", "") or "")]
-
-
-def units_problem(value: str, modality: str) -> str:
-    """What is wrong with a ``units`` cell, naming the column; ``""`` when nothing."""
-    value = str(value or "")
-    if value not in UNITS:
-        return f"column 'units': {value!r} unknown (expected mm, cm or m; empty means mm)"
-    if UNITS[value] != 1.0 and modality not in UNITS_MODALITIES:
-        return (
-            f"column 'units': {value!r} is for mesh and range takes (a {modality} take gives its "
-            "unit in its own files: a stereo calibration's T, an RGB-D sensor's depth_scale_mm)"
-        )
-    return ""
+    return unit_scale(row.get("units", ""))
 
 
 def split_paths(value: str) -> list[str]:

@@ -115,6 +115,10 @@ def test_a_mesh_in_metres_with_its_unit_equals_the_mesh_in_mm(scans):
     assert both.sum() > 0.99 * np.isfinite(b[..., 2]).sum()
     np.testing.assert_allclose(a[both], b[both], atol=0.03)  # mm: the depth buffer's resolution
     assert np.median(np.abs(a[both] - b[both])) < 1e-3
+    # the unit as a number of mm per unit: the same scale, the same take bit for bit
+    numeric = _ingest(_row("car", units="1000"), car["obj_m"], car["landmarks_m"])
+    for key in (paths.clicks("car"), paths.raw("car", "xyz")):
+        np.testing.assert_array_equal(numeric[key], metres[key])
     with pytest.raises(InputError, match="looks like metres, not mm: give its unit in the sheet"):
         _ingest(_row("car"), car["obj_m"], car["landmarks_m"])
 
@@ -127,14 +131,21 @@ def test_a_bad_unit_is_refused_naming_the_row_and_the_column(tmp_path, scans):
         f"{scans['neutral']['landmarks']}\t\n",
         f"s1\tcar\tviseme\tcar\tmesh\t{car['obj_m']}\t{car['landmarks_m']}\tinch\n",
         f"s1\tcar2\tviseme\tcar\tstereo\t\t{car['landmarks_m']}\tcm\n",
+        f"s1\tcar3\tviseme\tcar\tmesh\t{car['obj_m']}\t{car['landmarks_m']}\t-2.5\n",
+        f"s1\tcar4\tviseme\tcar\tmesh\t{car['obj_m']}\t{car['landmarks_m']}\t25.4\n",
     ]
     (tmp_path / "sheet.tsv").write_text(header + "".join(rows))
     table = read_sheet(tmp_path / "sheet.tsv")
     problems = subject_problems(table, check_files=False)["s1"]
     sheet = tmp_path / "sheet.tsv"
-    assert f"{sheet} row 3 (s1/car): column 'units': 'inch' unknown (expected mm, cm or m; " in (
+    expected = "(expected mm, cm, m or a number of mm per unit, e.g. 25.4 for inches; "
+    assert f"{sheet} row 3 (s1/car): column 'units': 'inch' unknown {expected}" in (
         "\n".join(problems)
     )
+    assert f"{sheet} row 5 (s1/car3): column 'units': '-2.5' unknown {expected}" in (
+        "\n".join(problems)
+    )
+    assert not any("row 6 " in p for p in problems)  # 25.4 mm per unit (inches)
     assert any(
         p.startswith(f"{sheet} row 4 (s1/car2): column 'units': 'cm' is for mesh and range takes")
         for p in problems

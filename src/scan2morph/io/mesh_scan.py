@@ -61,6 +61,8 @@ DEFAULT_MESH_CAMERA = {
 MAX_LANDMARK_OFFSET_MM = 5.0
 #: The largest extent of a face or head scan (a face-only crop to head and shoulders), mm.
 MESH_EXTENT_MM = (60.0, 1000.0)
+#: What the sheet's ``units`` column takes, for messages.
+UNIT_HELP = "mm, cm, m or mm per unit: 25.4 for inches"
 #: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
 #: is the surface's shading, no skin texture.
 SHADED = "shading"
@@ -251,7 +253,7 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
         unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
         likely = (
             f"the mesh looks like {unit}, not mm: give its unit in the sheet's units column "
-            "(mm, cm or m)"
+            f"({UNIT_HELP})"
             if unit
             else "not a face in mm"
         )
@@ -289,12 +291,10 @@ def check_mesh_size(mesh, mm_per_unit: float = 1.0, source: str | Path = "mesh")
     if lo <= largest <= hi:
         return
     unit = next((name for name, f in _UNITS if lo <= largest * f <= hi), None)
-    if unit in ("metres", "cm"):
-        likely = f"it looks like {unit}: give its unit in the sheet's units column (mm, cm or m)"
-    elif unit:
-        likely = f"it looks like {unit}: scale it to mm"
+    if unit:
+        likely = f"it looks like {unit}: give its unit in the sheet's units column ({UNIT_HELP})"
     else:
-        likely = "not a face or head in mm"
+        likely = f"not a face or head in mm: give its scale in the sheet's units column ({UNIT_HELP})"
     size = " x ".join(f"{e:.4g}" for e in extents)
     raise InputError(
         source,
