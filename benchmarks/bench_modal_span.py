@@ -25,7 +25,7 @@ vertices (the motion of the skin point each vertex sits on, from
 correspondence's error (measured - true), rows ``field`` = ``true`` / ``error`` beside
 ``measured``, each share of its own field's RMS; the anchor then at every K (round(K/3)
 functions per axis, at least one: K = 1 is the three translations, K = 5 six fields, K = 10
-nine). On the default run (/work/ci33, synth01-02 tune / synth03-04 held out; ``--configs skin
+nine). On a default run (synth01-02 tune / synth03-04 held out; ``--configs skin
 paper``), least squares, the share left as ranges over the six expressions of each group::
 
     K                  1          5          10         25         50         100
