@@ -173,15 +173,16 @@ def settle(clicks: np.ndarray | None, color: np.ndarray, xyz: np.ndarray, source
         points = complete_jawline(clicks[given], color, xyz, source)
         points = np.where(given[:, None], clicks, points)
         out = Landmarks(points, JAWLINE_DETECTED, detector=DETECTOR)
-    check_face(
-        xyz,
-        out.points,
-        source,
-        f"{source} (detected landmarks)",
-        "; these landmarks were detected: a detection this far off is wrong, give the take's "
-        "landmarks in the sheet's landmarks column",
-        DETECTED_EYE_SPAN_MM,
-    )
+    if out.source == DETECTED:
+        hint = (
+            "; these landmarks were detected: a detection this far off is wrong, give the take's "
+            "landmarks in the sheet's landmarks column"
+        )
+        check_face(
+            xyz, out.points, source, f"{source} (detected landmarks)", hint, DETECTED_EYE_SPAN_MM
+        )
+    else:  # the eye corners are clicked (a 51-point file): the clicks' band
+        check_face(xyz, out.points, source, f"{source} (detected jawline)")
     return out
 
 
