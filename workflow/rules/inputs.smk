@@ -105,7 +105,9 @@ def get_subject_rows(wildcards):
     """subject, take, kind, label, modality and units of each of the subject's rows (its check
     job's params: the units scale a mesh before its size is checked)."""
     rows = TAKES.loc[wildcards.subject]
-    return rows[["subject", "take", "kind", "label", "modality", "units"]].to_dict("records")
+    return rows[["subject", "take", "kind", "label", "modality", "units"]].to_dict(
+        "records"
+    )
 
 
 def get_subject_files(wildcards):
