@@ -82,7 +82,9 @@ synth01-02 with ``--truth``: a partial strip costs the frowns and sad faces up t
 K = 25 (synth01 frown1, true); the only variant within +0.005 of ``skin`` on synth01-02
 (``skin_strip_0.5_brow_1.6``) loses the held-out smiles at K = 50 by up to +0.033 (true 0.38 ->
 0.41); ``skin_strip_3_brow_2`` wins every held-out expression at K = 25 and 50 but loses
-synth02's smiles (+0.037) and synth01's sad faces (+0.022) at K = 50. Not adopted
+synth02's smiles (+0.037) and synth01's sad faces (+0.022) at K = 50; the closest on both
+groups, strip 3 mm with mimic mass 1.6 and brows 1.6, loses up to +0.015 (synth02 sad1, true,
+K = 25) and +0.007 held out. Not adopted
 (docs/outputs.md has the per-label table).
 
 A synthetic run to measure on (four subjects, four expressions each, 320 x 240 range scans,

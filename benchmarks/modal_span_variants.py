@@ -95,6 +95,14 @@ VARIANTS: dict[str, dict] = {
     "skin_brow_2": {"preset": "skin", "brow_mass_factor": 2.0},
     "skin_strip_1_brow_1.6": {"preset": "skin", "clamp_strip_mm": 1.0, "brow_mass_factor": 1.6},
     "skin_strip_0.5_brow_1.6": {"preset": "skin", "clamp_strip_mm": 0.5, "brow_mass_factor": 1.6},
+    "skin_strip_3_mimic_1.6": {"preset": "skin", "clamp_strip_mm": 3.0, "mimic_mass_factor": 1.6},
+    "skin_strip_1_mimic_1.6": {"preset": "skin", "clamp_strip_mm": 1.0, "mimic_mass_factor": 1.6},
+    "skin_strip_3_mimic_1.6_brow_1.6": {
+        "preset": "skin",
+        "clamp_strip_mm": 3.0,
+        "mimic_mass_factor": 1.6,
+        "brow_mass_factor": 1.6,
+    },
 }
 
 
