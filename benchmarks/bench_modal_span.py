@@ -75,6 +75,18 @@ mouth, as the free outline does (``skin_free_outline``); l = 10 mm gains more on
 held out, +0.081 on synth01). The rule for a default (no expression worse by more than 0.005)
 keeps ``skin``.
 
+Then (issue #37) the strip only on the outline below a named point, the forehead clamped
+(variant key ``strip_below``), and the strip with the brows' mass per area raised
+(``brow_mass_factor`` b: ``1 + 0.4 w_mimic + (b - 1) w_brow``, :data:`BROW_LINES`), chosen on
+synth01-02 with ``--truth``: a partial strip costs the frowns and sad faces up to +0.161 at
+K = 25 (synth01 frown1, true); the only variant within +0.005 of ``skin`` on synth01-02
+(``skin_strip_0.5_brow_1.6``) loses the held-out smiles at K = 50 by up to +0.033 (true 0.38 ->
+0.41); ``skin_strip_3_brow_2`` wins every held-out expression at K = 25 and 50 but loses
+synth02's smiles (+0.037) and synth01's sad faces (+0.022) at K = 50; the closest on both
+groups, strip 3 mm with mimic mass 1.6 and brows 1.6, loses up to +0.015 (synth02 sad1, true,
+K = 25) and +0.007 held out. Not adopted
+(docs/outputs.md has the per-label table).
+
 A synthetic run to measure on (four subjects, four expressions each, 320 x 240 range scans,
 about 10 minutes on one core)::
 
@@ -98,95 +110,19 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from modal_span_variants import (
+    BENCH_KEYS,
+    BROW_LINES,
+    VARIANTS,
+    custom_basis,
+    mass_weight,
+    strip_only,
+    variant_params,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 KS = [1, 5, 10, 25, 50, 100]
 ANCHOR_KS = [25, 50, 100]
-
-#: Basis configurations: a preset and the config keys set over it. The presets are the
-#: candidates for the default; the variants are the other physics measured on the way.
-VARIANTS: dict[str, dict] = {
-    "paper": {"preset": "paper"},
-    "clamped_still": {"preset": "clamped_still"},
-    "skin": {"preset": "skin"},
-    "free_steel": {"preset": "paper", "fixed_outline": "none"},
-    "free_thick_soft_membrane": {
-        "preset": "paper",
-        "fixed_outline": "none",
-        "thickness_mm": 10.0,
-        "stiff_factor": 1.0,
-        "membrane_scale": 0.1,
-        "rotary_inertia": False,
-    },
-    "skin_tension_only": {
-        "preset": "skin",
-        "foundation_n_per_mm3": 0.0,
-        "tether_n_per_mm3": 0.0,
-        "tether_normal_n_per_mm3": 0.0,
-    },
-    "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0, "tether_normal_n_per_mm3": 0.0},
-    "skin_tangential_tether": {"preset": "skin", "tether_normal_n_per_mm3": 0.0},
-    "skin_free_outline": {"preset": "skin", "fixed_outline": "none"},
-    "skin_stiff_upper": {"preset": "skin", "stiff_factor": 3.0, "youngs_modulus_mpa": 1.0},
-    "skin_vertex_mass": {"preset": "skin", "mass": "vertex"},
-    "skin_stable_tether": {  # the skin preset as first measured: a light tie on the stable face
-        "preset": "skin",
-        "foundation_n_per_mm3": 0.005,
-        "tether_n_per_mm3": 0.003,
-        "tether_normal_n_per_mm3": 0.01,
-        "tether_region": "stable",
-        "coordinates": "mass",
-        "fixed_outline": "none",
-    },
-    "skin_soft_shell": {"preset": "skin", "youngs_modulus_mpa": 0.01},  # skin until the membrane
-    "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
-    "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},
-    # The skin varying over the face (the mimic skin of scan2morph.modal.skin), measured with
-    # brows1 and frown1 in the cohort against skin before it (uniform): the share left of the
-    # worst expression moves by -0.14 (synth01 frown1, K = 25) to +0.08 at K = 25 / 50 / 100,
-    # with the mimic lines round the mouth, cheeks and brows only: heavier mimic skin (mass
-    # 2, 4) helps the smiles and sad faces at K = 50 (synth04 sad1 0.46 -> 0.39) and hurts the
-    # brow expressions (synth02 brows1 +0.08); softer (tension 0.5) is worse at K = 25 (up to
-    # +0.16); a softer foundation there (0.3) helps the brow expressions and the real smile's
-    # normal part and costs sad faces up to +0.02. With the forehead (frontalis) in the mimic
-    # skin too, mass 1.2-1.4 moves no expression by more than +0.004 and takes synth01 at
-    # K = 50 from 0.40 to 0.34 (the skin preset's mimic_mass_factor).
-    "skin_uniform": {"preset": "skin", "mimic_mass_factor": 1.0},
-    "skin_mimic_mass_2": {"preset": "skin", "mimic_mass_factor": 2.0},
-    "skin_mimic_mass_4": {"preset": "skin", "mimic_mass_factor": 4.0},
-    "skin_mimic_tension_0.5": {"preset": "skin", "mimic_tension_factor": 0.5},
-    "skin_mimic_foundation_0.3": {"preset": "skin", "mimic_foundation_factor": 0.3},
-    "skin_mimic_mass_1.5_foundation_0.5": {
-        "preset": "skin",
-        "mimic_mass_factor": 1.5,
-        "mimic_foundation_factor": 0.5,
-    },
-    # over the skin preset's mimic mass 1.4: neither leaves less on every expression (softer:
-    # synth01 frown1 +0.15 at K = 25; the foundation: synth03 frown1 +0.04 at K = 25)
-    "skin_mimic_tension_0.8": {"preset": "skin", "mimic_tension_factor": 0.8},
-    "skin_mimic_foundation_0.8": {"preset": "skin", "mimic_foundation_factor": 0.8},
-    "skin_still_0.5": {"preset": "skin", "still_mm": 0.5},  # tied and clamped: less skin
-    "skin_still_2": {"preset": "skin", "still_mm": 2.0},  # more skin
-    "skin_foundation_0.003": {"preset": "skin", "foundation_n_per_mm3": 0.003},
-    "skin_foundation_0.03": {"preset": "skin", "foundation_n_per_mm3": 0.03},
-    # the clamp replaced by the skin beyond the cut, a strip l mm wide held at its far edge
-    # (ModalParams.clamp_strip_mm, a library parameter, no config key; see the docstring)
-    "skin_strip_3": {"preset": "skin", "clamp_strip_mm": 3.0},
-    "skin_strip_10": {"preset": "skin", "clamp_strip_mm": 10.0},
-}
-
-
-def variant_params(cfg: dict, variant: dict):
-    """The modal stage's parameters for a configuration (its ``clamp_strip_mm`` set on the
-    :class:`~scan2morph.modal.ModalParams`: no config key), two eigensolver threads."""
-    from dataclasses import replace
-
-    from scan2morph.stages import modal
-
-    keys = dict(variant)
-    strip = float(keys.pop("clamp_strip_mm", 0.0))
-    params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | keys}).with_threads(2)
-    return replace(params, modal=replace(params.modal, clamp_strip_mm=strip))
 
 
 def subject_case(run: Path, subject: str, cfg: dict, truth: bool = False) -> dict:
@@ -253,9 +189,12 @@ def subject_rows(case: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
 
     params = variant_params(cfg, variant)
     t0 = time.perf_counter()
-    basis, outline = modal.natural_basis(
-        case["fine"], case["subject"], case["data"], case["fields"], params
-    )
+    if any(k in variant for k in BENCH_KEYS):
+        basis, outline = custom_basis(case, params, variant)
+    else:
+        basis, outline = modal.natural_basis(
+            case["fine"], case["subject"], case["data"], case["fields"], params
+        )
     seconds = time.perf_counter() - t0
     neutral = case["data"][paths.neutral("vertices")]
     normals = vertex_normals(neutral, case["fine"].faces)
@@ -344,7 +283,12 @@ def realdata_case(template, data_dir: str | None = None):
     x, y = v[:, 0] - head.nose[0], v[:, 1] - head.nose[1]
     stable = (y > 55) | ((np.abs(x) < 8) & (y > 10) & (y < 45)) | ((np.abs(x) > 50) & (y > 10))
     mimic = _mimic_by_measure(template, np.column_stack([x, y]))
+    brow = _mimic_by_measure(template, np.column_stack([x, y]), BROW_LINES)
+    tip = template.vertices[template.named["nose_tip"]][1]
+    below = {n: y < -(template.vertices[i][1] - tip) * 45.0 for n, i in template.named.items()}
     return {
+        "brow": brow,
+        "below": below,
         "vertices": v,
         "faces": f,
         "smile": _smile(x, y),
@@ -354,9 +298,12 @@ def realdata_case(template, data_dir: str | None = None):
     }
 
 
-def _mimic_by_measure(template, xy_mm, mm_per_unit: float = 45.0):
-    """The template's mimic lines in mm from the nose tip (x right, y up) and their weight."""
+def _mimic_by_measure(template, xy_mm, lines=None, mm_per_unit: float = 45.0):
+    """The template's mimic lines (or ``lines`` of named points and widths) in mm from the nose
+    tip (x right, y up) and their weight."""
     from scan2morph.modal.skin import MIMIC_LINES, mimic_weight
+
+    named_lines = MIMIC_LINES if lines is None else lines
 
     tv = np.asarray(template.vertices)[:, :2]
     tip = tv[template.named["nose_tip"]]
@@ -365,7 +312,7 @@ def _mimic_by_measure(template, xy_mm, mm_per_unit: float = 45.0):
         d = tv[template.named[name]] - tip
         return [-d[0] * mm_per_unit, -d[1] * mm_per_unit]  # canonical: x image-right, y down
 
-    lines = [(np.array([mm(n) for n in names]), w * mm_per_unit) for names, w in MIMIC_LINES]
+    lines = [(np.array([mm(n) for n in names]), w * mm_per_unit) for names, w in named_lines]
     return mimic_weight(xy_mm, lines)
 
 
@@ -387,15 +334,16 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     t0 = time.perf_counter()
     m = params.modal
     soft = (m.mimic_tension_factor, m.mimic_foundation_factor, m.mimic_mass_factor) != (1, 1, 1)
-    basis = modal_basis(
-        v,
-        f,
-        params.modal,
-        real["upper"],
-        fixed=fixed,
-        tethered=tethered,
-        mimic=real["mimic"] if soft else None,
-    )
+    weight = real["mimic"] if soft else None
+    if variant.get("brow_mass_factor", 1.0) != 1.0:
+        weight, params = mass_weight(
+            params, real["mimic"], real["brow"], variant["brow_mass_factor"]
+        )
+    below = variant.get("strip_below")
+    with strip_only(real["below"][below] if below else None):
+        basis = modal_basis(
+            v, f, params.modal, real["upper"], fixed=fixed, tethered=tethered, mimic=weight
+        )
     seconds = time.perf_counter() - t0
     normals = vertex_normals(v, f)
     where = np.ones(len(v), bool)
