@@ -8,23 +8,26 @@ import numpy as np
 import pytest
 
 from scan2morph.errors import InputError
-from scan2morph.landmarks.cascade import load, ridge_path
-from scan2morph.landmarks.train import train
+from scan2morph.landmarks.cascade import PATTERN, fit_stage, load, pattern, ridge_path, run, save
+from scan2morph.landmarks.train import DEFAULTS, _fit_local, train
+
+#: A tiny training: one range take, two local stages, two starts, one stretched copy.
+TINY = {
+    "subjects": 1,
+    "takes": 1,
+    "mesh_subjects": 0,
+    "stereo_subjects": 0,
+    "radii_mm": [6.0, 3.0],
+    "starts": 2,
+    "stretched": 1,
+}
 
 
 def test_training_is_deterministic(tmp_path):
     """Two trainings with the same seed on a tiny set give identical weights, the second from
     the simulated takes the first kept in its cache (their simulation's determinism is
     test_synth's); another seed gives other weights."""
-    config = {
-        "subjects": 1,
-        "takes": 1,
-        "mesh_subjects": 0,
-        "stereo_subjects": 0,
-        "radii_mm": [6.0, 3.0],
-        "starts": 2,
-        "stretched": 1,
-    }
+    config = TINY
     a, b = train(5, config, cache=tmp_path), train(5, config, cache=tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["samples-5-1x1.npz"]
     c = train(6, config)
@@ -153,3 +156,51 @@ def test_ridge_path_is_the_ridge_solution_with_few_or_many_samples(n_samples):
         W = np.linalg.solve(Xs.T @ Xs + lam * np.eye(80), Xs.T @ (Y - Y.mean(axis=0)))
         np.testing.assert_allclose(stage.weights, W, rtol=0, atol=2e-6 * np.abs(W).max())
         assert stage.radius == 4.0
+
+
+def test_a_denser_pattern_is_kept_in_the_model_file(tmp_path):
+    """A cascade trained with a 5 x 5 pattern (``pattern_side``) reads 25 samples per point and
+    channel, its file keeps the side and, read back, runs to the same shapes; the default
+    3 x 3 pattern is :data:`PATTERN` and its file has no ``sides`` (the committed model's file
+    as before)."""
+    np.testing.assert_array_equal(pattern(3), PATTERN)
+    config = TINY | {"pattern_side": 5}
+    model = train(5, config, cache=tmp_path)
+    local = model.stages[1:]
+    assert [s.side for s in local] == [5, 5]
+    channels = local[0].mean.size // (68 * 25)
+    assert local[0].mean.size == 68 * 25 * channels
+    save(model, tmp_path / "m.npz")
+    back = load(tmp_path / "m.npz")
+    assert [s.side for s in back.stages] == [3, 5, 5]  # the global stage's is unused
+    rng = np.random.default_rng(0)
+    chans = rng.random((320, 320, channels), dtype=np.float32)
+    np.testing.assert_allclose(
+        run(back, chans, model.init), run(model, chans, model.init), atol=0.05
+    )
+    save(train(5, config | {"pattern_side": 3}, cache=tmp_path), tmp_path / "d.npz")
+    with np.load(tmp_path / "d.npz") as z:
+        assert "sides" not in z.files
+
+
+def test_a_ridge_per_point_takes_each_points_columns_from_its_own_penalty():
+    """With ``ridge_per_point`` each point's two weight columns are those of the stage fitted
+    with that point's chosen penalty (the oracle: :func:`fit_stage` with each penalty); a point
+    whose updates are exact in the features gets the smallest penalty, one whose updates are
+    noise alone the largest."""
+    rng = np.random.default_rng(7)
+    X = rng.normal(size=(400, 20))
+    Y = 0.3 * rng.normal(size=(400, 136))
+    Y[:, :2] = X[:, :2] @ rng.normal(size=(2, 2))  # point 0: exact in the features
+    Y[:, 2:4] = rng.normal(size=(400, 2))  # point 1: noise alone
+    held = np.arange(400) % 5 == 4
+    config = DEFAULTS | {"ridges": [0.001, 1.0, 1000.0], "ridge_per_point": True}
+    stage, ridges = _fit_local(X, Y, held, 2.0, config)
+    assert len(ridges) == 68 and ridges[0] == 0.001 and ridges[1] == 1000.0
+    for point, ridge in enumerate(ridges):
+        cols = slice(2 * point, 2 * point + 2)
+        np.testing.assert_allclose(
+            stage.weights[:, cols], fit_stage(X, Y, 2.0, ridge).weights[:, cols], atol=1e-6
+        )
+    one, ridge = _fit_local(X, Y, held, 2.0, config | {"ridge_per_point": False})
+    assert np.isscalar(ridge) and one.weights.shape == stage.weights.shape

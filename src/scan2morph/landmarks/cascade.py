@@ -4,8 +4,9 @@ The first, global stage reads the smoothed canonical channels (:mod:`scan2morph.
 canonical`) on a fixed 17 x 19 grid over the face (9 mm apart) and predicts the whole shape by
 ridge regression: where the eyes, mouth and chin are, whatever the face's proportions. Each
 following, local stage samples the channels on a 3 x 3 pattern of half-width ``radius`` cells
-around each of the 68 current points, standardises the 2448 values and adds a ridge-regressed
-update of all 136 coordinates; they look closer and closer.
+around each of the 68 current points (a stage's ``side`` x ``side`` pattern: 3 in the committed
+model), standardises the 2448 values and adds a ridge-regressed update of all 136 coordinates;
+they look closer and closer.
 """
 
 from __future__ import annotations
@@ -34,6 +35,17 @@ MIRROR = np.array(
 )
 #: The 3 x 3 sampling pattern around a point, in units of the stage's radius.
 PATTERN = np.array([(x, y) for y in (-1.0, 0.0, 1.0) for x in (-1.0, 0.0, 1.0)])
+
+
+def pattern(side: int) -> np.ndarray:
+    """The ``side`` x ``side`` sampling pattern (side**2, 2) spanning -1..1 (units of the
+    stage's radius), row by row; ``side`` 3 is :data:`PATTERN`."""
+    if side < 2:
+        raise InputError("landmark cascade", f"pattern side: expected 2 or more, got {side}")
+    t = np.linspace(-1.0, 1.0, int(side))
+    return np.array([(x, y) for y in t for x in t])
+
+
 #: The global stage's grid about the nose tip, mm (x right, y down).
 GLOBAL_GRID_MM = np.array(
     [(x, y) for y in np.arange(-75.0, 88.0, 9.0) for x in np.arange(-72.0, 73.0, 9.0)]
@@ -56,6 +68,8 @@ class Stage:
     bias : (136,) float32
     mean, scale : (F,) float32
         Feature standardisation.
+    side : int
+        Points per side of the local sampling pattern (:func:`pattern`).
     """
 
     radius: float
@@ -63,6 +77,7 @@ class Stage:
     bias: np.ndarray
     mean: np.ndarray
     scale: np.ndarray
+    side: int = 3
 
 
 @dataclass(frozen=True)
@@ -106,7 +121,7 @@ def global_features(channels: np.ndarray) -> np.ndarray:
     return _sample(smooth, NOSE_CELL + GLOBAL_GRID_MM / STEP_MM).reshape(-1)
 
 
-def features(channels: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+def features(channels: np.ndarray, points: np.ndarray, radius: float, side: int = 3) -> np.ndarray:
     """Channel values around each point.
 
     Parameters
@@ -117,13 +132,15 @@ def features(channels: np.ndarray, points: np.ndarray, radius: float) -> np.ndar
         Current shapes, canonical cells.
     radius : float
         Pattern half-width, cells.
+    side : int
+        Points per side of the pattern (:func:`pattern`).
 
     Returns
     -------
-    (..., 68 * 9 * C) float32
+    (..., 68 * side**2 * C) float32
     """
     pts = np.asarray(points, dtype=np.float64)
-    where = pts[..., :, None, :] + radius * PATTERN  # (..., 68, 9, 2)
+    where = pts[..., :, None, :] + radius * pattern(side)  # (..., 68, side**2, 2)
     return _sample(channels, where.reshape(-1, 2)).reshape(*pts.shape[:-2], -1)
 
 
@@ -154,12 +171,14 @@ def run(
             shape = np.broadcast_to((f @ stage.weights + stage.bias).reshape(68, 2), shape.shape)
             shape = shape.astype(np.float64)
             continue
-        f = (features(channels, shape, stage.radius) - stage.mean) / stage.scale
+        f = (features(channels, shape, stage.radius, stage.side) - stage.mean) / stage.scale
         shape = shape + (f @ stage.weights + stage.bias).reshape(shape.shape)
     return shape
 
 
-def fit_stage(feats: np.ndarray, target: np.ndarray, radius: float, ridge: float) -> Stage:
+def fit_stage(
+    feats: np.ndarray, target: np.ndarray, radius: float, ridge: float, side: int = 3
+) -> Stage:
     """Ridge regression of the shape updates on standardised features.
 
     Parameters
@@ -171,16 +190,18 @@ def fit_stage(feats: np.ndarray, target: np.ndarray, radius: float, ridge: float
     radius : float
     ridge : float
         Ridge penalty per sample (the penalty is ``ridge * N``).
+    side : int
+        The features' pattern side, kept in the stage.
 
     Returns
     -------
     Stage
     """
-    return ridge_path(feats, target, radius, [ridge])[0]
+    return ridge_path(feats, target, radius, [ridge], side)[0]
 
 
 def ridge_path(
-    feats: np.ndarray, target: np.ndarray, radius: float, ridges: list[float]
+    feats: np.ndarray, target: np.ndarray, radius: float, ridges: list[float], side: int = 3
 ) -> list[Stage]:
     """:func:`fit_stage` for several ridge penalties at the cost of one (an eigen-decomposition
     of the Gram matrix serves them all; of the samples' kernel matrix when there are fewer
@@ -209,17 +230,25 @@ def ridge_path(
             W = Xs.T @ W
         out.append(
             Stage(
-                float(radius), W.astype(f32), ybar.astype(f32), mean.astype(f32), scale.astype(f32)
+                float(radius),
+                W.astype(f32),
+                ybar.astype(f32),
+                mean.astype(f32),
+                scale.astype(f32),
+                int(side),
             )
         )
     return out
 
 
 def save(model: Cascade, path: str | Path) -> None:
-    """Write a cascade as ``.npz`` (weights float16, the training record as JSON text)."""
+    """Write a cascade as ``.npz`` (weights float16, the training record as JSON text; the
+    patterns' sides only when one is not 3, so the committed model's file is as before)."""
     from scan2morph.synth.cohort import write_npz
 
     arrays = {"init": model.init, "radii": np.array([s.radius for s in model.stages])}
+    if any(s.side != 3 for s in model.stages):
+        arrays["sides"] = np.array([s.side for s in model.stages])
     for k, s in enumerate(model.stages):
         arrays |= {
             f"weights{k}": s.weights.astype(np.float16),
@@ -245,6 +274,7 @@ def load(path: str | Path) -> Cascade:
     try:
         with np.load(path, allow_pickle=False) as z:
             radii = z["radii"]
+            sides = z["sides"] if "sides" in z.files else np.full(len(radii), 3)
             stages = tuple(
                 Stage(
                     float(r),
@@ -252,6 +282,7 @@ def load(path: str | Path) -> Cascade:
                     z[f"bias{k}"],
                     z[f"mean{k}"],
                     z[f"scale{k}"],
+                    int(sides[k]),
                 )
                 for k, r in enumerate(radii)
             )

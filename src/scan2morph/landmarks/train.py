@@ -18,6 +18,7 @@ import argparse
 import logging
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -43,6 +44,7 @@ from scan2morph.landmarks.data import (
 )
 from scan2morph.landmarks.detect import mirror_channels, mirror_shapes
 from scan2morph.landmarks.face import find_face
+from scan2morph.tol import N_IBUG
 
 #: Model version: bump when the features, the frame or the training change.
 VERSION = "1.1"
@@ -56,6 +58,8 @@ DEFAULTS = {
     "stereo_takes": 4,
     "global": True,
     "radii_mm": [10.0, 6.0, 4.0, 2.5, 1.5],
+    "pattern_side": 3,
+    "ridge_per_point": False,
     "starts": 6,
     "ridges": [0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0],
     "jitter_mm": 3.0,
@@ -71,6 +75,9 @@ DEFAULTS = {
     "extra_wide_share": 0.0,
     "extra_knobs": list(WIDE_RANGE),
 }
+#: ``radii_mm``: the local stages' pattern half-widths, mm, in order; ``pattern_side``: points
+#: per side of their sampling pattern (3: 3 x 3); ``ridge_per_point``: each point's own ridge
+#: penalty in the local stages (of ``ridges``, by the held-out identities) instead of one per stage.
 #: ``extra_*``: extra range and RGB-D training subjects (``wide000``, ...; ``takes`` each) added
 #: to the committed ones, their faces drawn by ``landmarks.data.wide_identity`` with closed
 #: eyes in a share ``extra_closed_eyes`` of them and the knobs ``extra_knobs`` redrawn in a share
@@ -174,6 +181,27 @@ def _chosen_ridge(X: np.ndarray, Y: np.ndarray, held: np.ndarray, radius: float,
     return ridges[int(np.argmin(errs))]
 
 
+def _fit_local(X: np.ndarray, Y: np.ndarray, held: np.ndarray, radius: float, config: dict):
+    """A local stage and its ridge penalty: one for the whole stage (the held-out rows' median
+    error over all points) or, with ``config["ridge_per_point"]``, one per point (each point's
+    two coordinates with the penalty that best predicts its held-out updates; a list)."""
+    side = int(config["pattern_side"])
+    ridges = [float(r) for r in config["ridges"]]
+    if not config["ridge_per_point"] or len(ridges) == 1 or held.all() or not held.any():
+        ridge = _chosen_ridge(X, Y, held, radius, config)
+        return fit_stage(X, Y, radius, ridge, side), ridge
+    errs = []
+    for stage in ridge_path(X[~held], Y[~held], radius, ridges):
+        res = (Y[held] - _predict(stage, X[held])).reshape(-1, N_IBUG, 2)
+        errs.append(np.median(np.linalg.norm(res, axis=2), axis=0))
+    best = np.argmin(np.asarray(errs), axis=0)  # (68,) index into ridges
+    path = ridge_path(X, Y, radius, ridges, side)
+    cols = np.repeat(best, 2)  # x and y of each point
+    weights = np.stack([path[k].weights[:, j] for j, k in enumerate(cols)], axis=1)
+    stage = replace(path[0], weights=weights)
+    return stage, [ridges[k] for k in best]
+
+
 def _fit_global(chans, truths: np.ndarray, groups: np.ndarray, config: dict):
     """The global stage, its out-of-fold predictions (N, 68, 2) (each identity predicted by a
     stage fitted without it: as good as on new faces) and its ridge penalty."""
@@ -228,19 +256,20 @@ def fit_cascade(
     shapes = np.stack([_starts(b, m, config, rng) for b in base])  # (N, m, 68, 2)
     target = np.repeat(truths[:, None], m, axis=1)
     held = np.repeat(np.asarray(groups) % HOLDOUT_EVERY == HOLDOUT_EVERY - 1, m)
+    side = int(config["pattern_side"])
     for radius_mm in config["radii_mm"]:
         radius = radius_mm / STEP_MM
-        feats = np.stack([features(c, s, radius) for c, s in zip(chans, shapes, strict=True)])
+        feats = np.stack([features(c, s, radius, side) for c, s in zip(chans, shapes, strict=True)])
         X = feats.reshape(len(chans) * m, -1)
         Y = (target - shapes).reshape(len(chans) * m, -1)
-        ridges.append(_chosen_ridge(X, Y, held, radius, config))
-        stage = fit_stage(X, Y, radius, ridges[-1])
+        stage, ridge = _fit_local(X, Y, held, radius, config)
+        ridges.append(ridge)
         shapes = shapes + _predict(stage, X).reshape(shapes.shape)
         err = np.linalg.norm(target - shapes, axis=-1) * STEP_MM
         log.info(
-            "stage r=%.1f mm (ridge %g): training error median %.2f mm",
+            "stage r=%.1f mm (ridge %s): training error median %.2f mm",
             radius_mm,
-            ridges[-1],
+            f"{ridge:g}" if np.isscalar(ridge) else f"per point {np.median(ridge):g} median",
             np.median(err),
         )
         stages.append(stage)
@@ -341,13 +370,29 @@ def train(seed: int, config: dict | None = None, cache: Path | None = None) -> C
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: ``--seed N --out PATH [--subjects N] [--takes N] [--cache DIR]
-    [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
+    [--radii-mm R,...] [--pattern-side N] [--ridge-per-point] [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
     parser = argparse.ArgumentParser(prog="python -m scan2morph.landmarks.train")
     parser.add_argument("--seed", type=int, required=True)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--subjects", type=int, default=DEFAULTS["subjects"])
     parser.add_argument("--takes", type=int, default=DEFAULTS["takes"])
     parser.add_argument("--cache", type=Path, default=None)
+    parser.add_argument(
+        "--radii-mm",
+        default=",".join(f"{r:g}" for r in DEFAULTS["radii_mm"]),
+        help="comma-separated local stages' pattern half-widths, mm",
+    )
+    parser.add_argument(
+        "--pattern-side",
+        type=int,
+        default=DEFAULTS["pattern_side"],
+        help="points per side of the local stages' sampling pattern",
+    )
+    parser.add_argument(
+        "--ridge-per-point",
+        action="store_true",
+        help="each point's own ridge penalty in the local stages",
+    )
     parser.add_argument(
         "--extra-subjects",
         type=int,
@@ -369,6 +414,9 @@ def main(argv: list[str] | None = None) -> int:
     config = {
         "subjects": args.subjects,
         "takes": args.takes,
+        "radii_mm": [float(r) for r in args.radii_mm.split(",") if r],
+        "pattern_side": args.pattern_side,
+        "ridge_per_point": args.ridge_per_point,
         "extra_subjects": args.extra_subjects,
         "extra_closed_eyes": args.extra_closed_eyes,
         "extra_wide_share": args.extra_wide_share,
