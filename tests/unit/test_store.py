@@ -126,3 +126,20 @@ def test_open_store_refuses_unknown_major(tmp_path):
     (tmp_path / "x.h5").write_text("nope")
     with pytest.raises(InputError, match="not an HDF5 file"):
         open_store(tmp_path / "x.h5")
+
+
+def test_read_attrs_of_a_group_a_part_lacks(tmp_path):
+    """A group's attributes as written; a group the part lacks is an error, or ``{}`` when the
+    caller allows it (a left-out take's refine part has no refine group)."""
+    from scan2morph.store.hdf5 import read_attrs, write_part
+
+    part = tmp_path / "refine.h5"
+    write_part(
+        part,
+        {"takes/car/refine/valid": np.ones(3, bool)},
+        attrs={"takes/car/refine": {"shape_used": 1.0, "problem": "x"}},
+    )
+    assert read_attrs(part, "takes/car/refine") == {"shape_used": 1.0, "problem": "x"}
+    assert read_attrs(part, "takes/too/refine", missing_ok=True) == {}
+    with pytest.raises(KeyError):
+        read_attrs(part, "takes/too/refine")

@@ -70,10 +70,12 @@ def run_motion_noise(j):
     reads = j.p.reads["motion_noise"]
     refines = {Path(f).parent.name: f for f in reads if Path(f).name == "refine.h5"}
     data = read_parts([f for f in reads if f not in refines.values()]) | read_part(j.out.motion)
-    # the pipeline's verdict on each viseme's texture (refined by it, or by the shape)
-    data |= {
-        paths.refine_group(t): read_attrs(f, paths.refine_group(t)) for t, f in refines.items()
+    # the pipeline's verdict on each viseme's texture (refined by it, or by the shape); a take
+    # left out has none
+    verdicts = {
+        t: read_attrs(f, paths.refine_group(t), missing_ok=True) for t, f in refines.items()
     }
+    data |= {paths.refine_group(t): v for t, v in verdicts.items() if v}
     module = stage_module("motion_noise")
     part = module.run(j.template(), j.subject, data, j.params("motion_noise"))
     write_part(j.out.motion_noise, part.datasets, attrs=part.attrs)

@@ -148,9 +148,12 @@ def read_part(path: str | Path, prefix: str = "/") -> dict[str, np.ndarray]:
     return out
 
 
-def read_attrs(path: str | Path, name: str = "/") -> dict:
-    """Attributes of one group or dataset of a part or store."""
+def read_attrs(path: str | Path, name: str = "/", missing_ok: bool = False) -> dict:
+    """Attributes of one group or dataset of a part or store; with ``missing_ok``, ``{}`` when
+    the part has no ``name`` (a left-out take's part records only why it was left out)."""
     with h5py.File(path, "r") as h5:
+        if missing_ok and name not in h5:
+            return {}
         return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5[name].attrs.items()}
 
 
