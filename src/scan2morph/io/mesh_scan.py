@@ -39,11 +39,11 @@ from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
 from scan2morph.io.mesh_view import face_camera, face_view, surface_camera  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
-    _UNITS,
     EYE_SPAN_MM,
     RangeTake,
     check_face,
     check_landmarks_inside,
+    likely_unit,
 )
 
 log = logging.getLogger("scan2morph")
@@ -250,7 +250,7 @@ def _check_units(lm3: np.ndarray, mesh_path) -> None:
     span = float(np.linalg.norm(lm3[45] - lm3[36]))
     lo, hi = EYE_SPAN_MM
     if not lo <= span <= hi:
-        unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
+        unit = likely_unit(span, EYE_SPAN_MM)
         likely = (
             f"the mesh looks like {unit}, not mm: give its unit in the sheet's units column "
             f"({UNIT_HELP})"
@@ -290,11 +290,13 @@ def check_mesh_size(mesh, mm_per_unit: float = 1.0, source: str | Path = "mesh")
     lo, hi = MESH_EXTENT_MM
     if lo <= largest <= hi:
         return
-    unit = next((name for name, f in _UNITS if lo <= largest * f <= hi), None)
+    unit = likely_unit(largest, MESH_EXTENT_MM)
     if unit:
         likely = f"it looks like {unit}: give its unit in the sheet's units column ({UNIT_HELP})"
     else:
-        likely = f"not a face or head in mm: give its scale in the sheet's units column ({UNIT_HELP})"
+        likely = (
+            f"not a face or head in mm: give its scale in the sheet's units column ({UNIT_HELP})"
+        )
     size = " x ".join(f"{e:.4g}" for e in extents)
     raise InputError(
         source,

@@ -30,6 +30,13 @@ MIRROR_MARGIN_MM = 5.0
 _UNITS = (("metres", 1000.0), ("cm", 10.0), ("inches", 25.4), ("0.1 mm", 0.1), ("µm", 1e-3))
 
 
+def likely_unit(size: float, band: tuple[float, float]) -> str | None:
+    """The unit a size read as mm is more likely in: the first of metres, cm, inches, 0.1 mm
+    and µm in which it would lie within ``band`` (mm); None when none does."""
+    lo, hi = band
+    return next((name for name, f in _UNITS if lo <= size * f <= hi), None)
+
+
 @dataclass(frozen=True)
 class RangeTake:
     """A range take: XYZ, color and landmarks on the same pixel grid.
@@ -317,7 +324,7 @@ def check_face(
     span = float(np.linalg.norm(lifted[1] - lifted[0]))
     lo, hi = eye_span_mm
     if not lo <= span <= hi:
-        unit = next((name for name, f in _UNITS if lo <= span * f <= hi), None)
+        unit = likely_unit(span, eye_span_mm)
         if unit is not None:
             likely = f"the coordinates look like {unit}, not mm"
         elif span > 0:
