@@ -62,10 +62,13 @@ difference of squares is no measure of it: the click error is not orthogonal to 
 exact clicks leave, and the difference is zero (negative) on 9 of the 15 visemes. Halving the
 refined draws (the CPU needed for synth02's and synth03's subject jobs under 30 s) loosens the
 tracking 0.24 -> 0.30; the fit-only draws do not win it back as a control variate (0.31), nor do
-sign clicks (0.32; with 4 draws 0.28): ``--paired`` on synth02 shows why: the fit-only change
-explains 1-23% of the refined change per vertex (car 0.01, man 0.11, she 0.23, eel 0.14, too
-0.17), the refined change being the refinement's own response to the moved clicks (flow, lips,
-jaw), not the fit's slide passed through. Cheaper refinements in the draws move the error bar
+sign clicks (0.32; with 4 draws 0.28). Within a realisation a draw's refined and fit-only mean
+squared changes correlate with a median r of 0.46 (-0.17 to 0.86): a control variate removes
+r^2 of the variance (a median 21%), where halving the draws doubles it (r^2 >= 0.5 would be
+needed; 1 viseme of 15 has it). ``--paired`` on synth02 shows why: the fit-only change explains
+1-23% of the refined change per vertex (car 0.01, man 0.11, she 0.23, eel 0.14, too 0.17), the
+refined change being the refinement's own response to the moved clicks (flow, lips, jaw), not
+the fit's slide passed through. Cheaper refinements in the draws move the error bar
 itself (ratio to the config's on the same clicks, synth02, 4 draws; CPU-s of the draws 24.9):
 ``flow_level=1`` 1.11-1.38 (16.1 CPU-s), ``iterations=3`` 1.01-1.19 (20.7), ``iterations=2``
 1.18-1.83 (15.3), and OpenCV's FAST preset for the flow (patched in, not a config key) 0.85-1.15
