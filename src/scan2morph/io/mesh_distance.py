@@ -7,8 +7,10 @@ check itself. :func:`surface_distance` finds, for each point, the triangles that
 a given reach (a k-d tree over the triangles' centroids: a triangle's points all lie within
 its *radius*, the largest distance of a corner from its centroid, so a triangle within
 ``reach`` of a point has its centroid within ``reach + radius``) and takes the least exact
-point-to-triangle distance among them (:func:`point_triangle_distance`); a point none of whose
-candidates lies within reach is measured against every triangle.
+point-to-triangle distance among them (:func:`point_triangle_distance`); for a point none of
+whose candidates lies within reach, the distance to one triangle (the closest candidate's, or
+the nearest centroid's) bounds the least one, and the triangles that can lie within that bound
+are measured (as exact as measuring every triangle, and as fast for a point far off the mesh).
 """
 
 from __future__ import annotations
@@ -73,8 +75,9 @@ def surface_distance(
         The points, mm (finite).
     reach : float
         The distance the answer matters within, mm: a point's candidate triangles are those
-        that can lie this close; a point with none that close is measured against every
-        triangle. The result is exact either way; ``reach`` only sets the speed.
+        that can lie this close; a point with none that close is measured against those that
+        can lie as close as one triangle does. The result is exact either way (the least
+        distance to any triangle); ``reach`` only sets the speed.
 
     Returns
     -------
@@ -92,16 +95,26 @@ def surface_distance(
     radius = np.sqrt(
         np.max([np.einsum("ij,ij->i", x - centre, x - centre) for x in (a, b, c)], axis=0)
     )
-    # a little slack over the largest radius: the centroids' rounding cannot drop a candidate
-    near = cKDTree(centre).query_ball_point(pts, reach + float(radius.max()) * (1 + 1e-9) + 1e-9)
+    tree = cKDTree(centre)
+
+    def ball(r: float) -> float:
+        # a little slack over the largest radius: the centroids' rounding cannot drop a candidate
+        return r + float(radius.max()) * (1 + 1e-9) + 1e-9
+
+    def closest(p: np.ndarray, cand) -> float:
+        cand = np.asarray(cand, dtype=np.int64)
+        p = np.broadcast_to(p, (len(cand), 3))
+        return float(point_triangle_distance(p, a[cand], b[cand], c[cand]).min())
+
+    near = tree.query_ball_point(pts, ball(reach))
     for i, cand in enumerate(near):
         if len(cand):
-            cand = np.asarray(cand, dtype=np.int64)
-            p = np.broadcast_to(pts[i], (len(cand), 3))
-            out[i] = point_triangle_distance(p, a[cand], b[cand], c[cand]).min()
+            out[i] = closest(pts[i], cand)
         if not out[i] <= reach:  # the closest triangle may be none of the candidates
-            p = np.broadcast_to(pts[i], (len(f), 3))
-            out[i] = point_triangle_distance(p, a, b, c).min()
+            # a triangle's distance bounds the least one (the nearest centroid's, when no
+            # candidate); every triangle that close has its centroid within the ball of it
+            bound = min(out[i], closest(pts[i], [tree.query(pts[i])[1]]))
+            out[i] = closest(pts[i], tree.query_ball_point(pts[i], ball(bound)))
     return out
 
 

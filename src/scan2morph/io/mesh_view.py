@@ -55,8 +55,8 @@ MAX_COARSE_TRIANGLES = 10000
 #: The tip search refines this many of the best coarse grid points.
 TIP_CANDIDATES = 10
 #: At most about twice this many surface points around a coarse grid point are scored in the tip
-#: search (an even stride of them when there are more): it bounds the search's time and memory on
-#: dense scans (a synthetic mesh scan of 108,000 triangles has at most about 400 there, a real
+#: search (an even stride of them when there are more), and the most scored in one call: it bounds
+#: the search's time and memory on dense scans (a synthetic mesh scan of 108,000 triangles has at most about 400 there, a real
 #: head subdivided to 1.1 million about 4,000).
 MAX_TIP_POINTS = 500
 #: Radius around the nose tip of the face region (first direction, symmetry plane), mm.
@@ -199,14 +199,25 @@ def nose_tip(centres, areas, normals) -> np.ndarray:
     stride = max(1, len(centres) // MAX_PROTRUSION_TRIANGLES)
     tree = cKDTree(centres[::stride])
     sub_areas, sub_normals = areas[::stride], normals[::stride]
-    # the best few coarse points (a grid point may sit off a sharp tip) refined on the surface
-    best, best_score = coarse[0], -np.inf
+    # the best few coarse points (a grid point may sit off a sharp tip) refined on the surface;
+    # their neighbourhoods overlap, so each surface point is scored once for all of them
+    picks = []
     for k in np.argsort(score)[::-1][:TIP_CANDIDATES]:
-        near = centres[np.linalg.norm(centres - coarse[k], axis=1) < 1.5 * TIP_GRID_MM]
-        near = near[:: max(1, len(near) // MAX_TIP_POINTS)]
-        fine = _protrusion(tree, sub_areas, sub_normals, near, PROTRUSION_RADIUS_MM)
-        if fine.max() > best_score:
-            best, best_score = near[int(np.argmax(fine))], float(fine.max())
+        near = np.flatnonzero(np.linalg.norm(centres - coarse[k], axis=1) < 1.5 * TIP_GRID_MM)
+        picks.append(near[:: max(1, len(near) // MAX_TIP_POINTS)])
+    scored, where = np.unique(np.concatenate(picks), return_inverse=True)
+    fine = np.concatenate(  # at most MAX_TIP_POINTS a call: the pairs' memory stays bounded
+        [
+            _protrusion(tree, sub_areas, sub_normals, centres[chunk], PROTRUSION_RADIUS_MM)
+            for chunk in np.array_split(scored, -(-len(scored) // MAX_TIP_POINTS))
+        ]
+    )
+    best, best_score, start = coarse[0], -np.inf, 0
+    for near in picks:
+        mine = fine[where[start : start + len(near)]]
+        start += len(near)
+        if mine.max() > best_score:
+            best, best_score = centres[near[int(np.argmax(mine))]], float(mine.max())
     return best
 
 

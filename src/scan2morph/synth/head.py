@@ -129,7 +129,9 @@ class HeadModel:
         return np.isin(self.segment, SKIN_SEGMENTS)
 
 
-@functools.lru_cache(maxsize=8)
+#: Heads kept per process (about 30 MB each): a pipeline job builds one or two; a test worker
+#: builds more, and with 8 kept it built two of them twice.
+@functools.lru_cache(maxsize=16)
 def build_head(identity: Identity) -> HeadModel:
     """Mesh a subject's head at rest and set up its articulation and landmarks.
 

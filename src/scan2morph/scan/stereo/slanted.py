@@ -280,9 +280,12 @@ def _disparity_shape(disparity: np.ndarray, sigma: float, curvature: bool) -> np
     gyy = cv2.Sobel(wide, cv2.CV_32F, 0, 2, ksize=1) * trust
     gxy = cv2.Sobel(cv2.Sobel(wide, cv2.CV_32F, 1, 0, ksize=1), cv2.CV_32F, 0, 1, ksize=1)
     gxy *= 0.25 * trust
-    curv = np.stack([gxx, gxy, gyy], axis=-1)
-    curv[np.abs(curv).max(axis=-1) > _MAX_CURVATURE] = 0.0
-    return np.concatenate([gx[..., None], gy[..., None], curv], axis=-1)
+    # the largest of the three per pixel, one image at a time (numpy's reduction over a short
+    # last axis is about 10 times slower; max is exact, so the same answer)
+    steep = np.maximum(np.maximum(np.abs(gxx), np.abs(gxy)), np.abs(gyy)) > _MAX_CURVATURE
+    out = np.stack([gx, gy, gxx, gxy, gyy], axis=-1)
+    out[steep, 2:] = 0.0
+    return out
 
 
 def _refine_patches(
