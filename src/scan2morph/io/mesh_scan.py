@@ -128,8 +128,9 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Raises
     ------
     InputError
-        Missing or unreadable file, no faces (a point cloud), a texture the file references
-        but that is missing, a ``texture`` given for a mesh without UVs.
+        Missing, empty or unreadable file, a face indexing past the vertices, no faces (a point
+        cloud), a NaN or infinite vertex, a texture the file references but that is missing, a
+        ``texture`` given for a mesh without UVs.
 
     Notes
     -----
@@ -143,15 +144,31 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         raise InputError(path, "file not found (expected an OBJ, PLY or glTF/GLB mesh)")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(path, f"mesh: unknown format {path.suffix!r} (expected {MESH_SUFFIXES})")
+    if path.stat().st_size == 0:
+        raise InputError(
+            path, "mesh: the file is empty (0 bytes; expected an OBJ, PLY or glTF/GLB)"
+        )
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds on corrupt files
-        raise InputError(path, f"mesh: cannot read: {str(exc)[:200]}") from None
+        if isinstance(exc, IndexError) and path.suffix.lower() in (".obj", ".ply"):
+            # numpy's, from a face list indexing past the vertex list
+            problem = f"faces: a face refers to a vertex the file does not have ({exc})"
+        else:
+            problem = f"mesh: cannot read: {str(exc)[:200]}"
+        raise InputError(path, problem) from None
     faces = getattr(loaded, "faces", None)
     if faces is None or len(faces) == 0:
         n = len(getattr(loaded, "vertices", []))
         raise InputError(
             path, f"mesh: no faces ({n} vertices: a point cloud?); expected a triangle mesh"
+        )
+    bad = np.flatnonzero(~np.isfinite(np.asarray(loaded.vertices)).all(axis=1))
+    if len(bad):
+        raise InputError(
+            path,
+            f"vertices: {len(bad)} of {len(loaded.vertices)} have a NaN or infinite coordinate "
+            f"(the first: vertex {bad[0] + 1}); expected finite numbers",
         )
     visual = loaded.visual
     if texture is not None:
