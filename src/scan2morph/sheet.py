@@ -10,6 +10,7 @@ subject's jobs fail, with a message naming the file and the row.
 from __future__ import annotations
 
 import copy
+import io
 import re
 from collections.abc import Mapping
 from os import PathLike
@@ -87,11 +88,12 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     if not path.is_file():
         raise InputError(path, "sheet not found (config key 'subjects')")
     try:
-        df = pd.read_csv(path, sep="\t", dtype=str, comment="#", skip_blank_lines=True)
+        text = _tab_cells(path, path.read_text(encoding="utf-8-sig"))
+        df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, comment="#", index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"not a tab-separated sheet: {exc}") from exc
+        raise InputError(path, f"not a tab-separated sheet: {' '.join(str(exc).split())}") from exc
     df.columns = [c.strip() for c in df.columns]
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
@@ -99,19 +101,13 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     unknown = [c for c in df.columns if c not in COLUMNS]
     if unknown:
         raise InputError(path, f"unknown columns {unknown} (expected {list(COLUMNS)})")
-    for c in COLUMNS:
-        if c not in df.columns:
-            df[c] = ""
-    df = df[list(COLUMNS)].fillna("")
-    df = df.apply(lambda col: col.str.strip())
+    df = df.reindex(columns=list(COLUMNS), fill_value="").fillna("").apply(lambda c: c.str.strip())
     for row, rec in enumerate(df.itertuples(index=False), start=2):
         for col in ("subject", "take"):
             value = getattr(rec, col)
             if not _ID.match(value):
-                raise InputError(
-                    path,
-                    f"row {row}, column '{col}': {value!r} is not an id (letters, digits, _ and -)",
-                )
+                what = "is not an id (letters, digits, _ and -)"
+                raise InputError(path, f"row {row}, column '{col}': {value!r} {what}")
     base = path.resolve().parent
     for col in PATH_COLUMNS:
         df[col] = [_resolve(v, base, col in MULTI_PATH_COLUMNS) for v in df[col]]
@@ -119,6 +115,29 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     df["sheet"] = str(path)
     df["synthetic"] = False
     return df
+
+
+def _tab_cells(path: Path, text: str) -> str:
+    """``text`` without empty cells past the header's (trailing tabs); a header without a tab, or
+    a row with a filled cell past the header's (pandas would shift every cell), is refused."""
+    lines, width, row = text.splitlines(), 0, 1
+    for k, line in enumerate(lines):
+        cells = line.split("#", 1)[0].split("\t")  # '#' starts a comment, as for pandas
+        if not "".join(cells).strip():
+            continue
+        if not width and len(cells) == 1 and re.search(r",|\S +\S", cells[0]):
+            looks = "expected a tab-separated sheet (this one looks separated by commas or spaces)"
+            raise InputError(
+                path, f"header: no tab between the column names ({cells[0][:60]!r}); {looks}"
+            )
+        row, width = (row + 1, width) if width else (row, len(cells))
+        if extra := [c for c in cells[width:] if c.strip()]:
+            n = f"{len(cells)} cells but the header has {width} columns"
+            raise InputError(
+                path, f"row {row}: {n} (a tab too many?; the extra: {extra[0][:40]!r})"
+            )
+        lines[k] = "\t".join(cells[:width]) if len(cells) > width else line
+    return "\n".join(lines) + "\n"
 
 
 def mm_per_unit(row) -> float:

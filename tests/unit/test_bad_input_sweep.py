@@ -11,6 +11,7 @@ import pytest
 
 from scan2morph.errors import InputError
 from scan2morph.io import read_mesh
+from scan2morph.sheet import read_sheet
 
 TETRA_V = np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]])
 TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -62,3 +63,46 @@ def test_an_empty_mesh_file_says_so(tmp_path, name):
     assert _one_line(exc, tmp_path / name).endswith(
         "mesh: the file is empty (0 bytes; expected an OBJ, PLY or glTF/GLB)"
     )
+
+
+# --- the sheet --------------------------------------------------------------------------------
+HEADER = "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tlandmarks\n"
+ROW = "a\tneutral\tneutral\tneutral\trange\tn.abs\tn.png\tn.pts\n"
+
+
+def test_a_row_with_one_cell_too_many_is_refused_not_shifted(tmp_path):
+    """pandas took the first column of such a sheet for its index: every cell moved one column
+    to the left (subject 'neutral', modality 'n.abs') and the problems named the wrong ones."""
+    path = tmp_path / "s.tsv"
+    path.write_text(HEADER + ROW.rstrip("\n") + "\tn2.pts\n")
+    with pytest.raises(InputError) as exc:
+        read_sheet(path)
+    assert _one_line(exc, path) == (
+        f"{path}: row 2: 9 cells but the header has 8 columns (a tab too many?; the extra: "
+        "'n2.pts')"
+    )
+
+
+def test_trailing_tabs_are_empty_cells_on_any_row(tmp_path):
+    """A trailing tab (as spreadsheets export) on the first row shifted the sheet; on a later
+    row it stopped the run with pandas' two-line 'Expected 8 fields in line 3, saw 9'."""
+    path = tmp_path / "s.tsv"
+    path.write_text(
+        HEADER + ROW.rstrip("\n") + "\t\n" + ROW.replace("a\t", "b\t", 1).rstrip() + "\t\t\n"
+    )
+    sheet = read_sheet(path)
+    assert list(sheet["subject"]) == ["a", "b"]
+    assert list(sheet["modality"]) == ["range", "range"]
+    assert sheet.loc[1, "landmarks"] == str(tmp_path / "n.pts")
+
+
+@pytest.mark.parametrize("sep, looks", [(",", "commas"), ("  ", "spaces"), (" ", "spaces")])
+def test_a_sheet_separated_by_commas_or_spaces_is_named(tmp_path, sep, looks):
+    path = tmp_path / "s.tsv"
+    path.write_text((HEADER + ROW).replace("\t", sep))
+    with pytest.raises(InputError) as exc:
+        read_sheet(path)
+    assert _one_line(exc, path).endswith(
+        "expected a tab-separated sheet (this one looks separated by commas or spaces)"
+    )
+    assert f"{path}: header: no tab between the column names ('subject{sep}take" in str(exc.value)
