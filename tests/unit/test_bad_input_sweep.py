@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from scan2morph.errors import InputError
-from scan2morph.io import read_mesh
+from scan2morph.io import (
+    StereoCalibration,
+    read_mesh,
+    read_stereo_calibration,
+    write_stereo_calibration,
+)
 from scan2morph.sheet import read_sheet
 
 TETRA_V = np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]])
@@ -106,3 +111,56 @@ def test_a_sheet_separated_by_commas_or_spaces_is_named(tmp_path, sep, looks):
         "expected a tab-separated sheet (this one looks separated by commas or spaces)"
     )
     assert f"{path}: header: no tab between the column names ('subject{sep}take" in str(exc.value)
+
+
+# --- the stereo calibration -------------------------------------------------------------------
+K = [[800.0, 0, 319.5], [0, 800.0, 239.5], [0, 0, 1]]
+K1_DATA = "data: [ 800., 0., 319.5, 0., 800., 239.5, 0., 0., 1. ]"
+
+
+@pytest.fixture
+def calibration(tmp_path):
+    calib = StereoCalibration(K, np.zeros(5), K, np.zeros(5), np.eye(3), [-60.0, 0, 0])
+    write_stereo_calibration(tmp_path / "good.yaml", calib)
+    text = (tmp_path / "good.yaml").read_text()
+    assert K1_DATA in text
+    return text
+
+
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (
+            lambda t: t.replace("319.5", "abc", 1),
+            "K1: expected an !!opencv-matrix with rows, cols, dt and rows x cols numbers in data; "
+            "got the non-numeric entry 'abc'",
+        ),
+        (
+            lambda t: t.replace(" 0., 0., 1. ]", " 0., 0. ]", 1),
+            "K1: expected an !!opencv-matrix with rows, cols, dt and rows x cols numbers in data; "
+            "got rows 3 x cols 3 but 8 numbers",
+        ),
+        (
+            lambda t: t.replace("   " + K1_DATA + "\n", "", 1),
+            "K1: expected an !!opencv-matrix with rows, cols, dt and rows x cols numbers in data; "
+            "data missing (a truncated file?)",
+        ),
+        (
+            lambda t: "\ufeff" + t,
+            "not an OpenCV FileStorage calibration (expected a YAML file with a '%YAML:1.0' header "
+            "and the matrices K1 D1 K2 D2 R T); it starts with a byte-order mark (BOM): save it "
+            "as UTF-8 without BOM",
+        ),
+        (
+            lambda t: t.replace("   rows: 3", "\trows: 3", 1),
+            "; line 5 is indented with a tab (YAML: spaces only)",
+        ),
+    ],
+)
+def test_a_hand_edited_calibration_says_what_is_wrong(tmp_path, calibration, edit, problem):
+    """Before: 'K1: not an !!opencv-matrix' for the first three, no hint for the last two."""
+    path = tmp_path / "bad.yaml"
+    path.write_text(edit(calibration), encoding="utf-8")
+    with pytest.raises(InputError) as exc:
+        read_stereo_calibration(path)
+    assert _one_line(exc, path).endswith(problem)
