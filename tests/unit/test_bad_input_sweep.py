@@ -8,14 +8,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.io import (
+    RGBDIntrinsics,
     StereoCalibration,
     read_mesh,
+    read_rgbd_intrinsics,
     read_stereo_calibration,
+    write_rgbd_intrinsics,
     write_stereo_calibration,
 )
+from scan2morph.io.rgbd import PinholeCamera
 from scan2morph.sheet import read_sheet
 
 TETRA_V = np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]])
@@ -164,3 +169,31 @@ def test_a_hand_edited_calibration_says_what_is_wrong(tmp_path, calibration, edi
     with pytest.raises(InputError) as exc:
         read_stereo_calibration(path)
     assert _one_line(exc, path).endswith(problem)
+
+
+# --- RGB-D and mesh side files ----------------------------------------------------------------
+def _intrinsics(tmp_path, **extra) -> Path:
+    depth = PinholeCamera(np.array(K), np.zeros(5), (640, 480))
+    write_rgbd_intrinsics(
+        tmp_path / "i.yaml", RGBDIntrinsics(depth, depth, np.eye(3), np.zeros(3), 1.0)
+    )
+    doc = yaml.safe_load((tmp_path / "i.yaml").read_text())
+    doc.update(extra)
+    (tmp_path / "i.yaml").write_text(yaml.safe_dump(doc))
+    return tmp_path / "i.yaml"
+
+
+def test_a_misspelt_intrinsics_key_is_refused_not_ignored(tmp_path):
+    """Before: 'distorsion' was ignored and the take resampled without its distortion."""
+    assert read_rgbd_intrinsics(_intrinsics(tmp_path)).depth.size == (640, 480)
+    path = _intrinsics(tmp_path, distorsion=[0.1, 0, 0, 0, 0])
+    with pytest.raises(InputError) as exc:
+        read_rgbd_intrinsics(path)
+    assert _one_line(exc, path) == (
+        f"{path}: distorsion: unknown key (known: width, height, fx, fy, cx, cy, depth_scale_mm, "
+        "distortion, color)"
+    )
+    path = _intrinsics(tmp_path, color={"width": 640, "height": 480, "fx": 800.0, "fy": 800.0,
+                                        "cx": 319.5, "cy": 239.5, "t": [15.0, 0, 0]})  # fmt: skip
+    with pytest.raises(InputError, match=r"i.yaml: color.t: unknown key \(known: .*, R, T\)"):
+        read_rgbd_intrinsics(path)

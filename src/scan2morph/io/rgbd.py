@@ -161,14 +161,22 @@ def _camera(block, source, where: str) -> PinholeCamera:
     return PinholeCamera(K, D, (int(vals["width"]), int(vals["height"])))
 
 
+def _known_keys(block: dict, known: tuple[str, ...], source, where: str) -> None:
+    """Refuse a key the format does not have (a misspelt ``distorsion`` was ignored: the take
+    was resampled without its distortion)."""
+    if unknown := [k for k in block if k not in known]:
+        raise InputError(source, f"{where}{unknown[0]}: unknown key (known: {', '.join(known)})")
+
+
 def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     """Read an RGB-D intrinsics YAML (see the module docstring).
 
     Raises
     ------
     InputError
-        Missing file, not YAML, a key missing or not a number, a non-positive focal length or
-        size, ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3 numbers (names the key).
+        Missing file, not YAML, a key missing or not a number, an unknown key, a non-positive
+        focal length or size, ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3
+        numbers (names the key).
     """
     import yaml
 
@@ -181,12 +189,14 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
         raise InputError(path, f"cannot read as YAML: {str(exc).splitlines()[0]}") from None
     if not isinstance(doc, dict):
         raise InputError(path, f"expected a mapping with keys {list(_PINHOLE)}, got {doc!r:.60}")
+    _known_keys(doc, (*_PINHOLE, "depth_scale_mm", "distortion", "color"), path, "")
     depth = _camera(doc, path, "")
     scale = _number(doc, "depth_scale_mm", path, "", positive=True)
     color, R, T = depth, np.eye(3), np.zeros(3)
     if doc.get("color") is not None:
         block = doc["color"]
         color = _camera(block, path, "color.")
+        _known_keys(block, (*_PINHOLE, "distortion", "R", "T"), path, "color.")
         R = _matrix(block.get("R", np.eye(3).tolist()), (3, 3), path, "color.R")
         T = _matrix(block.get("T", [0.0, 0.0, 0.0]), (3,), path, "color.T (mm)")
         if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOL or np.linalg.det(R) < 0:
