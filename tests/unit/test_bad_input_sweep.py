@@ -14,6 +14,7 @@ from scan2morph.errors import InputError
 from scan2morph.io import (
     RGBDIntrinsics,
     StereoCalibration,
+    read_depth,
     read_mesh,
     read_rgbd_intrinsics,
     read_stereo_calibration,
@@ -197,3 +198,13 @@ def test_a_misspelt_intrinsics_key_is_refused_not_ignored(tmp_path):
                                         "cx": 319.5, "cy": 239.5, "t": [15.0, 0, 0]})  # fmt: skip
     with pytest.raises(InputError, match=r"i.yaml: color.t: unknown key \(known: .*, R, T\)"):
         read_rgbd_intrinsics(path)
+
+
+def test_a_boolean_depth_array_names_its_type(tmp_path):
+    """Before: 'expected an (H, W) number array, got (120, 160)': the shape it asked for."""
+    np.save(tmp_path / "d.npy", np.ones((120, 160), bool))
+    with pytest.raises(InputError) as exc:
+        read_depth(tmp_path / "d.npy")
+    assert _one_line(exc, tmp_path / "d.npy").endswith(
+        "depth: expected an (H, W) number array, got (120, 160) bool"
+    )
