@@ -15,6 +15,7 @@ from scan2morph.io import (
     RGBDIntrinsics,
     StereoCalibration,
     read_depth,
+    read_landmarks3d,
     read_mesh,
     read_rgbd_intrinsics,
     read_stereo_calibration,
@@ -208,3 +209,11 @@ def test_a_boolean_depth_array_names_its_type(tmp_path):
     assert _one_line(exc, tmp_path / "d.npy").endswith(
         "depth: expected an (H, W) number array, got (120, 160) bool"
     )
+
+
+def test_3d_landmarks_saved_with_a_bom_read_like_a_pts_file(tmp_path):
+    """Before: 'line 1: expected 'x y z' numbers, got '\\ufeff1 2 3'' (a .pts with a BOM read)."""
+    rows = np.arange(68 * 3, dtype=float).reshape(68, 3)
+    text = "".join(f"{x} {y} {z}\r\n" for x, y, z in rows)
+    (tmp_path / "l.txt").write_text("\ufeff" + text, encoding="utf-8", newline="")
+    np.testing.assert_array_equal(read_landmarks3d(tmp_path / "l.txt"), rows)

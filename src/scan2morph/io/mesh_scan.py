@@ -222,7 +222,7 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(path, "file not found (expected 68 or 51 lines 'x y z' of 3D landmarks)")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM, as Windows editors save
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as text: {exc}") from None
     rows = []
