@@ -19,9 +19,12 @@ from scan2morph.io import (
     read_mesh,
     read_rgbd_intrinsics,
     read_stereo_calibration,
+    write_color,
+    write_depth_png,
     write_rgbd_intrinsics,
     write_stereo_calibration,
 )
+from scan2morph.io.check import take_file_problems
 from scan2morph.io.rgbd import PinholeCamera
 from scan2morph.sheet import read_sheet
 
@@ -217,3 +220,36 @@ def test_3d_landmarks_saved_with_a_bom_read_like_a_pts_file(tmp_path):
     text = "".join(f"{x} {y} {z}\r\n" for x, y, z in rows)
     (tmp_path / "l.txt").write_text("\ufeff" + text, encoding="utf-8", newline="")
     np.testing.assert_array_equal(read_landmarks3d(tmp_path / "l.txt"), rows)
+
+
+def _rgbd_files(tmp_path, depth, color_size=(64, 48)) -> dict:
+    camera = PinholeCamera(
+        np.array([[60.0, 0, 31.5], [0, 60.0, 23.5], [0, 0, 1]]), np.zeros(5), (64, 48)
+    )
+    write_rgbd_intrinsics(
+        tmp_path / "i.yaml", RGBDIntrinsics(camera, camera, np.eye(3), np.zeros(3), 1.0)
+    )
+    write_depth_png(tmp_path / "d.png", depth)
+    write_color(tmp_path / "c.png", np.zeros((color_size[1], color_size[0], 3), np.uint8))
+    return {
+        "depth": tmp_path / "d.png",
+        "color": tmp_path / "c.png",
+        "intrinsics": tmp_path / "i.yaml",
+    }
+
+
+def test_the_check_lists_an_rgbd_takes_size_and_data_problems(tmp_path):
+    """Before, the subject's check passed an all-zero depth frame and a colour image of another
+    size than its intrinsics: the take failed only at its ingest, after the check had said the
+    subject's files were fine."""
+    good = np.full((48, 64), 600, np.uint16)
+    assert take_file_problems("rgbd", _rgbd_files(tmp_path, good)) == []
+    files = _rgbd_files(tmp_path, np.zeros((48, 64), np.uint16))
+    assert take_file_problems("rgbd", files) == [
+        f"{files['depth']}: depth: no pixel with data (all 0 or NaN)"
+    ]
+    files = _rgbd_files(tmp_path, good, color_size=(128, 96))
+    assert take_file_problems("rgbd", files) == [
+        f"{files['intrinsics']}: color.width/color.height: 64x48 but the color image c.png is "
+        "128x96 (WxH); are these the intrinsics of this color camera?"
+    ]

@@ -359,6 +359,42 @@ class RGBDTake(RangeTake):
     fusion: object | None = None
 
 
+def check_rgbd_files(
+    intr: RGBDIntrinsics,
+    intrinsics_path: str | Path,
+    frames: list[np.ndarray],
+    paths: list[Path],
+    color: np.ndarray,
+    color_path: str | Path,
+) -> None:
+    """The cheap checks between an RGB-D take's files, before any resampling (the subject's
+    check job runs them too, :mod:`scan2morph.io.check`).
+
+    Raises
+    ------
+    InputError
+        A depth image under the smallest size; a depth or colour image whose size differs from
+        the intrinsics' ``width``/``height`` (names the intrinsics file); a frame without depth
+        data.
+    """
+    check_image_size(frames[0].shape, paths[0], "depth")
+    for name, img, cam, where in (
+        ("depth", frames[0], intr.depth, ""),
+        ("color", color, intr.color, "color."),
+    ):
+        h, w = img.shape[:2]
+        if (w, h) != cam.size:
+            raise InputError(
+                intrinsics_path,
+                f"{where}width/{where}height: {cam.size[0]}x{cam.size[1]} but the {name} image "
+                f"{Path(paths[0] if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
+                f"are these the intrinsics of this {name} camera?",
+            )
+    for path, frame in zip(paths, frames, strict=True):
+        if not (np.isfinite(frame) & (frame > 0)).any():
+            raise InputError(path, "depth: no pixel with data (all 0 or NaN)")
+
+
 def read_rgbd_take(
     depth_path,
     color_path: str | Path,
@@ -403,23 +439,8 @@ def read_rgbd_take(
     paths = depth_frame_paths(depth_path)
     frames = read_depth_frames(paths)
     depth = frames[0]
-    check_image_size(depth.shape, paths[0], "depth")
     color = read_color(color_path)
-    for name, img, cam, where in (
-        ("depth", depth, intr.depth, ""),
-        ("color", color, intr.color, "color."),
-    ):
-        h, w = img.shape[:2]
-        if (w, h) != cam.size:
-            raise InputError(
-                intrinsics_path,
-                f"{where}width/{where}height: {cam.size[0]}x{cam.size[1]} but the {name} image "
-                f"{Path(paths[0] if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
-                f"are these the intrinsics of this {name} camera?",
-            )
-    for path, frame in zip(paths, frames, strict=True):
-        if not (np.isfinite(frame) & (frame > 0)).any():
-            raise InputError(path, "depth: no pixel with data (all 0 or NaN)")
+    check_rgbd_files(intr, intrinsics_path, frames, paths, color, color_path)
     fusion = None
     depth_mm = depth * intr.depth_scale_mm
     if len(frames) > 1:
