@@ -253,3 +253,24 @@ def test_the_check_lists_an_rgbd_takes_size_and_data_problems(tmp_path):
         f"{files['intrinsics']}: color.width/color.height: 64x48 but the color image c.png is "
         "128x96 (WxH); are these the intrinsics of this color camera?"
     ]
+
+
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        (
+            "width: 64\ncolor:\n\twidth: 64\n",
+            "line 3: found a tab (YAML indents with spaces) that cannot start any token",
+        ),
+        ("width: [64, 48\n", "line 2: expected ',' or ']', but got '<stream end>'"),
+    ],
+)
+def test_intrinsics_that_are_not_yaml_name_the_line(tmp_path, text, problem):
+    """Before: PyYAML's context alone, 'cannot read as YAML: while scanning for the next token'."""
+    (tmp_path / "i.yaml").write_text(text)
+    with pytest.raises(InputError) as exc:
+        read_rgbd_intrinsics(tmp_path / "i.yaml")
+    assert (
+        _one_line(exc, tmp_path / "i.yaml")
+        == f"{tmp_path / 'i.yaml'}: cannot read as YAML: {problem}"
+    )

@@ -161,6 +161,16 @@ def _camera(block, source, where: str) -> PinholeCamera:
     return PinholeCamera(K, D, (int(vals["width"]), int(vals["height"])))
 
 
+def _yaml_problem(exc: Exception) -> str:
+    """PyYAML's problem and its line (its message's first line is only its context: 'while
+    scanning for the next token')."""
+    problem, mark = getattr(exc, "problem", None), getattr(exc, "problem_mark", None)
+    if problem is None or mark is None:
+        return str(exc).splitlines()[0]
+    problem = problem.replace("character '\\t'", "a tab (YAML indents with spaces)")
+    return f"line {mark.line + 1}: {problem}"
+
+
 def _known_keys(block: dict, known: tuple[str, ...], source, where: str) -> None:
     """Refuse a key the format does not have (a misspelt ``distorsion`` was ignored: the take
     was resampled without its distortion)."""
@@ -186,7 +196,7 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     try:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(path, f"cannot read as YAML: {str(exc).splitlines()[0]}") from None
+        raise InputError(path, f"cannot read as YAML: {_yaml_problem(exc)}") from None
     if not isinstance(doc, dict):
         raise InputError(path, f"expected a mapping with keys {list(_PINHOLE)}, got {doc!r:.60}")
     _known_keys(doc, (*_PINHOLE, "depth_scale_mm", "distortion", "color"), path, "")
