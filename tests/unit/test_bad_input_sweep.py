@@ -17,10 +17,12 @@ from scan2morph.io import (
     read_depth,
     read_landmarks3d,
     read_mesh,
+    read_pts,
     read_rgbd_intrinsics,
     read_stereo_calibration,
     write_color,
     write_depth_png,
+    write_pts,
     write_rgbd_intrinsics,
     write_stereo_calibration,
 )
@@ -273,4 +275,31 @@ def test_intrinsics_that_are_not_yaml_name_the_line(tmp_path, text, problem):
     assert (
         _one_line(exc, tmp_path / "i.yaml")
         == f"{tmp_path / 'i.yaml'}: cannot read as YAML: {problem}"
+    )
+
+
+# --- landmark files of the other kind ---------------------------------------------------------
+def test_a_bare_list_of_points_or_an_empty_file_as_pts(tmp_path):
+    """Before: "header line '60.95 56.48': expected 'key: value' or '{'" and "missing '{' that
+    opens the point list"."""
+    path = tmp_path / "bare.pts"
+    path.write_text("".join(f"{x} {x + 1}\n" for x in range(68)))
+    with pytest.raises(InputError) as exc:
+        read_pts(path)
+    assert _one_line(exc, path) == (
+        f"{path}: header: '0 1' is a point, but an iBUG .pts starts with a header ('version: 1', "
+        "'n_points: 68', '{'; the points, then '}')"
+    )
+    (tmp_path / "empty.pts").write_text("\n")
+    with pytest.raises(InputError, match=r"empty.pts: the file is empty \(expected an iBUG .pts"):
+        read_pts(tmp_path / "empty.pts")
+
+
+def test_a_2d_pts_given_for_a_mesh_take_is_named(tmp_path):
+    write_pts(tmp_path / "l.pts", np.zeros((68, 2)))
+    with pytest.raises(InputError) as exc:
+        read_landmarks3d(tmp_path / "l.pts")
+    assert _one_line(exc, tmp_path / "l.pts").endswith(
+        "line 1: expected 'x y z' numbers, got 'version: 1' (an iBUG .pts of 2D image points? a "
+        "mesh take needs 3D points on the mesh)"
     )

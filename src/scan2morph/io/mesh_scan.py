@@ -234,8 +234,10 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
         try:
             values = [float(v) for v in parts]
         except ValueError:
+            pts = line.split(":")[0].strip() in ("version", "n_points")  # a 2D .pts header
+            hint = " (an iBUG .pts of 2D image points? a mesh take needs 3D points on the mesh)"
             raise InputError(
-                path, f"line {number}: expected 'x y z' numbers, got {line[:40]!r}"
+                path, f"line {number}: expected 'x y z' numbers, got {line[:40]!r}{hint * pts}"
             ) from None
         if len(values) != 3 or not np.isfinite(values).all():
             raise InputError(path, f"line {number}: expected 3 finite numbers, got {line[:40]!r}")
