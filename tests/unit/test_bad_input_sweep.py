@@ -4,6 +4,8 @@ silent garbage. Small files written here, read by the library's readers and the 
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +32,7 @@ from scan2morph.io.check import take_file_problems
 from scan2morph.io.rgbd import PinholeCamera
 from scan2morph.sheet import read_sheet
 
+ROOT = Path(__file__).resolve().parents[2]
 TETRA_V = np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]])
 TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 
@@ -302,4 +305,25 @@ def test_a_2d_pts_given_for_a_mesh_take_is_named(tmp_path):
     assert _one_line(exc, tmp_path / "l.pts").endswith(
         "line 1: expected 'x y z' numbers, got 'version: 1' (an iBUG .pts of 2D image points? a "
         "mesh take needs 3D points on the mesh)"
+    )
+
+
+def test_an_empty_sheet_without_the_synthetic_cohort_stops_the_run_in_one_line(tmp_path):
+    """Before: Snakemake ran its 'all' rule over no subject and exited 0, saying nothing."""
+    (tmp_path / "s.tsv").write_text(HEADER + "# a\tneutral\tneutral\tneutral\trange\tn.abs\n")
+    (tmp_path / "my.yaml").write_text("subjects: s.tsv\nsynthetic: {subjects: 0}\n")
+    out = subprocess.run(
+        [
+            str(Path(sys.executable).parent / "snakemake"),
+            "-s", str(ROOT / "Snakefile"), "-n",
+            "--configfile", str(ROOT / "config" / "config.yaml"), "my.yaml",
+        ],
+        cwd=tmp_path, capture_output=True, text=True,
+    )  # fmt: skip
+    assert out.returncode != 0
+    lines = (out.stdout + out.stderr).strip().splitlines()
+    assert len(lines) <= 3
+    assert lines[-1] == (
+        "Error: s.tsv: no takes: the sheet has no rows (only its header or comments) and "
+        "synthetic.subjects is 0, so there is nothing to run"
     )
