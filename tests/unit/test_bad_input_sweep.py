@@ -327,3 +327,38 @@ def test_an_empty_sheet_without_the_synthetic_cohort_stops_the_run_in_one_line(t
         "Error: s.tsv: no takes: the sheet has no rows (only its header or comments) and "
         "synthetic.subjects is 0, so there is nothing to run"
     )
+
+
+def test_a_gltf_whose_buffer_file_is_missing_names_it(tmp_path):
+    """Before: 'mesh: cannot read: gltf_buffer_0.bin' (trimesh's FileNotFoundError)."""
+    import trimesh
+
+    files = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="gltf")
+    for name, data in files.items():
+        (tmp_path / ("m.gltf" if name == "model.gltf" else name)).write_bytes(data)
+    assert len(read_mesh(tmp_path / "m.gltf").faces) == 4
+    buffers = sorted(p.name for p in tmp_path.glob("*.bin"))
+    for name in buffers:
+        (tmp_path / name).unlink()
+    with pytest.raises(InputError) as exc:
+        read_mesh(tmp_path / "m.gltf")
+    assert _one_line(exc, tmp_path / "m.gltf").endswith(
+        f"mesh: the file names '{buffers[0]}' (a buffer or image), which is missing"
+    )
+
+
+def test_a_corrupt_texture_is_not_called_missing(tmp_path):
+    """Before: '... (the material names 'tex.png', which is missing)' for a file that is there."""
+    (tmp_path / "t.mtl").write_text("newmtl m\nmap_Kd tex.png\n")
+    (tmp_path / "tex.png").write_text("not an image")
+    lines = ["mtllib t.mtl", "usemtl m"] + [f"v {x} {y} {z}" for x, y, z in TETRA_V]
+    lines += ["vt 0 0", "vt 1 0", "vt 0 1", "vt 1 1"]
+    lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in TETRA_F]
+    (tmp_path / "m.obj").write_text("\n".join(lines) + "\n")
+    with pytest.raises(
+        InputError, match=r"names 'tex.png', which cannot be read as an image \(corrupt\?\)\)"
+    ):
+        read_mesh(tmp_path / "m.obj")
+    (tmp_path / "tex.png").unlink()
+    with pytest.raises(InputError, match=r"names 'tex.png', which is missing\)"):
+        read_mesh(tmp_path / "m.obj")

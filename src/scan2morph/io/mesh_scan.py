@@ -154,6 +154,9 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         if isinstance(exc, IndexError) and path.suffix.lower() in (".obj", ".ply"):
             # numpy's, from a face list indexing past the vertex list
             problem = f"faces: a face refers to a vertex the file does not have ({exc})"
+        elif isinstance(exc, FileNotFoundError) and not Path(str(exc)).is_absolute():
+            # trimesh's, with the name a glTF gives one of its buffers or images
+            problem = f"mesh: the file names {str(exc)!r} (a buffer or image), which is missing"
         else:
             problem = f"mesh: cannot read: {str(exc)[:200]}"
         raise InputError(path, problem) from None
@@ -187,10 +190,12 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         if image is not None:
             loaded.visual = _unlit_texture(visual.uv, image)
         elif names := _referenced_textures(path):
+            found = (path.parent / names[0]).is_file()
+            why = "which cannot be read as an image (corrupt?)" if found else "which is missing"
             raise InputError(
                 path,
                 f"texture: the mesh has UVs but no texture image (the material names "
-                f"{names[0]!r}, which is missing); put the texture beside the MTL or name it in "
+                f"{names[0]!r}, {why}); put the texture beside the MTL or name it in "
                 "the sheet's texture column",
             )
         else:  # UVs but no texture named: geometry only
