@@ -1,7 +1,8 @@
 """The take sheet: one row per take (README, "Running on your own scans"; docs/inputs.md).
 
-The sheet is read one way (pandas, tab-separated, all strings, ``#`` comments), its relative paths
-are resolved against the sheet's folder, and the synthetic cohort's rows are added from the config.
+The sheet is read one way (pandas, tab-separated, all strings, ``#`` comments at the start of a
+line or a cell: :mod:`scan2morph.sheet_text`), its relative paths are resolved against the
+sheet's folder, and the synthetic cohort's rows are added from the config.
 Problems that belong to one subject (a missing file, an unknown modality, a duplicate take, no
 neutral take) do not stop the whole run: :func:`subject_problems` lists them so that only that
 subject's jobs fail, with a message naming the file and the row.
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from scan2morph.errors import InputError
+from scan2morph.sheet_text import tab_cells
 from scan2morph.units import unit_scale, units_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is made: a take's ingest needs none (0.3 s)
@@ -88,8 +90,8 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     if not path.is_file():
         raise InputError(path, "sheet not found (config key 'subjects')")
     try:
-        text = _tab_cells(path, path.read_text(encoding="utf-8-sig"))
-        df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, comment="#", index_col=False)
+        text = tab_cells(path, path.read_text(encoding="utf-8-sig"))
+        df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -115,29 +117,6 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     df["sheet"] = str(path)
     df["synthetic"] = False
     return df
-
-
-def _tab_cells(path: Path, text: str) -> str:
-    """``text`` without empty cells past the header's (trailing tabs); a header without a tab, or
-    a row with a filled cell past the header's (pandas would shift every cell), is refused."""
-    lines, width, row = text.splitlines(), 0, 1
-    for k, line in enumerate(lines):
-        cells = line.split("#", 1)[0].split("\t")  # '#' starts a comment, as for pandas
-        if not "".join(cells).strip():
-            continue
-        if not width and len(cells) == 1 and re.search(r",|\S +\S", cells[0]):
-            looks = "expected a tab-separated sheet (this one looks separated by commas or spaces)"
-            raise InputError(
-                path, f"header: no tab between the column names ({cells[0][:60]!r}); {looks}"
-            )
-        row, width = (row + 1, width) if width else (row, len(cells))
-        if extra := [c for c in cells[width:] if c.strip()]:
-            n = f"{len(cells)} cells but the header has {width} columns"
-            raise InputError(
-                path, f"row {row}: {n} (a tab too many?; the extra: {extra[0][:40]!r})"
-            )
-        lines[k] = "\t".join(cells[:width]) if len(cells) > width else line
-    return "\n".join(lines) + "\n"
 
 
 def mm_per_unit(row) -> float:

@@ -116,6 +116,18 @@ def test_trailing_tabs_are_empty_cells_on_any_row(tmp_path):
     assert sheet.loc[1, "landmarks"] == str(tmp_path / "n.pts")
 
 
+def test_a_hash_inside_a_path_is_kept_and_one_starting_a_cell_is_a_comment(tmp_path):
+    """Before: pandas' comment='#' cut 'take#2.abs' to 'take' and dropped the row's colour and
+    landmarks after it, silently (the problem named a file 'take' that nobody wrote)."""
+    path = tmp_path / "s.tsv"
+    row = ROW.replace("n.abs", "take#2.abs").rstrip("\n") + "\t# clicked twice\n"
+    path.write_text("# my sheet\n" + HEADER + "  # a commented-out row\n" + row)
+    sheet = read_sheet(path)
+    assert len(sheet) == 1
+    assert sheet.loc[0, "xyz"] == str(tmp_path / "take#2.abs")
+    assert sheet.loc[0, "landmarks"] == str(tmp_path / "n.pts")
+
+
 @pytest.mark.parametrize("sep, looks", [(",", "commas"), ("  ", "spaces"), (" ", "spaces")])
 def test_a_sheet_separated_by_commas_or_spaces_is_named(tmp_path, sep, looks):
     path = tmp_path / "s.tsv"
