@@ -146,8 +146,10 @@ def split_paths(value: str) -> list[str]:
 
 
 def _resolve(value: str, base: Path, several: bool) -> str:
-    """A cell's path(s) resolved against the sheet's folder ``base``."""
+    """A cell's path(s) resolved against the sheet's folder ``base`` (``~`` is the home folder,
+    as in a shell)."""
     parts = split_paths(value) if several else ([value] if value else [])
+    parts = [str(Path(v).expanduser()) if v.startswith("~") else v for v in parts]
     out = [v if Path(v).is_absolute() else str(base / v) for v in parts]
     return f"{PATH_SEPARATOR} ".join(out)
 

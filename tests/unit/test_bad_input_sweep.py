@@ -128,6 +128,15 @@ def test_a_hash_inside_a_path_is_kept_and_one_starting_a_cell_is_a_comment(tmp_p
     assert sheet.loc[0, "landmarks"] == str(tmp_path / "n.pts")
 
 
+def test_a_path_from_the_home_folder(tmp_path, monkeypatch):
+    """Before: '~/scans/n.abs' was taken relative to the sheet ('file not found: <sheet
+    folder>/~/scans/n.abs')."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    path = tmp_path / "s.tsv"
+    path.write_text(HEADER + ROW.replace("n.abs", "~/scans/n.abs"))
+    assert read_sheet(path).loc[0, "xyz"] == str(tmp_path / "home" / "scans" / "n.abs")
+
+
 @pytest.mark.parametrize("sep, looks", [(",", "commas"), ("  ", "spaces"), (" ", "spaces")])
 def test_a_sheet_separated_by_commas_or_spaces_is_named(tmp_path, sep, looks):
     path = tmp_path / "s.tsv"
