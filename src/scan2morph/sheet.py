@@ -523,11 +523,25 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
     for _ in filling(schema_doc).iter_errors(config):
         pass  # the errors are reported below, from a plain validator on the filled config
     problems = schema_errors(config, schema_doc)
+    if (nan := _nan_path(config)) is not None:  # the schema's 'number' takes it
+        problems.insert(0, (_key_path(nan), "expected a number, got nan"))
     if problems:
         key, problem = problems[0]
         more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""
         raise InputError(source, f"{key}: {problem}{more}")
     return config
+
+
+def _nan_path(value: object, path: tuple = ()) -> tuple | None:
+    """The key path of the first NaN in a config (a number every comparison refuses: a
+    threshold of .nan would let everything through, or nothing), None when there is none."""
+    if isinstance(value, float) and value != value:
+        return path
+    items = value.items() if isinstance(value, dict) else ()
+    for key, item in enumerate(value) if isinstance(value, list) else items:
+        if (found := _nan_path(item, (*path, key))) is not None:
+            return found
+    return None
 
 
 def _key_path(path) -> str:

@@ -4,6 +4,7 @@ silent garbage. Small files written here, read by the library's readers and the 
 
 from __future__ import annotations
 
+import copy
 import subprocess
 import sys
 from pathlib import Path
@@ -30,7 +31,7 @@ from scan2morph.io import (
 )
 from scan2morph.io.check import take_file_problems
 from scan2morph.io.rgbd import PinholeCamera
-from scan2morph.sheet import read_sheet
+from scan2morph.sheet import read_sheet, validate_config
 
 ROOT = Path(__file__).resolve().parents[2]
 TETRA_V = np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]])
@@ -383,3 +384,14 @@ def test_a_corrupt_texture_is_not_called_missing(tmp_path):
     (tmp_path / "tex.png").unlink()
     with pytest.raises(InputError, match=r"names 'tex.png', which is missing\)"):
         read_mesh(tmp_path / "m.obj")
+
+
+def test_a_nan_in_the_config_is_refused_naming_its_key():
+    """Before: '.nan' passed the schema's 'number' and every comparison with the threshold
+    failed silently (min_confidence .nan: no take ever warned of a low confidence)."""
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    validate_config(copy.deepcopy(config), ROOT / "schemas" / "config.schema.yaml")
+    config["landmarks"]["min_confidence"] = float("nan")
+    with pytest.raises(InputError) as exc:
+        validate_config(config, ROOT / "schemas" / "config.schema.yaml")
+    assert str(exc.value) == "config: landmarks.min_confidence: expected a number, got nan"
