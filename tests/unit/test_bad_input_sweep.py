@@ -395,3 +395,46 @@ def test_a_nan_in_the_config_is_refused_naming_its_key():
     with pytest.raises(InputError) as exc:
         validate_config(config, ROOT / "schemas" / "config.schema.yaml")
     assert str(exc.value) == "config: landmarks.min_confidence: expected a number, got nan"
+
+
+def _stereo_pair(tmp_path, right_shift=3):
+    """A small textured pair (64 x 48) and a calibration for it, written as a user brings them."""
+    rng = np.random.default_rng(1)
+    left = rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)
+    write_color(tmp_path / "l.png", left)
+    write_color(tmp_path / "r.png", np.roll(left, right_shift, axis=1))
+    k = [[60.0, 0, 31.5], [0, 60.0, 23.5], [0, 0, 1]]
+    calib = StereoCalibration(k, np.zeros(5), k, np.zeros(5), np.eye(3), [-60.0, 0, 0])
+    write_stereo_calibration(tmp_path / "c.yaml", calib)
+    return {
+        "left": tmp_path / "l.png",
+        "right": tmp_path / "r.png",
+        "calibration": tmp_path / "c.yaml",
+    }
+
+
+def test_one_image_given_twice_as_a_stereo_pair(tmp_path):
+    """Before: the pair went to the stereo matching, which refused it as '2.30% of the left pixels
+    were matched (floor 5%); check that left and right belong to this calibration, ...'."""
+    files = _stereo_pair(tmp_path)
+    assert take_file_problems("stereo", files) == []
+    files["right"] = files["left"]
+    assert take_file_problems("stereo", files) == [
+        f"{files['left']}: right: the same image as the left l.png (one file given twice?); "
+        "expected the second camera's view"
+    ]
+
+
+def test_a_calibration_of_another_image_size_is_named_by_its_principal_point(tmp_path):
+    """Before (a calibration without image_width/height): 'calibration: expected views that can
+    share a surface at 200-5000 mm, got rectified views that do not', after rectifying."""
+    files = _stereo_pair(tmp_path)
+    calib = read_stereo_calibration(files["calibration"])
+    k = calib.K1 * [[4], [4], [1]]  # the rig's calibration at 256 x 192
+    write_stereo_calibration(
+        files["calibration"], StereoCalibration(k, calib.D1, k, calib.D2, calib.R, calib.T)
+    )
+    assert take_file_problems("stereo", files) == [
+        f"{files['calibration']}: K1: the principal point (126, 94) px lies outside the 64x48 "
+        "images; is this the calibration of this camera pair, at this image size?"
+    ]
