@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from scan2morph.errors import InputError
-from scan2morph.sheet_text import tab_cells
+from scan2morph.sheet_text import sheet_text, tab_cells
 from scan2morph.units import unit_scale, units_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is made: a take's ingest needs none (0.3 s)
@@ -90,7 +90,7 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     if not path.is_file():
         raise InputError(path, "sheet not found (config key 'subjects')")
     try:
-        text = tab_cells(path, path.read_text(encoding="utf-8-sig"))
+        text = tab_cells(path, sheet_text(path))
         df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))

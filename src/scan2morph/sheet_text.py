@@ -9,6 +9,7 @@ A base module (no pandas): the rules of a sheet's lines that pandas would get wr
 - A row with a filled cell past the header's columns is refused: pandas took the first column
   of such a sheet for its index and shifted every cell of every row one column left.
 - A header without a tab is refused naming what the sheet looks separated by.
+- The text is UTF-8, or UTF-16 with its byte-order mark (:func:`sheet_text`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,33 @@ import re
 from pathlib import Path
 
 from scan2morph.errors import InputError
+
+
+def sheet_text(path: str | Path) -> str:
+    """A sheet's text: UTF-8 (with or without a byte-order mark), or UTF-16 with its mark (what
+    a spreadsheet's "Unicode text" export writes).
+
+    Raises
+    ------
+    InputError
+        A spreadsheet's own file (a zip archive); bytes that are not UTF-8 (a sheet saved as
+        Latin-1 or another code page): names the line and the byte.
+    """
+    raw = Path(path).read_bytes()
+    if raw.startswith(b"PK\x03\x04"):  # a zip archive, as .xlsx and .ods files are
+        raise InputError(
+            path, "a zip file (an .xlsx or .ods spreadsheet?); expected tab-separated UTF-8 text"
+        )
+    encoding = "utf-16" if raw.startswith((b"\xff\xfe", b"\xfe\xff")) else "utf-8-sig"
+    try:
+        return raw.decode(encoding)
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise InputError(
+            path,
+            f"line {line}: byte {raw[exc.start]:#04x} is not {encoding.split('-sig')[0].upper()} "
+            "text (a sheet saved in another encoding?); save it as UTF-8",
+        ) from None
 
 
 def tab_cells(path: str | Path, text: str) -> str:
@@ -66,4 +94,4 @@ def tab_cells(path: str | Path, text: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["tab_cells"]
+__all__ = ["sheet_text", "tab_cells"]

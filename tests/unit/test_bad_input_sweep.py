@@ -438,3 +438,21 @@ def test_a_calibration_of_another_image_size_is_named_by_its_principal_point(tmp
         f"{files['calibration']}: K1: the principal point (126, 94) px lies outside the 64x48 "
         "images; is this the calibration of this camera pair, at this image size?"
     ]
+
+
+def test_a_sheet_in_utf16_reads_and_one_in_latin1_or_xlsx_is_named(tmp_path):
+    """Before: "not a tab-separated sheet: 'utf-8' codec can't decode byte 0xff in position 0:
+    invalid start byte" for all three (a spreadsheet's "Unicode text" export is UTF-16)."""
+    path = tmp_path / "s.tsv"
+    path.write_bytes((HEADER + ROW).encode("utf-16"))
+    assert list(read_sheet(path)["modality"]) == ["range"]
+    path.write_bytes((HEADER + ROW.replace("n.png", "café.png")).encode("latin-1"))
+    with pytest.raises(InputError) as exc:
+        read_sheet(path)
+    assert _one_line(exc, path) == (
+        f"{path}: line 2: byte 0xe9 is not UTF-8 text (a sheet saved in another encoding?); "
+        "save it as UTF-8"
+    )
+    path.write_bytes(b"PK\x03\x04\x14\x00\x06\x00")
+    with pytest.raises(InputError, match=r"s.tsv: a zip file \(an .xlsx or .ods spreadsheet\?\)"):
+        read_sheet(path)
