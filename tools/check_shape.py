@@ -32,7 +32,7 @@ included. Encoded as it stands, with these additions and one correction:
   package (``store.paths`` builds every store path; ``hdf5``, ``warnings``, ``layout`` and
   ``compare`` read and write the store) are used by every layer, and themselves import only
   each other: they come before ``io``, not after ``stages``. ``sheet`` (the sample sheet, with
-  ``units``, its units column) and
+  ``units``, its units column, and ``sheet_text``, its text cell by cell) and
   ``tables`` (the result tables) import only the base and are placed in it, and so is
   ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
   mesh-scan reader and the figures), ``open3d_light`` (open3d imported without its web viewer,
@@ -73,6 +73,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.jobs",
             "scan2morph.store",
             "scan2morph.sheet",
+            "scan2morph.sheet_text",
             "scan2morph.units",
             "scan2morph.tables",
             "scan2morph.offscreen",

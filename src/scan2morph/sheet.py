@@ -1,7 +1,8 @@
 """The take sheet: one row per take (README, "Running on your own scans"; docs/inputs.md).
 
-The sheet is read one way (pandas, tab-separated, all strings, ``#`` comments), its relative paths
-are resolved against the sheet's folder, and the synthetic cohort's rows are added from the config.
+The sheet is read one way (pandas, tab-separated, all strings, ``#`` comments at the start of a
+line or a cell: :mod:`scan2morph.sheet_text`), its relative paths are resolved against the
+sheet's folder, and the synthetic cohort's rows are added from the config.
 Problems that belong to one subject (a missing file, an unknown modality, a duplicate take, no
 neutral take) do not stop the whole run: :func:`subject_problems` lists them so that only that
 subject's jobs fail, with a message naming the file and the row.
@@ -10,6 +11,7 @@ subject's jobs fail, with a message naming the file and the row.
 from __future__ import annotations
 
 import copy
+import io
 import re
 from collections.abc import Mapping
 from os import PathLike
@@ -17,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from scan2morph.errors import InputError
+from scan2morph.sheet_text import sheet_text, tab_cells
 from scan2morph.units import unit_scale, units_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is made: a take's ingest needs none (0.3 s)
@@ -87,11 +90,12 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     if not path.is_file():
         raise InputError(path, "sheet not found (config key 'subjects')")
     try:
-        df = pd.read_csv(path, sep="\t", dtype=str, comment="#", skip_blank_lines=True)
+        text = tab_cells(path, sheet_text(path))
+        df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"not a tab-separated sheet: {exc}") from exc
+        raise InputError(path, f"not a tab-separated sheet: {' '.join(str(exc).split())}") from exc
     df.columns = [c.strip() for c in df.columns]
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
@@ -99,19 +103,13 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     unknown = [c for c in df.columns if c not in COLUMNS]
     if unknown:
         raise InputError(path, f"unknown columns {unknown} (expected {list(COLUMNS)})")
-    for c in COLUMNS:
-        if c not in df.columns:
-            df[c] = ""
-    df = df[list(COLUMNS)].fillna("")
-    df = df.apply(lambda col: col.str.strip())
+    df = df.reindex(columns=list(COLUMNS), fill_value="").fillna("").apply(lambda c: c.str.strip())
     for row, rec in enumerate(df.itertuples(index=False), start=2):
         for col in ("subject", "take"):
             value = getattr(rec, col)
             if not _ID.match(value):
-                raise InputError(
-                    path,
-                    f"row {row}, column '{col}': {value!r} is not an id (letters, digits, _ and -)",
-                )
+                what = "is not an id (letters, digits, _ and -)"
+                raise InputError(path, f"row {row}, column '{col}': {value!r} {what}")
     base = path.resolve().parent
     for col in PATH_COLUMNS:
         df[col] = [_resolve(v, base, col in MULTI_PATH_COLUMNS) for v in df[col]]
@@ -148,8 +146,10 @@ def split_paths(value: str) -> list[str]:
 
 
 def _resolve(value: str, base: Path, several: bool) -> str:
-    """A cell's path(s) resolved against the sheet's folder ``base``."""
+    """A cell's path(s) resolved against the sheet's folder ``base`` (``~`` is the home folder,
+    as in a shell)."""
     parts = split_paths(value) if several else ([value] if value else [])
+    parts = [str(Path(v).expanduser()) if v.startswith("~") else v for v in parts]
     out = [v if Path(v).is_absolute() else str(base / v) for v in parts]
     return f"{PATH_SEPARATOR} ".join(out)
 
@@ -523,11 +523,25 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
     for _ in filling(schema_doc).iter_errors(config):
         pass  # the errors are reported below, from a plain validator on the filled config
     problems = schema_errors(config, schema_doc)
+    if (nan := _nan_path(config)) is not None:  # the schema's 'number' takes it
+        problems.insert(0, (_key_path(nan), "expected a number, got nan"))
     if problems:
         key, problem = problems[0]
         more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""
         raise InputError(source, f"{key}: {problem}{more}")
     return config
+
+
+def _nan_path(value: object, path: tuple = ()) -> tuple | None:
+    """The key path of the first NaN in a config (a number every comparison refuses: a
+    threshold of .nan would let everything through, or nothing), None when there is none."""
+    if isinstance(value, float) and value != value:
+        return path
+    items = value.items() if isinstance(value, dict) else ()
+    for key, item in enumerate(value) if isinstance(value, list) else items:
+        if (found := _nan_path(item, (*path, key))) is not None:
+            return found
+    return None
 
 
 def _key_path(path) -> str:

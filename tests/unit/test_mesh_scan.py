@@ -121,9 +121,11 @@ def test_skin_texture_is_fixed_to_the_skin(scan):
     assert moved.sum() > 200
     # ... the skin's detail does not: the same factor to the uint8 rounding (0.5 / 60 ~ 1 %)
     diff = np.abs(r_smile[ok] - r_neutral[ok])[moved]
-    print(f"\n{moved.sum()} vertices shaded otherwise; skin detail factor: neutral vs smile median {np.median(diff):.4f}, p99 "
-          f"{np.percentile(diff, 99):.4f}; |factor - 1| median "
-          f"{np.median(np.abs(r_neutral[ok] - 1)):.3f}")
+    print(
+        f"\n{moved.sum()} vertices shaded otherwise; skin detail factor: neutral vs smile median {np.median(diff):.4f}, p99 "
+        f"{np.percentile(diff, 99):.4f}; |factor - 1| median "
+        f"{np.median(np.abs(r_neutral[ok] - 1)):.3f}"
+    )
     assert np.median(diff) < 0.008 and np.percentile(diff, 99) < 0.03
     # and there is detail to correlate: freckles and mottling of a few per cent and more
     assert np.median(np.abs(r_neutral[ok] - 1.0)) > 0.02

@@ -290,7 +290,9 @@ def test_presets_resolve_and_overrides_win():
     heavier = {"mimic_mass_factor": 2.0}
     assert modal.Params.from_config(_config(SECTION | heavier)).modal.mimic_mass_factor == 2.0
     for other in ({"preset": "paper"}, {"youngs_modulus_mpa": 0.01}, {"mass": "vertex"}):
-        with pytest.raises(InputError, match=r"config modal: mimic_mass_factor: 2.0 .* set it to 1"):
+        with pytest.raises(
+            InputError, match=r"config modal: mimic_mass_factor: 2.0 .* set it to 1"
+        ):
             modal.Params.from_config(_config(SECTION | heavier | other))
     paper_plain = modal.Params.from_config(_config(SECTION | {"preset": "paper"}))
     assert paper_plain.modal.mimic_mass_factor == 1.0  # the paper's shell is untouched

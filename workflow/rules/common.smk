@@ -51,6 +51,14 @@ try:
 except InputError as _exc:
     stop_run(_exc)
 SUBJECTS = list(dict.fromkeys(TAKES["subject"]))
+if not SUBJECTS:  # else the run does nothing and says nothing
+    stop_run(
+        InputError(
+            config["subjects"],
+            "no takes: the sheet has no rows (only its header or comments) and "
+            "synthetic.subjects is 0, so there is nothing to run",
+        )
+    )
 # a row that breaks the sheet's schema (e.g. an empty label): its take is left out (its subject
 # stops when it is the neutral's); reported with the files' problems by the subject's check job
 PROBLEMS = sheet_problems(

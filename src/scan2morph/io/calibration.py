@@ -200,11 +200,11 @@ def read_stereo_calibration(path: str | PathLike[str]) -> StereoCalibration:
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     except (cv2.error, SystemError) as exc:  # the binding wraps parse errors in SystemError
-        raise InputError(path, not_calibration) from exc
+        raise InputError(path, not_calibration + _yaml_text_hint(path)) from exc
     try:
         root = fs.root()
         if not fs.isOpened() or not root.isMap():
-            raise InputError(path, not_calibration)
+            raise InputError(path, not_calibration + _yaml_text_hint(path))
         keys = root.keys()
         values = {}
         for field, names in _KEYS.items():
@@ -287,7 +287,7 @@ def _node_array(node: cv2.FileNode, name: str, path: Path) -> np.ndarray:
         try:
             mat = node.mat()
         except cv2.error as exc:
-            raise InputError(path, f"{name}: not an !!opencv-matrix") from exc
+            raise InputError(path, f"{name}: {_matrix_problem(node)}") from exc
         if mat is None:
             raise InputError(path, f"{name}: empty matrix")
         return np.asarray(mat, dtype=np.float64)
@@ -304,6 +304,33 @@ def _node_array(node: cv2.FileNode, name: str, path: Path) -> np.ndarray:
     if node.isReal() or node.isInt():
         return np.array([node.real()], dtype=np.float64)
     raise InputError(path, f"{name}: expected a matrix or a sequence of numbers")
+
+
+def _yaml_text_hint(path: Path) -> str:
+    """What in a YAML file's text OpenCV's parser refuses without saying: a byte-order mark (as
+    Windows editors save) or a tab in a line's indentation."""
+    with open(path, "rb") as fh:
+        raw = fh.read(1 << 20)  # a calibration is a few kB
+    if raw.startswith(b"\xef\xbb\xbf"):
+        return "; it starts with a byte-order mark (BOM): save it as UTF-8 without BOM"
+    lines = raw.splitlines()
+    tab = next((k for k, ln in enumerate(lines) if b"\t" in ln[: len(ln) - len(ln.lstrip())]), None)
+    return "" if tab is None else f"; line {tab + 1} is indented with a tab (YAML: spaces only)"
+
+
+def _matrix_problem(node: cv2.FileNode) -> str:
+    """Why an ``!!opencv-matrix`` node does not read: a key missing, a non-numeric entry or a
+    count of numbers other than rows x cols."""
+    need = "expected an !!opencv-matrix with rows, cols, dt and rows x cols numbers in data"
+    if missing := [k for k in ("rows", "cols", "dt", "data") if k not in node.keys()]:
+        truncated = " (a truncated file?)" if "data" in missing else ""
+        return f"{need}; {', '.join(missing)} missing{truncated}"
+    data = node.getNode("data")
+    entries = [data.at(i) for i in range(data.size())] if data.isSeq() else [data]
+    if text := [e.string() for e in entries if not (e.isReal() or e.isInt())]:
+        return f"{need}; got the non-numeric entry {text[0][:20]!r}"
+    rows, cols = node.getNode("rows").real(), node.getNode("cols").real()
+    return f"{need}; got rows {rows:g} x cols {cols:g} but {len(entries)} numbers"
 
 
 def _node_number(node: cv2.FileNode, name: str, path: Path) -> float:

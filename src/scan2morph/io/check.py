@@ -4,8 +4,9 @@ The take readers (:func:`~scan2morph.io.read_range_take`, ...) stop at the first
 each file of a take is read on its own by the same reader the ingest uses (so the checks and
 their messages are the readers' own, written once), every problem is collected, and when every
 file reads, the take's files are checked against each other (image sizes, landmarks inside the
-image, the range scan's units and handedness). Nothing heavy runs: no stereo matching, no mesh rendering, no
-depth resampling.
+image, the range scan's units and handedness, an RGB-D take's images against its intrinsics and
+its frames' data). Nothing heavy runs: no stereo matching, no mesh rendering, no depth
+resampling.
 """
 
 from __future__ import annotations
@@ -15,13 +16,19 @@ from pathlib import Path
 
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import read_stereo_calibration
-from scan2morph.io.depth_image import read_depth_frames
+from scan2morph.io.depth_image import depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.mesh_scan import check_mesh_size, read_landmarks3d, read_mesh
 from scan2morph.io.range_image import read_range
-from scan2morph.io.rgbd import read_rgbd_intrinsics
-from scan2morph.io.take import check_face, check_handedness, read_range_take, read_stereo_take
+from scan2morph.io.rgbd import check_rgbd_files, read_rgbd_intrinsics
+from scan2morph.io.take import (
+    check_face,
+    check_handedness,
+    check_landmarks_inside,
+    read_range_take,
+    read_stereo_take,
+)
 from scan2morph.sheet import OPTIONAL_FILES
 
 #: The reader of each file column, per modality (the ingest's own readers).
@@ -96,6 +103,12 @@ def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping
     elif modality == "stereo":
         landmarks = files.get("landmarks")
         read_stereo_take(files["left"], files["right"], files["calibration"], landmarks)
+    elif modality == "rgbd":
+        intr, paths = loaded["intrinsics"], depth_frame_paths(files["depth"])
+        args = (loaded["depth"], paths, loaded["color"], files["color"])
+        check_rgbd_files(intr, files["intrinsics"], *args)
+        if loaded.get("landmarks") is not None:
+            check_landmarks_inside(loaded["landmarks"], *intr.color.size, files["landmarks"])
 
 
 __all__ = ["READERS", "take_file_problems"]

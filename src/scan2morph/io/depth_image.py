@@ -130,7 +130,8 @@ def read_depth(path: str | Path) -> np.ndarray:
         except Exception as exc:  # zip, pickle or format errors from numpy
             raise InputError(path, f"depth: cannot read as {suffix}: {exc}") from None
         if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.number):
-            raise InputError(path, f"depth: expected an (H, W) number array, got {depth.shape}")
+            got = f"{depth.shape} {depth.dtype}"
+            raise InputError(path, f"depth: expected an (H, W) number array, got {got}")
         depth = depth.astype(np.float64)
     if np.isinf(depth).any() or (depth < 0).any():
         raise InputError(path, "depth: negative or infinite values (0 or NaN = no data)")

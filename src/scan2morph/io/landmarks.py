@@ -90,10 +90,18 @@ def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as text: {exc}") from exc
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        raise InputError(path, "the file is empty (expected an iBUG .pts landmark file)")
     header = {}
     i = 0
     while i < len(lines) and lines[i] != "{":
         key, sep, value = lines[i].partition(":")
+        if not sep and _numbers(lines[i]):
+            raise InputError(
+                path,
+                f"header: {lines[i][:40]!r} is a point, but an iBUG .pts starts with a header "
+                "('version: 1', 'n_points: 68', '{'; the points, then '}')",
+            )
         if not sep:
             raise InputError(path, f"header line {lines[i][:40]!r}: expected 'key: value' or '{{'")
         header[key.strip()] = value.strip()
@@ -134,6 +142,16 @@ def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
         bad = int(np.flatnonzero(~np.all(np.isfinite(points), axis=1))[0]) + 1
         raise InputError(path, f"point {bad}: non-finite coordinate")
     return points - 1.0 if n_points is not None else as_ibug68(points - 1.0)
+
+
+def _numbers(line: str) -> bool:
+    """True when ``line`` is two or three numbers (a point where a header line should be)."""
+    parts = line.replace(",", " ").split()
+    try:
+        [float(p) for p in parts]
+    except ValueError:
+        return False
+    return len(parts) in (2, 3)
 
 
 def write_pts(path: str | Path, points: np.ndarray) -> None:

@@ -128,8 +128,9 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Raises
     ------
     InputError
-        Missing or unreadable file, no faces (a point cloud), a texture the file references
-        but that is missing, a ``texture`` given for a mesh without UVs.
+        Missing, empty or unreadable file, a face indexing past the vertices, no faces (a point
+        cloud), a NaN or infinite vertex, a texture the file references but that is missing, a
+        ``texture`` given for a mesh without UVs.
 
     Notes
     -----
@@ -143,15 +144,34 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         raise InputError(path, "file not found (expected an OBJ, PLY or glTF/GLB mesh)")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(path, f"mesh: unknown format {path.suffix!r} (expected {MESH_SUFFIXES})")
+    if path.stat().st_size == 0:
+        raise InputError(
+            path, "mesh: the file is empty (0 bytes; expected an OBJ, PLY or glTF/GLB)"
+        )
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds on corrupt files
-        raise InputError(path, f"mesh: cannot read: {str(exc)[:200]}") from None
+        if isinstance(exc, IndexError) and path.suffix.lower() in (".obj", ".ply"):
+            # numpy's, from a face list indexing past the vertex list
+            problem = f"faces: a face refers to a vertex the file does not have ({exc})"
+        elif isinstance(exc, FileNotFoundError) and not Path(str(exc)).is_absolute():
+            # trimesh's, with the name a glTF gives one of its buffers or images
+            problem = f"mesh: the file names {str(exc)!r} (a buffer or image), which is missing"
+        else:
+            problem = f"mesh: cannot read: {str(exc)[:200]}"
+        raise InputError(path, problem) from None
     faces = getattr(loaded, "faces", None)
     if faces is None or len(faces) == 0:
         n = len(getattr(loaded, "vertices", []))
         raise InputError(
             path, f"mesh: no faces ({n} vertices: a point cloud?); expected a triangle mesh"
+        )
+    bad = np.flatnonzero(~np.isfinite(np.asarray(loaded.vertices)).all(axis=1))
+    if len(bad):
+        raise InputError(
+            path,
+            f"vertices: {len(bad)} of {len(loaded.vertices)} have a NaN or infinite coordinate "
+            f"(the first: vertex {bad[0] + 1}); expected finite numbers",
         )
     visual = loaded.visual
     if texture is not None:
@@ -170,10 +190,12 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         if image is not None:
             loaded.visual = _unlit_texture(visual.uv, image)
         elif names := _referenced_textures(path):
+            found = (path.parent / names[0]).is_file()
+            why = "which cannot be read as an image (corrupt?)" if found else "which is missing"
             raise InputError(
                 path,
                 f"texture: the mesh has UVs but no texture image (the material names "
-                f"{names[0]!r}, which is missing); put the texture beside the MTL or name it in "
+                f"{names[0]!r}, {why}); put the texture beside the MTL or name it in "
                 "the sheet's texture column",
             )
         else:  # UVs but no texture named: geometry only
@@ -205,7 +227,7 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(path, "file not found (expected 68 or 51 lines 'x y z' of 3D landmarks)")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM, as Windows editors save
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as text: {exc}") from None
     rows = []
@@ -217,8 +239,10 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
         try:
             values = [float(v) for v in parts]
         except ValueError:
+            pts = line.split(":")[0].strip() in ("version", "n_points")  # a 2D .pts header
+            hint = " (an iBUG .pts of 2D image points? a mesh take needs 3D points on the mesh)"
             raise InputError(
-                path, f"line {number}: expected 'x y z' numbers, got {line[:40]!r}"
+                path, f"line {number}: expected 'x y z' numbers, got {line[:40]!r}{hint * pts}"
             ) from None
         if len(values) != 3 or not np.isfinite(values).all():
             raise InputError(path, f"line {number}: expected 3 finite numbers, got {line[:40]!r}")

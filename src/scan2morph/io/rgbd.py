@@ -161,14 +161,32 @@ def _camera(block, source, where: str) -> PinholeCamera:
     return PinholeCamera(K, D, (int(vals["width"]), int(vals["height"])))
 
 
+def _yaml_problem(exc: Exception) -> str:
+    """PyYAML's problem and its line (its message's first line is only its context: 'while
+    scanning for the next token')."""
+    problem, mark = getattr(exc, "problem", None), getattr(exc, "problem_mark", None)
+    if problem is None or mark is None:
+        return str(exc).splitlines()[0]
+    problem = problem.replace("character '\\t'", "a tab (YAML indents with spaces)")
+    return f"line {mark.line + 1}: {problem}"
+
+
+def _known_keys(block: dict, known: tuple[str, ...], source, where: str) -> None:
+    """Refuse a key the format does not have (a misspelt ``distorsion`` was ignored: the take
+    was resampled without its distortion)."""
+    if unknown := [k for k in block if k not in known]:
+        raise InputError(source, f"{where}{unknown[0]}: unknown key (known: {', '.join(known)})")
+
+
 def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     """Read an RGB-D intrinsics YAML (see the module docstring).
 
     Raises
     ------
     InputError
-        Missing file, not YAML, a key missing or not a number, a non-positive focal length or
-        size, ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3 numbers (names the key).
+        Missing file, not YAML, a key missing or not a number, an unknown key, a non-positive
+        focal length or size, ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3
+        numbers (names the key).
     """
     import yaml
 
@@ -178,15 +196,17 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     try:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(path, f"cannot read as YAML: {str(exc).splitlines()[0]}") from None
+        raise InputError(path, f"cannot read as YAML: {_yaml_problem(exc)}") from None
     if not isinstance(doc, dict):
         raise InputError(path, f"expected a mapping with keys {list(_PINHOLE)}, got {doc!r:.60}")
+    _known_keys(doc, (*_PINHOLE, "depth_scale_mm", "distortion", "color"), path, "")
     depth = _camera(doc, path, "")
     scale = _number(doc, "depth_scale_mm", path, "", positive=True)
     color, R, T = depth, np.eye(3), np.zeros(3)
     if doc.get("color") is not None:
         block = doc["color"]
         color = _camera(block, path, "color.")
+        _known_keys(block, (*_PINHOLE, "distortion", "R", "T"), path, "color.")
         R = _matrix(block.get("R", np.eye(3).tolist()), (3, 3), path, "color.R")
         T = _matrix(block.get("T", [0.0, 0.0, 0.0]), (3,), path, "color.T (mm)")
         if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOL or np.linalg.det(R) < 0:
@@ -349,6 +369,42 @@ class RGBDTake(RangeTake):
     fusion: object | None = None
 
 
+def check_rgbd_files(
+    intr: RGBDIntrinsics,
+    intrinsics_path: str | Path,
+    frames: list[np.ndarray],
+    paths: list[Path],
+    color: np.ndarray,
+    color_path: str | Path,
+) -> None:
+    """The cheap checks between an RGB-D take's files, before any resampling (the subject's
+    check job runs them too, :mod:`scan2morph.io.check`).
+
+    Raises
+    ------
+    InputError
+        A depth image under the smallest size; a depth or colour image whose size differs from
+        the intrinsics' ``width``/``height`` (names the intrinsics file); a frame without depth
+        data.
+    """
+    check_image_size(frames[0].shape, paths[0], "depth")
+    for name, img, cam, where in (
+        ("depth", frames[0], intr.depth, ""),
+        ("color", color, intr.color, "color."),
+    ):
+        h, w = img.shape[:2]
+        if (w, h) != cam.size:
+            raise InputError(
+                intrinsics_path,
+                f"{where}width/{where}height: {cam.size[0]}x{cam.size[1]} but the {name} image "
+                f"{Path(paths[0] if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
+                f"are these the intrinsics of this {name} camera?",
+            )
+    for path, frame in zip(paths, frames, strict=True):
+        if not (np.isfinite(frame) & (frame > 0)).any():
+            raise InputError(path, "depth: no pixel with data (all 0 or NaN)")
+
+
 def read_rgbd_take(
     depth_path,
     color_path: str | Path,
@@ -393,23 +449,8 @@ def read_rgbd_take(
     paths = depth_frame_paths(depth_path)
     frames = read_depth_frames(paths)
     depth = frames[0]
-    check_image_size(depth.shape, paths[0], "depth")
     color = read_color(color_path)
-    for name, img, cam, where in (
-        ("depth", depth, intr.depth, ""),
-        ("color", color, intr.color, "color."),
-    ):
-        h, w = img.shape[:2]
-        if (w, h) != cam.size:
-            raise InputError(
-                intrinsics_path,
-                f"{where}width/{where}height: {cam.size[0]}x{cam.size[1]} but the {name} image "
-                f"{Path(paths[0] if name == 'depth' else color_path).name} is {w}x{h} (WxH); "
-                f"are these the intrinsics of this {name} camera?",
-            )
-    for path, frame in zip(paths, frames, strict=True):
-        if not (np.isfinite(frame) & (frame > 0)).any():
-            raise InputError(path, "depth: no pixel with data (all 0 or NaN)")
+    check_rgbd_files(intr, intrinsics_path, frames, paths, color, color_path)
     fusion = None
     depth_mm = depth * intr.depth_scale_mm
     if len(frames) > 1:

@@ -187,8 +187,9 @@ def read_stereo_take(
         From the readers (a missing file, a calibration missing a matrix or with a wrong
         shape, a file that is not a calibration, a bad ``.pts``); the right image's size
         differs from the left's (names the right file); the calibration's
-        ``image_width``/``image_height`` differ from the images' (names the calibration file);
-        a landmark lies outside the left image (names the ``.pts`` file).
+        ``image_width``/``image_height`` differ from the images', or a principal point lies
+        outside them (names the calibration file); the right image is the left one; a landmark
+        lies outside the left image (names the ``.pts`` file).
     """
     left = read_color(left_path)
     check_image_size(left.shape, left_path, "left")
@@ -201,6 +202,12 @@ def read_stereo_take(
             f"{Path(left_path).name} is {w}x{h}; the two images of a stereo pair must have "
             "the same size",
         )
+    if np.array_equal(left, right):
+        raise InputError(
+            right_path,
+            f"right: the same image as the left {Path(left_path).name} (one file given twice?); "
+            "expected the second camera's view",
+        )
     calib = read_stereo_calibration(calibration_path)
     if calib.image_size is not None and tuple(calib.image_size) != (w, h):
         raise InputError(
@@ -208,6 +215,14 @@ def read_stereo_take(
             f"image_width/image_height: {calib.image_size[0]}x{calib.image_size[1]} but the "
             f"images are {w}x{h} (WxH); is this the calibration of this camera pair?",
         )
+    for name in ("K1", "K2"):
+        cx, cy = getattr(calib, name)[:2, 2]
+        if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+            raise InputError(
+                calibration_path,
+                f"{name}: the principal point ({cx:g}, {cy:g}) px lies outside the {w}x{h} "
+                "images; is this the calibration of this camera pair, at this image size?",
+            )
     landmarks = _read_clicks(landmarks_path, {}, w, h)
     return StereoTake(left=left, right=right, calib=calib, landmarks=landmarks)
 
