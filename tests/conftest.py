@@ -11,28 +11,29 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 pytest_plugins = ["tests.support.slurm_run"]
 
-#: The modules that take longest (about 3-15 CPU-s each, ``--durations``), longest first. A
+#: The modules that take longest (about 4-15 CPU-s each, summed ``--junitxml`` times), longest first. A
 #: parallel run (``make test-fast``: pytest-xdist, ``--dist loadscope``, one module to a worker
 #: at a time) hands them out first, so that no worker is still busy with a long module while
 #: the others have run out of work.
 LONGEST_FIRST = (
-    "test_landmarks.py",
-    "test_figures.py",
-    "test_synth_stereo.py",
-    "test_mesh_camera.py",
-    "test_stereo.py",
     "test_landmarks_train.py",
-    "test_realdata.py",
+    "test_landmarks.py",
+    "test_mesh_camera.py",
+    "test_synth_stereo.py",
     "test_bad_input.py",
-    "test_refine_shape.py",
+    "test_realdata.py",
+    "test_stereo.py",
+    "test_figures.py",
     "test_mesh_geometry_only.py",
-    "test_stereo_rigs.py",
+    "test_align.py",
     "test_landmark_inputs.py",
     "test_refine.py",
-    "test_align.py",
     "test_synth.py",
+    "test_refine_shape.py",
     "test_modal_span.py",
+    "test_synth_faces.py",
     "test_motion_noise.py",
+    "test_mesh_scan.py",
 )
 
 
