@@ -47,23 +47,34 @@ def test_training_is_deterministic(tiny):
     assert a.meta["seed"] == 5 and a.meta["config"]["takes"] == 1
 
 
-def test_stereo_training_take_has_its_truth_on_its_grid():
+def test_stereo_training_take_has_its_truth_on_its_grid(monkeypatch):
     """A simulated stereo training take, reconstructed as the ingest stage does: its truth lies
     on the left camera's raw grid (where the reconstruction's points and the colour are): the
-    nose tip found on the reconstructed surface is within 3 px of the truth's point 31, and the
-    reconstruction covers most of the inner face's truth points."""
+    nose tip found on the reconstructed surface is within 1.5 px of the truth's point 31, and the
+    reconstruction covers most of the inner face's truth points. The trainer's rig on a 320 x 240
+    sensor with half its focal length (the face fills the same share of the image; the grids'
+    mapping does not depend on their size): measured 0.78 px and 0.98 (at 640 x 480: 1.66 px,
+    i.e. 0.83 at this scale, and 0.86), in 2.7 CPU-s instead of 6.1."""
     from scan2morph.landmarks.data import make_stereo_samples
     from scan2morph.landmarks.face import find_face
+    from scan2morph.synth import stereo
     from scan2morph.template.sample import sample_range
 
+    full = stereo.make_stereo_take
+
+    def half(subject, label, kind, take, seed, params, *rest):
+        small = dict(params) | {"width": 320, "height": 240, "focal_px": params["focal_px"] / 2}
+        return full(subject, label, kind, take, seed, small, *rest)
+
+    monkeypatch.setattr(stereo, "make_stereo_take", half)
     (s,) = make_stereo_samples(5, 1, 1)
     assert s.name.startswith("stereo000/t00/") and s.name.endswith("/stereo")
-    assert s.color.shape == s.xyz.shape == (480, 640, 3) and s.truth.shape == (68, 2)
+    assert s.color.shape == s.xyz.shape == (240, 320, 3) and s.truth.shape == (68, 2)
     nose = find_face(s.xyz, s.name).nose_px
     print(f"nose tip found {nose}, truth {s.truth[30]}")
-    assert np.linalg.norm(nose - s.truth[30]) < 3.0
+    assert np.linalg.norm(nose - s.truth[30]) < 1.5
     inner = sample_range(s.xyz.astype(float), s.truth[17:], s.name, 0.5)[0]
-    assert np.isfinite(inner).all(axis=1).mean() > 0.75  # measured 0.86 (eyes, nostrils: holes)
+    assert np.isfinite(inner).all(axis=1).mean() > 0.75  # eyes, nostrils: holes
 
 
 def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_when_asked(
