@@ -94,7 +94,7 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
         df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+    except pd.errors.ParserError as exc:  # the text is decoded: sheet_text names bad bytes
         raise InputError(path, f"not a tab-separated sheet: {' '.join(str(exc).split())}") from exc
     df.columns = [c.strip() for c in df.columns]
     missing = [c for c in REQUIRED if c not in df.columns]

@@ -7,6 +7,23 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 
 
+def snakemake_dry_run(workdir: Path, configfile: str) -> tuple[int, list[str]]:
+    """The lines a user sees from ``snakemake -n`` in ``workdir`` with the repo's config and
+    ``configfile`` on top (the CLI, as ``make dry-run`` runs it); also its exit status."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [
+            str(Path(sys.executable).parent / "snakemake"),
+            "-s", str(REPO / "Snakefile"), "-n",
+            "--configfile", str(REPO / "config" / "config.yaml"), configfile,
+        ],
+        cwd=workdir, capture_output=True, text=True,
+    )  # fmt: skip
+    return out.returncode, (out.stdout + out.stderr).strip().splitlines()
+
+
 def run_workflow(
     workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False
 ):

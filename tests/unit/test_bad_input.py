@@ -37,6 +37,7 @@ from scan2morph.stages import fit as fit_stage
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from scan2morph.template import build_template, fit_take
 from scan2morph.template.sample import SCANNER_FRAME, scanner_view
+from tests.support.workflow_api import snakemake_dry_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = dict(width=160, height=120, focal_px=362.5, distance_mm=1000.0)
@@ -462,16 +463,8 @@ def test_an_empty_cell_fails_only_its_subject(tmp_path):
 
 def test_a_bad_config_key_stops_snakemake_in_a_few_lines(tmp_path):
     (tmp_path / "bad.yaml").write_text("bogus_key: 1\n")
-    out = subprocess.run(
-        [
-            str(Path(sys.executable).parent / "snakemake"),
-            "-s", str(ROOT / "Snakefile"), "-n",
-            "--configfile", str(ROOT / "config" / "config.yaml"), "bad.yaml",
-        ],
-        cwd=tmp_path, capture_output=True, text=True,
-    )  # fmt: skip
-    assert out.returncode != 0
-    lines = (out.stdout + out.stderr).strip().splitlines()
+    status, lines = snakemake_dry_run(tmp_path, "bad.yaml")
+    assert status != 0
     assert len(lines) <= 3
     assert "config: bogus_key: unknown key" in lines[-1]
 

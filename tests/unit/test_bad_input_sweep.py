@@ -5,8 +5,6 @@ silent garbage. Small files written here, read by the library's readers and the 
 from __future__ import annotations
 
 import copy
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +30,7 @@ from scan2morph.io import (
 from scan2morph.io.check import take_file_problems
 from scan2morph.io.rgbd import PinholeCamera
 from scan2morph.sheet import read_sheet, validate_config
+from tests.support.workflow_api import snakemake_dry_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TETRA_V = np.array([[0.0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]])
@@ -334,16 +333,8 @@ def test_an_empty_sheet_without_the_synthetic_cohort_stops_the_run_in_one_line(t
     """Before: Snakemake ran its 'all' rule over no subject and exited 0, saying nothing."""
     (tmp_path / "s.tsv").write_text(HEADER + "# a\tneutral\tneutral\tneutral\trange\tn.abs\n")
     (tmp_path / "my.yaml").write_text("subjects: s.tsv\nsynthetic: {subjects: 0}\n")
-    out = subprocess.run(
-        [
-            str(Path(sys.executable).parent / "snakemake"),
-            "-s", str(ROOT / "Snakefile"), "-n",
-            "--configfile", str(ROOT / "config" / "config.yaml"), "my.yaml",
-        ],
-        cwd=tmp_path, capture_output=True, text=True,
-    )  # fmt: skip
-    assert out.returncode != 0
-    lines = (out.stdout + out.stderr).strip().splitlines()
+    status, lines = snakemake_dry_run(tmp_path, "my.yaml")
+    assert status != 0
     assert len(lines) <= 3
     assert lines[-1] == (
         "Error: s.tsv: no takes: the sheet has no rows (only its header or comments) and "

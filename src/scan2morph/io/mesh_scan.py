@@ -32,7 +32,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 import numpy as np  # noqa: E402
 
 from scan2morph.errors import InputError  # noqa: E402
-from scan2morph.geometry import lambert_grey  # noqa: E402
+from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
@@ -166,7 +166,7 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         raise InputError(
             path, f"mesh: no faces ({n} vertices: a point cloud?); expected a triangle mesh"
         )
-    bad = np.flatnonzero(~np.isfinite(np.asarray(loaded.vertices)).all(axis=1))
+    bad = np.flatnonzero(~finite_points(np.asarray(loaded.vertices)))
     if len(bad):
         raise InputError(
             path,
