@@ -461,6 +461,7 @@ def test_an_empty_cell_fails_only_its_subject(tmp_path):
     assert not [p for p in problems["bob"] if "'landmarks'" in p]
 
 
+@pytest.mark.slow  # starts Snakemake: not in make test-fast
 def test_a_bad_config_key_stops_snakemake_in_a_few_lines(tmp_path):
     (tmp_path / "bad.yaml").write_text("bogus_key: 1\n")
     status, lines = snakemake_dry_run(tmp_path, "bad.yaml")

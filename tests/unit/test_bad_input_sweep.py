@@ -329,6 +329,7 @@ def test_a_2d_pts_given_for_a_mesh_take_is_named(tmp_path):
     )
 
 
+@pytest.mark.slow  # starts Snakemake: not in make test-fast
 def test_an_empty_sheet_without_the_synthetic_cohort_stops_the_run_in_one_line(tmp_path):
     """Before: Snakemake ran its 'all' rule over no subject and exited 0, saying nothing."""
     (tmp_path / "s.tsv").write_text(HEADER + "# a\tneutral\tneutral\tneutral\trange\tn.abs\n")
