@@ -87,11 +87,12 @@ def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_whe
     from scan2morph.landmarks import data
     from scan2morph.landmarks import train as train_mod
 
-    calls = []
+    calls, conventions = [], set()
 
     def fake(kind):
-        def make(seed, n, k, extra=None):
+        def make(seed, n, k, extra=None, convention="synth"):
             calls.append((kind, seed, n, k, extra))
+            conventions.add(convention)
             prefix = {"range": "train" if extra is None else "wide"}.get(kind, kind)
             return [f"{prefix}{i:03d}/t{j:02d}" for i in range(n) for j in range(k)]
 
@@ -121,6 +122,12 @@ def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_whe
     assert {train_mod._identity(n) for n in more[420:]} == {3000, 3001, 3002}
     with pytest.raises(InputError, match="extra_knobs: unknown"):
         train_mod.extra_shares(config | {"extra_knobs": ["ears"]})
+    assert conventions == {"synth"}
+    calls.clear()
+    ibug = train_mod._cached_samples(1, config | {"convention": "ibug"}, None)
+    assert ibug == more and calls[:3] == committed and conventions == {"synth", "ibug"}
+    with pytest.raises(InputError, match="convention: expected one of"):
+        train_mod._cached_samples(1, config | {"convention": "dlib"}, None)
 
 
 def test_extra_subjects_leave_the_committed_takes_as_they_were():

@@ -44,6 +44,7 @@ from scan2morph.landmarks.data import (
 )
 from scan2morph.landmarks.detect import mirror_channels, mirror_shapes
 from scan2morph.landmarks.face import find_face
+from scan2morph.synth.convention import CONVENTIONS, check_convention
 from scan2morph.tol import N_IBUG
 
 #: Model version: bump when the features, the frame or the training change.
@@ -74,6 +75,7 @@ DEFAULTS = {
     "extra_closed_eyes": 1.0,
     "extra_wide_share": 0.0,
     "extra_knobs": list(WIDE_RANGE),
+    "convention": "synth",
 }
 #: ``radii_mm``: the local stages' pattern half-widths, mm, in order; ``pattern_side``: points
 #: per side of their sampling pattern (3: 3 x 3); ``ridge_per_point``: each point's own ridge
@@ -81,7 +83,9 @@ DEFAULTS = {
 #: ``extra_*``: extra range and RGB-D training subjects (``wide000``, ...; ``takes`` each) added
 #: to the committed ones, their faces drawn by ``landmarks.data.wide_identity`` with closed
 #: eyes in a share ``extra_closed_eyes`` of them and the knobs ``extra_knobs`` redrawn in a share
-#: ``extra_wide_share``; none for the committed model.
+#: ``extra_wide_share``; none for the committed model. ``convention``: where the training truth
+#: puts the points (:data:`scan2morph.synth.convention.CONVENTIONS`: the generator's own, or our
+#: annotation's iBUG rules with the jawline on each take's silhouette).
 #: Every this many-th training identity is held out to choose each stage's ridge penalty.
 HOLDOUT_EVERY = 5
 log = logging.getLogger("scan2morph")
@@ -305,28 +309,31 @@ def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]
     them."""
     n, k = config["subjects"], config["takes"]
     nm, km = config["mesh_subjects"], config["mesh_takes"]
+    convention = check_convention(config["convention"], "training config: convention")
+    # the default convention's files keep their names (caches made before the option)
+    tag = "" if convention == CONVENTIONS[0] else f"-{convention}"
     out = _cached(
-        cache / f"samples-{seed}-{n}x{k}.npz" if cache else None,
-        lambda: make_samples(seed, n, k),
+        cache / f"samples-{seed}-{n}x{k}{tag}.npz" if cache else None,
+        lambda: make_samples(seed, n, k, convention=convention),
     )
     if nm and km:
         out += _cached(
-            cache / f"mesh-{seed}-{nm}x{km}.npz" if cache else None,
-            lambda: make_mesh_samples(seed, nm, km),
+            cache / f"mesh-{seed}-{nm}x{km}{tag}.npz" if cache else None,
+            lambda: make_mesh_samples(seed, nm, km, convention=convention),
         )
     ns, ks = config["stereo_subjects"], config["stereo_takes"]
     if ns and ks:
         out += _cached(
-            cache / f"stereo-{seed}-{ns}x{ks}.npz" if cache else None,
-            lambda: make_stereo_samples(seed, ns, ks),
+            cache / f"stereo-{seed}-{ns}x{ks}{tag}.npz" if cache else None,
+            lambda: make_stereo_samples(seed, ns, ks, convention=convention),
         )
     ne = int(config["extra_subjects"])
     if ne and k:
         extra = extra_shares(config)
-        tag = f"c{extra.closed_eyes:g}-w{extra.wide:g}-{'+'.join(extra.knobs)}"
+        shares = f"c{extra.closed_eyes:g}-w{extra.wide:g}-{'+'.join(extra.knobs)}"
         out += _cached(
-            cache / f"extra-{seed}-{ne}x{k}-{tag}.npz" if cache else None,
-            lambda: make_samples(seed, ne, k, extra),
+            cache / f"extra-{seed}-{ne}x{k}-{shares}{tag}.npz" if cache else None,
+            lambda: make_samples(seed, ne, k, extra, convention=convention),
         )
     return out
 
@@ -370,7 +377,7 @@ def train(seed: int, config: dict | None = None, cache: Path | None = None) -> C
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: ``--seed N --out PATH [--subjects N] [--takes N] [--cache DIR]
-    [--radii-mm R,...] [--pattern-side N] [--ridge-per-point] [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
+    [--radii-mm R,...] [--pattern-side N] [--ridge-per-point] [--convention C] [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
     parser = argparse.ArgumentParser(prog="python -m scan2morph.landmarks.train")
     parser.add_argument("--seed", type=int, required=True)
     parser.add_argument("--out", type=Path, required=True)
@@ -399,6 +406,12 @@ def main(argv: list[str] | None = None) -> int:
         default=0,
         help="extra range/RGB-D subjects with wider faces, added to the committed ones",
     )
+    parser.add_argument(
+        "--convention",
+        choices=CONVENTIONS,
+        default=DEFAULTS["convention"],
+        help="where the training truth puts the points: the generator's own or iBUG's rules",
+    )
     parser.add_argument("--extra-closed-eyes", type=float, default=DEFAULTS["extra_closed_eyes"])
     parser.add_argument("--extra-wide-share", type=float, default=DEFAULTS["extra_wide_share"])
     parser.add_argument(
@@ -421,6 +434,7 @@ def main(argv: list[str] | None = None) -> int:
         "extra_closed_eyes": args.extra_closed_eyes,
         "extra_wide_share": args.extra_wide_share,
         "extra_knobs": [k for k in args.extra_knobs.split(",") if k],
+        "convention": args.convention,
     }
     try:
         extra_shares(config)
