@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from scan2morph.align.noise import mesh_noise
+from scan2morph.align.noise import mesh_noise, tail_rms
 from scan2morph.align.rigid import transform_points
 from scan2morph.align.settings import (
     AlignMeshes,
@@ -108,12 +108,18 @@ def rmse_gate(
     return replace(gate, kept=float(keep.mean()))
 
 
-def residual_gate(residuals, noise_take, noise_neutral, prm) -> RmseGate:
+def residual_gate(residuals, noise_take, noise_neutral, prm, robust: bool = False) -> RmseGate:
     """The RMSE gate of point-to-plane ``residuals`` (n,) mm, given the measured noise of the
-    two sides (mm) and the ICP settings ``prm`` (``max_rmse_ratio``, ``max_rmse_mm``)."""
-    rmse = float(np.sqrt(np.mean(residuals**2))) if residuals.size else float("inf")
+    two sides (mm) and the ICP settings ``prm`` (``max_rmse_ratio``, ``max_rmse_mm``); with
+    ``robust`` the RMS is :func:`~scan2morph.align.noise.tail_rms`'s."""
+    if not residuals.size:
+        rmse = float("inf")
+    elif robust:
+        rmse = tail_rms(residuals)
+    else:
+        rmse = float(np.sqrt(np.mean(residuals**2)))
     limit, kind = rmse_limit(noise_take, noise_neutral, prm)
-    problem = _rmse_verdict(rmse, limit, kind, noise_take, noise_neutral, prm)
+    problem = _rmse_verdict(rmse, limit, kind, noise_take, noise_neutral, prm, robust)
     return RmseGate(rmse, float(noise_take), float(noise_neutral), limit, kind, problem)
 
 
@@ -142,7 +148,9 @@ def rmse_limit(noise_take: float, noise_neutral: float, params: IcpParams) -> tu
     return float(max(params.max_rmse_ratio * expected, _RMSE_FLOOR_MM)), "relative"
 
 
-def _rmse_verdict(residual_rmse, limit, kind, noise_take, noise_neutral, prm) -> str | None:
+def _rmse_verdict(
+    residual_rmse, limit, kind, noise_take, noise_neutral, prm, robust=False
+) -> str | None:
     """The RMSE gate's problem, naming the measured noise and the limit; None when it passed."""
     if residual_rmse <= limit:
         return None
@@ -155,8 +163,9 @@ def _rmse_verdict(residual_rmse, limit, kind, noise_take, noise_neutral, prm) ->
             f"limit {limit:.3f} mm (max_rmse_ratio {prm.max_rmse_ratio:g} x the "
             f"{expected:.3f} mm a right alignment leaves; {noise})"
         )
+    what = "robust point-to-plane RMS" if robust else "point-to-plane RMSE"
     return (
-        f"point-to-plane RMSE {residual_rmse:.3f} mm over the kept region > {why}: "
+        f"{what} {residual_rmse:.3f} mm over the kept region > {why}: "
         "misaligned, or the stable region moved"
     )
 

@@ -25,6 +25,8 @@ from scan2morph.errors import InputError
 
 #: Median of a chi-square variable with one degree of freedom (its mean is 1).
 CHI2_1_MEDIAN = 0.454936423119572
+#: The 80th percentile of a chi-square with one degree of freedom (:func:`tail_rms`).
+CHI2_1_Q80 = 1.642374415149818
 
 #: Quadric terms plus a margin: fewer valid neighbours than this give no estimate at a vertex.
 MIN_NEIGHBOURS = 9
@@ -54,6 +56,14 @@ class MeshNoise:
         r = self.sq_residual[np.asarray(mask)]
         r = r[np.isfinite(r)]
         return float(np.sqrt(np.median(r) / CHI2_1_MEDIAN)) if r.size else float("nan")
+
+
+def tail_rms(residuals: np.ndarray) -> float:
+    """The standard deviation of Gaussian residuals (n,) from the 80th percentile of their
+    squares: up to a fifth of outlying residuals (a depth camera's noisy grazing edge) does
+    not count, a deformed quarter of the region does; NaN for none."""
+    r = np.asarray(residuals, dtype=np.float64)
+    return float(np.sqrt(np.quantile(r**2, 0.8) / CHI2_1_Q80)) if r.size else float("nan")
 
 
 def robust_rms(residuals: np.ndarray) -> float:

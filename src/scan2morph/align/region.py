@@ -44,8 +44,10 @@ def region_motion(
     centroid and damped, so that a direction the region's shape hardly constrains moves
     slowly; the kernel annealed as in :func:`~scan2morph.align.align_take` and never narrower than
     ``kernel_noise_sigmas`` times the RMSE the measured noise explains; points off the surface's
-    data left out). Nothing is trimmed: the verdict says whether the *whole* region moved
-    rigidly.
+    data left out). Nothing is trimmed; the verdict judges the region's robust point-to-plane
+    RMS (from the 80th percentile of the squares, :func:`~scan2morph.align.noise.tail_rms`):
+    up to a fifth of outlying points (a depth camera's noisy grazing edge) does not count, a
+    deformed quarter of the region does.
 
     Parameters
     ----------
@@ -68,7 +70,7 @@ def region_motion(
     -------
     AlignResult
         ``transform`` maps the region onto the surface; ``residual_rmse`` is the region's
-        point-to-plane RMSE there; ``fitness`` the share of the region the surface covers;
+        robust point-to-plane RMS there; ``fitness`` the share of the region the surface covers;
         ``noise_take`` and ``noise_neutral`` are the measured noise of the surface and of the
         region; ``ok`` is False, with the reasons in ``problems``, when ICP did not converge,
         the fitness is below ``min_fitness`` or the RMSE is above :func:`rmse_limit` (the
@@ -95,7 +97,7 @@ def region_motion(
     plane, seen, d = surface.residuals(transform_points(t, p), reach)
     fitness = float(seen.mean())
     rmse = float(np.sqrt(np.mean(d[seen] ** 2))) if seen.any() else 0.0
-    gate = residual_gate(plane[seen], noise_surface, noise_region, prm)
+    gate = residual_gate(plane[seen], noise_surface, noise_region, prm, robust=True)
     problems = _region_problems(conv, iterations, fitness, gate, prm)
     return AlignResult(
         transform=t,

@@ -11,8 +11,9 @@ vertex goes where that rigid motion carries its skin point, found in the take's 
 (:func:`scan2morph.template.sample.range_pixels`).
 
 The prior holds only where the chin did move rigidly. It is used when the registration's
-point-to-plane RMSE is within ``max_rmse_ratio`` times the residual the still skin (the
-alignment's region) leaves on the same scans, the ICP converged and the chin's shape pins every
+robust point-to-plane RMS (from the 80th percentile of the squares: a depth camera's noisy
+edge of the chin does not count against it, a pout does) is within ``max_rmse_ratio`` times
+the residual the still skin (the alignment's region) leaves on the same scans, the ICP converged and the chin's shape pins every
 direction of its motion (a chin that the lips' rounding or a pout deforms is not rigid, a plane
 slides freely: both keep the flow's answer). Its weight rises from 0 to 1 along the way from the
 lower lip's outer midpoint (iBUG 58) to the chin (iBUG 9), between the shares ``start`` and
@@ -345,7 +346,7 @@ def _motion_problem(motion, limit: float, reference: float, max_rmse_ratio: floa
         return ""
     if motion.converged and motion.residual_rmse > limit:
         return (
-            f"the chin did not move rigidly: point-to-plane RMSE {motion.residual_rmse:.3f} "
+            f"the chin did not move rigidly: robust point-to-plane RMS {motion.residual_rmse:.3f} "
             f"mm > {limit:.3f} mm (max_rmse_ratio {max_rmse_ratio:g} x the "
             f"{reference:.3f} mm the still skin leaves, at least {MIN_LIMIT_MM:g} mm)"
         )
