@@ -105,8 +105,9 @@ def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping
         read_stereo_take(files["left"], files["right"], files["calibration"], landmarks)
     elif modality == "rgbd":
         intr, paths = loaded["intrinsics"], depth_frame_paths(files["depth"])
-        args = (loaded["depth"], paths, loaded["color"], files["color"])
-        check_rgbd_files(intr, files["intrinsics"], *args)
+        check_rgbd_files(
+            intr, files["intrinsics"], loaded["depth"], paths, loaded["color"], files["color"]
+        )
         if loaded.get("landmarks") is not None:
             check_landmarks_inside(loaded["landmarks"], *intr.color.size, files["landmarks"])
 

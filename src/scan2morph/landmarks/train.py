@@ -75,7 +75,7 @@ DEFAULTS = {
     "extra_closed_eyes": 1.0,
     "extra_wide_share": 0.0,
     "extra_knobs": list(WIDE_RANGE),
-    "convention": "synth",
+    "convention": CONVENTIONS[0],  # the generator's own points
 }
 #: ``radii_mm``: the local stages' pattern half-widths, mm, in order; ``pattern_side``: points
 #: per side of their sampling pattern (3: 3 x 3); ``ridge_per_point``: each point's own ridge
