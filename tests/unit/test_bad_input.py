@@ -412,6 +412,10 @@ def test_config_validation_fills_defaults_as_snakemake_does():
         ),
         ({"refine": {"flow_level": 3}}, r"^config: refine\.flow_level: expected a value <= 2"),
         ({"refine": {"flow_level": 0.5}}, r"^config: refine\.flow_level: "),
+        (
+            {"refine": {"jaw": {"fade_rmse_ratio": 0}}},
+            r"^config: refine\.jaw\.fade_rmse_ratio: expected a value > 0, got 0$",
+        ),
     ],
 )
 def test_config_errors_are_one_short_line(extra, match):

@@ -13,7 +13,14 @@ from scan2morph.align import IcpParams, SampledSurface, invert, region_motion, t
 from scan2morph.errors import InputError
 from scan2morph.geometry import surface_normals
 from scan2morph.open3d_light import open3d
-from scan2morph.refine.jaw import MIN_CONSTRAINT, ChinMeshes, chin_weights, jaw_prior
+from scan2morph.refine.jaw import (
+    MIN_CONSTRAINT,
+    ChinMeshes,
+    JawParams,
+    chin_weights,
+    gate_share,
+    jaw_prior,
+)
 from scan2morph.template import build_template
 from scan2morph.template.sample import range_pixels, sample_range
 from tests.support.meshes import grid_mesh
@@ -119,14 +126,14 @@ def _scene(angle_deg=12.0, bulge_mm=0.0, flat=False, seed=0, noise=NOISE):
     }
 
 
-def _prior(s, ratio=1.5):
+def _prior(s, ratio=1.5, fade=None):
     weights = np.clip((s["y"] - SULCUS_Y) / 10.0, 0.0, 1.0)  # the chin: 10 mm under the sulcus
     still = s["y"] < SULCUS_Y - 14.0  # above the jaw's reach
     meshes = ChinMeshes(
         s["neutral"], s["neutral_valid"], s["take"], s["take_valid"], weights, still
     )
     prior = jaw_prior(
-        meshes, s["take_xyz"], s["transform"], IcpParams(kernel_k_mm=0.3), ratio, "test/car"
+        meshes, s["take_xyz"], s["transform"], IcpParams(kernel_k_mm=0.3), ratio, "test/car", fade
     )
     return prior, weights
 
@@ -307,6 +314,44 @@ def test_jaw_prior_is_not_used_where_it_does_not_hold(case, match):
     np.testing.assert_array_equal(prior.apply(start), start)
 
 
+def test_gate_share_falls_linearly_from_full_to_the_limit():
+    """The gate's share: whole up to ``full``, none from ``limit``, linear between (the midpoint
+    half), and a step when the two are equal (the hard gate)."""
+    full, limit = 0.15, 0.25
+    residual = np.array([0.0, 0.15, 0.175, 0.2, 0.225, 0.25, 0.3])
+    share = [gate_share(r, full, limit) for r in residual]
+    np.testing.assert_allclose(share, [1.0, 1.0, 0.75, 0.5, 0.25, 0.0, 0.0], atol=1e-12)
+    assert [gate_share(r, full, full) for r in (0.149, 0.15, 0.151)] == [1.0, 1.0, 0.0]
+
+
+@pytest.mark.parametrize("bulge_mm, seed", [(3.0, 0), (2.0, 2)])
+def test_a_chin_between_the_gate_and_the_fade_gets_part_of_the_prior(bulge_mm, seed):
+    """A pout that the hard gate refuses (3 mm: robust residual 1.76 x the still skin's; 2 mm with
+    another noise draw: 1.77 x) gets the share the fade gives it, (2.5 - ratio) / (2.5 - 1.5) of
+    every chin vertex's weight."""
+    s = _scene(bulge_mm=bulge_mm, seed=seed)
+    hard, _ = _prior(s)
+    assert not hard.used and "(max_rmse_ratio 1.5 x the" in hard.problem
+    prior, weights = _prior(s, fade=2.5)
+    assert prior.used, prior.problem
+    ratio = prior.motion.residual_rmse / (prior.motion.rmse_limit / 2.5)
+    assert 1.5 < ratio < 2.5
+    np.testing.assert_allclose(prior.share, (2.5 - ratio) / 1.0, atol=1e-9)
+    found = np.isfinite(prior.points).all(axis=1)
+    assert found.any()
+    np.testing.assert_allclose(prior.weight[found], prior.share * weights[found])
+    np.testing.assert_array_equal(prior.weight[~found], 0.0)
+
+
+def test_a_chin_beyond_the_fade_gets_none_of_the_prior():
+    """An 8 mm pout (2.87 x the still skin's residual) lies beyond the fade: refused, the message
+    naming fade_rmse_ratio."""
+    far, _ = _prior(_scene(bulge_mm=8.0), fade=2.5)
+    assert not far.used and "(fade_rmse_ratio 2.5 x the" in far.problem
+    assert far.share == 0.0
+    np.testing.assert_array_equal(far.weight, 0.0)
+
+
 def test_jaw_prior_without_enough_chin():
     s = _scene()
     prior, weights = _prior(s | {"take_valid": np.zeros_like(s["take_valid"])})
@@ -321,14 +366,16 @@ def test_chin_weights_rise_from_the_lower_lip_to_the_chin():
     w = chin_weights(template.vertices, template.ibug_xy, 0.0, 0.3)
     eyes = template.ibug_xy[36:48]
     assert w.max() == 1.0 and chin_weights(eyes, template.ibug_xy, 0.0, 0.3).max() == 0.0
-    from scan2morph.refine.jaw import JawParams
-
     with pytest.raises(InputError, match="^JawParams: start, end: expected 0 <= start < end"):
         JawParams(start=0.4, end=0.3)
     with pytest.raises(InputError, match="^JawParams: start: expected a number"):
         JawParams(start="0")
     with pytest.raises(InputError, match="^JawParams: max_rmse_ratio"):
         JawParams(max_rmse_ratio=0.0)
+    with pytest.raises(InputError, match="^JawParams: fade_rmse_ratio: expected at least max_rmse"):
+        JawParams(max_rmse_ratio=2.0, fade_rmse_ratio=1.5)
+    with pytest.raises(InputError, match="^JawParams: fade_rmse_ratio: expected a number"):
+        JawParams(fade_rmse_ratio="2")
 
 
 def test_the_prior_fills_in_where_the_flow_measured_nothing():

@@ -10,12 +10,16 @@ chin is registered to the take's surface by point-to-plane ICP
 vertex goes where that rigid motion carries its skin point, found in the take's range image
 (:func:`scan2morph.template.sample.range_pixels`).
 
-The prior holds only where the chin did move rigidly. It is used when the registration's
-robust point-to-plane RMS (from the 80th percentile of the squares: a depth camera's noisy
-edge of the chin does not count against it, a pout does) is within ``max_rmse_ratio`` times
-the residual the still skin (the alignment's region) leaves on the same scans, the ICP converged and the chin's shape pins every
-direction of its motion (a chin that the lips' rounding or a pout deforms is not rigid, a plane
-slides freely: both keep the flow's answer). Its weight rises from 0 to 1 along the way from the
+The prior holds only where the chin did move rigidly. It is used in full when the
+registration's robust point-to-plane RMS (from the 80th percentile of the squares: a depth
+camera's noisy edge of the chin does not count against it, a pout does) is within
+``max_rmse_ratio`` times the residual the still skin (the alignment's region) leaves on the same
+scans, the ICP converged and the chin's shape pins every direction of its motion (a chin that
+the lips' rounding or a pout deforms is not rigid, a plane slides freely: both keep the flow's
+answer). Between ``max_rmse_ratio`` and ``fade_rmse_ratio`` times that residual its weight falls
+linearly to 0 (:func:`gate_share`), so that a chin near the gate is not all in or all out: the
+same take with a little more noise, or its landmarks clicked a little otherwise, got the whole
+prior or none. Its weight rises from 0 to 1 along the way from the
 lower lip's outer midpoint (iBUG 58) to the chin (iBUG 9), between the shares ``start`` and
 ``end`` of it: the lower lip and the sulcus under it move with the lips as much as with the jaw.
 The refine stage moves a chin vertex towards the prior by its weight times one minus the flow's
@@ -87,20 +91,24 @@ class JawParams:
         Shares of the way from iBUG 58 to iBUG 9 where the prior's weight starts to rise from 0
         and reaches 1; the vertices at weight 1 are the region registered.
     max_rmse_ratio : float
-        The registration's RMSE gate, in units of the residual the still skin leaves.
+        The registration's RMSE gate, in units of the residual the still skin leaves: the prior
+        in full up to it.
+    fade_rmse_ratio : float
+        Its weight falls linearly to 0 from ``max_rmse_ratio`` to this (same units; equal to it:
+        a hard gate).
     """
 
     prior: bool = True
     start: float = 0.0
     end: float = 0.3
     max_rmse_ratio: float = 1.5
+    fade_rmse_ratio: float = 2.5
 
     def __post_init__(self):
         if not isinstance(self.prior, bool | np.bool_):
             raise InputError("JawParams", f"prior: expected true or false, got {self.prior!r}")
-        require_numbers(
-            "JawParams", {n: getattr(self, n) for n in ("start", "end", "max_rmse_ratio")}
-        )
+        names = ("start", "end", "max_rmse_ratio", "fade_rmse_ratio")
+        require_numbers("JawParams", {n: getattr(self, n) for n in names})
         if not 0.0 <= self.start < self.end <= 1.0:
             raise InputError(
                 "JawParams",
@@ -109,6 +117,12 @@ class JawParams:
         if not self.max_rmse_ratio > 0:
             raise InputError(
                 "JawParams", f"max_rmse_ratio: expected a positive ratio, got {self.max_rmse_ratio}"
+            )
+        if not self.fade_rmse_ratio >= self.max_rmse_ratio:
+            raise InputError(
+                "JawParams",
+                f"fade_rmse_ratio: expected at least max_rmse_ratio ({self.max_rmse_ratio}), "
+                f"got {self.fade_rmse_ratio}",
             )
 
 
@@ -127,6 +141,9 @@ class JawPrior:
     used : bool
     problem : str
         Why it is not used ("" when it is).
+    share : float
+        The gate's share of the prior in [0, 1] (:func:`gate_share`), already in ``weight``; 0
+        when it is not used.
     """
 
     points: np.ndarray
@@ -134,6 +151,7 @@ class JawPrior:
     motion: AlignResult | None
     used: bool
     problem: str
+    share: float = 0.0
 
     def fill(self, points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The prior where the flow measured nothing: each point moves towards it by its weight
@@ -243,6 +261,7 @@ def jaw_prior(
     icp: IcpParams | None = None,
     max_rmse_ratio: float = 1.5,
     source: str = "subject/take",
+    fade_rmse_ratio: float | None = None,
 ) -> JawPrior:
     """The jaw prior of one take.
 
@@ -260,9 +279,12 @@ def jaw_prior(
     max_rmse_ratio : float
         The rigidity gate: the chin's point-to-plane RMSE at most this many times the still
         skin's (robust) residual against the take's surface under the alignment, the RMSE that
-        a rigid motion leaves on these scans.
+        a rigid motion leaves on these scans, for the prior in full.
     source : str
         ``subject/take``, for messages.
+    fade_rmse_ratio : float, optional
+        Beyond ``max_rmse_ratio`` the prior's weight falls linearly to 0 at this many times the
+        still skin's residual (:func:`gate_share`); default ``max_rmse_ratio``: a hard gate.
 
     Returns
     -------
@@ -301,20 +323,35 @@ def jaw_prior(
     reference = _still_residual(xyz, mapped, take_transform, neutral[still], margin, source)
     if reference is None:
         return refused("the take's scan does not show the still skin (align.icp_region)")
-    limit = max(max_rmse_ratio * reference, MIN_LIMIT_MM)
+    fade = max_rmse_ratio if fade_rmse_ratio is None else fade_rmse_ratio
+    full = max(max_rmse_ratio * reference, MIN_LIMIT_MM)
+    limit = full * fade / max_rmse_ratio
     motion = region_motion(
         neutral[core], start, surface, replace(icp or IcpParams(), max_rmse_mm=limit), source
     )
-    problem = _motion_problem(motion, limit, reference, max_rmse_ratio)
+    name = "max_rmse_ratio" if fade == max_rmse_ratio else "fade_rmse_ratio"
+    gate = (name, fade, MIN_LIMIT_MM * fade / max_rmse_ratio)
+    problem = _motion_problem(motion, limit, reference, gate)
     if problem:
         return refused(problem, motion)
+    share = gate_share(motion.residual_rmse, full, limit)
     moved = transform_points(motion.transform, neutral[near])
     points = none.copy()
     points[near] = offset + range_pixels(
         window, transform_points(invert(take_transform), moved), source=source
     )
     found = np.isfinite(points).all(axis=1)
-    return JawPrior(points, np.where(found, weights, 0.0), motion, True, "")
+    return JawPrior(points, np.where(found, share * weights, 0.0), motion, True, "", share)
+
+
+def gate_share(residual: float, full: float, limit: float) -> float:
+    """The share of the jaw prior a chin's registration earns: 1 for a residual up to
+    ``full``, falling linearly to 0 at ``limit`` (mm all three; ``limit == full``: a step)."""
+    if residual <= full:
+        return 1.0
+    if residual >= limit:
+        return 0.0
+    return float((limit - residual) / (limit - full))
 
 
 def _still_residual(xyz, mapped, take_transform, still_points, margin, source) -> float | None:
@@ -333,10 +370,11 @@ def _still_residual(xyz, mapped, take_transform, still_points, margin, source) -
     return robust_rms(plane) if plane.size >= MIN_VERTICES else None
 
 
-def _motion_problem(motion, limit: float, reference: float, max_rmse_ratio: float) -> str:
+def _motion_problem(motion, limit: float, reference: float, gate: tuple) -> str:
     """Why the chin's registered ``motion`` is not used ("" when it is): its shape does not pin
     it (:data:`MIN_CONSTRAINT`), or it failed its gate (its RMSE above ``limit``, mm: the still
-    skin's ``reference`` residual times ``max_rmse_ratio``, at least :data:`MIN_LIMIT_MM`)."""
+    skin's ``reference`` residual times the ratio of ``gate``, ``(name, ratio, floor)``: the
+    setting's name, its value and the least limit, mm)."""
     if not motion.constraint >= MIN_CONSTRAINT:
         return (
             f"the chin's shape does not pin its motion: a slide of 1 mm changes its fit by "
@@ -345,10 +383,11 @@ def _motion_problem(motion, limit: float, reference: float, max_rmse_ratio: floa
     if motion.ok:
         return ""
     if motion.converged and motion.residual_rmse > limit:
+        name, ratio, floor = gate
         return (
             f"the chin did not move rigidly: robust point-to-plane RMS {motion.residual_rmse:.3f} "
-            f"mm > {limit:.3f} mm (max_rmse_ratio {max_rmse_ratio:g} x the "
-            f"{reference:.3f} mm the still skin leaves, at least {MIN_LIMIT_MM:g} mm)"
+            f"mm > {limit:.3f} mm ({name} {ratio:g} x the {reference:.3f} mm the still skin "
+            f"leaves, at least {floor:.3g} mm)"
         )
     return "; ".join(motion.problems)
 

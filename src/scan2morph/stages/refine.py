@@ -212,8 +212,9 @@ def run(template: Template, take: Take, params: Params) -> Part:
         the ``problem``; whether the take's texture did not correlate and the surface's shape
         refined it (``shape_used``, :mod:`scan2morph.refine.shape`); whether the jaw prior was
         used (``jaw_used``), why not
-        (``jaw_problem``, ``"off"`` with ``refine.jaw.prior`` false) and, when the chin was
-        registered, ``jaw_rmse_mm``, ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
+        (``jaw_problem``, ``"off"`` with ``refine.jaw.prior`` false), the rigidity gate's share
+        of it (``jaw_share``) and, when the chin was registered, ``jaw_rmse_mm``,
+        ``jaw_rmse_limit_mm`` and ``jaw_angle_deg``; whether the
         upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
         and those placed (``lip_vertices``, ``lip_measured``) and the median redness step at
         its border (``lip_contrast``).
@@ -310,6 +311,7 @@ def _attrs(params: Params, problem: str, report, ok, jaw: JawPrior, priors) -> d
         "valid_share": float(ok.mean()),
         "jaw_used": jaw.used,
         "jaw_problem": jaw.problem,
+        "jaw_share": jaw.share,
     }
     for key, prior in priors.items():
         attrs |= {
@@ -465,6 +467,7 @@ def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, so
         params.icp,
         params.jaw.max_rmse_ratio,
         source,
+        params.jaw.fade_rmse_ratio,
     )
 
 
