@@ -343,6 +343,11 @@ def test_a_chin_between_the_gate_and_the_fade_gets_part_of_the_prior(bulge_mm, s
     np.testing.assert_array_equal(prior.weight[~found], 0.0)
 
 
+def test_a_fade_below_the_gate_is_refused():
+    with pytest.raises(InputError, match=r"^test/car: jaw prior: expected 0 < max_rmse_ratio <= "):
+        _prior(_scene(), ratio=2.0, fade=1.5)
+
+
 def test_a_chin_beyond_the_fade_gets_none_of_the_prior():
     """An 8 mm pout (2.87 x the still skin's residual) lies beyond the fade: refused, the message
     naming fade_rmse_ratio."""

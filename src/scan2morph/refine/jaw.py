@@ -54,6 +54,7 @@ __all__ = [
     "JawParams",
     "JawPrior",
     "chin_weights",
+    "gate_share",
     "jaw_prior",
     "scan_surface",
     "LOWER_LIP",
@@ -290,6 +291,13 @@ def jaw_prior(
     -------
     JawPrior
     """
+    fade = max_rmse_ratio if fade_rmse_ratio is None else fade_rmse_ratio
+    if not fade >= max_rmse_ratio > 0:
+        raise InputError(
+            source,
+            f"jaw prior: expected 0 < max_rmse_ratio <= fade_rmse_ratio, got {max_rmse_ratio} "
+            f"and {fade}",
+        )
     m = meshes
     weights, neutral, neutral_valid, take, take_valid, still = _checked(
         m.weights, m.neutral, m.neutral_valid, m.take, m.take_valid, m.still, source
@@ -323,7 +331,6 @@ def jaw_prior(
     reference = _still_residual(xyz, mapped, take_transform, neutral[still], margin, source)
     if reference is None:
         return refused("the take's scan does not show the still skin (align.icp_region)")
-    fade = max_rmse_ratio if fade_rmse_ratio is None else fade_rmse_ratio
     full = max(max_rmse_ratio * reference, MIN_LIMIT_MM)
     limit = full * fade / max_rmse_ratio
     motion = region_motion(
