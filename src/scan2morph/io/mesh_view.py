@@ -35,8 +35,8 @@ bridge to the mouth (along the face's profile the bridge stays close behind the 
 lies well behind it), centred :data:`CENTRE_BELOW_TIP_MM` below the tip.
 
 Measured on every take of four synthetic subjects within 4.4 degrees of the true frontal
-direction (the cohort's mesh subject synth03: 3.1 from the surface alone, 1.6 with the landmarks'
-nose tip), and 1.7 degrees on a real head scan; noses pointing down as real ones do (about 60
+direction with the symmetry plane before its exact refinement (the cohort's mesh subject synth03,
+measured again with it: 3.1 from the surface alone, 1.6 with the landmarks' nose tip), and 1.7 degrees on a real head scan; noses pointing down as real ones do (about 60
 degrees below the horizontal from bridge to tip) do not bias it.
 """
 
