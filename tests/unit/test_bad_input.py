@@ -34,6 +34,7 @@ from scan2morph.io import (
 from scan2morph.sheet import read_sheet, subject_problems, validate_config
 from scan2morph.stages import Take, ingest
 from scan2morph.stages import fit as fit_stage
+from scan2morph.stages.stage_job import check_take_params
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from scan2morph.template import build_template, fit_take
 from scan2morph.template.sample import SCANNER_FRAME, scanner_view
@@ -465,13 +466,49 @@ def test_an_empty_cell_fails_only_its_subject(tmp_path):
     assert not [p for p in problems["bob"] if "'landmarks'" in p]
 
 
+@pytest.mark.parametrize(
+    "jaw, match",
+    [
+        (
+            {"fade_rmse_ratio": 1.0},
+            r"^config: refine\.jaw: fade_rmse_ratio: expected at least max_rmse_ratio \(1\.5\), "
+            r"got 1\.0$",
+        ),
+        (
+            {"start": 0.5},
+            r"^config: refine\.jaw: start, end: expected 0 <= start < end <= 1, got 0\.5 and 0\.3$",
+        ),
+    ],
+)
+def test_settings_that_contradict_each_other_are_one_config_line(jaw, match):
+    """What the schema cannot check, one setting against another, is found before any job: the
+    take stages' parameters built from the config (the repo's passes)."""
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    validate_config(config, ROOT / "schemas" / "config.schema.yaml")
+    check_take_params(config)
+    config["refine"]["jaw"] |= jaw
+    validate_config(config, ROOT / "schemas" / "config.schema.yaml")  # each value is valid alone
+    with pytest.raises(InputError, match=match):
+        check_take_params(config)
+
+
 @pytest.mark.slow  # starts Snakemake: not in make test-fast
-def test_a_bad_config_key_stops_snakemake_in_a_few_lines(tmp_path):
-    (tmp_path / "bad.yaml").write_text("bogus_key: 1\n")
+@pytest.mark.parametrize(
+    "text, line",
+    [
+        ("bogus_key: 1\n", "Error: config: bogus_key: unknown key"),
+        (  # each value valid alone, the two together not: found before any job too
+            "refine:\n  jaw:\n    fade_rmse_ratio: 1.0\n",
+            "Error: config: refine.jaw: fade_rmse_ratio: expected at least max_rmse_ratio",
+        ),
+    ],
+)
+def test_a_bad_config_stops_snakemake_in_a_few_lines(tmp_path, text, line):
+    (tmp_path / "bad.yaml").write_text(text)
     status, lines = snakemake_dry_run(tmp_path, "bad.yaml")
     assert status != 0
     assert len(lines) <= 3
-    assert "config: bogus_key: unknown key" in lines[-1]
+    assert lines[-1].startswith(line), lines[-1]
 
 
 # --- RGB-D and mesh takes (issue #18) ---

@@ -15,7 +15,7 @@ from scan2morph.sheet import (
     take_table,
     validate_config,
 )
-from scan2morph.stages.stage_job import SUBJECT_STAGES
+from scan2morph.stages.stage_job import SUBJECT_STAGES, check_take_params
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
 SCHEMAS = Path(workflow.basedir) / "schemas"
@@ -29,6 +29,9 @@ def stop_run(exc):
 
 try:
     validate_config(config, SCHEMAS / "config.schema.yaml", source="config")
+    # once a run, not again in each cluster job's Snakemake
+    if workflow.is_main_process:
+        check_take_params(config)
 except InputError as _exc:
     stop_run(_exc)
 

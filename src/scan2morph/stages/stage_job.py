@@ -49,6 +49,24 @@ SUBJECT_STAGES = (
     "report_subject",
 )
 
+
+def check_take_params(config: Mapping) -> None:
+    """Build the take stages' ``Params`` from a (schema-checked) ``config`` once, so that what a
+    schema cannot check, one setting against another (``refine.jaw.start`` below ``end``,
+    ``fade_rmse_ratio`` not below ``max_rmse_ratio``), stops a run at its start: in a take's job
+    it would leave every take out alike, each with the same line.
+
+    Raises
+    ------
+    InputError
+        The parameters' own one line (``config: refine.jaw: ...``).
+    """
+    import importlib
+
+    for stage in TAKE_STAGES:
+        importlib.import_module(f"scan2morph.stages.{stage}").Params.from_config(config)
+
+
 #: Columns of Snakemake's benchmark files (``benchmark:`` of a rule), in its order.
 BENCHMARK_COLUMNS = (
     "s",
@@ -282,6 +300,7 @@ __all__ = [
     "SUBJECT_STAGES",
     "TAKE_STAGES",
     "benchmarked",
+    "check_take_params",
     "fingerprint",
     "part_fingerprint",
     "read_fingerprints",
