@@ -36,8 +36,9 @@ lies well behind it), centred :data:`CENTRE_BELOW_TIP_MM` below the tip.
 
 Measured on every take of four synthetic subjects within 4.4 degrees of the true frontal
 direction with the symmetry plane before its exact refinement (the cohort's mesh subject synth03,
-measured again with it: 3.1 from the surface alone, 1.6 with the landmarks' nose tip), and 1.7 degrees on a real head scan; noses pointing down as real ones do (about 60
-degrees below the horizontal from bridge to tip) do not bias it.
+measured again with it: 3.1 from the surface alone, 1.6 with the landmarks' nose tip), and 1.7
+degrees on a real head scan; noses pointing down as real ones do (about 60 degrees below the
+horizontal from bridge to tip) do not bias it.
 """
 
 from __future__ import annotations
@@ -141,6 +142,12 @@ class FaceView:
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
+
+
+def _perpendicular(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (3,) perpendicular to the unit vector ``n`` (3,) and to each other."""
+    u = _unit(np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))]))
+    return u, np.cross(n, u)
 
 
 def outward_normals(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -272,9 +279,7 @@ def symmetry_plane(
     residual : float
         Median distance of the mirrored points to the surface, mm.
     """
-    helper = np.eye(3)[int(np.argmin(np.abs(forward)))]
-    u = _unit(np.cross(forward, helper))
-    v = np.cross(forward, u)
+    u, v = _perpendicular(forward)
     trials = [np.cos(t) * u + np.sin(t) * v for t in np.radians(np.arange(0.0, 180.0, 15.0))]
     coarse = points[:: max(1, len(points) // COARSE_SYMMETRY_POINTS)]
     residuals = [_mirror_residual(tree, coarse, origin, x, bounded=True) for x in trials]
@@ -324,8 +329,7 @@ def _refine_symmetry(tree, normals, points, origin, axis, iterations):
         r = np.einsum("ij,ij->i", mirrored[keep] - tree.data[j[keep]], n)
         # the mirror image p - 2 s a moves with the plane's turn (a + x0 u + x1 v, u and v
         # perpendicular to a) and shift (offset + x2)
-        u = _unit(np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))]))
-        v = np.cross(axis, u)
+        u, v = _perpendicular(axis)
         na = n @ axis
         jac = np.column_stack([-2.0 * (na * (p @ w) + s * (n @ w)) for w in (u, v)] + [2.0 * na])
         x = np.linalg.lstsq(jac, -r, rcond=None)[0]

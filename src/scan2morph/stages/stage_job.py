@@ -50,23 +50,6 @@ SUBJECT_STAGES = (
 )
 
 
-def check_take_params(config: Mapping) -> None:
-    """Build the take stages' ``Params`` from a (schema-checked) ``config`` once, so that what a
-    schema cannot check, one setting against another (``refine.jaw.start`` below ``end``,
-    ``fade_rmse_ratio`` not below ``max_rmse_ratio``), stops a run at its start: in a take's job
-    it would leave every take out alike, each with the same line.
-
-    Raises
-    ------
-    InputError
-        The parameters' own one line (``config: refine.jaw: ...``).
-    """
-    import importlib
-
-    for stage in TAKE_STAGES:
-        importlib.import_module(f"scan2morph.stages.{stage}").Params.from_config(config)
-
-
 #: Columns of Snakemake's benchmark files (``benchmark:`` of a rule), in its order.
 BENCHMARK_COLUMNS = (
     "s",
@@ -293,6 +276,23 @@ def benchmarked(path: str | Path) -> Iterator[None]:
     finally:
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         write_benchmark(path, wall, cpu, _peak_rss_mb())
+
+
+def check_take_params(config: Mapping) -> None:
+    """Build the take stages' ``Params`` from a (schema-checked) ``config`` once, so that what a
+    schema cannot check, one setting against another (``refine.jaw.start`` below ``end``,
+    ``fade_rmse_ratio`` not below ``max_rmse_ratio``), stops a run at its start: in a take's job
+    it would leave every take out alike, each with the same line.
+
+    Raises
+    ------
+    InputError
+        The parameters' own one line (``config: refine.jaw: ...``).
+    """
+    import importlib
+
+    for stage in TAKE_STAGES:
+        importlib.import_module(f"scan2morph.stages.{stage}").Params.from_config(config)
 
 
 __all__ = [
