@@ -320,3 +320,29 @@ def test_the_draws_follow_the_pipelines_verdict_on_the_texture(monkeypatch, verd
     data = {paths.refine_group(t): a for t, a in attrs.items()}
     verdicts = motion_noise.shape_verdicts(data, ["she", "car", "eel", "man"])
     assert verdicts == {"she": True, "car": False}
+
+
+def test_a_visemes_reference_places_its_rim_from_the_neutrals_clicks(template, takes):
+    """With ``rim_share`` < 1 the reference motion is the pipeline's fit with the viseme's
+    forehead rim placed from the neutral's clicks (:class:`~scan2morph.template.rim.Rim`): a
+    viseme whose brows were clicked 6 px higher moves as the two fits the stage makes say, and
+    not as the plain splines do."""
+    from scan2morph.template.rim import BROWS, Rim
+
+    neutral, visemes = takes
+    raised = visemes["she"].landmarks.copy()
+    raised[np.array(BROWS) - 1, 1] -= 6.0
+    she = replace(visemes["she"], landmarks=raised)
+    no_mask = np.zeros(len(template.vertices), bool)
+    n_mesh = fit_take(template, neutral.landmarks, neutral.xyz, (W, H), "closed", FIT)
+    motions = {}
+    for share in (0.5, 1.0):
+        rim = Rim(neutral.landmarks, "closed", share) if share < 1 else None
+        mesh = fit_take(template, raised, she.xyz, (W, H), "closed", FIT, rim=rim)
+        motions[share] = transform_points(she.transform, mesh["vertices"]) - n_mesh["vertices"]
+        recipe = DrawRecipe(FIT, NO_SMOOTHING, rim_share=share)
+        got = click_noise_motion(
+            template, neutral, {"she": she}, no_mask, recipe, ClickNoise(0.5, 2, 1), "subj"
+        )["she"]["motion"]
+        assert_allclose(got, motions[share], atol=1e-9)
+    assert np.max(np.abs(motions[0.5] - motions[1.0])) > 1.0

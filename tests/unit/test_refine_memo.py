@@ -11,7 +11,8 @@ from scan2morph.refine import RefineParams, refine_points
 from scan2morph.refine.lip import LipParams
 from scan2morph.refine.memo import active, digest, shared, sharing
 from scan2morph.template import build_template, subdivide_template
-from scan2morph.template.sample import _partial_weights, fit_map, sample_range
+from scan2morph.template.fit import fit_map
+from scan2morph.template.sample import _partial_weights, sample_range
 from tests.unit.test_lip import _prior, _scene
 from tests.unit.test_refine import _texture, _warp
 

@@ -70,7 +70,7 @@ def run_landmarks(j):
 def run_fit(j):
     """Fit the template: its part and the OBJ, MTL and PNG."""
     attrs = read_attrs(j.out.repair, paths.take(j.w.take))
-    take = _take(j, read_part(j.out.repair) | read_part(j.out.landmarks), attrs)
+    take = _take(j, read_parts(j.reads["fit"]), attrs)
     part = fit.run(j.template(), take, j.params("fit"))
     write_part(j.out.fit, part.datasets, attrs=part.attrs)
     mesh = {k: part.datasets[paths.mesh(j.w.take, k)] for k in ("vertices", "uv", "valid")}
@@ -123,12 +123,12 @@ def outputs(j, stage):
 
 
 #: The parts each stage reads: the take's own, and the neutral's (for a take that is not the
-#: neutral: the neutral's landmarks read its own repair only).
+#: neutral: the neutral's landmarks and fit read its own parts only).
 READS = {
     "ingest": ((), ()),
     "repair": (("ingest",), ()),
     "landmarks": (("repair",), ("repair", "landmarks")),
-    "fit": (("repair", "landmarks"), ()),
+    "fit": (("repair", "landmarks"), ("landmarks",)),
     "align": (("fit",), ("fit",)),
     "refine": (("repair", "landmarks", "fit", "align"), ("repair", "landmarks", "fit")),
 }
@@ -136,7 +136,7 @@ READS = {
 
 def neutral_reads(own, stage):
     """The neutral's parts ``stage`` reads (``own``: the take is the neutral)."""
-    return () if own and stage == "landmarks" else READS[stage][1]
+    return () if own and stage in ("landmarks", "fit") else READS[stage][1]
 
 
 def job_context(snakemake):

@@ -27,7 +27,8 @@ from scan2morph.motion.precision import resolve_click_noise
 from scan2morph.motion.smooth import Relief, laplacian_smooth
 from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
-from scan2morph.template.sample import FitRules, fit_take
+from scan2morph.template.fit import FitRules, fit_take
+from scan2morph.template.rim import Rim
 
 #: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid, confidence)``: a
 #: take's refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them),
@@ -60,15 +61,20 @@ def noise_by_take(store: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]
     }
 
 
-def _fit(template, take: ClickedTake, landmarks, fit_rules: FitRules, source):
-    xyz = take.xyz
+def _fit(template, take: ClickedTake, landmarks, recipe: DrawRecipe, source, neutral=None):
+    """The take's fit to ``landmarks`` (its forehead rim placed from the ``neutral``'s
+    landmarks, when given and ``recipe.rim_share`` < 1): ``(aligned vertices, fit)``."""
+    rim = None
+    if neutral is not None and recipe.rim_share < 1.0:
+        rim = Rim(neutral.landmarks, neutral.fiducial_set, recipe.rim_share)
     mesh = fit_take(
         template,
         landmarks,
-        xyz,
+        take.xyz,
         fiducial_set=take.fiducial_set,
-        rules=fit_rules,
+        rules=recipe.fit_rules,
         source=source,
+        rim=rim,
     )
     return transform_points(np.asarray(take.transform, float), mesh["vertices"]), mesh
 
@@ -91,11 +97,15 @@ class DrawRecipe:
         mm), when the pipeline refines (:mod:`scan2morph.stages.refine`); the motion of every
         draw is then that of the refined meshes, smoothed with their confidence, as the
         pipeline's is.
+    rim_share : float
+        A viseme's forehead rim placed from the neutral's with this share of its own spline
+        motion (``template.rim_share``; :mod:`scan2morph.template.rim`); 1: the plain spline.
     """
 
     fit_rules: FitRules
     smoothing: Mapping[str, float]
     refiner: Refiner | None = None
+    rim_share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -178,9 +188,7 @@ def click_noise_motion(
     draws = _checked_draws(noise, source)
     suppressed = np.asarray(suppressed, dtype=bool)
     smooth = _FinalMotion(suppressed, recipe.smoothing)
-    n_base, n_mesh = _fit(
-        template, neutral, neutral.landmarks, recipe.fit_rules, f"{source}/neutral"
-    )
+    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, recipe, f"{source}/neutral")
     faces = n_mesh["faces"]
     if suppressed.shape != (len(n_base),):
         raise InputError(
@@ -193,10 +201,14 @@ def click_noise_motion(
         for take, data in visemes.items()
     }
     n_fits = _perturbed(template, "neutral", neutral, [0], noise, draws, recipe, source)
+    # each draw's viseme fit places its rim from that draw's neutral clicks
+    partners = [neutral if f is None else replace(neutral, landmarks=f[2]) for f in n_fits]
     out = {}
     for take, data in visemes.items():
         stream = [1, zlib.crc32(take.encode())]
-        t_fits = _perturbed(template, take, data, stream, noise, draws, recipe, source)
+        t_fits = _perturbed(
+            template, take, data, stream, noise, draws, recipe, source, partners
+        )  # fmt: skip
         sq, count = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64)
         used = 0
         for n_fit, t_fit in zip(n_fits, t_fits, strict=True):
@@ -224,7 +236,7 @@ def _reference(
     if data.motion is not None:
         return np.asarray(data.motion, dtype=np.float64)
     n_base, n_mesh = n_fit
-    t_fit = _fit(template, data, data.landmarks, recipe.fit_rules, f"{source}/{take}")
+    t_fit = _fit(template, data, data.landmarks, recipe, f"{source}/{take}", neutral)
     v, valid, conf = _corresponded(recipe.refiner, take, t_fit, data.landmarks, neutral.landmarks)
     return smooth(v, valid, conf, n_base, n_mesh["valid"], n_mesh["faces"], take)
 
@@ -279,15 +291,20 @@ def _corresponded(refiner, take, t_fit, t_landmarks, n_landmarks):
     return refiner(take, t_fit[1], t_landmarks, n_landmarks)
 
 
-def _perturbed(template, name, data, stream, noise: ClickNoise, draws, recipe, source) -> list:
+def _perturbed(
+    template, name, data, stream, noise: ClickNoise, draws, recipe, source, partners=None
+) -> list:
     """The take's ``draws`` fits with perturbed clicks (None where refused), each with its
-    clicks; its own noise stream (``noise.seed`` and ``stream``)."""
+    clicks; its own noise stream (``noise.seed`` and ``stream``); ``partners``: each draw's
+    neutral (its clicks), whose rim a viseme's fit follows."""
     rng = np.random.default_rng([int(noise.seed), *stream])
     fits, first = [], None
     for k in range(draws):
         noisy = data.landmarks + noise.px * rng.standard_normal(np.shape(data.landmarks))
         try:
-            fits.append((*_fit(template, data, noisy, recipe.fit_rules, f"{source}/{name}"), noisy))
+            partner = None if partners is None else partners[k]
+            fit = _fit(template, data, noisy, recipe, f"{source}/{name}", partner)
+            fits.append((*fit, noisy))
         except InputError as err:
             fits.append(None)
             first = first or f"draw {k}: {err}"

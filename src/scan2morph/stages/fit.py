@@ -12,6 +12,7 @@ import numpy as np
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import FitRules, Template, fit_take, subdivide_template
+from scan2morph.template.rim import Rim
 
 #: Config section this stage reads.
 SECTIONS = ("template",)
@@ -34,10 +35,15 @@ class Params:
         Subdivisions (``template.subdivision_levels``), validity and fold limits
         (``min_valid_fraction``, ``max_fold_fraction``) and sampling rules
         (``sample_min_weight``, ``max_slope_deg``).
+    rim_share : float
+        Share of a take's own spline motion its forehead rim keeps (``template.rim_share``;
+        :mod:`scan2morph.template.rim`): 0 places it from the neutral's by the eyes and nose,
+        1 is the plain spline.
     """
 
     fiducials: Mapping[str, str]
     rules: FitRules
+    rim_share: float = 0.0
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -50,11 +56,19 @@ class Params:
             section["sample_min_weight"],
             section["max_slope_deg"],
         )
-        return cls(dict(section["fiducials"]), rules)
+        return cls(dict(section["fiducials"]), rules, float(section["rim_share"]))
 
     def fiducial_set(self, kind: str) -> str:
         """The fiducial set of a take of ``kind``."""
         return self.fiducials.get(kind, DEFAULT_FIDUCIALS)
+
+    def rim(self, take: Take) -> Rim | None:
+        """How ``take``'s forehead rim follows its neutral's (its ``data`` holds the neutral's
+        landmarks); None for the neutral itself, a take without one, or a share of 1."""
+        if take.take == take.neutral or not take.neutral or self.rim_share >= 1.0:
+            return None
+        landmarks = need(take.data, paths.landmarks(take.neutral), take.source)
+        return Rim(landmarks, self.fiducial_set("neutral"), self.rim_share)
 
 
 def template_part(template: Template, params: Params) -> Part:
@@ -87,7 +101,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
         The base template.
     take : Take
         Its ``kind`` (the fiducial set), ``data`` (the repair part: ``range/xyz``,
-        ``range/color``, ``landmarks``) and ``attrs`` (the take group's attributes so far, kept
+        ``range/color``, ``landmarks``; for a take other than the neutral the neutral's
+        ``landmarks`` too) and ``attrs`` (the take group's attributes so far, kept
         with the fit's added).
     params : Params
 
@@ -100,6 +115,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
     """
     name, data, source = take.take, take.data, take.source
     fiducials = params.fiducial_set(take.kind)
+    rim = params.rim(take)
+    share = 1.0 if rim is None else rim.share
     mesh = fit_take(
         template,
         need(data, paths.landmarks(name), source),
@@ -107,6 +124,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
         fiducial_set=fiducials,
         rules=params.rules,
         source=source,
+        rim=rim,
     )
     log.info(
         "%s: %d vertices, %.1f%% valid, %d folded triangles",
@@ -119,7 +137,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
         {paths.mesh(name, k): mesh[k] for k in ("vertices", "uv", "valid", "points2d")},
         attrs={
             paths.take(name): dict(take.attrs)
-            | {"fiducial_set": fiducials, "n_folded": mesh["n_folded"]}
+            | {"fiducial_set": fiducials, "n_folded": mesh["n_folded"], "rim_share": share}
         },
         files={"faces": mesh["faces"], "texture": data.get(paths.range_image(name, "color"))},
     )

@@ -143,7 +143,7 @@ def run(
     if params.refine is not None:
         verdicts = shape_verdicts(data, subject.visemes)
         refiner = _refiner(template, subject, data, params.refine, verdicts)
-    recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner)
+    recipe = DrawRecipe(params.fit.rules, params.smoothing, refiner, params.fit.rim_share)
     # the draws' common work (the neutral's side, each take's) once
     with sharing() as counts:
         datasets, result, noise = subject_motion_noise(

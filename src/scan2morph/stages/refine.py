@@ -35,8 +35,9 @@ from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
+from scan2morph.template.fit import fit_map
 from scan2morph.template.regions import icp_region, lip
-from scan2morph.template.sample import fit_map, sample_mesh
+from scan2morph.template.sample import sample_mesh
 
 #: Config sections this stage reads (``template`` for the subdivision level and sampling rules,
 #: ``align`` for the ICP settings of the jaw prior).
@@ -244,8 +245,9 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     points = np.asarray(need(data, paths.mesh(name, "points2d"), source), dtype=np.float64)
     fine = subdivide_template(template, params.levels)
     sets = {t: params.fit.fiducial_set(k) for t, k in ((neutral, "neutral"), (name, kind))}
+    rims = {neutral: None, name: params.fit.rim(take)}
     maps = [
-        fit_map(template, need(data, paths.landmarks(t), source), sets[t], source)
+        fit_map(template, need(data, paths.landmarks(t), source), sets[t], source, rim=rims[t])
         for t in (neutral, name)
     ]
     anchors = _anchors(template, sets[name], source)

@@ -1,5 +1,6 @@
 """Correspondent face meshes: 2D template, thin-plate-spline fit, subdivision, sampling."""
 
+from scan2morph.template.fit import FitRules, fit_map, fit_take
 from scan2morph.template.mesh import (
     DEFAULT_FIDUCIAL_SET_BY_KIND,
     FIDUCIAL_SETS,
@@ -9,11 +10,8 @@ from scan2morph.template.mesh import (
     build_template,
 )
 from scan2morph.template.sample import (
-    FitRules,
     behind_steps,
     check_no_folds,
-    fit_map,
-    fit_take,
     sample_mesh,
     sample_range,
     texture_uv,
