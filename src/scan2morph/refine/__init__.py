@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from scan2morph.geometry import face_sides, lengths_2d
-from scan2morph.refine.flow import aperture, fuse, fuse_across, measure_flow
+from scan2morph.refine.flow import aperture, fuse_across, fusion, measure_flow
 from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
 from scan2morph.refine.template_space import pull_back, template_grid
@@ -259,9 +259,7 @@ def refine_channels(
             channels, references, mapped, inside, params, apertures
         )
 
-        def solve(m, weight=weight):
-            return fuse(m, weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
-
+        solve = fusion(weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
         f = fuse_across(solve(flow), across, share, solve, params.aperture_iterations)
         mapped = _compose(mapped, f)
     at = pull_back_field(mapped, g_vertices)
@@ -323,16 +321,21 @@ def _neutral_side(v2, faces, neutral_map, neutral_images, channels, params: Refi
 
 
 def _apertures(channels, references, params: RefineParams) -> list:
-    """Each channel's :func:`~scan2morph.refine.flow.aperture` of its reference (None for the
-    still skin's and when ``params.aperture_iterations`` is 0), computed once per reference."""
+    """Each channel's :func:`~scan2morph.refine.flow.aperture` (None for all when
+    ``params.aperture_iterations`` is 0), each reference's computed once: an image channel's
+    of its own reference; the still skin's that of the first image channel (the surface's
+    shape, in the shape's refinement: a point slid along a smooth surface stays on it, so the
+    still skin measures only where the shape has texture, and the same way)."""
     if not params.aperture_iterations:
         return [None] * len(channels)
-    return [
+    own = [
         shared("aperture", (r, c.high_pass_px, c.noise), lambda r=r, c=c: aperture(
             r, c.high_pass_px, c.noise
         )) if isinstance(c, Channel) else None
         for c, r in zip(channels, references, strict=True)
     ]  # fmt: skip
+    first = next((a for a in own if a is not None), None)
+    return [first if a is None else a for a in own]
 
 
 def _measure(channels, references, mapped, inside, params: RefineParams, apertures):

@@ -253,11 +253,23 @@ def fuse(
     (rows, columns, 2) float64
         The correction, px; 0 outside ``inside``.
     """
+    return fusion(weight, inside, smooth, prior, anchors, anchor_weight, coarsen)(measured)
+
+
+def fusion(
+    weight: np.ndarray,
+    inside: np.ndarray,
+    smooth: float,
+    prior: float,
+    anchors: np.ndarray | None = None,
+    anchor_weight: float = 0.0,
+    coarsen: int = 1,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`fuse` with its system factorised once: a function of the measurements
+    (rows, columns, 2) px, for several fields with the same weights (the same arguments)."""
     rows, cols = inside.shape
     if coarsen > 1:
-        return _fuse_coarse(
-            measured, weight, inside, smooth, prior, anchors, anchor_weight, int(coarsen)
-        )
+        return _fusion_coarse(weight, inside, smooth, prior, anchors, anchor_weight, int(coarsen))
     idx, lap, pattern, slots, deg = _membrane(inside, smooth)
     w = np.where(inside, weight, 0.0)[inside]
     # the pull to zero acts where nothing is measured (mu^2 / (w + mu): mu at w = 0, vanishing
@@ -275,10 +287,14 @@ def fuse(
     else:  # a zero (on the diagonal, or smooth) leaves the sum's pattern: built as it is
         A = (sparse.diags(main) + lap).tocsc()
     solve = _factorised(A)
-    out = np.zeros((rows, cols, 2))
-    for k in range(2):
-        out[..., k][inside] = solve(w * measured[..., k][inside])
-    return out
+
+    def apply(measured: np.ndarray) -> np.ndarray:
+        out = np.zeros((rows, cols, 2))
+        for k in range(2):
+            out[..., k][inside] = solve(w * measured[..., k][inside])
+        return out
+
+    return apply
 
 
 def fuse_across(
@@ -304,7 +320,7 @@ def fuse_across(
     share : (rows, columns, 2, 2) float
         ``P`` (a weighted mean of projectors where several channels measured).
     solve : callable
-        :func:`fuse` of a measurement field (rows, columns, 2) with the round's weights.
+        The round's :func:`fusion`: a measurement field (rows, columns, 2) -> its correction.
     iterations : int
         Fixed-point steps (>= 0).
 
@@ -379,22 +395,27 @@ def _factorised(A: sparse.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
     return solve
 
 
-def _fuse_coarse(measured, weight, inside, smooth, prior, anchors, anchor_weight, k):
-    """:func:`fuse` on a grid ``k`` times coarser, interpolated back (see its ``coarsen``)."""
+def _fusion_coarse(weight, inside, smooth, prior, anchors, anchor_weight, k):
+    """:func:`fusion` on a grid ``k`` times coarser, interpolated back (see :func:`fuse`'s
+    ``coarsen``)."""
     rows, cols = inside.shape
     rc, cc = -(-rows // k), -(-cols // k)
     pad = ((0, rc * k - rows), (0, cc * k - cols))
     w = np.pad(np.where(inside, weight, 0.0), pad)
-    m = np.pad(measured, (*pad, (0, 0)))
     w_c = w.reshape(rc, k, cc, k).sum(axis=(1, 3))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        m_c = (w[..., None] * m).reshape(rc, k, cc, k, 2).sum(axis=(1, 3)) / w_c[..., None]
-    m_c = np.nan_to_num(m_c)
     padded, inside_c = np.pad(inside, pad), np.zeros((rc, cc), dtype=bool)
     for i in range(k):  # any of the cell's k x k points (numpy's any over two short axes is slow)
         for j in range(k):
             inside_c |= padded[i::k, j::k]
     a = None if anchors is None else np.asarray(anchors, dtype=np.int64) // k
-    f_c = fuse(m_c, w_c, inside_c, smooth, prior * k * k, a, anchor_weight)
-    f = cv2.resize(f_c.astype(np.float32), (cc * k, rc * k), interpolation=cv2.INTER_LINEAR)
-    return np.where(inside[..., None], f[:rows, :cols].astype(np.float64), 0.0)
+    solve = fusion(w_c, inside_c, smooth, prior * k * k, a, anchor_weight)
+
+    def apply(measured: np.ndarray) -> np.ndarray:
+        m = np.pad(measured, (*pad, (0, 0)))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m_c = (w[..., None] * m).reshape(rc, k, cc, k, 2).sum(axis=(1, 3)) / w_c[..., None]
+        f_c = solve(np.nan_to_num(m_c))
+        f = cv2.resize(f_c.astype(np.float32), (cc * k, rc * k), interpolation=cv2.INTER_LINEAR)
+        return np.where(inside[..., None], f[:rows, :cols].astype(np.float64), 0.0)
+
+    return apply
