@@ -258,7 +258,6 @@ def refine_channels(
         flow, weight, conf, measured, (across, share) = _measure(
             channels, references, mapped, inside, params, apertures
         )
-
         solve = fusion(weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
         f = fuse_across(solve(flow), across, share, solve, params.aperture_iterations)
         mapped = _compose(mapped, f)
