@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from scan2morph.geometry import face_sides, lengths_2d
-from scan2morph.refine.flow import fuse, measure_flow
+from scan2morph.refine.flow import aperture, fuse_across, fusion, measure_flow
 from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
 from scan2morph.refine.template_space import pull_back, template_grid
@@ -70,6 +70,12 @@ class RefineParams:
     margin_px : float
         Skin around the template's outline taken into the correlation, px (an outline vertex
         may have slid in from there).
+    aperture_iterations : int
+        Each round's fusion is solved again this many times with every vector trusted only
+        across its image's texture (:func:`~scan2morph.refine.flow.aperture`; the component
+        along an edge taken from the last solution): a fixed-point iteration towards the
+        fusion with each vector's own 2 x 2 weight, on the same system. 0: every vector
+        trusted in every direction.
     """
 
     iterations: int = 4
@@ -83,6 +89,7 @@ class RefineParams:
     min_zncc: float = 0.5
     flow_level: int = 0
     margin_px: float = 24.0
+    aperture_iterations: int = 3
 
 
 def grey(color: np.ndarray) -> np.ndarray:
@@ -246,9 +253,13 @@ def refine_channels(
     anchor_w = 1.0 / (2.0 * params.click_precision_px**2)
     conf = measured = np.zeros(grid.shape)
     channels = [_sampled_take(c) for c in channels]
+    apertures = _apertures(channels, references, params)
     for _ in range(int(params.iterations)):
-        flow, weight, conf, measured = _measure(channels, references, mapped, inside, params)
-        f = fuse(flow, weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
+        flow, weight, conf, measured, (across, share) = _measure(
+            channels, references, mapped, inside, params, apertures
+        )
+        solve = fusion(weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
+        f = fuse_across(solve(flow), across, share, solve, params.aperture_iterations)
         mapped = _compose(mapped, f)
     at = pull_back_field(mapped, g_vertices)
     points = np.where(np.isfinite(at).all(axis=1)[:, None], at, pt)
@@ -308,23 +319,47 @@ def _neutral_side(v2, faces, neutral_map, neutral_images, channels, params: Refi
     return shared("neutral", (*parts, params.margin_px, kinds, *neutral_images), compute)
 
 
-def _measure(channels, references, mapped, inside, params: RefineParams):
+def _apertures(channels, references, params: RefineParams) -> list:
+    """Each channel's :func:`~scan2morph.refine.flow.aperture` (None for all when
+    ``params.aperture_iterations`` is 0), each reference's computed once: an image channel's
+    of its own reference; the still skin's that of the first image channel (the surface's
+    shape, in the shape's refinement: a point slid along a smooth surface stays on it, so the
+    still skin measures only where the shape has texture, and the same way)."""
+    if not params.aperture_iterations:
+        return [None] * len(channels)
+    own = [
+        shared("aperture", (r, c.high_pass_px, c.noise), lambda r=r, c=c: aperture(
+            r, c.high_pass_px, c.noise
+        )) if isinstance(c, Channel) else None
+        for c, r in zip(channels, references, strict=True)
+    ]  # fmt: skip
+    first = next((a for a in own if a is not None), None)
+    return [first if a is None else a for a in own]
+
+
+def _measure(channels, references, mapped, inside, params: RefineParams, apertures):
     """Every channel's flow from its reference to its take image pulled back through
-    ``mapped``, averaged by weight: ``(flow (rows, cols, 2), weight, confidence, measured)``
-    (the last three (rows, cols)), the weight the sum of each channel's confidence over its
-    precision squared, the confidence that weight over ``1 / params.flow_precision_px^2`` and
-    ``measured`` the sum of the channels' confidences, both at most 1 (one image channel: its
-    own confidence and measurement as they are when its precision is
-    ``params.flow_precision_px``, the texture's refinement). A channel with a ``gate_px``
-    counts after the others, only where they measured and its vector lies within ``gate_px``
-    of theirs."""
+    ``mapped``, averaged by weight: ``(flow (rows, cols, 2), weight, confidence, measured,
+    (across, share))`` (the middle three (rows, cols)), the weight the sum of each channel's
+    confidence over its precision squared, the confidence that weight over ``1 /
+    params.flow_precision_px^2`` and ``measured`` the sum of the channels' confidences, both at
+    most 1 (one image channel: its own confidence and measurement as they are when its
+    precision is ``params.flow_precision_px``, the texture's refinement). ``across`` (rows,
+    cols, 2) is the weighted mean of each channel's vector projected by its ``apertures``
+    projector and ``share`` (rows, cols, 2, 2) the weighted mean of those projectors (a channel
+    without one: the identity). A channel with a ``gate_px`` counts after the others, only
+    where they measured and its vector lies within ``gate_px`` of theirs."""
     lone = len(channels) == 1 and isinstance(channels[0], Channel)
     if lone and channels[0].precision_px == params.flow_precision_px:
         flow, conf = _channel_flow(channels[0], references[0], mapped, inside, params)
-        return flow, conf * (1.0 / channels[0].precision_px ** 2), conf, conf  # w_data * conf
+        share = _projector(apertures[0], inside.shape)
+        across = np.einsum("rcij,rcj->rci", share, flow)
+        return flow, conf * (1.0 / channels[0].precision_px ** 2), conf, conf, (across, share)
     total = np.zeros(inside.shape)
     summed = np.zeros(inside.shape)
     acc = np.zeros((*inside.shape, 2))
+    acc_across = np.zeros((*inside.shape, 2))
+    acc_share = np.zeros((*inside.shape, 2, 2))
     order = sorted(range(len(channels)), key=lambda k: _gate(channels[k]) < np.inf)
     for k in order:
         channel = channels[k]
@@ -338,10 +373,20 @@ def _measure(channels, references, mapped, inside, params: RefineParams):
         summed += conf
         total += w
         acc += w[..., None] * flow
+        projector = _projector(apertures[k], inside.shape)
+        acc_across += w[..., None] * np.einsum("rcij,rcj->rci", projector, flow)
+        acc_share += w[..., None, None] * projector
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(total[..., None] > 0, acc / total[..., None], 0.0)
+        across = np.where(total[..., None] > 0, acc_across / total[..., None], 0.0)
+        share = np.where(total[..., None, None] > 0, acc_share / total[..., None, None], np.eye(2))
     confidence = np.clip(total * params.flow_precision_px**2, 0.0, 1.0)
-    return mean, total, confidence, np.clip(summed, 0.0, 1.0)
+    return mean, total, confidence, np.clip(summed, 0.0, 1.0), (across, share)
+
+
+def _projector(projector, shape) -> np.ndarray:
+    """``projector`` (rows, cols, 2, 2), or the identity on a grid of ``shape`` for None."""
+    return np.broadcast_to(np.eye(2), (*shape, 2, 2)) if projector is None else projector
 
 
 def _gate(channel) -> float:
