@@ -115,15 +115,20 @@ def aperture(reference: np.ndarray, sigma: float, noise: float) -> np.ndarray:
     hp, _ = high_pass(reference, sigma)
     gy, gx = np.gradient(hp)
     jxx, jxy, jyy = (gaussian_filter(a, APERTURE_RHO_PX) for a in (gx * gx, gx * gy, gy * gy))
-    tensor = np.stack([np.stack([jxx, jxy], -1), np.stack([jxy, jyy], -1)], -2)
-    lam, vec = np.linalg.eigh(tensor)  # ascending
-    lam = np.clip(lam, 0.0, None)
-    share = lam / (lam + APERTURE_NOISE * noise**2 / 2)
+    # the 2 x 2 eigenvalues in closed form; u1 u1^T = (J - l2 I) / (l1 - l2), and
+    # P = u1 u1^T + r (I - u1 u1^T)
+    mean, half = (jxx + jyy) / 2, np.hypot((jxx - jyy) / 2, jxy)
+    strong, weak = mean + half, np.clip(mean - half, 0.0, None)
+    big = APERTURE_NOISE * noise**2 / 2
+    s1, s2 = strong / (strong + big), weak / (weak + big)
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(share[..., 1] > 0, share[..., 0] / share[..., 1], 1.0)
-    weak, strong = vec[..., :, 0], vec[..., :, 1]
-    out = strong[..., :, None] * strong[..., None, :]
-    out += np.clip(ratio, 0.0, 1.0)[..., None, None] * weak[..., :, None] * weak[..., None, :]
+        ratio = np.clip(np.where(s1 > 0, s2 / s1, 1.0), 0.0, 1.0)
+        distinct = half > 1e-12 * np.maximum(mean, 1e-300)
+        scale = np.where(distinct, (1.0 - ratio) / np.where(distinct, 2 * half, 1.0), 0.0)
+    out = np.empty((*hp.shape, 2, 2))
+    out[..., 0, 0] = ratio + scale * (jxx - weak)
+    out[..., 1, 1] = ratio + scale * (jyy - weak)
+    out[..., 0, 1] = out[..., 1, 0] = scale * jxy
     return out
 
 
