@@ -124,3 +124,21 @@ def test_the_fit_stage_places_a_takes_rim_from_its_neutral(template):
     del data[paths.landmarks("n")]
     with pytest.raises(InputError, match=r"s/b.*takes/n/landmarks: missing"):
         fit_stage.run(template, Take("s", "b", "expression", "b", "n", data), params)
+
+
+def test_the_rim_share_default_agrees_in_config_schema_and_library():
+    """``template.rim_share``: config/config.yaml, the schema's default, the fit stage's
+    ``Params`` and :class:`Rim` give one value."""
+    import dataclasses
+
+    import yaml
+
+    from scan2morph.stages import fit as fit_stage
+    from tests.support.workflow_api import REPO
+
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["template"]
+    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
+    spec = schema["properties"]["template"]["properties"]["rim_share"]["default"]
+    defaults = {f.name: f.default for f in dataclasses.fields(fit_stage.Params)}
+    rim = {f.name: f.default for f in dataclasses.fields(Rim)}
+    assert config["rim_share"] == spec == defaults["rim_share"] == rim["share"] == 0.5

@@ -43,7 +43,7 @@ class Params:
 
     fiducials: Mapping[str, str]
     rules: FitRules
-    rim_share: float = 0.0
+    rim_share: float = 0.5
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:

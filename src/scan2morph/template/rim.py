@@ -48,7 +48,7 @@ class Rim:
 
     neutral_landmarks: np.ndarray
     neutral_set: str = "closed"
-    share: float = 0.0
+    share: float = 0.5
 
     def __post_init__(self) -> None:
         require_numbers("Rim", {"share": self.share})
