@@ -417,6 +417,16 @@ def test_config_validation_fills_defaults_as_snakemake_does():
             {"refine": {"jaw": {"fade_rmse_ratio": 0}}},
             r"^config: refine\.jaw\.fade_rmse_ratio: expected a value > 0, got 0$",
         ),
+        (
+            {"template": {"rim_share": 1.5}},
+            r"^config: template\.rim_share: expected a value <= 1, got 1\.5$",
+        ),
+        ({"template": {"rim_share": "half"}}, r"^config: template\.rim_share: expected number"),
+        (
+            {"refine": {"aperture_iterations": -1}},
+            r"^config: refine\.aperture_iterations: expected a value >= 0, got -1$",
+        ),
+        ({"refine": {"aperture_iterations": 1.5}}, r"^config: refine\.aperture_iterations: "),
     ],
 )
 def test_config_errors_are_one_short_line(extra, match):
