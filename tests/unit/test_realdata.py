@@ -182,6 +182,20 @@ def _raycasting_scene(vertices_w: np.ndarray, faces: np.ndarray) -> o3d.t.geomet
     return scene
 
 
+def _moved(head: Head, vertices: np.ndarray) -> Head:
+    """The head with its vertices moved to ``vertices`` (V, 3), model frame, mm (an expression):
+    its scanner-frame vertices, ray-casting scene and normals to match."""
+    import dataclasses
+
+    from scan2morph.geometry import vertex_normals
+
+    moved_w = vertices @ head.R_w.T + head.t_w
+    return dataclasses.replace(
+        head, vertices=vertices, vertices_w=moved_w, scene=_raycasting_scene(moved_w, head.faces),
+        normals=vertex_normals(vertices, head.faces),
+    )  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def head() -> Head:
     return load_head()
@@ -1043,20 +1057,14 @@ def skin_scene(head: Head) -> SkinScene:
     """The real face smiling (``_smile``: cheeks 5 mm up and out, mouth corners 6 mm), seen 4
     degrees aside and 2 above in a 15% dimmer light, against its front view (:class:`SkinScene`;
     seeded, so the same on every call)."""
-    import dataclasses
 
     from scipy.spatial import Delaunay
 
-    from scan2morph.geometry import vertex_normals
     from scan2morph.refine import grey
 
     x, y = head.vertices[:, 0] - head.nose[0], head.vertices[:, 1] - head.nose[1]
-    smiled = head.vertices + _smile(x, y)
-    smiled_w = smiled @ head.R_w.T + head.t_w
-    take = dataclasses.replace(
-        head, vertices=smiled, vertices_w=smiled_w, scene=_raycasting_scene(smiled_w, head.faces),
-        normals=vertex_normals(smiled, head.faces),
-    )  # fmt: skip
+    take = _moved(head, head.vertices + _smile(x, y))
+    smiled_w = take.vertices_w
     xyz0, c0, K, R0, C0 = _colour_scan(head, 0.0, 0.0, 1.0, 1.0)
     _, c1, _, R1, C1 = _colour_scan(take, 4.0, 2.0, 0.85, 1.0)
     rng = np.random.default_rng(SEED + 7)
@@ -1196,11 +1204,9 @@ def test_the_fits_forehead_rim_on_a_real_brow_raise(head):
     fitted as well or better. Measured, the fit's RMS error in the top tenth / the rest, mm: plain
     5.83 / 1.06, the default share 0.5 1.90 / 0.75 (0: 2.86 / 0.97, 0.25: 1.18 / 0.80, 0.75:
     3.82 / 0.85), while the top tenth moves 3.87 mm RMS."""
-    import dataclasses
 
     import yaml
 
-    from scan2morph.geometry import vertex_normals
     from scan2morph.stages import fit as fit_stage
     from scan2morph.template import build_template, fit_take, subdivide_template
     from scan2morph.template.rim import Rim
@@ -1216,12 +1222,7 @@ def test_the_fits_forehead_rim_on_a_real_brow_raise(head):
         rel = model - head.nose
         return _brow_raise(rel[:, 0], rel[:, 1], brow_y)
 
-    raised = head.vertices + field(head.vertices)
-    raised_w = raised @ head.R_w.T + head.t_w
-    take = dataclasses.replace(
-        head, vertices=raised, vertices_w=raised_w, scene=_raycasting_scene(raised_w, head.faces),
-        normals=vertex_normals(raised, head.faces),
-    )  # fmt: skip
+    take = _moved(head, head.vertices + field(head.vertices))
     xyz0, _, K, R0, C0 = _colour_scan(head, 0.0, 0.0, 1.0, 1.0)
     xyz1, _, _, R1, C1 = _colour_scan(take, 3.0, 1.0, 1.0, 1.0)
     to_w = lambda model: model @ head.R_w.T + head.t_w  # noqa: E731

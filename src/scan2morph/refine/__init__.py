@@ -346,14 +346,14 @@ def _measure(channels, references, mapped, inside, params: RefineParams, apertur
     most 1 (one image channel: its own confidence and measurement as they are when its
     precision is ``params.flow_precision_px``, the texture's refinement). ``across`` (rows,
     cols, 2) is the weighted mean of each channel's vector projected by its ``apertures``
-    projector and ``share`` (rows, cols, 2, 2) the weighted mean of those projectors (a channel
-    without one: the identity). A channel with a ``gate_px`` counts after the others, only
+    projector and ``share`` (rows, cols, 2, 2) the weighted mean of those projectors (both None
+    when no channel has one: every direction trusted). A channel with a ``gate_px`` counts after the others, only
     where they measured and its vector lies within ``gate_px`` of theirs."""
     lone = len(channels) == 1 and isinstance(channels[0], Channel)
     if lone and channels[0].precision_px == params.flow_precision_px:
         flow, conf = _channel_flow(channels[0], references[0], mapped, inside, params)
-        share = _projector(apertures[0], inside.shape)
-        across = np.einsum("rcij,rcj->rci", share, flow)
+        share = apertures[0]
+        across = None if share is None else np.einsum("rcij,rcj->rci", share, flow)
         return flow, conf * (1.0 / channels[0].precision_px ** 2), conf, conf, (across, share)
     total = np.zeros(inside.shape)
     summed = np.zeros(inside.shape)
@@ -373,20 +373,17 @@ def _measure(channels, references, mapped, inside, params: RefineParams, apertur
         summed += conf
         total += w
         acc += w[..., None] * flow
-        projector = _projector(apertures[k], inside.shape)
-        acc_across += w[..., None] * np.einsum("rcij,rcj->rci", projector, flow)
-        acc_share += w[..., None, None] * projector
+        if apertures[k] is not None:
+            acc_across += w[..., None] * np.einsum("rcij,rcj->rci", apertures[k], flow)
+            acc_share += w[..., None, None] * apertures[k]
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(total[..., None] > 0, acc / total[..., None], 0.0)
         across = np.where(total[..., None] > 0, acc_across / total[..., None], 0.0)
         share = np.where(total[..., None, None] > 0, acc_share / total[..., None, None], np.eye(2))
     confidence = np.clip(total * params.flow_precision_px**2, 0.0, 1.0)
+    if all(a is None for a in apertures):  # every direction trusted: nothing to project
+        across = share = None
     return mean, total, confidence, np.clip(summed, 0.0, 1.0), (across, share)
-
-
-def _projector(projector, shape) -> np.ndarray:
-    """``projector`` (rows, cols, 2, 2), or the identity on a grid of ``shape`` for None."""
-    return np.broadcast_to(np.eye(2), (*shape, 2, 2)) if projector is None else projector
 
 
 def _gate(channel) -> float:

@@ -33,12 +33,14 @@ class FitRules:
         Share of the warped triangles outside the lips allowed to fold (the lips' may all
         fold); the folded triangles' vertices are marked invalid.
     min_weight : float
-        Sampling at the edge of the data (see :func:`sample_range`).
+        Sampling at the edge of the data (see :func:`~scan2morph.template.sample.sample_range`).
     max_slope_deg : float or None
-        Sampling across depth steps, degrees (see :func:`sample_range`); also invalidates
-        vertices behind a depth step of the fitted mesh (:func:`behind_steps`), both along the
-        scanner's viewing direction estimated from the range image (:func:`scanner_view`: the
-        XYZ may come in any right-handed frame). None: off.
+        Sampling across depth steps, degrees (see
+        :func:`~scan2morph.template.sample.sample_range`); also invalidates vertices behind a
+        depth step of the fitted mesh (:func:`~scan2morph.template.sample.behind_steps`), both
+        along the scanner's viewing direction estimated from the range image
+        (:func:`~scan2morph.scan.view.scanner_view`: the XYZ may come in any right-handed
+        frame). None: off.
     """
 
     levels: int = 1
