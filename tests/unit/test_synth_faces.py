@@ -142,3 +142,18 @@ def test_wide_identity_is_the_subjects_own_at_the_committed_shares(monkeypatch):
     for f in wide:
         for k, (lo, hi) in data.WIDE_RANGE.items():
             assert lo <= getattr(f, k) <= hi
+
+
+@pytest.mark.parametrize("carve", [True, False])
+def test_the_shape_in_blocks_is_the_shape_at_once(carve):
+    """The implicit function evaluated block by block (its cache-sized chunks) gives the same
+    numbers, bit for bit, as one evaluation of all the points: every step is elementwise. The
+    points straddle the surface, the eyes and the lips (closed eyes carve the lid groove)."""
+    from scan2morph.synth import shape as shape_mod
+
+    shape = _Shape(replace(subject_identity("s1", 3), eyes_closed=carve))
+    rng = np.random.default_rng(4)
+    points = rng.normal(0.0, 60.0, size=(2 * shape_mod._CHUNK + 123, 3)) + [0.0, 0.0, 60.0]
+    blocked = shape(points, carve=carve)
+    assert len(blocked) == len(points) and (blocked < 0).any() and (blocked > 0).any()
+    np.testing.assert_array_equal(blocked, shape._value(points, carve))

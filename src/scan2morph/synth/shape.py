@@ -18,6 +18,8 @@ from scan2morph.synth.identity import Identity
 _LID_MM = 1.2
 #: Tilt of the eye's axis (its opening and its closed lid line), up at the outer corner, radians.
 _EYE_TILT = 0.07
+#: Positions evaluated together by :class:`_Shape` (its temporaries stay in the CPU's cache).
+_CHUNK = 16384
 
 
 def _smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
@@ -272,6 +274,17 @@ class _Shape:
 
         With ``carve=False`` the eye openings are left closed (the lids run over the eyes).
         """
+        p = np.asarray(p, dtype=np.float64)
+        if len(p) <= _CHUNK:
+            return self._value(p, carve)
+        # every step is elementwise: blocks that keep their temporaries in the cache give the
+        # same numbers (about 1.5x faster on the head's 53,000 rays)
+        return np.concatenate(
+            [self._value(p[i : i + _CHUNK], carve) for i in range(0, len(p), _CHUNK)]
+        )
+
+    def _value(self, p: np.ndarray, carve: bool) -> np.ndarray:
+        """:meth:`__call__` on one block of positions (N, 3), mm; (N,)."""
         cols = tuple(np.ascontiguousarray(p[:, k]) for k in range(3))
         d = self.cranium.sdf(p, cols)
         d = _smin(d, self.midface.sdf(p, cols), 25.0)
