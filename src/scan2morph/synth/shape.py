@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scan2morph.geometry import in_blocks
 from scan2morph.synth.identity import Identity
 
 #: Thickness of a closed lid over the eyeball, mm.
@@ -274,14 +275,9 @@ class _Shape:
 
         With ``carve=False`` the eye openings are left closed (the lids run over the eyes).
         """
-        p = np.asarray(p, dtype=np.float64)
-        if len(p) <= _CHUNK:
-            return self._value(p, carve)
-        # every step is elementwise: blocks that keep their temporaries in the cache give the
-        # same numbers (about 1.5x faster on the head's 53,000 rays)
-        return np.concatenate(
-            [self._value(p[i : i + _CHUNK], carve) for i in range(0, len(p), _CHUNK)]
-        )
+        # every step is elementwise: cache-sized blocks, the same numbers (about 1.5x faster on
+        # the head's 53,000 rays)
+        return in_blocks(lambda q: self._value(q, carve), np.asarray(p, dtype=np.float64), _CHUNK)
 
     def _value(self, p: np.ndarray, carve: bool) -> np.ndarray:
         """:meth:`__call__` on one block of positions (N, 3), mm; (N,)."""
