@@ -14,14 +14,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from scan2morph.sheet import input_roles, synthetic_rows
 from scan2morph.stages import ingest, repair, synth
 from scan2morph.stages.part import Take
 from scan2morph.store import paths
-
-REPO = Path(__file__).resolve().parents[2]
+from tests.support.configs import repo_config
 
 
 @dataclass(frozen=True)
@@ -43,11 +41,6 @@ class GridTake:
     color: np.ndarray
     xyz: np.ndarray
     truth: np.ndarray
-
-
-def default_config() -> dict:
-    """The repository's config/config.yaml."""
-    return yaml.safe_load((REPO / "config" / "config.yaml").read_text(encoding="utf-8"))
 
 
 def _rows(config: dict, root: Path):
@@ -126,7 +119,7 @@ def cohort_takes(
     -------
     list of GridTake
     """
-    config = config or default_config()
+    config = config or repo_config()
     rows = _rows(config, root).to_dict("records")
     if picks is not None:
         rows = [r for r in rows if (r["subject"], r["take"]) in set(picks)]

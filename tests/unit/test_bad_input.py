@@ -38,6 +38,7 @@ from scan2morph.stages.stage_job import check_take_params
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from scan2morph.template import build_template, fit_take
 from scan2morph.template.sample import SCANNER_FRAME, scanner_view
+from tests.support.configs import repo_config
 from tests.support.workflow_api import snakemake_dry_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -309,7 +310,7 @@ def test_a_rotated_scanner_frame_gives_the_same_fit(take, template, degrees):
     axis = np.array([0.3, -0.8, 0.52])
     R = Rotation.from_rotvec(np.radians(degrees) * axis / np.linalg.norm(axis)).as_matrix()
     t = np.array([120.0, -40.0, 300.0])
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     rules = fit_stage.Params.from_config(config).rules
     a = fit_take(template, take["landmarks"], take["xyz"], rules=rules, source="s1/a")
     b = fit_take(template, take["landmarks"], take["xyz"] @ R.T + t, rules=rules, source="s1/b")
@@ -394,7 +395,7 @@ def test_config_validation_fills_defaults_as_snakemake_does():
     from snakemake.utils import validate
 
     schema = ROOT / "schemas" / "config.schema.yaml"
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     for cfg in (config, {}):
         ours, theirs = copy.deepcopy(cfg), copy.deepcopy(cfg)
         validate_config(ours, schema)
@@ -430,7 +431,7 @@ def test_config_validation_fills_defaults_as_snakemake_does():
     ],
 )
 def test_config_errors_are_one_short_line(extra, match):
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     for key, value in extra.items():
         config[key] = value if not isinstance(config.get(key), dict) else {**config[key], **value}
     with pytest.raises(InputError, match=match) as exc:
@@ -456,7 +457,7 @@ def test_config_errors_are_one_short_line(extra, match):
 def test_a_config_key_that_moved_is_named_with_its_new_place(section, old, new):
     """A user's config over the repo's (as Snakemake merges them) that still uses an old flat
     key: one line naming the new key, before any other check."""
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     config[section] |= old
     with pytest.raises(InputError, match=f"^config: {re.escape(new)}$"):
         validate_config(config, ROOT / "schemas" / "config.schema.yaml")
@@ -493,7 +494,7 @@ def test_an_empty_cell_fails_only_its_subject(tmp_path):
 def test_settings_that_contradict_each_other_are_one_config_line(jaw, match):
     """What the schema cannot check, one setting against another, is found before any job: the
     take stages' parameters built from the config (the repo's passes)."""
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     validate_config(config, ROOT / "schemas" / "config.schema.yaml")
     check_take_params(config)
     config["refine"]["jaw"] |= jaw

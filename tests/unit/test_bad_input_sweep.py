@@ -30,6 +30,7 @@ from scan2morph.io import (
 from scan2morph.io.check import take_file_problems
 from scan2morph.io.rgbd import PinholeCamera
 from scan2morph.sheet import read_sheet, validate_config
+from tests.support.configs import repo_config
 from tests.support.workflow_api import snakemake_dry_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -381,7 +382,7 @@ def test_a_corrupt_texture_is_not_called_missing(tmp_path):
 def test_a_nan_in_the_config_is_refused_naming_its_key():
     """Before: '.nan' passed the schema's 'number' and every comparison with the threshold
     failed silently (min_confidence .nan: no take ever warned of a low confidence)."""
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     validate_config(copy.deepcopy(config), ROOT / "schemas" / "config.schema.yaml")
     config["landmarks"]["min_confidence"] = float("nan")
     with pytest.raises(InputError) as exc:

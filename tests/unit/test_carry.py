@@ -25,7 +25,7 @@ IDX = np.asarray(STABLE) - 1
 def takes():
     out = {}
     for take, kind, label in (("neutral", "neutral", "neutral"), ("car", "viseme", "car")):
-        r = make_take("c1", label, kind, take, 11)
+        r = make_take("s1", label, kind, take, 3)
         xyz = repair_range(r["xyz"], dict(DEFAULT_REPAIR), source=take)[0]
         out[take] = (xyz, r["truth"]["landmarks2d"], r["color"])
     return out
@@ -35,7 +35,7 @@ def test_noisy_stable_points_are_carried_onto_the_true_ones(takes):
     (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     rng = np.random.default_rng(0)
     noisy = true_t + rng.normal(0.0, 2.0, size=true_t.shape)
-    got = carry_stable(xyz_t, noisy, xyz_n, true_n, STABLE, "c1/car")
+    got = carry_stable(xyz_t, noisy, xyz_n, true_n, STABLE, "s1/car")
     err_before = np.linalg.norm(noisy[IDX] - true_t[IDX], axis=1)
     err_after = np.linalg.norm(got.points[IDX] - true_t[IDX], axis=1)
     print(
@@ -54,7 +54,7 @@ def test_a_neutral_error_is_carried_as_it_is(takes):
     (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     off = true_n.copy()
     off[IDX] += np.array([1.5, -1.0])
-    got = carry_stable(xyz_t, true_t, xyz_n, off, STABLE, "c1/car")
+    got = carry_stable(xyz_t, true_t, xyz_n, off, STABLE, "s1/car")
     shift = got.points[IDX] - true_t[IDX]
     assert np.abs(shift - shift.mean(axis=0)).max() < 0.5  # one rigid shift, ...
     assert 1.0 < np.linalg.norm(shift.mean(axis=0)) < 2.5  # ... about the neutral's
@@ -64,7 +64,7 @@ def test_too_few_stable_points_with_data_leaves_the_take_as_it_is(takes):
     (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     far = true_t.copy()
     far[IDX] = -50.0  # off the grid
-    got = carry_stable(xyz_t, far, xyz_n, true_n, STABLE, "c1/car")
+    got = carry_stable(xyz_t, far, xyz_n, true_n, STABLE, "s1/car")
     assert not got.carried.any()
     np.testing.assert_array_equal(got.points, far)
 
@@ -77,14 +77,14 @@ def test_the_neutral_points_are_tracked_onto_the_take_by_the_skin_texture(takes)
     """From the neutral's true points, the correlation finds the take's true points on the
     moving skin (the mouth opens for *car*), where the rigid prediction alone is off."""
     (xyz_n, true_n, color_n), (xyz_t, true_t, color_t) = takes["neutral"], takes["car"]
-    carried = carry_stable(xyz_t, true_t, xyz_n, true_n, STABLE, "c1/car")
+    carried = carry_stable(xyz_t, true_t, xyz_n, true_n, STABLE, "s1/car")
     got = track_points(
         (xyz_t, grey(color_t)),
         (xyz_n, grey(color_n)),
         true_n,
         carried.transform,
         partial(measure_flow, sigma=3.0, noise=2.0),
-        "c1/car",
+        "s1/car",
     )
     sure = got.confidence >= 0.3
     err = np.linalg.norm(got.points - true_t, axis=1)
@@ -114,7 +114,7 @@ def _second_pass(takes, params, as_grey=False):
     }
     noisy = true_t + np.random.default_rng(1).normal(0.0, 2.0, size=true_t.shape)
     found = landmarks.Landmarks(noisy, landmarks.DETECTED, np.full(68, 0.4), "d", "1")
-    take = Take("c1", "car", "viseme", "car", "neutral", data)
+    take = Take("s1", "car", "viseme", "car", "neutral", data)
     got, attrs = landmarks.second_pass(found, take, (xyz_t, color_t), params)
     return got, attrs, noisy, true_t
 

@@ -25,6 +25,7 @@ from scan2morph.stages import Subject, Take, check
 from scan2morph.stages.failure import Failure, failures, part_failures, run_take_job, usable
 from scan2morph.store import merge_parts, paths, read_part, write_part
 from scan2morph.synth import make_take, write_take
+from tests.support.configs import load_yaml
 
 TINY = dict(width=160, height=120, focal_px=362.5, distance_mm=1000.0)
 SUBJECT = Subject("s", {"n": "neutral", "car": "viseme", "smile": "expression"}, {})
@@ -32,7 +33,7 @@ SUBJECT = Subject("s", {"n": "neutral", "car": "viseme", "smile": "expression"},
 
 @pytest.fixture(scope="module")
 def take():
-    return make_take("s", "car", "viseme", "car", seed=7, params=dict(TINY))
+    return make_take("s1", "car", "viseme", "car", seed=3, params=dict(TINY))
 
 
 def _run(job, tmp_path, inputs=(), take="car", stage="fit"):
@@ -293,9 +294,8 @@ def test_accuracy_and_cohort_name_the_takes_left_out(tmp_path_factory, tmp_path,
 
 def run_config(run):
     """The tiny run's merged config sections (repo config under the run's)."""
-    import yaml
 
-    config = yaml.safe_load(run.configfiles[0].read_text())
-    for key, value in yaml.safe_load(run.configfile.read_text()).items():
+    config = load_yaml(run.configfiles[0])
+    for key, value in load_yaml(run.configfile).items():
         config[key] = value
     return config

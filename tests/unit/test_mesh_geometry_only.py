@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.sheet import read_sheet, subject_problems
@@ -20,7 +19,7 @@ from scan2morph.stages.part import Run, Subject, Take
 from scan2morph.store import paths
 from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d
 from scan2morph.template import build_template
-from tests.support.workflow_api import REPO
+from tests.support.configs import repo_config
 
 CAMERA = {"width": 320, "height": 240}
 KINDS = {"neutral": "neutral", "car": "viseme"}
@@ -82,7 +81,7 @@ def test_an_untextured_mesh_is_shaded_fitted_and_keeps_its_fit_at_refine(scans, 
     # mm: the depth buffer's resolution (the OBJ's 8 digits against the PLY's float32 move an edge)
     np.testing.assert_allclose(a, b, atol=0.03)
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     run = Run(Subject("s1", KINDS, {t: t for t in KINDS}), build_template(), config)
     for stage in (repair, landmarks, fit, align):
         data |= stage.apply(data, run)
@@ -179,7 +178,7 @@ def test_a_range_scan_without_colour_is_shaded_and_keeps_its_fit_at_refine(tmp_p
         seen = data[paths.raw(take, "color")][np.isfinite(res["xyz"][..., 2])]
         assert (seen[:, 0] == seen[:, 1]).all() and seen[:, 0].astype(float).std() > 10.0
         assert not part.attrs[paths.take(take)]["grey_color"]  # said once, as geometry-only
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     run = Run(Subject("s1", KINDS, {t: t for t in KINDS}), build_template(), config)
     for stage in (repair, landmarks, fit, align):
         data |= stage.apply(data, run)

@@ -21,6 +21,7 @@ from scan2morph.motion.uncertainty import (
 from scan2morph.store import read_part, write_part
 from scan2morph.template import FitRules, build_template, fit_take, noise_gain
 from scan2morph.template.regions import named_indices
+from tests.support.configs import repo_config
 
 W, H = 640, 480
 #: d(xyz)/dx, d(xyz)/dy (mm per px) and the offset of a tilted plane seen by the scanner.
@@ -290,13 +291,11 @@ def test_the_draws_follow_the_pipelines_verdict_on_the_texture(monkeypatch, verd
     the refine part's ``shape_used``) is refined by the shape straight away in every draw, the
     first too; one it refined by the texture tries the texture in every draw (whatever a draw
     finds); without the pipeline's verdict the first draw's decides for the others."""
-    import yaml
 
     from scan2morph.stages import motion_noise
     from scan2morph.stages import refine as refine_stage
     from scan2morph.stages.part import Part, Subject
     from scan2morph.store import paths
-    from tests.support.workflow_api import REPO
 
     skipped = []
 
@@ -307,7 +306,7 @@ def test_the_draws_follow_the_pipelines_verdict_on_the_texture(monkeypatch, verd
         return Part(out, attrs={paths.refine_group("she"): {"shape_used": True}})
 
     monkeypatch.setattr(refine_stage, "run", run)
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     params = refine_stage.Params.from_config(config)
     subject = Subject("s", {"neutral": "neutral", "she": "viseme"}, {"neutral": "n", "she": "s"})
     data = {paths.align("she", "transform"): np.eye(4)}

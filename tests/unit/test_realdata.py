@@ -54,6 +54,7 @@ from scan2morph.modal import ModalParams, modal_basis, project, reconstruct
 from scan2morph.modal.fem import DOF, check_mesh
 from scan2morph.open3d_light import open3d
 from scan2morph.scan import DEFAULT_REPAIR, reconstruct_stereo, repair_range
+from tests.support.configs import repo_config
 from tests.support.stereo_scene import pixel_rays
 
 o3d = open3d()  # open3d without its web viewer, as the library imports it
@@ -1136,13 +1137,10 @@ def test_refinement_follows_real_skin(head):
     is the parameters' check
     on real skin: the synthetic albedo is not the measure of them
     (``benchmarks/bench_refine_skin.py`` compares parameters over many draws of the clicks)."""
-    import yaml
 
     from scan2morph.stages import refine as refine_stage
 
-    config = yaml.safe_load(
-        (Path(__file__).resolve().parents[2] / "config/config.yaml").read_text()
-    )
+    config = repo_config()
     params = refine_stage.Params.from_config(config).flow
     scene = skin_scene(head)
     e = skin_errors(scene, SEED + 7, params)
@@ -1205,16 +1203,12 @@ def test_the_fits_forehead_rim_on_a_real_brow_raise(head):
     5.83 / 1.06, the default share 0.5 1.90 / 0.75 (0: 2.86 / 0.97, 0.25: 1.18 / 0.80, 0.75:
     3.82 / 0.85), while the top tenth moves 3.87 mm RMS."""
 
-    import yaml
-
     from scan2morph.stages import fit as fit_stage
     from scan2morph.template import build_template, fit_take, subdivide_template
     from scan2morph.template.rim import Rim
     from tests.support.lps_landmarks import LANDMARKS_MM
 
-    config = yaml.safe_load(
-        (Path(__file__).resolve().parents[2] / "config/config.yaml").read_text()
-    )
+    config = repo_config()
     params = fit_stage.Params.from_config(config)
     brow_y = float(np.mean(LANDMARKS_MM[17:27, 1])) - head.nose[1]
 

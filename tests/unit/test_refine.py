@@ -18,6 +18,7 @@ from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
+from tests.support.configs import config_schema, repo_config
 
 
 @pytest.fixture(scope="module")
@@ -206,12 +207,8 @@ def test_the_flow_defaults_agree_in_config_schema_and_library():
     parameters (a default changed in one place and not the others fails here)."""
     import dataclasses
 
-    import yaml
-
-    from tests.support.workflow_api import REPO
-
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["refine"]
-    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
+    config = repo_config()["refine"]
+    schema = config_schema()
     spec = schema["properties"]["refine"]["properties"]
     library = RefineParams()
     for field in dataclasses.fields(RefineParams):
@@ -257,16 +254,14 @@ def test_refine_points_undoes_sliding_on_textured_skin(fine):
 
 def _subject_in_memory(skin_texture, takes=("neutral", "she", "smile1")):
     """Synthetic takes (480 x 360) through repair, fit and align in memory, and their truths."""
-    import yaml
 
     from scan2morph.evaluate.truth import Truth
     from scan2morph.stages import align, fit, repair
     from scan2morph.stages.part import Run, Subject
     from scan2morph.store import paths
     from scan2morph.synth import make_take
-    from tests.support.workflow_api import REPO
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     kinds = {"neutral": "neutral", "she": "viseme", "car": "viseme", "smile1": "expression"}
     labels = {"neutral": "neutral", "she": "she", "car": "car", "smile1": "smile"}
     scanner = {"width": 480, "height": 360, "focal_px": 1087.5, "skin_texture": skin_texture}
@@ -426,13 +421,10 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
     (and move nothing either: the plane did not move)."""
     from dataclasses import replace
 
-    import yaml
-
     from scan2morph.stages import refine
     from scan2morph.store import paths
-    from tests.support.workflow_api import REPO
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     template = build_template()
     rename = lambda d, t: {k.replace("/takes/t/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: E731
     data = rename(_plane_take(template, 21, config), "neutral")
@@ -491,14 +483,12 @@ def test_a_refinement_not_used_is_a_warning_of_the_subject(tmp_path):
 
 
 def test_jaw_settings_come_from_the_refine_section():
-    import yaml
 
     from scan2morph.errors import InputError
     from scan2morph.refine.jaw import JawParams
     from scan2morph.stages import refine
-    from tests.support.workflow_api import REPO
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     jaw = {"prior": False, "start": 0.05, "end": 0.3, "max_rmse_ratio": 2}
     params = refine.Params.from_config(config | {"refine": config["refine"] | {"jaw": jaw}})
     assert params.jaw == JawParams(False, 0.05, 0.3, 2.0) and params.still_region == "stable"
@@ -512,14 +502,12 @@ def test_jaw_settings_come_from_the_refine_section():
 
 
 def test_lip_settings_come_from_the_refine_section():
-    import yaml
 
     from scan2morph.errors import InputError
     from scan2morph.refine.lip import LipParams
     from scan2morph.stages import refine
-    from tests.support.workflow_api import REPO
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     params = refine.Params.from_config(config)
     section = config["refine"]
     assert params.lip.prior and params.lip.stretch == section["lip"]["stretch"]

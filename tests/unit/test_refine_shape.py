@@ -10,6 +10,7 @@ from scan2morph.errors import InputError
 from scan2morph.refine import Channel, RefineParams, SurfaceChannel, refine_channels
 from scan2morph.refine.shape import ShapeParams, shape_image
 from scan2morph.template import build_template, subdivide_template
+from tests.support.configs import config_schema, repo_config
 
 SHAPE = (420, 380)
 MM_PER_PX = 0.7
@@ -208,12 +209,8 @@ def test_the_shape_defaults_agree_in_config_schema_and_library():
     """config/config.yaml's refine.shape, the schema's defaults and ShapeParams' are one set."""
     import dataclasses
 
-    import yaml
-
-    from tests.support.workflow_api import REPO
-
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["refine"]["shape"]
-    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
+    config = repo_config()["refine"]["shape"]
+    schema = config_schema()
     spec = schema["properties"]["refine"]["properties"]["shape"]["properties"]
     library = ShapeParams()
     assert set(config) == set(spec) == {f.name for f in dataclasses.fields(ShapeParams)}
@@ -222,12 +219,10 @@ def test_the_shape_defaults_agree_in_config_schema_and_library():
 
 
 def test_a_bad_shape_setting_in_the_config_is_named_by_its_key():
-    import yaml
 
     from scan2morph.stages import refine
-    from tests.support.workflow_api import REPO
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config = repo_config()
     config["refine"]["shape"]["sigma_mm"] = -1.0
     with pytest.raises(InputError, match=r"refine\.shape: sigma_mm: expected a number > 0"):
         refine.Params.from_config(config)

@@ -28,7 +28,6 @@ import cv2
 import h5py
 import numpy as np
 import pytest
-import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import TexturedMesh
@@ -48,6 +47,7 @@ from scan2morph.report import (
 from scan2morph.report.viewer import VIEWER_BUNDLE, script_hash, three_unavailable, viewer_script
 from scan2morph.store import paths
 from scan2morph.template import build_template, subdivide_template
+from tests.support.configs import repo_config
 from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
 from tests.support.workflow_api import REPO
 
@@ -476,7 +476,7 @@ def test_viewer_shows_the_face_upright_from_the_front(report, run, browser, tmp_
     subject's left eye on the viewer's right and the nose tip nearest the camera."""
     path, *_ = report
     glb = run.path("results", SUBJECT, f"{SUBJECT}.glb")
-    levels = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["template"]
+    levels = repo_config()["template"]
     template = subdivide_template(build_template(), levels["subdivision_levels"])
     names = ["forehead_centre", "eye_r_outer", "eye_r_inner", "eye_l_inner", "eye_l_outer"]
     names += ["nose_tip", "mouth_r", "mouth_l", "chin"]

@@ -114,7 +114,7 @@ def test_depth_formats(tmp_path):
 
 @pytest.fixture(scope="module")
 def rgbd_take():
-    return make_rgbd_take("r1", "neutral", "neutral", "neutral", seed=5, params=dict(TINY_RGBD))
+    return make_rgbd_take("s1", "neutral", "neutral", "neutral", seed=3, params=dict(TINY_RGBD))
 
 
 def test_synthetic_sensor_read_back_against_its_truth(rgbd_take, tmp_path):

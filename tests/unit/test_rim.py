@@ -8,6 +8,7 @@ import pytest
 from scan2morph.errors import InputError
 from scan2morph.template import build_template, fit_map, subdivide_template
 from scan2morph.template.rim import BROWS, Rim, rim_vertices, still_affine
+from tests.support.configs import config_schema, repo_config
 
 
 @pytest.fixture(scope="module")
@@ -131,13 +132,10 @@ def test_the_rim_share_default_agrees_in_config_schema_and_library():
     ``Params`` and :class:`Rim` give one value."""
     import dataclasses
 
-    import yaml
-
     from scan2morph.stages import fit as fit_stage
-    from tests.support.workflow_api import REPO
 
-    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["template"]
-    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
+    config = repo_config()["template"]
+    schema = config_schema()
     spec = schema["properties"]["template"]["properties"]["rim_share"]["default"]
     defaults = {f.name: f.default for f in dataclasses.fields(fit_stage.Params)}
     rim = {f.name: f.default for f in dataclasses.fields(Rim)}

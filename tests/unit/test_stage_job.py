@@ -12,7 +12,6 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-import yaml
 
 from scan2morph.jobs import sha256_file
 from scan2morph.report.provenance import stage_timings
@@ -43,6 +42,7 @@ from scan2morph.stages.stage_job import (
     write_benchmark,
     write_fingerprints,
 )
+from tests.support.configs import repo_config
 
 ROOT = Path(__file__).resolve().parents[2]
 MODULES = (ingest, repair, landmarks, fit, align, refine)
@@ -51,7 +51,7 @@ SUBJECT_MODULES = (motion, motion_noise, morph, modal, store, accuracy, report)
 
 @pytest.fixture(scope="module")
 def config():
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = repo_config()
     return validate_config(config, ROOT / "schemas" / "config.schema.yaml")
 
 

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from scan2morph.align import IcpParams
 from scan2morph.errors import InputError
@@ -20,10 +19,11 @@ from scan2morph.stages import Part, Subject, Take, align, fit, modal, morph, mot
 from scan2morph.store import paths, read_part
 from scan2morph.sweep import SECTION_STAGE, STAGES
 from scan2morph.template import FitRules, load_template
+from tests.support.configs import repo_config
 from tests.support.tiny_run import SUBJECT, TAKES, tiny_run
 
 REPO = Path(__file__).resolve().parents[2]
-CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+CONFIG = repo_config()
 VALIDATED = validate_config(copy.deepcopy(CONFIG), REPO / "schemas" / "config.schema.yaml")
 
 

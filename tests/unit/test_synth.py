@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import trimesh
-import yaml
 from matplotlib.path import Path as MplPath
 
 from scan2morph.errors import InputError
@@ -27,6 +24,7 @@ from scan2morph.synth.scanner import (
     project,
     surface_normals,
 )
+from tests.support.configs import repo_config
 
 o3d = open3d()  # open3d without its web viewer, as the library imports it
 
@@ -67,7 +65,7 @@ def test_default_takes():
     assert ("smile2", "expression", "smile") in takes and ("sad1", "expression", "sad") in takes
     assert len({t for t, _, _ in takes}) == len(takes) == 12
     # the config's default cohort takes exactly these
-    config = yaml.safe_load((Path(__file__).parents[2] / "config" / "config.yaml").read_text())
+    config = repo_config()
     assert [(t["take"], t["kind"], t["label"]) for t in config["synthetic"]["takes"]] == takes
 
 

@@ -12,7 +12,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-import yaml
 from scipy import ndimage
 
 from scan2morph.errors import InputError
@@ -39,9 +38,10 @@ from scan2morph.synth import (
     subject_identity,
     write_stereo_take,
 )
+from tests.support.configs import config_schema, repo_config
 
 REPO = Path(__file__).resolve().parents[2]
-CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+CONFIG = repo_config()
 SMALL = dict(width=160, height=120, focal_px=325.0)
 _SUFFIXES = {
     "left": "_left.png",
@@ -405,7 +405,7 @@ def test_stereo_accuracy_bad_input(case, match):
 
 
 def test_config_mirrors_the_library_defaults():
-    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text())
+    schema = config_schema()
     props = schema["properties"]
     assert set(CONFIG["stereo"]) == set(DEFAULT_STEREO) == set(props["stereo"]["properties"])
     for key, spec in props["stereo"]["properties"].items():

@@ -174,7 +174,7 @@ def neutral_scan():
     from scan2morph.synth import make_take
 
     params = dict(width=320, height=240, focal_px=725.0, spike_fraction=0.0, hole_blobs=0)
-    return make_take("t1", "neutral", "neutral", "neutral", seed=3, params=params)
+    return make_take("s1", "neutral", "neutral", "neutral", seed=3, params=params)
 
 
 def test_fit_take_samples_the_true_surface(template, neutral_scan):

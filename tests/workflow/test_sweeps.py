@@ -16,7 +16,6 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import read_truth
@@ -33,11 +32,12 @@ from scan2morph.store import paths, read_part
 from scan2morph.sweep import first_stage, read_sweep_table, rerun_accuracy, sweep_settings
 from scan2morph.tables import read_dictionary
 from scan2morph.template import load_template
+from tests.support.configs import repo_config
 from tests.support.tiny_run import SUBJECT, TAKES, tiny_config, tiny_run
 from tests.support.workflow_api import REPO
 
 SCHEMA = REPO / "schemas" / "config.schema.yaml"
-CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+CONFIG = repo_config()
 
 
 def _table(tmp_path, text):

@@ -1,0 +1,64 @@
+"""The user-facing text keeps the shape issue #31 gave it: a README a person reads in one sitting,
+and a configuration whose comments and schema descriptions give meaning, unit and default only
+(measurements, dates and what changed belong in docs/ and CHANGELOG.md)."""
+
+from __future__ import annotations
+
+import re
+
+from tests.support.configs import REPO, config_schema
+
+#: A measurement or a change: an ISO date, a commit hash, "a -> b", "Measured ...".
+HISTORY = re.compile(
+    r"\b20\d\d-\d\d-\d\d\b"  # a date
+    r"|\b(?=[0-9a-f]*\d)(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}\b"  # a commit
+    r"|\d\s*->\s*\d"  # a before and after
+    r"|\bMeasured\b|measured (worse|better)"  # a measurement
+)
+
+
+def _descriptions(node, path="") -> list[tuple[str, str]]:
+    """Every schema ``description`` with its key path."""
+    out = []
+    if isinstance(node, dict):
+        if isinstance(node.get("description"), str):
+            out.append((path, node["description"]))
+        for key, value in node.items():
+            out += _descriptions(value, f"{path}.{key}")
+    elif isinstance(node, list):
+        for k, value in enumerate(node):
+            out += _descriptions(value, f"{path}[{k}]")
+    return out
+
+
+def test_the_readme_is_short():
+    assert len((REPO / "README.md").read_text(encoding="utf-8").splitlines()) <= 200
+
+
+def test_schema_descriptions_and_config_comments_carry_no_history():
+    offences = [p for p, text in _descriptions(config_schema()) if HISTORY.search(text)]
+    for number, line in enumerate(
+        (REPO / "config" / "config.yaml").read_text(encoding="utf-8").splitlines(), 1
+    ):
+        if "#" in line and HISTORY.search(line.split("#", 1)[1]):
+            offences.append(f"config.yaml:{number}")
+    assert not offences, offences
+
+
+def test_the_history_pattern_finds_what_it_names():
+    for text in (
+        "before 2026-12-02",
+        "0.454 -> 0.379 mm",
+        "Measured on 30 takes",
+        "a1b2c3d4",
+        "measured worse",
+    ):
+        assert HISTORY.search(text), text
+    for text in (
+        "default 0.875, px",
+        "lanczos4",
+        "iBUG 58",
+        "1e-12 of the largest",
+        "auto: measured on the stable points",
+    ):
+        assert not HISTORY.search(text), text
