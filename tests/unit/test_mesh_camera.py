@@ -11,7 +11,6 @@ fail it: real noses (and the generator's) point mostly down, not out of the face
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,17 +22,9 @@ from scan2morph.io.mesh_scan import view_direction
 from scan2morph.io.mesh_view import face_view
 from scan2morph.synth.cohort import default_takes
 from scan2morph.synth.mesh_scan import make_mesh_take
+from tests.support.real_head import GLB
 
 MAX_ERROR_DEG = 5.0
-#: The real head: ``../shared/data`` beside the repository (or beside its worktree folder).
-GLB = next(
-    (
-        p / "shared" / "data" / "lee-perry-smith" / "LeePerrySmith.glb"
-        for p in Path(__file__).resolve().parents[3:5]
-        if (p / "shared" / "data").is_dir()
-    ),
-    Path("../shared/data/lee-perry-smith/LeePerrySmith.glb"),
-)
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:

@@ -12,7 +12,9 @@ from PIL import Image
 from scan2morph.evaluate.mesh import mesh_accuracy
 from scan2morph.evaluate.truth import Truth
 from scan2morph.io.mesh_scan import read_landmarks3d, read_mesh_take
+from scan2morph.io.uv_orientation import MIN_GAIN, texture_agreement
 from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d, write_mesh_take
+from tests.support.real_head import COLOR_MAP, GLB
 
 #: A tiny virtual camera.
 TINY_CAMERA = dict(width=160, height=120)
@@ -88,6 +90,80 @@ def test_texture_column_supplies_a_missing_texture(textured, tmp_path):
     take = read_mesh_take(tmp_path / "face.obj", png, d / "face.txt", TINY_CAMERA)
     assert take.report["colour"] == "texture"
     assert take.color[60, 80].tolist() != [44, 46, 56]  # the face, not the background
+    # a ramp has no features: it agrees with the surface neither way up and is kept as read
+    assert take.report["uv_flipped"] is False
+
+
+@pytest.fixture(scope="module")
+def baked(scan, tmp_path_factory):
+    """The scan as a GLB without a texture of its own, and its vertex colours (the albedo with
+    brows, lids and lips under the scanner's lamp) baked into a PNG through a cylindrical UV
+    map; once with the glTF's UVs as glTF has them, once written OBJ-style (v = 0 at the image
+    bottom), as a converted file can have them."""
+    from scipy.spatial import cKDTree
+
+    d = tmp_path_factory.mktemp("baked")
+    v = scan["vertices"]
+    centre = v.mean(axis=0)
+    u = np.arctan2(v[:, 0] - centre[0], v[:, 2] - centre[2]) / (2 * np.pi) + 0.5
+    uv = np.column_stack([u, (v[:, 1] - v[:, 1].min()) / np.ptp(v[:, 1])])  # v = 0 at the chin
+    n = 512
+    texel = (np.arange(n) + 0.5) / n
+    tu, tv = np.meshgrid(texel, 1.0 - texel)  # image rows run down: row 0 at v = 1
+    _, nearest = cKDTree(uv).query(np.column_stack([tu.ravel(), tv.ravel()]))
+    Image.fromarray(scan["colors"][nearest].reshape(n, n, 3)).save(d / "skin.png")
+    for name, uv_file in (("right.glb", uv), ("obj_style.glb", uv * [1, -1] + [0, 1])):
+        material = trimesh.visual.material.PBRMaterial()
+        visual = trimesh.visual.TextureVisuals(uv=uv_file, material=material)
+        trimesh.Trimesh(v, scan["faces"], visual=visual, process=False).export(d / name)
+    write_landmarks3d(d / "face.txt", scan["landmarks"])
+    return d
+
+
+def test_a_sheet_texture_upside_down_on_the_mesh_is_turned_the_right_way(baked):
+    """The same texture from the sheet on the same surface: on the GLB whose UVs are glTF's it
+    is kept as read; on the one whose UVs were written OBJ-style it is flipped, and the take's
+    colour image is the first one's. Known answer: only one reading puts the baked brows, lids
+    and lips on the surface that has them."""
+    camera = dict(width=320, height=240)
+    right = read_mesh_take(baked / "right.glb", baked / "skin.png", baked / "face.txt", camera)
+    wrong = read_mesh_take(baked / "obj_style.glb", baked / "skin.png", baked / "face.txt", camera)
+    print(
+        f"\nagreement as read / flipped: {right.report['uv_agreement']}, "
+        f"{wrong.report['uv_agreement']}"
+    )
+    assert right.report["uv_flipped"] is False and wrong.report["uv_flipped"] is True
+    assert right.report["uv_agreement"][0] > right.report["uv_agreement"][1] + MIN_GAIN
+    # the same two renders (up to the UVs' float32 rounding in the files)
+    flipped_back = wrong.report["uv_agreement"][::-1]
+    np.testing.assert_allclose(flipped_back, right.report["uv_agreement"], atol=1e-3)
+    diff = np.abs(wrong.color.astype(int) - right.color.astype(int))
+    assert np.mean(diff) < 0.05 and np.percentile(diff, 99.9) <= 2
+    # the file's own texture is never second-guessed: no check without a sheet texture
+    assert "uv_flipped" not in read_mesh_take(baked / "right.glb", None, None, camera).report
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not GLB.is_file(), reason=f"real head scan absent: {GLB}")
+def test_the_real_heads_colour_map_is_turned_the_way_it_lies_on_the_scan():
+    """The real head's glTF carries OBJ-style UVs (the real-data tests flip its v to show the
+    colour map; three.js's own example of it loads the map with flipY): given the colour map in
+    the sheet's texture column, the take turns it, by a clear margin (measured at 320 x 240:
+    0.01 as read, 0.24 flipped; at 640 x 480 -0.01 and 0.20)."""
+    take = read_mesh_take(GLB, COLOR_MAP, None, dict(width=320, height=240), 41.4)
+    as_read, flipped = take.report["uv_agreement"]
+    print(f"\nreal head: agreement {as_read:.3f} as read, {flipped:.3f} flipped")
+    assert take.report["uv_flipped"] is True
+    assert flipped > 0.12 and as_read < 0.05
+
+
+def test_agreement_needs_a_surface():
+    """Fewer than 100 face pixels: no measure (NaN), and a flat colour has no edges to agree."""
+    xyz = np.full((40, 40, 3), np.nan)
+    assert np.isnan(texture_agreement(np.zeros((40, 40, 3), np.uint8), xyz))
+    yy, xx = np.mgrid[0:40, 0:40].astype(float)
+    dome = np.dstack([xx, yy, 200.0 + 0.05 * ((xx - 20) ** 2 + (yy - 20) ** 2)])
+    assert np.isnan(texture_agreement(np.full((40, 40, 3), 128, np.uint8), dome))
 
 
 def _colour_ratio(flat: dict, textured: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -55,13 +54,11 @@ from scan2morph.modal.fem import DOF, check_mesh
 from scan2morph.open3d_light import open3d
 from scan2morph.scan import DEFAULT_REPAIR, reconstruct_stereo, repair_range
 from tests.support.configs import repo_config
+from tests.support.real_head import COLOR_MAP, DATA_DIR, GLB
 from tests.support.stereo_scene import pixel_rays
 
 o3d = open3d()  # open3d without its web viewer, as the library imports it
 
-DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "lee-perry-smith"
-GLB = DATA_DIR / "LeePerrySmith.glb"
-COLOR_MAP = DATA_DIR / "Map-COL.jpg"
 _MISSING = [p.name for p in (GLB, COLOR_MAP) if not p.is_file()]
 
 pytestmark = [

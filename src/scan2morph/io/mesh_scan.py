@@ -45,6 +45,7 @@ from scan2morph.io.take import (  # noqa: E402
     check_landmarks_inside,
     likely_unit,
 )
+from scan2morph.io.uv_orientation import orient_texture  # noqa: E402
 
 log = logging.getLogger("scan2morph")
 #: Mesh file suffixes trimesh reads for us.
@@ -469,6 +470,34 @@ def render_mesh(mesh, K: np.ndarray, pose: np.ndarray, size: tuple[int, int]):
     return np.ascontiguousarray(color[..., :3]), depth
 
 
+def _render_take(mesh, camera, pose, sheet_texture, mesh_path):
+    """A read mesh rendered through the take's camera: ``(color, depth, report entries)``.
+
+    A geometry-only mesh is shown by its shading (:func:`shade`, with a warning); a texture
+    from the sheet (``sheet_texture``) is kept the way up it lies on the surface
+    (:mod:`~scan2morph.io.uv_orientation`). The entries: ``colour`` (:func:`colour_source`)
+    and, for a sheet's texture, ``uv_flipped`` and ``uv_agreement``."""
+    source = colour_source(mesh)
+    if source == SHADED:
+        log.warning(
+            "%s: no texture and no vertex colours: rendered with shading (grey, lit from the "
+            "camera); texture-driven refinement is not available for this take",
+            mesh_path,
+        )
+        mesh = shade(mesh, pose)
+    K, size = camera.K, camera.size
+    if sheet_texture is None or source != "texture":  # the file's own colour: seen on the mesh
+        return (*render_mesh(mesh, K, pose, size), {"colour": source})
+    color, depth, orientation = orient_texture(
+        mesh,
+        lambda m: render_mesh(m, K, pose, size),
+        lambda d: depth_points(np.nan_to_num(d, nan=0.0), camera),
+    )
+    if orientation.flipped:
+        log.warning("%s: %s", mesh_path, orientation.flip_message(Path(sheet_texture).name))
+    return color, depth, {"colour": source} | orientation.as_report()
+
+
 def read_mesh_take(
     mesh_path: str | Path,
     texture_path: str | Path | None,
@@ -529,16 +558,9 @@ def read_mesh_take(
     else:
         K, pose = surface_camera(np.asarray(mesh.vertices), view, cfg, str(mesh_path))
     size = (int(cfg["width"]), int(cfg["height"]))
-    source = colour_source(mesh)
-    if source == SHADED:
-        log.warning(
-            "%s: no texture and no vertex colours: rendered with shading (grey, lit from the "
-            "camera); texture-driven refinement is not available for this take",
-            mesh_path,
-        )
-        mesh = shade(mesh, pose)
-    color, depth = render_mesh(mesh, K, pose, size)
-    xyz_cam = depth_points(np.nan_to_num(depth, nan=0.0), PinholeCamera(K, np.zeros(5), size))
+    camera = PinholeCamera(K, np.zeros(5), size)
+    color, depth, colour = _render_take(mesh, camera, pose, texture_path, mesh_path)
+    xyz_cam = depth_points(np.nan_to_num(depth, nan=0.0), camera)
     xyz = (xyz_cam - pose[:3, 3]) @ pose[:3, :3]  # camera -> mesh frame
     landmarks = None
     if lm3 is not None:
@@ -547,10 +569,9 @@ def read_mesh_take(
         check_landmarks_inside(landmarks, *size, landmarks_path)
         if complete(landmarks):
             check_face(xyz, landmarks, mesh_path, landmarks_path)
-    report = {
+    report = colour | {
         "n_vertices": int(len(mesh.vertices)),
         "n_faces": int(len(mesh.faces)),
-        "colour": source,
         "coverage": float(np.isfinite(depth).mean()),
         "pixel_mm": float(cfg["distance_mm"] / K[0, 0]),
         "view_direction": [float(x) for x in view.direction],
