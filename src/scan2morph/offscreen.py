@@ -5,10 +5,15 @@ garbage collection on each delete (pyrender frees its GL objects that way): meas
 ``benchmarks/bench_profile.py``, 32 renders of the morph figures spent 14 s in ``gc.collect``
 alone. A renderer kept for the process renders any number of scenes (pyrender drops the GL
 objects of a scene's meshes when they leave the rendered scene).
+
+The renderers are deleted when the interpreter exits (``atexit``), while imports still work:
+deleted later, by the interpreter's own teardown, PyOpenGL tries to import as it frees the
+context and prints a warning and a stray line on the job's console.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")  # headless, unless the caller chose
@@ -26,4 +31,13 @@ def offscreen_renderer(width: int, height: int) -> pyrender.OffscreenRenderer:
     return _RENDERERS[key]
 
 
-__all__ = ["offscreen_renderer"]
+@atexit.register
+def close_renderers() -> None:
+    """Delete every renderer of the process (their GL contexts); the next render makes a new
+    one. Registered to run at the interpreter's exit."""
+    while _RENDERERS:
+        _, renderer = _RENDERERS.popitem()
+        renderer.delete()
+
+
+__all__ = ["close_renderers", "offscreen_renderer"]
