@@ -725,6 +725,43 @@ def test_mesh_without_landmarks_in_cm_is_refused_before_its_surface_is_searched(
     assert "it looks like metres: give its unit in the sheet's units column" in problem
 
 
+def test_the_unit_named_is_the_one_that_gives_a_head_its_usual_size():
+    """Of the units that put a size within the band, the one nearest the band's middle: a head
+    8.55 units across (the real head's GLB) is 217 mm in inches against 86 mm in cm; one 38
+    units across is 382 mm in cm (965 mm in inches); an eye span of 0.09 is metres."""
+    from scan2morph.io.mesh_scan import MESH_EXTENT_MM
+    from scan2morph.io.take import likely_unit
+
+    assert likely_unit(8.553, MESH_EXTENT_MM) == "inches"
+    assert likely_unit(38.17, MESH_EXTENT_MM) == "cm"
+    assert likely_unit(0.38, MESH_EXTENT_MM) == "metres"
+    assert likely_unit(0.09, (70.0, 130.0)) == "metres"
+    assert likely_unit(1e9, MESH_EXTENT_MM) is None
+
+
+def test_a_face_too_small_for_its_nose_names_the_mesh_size(mesh_files, tmp_path):
+    """A head 85 mm across as read (the real head given in cm, as the old guess had it) passes
+    the size check but has no face profile around its nose at that scale: the refusal says how
+    big the mesh is as read and where its unit goes."""
+    import trimesh
+
+    scan = mesh_files["scan"]
+    trimesh.Trimesh(scan["vertices"] / 4.5, scan["faces"], process=False).export(
+        tmp_path / "small.ply"
+    )
+    with pytest.raises(
+        InputError,
+        match=r"small.ply: mesh: no surface 8-20 mm from the nose tip along the face's profile "
+        r"\(expected a face around the nose; the mesh is 84.8\d mm across: if that is not its "
+        r"true size, give its unit in the sheet's units column\)",
+    ):
+        _run_ingest(
+            dict(ROW, modality="mesh"),
+            {"mesh": str(tmp_path / "small.ply")},
+            {"width": 160, "height": 120},
+        )
+
+
 def test_mesh_landmarks_mirrored(mesh_files, tmp_path):
     from scan2morph.synth.mesh_scan import write_landmarks3d
 

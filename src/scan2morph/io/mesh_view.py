@@ -445,10 +445,12 @@ def face_up(vertices: np.ndarray, view: FaceView, source: str = "mesh") -> np.nd
     for side in (1.0, -1.0):
         near = (side * s > lo) & (side * s < hi)
         if not near.any():
+            across = float(np.ptp(np.asarray(vertices, dtype=np.float64), axis=0).max())
             raise InputError(
                 source,
                 f"mesh: no surface {lo:g}-{hi:g} mm from the nose tip along the face's profile "
-                "(expected a face around the nose)",
+                f"(expected a face around the nose; the mesh is {across:.4g} mm across: if that "
+                "is not its true size, give its unit in the sheet's units column)",
             )
         bins = np.floor(side * s[near] / 2.0).astype(int)
         fronts = [depth[near][bins == b].min() for b in np.unique(bins)]  # frontmost surface

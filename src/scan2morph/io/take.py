@@ -31,10 +31,17 @@ _UNITS = (("metres", 1000.0), ("cm", 10.0), ("inches", 25.4), ("0.1 mm", 0.1), (
 
 
 def likely_unit(size: float, band: tuple[float, float]) -> str | None:
-    """The unit a size read as mm is more likely in: the first of metres, cm, inches, 0.1 mm
-    and µm in which it would lie within ``band`` (mm); None when none does."""
+    """The unit a size read as mm is most likely in: of metres, cm, inches, 0.1 mm and µm, the
+    one in which it would lie within ``band`` (mm), nearest the band's middle (geometric mean)
+    when several do (a mesh 8.5 units across is a head in inches, 217 mm, sooner than in cm,
+    85 mm); None when none does."""
     lo, hi = band
-    return next((name for name, f in _UNITS if lo <= size * f <= hi), None)
+    fits = [
+        (abs(np.log(size * f / np.sqrt(lo * hi))), name)
+        for name, f in _UNITS
+        if lo <= size * f <= hi
+    ]
+    return min(fits)[1] if fits else None
 
 
 @dataclass(frozen=True)
