@@ -265,7 +265,9 @@ def realdata_case(template, data_dir: str | None = None):
     sys.path[:0] = [str(REPO / "tests" / "unit"), str(REPO)]
     import test_realdata
     import trimesh
-    from test_realdata import _smile, load_head
+    from test_realdata import load_head
+
+    from tests.support.real_head import smile_displacement
 
     if data_dir:  # the scan elsewhere than ../shared/data next to the repository
         test_realdata.GLB = Path(data_dir) / test_realdata.GLB.name
@@ -291,7 +293,7 @@ def realdata_case(template, data_dir: str | None = None):
         "below": below,
         "vertices": v,
         "faces": f,
-        "smile": _smile(x, y),
+        "smile": smile_displacement(x, y),
         "upper": y > 0,
         "stable": stable,
         "mimic": mimic,

@@ -40,7 +40,6 @@ turned view is no longer on that view's silhouette: its truth holds only near th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -118,8 +117,6 @@ LANDMARKS_MM = np.array(
     ]
 )
 
-DATA_DIR = Path("/work/shared/data/lee-perry-smith")
-
 
 @dataclass(frozen=True)
 class RealTake:
@@ -139,20 +136,10 @@ class RealTake:
     truth: np.ndarray
 
 
-def data_dir() -> Path:
-    """Where the head's files are: next to the repository clone (as the realdata tests look
-    for them), else the shared data folder."""
-    from tests.unit import test_realdata as rd
-
-    return rd.DATA_DIR if rd.GLB.is_file() else DATA_DIR
-
-
 def load_real_head():
-    """The head of tests/unit/test_realdata.py, read from :func:`data_dir`."""
+    """The head of tests/unit/test_realdata.py (read from tests/support/real_head.py's folder)."""
     from tests.unit import test_realdata as rd
 
-    folder = data_dir()
-    rd.GLB, rd.COLOR_MAP = folder / "LeePerrySmith.glb", folder / "Map-COL.jpg"
     return rd.load_head()
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 _REPO = Path(__file__).resolve().parents[2]
 #: The scan's folder (the first ``shared/data`` found beside the clone or its worktree folder).
 DATA_DIR = next(
@@ -23,3 +25,18 @@ DATA_DIR = next(
 GLB = DATA_DIR / "LeePerrySmith.glb"
 #: Its colour map (1024 x 1024 JPEG).
 COLOR_MAP = DATA_DIR / "Map-COL.jpg"
+
+
+def smile_displacement(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A smile-like displacement (V, 3) in the model frame, mm, at face coordinates relative to
+    the nose tip (x right, y up): the cheeks 5 mm up and out, the lower temples 2 mm, the mouth
+    corners 6 mm."""
+
+    def bump(cx, cy, sigma):
+        return np.exp(-((np.abs(x) - cx) ** 2 + (y - cy) ** 2) / (2 * sigma * sigma))[:, None]
+
+    return (
+        5.0 * bump(38, -10, 12) * [0.0, 0.8, 0.6]
+        + 2.0 * bump(58, 20, 10) * [0.0, 0.5, 0.8]
+        + 6.0 * bump(25, -40, 10) * [0.0, 0.6, 0.3]
+    )

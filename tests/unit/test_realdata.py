@@ -54,7 +54,7 @@ from scan2morph.modal.fem import DOF, check_mesh
 from scan2morph.open3d_light import open3d
 from scan2morph.scan import DEFAULT_REPAIR, reconstruct_stereo, repair_range
 from tests.support.configs import repo_config
-from tests.support.real_head import COLOR_MAP, DATA_DIR, GLB
+from tests.support.real_head import COLOR_MAP, DATA_DIR, GLB, smile_displacement
 from tests.support.stereo_scene import pixel_rays
 
 o3d = open3d()  # open3d without its web viewer, as the library imports it
@@ -739,21 +739,6 @@ def test_modal_basis_on_real_geometry(face_mesh):
 # rigid alignment of a smiling take on the real face's shape
 
 
-def _smile(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """A smile-like displacement (V, 3) in the model frame, mm, at face coordinates relative to
-    the nose tip (x right, y up): the cheeks 5 mm up and out, the lower temples 2 mm, the mouth
-    corners 6 mm."""
-
-    def bump(cx, cy, sigma):
-        return np.exp(-((np.abs(x) - cx) ** 2 + (y - cy) ** 2) / (2 * sigma * sigma))[:, None]
-
-    return (
-        5.0 * bump(38, -10, 12) * [0.0, 0.8, 0.6]
-        + 2.0 * bump(58, 20, 10) * [0.0, 0.5, 0.8]
-        + 6.0 * bump(25, -40, 10) * [0.0, 0.6, 0.3]
-    )
-
-
 def test_alignment_grows_into_the_still_skin_of_a_real_face(head):
     """The stable region (forehead, nose ridge, temples, placed by measure from the nose tip)
     of the real face constrains a smiling take's rotation only to about 0.2 degrees under
@@ -791,7 +776,7 @@ def test_alignment_grows_into_the_still_skin_of_a_real_face(head):
             np.radians(5.0) * axis / np.linalg.norm(axis)
         ).as_matrix()
         truth[:3, 3] = rng.normal(scale=6.0, size=3)
-        take = transform_points(invert(truth), v + _smile(x, y))
+        take = transform_points(invert(truth), v + smile_displacement(x, y))
         take += rng.normal(scale=NOISE_MM, size=v.shape)
         take[pairs] += rng.normal(scale=1.0, size=(len(pairs), 3))  # clicked, not exact
         for name, grow in (("alone", None), ("grown", upper)):
@@ -1061,7 +1046,7 @@ def skin_scene(head: Head) -> SkinScene:
     from scan2morph.refine import grey
 
     x, y = head.vertices[:, 0] - head.nose[0], head.vertices[:, 1] - head.nose[1]
-    take = _moved(head, head.vertices + _smile(x, y))
+    take = _moved(head, head.vertices + smile_displacement(x, y))
     smiled_w = take.vertices_w
     xyz0, c0, K, R0, C0 = _colour_scan(head, 0.0, 0.0, 1.0, 1.0)
     _, c1, _, R1, C1 = _colour_scan(take, 4.0, 2.0, 0.85, 1.0)
