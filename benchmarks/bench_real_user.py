@@ -1,4 +1,4 @@
-"""The real head through the user's path: mesh scans in a sheet, clicked and without clicks.
+"""The real head through the user's path: mesh, range and RGB-D scans, clicked and without.
 
 Usage::
 
@@ -9,8 +9,9 @@ is written as a user's scans: a neutral and a smiling take (the real-data tests'
 5 mm up and out and the mouth corners 6 mm, moving the vertices and so the texture with them: the
 skin's material motion is known at every point), each an OBJ with its colour map (MTL + image) in
 a scanner frame of its own (a seeded rotation of a few degrees and a few mm), and the hand
-annotation's 68 points moved with them (tests/support/lps_landmarks.py) as landmark files. One
-subject's rows give the landmark files (clicked), another's leave them out (detected); the
+annotation's 68 points moved with them (tests/support/lps_landmarks.py) as landmark files; each
+OBJ also scanned as a range scan and as an RGB-D take (tests/support/real_user.py). Per modality
+one subject's rows give the landmark files (clicked), another's leave them out (detected); the
 workflow runs on the sheet with the default config, as ``make run CONFIG=...`` would.
 
 It prints, per subject, the alignment of the smile against the truth (degrees, mm), the
@@ -54,14 +55,14 @@ def main(argv=None) -> int:
     wall = time.perf_counter() - t0
     print(f"\nworkflow {'finished' if done else 'FAILED'} in {wall:.0f} s ({args.work})")
     print(
-        f"{'subject':9s} {'rot deg':>8s} {'trans mm':>9s} {'motion mm':>10s} {'material':>9s} "
+        f"{'subject':15s} {'rot deg':>8s} {'trans mm':>9s} {'motion mm':>10s} {'material':>9s} "
         f"{'normal mm':>10s} {'tangent mm':>11s} {'vertices':>9s}"
     )
     out = {}
     for subject in SUBJECTS:
         r = out[subject] = evaluate(head, args.work, subject, poses)
         print(
-            f"{subject:9s} {r['rotation_deg']:8.3f} {r['translation_mm']:9.3f} "
+            f"{subject:15s} {r['rotation_deg']:8.3f} {r['translation_mm']:9.3f} "
             f"{r['motion_rms_mm']:10.3f} {r['material_relative_error']:9.3f} "
             f"{r['normal_mm']:10.3f} {r['tangential_mm']:11.3f} {r['vertices']:9d}"
         )

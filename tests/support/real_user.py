@@ -1,12 +1,15 @@
-"""The real head written as a user's mesh scans, and the smile's accuracy in the results.
+"""The real head written as a user's scans, and the smile's accuracy in the results.
 
 The real head of the real-data tests (tests/support/real_head.py) as a neutral and a smiling
 take (:func:`~tests.support.real_head.smile_displacement` moves the vertices, and the texture
 with them: the skin's material motion is known at every point), each an OBJ with its colour map
 in a scanner frame of its own, with the hand annotation's 68 points moved with it
-(tests/support/lps_landmarks.py) as its landmark file; a sheet with one subject that gives the
-landmark files (``clicked``) and one that leaves them out (``detected``). Used by
-``benchmarks/bench_real_user.py`` and ``tests/workflow/test_real_user.py``.
+(tests/support/lps_landmarks.py) as its landmark file; each OBJ also scanned as a range scan
+(XYZ, colour, 0.1 mm noise along the rays) and as an RGB-D take (16-bit depth in 1 mm units with
+a depth camera's noise, 600 mm away at 1 mm per pixel), their landmarks projected onto their
+grids. A sheet holds, per modality, one subject that gives the landmark files (``*_clicked``) and
+one that leaves them out (``*_detected``). Used by ``benchmarks/bench_real_user.py`` and
+``tests/workflow/test_real_user.py``.
 """
 
 from __future__ import annotations
@@ -22,11 +25,24 @@ from scipy.spatial.transform import Rotation
 from tests.support.lps_landmarks import LANDMARKS_MM
 from tests.support.real_head import smile_displacement
 
-#: The subjects of the sheet: with the landmark files, and without.
-SUBJECTS = ("clicked", "detected")
+#: The modalities the scans are written in.
+MODALITIES = ("mesh", "range", "rgbd")
+#: A subject per modality and landmark source: with the landmark files, and without.
+SUBJECTS = tuple(f"{m}_{v}" for m in MODALITIES for v in ("clicked", "detected"))
 #: The scanner frames' motion: standard deviation of the rotation per axis (degrees) and of the
 #: translation per axis (mm).
 POSE_SIGMA = (3.0, 5.0)
+#: The range scanner's noise along each pixel's ray (the synthetic range scanner's default), mm;
+#: its grid is the mesh take's virtual camera (about 0.5 mm per pixel).
+RANGE_NOISE_MM = 0.1
+#: The depth camera (the colour camera with it): 600 mm from the face, 1 mm per pixel; its depth
+#: noise 2 mm x (z / 1 m)^2 in 1 mm units (the synthetic sensor's defaults).
+RGBD_CAMERA = {"distance_mm": 600.0, "pixel_mm": 1.0}
+RGBD_NOISE_MM_AT_1M = 2.0
+#: The colour sensors' noise, grey levels.
+IMAGE_NOISE = 1.5
+#: The takes: (take, kind, label).
+TAKES = (("neutral", "neutral", "neutral"), ("smile", "expression", "smile"))
 
 
 def _pose(rng: np.random.Generator) -> np.ndarray:
@@ -46,9 +62,56 @@ def _smile_at(points: np.ndarray, nose: np.ndarray) -> np.ndarray:
     return smile_displacement(points[:, 0] - nose[0], points[:, 1] - nose[1])
 
 
-def write_scans(head, work: Path, seed: int) -> dict[str, np.ndarray]:
-    """The neutral and the smile as textured OBJs with landmark files, the sheet
-    (``work/subjects.tsv``) and its config (``work/real.yaml``).
+def _noisy_color(color: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    noisy = color.astype(np.float64) + IMAGE_NOISE * rng.standard_normal(color.shape)
+    return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+
+
+def _range_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator) -> dict:
+    """The OBJ scanned by a range scanner: XYZ (.npz, the scan frame) with noise along each
+    pixel's ray, colour (.png) and the landmarks (.pts) on its grid; the sheet's cells."""
+    import cv2
+
+    from scan2morph.io import write_pts
+    from scan2morph.io.mesh_scan import read_mesh_take
+
+    take = read_mesh_take(obj, None, marks)
+    cam = take.xyz @ take.pose[:3, :3].T + take.pose[:3, 3]
+    length = np.linalg.norm(cam, axis=2, keepdims=True)
+    cam = cam * (1.0 + RANGE_NOISE_MM * rng.standard_normal(length.shape) / length)
+    xyz = (cam - take.pose[:3, 3]) @ take.pose[:3, :3]
+    np.savez_compressed(folder / "range.npz", xyz=xyz.astype(np.float32))
+    cv2.imwrite(str(folder / "range.png"), _noisy_color(take.color, rng)[..., ::-1])
+    write_pts(folder / "range.pts", take.landmarks)
+    return {"xyz": "range.npz", "color": "range.png", "landmarks": "range.pts"}
+
+
+def _rgbd_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator):
+    """The OBJ seen by a depth camera: 16-bit depth (1 mm units) with depth-dependent noise,
+    colour, intrinsics YAML and landmarks (.pts); the sheet's cells and the scan frame ->
+    camera pose (4, 4)."""
+    import cv2
+
+    from scan2morph.io import write_pts
+    from scan2morph.io.mesh_scan import read_mesh_take
+
+    take = read_mesh_take(obj, None, marks, RGBD_CAMERA)
+    z = (take.xyz @ take.pose[:3, :3].T + take.pose[:3, 3])[..., 2]
+    z = z + RGBD_NOISE_MM_AT_1M * (z / 1000.0) ** 2 * rng.standard_normal(z.shape)
+    depth = np.where(np.isfinite(z), np.rint(z), 0).astype(np.uint16)
+    cv2.imwrite(str(folder / "depth.png"), depth)
+    cv2.imwrite(str(folder / "color.png"), _noisy_color(take.color, rng)[..., ::-1])
+    (fx, _, cx), (_, fy, cy) = take.K[:2].tolist()
+    intrinsics = dict(width=take.size[0], height=take.size[1], fx=fx, fy=fy, cx=cx, cy=cy)
+    (folder / "intrinsics.yaml").write_text(yaml.safe_dump(intrinsics | {"depth_scale_mm": 1.0}))
+    write_pts(folder / "rgbd.pts", take.landmarks)
+    cells = {"depth": "depth.png", "color": "color.png", "intrinsics": "intrinsics.yaml"}
+    return cells | {"landmarks": "rgbd.pts"}, take.pose
+
+
+def write_scans(head, work: Path, seed: int) -> dict[str, dict[str, np.ndarray]]:
+    """The neutral and the smile as a user's scans in each of :data:`MODALITIES`, the sheet
+    (``work/subjects.tsv``, the :data:`SUBJECTS`) and its config (``work/real.yaml``).
 
     Parameters
     ----------
@@ -57,52 +120,62 @@ def write_scans(head, work: Path, seed: int) -> dict[str, np.ndarray]:
     work : Path
         The working directory.
     seed : int
-        Seed of the scanner frames.
+        Seed of the scanner frames and of the sensors' noise.
 
     Returns
     -------
-    dict take -> (4, 4) float64
-        Each take's scanner pose (model frame -> scan frame).
+    dict modality -> dict take -> (4, 4) float64
+        Each take's pose, model frame -> the take's frame (the mesh's and the range scan's
+        scanner frame; the depth camera's frame).
     """
     from scan2morph.synth.mesh_scan import write_landmarks3d
 
     rng = np.random.default_rng(seed)
     texture = Image.fromarray(head.texture)
-    poses = {}
-    for take in ("neutral", "smile"):
-        poses[take] = pose = _pose(rng)
+    poses: dict[str, dict[str, np.ndarray]] = {m: {} for m in MODALITIES}
+    cells: dict[tuple[str, str], dict[str, str]] = {}
+    for take, _, _ in TAKES:
+        pose = _pose(rng)
         v, lm = head.vertices, LANDMARKS_MM
         if take == "smile":
             v, lm = v + _smile_at(v, head.nose), lm + _smile_at(lm, head.nose)
         visual = trimesh.visual.TextureVisuals(uv=head.uv, image=texture)
         folder = work / "scans" / take
         folder.mkdir(parents=True, exist_ok=True)
-        mesh = trimesh.Trimesh(_moved(v, pose), head.faces, visual=visual, process=False)
-        mesh.export(folder / f"{take}.obj")
-        write_landmarks3d(folder / f"{take}.txt", _moved(lm, pose))
-    header = ["subject", "take", "kind", "label", "modality", "mesh", "landmarks"]
+        obj, marks = folder / f"{take}.obj", folder / f"{take}.txt"
+        trimesh.Trimesh(_moved(v, pose), head.faces, visual=visual, process=False).export(obj)
+        write_landmarks3d(marks, _moved(lm, pose))
+        cells["mesh", take] = {"mesh": obj.name, "landmarks": marks.name}
+        cells["range", take] = _range_take(obj, marks, folder, rng)
+        cells["rgbd", take], camera = _rgbd_take(obj, marks, folder, rng)
+        poses["mesh"][take] = poses["range"][take] = pose
+        poses["rgbd"][take] = camera @ pose
+    header = ["subject", "take", "kind", "label", "modality", "mesh", "xyz", "color", "depth"]
+    header += ["intrinsics", "landmarks"]
     rows = []
     for subject in SUBJECTS:
-        for take, kind, label in (
-            ("neutral", "neutral", "neutral"),
-            ("smile", "expression", "smile"),
-        ):
-            marks = f"scans/{take}/{take}.txt" if subject == "clicked" else ""
-            rows.append([subject, take, kind, label, "mesh", f"scans/{take}/{take}.obj", marks])
+        modality, source = subject.split("_")
+        for take, kind, label in TAKES:
+            given = {k: f"scans/{take}/{f}" for k, f in cells[modality, take].items()}
+            if source == "detected":
+                given["landmarks"] = ""
+            rows.append(
+                [subject, take, kind, label, modality, *(given.get(c, "") for c in header[5:])]
+            )
     (work / "subjects.tsv").write_text("\n".join("\t".join(r) for r in [header, *rows]) + "\n")
     config = {"subjects": str(work / "subjects.tsv"), "synthetic": {"subjects": 0}}
     (work / "real.yaml").write_text(yaml.safe_dump(config))
     return poses
 
 
-def evaluate(head, work: Path, subject: str, poses: dict[str, np.ndarray]) -> dict:
+def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarray]]) -> dict:
     """The smile's alignment and material error in a subject's store."""
     from scan2morph.align import rotation_angle_deg
     from scan2morph.geometry import vertex_normals
     from scan2morph.store import paths, read_part
 
     store = read_part(work / "results" / subject / f"{subject}.h5")
-    a, b = poses["neutral"], poses["smile"]
+    a, b = (poses[subject.split("_")[0]][take] for take in ("neutral", "smile"))
     true_transform = a @ np.linalg.inv(b)  # smile scan frame -> neutral scan frame
     got = np.asarray(store[paths.align("smile", "transform")], dtype=np.float64)
     delta = got @ np.linalg.inv(true_transform)
@@ -112,13 +185,15 @@ def evaluate(head, work: Path, subject: str, poses: dict[str, np.ndarray]) -> di
     truth = _smile_at(model, head.nose) @ a[:3, :3].T
     field = np.asarray(store[paths.expression("smile", "displacement")], dtype=np.float64)
     ok = np.isfinite(field).all(axis=1) & np.isfinite(nv).all(axis=1)
+    centre = nv[np.isfinite(nv).all(axis=1)].mean(axis=0)
     err = field[ok] - truth[ok]
     normals = vertex_normals(nv, faces)[ok]
     along = np.einsum("ij,ij->i", err, normals)
     rms = float(np.sqrt(np.mean(np.sum(truth[ok] ** 2, axis=1))))
     return {
         "rotation_deg": float(rotation_angle_deg(delta[:3, :3])),
-        "translation_mm": float(np.linalg.norm(delta[:3, 3])),
+        # at the face (an RGB-D take's frame has its origin at the camera, 600 mm away)
+        "translation_mm": float(np.linalg.norm(delta[:3, :3] @ centre + delta[:3, 3] - centre)),
         "motion_rms_mm": rms,
         "material_relative_error": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) / rms,
         "normal_mm": float(np.sqrt(np.mean(along**2))),

@@ -244,6 +244,12 @@ def test_texture_uv_maps_pixel_centres_and_image_corners():
         [[0.5 / W, 0.5 / H], [1 - 0.5 / W, 1 - 0.5 / H], [0, 0], [1, 1]],
         atol=1e-15,
     )
+    # beyond the image's edge (a template reaching past a face that fills its image): the
+    # edge's texel, so that the exports' texture coordinates stay in [0, 1]
+    beyond = np.array([[-13.0, 20.0], [W + 4.0, -30.0], [10.0, H + 0.1]])
+    np.testing.assert_allclose(
+        texture_uv(beyond, W, H), [[0, 20.5 / H], [1, 0], [10.5 / W, 1]], atol=1e-15
+    )
 
 
 def test_fold_check_counts_flipped_triangles(template):

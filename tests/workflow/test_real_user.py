@@ -1,9 +1,14 @@
-"""The real head through the user's path (tests/support/real_user.py): two textured OBJ scans of
-it, a neutral and a smile whose material motion is known at every point, in scanner frames of
-their own, in a sheet, once with the hand annotation's landmark files and once without; the
-workflow runs them with the default config. Measured (benchmarks/bench_real_user.py, seeds 7 and
-8): the smile aligned 0.03 / 0.05 degrees and 0.05-0.08 mm off the truth; its displacement's
-material error 0.050 of the motion clicked, 0.065 detected (1.30x)."""
+"""The real head through the user's path (tests/support/real_user.py): a neutral and a smile whose
+material motion is known at every point, as textured OBJ scans, as range scans and as RGB-D takes
+(with their sensors' noise), in scanner frames of their own, in a sheet, each once with landmark
+files and once without; the workflow runs them with the default config.
+
+Measured (benchmarks/bench_real_user.py, seeds 7 and 8), material error of the smile's
+displacement, clicked / detected: mesh 0.050 / 0.065, range 0.119-0.124 / 0.083-0.087, RGB-D
+0.190-0.199 / 0.198-0.234; alignment within 0.06 degrees on mesh and range scans, 0.14 / 0.03-0.30
+on RGB-D, and 0.07 mm at the face. The range scans' clicked run is worse than their detected
+one: the jaw prior takes the smile's pull on the chin for a rigid 8-degree turn of it (with the
+prior off, 0.078; the noise-free mesh scans' chin fails its gate)."""
 
 from __future__ import annotations
 
@@ -20,18 +25,23 @@ pytestmark = [
     pytest.mark.skipif(not GLB.is_file(), reason=f"real head scan absent: {GLB}"),
 ]
 
+#: Asserted bounds per modality: rotation (degrees), material error clicked, detected.
+BOUNDS = {"mesh": (0.1, 0.08, 0.10), "range": (0.1, 0.16, 0.12), "rgbd": (0.45, 0.26, 0.30)}
 
-def test_a_real_smile_in_mesh_scans_with_and_without_landmark_files(tmp_path):
+
+def test_a_real_smile_in_every_modality_with_and_without_landmark_files(tmp_path):
     head = load_real_head()
     poses = write_scans(head, tmp_path, seed=7)
     targets = [f"results/{s}/{s}.h5" for s in SUBJECTS]
     assert run_workflow(tmp_path, tmp_path / "real.yaml", targets)
-    clicked, detected = (evaluate(head, tmp_path, s, poses) for s in SUBJECTS)
-    for r in (clicked, detected):
-        assert r["rotation_deg"] < 0.1 and r["translation_mm"] < 0.2, r
-        assert r["vertices"] > 1600, r  # of the template's 1682
-    assert clicked["material_relative_error"] < 0.08, clicked
-    assert detected["material_relative_error"] < 0.10, detected
-    # the detection on a real face is doubtful, and says so
-    assert any("detected landmarks are doubtful" in w for w in detected["warnings"])
-    assert not any("detected" in w for w in clicked["warnings"])
+    for subject in SUBJECTS:
+        r = evaluate(head, tmp_path, subject, poses)
+        modality, source = subject.split("_")
+        max_rot, clicked, detected = BOUNDS[modality]
+        assert r["rotation_deg"] < max_rot and r["translation_mm"] < 0.2, (subject, r)
+        assert r["vertices"] > 1600, (subject, r)  # of the template's 1682
+        bound = clicked if source == "clicked" else detected
+        assert r["material_relative_error"] < bound, (subject, r)
+        # a detection on a real face is doubtful, and says so; clicks raise no such warning
+        doubtful = any("detected landmarks are doubtful" in w for w in r["warnings"])
+        assert doubtful == (source == "detected"), (subject, r["warnings"])

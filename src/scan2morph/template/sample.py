@@ -309,10 +309,14 @@ def texture_uv(points: np.ndarray, width: int, height: int) -> np.ndarray:
     -------
     uv : (V, 2) float64
         ``u = (x + 0.5) / W``, ``v = (y + 0.5) / H``: image convention, origin at the top-left
-        corner of the image (as glTF); the OBJ writer flips v.
+        corner of the image (as glTF); the OBJ writer flips v. Clipped to [0, 1]: a vertex
+        beyond the image's edge (it has no range data, so it is invalid; a template fitted to
+        a face that fills its image reaches past the edge) takes the edge's texel, as a glTF
+        sampler's clamp-to-edge would, and the exports stay valid.
     """
     points = np.asarray(points, dtype=np.float64)
-    return np.column_stack([(points[:, 0] + 0.5) / width, (points[:, 1] + 0.5) / height])
+    uv = np.column_stack([(points[:, 0] + 0.5) / width, (points[:, 1] + 0.5) / height])
+    return np.clip(uv, 0.0, 1.0)
 
 
 def folded_faces(points2d: np.ndarray, faces: np.ndarray) -> np.ndarray:
