@@ -401,6 +401,36 @@ def test_the_prior_fills_in_where_the_flow_measured_nothing():
     np.testing.assert_allclose(confidence, [1.0, 1.0, 0.75, 0.0])
 
 
+def test_a_confident_flow_elsewhere_than_the_rigid_motion_vetoes_the_prior():
+    """Known answers on 20 chin vertices (weight 1; four at weight 0.2, outside the judged chin)
+    whose rigid motion puts them at (10, 10): a flow confident on 80% of them 5 px away vetoes
+    the prior (the chin did not move rigidly), 2 px away does not (a jaw opening's foreshortened
+    skin); confident on 30% of them 5 px away does not (too little measured to judge; a jaw
+    opening leaves the flow unsure over most of the chin); nor does a prior not used."""
+    from scan2morph.refine.jaw import MAX_FLOW_DISAGREEMENT_PX, JawPrior
+
+    weight = np.r_[np.ones(20), np.full(4, 0.2)]
+    prior = JawPrior(np.full((24, 2), 10.0), weight, None, True, "", 1.0)
+
+    def flow(apart_px, sure):
+        confidence = np.zeros(24)
+        confidence[:sure] = 0.9
+        confidence[20:] = 1.0  # the vertices outside the judged chin never count
+        return np.full((24, 2), 10.0 + apart_px / np.sqrt(2.0)), confidence
+
+    veto = prior.contradiction(*flow(5.0, 16))
+    assert veto.startswith("the texture contradicts it: the flow measured 16 of the chin's 20")
+    assert "a median 5.0 px" in veto and f"(at most {MAX_FLOW_DISAGREEMENT_PX:g})" in veto
+    assert prior.contradiction(*flow(2.0, 16)) == ""
+    assert prior.contradiction(*flow(5.0, 6)) == ""
+    refused = prior.refused(veto)
+    assert not refused.used and refused.problem == veto and not refused.weight.any()
+    assert refused.contradiction(*flow(5.0, 16)) == ""
+    # the gate's share scales the weights: the judged chin is the same at half a share
+    half = JawPrior(np.full((24, 2), 10.0), 0.5 * weight, None, True, "", 0.5)
+    assert half.contradiction(*flow(5.0, 16)) == veto
+
+
 def test_jaw_prior_on_noise_free_scans_and_without_still_skin():
     """Noise-free scans: the still skin leaves almost nothing, and the gate's floor
     (MIN_LIMIT_MM) keeps a rigid chin; no still skin: refused, and said so."""

@@ -260,6 +260,8 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         report["confidence"] = np.zeros(len(points))
     neutral_points = maps[0](fine.vertices)  # the neutral's skin points, px
     jaw = _jaw(template, fine, name, neutral, data, neutral_points, params, source)
+    if veto := jaw.contradiction(refined, report["confidence"]):
+        jaw = jaw.refused(veto)
     if jaw.used:  # the geometry's answer where the texture gave none
         refined, report["confidence"] = jaw.fill(refined, report["confidence"])
     elif params.jaw.prior:
