@@ -739,26 +739,27 @@ def test_the_unit_named_is_the_one_that_gives_a_head_its_usual_size():
     assert likely_unit(1e9, MESH_EXTENT_MM) is None
 
 
-def test_a_face_too_small_for_its_nose_names_the_mesh_size(mesh_files, tmp_path):
-    """A head 85 mm across as read (the real head given in cm, as the old guess had it) passes
-    the size check but has no face profile around its nose at that scale: the refusal says how
-    big the mesh is as read and where its unit goes."""
+def test_a_face_too_small_for_its_nose_names_the_mesh_size(mesh_files):
+    """A mesh whose nose has no face profile 8-20 mm around it (the real head given in cm, 85 mm
+    across, as the old unit guess had it, met this after its nose search): the refusal says how
+    big the mesh is as read and where its unit goes. The scan's own view, its head and nose
+    scaled down 20 times: 19 mm across, no profile that far from the tip."""
+    import dataclasses
+
     import trimesh
 
+    from scan2morph.io.mesh_view import face_up, face_view
+
     scan = mesh_files["scan"]
-    trimesh.Trimesh(scan["vertices"] / 4.5, scan["faces"], process=False).export(
-        tmp_path / "small.ply"
-    )
+    view = face_view(trimesh.Trimesh(scan["vertices"], scan["faces"], process=False))
     with pytest.raises(
         InputError,
         match=r"small.ply: mesh: no surface 8-20 mm from the nose tip along the face's profile "
-        r"\(expected a face around the nose; the mesh is 84.8\d mm across: if that is not its "
+        r"\(expected a face around the nose; the mesh is 19.0\d mm across: if that is not its "
         r"true size, give its unit in the sheet's units column\)",
     ):
-        _run_ingest(
-            dict(ROW, modality="mesh"),
-            {"mesh": str(tmp_path / "small.ply")},
-            {"width": 160, "height": 120},
+        face_up(
+            scan["vertices"] / 20.0, dataclasses.replace(view, tip=view.tip / 20.0), "small.ply"
         )
 
 
