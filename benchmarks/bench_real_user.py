@@ -1,4 +1,4 @@
-"""The real head through the user's path: mesh, range and RGB-D scans, clicked and without.
+"""The real head through the user's path: mesh, range, RGB-D and stereo scans, clicked and not.
 
 Usage::
 
@@ -10,7 +10,8 @@ is written as a user's scans: a neutral and a smiling take (the real-data tests'
 skin's material motion is known at every point), each an OBJ with its colour map (MTL + image) in
 a scanner frame of its own (a seeded rotation of a few degrees and a few mm), and the hand
 annotation's 68 points moved with them (tests/support/lps_landmarks.py) as landmark files; each
-OBJ also scanned as a range scan and as an RGB-D take (tests/support/real_user.py). Per modality
+OBJ also scanned as a range scan and as an RGB-D take, and the head seen by the real-data tests'
+stereo rig (tests/support/real_user.py). Per modality
 one subject's rows give the landmark files (clicked), another's leave them out (detected); the
 workflow runs on the sheet with the default config, as ``make run CONFIG=...`` would.
 

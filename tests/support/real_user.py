@@ -7,7 +7,8 @@ in a scanner frame of its own, with the hand annotation's 68 points moved with i
 (tests/support/lps_landmarks.py) as its landmark file; each OBJ also scanned as a range scan
 (XYZ, colour, 0.1 mm noise along the rays) and as an RGB-D take (16-bit depth in 1 mm units with
 a depth camera's noise, 600 mm away at 1 mm per pixel), their landmarks projected onto their
-grids. A sheet holds, per modality, one subject that gives the landmark files (``*_clicked``) and
+grids; and the head seen by the real-data tests' stereo rig, which stays where it is while the head
+moves (its speckle is projected from the rig: it does not move with the skin). A sheet holds, per modality, one subject that gives the landmark files (``*_clicked``) and
 one that leaves them out (``*_detected``). Used by ``benchmarks/bench_real_user.py`` and
 ``tests/workflow/test_real_user.py``.
 """
@@ -26,7 +27,7 @@ from tests.support.lps_landmarks import LANDMARKS_MM
 from tests.support.real_head import smile_displacement
 
 #: The modalities the scans are written in.
-MODALITIES = ("mesh", "range", "rgbd")
+MODALITIES = ("mesh", "range", "rgbd", "stereo")
 #: A subject per modality and landmark source: with the landmark files, and without.
 SUBJECTS = tuple(f"{m}_{v}" for m in MODALITIES for v in ("clicked", "detected"))
 #: The scanner frames' motion: standard deviation of the rotation per axis (degrees) and of the
@@ -109,9 +110,38 @@ def _rgbd_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator):
     return cells | {"landmarks": "rgbd.pts"}, take.pose
 
 
-def write_scans(head, work: Path, seed: int) -> dict[str, dict[str, np.ndarray]]:
-    """The neutral and the smile as a user's scans in each of :data:`MODALITIES`, the sheet
-    (``work/subjects.tsv``, the :data:`SUBJECTS`) and its config (``work/real.yaml``).
+def _stereo_take(head, moved: np.ndarray, rig: list, folder: Path, seed: int, lm: np.ndarray):
+    """The head, its vertices at ``moved`` (model frame, mm), seen by the real-data tests' stereo
+    rig (``rig``, fixed while the head moves: the speckle is projected from it, so it does not
+    move with the skin): both images, the calibration and the landmarks ``lm`` (68, 3) (model
+    frame) on the left image; the sheet's cells and the model -> left camera pose (4, 4)."""
+    import cv2
+
+    from scan2morph.io import write_pts
+    from scan2morph.io.calibration import write_stereo_calibration
+    from tests.unit import test_realdata as rd
+
+    pair = rd.render_stereo_pair(rd._moved(head, moved), seed, rig)
+    cv2.imwrite(str(folder / "left.png"), pair.left[..., ::-1])
+    cv2.imwrite(str(folder / "right.png"), pair.right[..., ::-1])
+    write_stereo_calibration(folder / "calib.yaml", pair.calib)
+    left = rig[0]  # camera -> scanner rotation R, centre C
+    pose = np.eye(4)
+    pose[:3, :3] = left["R"].T @ head.R_w
+    pose[:3, 3] = left["R"].T @ (head.t_w - left["C"])
+    cam = _moved(lm, pose)
+    px, _ = cv2.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), left["K"], left["D"])
+    write_pts(folder / "stereo.pts", px.reshape(-1, 2))
+    cells = {"left": "left.png", "right": "right.png", "calibration": "calib.yaml"}
+    return cells | {"landmarks": "stereo.pts"}, pose
+
+
+def write_scans(
+    head, work: Path, seed: int, modalities: tuple[str, ...] = MODALITIES
+) -> dict[str, dict[str, np.ndarray]]:
+    """The neutral and the smile as a user's scans in each of ``modalities`` (the mesh scans
+    always: the others are scanned from them), the sheet (``work/subjects.tsv``: those of
+    :data:`SUBJECTS`) and its config (``work/real.yaml``).
 
     Parameters
     ----------
@@ -121,19 +151,25 @@ def write_scans(head, work: Path, seed: int) -> dict[str, dict[str, np.ndarray]]
         The working directory.
     seed : int
         Seed of the scanner frames and of the sensors' noise.
+    modalities : tuple of str
+        Of :data:`MODALITIES`.
 
     Returns
     -------
     dict modality -> dict take -> (4, 4) float64
         Each take's pose, model frame -> the take's frame (the mesh's and the range scan's
-        scanner frame; the depth camera's frame).
+        scanner frame; the depth camera's and the left camera's frame).
     """
     from scan2morph.synth.mesh_scan import write_landmarks3d
 
     rng = np.random.default_rng(seed)
     texture = Image.fromarray(head.texture)
-    poses: dict[str, dict[str, np.ndarray]] = {m: {} for m in MODALITIES}
+    poses: dict[str, dict[str, np.ndarray]] = {m: {} for m in modalities}
     cells: dict[tuple[str, str], dict[str, str]] = {}
+    from tests.unit import test_realdata as rd
+
+    rig = rd._rig(head)  # the stereo rig stays where it is for both takes
+    wanted = set(modalities)
     for take, _, _ in TAKES:
         pose = _pose(rng)
         v, lm = head.vertices, LANDMARKS_MM
@@ -146,14 +182,22 @@ def write_scans(head, work: Path, seed: int) -> dict[str, dict[str, np.ndarray]]
         trimesh.Trimesh(_moved(v, pose), head.faces, visual=visual, process=False).export(obj)
         write_landmarks3d(marks, _moved(lm, pose))
         cells["mesh", take] = {"mesh": obj.name, "landmarks": marks.name}
-        cells["range", take] = _range_take(obj, marks, folder, rng)
-        cells["rgbd", take], camera = _rgbd_take(obj, marks, folder, rng)
-        poses["mesh"][take] = poses["range"][take] = pose
-        poses["rgbd"][take] = camera @ pose
+        poses["mesh"][take] = pose
+        if "range" in wanted:
+            cells["range", take] = _range_take(obj, marks, folder, rng)
+            poses["range"][take] = pose
+        if "rgbd" in wanted:
+            cells["rgbd", take], camera = _rgbd_take(obj, marks, folder, rng)
+            poses["rgbd"][take] = camera @ pose
+        if "stereo" in wanted:  # the rig sees the head moved by its scanner pose
+            cells["stereo", take], left = _stereo_take(
+                head, _moved(v, pose), rig, folder, seed + len(poses["stereo"]), _moved(lm, pose)
+            )
+            poses["stereo"][take] = left @ pose
     header = ["subject", "take", "kind", "label", "modality", "mesh", "xyz", "color", "depth"]
-    header += ["intrinsics", "landmarks"]
+    header += ["intrinsics", "left", "right", "calibration", "landmarks"]
     rows = []
-    for subject in SUBJECTS:
+    for subject in (s for s in SUBJECTS if s.split("_")[0] in wanted):
         modality, source = subject.split("_")
         for take, kind, label in TAKES:
             given = {k: f"scans/{take}/{f}" for k, f in cells[modality, take].items()}

@@ -162,7 +162,7 @@ def test_landmarks_outside_the_image_or_nan(tmp_path, take):
     [
         (
             1e-3,
-            r"are 0\.09\d+ mm apart in 3D, expected 70-130 mm \(the coordinates look like metres",
+            r"are 0\.09\d+ mm apart in 3D, expected 50-150 mm \(the coordinates look like metres",
         ),
         (0.1, r"are 9\.\d+ mm apart .* \(the coordinates look like cm"),
         (3.0, r"are 28\d\.\d mm apart .* \(a face 2\.\d times the usual size\)"),
@@ -735,7 +735,7 @@ def test_the_unit_named_is_the_one_that_gives_a_head_its_usual_size():
     assert likely_unit(8.553, MESH_EXTENT_MM) == "inches"
     assert likely_unit(38.17, MESH_EXTENT_MM) == "cm"
     assert likely_unit(0.38, MESH_EXTENT_MM) == "metres"
-    assert likely_unit(0.09, (70.0, 130.0)) == "metres"
+    assert likely_unit(0.09, (50.0, 150.0)) == "metres"
     assert likely_unit(1e9, MESH_EXTENT_MM) is None
 
 

@@ -543,13 +543,16 @@ def _shade(head: Head, hit: dict, points: np.ndarray, rig: list[dict], pattern: 
     return np.where(miss[..., None], 0.0, value)
 
 
-@pytest.fixture(scope="module")
-def stereo_pair(head) -> StereoPair:
+def render_stereo_pair(head: Head, seed: int = SEED + 2, rig: list | None = None) -> StereoPair:
+    """The head seen by the test rig (:func:`_rig`, or ``rig``: a rig that stays where it was
+    while the head moves): both images (2 x 2 supersampled, the projected speckle over the
+    colour map, 1 grey level of sensor noise; ``seed``), the calibration and the left pixels'
+    truth."""
     t0 = time.perf_counter()
-    rng = np.random.default_rng(SEED + 2)
+    rng = np.random.default_rng(seed)
     pattern = ndimage.gaussian_filter(rng.random((PATTERN_PX, PATTERN_PX)), 0.6)
     pattern = np.clip(128.0 + 55.0 * (pattern - pattern.mean()) / pattern.std(), 5.0, 250.0)
-    rig = _rig(head)
+    rig = _rig(head) if rig is None else rig
     images = []
     sub = np.array([-0.25, 0.25])
     ys, xs, dy, dx = np.meshgrid(np.arange(HEIGHT), np.arange(WIDTH), sub, sub, indexing="ij")
@@ -579,6 +582,11 @@ def stereo_pair(head) -> StereoPair:
     front = face & (-np.sum(normal * rays_w, axis=-1) > np.cos(np.deg2rad(60.0)))
     render_s = time.perf_counter() - t0
     return StereoPair(images[0], images[1], calib, xyz, face, front, render_s)
+
+
+@pytest.fixture(scope="module")
+def stereo_pair(head) -> StereoPair:
+    return render_stereo_pair(head)
 
 
 def test_stereo_on_real_geometry(stereo_pair):

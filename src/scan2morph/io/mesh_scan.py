@@ -536,7 +536,7 @@ def read_mesh_take(
     Raises
     ------
     InputError
-        From :func:`read_mesh` and :func:`read_landmarks3d`; a face not 70-130 mm across the
+        From :func:`read_mesh` and :func:`read_landmarks3d`; a face not 50-150 mm across the
         outer eye corners, or a mesh not 60-1000 mm across (names the unit it looks like);
         landmarks off the mesh; landmarks
         whose surface faces away from the camera (mirrored: iBUG 37 must be the subject's right

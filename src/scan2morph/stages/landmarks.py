@@ -39,12 +39,6 @@ from scan2morph.store import paths
 SECTIONS = ("landmarks",)
 #: ``source`` of a take's landmarks.
 CLICKED, DETECTED, JAWLINE_DETECTED = "clicked", "detected", "clicked+detected jawline"
-#: The outer eye corners' accepted 3D distance for detected landmarks, mm. Clicked ones must lie
-#: 70-130 mm apart (:data:`~scan2morph.io.take.EYE_SPAN_MM`: a wrong unit shows there); a
-#: detection has found its face at a metric scale already, so the check only catches a detection
-#: far off (the real head's, 8 px off, puts them 68 mm apart against its annotation's 76 mm: it
-#: goes on, flagged doubtful, and the report shows it for correction).
-DETECTED_EYE_SPAN_MM = (50.0, 150.0)
 #: The image correlation that tracks a take's points from the neutral: the refinement's default
 #: high-pass, noise, consistency and correlation tests.
 FLOW = RefineParams()
@@ -178,9 +172,10 @@ def settle(clicks: np.ndarray | None, color: np.ndarray, xyz: np.ndarray, source
             "; these landmarks were detected: a detection this far off is wrong, give the take's "
             "landmarks in the sheet's landmarks column"
         )
-        check_face(
-            xyz, out.points, source, f"{source} (detected landmarks)", hint, DETECTED_EYE_SPAN_MM
-        )
+        # the clicks' band (:data:`~scan2morph.io.take.EYE_SPAN_MM`) catches a detection far off
+        # too (the real head's, 8 px off, puts them 68 mm apart against its annotation's 76 mm:
+        # it goes on, flagged doubtful, and the report shows it for correction)
+        check_face(xyz, out.points, source, f"{source} (detected landmarks)", hint)
     else:  # the eye corners are clicked (a 51-point file): the clicks' band
         check_face(xyz, out.points, source, f"{source} (detected jawline)")
     return out
