@@ -23,6 +23,7 @@ import yaml
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
+from scan2morph.align import invert, transform_points
 from tests.support.lps_landmarks import LANDMARKS_MM
 from tests.support.real_head import smile_displacement
 
@@ -54,10 +55,6 @@ def _pose(rng: np.random.Generator) -> np.ndarray:
     return pose
 
 
-def _moved(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    return points @ pose[:3, :3].T + pose[:3, 3]
-
-
 def _smile_at(points: np.ndarray, nose: np.ndarray) -> np.ndarray:
     """The smile's displacement (n, 3) at model-frame points (n, 3), mm."""
     return smile_displacement(points[:, 0] - nose[0], points[:, 1] - nose[1])
@@ -77,10 +74,10 @@ def _range_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator) 
     from scan2morph.io.mesh_scan import read_mesh_take
 
     take = read_mesh_take(obj, None, marks)
-    cam = take.xyz @ take.pose[:3, :3].T + take.pose[:3, 3]
+    cam = transform_points(take.pose, take.xyz)
     length = np.linalg.norm(cam, axis=2, keepdims=True)
     cam = cam * (1.0 + RANGE_NOISE_MM * rng.standard_normal(length.shape) / length)
-    xyz = (cam - take.pose[:3, 3]) @ take.pose[:3, :3]
+    xyz = transform_points(invert(take.pose), cam)
     np.savez_compressed(folder / "range.npz", xyz=xyz.astype(np.float32))
     cv2.imwrite(str(folder / "range.png"), _noisy_color(take.color, rng)[..., ::-1])
     write_pts(folder / "range.pts", take.landmarks)
@@ -97,7 +94,7 @@ def _rgbd_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator):
     from scan2morph.io.mesh_scan import read_mesh_take
 
     take = read_mesh_take(obj, None, marks, RGBD_CAMERA)
-    z = (take.xyz @ take.pose[:3, :3].T + take.pose[:3, 3])[..., 2]
+    z = transform_points(take.pose, take.xyz)[..., 2]
     z = z + RGBD_NOISE_MM_AT_1M * (z / 1000.0) ** 2 * rng.standard_normal(z.shape)
     depth = np.where(np.isfinite(z), np.rint(z), 0).astype(np.uint16)
     cv2.imwrite(str(folder / "depth.png"), depth)
@@ -129,7 +126,7 @@ def _stereo_take(head, moved: np.ndarray, rig: list, folder: Path, seed: int, lm
     pose = np.eye(4)
     pose[:3, :3] = left["R"].T @ head.R_w
     pose[:3, 3] = left["R"].T @ (head.t_w - left["C"])
-    cam = _moved(lm, pose)
+    cam = transform_points(pose, lm)
     px, _ = cv2.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), left["K"], left["D"])
     write_pts(folder / "stereo.pts", px.reshape(-1, 2))
     cells = {"left": "left.png", "right": "right.png", "calibration": "calib.yaml"}
@@ -179,8 +176,9 @@ def write_scans(
         folder = work / "scans" / take
         folder.mkdir(parents=True, exist_ok=True)
         obj, marks = folder / f"{take}.obj", folder / f"{take}.txt"
-        trimesh.Trimesh(_moved(v, pose), head.faces, visual=visual, process=False).export(obj)
-        write_landmarks3d(marks, _moved(lm, pose))
+        scanned, scanned_lm = transform_points(pose, v), transform_points(pose, lm)
+        trimesh.Trimesh(scanned, head.faces, visual=visual, process=False).export(obj)
+        write_landmarks3d(marks, scanned_lm)
         cells["mesh", take] = {"mesh": obj.name, "landmarks": marks.name}
         poses["mesh"][take] = pose
         if "range" in wanted:
@@ -191,7 +189,7 @@ def write_scans(
             poses["rgbd"][take] = camera @ pose
         if "stereo" in wanted:  # the rig sees the head moved by its scanner pose
             cells["stereo", take], left = _stereo_take(
-                head, _moved(v, pose), rig, folder, seed + len(poses["stereo"]), _moved(lm, pose)
+                head, scanned, rig, folder, seed + len(poses["stereo"]), scanned_lm
             )
             poses["stereo"][take] = left @ pose
     header = ["subject", "take", "kind", "label", "modality", "mesh", "xyz", "color", "depth"]
@@ -225,7 +223,7 @@ def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarr
     delta = got @ np.linalg.inv(true_transform)
     nv = np.asarray(store[paths.mesh("neutral", "vertices")], dtype=np.float64)
     faces = np.asarray(store[paths.template("faces")])
-    model = (nv - a[:3, 3]) @ a[:3, :3]  # neutral scan frame -> model frame
+    model = transform_points(invert(a), nv)  # neutral scan frame -> model frame
     truth = _smile_at(model, head.nose) @ a[:3, :3].T
     field = np.asarray(store[paths.expression("smile", "displacement")], dtype=np.float64)
     ok = np.isfinite(field).all(axis=1) & np.isfinite(nv).all(axis=1)

@@ -198,10 +198,15 @@ class JawPrior:
             "move rigidly"
         )
 
+    @classmethod
+    def unused(cls, n: int, problem: str, motion: AlignResult | None = None) -> JawPrior:
+        """A prior that is not used, for ``n`` template vertices, and why (``motion``: the
+        chin's registration, when there was one, kept for the record)."""
+        return cls(np.full((n, 2), np.nan), np.zeros(n), motion, False, problem)
+
     def refused(self, problem: str) -> JawPrior:
         """This prior not used, for ``problem`` (its registration kept for the record)."""
-        n = len(self.weight)
-        return JawPrior(np.full((n, 2), np.nan), np.zeros(n), self.motion, False, problem)
+        return JawPrior.unused(len(self.weight), problem, self.motion)
 
     def fill(self, points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The prior where the flow measured nothing: each point moves towards it by its weight
@@ -353,10 +358,9 @@ def jaw_prior(
     )
     xyz = _checked_scan(take_xyz, take_transform, source)
     n = len(weights)
-    none = np.full((n, 2), np.nan)
 
     def refused(problem, motion=None):
-        return JawPrior(none, np.zeros(n), motion, False, problem)
+        return JawPrior.unused(n, problem, motion)
 
     core = (weights >= 1.0) & neutral_valid
     both = core & take_valid
@@ -392,7 +396,7 @@ def jaw_prior(
         return refused(problem, motion)
     share = gate_share(motion.residual_rmse, full, limit)
     moved = transform_points(motion.transform, neutral[near])
-    points = none.copy()
+    points = np.full((n, 2), np.nan)
     points[near] = offset + range_pixels(
         window, transform_points(invert(take_transform), moved), source=source
     )

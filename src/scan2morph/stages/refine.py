@@ -445,8 +445,7 @@ def _jaw(template, fine, take, neutral, data, neutral_points, params: Params, so
     The neutral's mesh is sampled here from its range image at ``neutral_points`` (its fit's
     pixels, (V, 2)): a click-noise draw refits the neutral with other clicks."""
     if not params.jaw.prior:
-        n = len(fine.vertices)
-        return JawPrior(np.full((n, 2), np.nan), np.zeros(n), None, False, "off")
+        return JawPrior.unused(len(fine.vertices), "off")
     weights = chin_weights(fine.vertices, template.ibug_xy, params.jaw.start, params.jaw.end)
     neutral_vertices, neutral_valid = sample_mesh(
         need(data, paths.range_image(neutral, "xyz"), source),
