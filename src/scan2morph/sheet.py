@@ -55,10 +55,11 @@ FILES = {
 }
 #: File columns a modality may have (used when not empty): the landmarks (without them they are
 #: detected), a mesh's texture, when the mesh file does not reference one; a range scan's colour
-#: image (without it the take is geometry only).
+#: image (without it the take is geometry only); a stereo take's texture shot (the left camera's
+#: view without the rig's projected pattern; without it the left image is the colour).
 OPTIONAL_FILES = {
     "range": ("color", "landmarks"),
-    "stereo": ("landmarks",),
+    "stereo": ("color", "landmarks"),
     "mesh": ("texture", "landmarks"),
     "rgbd": ("landmarks",),
 }

@@ -8,8 +8,10 @@ in a scanner frame of its own, with the hand annotation's 68 points moved with i
 (XYZ, colour, 0.1 mm noise along the rays) and as an RGB-D take (16-bit depth in 1 mm units with
 a depth camera's noise, 600 mm away at 1 mm per pixel), their landmarks projected onto their
 grids; and the head seen by the real-data tests' stereo rig, which stays where it is while the head
-moves (its speckle is projected from the rig: it does not move with the skin). A sheet holds, per modality, one subject that gives the landmark files (``*_clicked``) and
-one that leaves them out (``*_detected``). Used by ``benchmarks/bench_real_user.py`` and
+moves (its speckle is projected from the rig: it does not move with the skin), its takes'
+colour once the left image and once the left camera's texture shot (the projector off). A sheet
+holds, per scan, one subject that gives the landmark files (``*_clicked``) and one that leaves
+them out (``*_detected``). Used by ``benchmarks/bench_real_user.py`` and
 ``tests/workflow/test_real_user.py``.
 """
 
@@ -27,9 +29,10 @@ from scan2morph.align import invert, transform_points
 from tests.support.lps_landmarks import LANDMARKS_MM
 from tests.support.real_head import smile_displacement
 
-#: The modalities the scans are written in.
-MODALITIES = ("mesh", "range", "rgbd", "stereo")
-#: A subject per modality and landmark source: with the landmark files, and without.
+#: The scans written: a modality each, and ``stereo-shot``, the stereo takes with the left
+#: camera's texture shot (the projector off) as their colour.
+MODALITIES = ("mesh", "range", "rgbd", "stereo", "stereo-shot")
+#: A subject per scan and landmark source: with the landmark files, and without.
 SUBJECTS = tuple(f"{m}_{v}" for m in MODALITIES for v in ("clicked", "detected"))
 #: The scanner frames' motion: standard deviation of the rotation per axis (degrees) and of the
 #: translation per axis (mm).
@@ -107,18 +110,25 @@ def _rgbd_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator):
     return cells | {"landmarks": "rgbd.pts"}, take.pose
 
 
-def _stereo_take(head, moved: np.ndarray, rig: list, folder: Path, seed: int, lm: np.ndarray):
+def _stereo_take(
+    head, moved: np.ndarray, rig: list, folder: Path, seed: int, lm: np.ndarray, shot: bool
+):
     """The head, its vertices at ``moved`` (model frame, mm), seen by the real-data tests' stereo
     rig (``rig``, fixed while the head moves: the speckle is projected from it, so it does not
     move with the skin): both images, the calibration and the landmarks ``lm`` (68, 3) (model
-    frame) on the left image; the sheet's cells and the model -> left camera pose (4, 4)."""
+    frame) on the left image, and with ``shot`` the left camera's texture shot (``shot.png``,
+    the sheet cells' ``color``); the sheet's cells and the model -> left camera pose (4, 4)."""
     import cv2
 
     from scan2morph.io import write_pts
     from scan2morph.io.calibration import write_stereo_calibration
     from tests.unit import test_realdata as rd
 
-    pair = rd.render_stereo_pair(rd._moved(head, moved), seed, rig)
+    pair = rd.render_stereo_pair(rd._moved(head, moved), seed, rig, texture_shot=shot)
+    cells = {"left": "left.png", "right": "right.png", "calibration": "calib.yaml"}
+    if shot:
+        cv2.imwrite(str(folder / "shot.png"), pair.texture[..., ::-1])
+        cells["color"] = "shot.png"
     cv2.imwrite(str(folder / "left.png"), pair.left[..., ::-1])
     cv2.imwrite(str(folder / "right.png"), pair.right[..., ::-1])
     write_stereo_calibration(folder / "calib.yaml", pair.calib)
@@ -129,7 +139,6 @@ def _stereo_take(head, moved: np.ndarray, rig: list, folder: Path, seed: int, lm
     cam = transform_points(pose, lm)
     px, _ = cv2.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), left["K"], left["D"])
     write_pts(folder / "stereo.pts", px.reshape(-1, 2))
-    cells = {"left": "left.png", "right": "right.png", "calibration": "calib.yaml"}
     return cells | {"landmarks": "stereo.pts"}, pose
 
 
@@ -153,7 +162,7 @@ def write_scans(
 
     Returns
     -------
-    dict modality -> dict take -> (4, 4) float64
+    dict scan (of :data:`MODALITIES`) -> dict take -> (4, 4) float64
         Each take's pose, model frame -> the take's frame (the mesh's and the range scan's
         scanner frame; the depth camera's and the left camera's frame).
     """
@@ -161,13 +170,13 @@ def write_scans(
 
     rng = np.random.default_rng(seed)
     texture = Image.fromarray(head.texture)
-    poses: dict[str, dict[str, np.ndarray]] = {m: {} for m in modalities}
+    poses: dict[str, dict[str, np.ndarray]] = {m: {} for m in ("mesh", *modalities)}
     cells: dict[tuple[str, str], dict[str, str]] = {}
     from tests.unit import test_realdata as rd
 
     rig = rd._rig(head)  # the stereo rig stays where it is for both takes
     wanted = set(modalities)
-    for take, _, _ in TAKES:
+    for take_number, (take, _, _) in enumerate(TAKES):
         pose = _pose(rng)
         v, lm = head.vertices, LANDMARKS_MM
         if take == "smile":
@@ -187,18 +196,23 @@ def write_scans(
         if "rgbd" in wanted:
             cells["rgbd", take], camera = _rgbd_take(obj, marks, folder, rng)
             poses["rgbd"][take] = camera @ pose
-        if "stereo" in wanted:  # the rig sees the head moved by its scanner pose
-            cells["stereo", take], left = _stereo_take(
-                head, scanned, rig, folder, seed + len(poses["stereo"]), scanned_lm
-            )
-            poses["stereo"][take] = left @ pose
+        stereo = wanted & {"stereo", "stereo-shot"}
+        if stereo:  # the rig sees the head moved by its scanner pose; one render serves both
+            shot = "stereo-shot" in stereo
+            both, left = _stereo_take(
+                head, scanned, rig, folder, seed + take_number, scanned_lm, shot
+            )  # fmt: skip
+            for s in stereo:
+                cells[s, take] = both if s == "stereo-shot" else both | {"color": ""}
+                poses[s][take] = left @ pose
     header = ["subject", "take", "kind", "label", "modality", "mesh", "xyz", "color", "depth"]
     header += ["intrinsics", "left", "right", "calibration", "landmarks"]
     rows = []
     for subject in (s for s in SUBJECTS if s.split("_")[0] in wanted):
-        modality, source = subject.split("_")
+        scan, source = subject.split("_")
+        modality = scan.split("-")[0]
         for take, kind, label in TAKES:
-            given = {k: f"scans/{take}/{f}" for k, f in cells[modality, take].items()}
+            given = {k: f"scans/{take}/{f}" if f else "" for k, f in cells[scan, take].items()}
             if source == "detected":
                 given["landmarks"] = ""
             rows.append(
@@ -211,12 +225,16 @@ def write_scans(
 
 
 def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarray]]) -> dict:
-    """The smile's alignment and material error in a subject's store."""
+    """The smile's alignment and material error in a subject's store; ``{"left_out": reason}``
+    when the subject left the smile out (the stage's message)."""
     from scan2morph.align import rotation_angle_deg
     from scan2morph.geometry import vertex_normals
     from scan2morph.store import paths, read_part
 
     store = read_part(work / "results" / subject / f"{subject}.h5")
+    if paths.failed("smile", "reason") in store:  # the take was left out of its subject
+        reason = np.asarray(store[paths.failed("smile", "reason")]).item()
+        return {"left_out": reason.decode() if isinstance(reason, bytes) else str(reason)}
     a, b = (poses[subject.split("_")[0]][take] for take in ("neutral", "smile"))
     true_transform = a @ np.linalg.inv(b)  # smile scan frame -> neutral scan frame
     got = np.asarray(store[paths.align("smile", "transform")], dtype=np.float64)

@@ -483,6 +483,7 @@ class StereoPair:
     face: np.ndarray  # (H, W) bool, left pixel sees the face
     front: np.ndarray  # face, seen within 60 degrees of the surface normal
     render_s: float
+    texture: np.ndarray | None = None  # the left camera's texture shot (no speckle), if asked
 
 
 def _rig(head: Head) -> list[dict]:
@@ -511,8 +512,9 @@ def _rig(head: Head) -> list[dict]:
     ]
 
 
-def _shade(head: Head, hit: dict, points: np.ndarray, rig: list[dict], pattern: np.ndarray):
-    """Intensity (..., 3) of scanner-frame surface points: colour map x speckle x Lambert."""
+def _shade(head: Head, hit: dict, points: np.ndarray, rig: list[dict], pattern: np.ndarray | None):
+    """Intensity (..., 3) of scanner-frame surface points: colour map x speckle x Lambert
+    (``pattern`` None: the projector off, a texture shot: colour map x Lambert)."""
     face, bary = hit["face"], hit["bary"]
     miss = face < 0
     uv = head.interpolate(head.uv, face, bary)
@@ -526,28 +528,31 @@ def _shade(head: Head, hit: dict, points: np.ndarray, rig: list[dict], pattern: 
         cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REFLECT,
     ).reshape(uv.shape[:-1] + (3,))
-    # speckle projected from the rig centre (no projector shadows): view independent
     proj = rig[2]
+    light = proj["C"] - points  # Lambert shading from the rig centre
+    light /= np.maximum(np.linalg.norm(light, axis=-1, keepdims=True), 1e-12)
+    normal = head.interpolate(head.normals, face, bary) @ head.R_w.T
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
+    shade = 0.6 + 0.4 * np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)
+    if pattern is None:
+        return np.where(miss[..., None], 0.0, shade[..., None] * colour)
+    # speckle projected from the rig centre (no projector shadows): view independent
     p = (points - proj["C"]) @ proj["R"]
     f_proj = DISTANCE_MM / SPECKLE_MM
     u = f_proj * p[..., 0] / p[..., 2] + 0.5 * (PATTERN_PX - 1)
     v = f_proj * p[..., 1] / p[..., 2] + 0.5 * (PATTERN_PX - 1)
     speckle = ndimage.map_coordinates(pattern, [v.ravel(), u.ravel()], order=1, mode="nearest")
-    # Lambert shading from the rig centre
-    normal = head.interpolate(head.normals, face, bary) @ head.R_w.T
-    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
-    light = proj["C"] - points
-    light /= np.maximum(np.linalg.norm(light, axis=-1, keepdims=True), 1e-12)
-    shade = 0.6 + 0.4 * np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)
     value = shade[..., None] * (0.35 * colour + 0.65 * speckle.reshape(shade.shape)[..., None])
     return np.where(miss[..., None], 0.0, value)
 
 
-def render_stereo_pair(head: Head, seed: int = SEED + 2, rig: list | None = None) -> StereoPair:
+def render_stereo_pair(
+    head: Head, seed: int = SEED + 2, rig: list | None = None, texture_shot: bool = False
+) -> StereoPair:
     """The head seen by the test rig (:func:`_rig`, or ``rig``: a rig that stays where it was
     while the head moves): both images (2 x 2 supersampled, the projected speckle over the
     colour map, 1 grey level of sensor noise; ``seed``), the calibration and the left pixels'
-    truth."""
+    truth; with ``texture_shot`` also the left camera's view with the projector off."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     pattern = ndimage.gaussian_filter(rng.random((PATTERN_PX, PATTERN_PX)), 0.6)
@@ -556,11 +561,12 @@ def render_stereo_pair(head: Head, seed: int = SEED + 2, rig: list | None = None
     images = []
     sub = np.array([-0.25, 0.25])
     ys, xs, dy, dx = np.meshgrid(np.arange(HEIGHT), np.arange(WIDTH), sub, sub, indexing="ij")
-    for cam in rig[:2]:
+    views = [(rig[0], pattern), (rig[1], pattern)] + [(rig[0], None)] * texture_shot
+    for cam, lit in views:
         rays = pixel_rays(xs + dx, ys + dy, cam["K"], cam["D"]) @ cam["R"].T  # (H, W, 2, 2, 3)
         hit = head.cast(cam["C"], rays)
         points = cam["C"] + np.nan_to_num(hit["t"])[..., None] * rays
-        value = _shade(head, hit, points, rig, pattern).mean(axis=(2, 3))
+        value = _shade(head, hit, points, rig, lit).mean(axis=(2, 3))
         value += rng.standard_normal(value.shape[:2])[..., None]  # 1 grey level sensor noise
         images.append(np.clip(np.rint(value), 0, 255).astype(np.uint8))
 
@@ -581,7 +587,8 @@ def render_stereo_pair(head: Head, seed: int = SEED + 2, rig: list | None = None
     normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
     front = face & (-np.sum(normal * rays_w, axis=-1) > np.cos(np.deg2rad(60.0)))
     render_s = time.perf_counter() - t0
-    return StereoPair(images[0], images[1], calib, xyz, face, front, render_s)
+    texture = images[2] if texture_shot else None
+    return StereoPair(images[0], images[1], calib, xyz, face, front, render_s, texture)
 
 
 @pytest.fixture(scope="module")

@@ -36,20 +36,13 @@ from scan2morph.synth import (
     rig_cameras,
     rig_params,
     subject_identity,
-    write_stereo_take,
 )
 from tests.support.configs import config_schema, repo_config
+from tests.support.stereo_takes import SMALL_RIG, neutral, write_take
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = repo_config()
-SMALL = dict(width=160, height=120, focal_px=325.0)
-_SUFFIXES = {
-    "left": "_left.png",
-    "right": "_right.png",
-    "calibration": "_calib.yaml",
-    "landmarks": ".pts",
-    "truth": ".npz",
-}
+SMALL = SMALL_RIG
 
 
 @pytest.fixture(scope="module")
@@ -68,10 +61,8 @@ def face(take):
 def files(tmp_path_factory):
     """A small stereo take written as a user would bring it."""
     d = tmp_path_factory.mktemp("stereo")
-    res = make_stereo_take("s1", "neutral", "neutral", "neutral", seed=3, params=SMALL)
-    paths = {k: d / f"neutral{s}" for k, s in _SUFFIXES.items()}
-    write_stereo_take(res, *paths.values())
-    return res, paths
+    res = neutral(SMALL)
+    return res, write_take(res, d / "neutral")
 
 
 def _zncc(a, b):
@@ -219,9 +210,7 @@ def test_written_files_read_back(files):
 
 def test_takes_are_deterministic(tmp_path, files):
     res, paths = files
-    again = make_stereo_take("s1", "neutral", "neutral", "neutral", seed=3, params=SMALL)
-    out = {k: tmp_path / f"n{s}" for k, s in _SUFFIXES.items()}
-    write_stereo_take(again, *out.values())
+    out = write_take(neutral(SMALL), tmp_path / "n")
     for key in out:
         assert out[key].read_bytes() == paths[key].read_bytes(), key
 

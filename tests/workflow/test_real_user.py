@@ -9,8 +9,9 @@ displacement, clicked / detected: mesh 0.050 / 0.065, range 0.075-0.078 / 0.083-
 on RGB-D, and 0.07 mm at the face. Before the texture's veto of the jaw prior the range scans'
 clicked run left 0.119-0.124: the prior took the smile's pull on the chin for a rigid 8-degree
 turn of it. The stereo takes (the real-data tests' rig, its speckle projected from the rig and
-so not moving with the skin) are measured by the benchmark, not asserted here: 0.50 clicked and
-2.95 detected; a pair of such takes is a case the default cohort does not have."""
+so not moving with the skin) with the left camera's texture shot as their colour: 0.33-0.38
+clicked (asserted), 1.44 detected or the detected smile left out for a folded template (the
+benchmark's); without the shot the benchmark measures 0.50-0.82 clicked and 1.37-2.95 detected."""
 
 from __future__ import annotations
 
@@ -27,24 +28,30 @@ pytestmark = [
     pytest.mark.skipif(not GLB.is_file(), reason=f"real head scan absent: {GLB}"),
 ]
 
-#: Asserted bounds per modality: rotation (degrees), material error clicked, detected.
-BOUNDS = {"mesh": (0.1, 0.08, 0.10), "range": (0.1, 0.10, 0.12), "rgbd": (0.45, 0.26, 0.30)}
+#: Asserted bounds per scan (tests/support/real_user.py): rotation (degrees), material error
+#: clicked, detected (None: that subject is measured by the benchmark only).
+BOUNDS = {
+    "mesh": (0.1, 0.08, 0.10),
+    "range": (0.1, 0.10, 0.12),
+    "rgbd": (0.45, 0.26, 0.30),
+    "stereo-shot": (0.2, 0.40, None),
+}
 
 
 def test_a_real_smile_in_every_modality_with_and_without_landmark_files(tmp_path):
     head = load_real_head()
     poses = write_scans(head, tmp_path, seed=7, modalities=tuple(BOUNDS))
-    subjects = [s for s in SUBJECTS if s.split("_")[0] in BOUNDS]
+    bound = {f"{scan}_clicked": b[1] for scan, b in BOUNDS.items()}
+    bound |= {f"{scan}_detected": b[2] for scan, b in BOUNDS.items() if b[2] is not None}
+    subjects = [s for s in SUBJECTS if s in bound]
     targets = [f"results/{s}/{s}.h5" for s in subjects]
     assert run_workflow(tmp_path, tmp_path / "real.yaml", targets)
     for subject in subjects:
         r = evaluate(head, tmp_path, subject, poses)
-        modality, source = subject.split("_")
-        max_rot, clicked, detected = BOUNDS[modality]
-        assert r["rotation_deg"] < max_rot and r["translation_mm"] < 0.2, (subject, r)
+        scan, source = subject.split("_")
+        assert r["rotation_deg"] < BOUNDS[scan][0] and r["translation_mm"] < 0.2, (subject, r)
         assert r["vertices"] > 1600, (subject, r)  # of the template's 1682
-        bound = clicked if source == "clicked" else detected
-        assert r["material_relative_error"] < bound, (subject, r)
+        assert r["material_relative_error"] < bound[subject], (subject, r)
         # a detection on a real face is doubtful, and says so; clicks raise no such warning
         doubtful = any("detected landmarks are doubtful" in w for w in r["warnings"])
         assert doubtful == (source == "detected"), (subject, r["warnings"])

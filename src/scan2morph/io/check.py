@@ -38,6 +38,7 @@ READERS: dict[str, dict[str, Callable]] = {
         "left": read_color,
         "right": read_color,
         "calibration": read_stereo_calibration,
+        "color": read_color,
         "landmarks": read_pts,
     },
     "rgbd": {
@@ -102,7 +103,9 @@ def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping
             check_handedness(scan.xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":
         landmarks = files.get("landmarks")
-        read_stereo_take(files["left"], files["right"], files["calibration"], landmarks)
+        read_stereo_take(
+            files["left"], files["right"], files["calibration"], landmarks, files.get("color")
+        )
     elif modality == "rgbd":
         intr, paths = loaded["intrinsics"], depth_frame_paths(files["depth"])
         check_rgbd_files(

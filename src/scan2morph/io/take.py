@@ -24,6 +24,12 @@ EYE_SPAN_MM = (50.0, 150.0)
 #: A face whose outer eye corners are closer in the image than this share of the nose-bridge to
 #: chin distance (iBUG 28 to 9) is seen from the side (frontal faces: about 0.8).
 MIN_EYE_SPAN_RATIO = 0.3
+#: The band a stereo take's texture shot is compared with its left image in: a difference of
+#: Gaussians of standard deviations (fine, coarse), each the larger of a floor (px) and a share of
+#: the image width (3 and 12 px at 640 px wide).
+TEXTURE_SHOT_BAND = ((2.0, 3.0 / 640), (8.0, 12.0 / 640))
+#: Least normalised correlation of a texture shot with its left image in that band.
+MIN_TEXTURE_SHOT_CORRELATION = 0.6
 #: Window (radius, px, and share of the image width) searched for range data at a landmark.
 _LIFT_RADIUS = (2, 0.03)
 #: A nose tip this far (mm) behind the plane of the outer eye corners and the mouth, seen from the
@@ -161,12 +167,22 @@ class StereoTake:
         The rig, ``x_right = R x_left + T``, mm.
     landmarks : (68, 2) float64
         0-based pixel coordinates on the raw left image.
+    color : (H, W, 3) uint8 or None
+        The left camera's texture shot (the skin without the rig's projected pattern), when
+        given; None: the left image is the take's colour.
     """
 
     left: np.ndarray
     right: np.ndarray
     calib: StereoCalibration
     landmarks: np.ndarray | None
+    color: np.ndarray | None = None
+
+    @property
+    def texture(self) -> np.ndarray:
+        """(H, W, 3) uint8: the take's colour on the left camera's grid, the texture shot if
+        there is one, else the left image."""
+        return self.left if self.color is None else self.color
 
 
 def read_stereo_take(
@@ -174,6 +190,7 @@ def read_stereo_take(
     right_path: str | Path,
     calibration_path: str | Path,
     landmarks_path: str | Path | None,
+    color_path: str | Path | None = None,
 ) -> StereoTake:
     """Read a stereo take and check that its files agree.
 
@@ -186,6 +203,9 @@ def read_stereo_take(
         :func:`~scan2morph.io.read_stereo_calibration`.
     landmarks_path : str or path-like or None
         iBUG 68- (or 51-) point ``.pts`` on the raw left image; None: no landmark file.
+    color_path : str or path-like or None
+        The left camera's texture shot (PNG/PPM/JPEG; the same camera and size as the left image,
+        taken without the rig's projected pattern); None: the left image is the take's colour.
 
     Returns
     -------
@@ -199,7 +219,9 @@ def read_stereo_take(
         differs from the left's (names the right file); the calibration's
         ``image_width``/``image_height`` differ from the images', or a principal point lies
         outside them (names the calibration file); the right image is the left one; a landmark
-        lies outside the left image (names the ``.pts`` file).
+        lies outside the left image (names the ``.pts`` file); the texture shot's size differs
+        from the left image's, or it is not the left camera's view (:func:`check_texture_shot`,
+        names the colour file).
     """
     left = read_color(left_path)
     check_image_size(left.shape, left_path, "left")
@@ -234,7 +256,63 @@ def read_stereo_take(
                 "images; is this the calibration of this camera pair, at this image size?",
             )
     landmarks = _read_clicks(landmarks_path, {}, w, h)
-    return StereoTake(left=left, right=right, calib=calib, landmarks=landmarks)
+    color = None
+    if color_path is not None:
+        color = read_color(color_path)
+        check_texture_shot(color, left, color_path, Path(left_path).name)
+    return StereoTake(left=left, right=right, calib=calib, landmarks=landmarks, color=color)
+
+
+def check_texture_shot(color: np.ndarray, left: np.ndarray, source, left_name: str) -> None:
+    """Refuse a stereo take's texture shot that is not the left camera's view of the take.
+
+    Both images are band-passed (a difference of Gaussians, :data:`TEXTURE_SHOT_BAND`: a
+    projected pattern's fine dots and the lighting's slow change fall out, the face's features
+    and outline stay) and compared pixel to pixel by their normalised correlation, which must
+    reach :data:`MIN_TEXTURE_SHOT_CORRELATION`. Measured: a texture shot of the same exposure
+    0.88-0.93 (the real head's and the synthetic faces', 160 x 120 to 640 x 480), the right
+    camera's view of the face below 0.27, the mirrored view below 0.25, the shot of the next
+    take (the head 5 mm and 3 degrees away, smiling) 0.48.
+
+    Parameters
+    ----------
+    color, left : (H, W, 3) uint8
+        The texture shot and the left image.
+    source : str or path-like
+        The texture shot's file, named in the error.
+    left_name : str
+        The left image's file name, for the message.
+
+    Raises
+    ------
+    InputError
+        The sizes differ, or the two do not correlate.
+    """
+    import cv2
+
+    (h, w), (hc, wc) = left.shape[:2], color.shape[:2]
+    if (hc, wc) != (h, w):
+        raise InputError(
+            source,
+            f"color: image is {wc}x{hc} (WxH) but the left image {left_name} is {w}x{h}; "
+            "a stereo take's colour is the left camera's texture shot, at the left image's size",
+        )
+    fine, coarse = (max(lo, w * share) for lo, share in TEXTURE_SHOT_BAND)
+    band = []
+    for image in (left, color):
+        grey = np.asarray(image, np.float32).mean(axis=2)
+        b = cv2.GaussianBlur(grey, (0, 0), fine) - cv2.GaussianBlur(grey, (0, 0), coarse)
+        band.append(b.astype(np.float64).ravel() - b.mean())
+    norm = np.sqrt(np.dot(band[0], band[0]) * np.dot(band[1], band[1]))
+    correlation = float(np.dot(band[0], band[1]) / norm) if norm > 0 else 0.0
+    if correlation < MIN_TEXTURE_SHOT_CORRELATION:
+        raise InputError(
+            source,
+            f"color: the image correlates with the left image {left_name} at {correlation:.2f} "
+            f"(at least {MIN_TEXTURE_SHOT_CORRELATION:g} expected); a stereo take's colour is "
+            "the left camera's texture shot of the same moment (not the right camera's, nor "
+            "another take's)",
+        )
 
 
 def check_image_size(shape: tuple[int, ...], source: str | Path, field: str) -> None:

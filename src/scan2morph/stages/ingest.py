@@ -51,6 +51,9 @@ CAMERA_MODELS = {
     "rgbd": "the RGB-D sensor's colour camera (intrinsics file)",
     "mesh": "a virtual pinhole camera in front of the face (rendered)",
 }
+#: ``/takes/{take}/camera/color_source`` of a stereo take whose colour is its texture shot (the
+#: sheet's ``color``), not its left image.
+TEXTURE_SHOT = "texture shot"
 log = logging.getLogger("scan2morph")
 
 
@@ -204,8 +207,9 @@ def _read_range(files, row, params: Params) -> _Scan:
 def _read_stereo(files, row, params: Params) -> _Scan:
     stereo = params.stereo
     pair = read_stereo_take(
-        files["left"], files["right"], files["calibration"], files.get("landmarks")
-    )
+        files["left"], files["right"], files["calibration"], files.get("landmarks"),
+        files.get("color"),
+    )  # fmt: skip
     source = f"{files['left']}, {files['right']}"
     try:
         xyz, report = reconstruct_stereo(
@@ -217,8 +221,10 @@ def _read_stereo(files, row, params: Params) -> _Scan:
             raise InputError(exc.source, f"{exc.problem}; {hint}") from None
         raise
     log.info("%s: stereo %s", row["take"], report)
+    # the colour's source is recorded when it is not the left image (the store as before)
+    camera = {} if pair.color is None else {"color_source": TEXTURE_SHOT}
     if not complete(pair.landmarks):
-        return _Scan(xyz, pair.left, pair.landmarks, {}, {"stereo": report})
+        return _Scan(xyz, pair.texture, pair.landmarks, camera, {"stereo": report})
     check_face(
         xyz,
         pair.landmarks,
@@ -229,7 +235,7 @@ def _read_stereo(files, row, params: Params) -> _Scan:
             f"{pair.calib.baseline_mm:.4g}): is T in mm?"
         ),
     )
-    return _Scan(xyz, pair.left, pair.landmarks, {}, {"stereo": report})
+    return _Scan(xyz, pair.texture, pair.landmarks, camera, {"stereo": report})
 
 
 #: Each modality's reader: (files, row, params) -> _Scan.

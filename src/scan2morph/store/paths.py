@@ -212,7 +212,9 @@ def clicks(take_id: str) -> str:
 def camera(take_id: str, name: str) -> str:
     """Provenance of a take's pixel grid: ``modality`` (``range``, ``stereo``, ``mesh``,
     ``rgbd``), ``model`` (which camera, real or virtual), for mesh takes ``color_source``
-    (``texture``, ``vertex colours`` or ``shading``: geometry only), and for mesh and RGB-D takes that
+    (``texture``, ``vertex colours`` or ``shading``: geometry only; also ``shading`` for a range
+    take without a colour image, ``texture shot`` for a stereo take with one), and for mesh and
+    RGB-D takes that
     camera's ``K`` (3, 3) px, ``distortion`` (5,), ``pose`` (4, 4) take frame -> camera, mm,
     and image ``size`` (width, height) px."""
     return _build("/takes/{take}/camera", name, take=take_id)
