@@ -17,6 +17,7 @@ TINY = {
     "takes": 1,
     "mesh_subjects": 0,
     "stereo_subjects": 0,
+    "brow_takes": 0,
     "radii_mm": [6.0, 3.0],
     "starts": 2,
     "stretched": 1,
