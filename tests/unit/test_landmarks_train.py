@@ -17,6 +17,7 @@ TINY = {
     "takes": 1,
     "mesh_subjects": 0,
     "stereo_subjects": 0,
+    "brow_takes": 0,
     "radii_mm": [6.0, 3.0],
     "starts": 2,
     "stretched": 1,
@@ -81,20 +82,22 @@ def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_whe
     monkeypatch,
 ):
     """The trainer's takes at the committed settings are those of the committed subjects (40
-    range/RGB-D ``train`` identities x 8 takes, 10 mesh x 4, 15 stereo x 4), nothing else;
-    ``extra_subjects`` adds exactly that many ``wide`` identities' takes, drawn with the
-    requested shares, the committed calls unchanged."""
+    range/RGB-D ``train`` identities x 8 takes, 10 mesh x 4, 15 stereo x 4, and 2 brow takes of
+    each range/RGB-D identity, grouped with it), nothing else; ``extra_subjects`` adds exactly
+    that many ``wide`` identities' takes, drawn with the requested shares, the committed calls
+    unchanged."""
     from scan2morph.landmarks import data
     from scan2morph.landmarks import train as train_mod
 
     calls, conventions = [], set()
 
     def fake(kind):
-        def make(seed, n, k, extra=None, convention="synth"):
-            calls.append((kind, seed, n, k, extra))
+        def make(seed, n, k, extra=None, convention="synth", brows=False):
+            calls.append((kind if not brows else "brows", seed, n, k, extra))
             conventions.add(convention)
             prefix = {"range": "train" if extra is None else "wide"}.get(kind, kind)
-            return [f"{prefix}{i:03d}/t{j:02d}" for i in range(n) for j in range(k)]
+            first = "b" if brows else "t"
+            return [f"{prefix}{i:03d}/{first}{j:02d}" for i in range(n) for j in range(k)]
 
         return make
 
@@ -105,9 +108,15 @@ def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_whe
         ("range", 1, 40, 8, None),
         ("mesh", 1, 10, 4, None),
         ("stereo", 1, 15, 4, None),
+        ("brows", 1, 40, 2, None),
     ]
     names = train_mod._cached_samples(1, train_mod.DEFAULTS, None)
-    assert calls == committed and len(names) == 320 + 40 + 60
+    assert calls == committed and len(names) == 320 + 40 + 60 + 80
+    brows = names[420:]
+    assert brows[:3] == ["train000/b00", "train000/b01", "train001/b00"]
+    draws = {data._draw_label(np.random.default_rng(k), data.BROW_LABELS) for k in range(20)}
+    assert draws == {"brows", "frown"}  # a raise and a frown, nothing else
+    assert [train_mod._identity(n) for n in brows[:3]] == [0, 0, 1]  # their subjects' groups
     calls.clear()
     config = train_mod.DEFAULTS | {
         "extra_subjects": 3,
@@ -116,16 +125,16 @@ def test_default_recipe_simulates_the_committed_subjects_and_extra_ones_only_whe
     }
     more = train_mod._cached_samples(1, config, None)
     assert calls == [*committed, ("range", 1, 3, 8, data.FaceShares(1.0, 0.65, ("width", "chin")))]
-    assert more[:420] == names and more[420:] == [
+    assert more[:500] == names and more[500:] == [
         f"wide{i:03d}/t{j:02d}" for i in range(3) for j in range(8)
     ]
-    assert {train_mod._identity(n) for n in more[420:]} == {3000, 3001, 3002}
+    assert {train_mod._identity(n) for n in more[500:]} == {3000, 3001, 3002}
     with pytest.raises(InputError, match="extra_knobs: unknown"):
         train_mod.extra_shares(config | {"extra_knobs": ["ears"]})
     assert conventions == {"synth"}
     calls.clear()
     ibug = train_mod._cached_samples(1, config | {"convention": "ibug"}, None)
-    assert ibug == more and calls[:3] == committed and conventions == {"synth", "ibug"}
+    assert ibug == more and calls[:4] == committed and conventions == {"synth", "ibug"}
     with pytest.raises(InputError, match="convention: expected one of"):
         train_mod._cached_samples(1, config | {"convention": "dlib"}, None)
 

@@ -33,6 +33,9 @@ log = logging.getLogger("scan2morph")
 
 #: Labels drawn for training takes, with their weights.
 LABELS = {"neutral": 2, "car": 1, "man": 1, "she": 1, "eel": 1, "too": 1, "smile": 2, "sad": 2}
+#: Labels of the brow takes (:func:`make_samples`' ``brows``): the expressions that move the
+#: brows most (a raise; a frown pulling them together and down), which :data:`LABELS` lacks.
+BROW_LABELS = {"brows": 1, "frown": 1}
 #: Uniform ranges of the pose: yaw, pitch, roll (degrees), distance (mm), focal length (px).
 POSE_RANGE = {
     "yaw": (-20.0, 20.0),
@@ -148,10 +151,11 @@ def _speckled(color: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.repeat(g[..., None], 3, axis=2)
 
 
-def _draw_label(rng: np.random.Generator) -> str:
-    """A take's label drawn with the weights of :data:`LABELS`."""
-    labels = list(LABELS)
-    weights = np.array([LABELS[k] for k in labels], dtype=np.float64)
+def _draw_label(rng: np.random.Generator, weighted: dict[str, int] | None = None) -> str:
+    """A take's label drawn with the weights of ``weighted`` (default :data:`LABELS`)."""
+    weighted = LABELS if weighted is None else weighted
+    labels = list(weighted)
+    weights = np.array([weighted[k] for k in labels], dtype=np.float64)
     return labels[int(rng.choice(len(labels), p=weights / weights.sum()))]
 
 
@@ -202,10 +206,10 @@ def _rgbd_take(
     return r["color"], xyz, r["truth"]["landmarks2d"]
 
 
-#: Random streams of the range and RGB-D training takes: the committed subjects' and the
-#: extra subjects' (:func:`make_samples`' ``extra``), so that adding the latter leaves the
-#: former's takes as they were.
-SUBJECT_STREAMS = {"train": 0x1A4D, "wide": 0x1A4E}
+#: Random streams of the range and RGB-D training takes: the committed subjects', the extra
+#: subjects' (:func:`make_samples`' ``extra``) and the committed subjects' brow takes
+#: (``brows``), so that adding the latter two leaves the former's takes as they were.
+SUBJECT_STREAMS = {"train": 0x1A4D, "wide": 0x1A4E, "brow": 0x1A4F}
 
 
 def make_samples(
@@ -214,6 +218,7 @@ def make_samples(
     takes: int,
     extra: FaceShares | None = None,
     convention: str = "synth",
+    brows: bool = False,
 ) -> list[Sample]:
     """Simulate the training takes.
 
@@ -230,6 +235,9 @@ def make_samples(
         :func:`wide_identity` with these shares, from a random stream of their own.
     convention : str
         The truth's landmark conventions (:data:`scan2morph.synth.convention.CONVENTIONS`).
+    brows : bool
+        Simulate instead brow takes (``b00``, ...) of the committed identities, their labels
+        drawn from :data:`BROW_LABELS`, from a random stream of their own.
 
     Returns
     -------
@@ -237,14 +245,15 @@ def make_samples(
         ``subjects * takes`` takes, in a fixed order.
     """
     prefix = "train" if extra is None else "wide"
-    rng = np.random.default_rng([int(seed), SUBJECT_STREAMS[prefix]])
+    stream, first = ("brow", "b") if brows else (prefix, "t")
+    rng = np.random.default_rng([int(seed), SUBJECT_STREAMS[stream]])
     out = []
     for i in range(subjects):
         subject = f"{prefix}{i:03d}"
         face = wide_identity(subject, seed, extra)
         for j in range(takes):
-            label = _draw_label(rng)
-            take = f"t{j:02d}"
+            label = _draw_label(rng, BROW_LABELS if brows else None)
+            take = f"{first}{j:02d}"
             if rng.uniform() < RGBD_SHARE:
                 color, xyz, truth = _rgbd_take(subject, label, take, seed, rng, face, convention)
                 look = "rgbd"

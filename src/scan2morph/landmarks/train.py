@@ -71,6 +71,7 @@ DEFAULTS = {
     "stretch_x": [0.8, 1.15],
     "stretch_up": [0.55, 1.1],
     "stretch_down": [0.8, 1.15],
+    "brow_takes": 2,
     "extra_subjects": 0,
     "extra_closed_eyes": 1.0,
     "extra_wide_share": 0.0,
@@ -80,7 +81,9 @@ DEFAULTS = {
 #: ``radii_mm``: the local stages' pattern half-widths, mm, in order; ``pattern_side``: points
 #: per side of their sampling pattern (3: 3 x 3); ``ridge_per_point``: each point's own ridge
 #: penalty in the local stages (of ``ridges``, by the held-out identities) instead of one per stage.
-#: ``extra_*``: extra range and RGB-D training subjects (``wide000``, ...; ``takes`` each) added
+#: ``brow_takes``: brow takes (``landmarks.data.BROW_LABELS``: a raise, a frown) of each
+#: committed range and RGB-D subject, from a random stream of their own (the other takes as they
+#: were). ``extra_*``: extra range and RGB-D training subjects (``wide000``, ...; ``takes`` each) added
 #: to the committed ones, their faces drawn by ``landmarks.data.wide_identity`` with closed
 #: eyes in a share ``extra_closed_eyes`` of them and the knobs ``extra_knobs`` redrawn in a share
 #: ``extra_wide_share``; none for the committed model. ``convention``: where the training truth
@@ -327,6 +330,12 @@ def _cached_samples(seed: int, config: dict, cache: Path | None) -> list[Sample]
             cache / f"stereo-{seed}-{ns}x{ks}{tag}.npz" if cache else None,
             lambda: make_stereo_samples(seed, ns, ks, convention=convention),
         )
+    kb = int(config["brow_takes"])
+    if n and kb:
+        out += _cached(
+            cache / f"brows-{seed}-{n}x{kb}{tag}.npz" if cache else None,
+            lambda: make_samples(seed, n, kb, convention=convention, brows=True),
+        )
     ne = int(config["extra_subjects"])
     if ne and k:
         extra = extra_shares(config)
@@ -377,7 +386,8 @@ def train(seed: int, config: dict | None = None, cache: Path | None = None) -> C
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: ``--seed N --out PATH [--subjects N] [--takes N] [--cache DIR]
-    [--radii-mm R,...] [--pattern-side N] [--ridge-per-point] [--convention C] [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
+    [--radii-mm R,...] [--pattern-side N] [--ridge-per-point] [--convention C] [--brow-takes N]
+    [--extra-subjects N [--extra-closed-eyes P] [--extra-wide-share P] [--extra-knobs K,...]]``."""
     parser = argparse.ArgumentParser(prog="python -m scan2morph.landmarks.train")
     parser.add_argument("--seed", type=int, required=True)
     parser.add_argument("--out", type=Path, required=True)
@@ -399,6 +409,12 @@ def main(argv: list[str] | None = None) -> int:
         "--ridge-per-point",
         action="store_true",
         help="each point's own ridge penalty in the local stages",
+    )
+    parser.add_argument(
+        "--brow-takes",
+        type=int,
+        default=DEFAULTS["brow_takes"],
+        help="brow takes (a raise, a frown) of each range/RGB-D subject",
     )
     parser.add_argument(
         "--extra-subjects",
@@ -430,6 +446,7 @@ def main(argv: list[str] | None = None) -> int:
         "radii_mm": [float(r) for r in args.radii_mm.split(",") if r],
         "pattern_side": args.pattern_side,
         "ridge_per_point": args.ridge_per_point,
+        "brow_takes": args.brow_takes,
         "extra_subjects": args.extra_subjects,
         "extra_closed_eyes": args.extra_closed_eyes,
         "extra_wide_share": args.extra_wide_share,
