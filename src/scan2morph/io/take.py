@@ -270,9 +270,9 @@ def check_texture_shot(color: np.ndarray, left: np.ndarray, source, left_name: s
     projected pattern's fine dots and the lighting's slow change fall out, the face's features
     and outline stay) and compared pixel to pixel by their normalised correlation, which must
     reach :data:`MIN_TEXTURE_SHOT_CORRELATION`. Measured: a texture shot of the same exposure
-    0.88-0.93 (the real head's and the synthetic faces', 160 x 120 to 640 x 480), the right
-    camera's view of the face below 0.27, the mirrored view below 0.25, the shot of the next
-    take (the head 5 mm and 3 degrees away, smiling) 0.48.
+    0.88-0.90 (the real head's and the synthetic faces', 160 x 120 to 640 x 480), the right
+    camera's view of the face below 0.13, the mirrored view below 0.25, the shot of the next
+    take (the head 5 mm and 3 degrees away, smiling) 0.55.
 
     Parameters
     ----------
