@@ -93,10 +93,10 @@ test-fast: setup
 
 # The landmark detector's weights (src/scan2morph/landmarks/model.npz, committed package data, so
 # setup downloads nothing): retrained from the project's own synthetic heads, identical for the
-# same seed (docs/landmarks.md).
+# same seed (docs/landmarks.md), on one BLAS thread (more threads change the fit's last bits).
 DETECTOR_SEED ?= 1
 detector: setup
-	$(BIN)/python -m scan2morph.landmarks.train --seed $(DETECTOR_SEED) --out src/scan2morph/landmarks/model.npz
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m scan2morph.landmarks.train --seed $(DETECTOR_SEED) --out src/scan2morph/landmarks/model.npz
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
