@@ -49,6 +49,7 @@ def test_a_real_smile_in_every_modality_with_and_without_landmark_files(tmp_path
     assert run_workflow(tmp_path, tmp_path / "real.yaml", targets)
     for subject in subjects:
         r = evaluate(head, tmp_path, subject, poses)
+        assert "left_out" not in r, (subject, r)  # the smile was left out of its subject
         scan, source = subject.split("_")
         assert r["rotation_deg"] < BOUNDS[scan][0] and r["translation_mm"] < 0.2, (subject, r)
         assert r["vertices"] > 1600, (subject, r)  # of the template's 1682
