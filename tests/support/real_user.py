@@ -202,8 +202,9 @@ def write_scans(
             both, left = _stereo_take(
                 head, scanned, rig, folder, seed + take_number, scanned_lm, shot
             )  # fmt: skip
+            plain = {k: f for k, f in both.items() if k != "color"}  # the left image's colour
             for s in stereo:
-                cells[s, take] = both if s == "stereo-shot" else both | {"color": ""}
+                cells[s, take] = both if s == "stereo-shot" else plain
                 poses[s][take] = left @ pose
     header = ["subject", "take", "kind", "label", "modality", "mesh", "xyz", "color", "depth"]
     header += ["intrinsics", "left", "right", "calibration", "landmarks"]
@@ -212,7 +213,7 @@ def write_scans(
         scan, source = subject.split("_")
         modality = scan.split("-")[0]
         for take, kind, label in TAKES:
-            given = {k: f"scans/{take}/{f}" if f else "" for k, f in cells[scan, take].items()}
+            given = {k: f"scans/{take}/{f}" for k, f in cells[scan, take].items()}
             if source == "detected":
                 given["landmarks"] = ""
             rows.append(

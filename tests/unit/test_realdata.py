@@ -558,15 +558,19 @@ def render_stereo_pair(
     pattern = ndimage.gaussian_filter(rng.random((PATTERN_PX, PATTERN_PX)), 0.6)
     pattern = np.clip(128.0 + 55.0 * (pattern - pattern.mean()) / pattern.std(), 5.0, 250.0)
     rig = _rig(head) if rig is None else rig
-    images = []
     sub = np.array([-0.25, 0.25])
     ys, xs, dy, dx = np.meshgrid(np.arange(HEIGHT), np.arange(WIDTH), sub, sub, indexing="ij")
-    views = [(rig[0], pattern), (rig[1], pattern)] + [(rig[0], None)] * texture_shot
-    for cam, lit in views:
+    values = []  # left, right, and the texture shot: the left camera's rays lit without speckle
+    for cam in rig[:2]:
         rays = pixel_rays(xs + dx, ys + dy, cam["K"], cam["D"]) @ cam["R"].T  # (H, W, 2, 2, 3)
         hit = head.cast(cam["C"], rays)
         points = cam["C"] + np.nan_to_num(hit["t"])[..., None] * rays
-        value = _shade(head, hit, points, rig, lit).mean(axis=(2, 3))
+        lights = [pattern, None] if texture_shot and cam is rig[0] else [pattern]
+        values += [_shade(head, hit, points, rig, lit).mean(axis=(2, 3)) for lit in lights]
+    if texture_shot:
+        values.append(values.pop(1))  # the images' noise is drawn left, right, shot
+    images = []
+    for value in values:
         value += rng.standard_normal(value.shape[:2])[..., None]  # 1 grey level sensor noise
         images.append(np.clip(np.rint(value), 0, 255).astype(np.uint8))
 
