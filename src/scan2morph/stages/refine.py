@@ -44,6 +44,10 @@ from scan2morph.template.sample import sample_mesh
 SECTIONS = ("refine", "template", "align")
 #: The last iBUG number of the jaw line (1-17: outline points, not skin points).
 JAW_LINE = 17
+#: A take's texture correlation stops after a round that measured less than this share of
+#: ``refine.min_confident_share``: it is taken as not correlating (its rounds measure about the
+#: same share; the shape refines it, where ``refine.shape.use``).
+GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
 log = logging.getLogger("scan2morph")
@@ -373,8 +377,15 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
         report = {"median_correction_px": np.nan, "confident_share": np.nan, "shape": False}
         kept = "its texture was taken as not correlating with the neutral's"
     else:
+        # a texture whose share after a round is below half the threshold will not reach it
         refined, report = refine_points(
-            fine.vertices, fine.faces, *maps, *images, anchors, params.flow
+            fine.vertices,
+            fine.faces,
+            *maps,
+            *images,
+            anchors,
+            params.flow,
+            give_up_share=GIVE_UP * params.min_confident_share,
         )
         report["shape"] = False
         if report["confident_share"] >= params.min_confident_share:
