@@ -12,7 +12,9 @@ from scan2morph.refine import (
     SurfaceChannel,
     _sampled_take,
     pull_back_field,
+    refine_channels,
     refine_points,
+    texture_channel,
 )
 from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
@@ -265,8 +267,10 @@ def test_a_texture_that_does_not_correlate_is_given_up_after_one_round(fine):
         return np.asarray(s) * scale + centre
 
     def refine(take, give_up=None):
-        return refine_points(
-            fine.vertices, fine.faces, fit, fit, neutral, take, base, RefineParams(), give_up
+        params = RefineParams()
+        channel = texture_channel(neutral, take, params)
+        return refine_channels(
+            fine.vertices, fine.faces, (fit, fit), [channel], base, params, give_up
         )
 
     threshold = 0.3  # refine.min_confident_share's default; the stage gives up below half

@@ -173,7 +173,6 @@ def refine_points(
     take_image: np.ndarray,
     anchors: np.ndarray,
     params: RefineParams,
-    give_up_share: float | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Move a take's fitted pixel positions onto the skin points of the neutral's vertices.
 
@@ -191,13 +190,6 @@ def refine_points(
     anchors : (n,) int
         Template vertices the fit pinned to clicked landmarks (soft constraints).
     params : RefineParams
-    give_up_share : float, optional
-        After a round (but the last) whose measurement found fewer than this share of the
-        vertices (those measured with confidence above one half), stop: the fit's points are
-        returned, with that share and ``given_up_after_round`` in the report. The images then
-        share no texture; every round measures about the same share (a stereo neutral's
-        speckle against range takes: 0.07-0.11 in every round, where a textured or flat skin
-        finds 0.37-1.0 from the first).
 
     Returns
     -------
@@ -209,9 +201,7 @@ def refine_points(
         ``median_correction_px`` (over the vertices).
     """
     channel = texture_channel(neutral_image, take_image, params)
-    return refine_channels(
-        vertices2d, faces, (neutral_map, take_map), [channel], anchors, params, give_up_share
-    )
+    return refine_channels(vertices2d, faces, (neutral_map, take_map), [channel], anchors, params)
 
 
 def refine_channels(
@@ -229,13 +219,20 @@ def refine_channels(
 
     Parameters
     ----------
-    vertices2d, faces, anchors, params, give_up_share
+    vertices2d, faces, anchors, params
         As :func:`refine_points`'s.
     maps : (callable, callable)
         The neutral's and the take's fit maps (:func:`refine_points`' ``neutral_map``,
         ``take_map``).
     channels : list of Channel or SurfaceChannel
         At least one :class:`Channel`.
+    give_up_share : float, optional
+        After a round (but the last) whose measurement found fewer than this share of the
+        vertices (those measured with confidence above one half), stop: the fit's points are
+        returned, with that share and ``given_up_after_round`` in the report. The images then
+        share no texture; every round measures about the same share (a stereo neutral's
+        speckle against range takes: 0.07-0.11 in every round, where a textured or flat skin
+        finds 0.37-1.0 from the first).
 
     Returns
     -------
