@@ -12,7 +12,9 @@ from scan2morph.refine import (
     SurfaceChannel,
     _sampled_take,
     pull_back_field,
+    refine_channels,
     refine_points,
+    texture_channel,
 )
 from scan2morph.refine.flow import fuse, high_pass, measure_flow, reference_side
 from scan2morph.refine.template_space import pull_back, template_grid
@@ -250,6 +252,43 @@ def test_refine_points_undoes_sliding_on_textured_skin(fine):
     assert np.sqrt(np.mean(before**2)) > 1.0
     assert np.sqrt(np.mean(after**2)) < 0.25 * np.sqrt(np.mean(before**2))
     assert report["confident_share"] > 0.5
+
+
+def test_a_texture_that_does_not_correlate_is_given_up_after_one_round(fine):
+    """``give_up_share``: images of unrelated textures measure about the same small share in
+    every round, so the refinement stops after the first (the fit's points, and that share);
+    the full four rounds end below the threshold too (the decision is the same). Images that
+    share their texture never stop early: the same points and report, bit for bit."""
+    shape, scale, centre = (240, 220), 50.0, np.array([110.0, 100.0])
+    neutral = _texture(shape, 4)
+    _, base = build_template().fiducial_set("closed")
+
+    def fit(s):
+        return np.asarray(s) * scale + centre
+
+    def refine(take, give_up=None):
+        params = RefineParams()
+        channel = texture_channel(neutral, take, params)
+        return refine_channels(
+            fine.vertices, fine.faces, (fit, fit), [channel], base, params, give_up
+        )
+
+    threshold = 0.3  # refine.min_confident_share's default; the stage gives up below half
+    same = _warp(neutral, np.full(shape, 0.7), np.full(shape, -0.4))
+    full, report = refine(same)
+    early, early_report = refine(same, 0.5 * threshold)
+    np.testing.assert_array_equal(early, full)
+    assert early_report.keys() == report.keys()
+    for key, value in report.items():
+        np.testing.assert_array_equal(early_report[key], value)
+    assert report["confident_share"] > 0.8 and "given_up_after_round" not in early_report
+    other = _texture(shape, 5)  # another skin: nothing correlates
+    stopped, stopped_report = refine(other, 0.5 * threshold)
+    assert stopped_report["given_up_after_round"] == 1
+    assert stopped_report["confident_share"] < 0.5 * threshold
+    np.testing.assert_array_equal(stopped, fit(fine.vertices))
+    np.testing.assert_array_equal(stopped_report["confidence"], 0.0)
+    assert refine(other)[1]["confident_share"] < threshold  # four rounds: the same verdict
 
 
 def _subject_in_memory(skin_texture, takes=("neutral", "she", "smile1")):

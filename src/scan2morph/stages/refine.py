@@ -23,7 +23,6 @@ from scan2morph.refine import (
     SurfaceChannel,
     grey,
     refine_channels,
-    refine_points,
     texture_channel,
 )
 from scan2morph.refine.jaw import ChinMeshes, JawParams, JawPrior, chin_weights, jaw_prior
@@ -44,6 +43,10 @@ from scan2morph.template.sample import sample_mesh
 SECTIONS = ("refine", "template", "align")
 #: The last iBUG number of the jaw line (1-17: outline points, not skin points).
 JAW_LINE = 17
+#: A take's texture correlation stops after a round that measured less than this share of
+#: ``refine.min_confident_share``: it is taken as not correlating (its rounds measure about the
+#: same share; the shape refines it, where ``refine.shape.use``).
+GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
 log = logging.getLogger("scan2morph")
@@ -357,8 +360,9 @@ def _anchors(template, fiducials, source: str) -> np.ndarray:
 
 def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str):
     """The image correlation of the take's skin against the neutral's
-    (:func:`~scan2morph.refine.refine_points`): ``(points, report, problem)``, ``problem``
-    saying why the points are not to be used (``""`` when they are). Where the texture does
+    (:func:`~scan2morph.refine.refine_channels` on the texture): ``(points, report,
+    problem)``, ``problem`` saying why the points are not to be used (``""`` when they are);
+    a texture given up after a round (:data:`GIVE_UP`) is one that does not correlate. Where the texture does
     not correlate, the surface's shape with whatever texture correlates (:func:`_by_shape`),
     when ``refine.shape.use``; ``report["shape"]`` says whether it did. A geometry-only scan
     keeps its fit."""
@@ -369,12 +373,20 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
         kept = "texture-driven refinement is not available, the template fit is kept"
         return None, report, f"{shaded}: {kept}{jaw}"
     images = [grey(need(data, paths.range_image(t, "color"), source)) for t in (neutral, take)]
+    texture = [texture_channel(*images, params.flow)]
     if params.texture_unmatched and params.shape.use:
         report = {"median_correction_px": np.nan, "confident_share": np.nan, "shape": False}
         kept = "its texture was taken as not correlating with the neutral's"
     else:
-        refined, report = refine_points(
-            fine.vertices, fine.faces, *maps, *images, anchors, params.flow
+        # a texture whose share after a round is below half the threshold will not reach it
+        refined, report = refine_channels(
+            fine.vertices,
+            fine.faces,
+            maps,
+            texture,
+            anchors,
+            params.flow,
+            give_up_share=GIVE_UP * params.min_confident_share,
         )
         report["shape"] = False
         if report["confident_share"] >= params.min_confident_share:
@@ -387,7 +399,6 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
             f"{100 * params.min_confident_share:.0f}%)"
         )
     if params.shape.use:
-        texture = [texture_channel(*images, params.flow)]
         refined, by_shape = _by_shape(fine, (take, neutral), data, maps, anchors, texture, params)
         if by_shape["confident_share"] >= params.shape.min_confident_share:
             log.info("%s: %s: refined by the surface's shape", source, kept)
