@@ -227,7 +227,9 @@ def write_scans(
 
 def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarray]]) -> dict:
     """The smile's alignment and material error in a subject's store; ``{"left_out": reason}``
-    when the subject left the smile out (the stage's message)."""
+    when the subject left the smile out (the stage's message). The error's split along the
+    neutral's normals and across them is over the vertices that have a normal (a folded
+    template's may not)."""
     from scan2morph.align import rotation_angle_deg
     from scan2morph.geometry import vertex_normals
     from scan2morph.store import paths, read_part
@@ -248,8 +250,10 @@ def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarr
     ok = np.isfinite(field).all(axis=1) & np.isfinite(nv).all(axis=1)
     centre = nv[np.isfinite(nv).all(axis=1)].mean(axis=0)
     err = field[ok] - truth[ok]
+    # a vertex whose faces fold over one another has no normal: the split leaves it out
     normals = vertex_normals(nv, faces)[ok]
-    along = np.einsum("ij,ij->i", err, normals)
+    has = np.isfinite(normals).all(axis=1)
+    along = np.einsum("ij,ij->i", err[has], normals[has])
     rms = float(np.sqrt(np.mean(np.sum(truth[ok] ** 2, axis=1))))
     return {
         "rotation_deg": float(rotation_angle_deg(delta[:3, :3])),
@@ -258,7 +262,7 @@ def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarr
         "motion_rms_mm": rms,
         "material_relative_error": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) / rms,
         "normal_mm": float(np.sqrt(np.mean(along**2))),
-        "tangential_mm": float(np.sqrt(np.mean(np.sum(err**2, axis=1) - along**2))),
+        "tangential_mm": float(np.sqrt(np.mean(np.sum(err[has] ** 2, axis=1) - along**2))),
         "vertices": int(ok.sum()),
         "warnings": [str(w) for w in np.asarray(store.get(paths.warnings("message"), []))],
     }
