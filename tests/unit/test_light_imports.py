@@ -63,3 +63,20 @@ def test_a_lazy_package_gives_its_names_on_first_use():
     out = _python(code).splitlines()
     assert out[0].split() == ["False", "True", "True", "True", "True"]
     assert out[1] == "module 'scan2morph.scan' has no attribute 'no_such_name'"
+
+
+def test_carrying_stable_points_needs_no_open3d():
+    """A detected take's second pass aligns it to its neutral without open3d (1.3 s to import in
+    a take's job): the carried points' ICP is the project's own."""
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from scan2morph.align.carry import carry_stable\n"
+        "y, x = np.mgrid[0:160, 0:160].astype(float)\n"
+        "z = 600.0 + ((x - 80.0) ** 2 + (y - 80.0) ** 2) / 80.0\n"
+        "xyz = np.stack([x - 80.0, y - 80.0, z], axis=-1)\n"
+        "points = np.column_stack([np.linspace(40, 120, 68), np.linspace(50, 110, 68)])\n"
+        "got = carry_stable(xyz, points, xyz, points, (28, 37, 40, 43, 46), 'x')\n"
+        "print(bool(got.carried.all()), 'open3d' in sys.modules)"
+    )
+    assert _python(code).split() == ["True", "False"]

@@ -33,17 +33,20 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
+from scan2morph.align.point_plane import PointToPlane
 from scan2morph.align.rigid import invert, kabsch, transform_points
 from scan2morph.geometry import surface_normals
-from scan2morph.open3d_light import open3d
 from scan2morph.template.sample import range_pixels, sample_range
 
 #: Surface around the lifted stable points that the ICP aligns, mm.
 SURFACE_RADIUS_MM = 20.0
 #: ICP correspondences farther apart than this are dropped, mm.
 MAX_PAIR_MM = 3.0
-#: ICP iterations.
+#: ICP iterations, at most.
 ICP_ITERATIONS = 30
+#: The ICP stops once an iteration changes the share of paired points and their RMS distance
+#: (mm) by less than this (open3d's ``ICPConvergenceCriteria`` defaults).
+ICP_CONVERGED = 1e-6
 #: At most this many take pixels enter the ICP (an even stride of them).
 MAX_ICP_POINTS = 6000
 #: Image around the neutral's landmarks that the tracking correlates, px.
@@ -127,9 +130,10 @@ def _near(xyz: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
 def _surface_icp(
     take_xyz: np.ndarray, neutral_xyz: np.ndarray, take_centres: np.ndarray, initial: np.ndarray
 ) -> np.ndarray:
-    """Point-to-plane ICP of the take's surface near ``take_centres`` onto the neutral's."""
-    o3d = open3d()
-
+    """Point-to-plane ICP of the take's surface near ``take_centres`` onto the neutral's:
+    Gauss-Newton steps without a robust kernel against one k-d tree of the neutral
+    (:class:`~scan2morph.align.point_plane.PointToPlane`, whose sums run in a fixed order: the
+    same inputs give the same pose, bit for bit), from ``initial`` until converged."""
     src = _near(np.asarray(take_xyz, float), take_centres, SURFACE_RADIUS_MM)
     src = src[:: max(1, len(src) // MAX_ICP_POINTS)]
     centres_n = transform_points(initial, take_centres)
@@ -140,17 +144,20 @@ def _surface_icp(
     keep = near < SURFACE_RADIUS_MM + MAX_PAIR_MM
     if len(src) < 50 or keep.sum() < 50:
         return initial
-    target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(dst[keep]))
-    target.normals = o3d.utility.Vector3dVector(dst_n[keep])
-    result = o3d.pipelines.registration.registration_icp(
-        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(src)),
-        target,
-        MAX_PAIR_MM,
-        initial,
-        o3d.pipelines.registration.TransformationEstimationPointToPlane(),
-        o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=ICP_ITERATIONS),
-    )
-    return np.asarray(result.transformation, dtype=np.float64)
+    surface = PointToPlane(dst[keep], dst_n[keep], MAX_PAIR_MM)
+    pose = np.array(initial, dtype=np.float64)
+    pairs = surface.at(src, pose)
+    for _ in range(ICP_ITERATIONS):
+        if pairs.fitness == 0.0:
+            break
+        pose = surface.step(pairs, "none", MAX_PAIR_MM, pose)
+        old, pairs = pairs, surface.at(src, pose)
+        if (
+            abs(pairs.fitness - old.fitness) < ICP_CONVERGED
+            and abs(pairs.rmse - old.rmse) < ICP_CONVERGED
+        ):
+            break
+    return pose
 
 
 @dataclass(frozen=True)
