@@ -362,10 +362,10 @@ def _flow(fine, take, neutral, data, maps, anchors, params: Params, source: str)
     """The image correlation of the take's skin against the neutral's
     (:func:`~scan2morph.refine.refine_channels` on the texture): ``(points, report,
     problem)``, ``problem`` saying why the points are not to be used (``""`` when they are);
-    a texture given up after a round (:data:`GIVE_UP`) is one that does not correlate. Where the texture does
-    not correlate, the surface's shape with whatever texture correlates (:func:`_by_shape`),
-    when ``refine.shape.use``; ``report["shape"]`` says whether it did. A geometry-only scan
-    keeps its fit."""
+    a texture given up after a round (:data:`GIVE_UP`) is one that does not correlate. Where
+    the texture does not correlate, the surface's shape with whatever texture correlates
+    (:func:`_by_shape`), when ``refine.shape.use``; ``report["shape"]`` says whether it did. A
+    geometry-only scan keeps its fit."""
     shaded = _shaded(data, (neutral, take))
     if shaded:  # no skin texture to correlate: the shading follows the geometry, not the skin
         report = {"median_correction_px": 0.0, "confident_share": 0.0, "shape": False}
