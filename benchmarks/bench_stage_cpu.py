@@ -8,10 +8,12 @@ wall and CPU seconds (user + system of the child) and each tree's median; it the
 the trees' outputs agree (largest absolute difference of every float dataset).
 
 ``.venv/bin/python benchmarks/bench_stage_cpu.py RUN --src OLD/src NEW/src [--stages align
-refine motion_noise] [--repeat 3]`` where ``RUN`` is a working directory that
-``benchmarks/bench_profile.py --keep`` kept (one synthetic subject, ``synth01``, the default
-config's takes) and each ``--src`` a source tree (e.g. ``git archive <commit> src | tar -x``).
-Nothing is asserted; the printed table is the measurement.
+refine motion_noise] [--repeat 3] [--subject synth01] [--take too]`` where ``RUN`` is a working
+directory that ``benchmarks/bench_profile.py --keep`` kept (one synthetic subject, ``synth01``,
+the default config's takes) or any finished default run (``make run``: ``--subject`` picks one
+of its subjects, e.g. ``synth02``, whose range takes are refined against a stereo neutral) and
+each ``--src`` a source tree (e.g. ``git archive <commit> src | tar -x``). Nothing is asserted;
+the printed table is the measurement.
 """
 
 from __future__ import annotations
@@ -30,8 +32,9 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The subject by default (a bench_profile run has this one only).
 SUBJECT = "synth01"
-#: The viseme a take stage is run on (the neutral is its reference).
+#: The viseme a take stage is run on by default (the neutral is its reference).
 TAKE = "too"
 
 #: The child: rebuild the stage's inputs from the run's parts, run it, save its float datasets.
@@ -67,10 +70,13 @@ np.savez(out, **{k.replace("/", "|"): v for k, v in floats.items()})
 """
 
 
-def run_child(stage: str, run: Path, src: Path, out: Path, config: Path) -> tuple[float, float]:
-    """One fresh-interpreter run of ``stage`` with ``src`` first on the path: (wall s, CPU s)."""
+def run_child(
+    stage: str, run: Path, src: Path, out: Path, config: Path, which: tuple[str, str]
+) -> tuple[float, float]:
+    """One fresh-interpreter run of ``stage`` on ``which`` (subject, take) with ``src`` first
+    on the path: (wall s, CPU s)."""
     env = dict(os.environ, PYTHONPATH=str(src), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    cmd = [sys.executable, "-c", CHILD, stage, str(run), str(out), SUBJECT, TAKE, str(config)]
+    cmd = [sys.executable, "-c", CHILD, stage, str(run), str(out), *which, str(config)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
@@ -100,18 +106,22 @@ def main(argv=None) -> int:
     ap.add_argument("--src", type=Path, nargs="+", required=True, help="source trees to compare")
     ap.add_argument("--stages", nargs="+", default=["align", "refine", "motion_noise"])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--subject", default=SUBJECT)
+    ap.add_argument("--take", default=TAKE, help="the take stage's take")
     args = ap.parse_args(argv)
     run = args.run if (args.run / "results").is_dir() else next(args.run.glob("bench_profile_*"))
     config = ROOT / "config" / "config.yaml"
-    scanner = yaml.safe_load((run / "scaling.yaml").read_text())["synthetic"]["scanner"]
-    print(f"run {run} ({scanner['width']} x {scanner['height']}), subject {SUBJECT}")
+    own = run / "scaling.yaml"  # a bench_profile run's config; a default run's is the repo's
+    scanner = yaml.safe_load((own if own.is_file() else config).read_text())["synthetic"]["scanner"]
+    which = (args.subject, args.take)
+    print(f"run {run} ({scanner['width']} x {scanner['height']}), subject {args.subject}")
     with tempfile.TemporaryDirectory() as tmp:
         for stage in args.stages:
             times = {src: [] for src in args.src}
             for k in range(args.repeat):
                 for i, src in enumerate(args.src):
                     out = Path(tmp) / f"{stage}-{i}.npz"
-                    wall, cpu = run_child(stage, run, src.resolve(), out, config)
+                    wall, cpu = run_child(stage, run, src.resolve(), out, config, which)
                     times[src].append(cpu)
                     print(
                         f"{stage:13s} {str(src):40s} run {k + 1}: {wall:7.2f} s wall {cpu:7.2f} CPU-s"
