@@ -227,13 +227,10 @@ def read_stereo_take(
     check_image_size(left.shape, left_path, "left")
     right = read_color(right_path)
     h, w = left.shape[:2]
-    if right.shape[:2] != (h, w):
-        raise InputError(
-            right_path,
-            f"right: image is {right.shape[1]}x{right.shape[0]} (WxH) but the left image "
-            f"{Path(left_path).name} is {w}x{h}; the two images of a stereo pair must have "
-            "the same size",
-        )
+    _check_left_size(
+        right, left, right_path, "right", Path(left_path).name,
+        "the two images of a stereo pair must have the same size",
+    )  # fmt: skip
     if np.array_equal(left, right):
         raise InputError(
             right_path,
@@ -290,13 +287,11 @@ def check_texture_shot(color: np.ndarray, left: np.ndarray, source, left_name: s
     """
     import cv2
 
-    (h, w), (hc, wc) = left.shape[:2], color.shape[:2]
-    if (hc, wc) != (h, w):
-        raise InputError(
-            source,
-            f"color: image is {wc}x{hc} (WxH) but the left image {left_name} is {w}x{h}; "
-            "a stereo take's colour is the left camera's texture shot, at the left image's size",
-        )
+    _check_left_size(
+        color, left, source, "color", left_name,
+        "a stereo take's colour is the left camera's texture shot, at the left image's size",
+    )  # fmt: skip
+    w = left.shape[1]
     fine, coarse = (max(lo, w * share) for lo, share in TEXTURE_SHOT_BAND)
     band = []
     for image in (left, color):
@@ -312,6 +307,19 @@ def check_texture_shot(color: np.ndarray, left: np.ndarray, source, left_name: s
             f"(at least {MIN_TEXTURE_SHOT_CORRELATION:g} expected); a stereo take's colour is "
             "the left camera's texture shot of the same moment (not the right camera's, nor "
             "another take's)",
+        )
+
+
+def _check_left_size(
+    image: np.ndarray, left: np.ndarray, source, field: str, left_name: str, why: str
+) -> None:
+    """Refuse a stereo take's ``field`` image (its file ``source``) whose size is not the left
+    image's (``left_name``), saying ``why`` it must be."""
+    (h, w), (hi, wi) = left.shape[:2], image.shape[:2]
+    if (hi, wi) != (h, w):
+        raise InputError(
+            source,
+            f"{field}: image is {wi}x{hi} (WxH) but the left image {left_name} is {w}x{h}; {why}",
         )
 
 
