@@ -9,6 +9,8 @@ to a profile).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -128,9 +130,11 @@ def test_jawline_needs_51_points(takes):
 # bad input: scenes rendered with the synthetic scanner
 
 
+@functools.cache
 def _scene(yaw_deg: float = 0.0, distance_mm: float = 1000.0, shifts=(0.0,), width: int = 640):
     """Range grid and colour of synth01's neutral head(s), posed and shifted sideways (mm),
-    seen by one 640 x 480 camera (f = 1450 px); several heads are z-buffered into one grid."""
+    seen by one 640 x 480 camera (f = 1450 px); several heads are z-buffered into one grid.
+    Rendered once per scene (the frontal one serves two tests): the arrays are read-only."""
     head, vertices, rng = articulated_head("synth01", "neutral", "neutral", "neutral", 2009)
     K = camera_matrix(width, 480, 1450.0)
     flip = np.diag([1.0, -1.0, -1.0])
@@ -149,6 +153,8 @@ def _scene(yaw_deg: float = 0.0, distance_mm: float = 1000.0, shifts=(0.0,), wid
             best["xyz"][..., 2], nan=np.inf
         )
         best = {k: np.where(nearer[..., None], out[k], best[k]) for k in ("xyz", "color")}
+    for a in (best["color"], best["xyz"]):
+        a.setflags(write=False)
     return best["color"], best["xyz"]
 
 
