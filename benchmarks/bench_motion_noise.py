@@ -184,6 +184,8 @@ takes = [t for t, k in kinds.items() if k in ("neutral", "viseme")]
 res = run / "results" / subject
 files = [res / "takes" / t / f"{p}.h5" for t in takes for p in ("repair", "landmarks")]
 files += [res / "takes" / t / "align.h5" for t in takes if kinds[t] == "viseme"]
+# the consensus part (a run before the stage has none): the corrections the draws repeat
+files += [res / "consensus.h5"] if (res / "consensus.h5").exists() else []
 data = read_parts(files) | read_part(res / "motion.h5")
 template = load_template(run / "resources" / "template.npz")
 params = motion_noise.Params.from_config(config)

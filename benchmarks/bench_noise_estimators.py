@@ -318,6 +318,7 @@ def paired(run_dir: Path, subject: str, variants: list[str], n: int) -> None:
     res = run_dir / "results" / subject
     files = [res / "takes" / t / f"{p}.h5" for t in takes for p in ("repair", "landmarks")]
     files += [res / "takes" / t / "align.h5" for t in takes if kinds[t] == "viseme"]
+    files += [res / "consensus.h5"] if (res / "consensus.h5").exists() else []  # the draws' moves
     data = read_parts(files) | read_part(res / "motion.h5")
     data |= {
         paths.refine_group(t): read_attrs(res / "takes" / t / "refine.h5", paths.refine_group(t))

@@ -56,7 +56,9 @@ if stage == "motion_noise":
     used = [t for t, k in kinds.items() if k in ("neutral", "viseme")]
     files = [takes / t / f"{s}.h5" for t in used for s in ("repair", "landmarks")]
     files += [takes / t / "align.h5" for t in used if kinds[t] != "neutral"]
-    data = read_parts(files) | read_part(Path(run) / "results" / subject / "motion.h5")
+    own = Path(run) / "results" / subject
+    files += [own / "consensus.h5"] if (own / "consensus.h5").exists() else []  # the draws' moves
+    data = read_parts(files) | read_part(own / "motion.h5")
     params = motion_noise.Params.from_config(config)
     part = motion_noise.run(template, Subject(subject, kinds, labels), data, params)
 else:

@@ -27,7 +27,17 @@ from jsonschema import Draft202012Validator, validators
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
 from scan2morph.sheet import RENAMED_KEYS, load_schema
-from scan2morph.stages import accuracy, align, fit, landmarks, motion, motion_noise, refine, repair
+from scan2morph.stages import (
+    accuracy,
+    align,
+    consensus,
+    fit,
+    landmarks,
+    motion,
+    motion_noise,
+    refine,
+    repair,
+)
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
 
@@ -38,6 +48,7 @@ _MODULES = {
     "fit": fit,
     "align": align,
     "refine": refine,
+    "consensus": consensus,
     "motion": motion,
     "motion_noise": motion_noise,
 }

@@ -57,3 +57,16 @@ def run_workflow(
         except Exception:  # snakemake raises when a job failed
             return False
     return True
+
+
+def run_synthetic(workdir: Path, synthetic: dict, targets, **config) -> bool:
+    """Run the workflow on a synthetic cohort alone: an empty subject sheet, the config's
+    ``synthetic`` section as ``synthetic`` (over the repo's) and the other sections in
+    ``config``, written to ``workdir/cfg.yaml``; True on success."""
+    import yaml
+
+    sheet = workdir / "subjects.tsv"
+    sheet.write_text("subject\ttake\tkind\tlabel\tmodality\tlandmarks\n")
+    cfg = dict(subjects=str(sheet), synthetic=synthetic, **config)
+    (workdir / "cfg.yaml").write_text(yaml.safe_dump(cfg))
+    return run_workflow(workdir, workdir / "cfg.yaml", targets=targets)

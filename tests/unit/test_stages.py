@@ -124,7 +124,16 @@ def test_semantic_takes_first_take_of_each_label():
 
 
 def test_sweep_stage_table_is_derived_from_the_stage_modules():
-    assert STAGES == ("repair", "landmarks", "fit", "align", "refine", "motion", "motion_noise")
+    assert STAGES == (
+        "repair",
+        "landmarks",
+        "fit",
+        "align",
+        "refine",
+        "consensus",
+        "motion",
+        "motion_noise",
+    )
     assert SECTION_STAGE == {
         "repair": "repair",
         "landmarks": "landmarks",
@@ -145,6 +154,7 @@ def test_each_part_holds_the_datasets_its_stage_owns(tmp_path_factory):
     takes = [t["take"] for t in TAKES]
     stages = ("ingest", "repair", "landmarks", "fit", "align", "refine")
     parts = {f"takes/{t}/{s}.h5": s for t in takes for s in stages}
+    # (the consensus part holds datasets only for takes refined by their shape: none here)
     parts |= {f"{s}.h5": s for s in ("motion", "motion_noise", "morph", "modal")}
     parts[f"{SUBJECT}.h5"] = "store"
     parts["template.h5"] = "fit"

@@ -9,10 +9,9 @@ import json
 import h5py
 import numpy as np
 import pytest
-import yaml
 
 from scan2morph.store import load_layout, paths, validate_store
-from tests.support.workflow_api import REPO, run_workflow
+from tests.support.workflow_api import REPO, run_synthetic
 
 pytestmark = pytest.mark.slow
 
@@ -35,25 +34,24 @@ SENSOR = dict(
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     work = tmp_path_factory.mktemp("modalities")
-    (work / "subjects.tsv").write_text("subject\ttake\tkind\tlabel\tmodality\tlandmarks\n")
-    cfg = dict(
-        subjects=str(work / "subjects.tsv"),
-        synthetic=dict(
-            subjects=2,
-            takes=TAKES,
-            stereo=dict(subjects=[]),
-            mesh=dict(subjects=[1], takes=["neutral", "car"]),
-            rgbd=dict(subjects=[2], takes=["neutral", "car"], sensor=SENSOR),
-        ),
+    synthetic = dict(
+        subjects=2,
+        takes=TAKES,
+        stereo=dict(subjects=[]),
+        mesh=dict(subjects=[1], takes=["neutral", "car"]),
+        rgbd=dict(subjects=[2], takes=["neutral", "car"], sensor=SENSOR),
+    )
+    targets = [f"results/{s}/accuracy.json" for s in ("synth01", "synth02")]
+    assert run_synthetic(
+        work,
+        synthetic,
+        targets,
         mesh_camera=dict(width=160, height=120),
         # an absolute alignment gate: repair smooths the RGB-D depth noise, so the meshes look
         # smoother (their roughness ~0.03 mm) than they are against each other (~0.2 mm)
         align=dict(icp=dict(max_rmse_mm=0.5)),
         modal=dict(modes=10, reconstruction_k=[1, 2, 5, 10]),
     )
-    (work / "cfg.yaml").write_text(yaml.safe_dump(cfg))
-    targets = [f"results/{s}/accuracy.json" for s in ("synth01", "synth02")]
-    assert run_workflow(work, work / "cfg.yaml", targets=targets)
     return work
 
 

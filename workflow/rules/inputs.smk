@@ -240,6 +240,17 @@ def get_subject_stage_reads(wildcards):
     stage reads them."""
     neutral = [get_neutral_fit(wildcards), get_neutral_repair(wildcards)]
     return {
+        "consensus": (
+            sum(
+                (
+                    get_take_parts(stage)(wildcards)
+                    for stage in ("repair", "landmarks", "fit", "align", "refine")
+                ),
+                [],
+            )
+            if REFINE
+            else []
+        ),
         "motion": get_take_parts("fit")(wildcards)
         + get_take_parts("align")(wildcards)
         + (get_take_parts("refine")(wildcards) if REFINE else []),

@@ -20,6 +20,7 @@ def subject_stage_outputs(truth):
     captions; ``truth``: a synthetic subject's, with its accuracy."""
     out = {
         "template_part": {"template_part": "results/{subject}/template.h5"},
+        "consensus": {"consensus": "results/{subject}/consensus.h5"},
         "motion": {"motion": "results/{subject}/motion.h5"},
         "motion_noise": {
             "motion_noise": "results/{subject}/motion_noise.h5",

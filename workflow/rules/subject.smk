@@ -1,5 +1,6 @@
 # A subject's own stages, one job per subject after its takes (one process: the interpreter and
-# imports paid once a subject): its template part, motion (viseme motion vectors and expression
+# imports paid once a subject): its template part, consensus (the takes refined by their shape
+# registered to one another by their texture), motion (viseme motion vectors and expression
 # displacement fields), motion_noise (the click-noise error bar), morph (PCA, blends, exports),
 # modal (shell-FEM basis, expression coordinates), store (the versioned HDF5 file), head_meshes
 # (every mesh in the head frame), accuracy (synthetic subjects: against the ground truth),

@@ -1,4 +1,4 @@
-"""Run a subject's own stages in one process: its template part, motion, motion_noise, morph,
+"""Run a subject's own stages in one process: its template part, consensus, motion, motion_noise, morph,
 modal, store, head_meshes, accuracy (synthetic subjects), figures and report_subject.
 
 A stage whose files are up to date (its fingerprint, :mod:`scan2morph.stages.stage_job`) is not
@@ -19,17 +19,18 @@ from scan2morph.errors import InputError
 from scan2morph.jobs import run_job, sha256_file, write_json
 from scan2morph.stages import Subject
 from scan2morph.stages.stage_job import fingerprint, part_fingerprint, run_stages
-from scan2morph.store import read_attrs, read_part, read_parts, write_part
+from scan2morph.store import paths, read_attrs, read_part, read_parts, write_part
 from scan2morph.template import load_template
 
 #: The subject's own stages each stage reads (besides the take parts it reads: params.reads).
 OWN_READS = {
     "template_part": (),
-    "motion": (),
-    "motion_noise": ("motion",),
+    "consensus": (),
+    "motion": ("consensus",),
+    "motion_noise": ("motion", "consensus"),
     "morph": ("motion",),
     "modal": ("motion",),
-    "store": ("template_part", "motion", "motion_noise", "morph", "modal"),
+    "store": ("template_part", "consensus", "motion", "motion_noise", "morph", "modal"),
     "head_meshes": ("store",),
     "accuracy": ("store",),
     "figures": ("store",),
@@ -37,7 +38,7 @@ OWN_READS = {
 }
 
 #: The stages that read the template.
-TEMPLATE = ("template_part", "motion", "motion_noise", "morph", "modal", "accuracy")
+TEMPLATE = ("template_part", "consensus", "motion", "motion_noise", "morph", "modal", "accuracy")
 
 
 def stage_module(stage):
@@ -55,27 +56,44 @@ def run_template_part(j):
     write_part(j.out.template_part, part.datasets)
 
 
+def refine_verdicts(files):
+    """Each take's refine group attributes (whether its texture correlated, or its shape refined
+    it), from its refine part (``.../takes/{take}/refine.h5``), under the group's store path; a
+    take left out has none."""
+    refines = {Path(f).parent.name: f for f in files if Path(f).name == "refine.h5"}
+    verdicts = {
+        t: read_attrs(f, paths.refine_group(t), missing_ok=True) for t, f in refines.items()
+    }
+    return {paths.refine_group(t): v for t, v in verdicts.items() if v}
+
+
+def run_consensus(j):
+    """The takes refined by their shape registered to one another by their shared texture (the
+    parts read only when enough takes were: the verdicts alone say why not)."""
+    reads, consensus = j.p.reads["consensus"], stage_module("consensus")
+    data = refine_verdicts(reads)
+    if len(consensus.members(j.subject, data)) >= consensus.MIN_TAKES:
+        data |= read_parts(reads)
+    part = consensus.run(j.template(), j.subject, data, j.params("consensus"))
+    write_part(j.out.consensus, part.datasets, attrs=part.attrs)
+
+
 def run_motion(j):
     """Viseme motion (mask, smoothing, models) and expression displacement fields."""
-    data = read_parts(j.p.reads["motion"])
+    data = read_parts([*j.p.reads["motion"], j.out.consensus])
     part = stage_module("motion").run(j.template(), j.subject, data, j.params("motion"))
     write_part(j.out.motion, part.datasets)
 
 
 def run_motion_noise(j):
     """Click precision and the click-noise error bar of each viseme's motion."""
-    from scan2morph.store import paths
     from scan2morph.tables import MOTION_NOISE, write_table
 
     reads = j.p.reads["motion_noise"]
-    refines = {Path(f).parent.name: f for f in reads if Path(f).name == "refine.h5"}
-    data = read_parts([f for f in reads if f not in refines.values()]) | read_part(j.out.motion)
-    # the pipeline's verdict on each viseme's texture (refined by it, or by the shape); a take
-    # left out has none
-    verdicts = {
-        t: read_attrs(f, paths.refine_group(t), missing_ok=True) for t, f in refines.items()
-    }
-    data |= {paths.refine_group(t): v for t, v in verdicts.items() if v}
+    own = [f for f in reads if Path(f).name != "refine.h5"]
+    data = read_parts([*own, j.out.motion, j.out.consensus])
+    # the pipeline's verdict on each viseme's texture (refined by it, or by the shape)
+    data |= refine_verdicts(reads)
     module = stage_module("motion_noise")
     part = module.run(j.template(), j.subject, data, j.params("motion_noise"))
     write_part(j.out.motion_noise, part.datasets, attrs=part.attrs)
@@ -106,7 +124,7 @@ def run_store(j):
     from scan2morph.store.hdf5 import write_file
 
     out = j.out
-    own = [out.template_part, out.motion, out.motion_noise, out.morph, out.modal]
+    own = [out.template_part, out.consensus, out.motion, out.motion_noise, out.morph, out.modal]
     params = j.params("store").with_layout(load_layout(j.inp.layout))
     data = {"parts": [*j.p.reads["store"], *own]}
     part = stage_module("store").run(None, j.subject, data, params)
@@ -164,6 +182,7 @@ def run_report_subject(j):
 
 RUN = {
     "template_part": run_template_part,
+    "consensus": run_consensus,
     "motion": run_motion,
     "motion_noise": run_motion_noise,
     "morph": run_morph,

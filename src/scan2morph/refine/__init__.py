@@ -25,14 +25,17 @@ from scan2morph.geometry import face_sides, lengths_2d
 from scan2morph.refine.flow import aperture, fuse_across, fusion, measure_flow
 from scan2morph.refine.memo import active, shared
 from scan2morph.refine.shape import surface_flow
-from scan2morph.refine.template_space import pull_back, template_grid
+from scan2morph.refine.template_space import TemplateGrid, pull_back, template_grid
 from scan2morph.template.tps import TPS
 
 __all__ = [
     "Channel",
     "SurfaceChannel",
     "RefineParams",
+    "compose_field",
     "grey",
+    "neutral_grid",
+    "pull_back_field",
     "refine_channels",
     "refine_points",
     "texture_channel",
@@ -278,7 +281,7 @@ def refine_channels(
                 }
         solve = fusion(weight, inside, smooth, prior, anchor_rc, anchor_w, coarsen=2)
         f = fuse_across(solve(flow), across, share, solve, params.aperture_iterations)
-        mapped = _compose(mapped, f)
+        mapped = compose_field(mapped, f)
     at = pull_back_field(mapped, g_vertices)
     points = np.where(np.isfinite(at).all(axis=1)[:, None], at, pt)
     vconf = np.nan_to_num(pull_back_field(conf[..., None], g_vertices)[:, 0])
@@ -322,13 +325,7 @@ def _neutral_side(v2, faces, neutral_map, neutral_images, channels, params: Refi
     it and the grid points inside the domain where every image channel has a value."""
 
     def compute():
-        pn = _warped(neutral_map, v2)
-        e = face_sides(faces)
-        ratio = np.linalg.norm(v2[e[:, 0]] - v2[e[:, 1]], axis=1) / np.linalg.norm(
-            pn[e[:, 0]] - pn[e[:, 1]], axis=1
-        )
-        step = float(np.median(ratio[np.isfinite(ratio)]))  # template units per neutral pixel
-        grid = template_grid(v2, faces, step, int(np.ceil(params.margin_px)))
+        grid = neutral_grid(v2, faces, neutral_map, params.margin_px)
         where = grid.points().reshape(-1, 2)
         at_neutral = _warped(neutral_map, where).reshape((*grid.shape, 2))
         references = [pull_back(image, at_neutral) for image in neutral_images]
@@ -341,6 +338,21 @@ def _neutral_side(v2, faces, neutral_map, neutral_images, channels, params: Refi
     kinds = tuple(isinstance(c, Channel) for c in channels)
     parts = (neutral_map.centres, neutral_map.weights, neutral_map.affine, v2, faces)
     return shared("neutral", (*parts, params.margin_px, kinds, *neutral_images), compute)
+
+
+def neutral_grid(vertices2d, faces, neutral_map: Callable, margin_px: float) -> TemplateGrid:
+    """The template grid a refinement compares on: the template (vertices (V, 2), triangles
+    (F, 3)) sampled at the neutral's pixel spacing (the median ratio of the template's edge
+    lengths to the neutral fit's, ``neutral_map`` its map to the neutral's pixels), with
+    ``margin_px`` grid points around the outline."""
+    v2 = np.asarray(vertices2d, dtype=np.float64)
+    pn = _warped(neutral_map, v2)
+    e = face_sides(faces)
+    ratio = np.linalg.norm(v2[e[:, 0]] - v2[e[:, 1]], axis=1) / np.linalg.norm(
+        pn[e[:, 0]] - pn[e[:, 1]], axis=1
+    )
+    step = float(np.median(ratio[np.isfinite(ratio)]))  # template units per neutral pixel
+    return template_grid(v2, faces, step, int(np.ceil(margin_px)))
 
 
 def _apertures(channels, references, params: RefineParams) -> list:
@@ -433,7 +445,7 @@ def _channel_flow(channel, reference, mapped, inside, params: RefineParams):
     )
 
 
-def _compose(field: np.ndarray, flow: np.ndarray) -> np.ndarray:
+def compose_field(field: np.ndarray, flow: np.ndarray) -> np.ndarray:
     """``field(x + flow(x))`` on the grid (bilinear; NaN stays NaN)."""
     rows, cols = flow.shape[:2]
     gx, gy = np.meshgrid(np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64))

@@ -2,7 +2,7 @@
 call the same functions.
 
 One module per stage (:mod:`check`, :mod:`ingest`, :mod:`repair`, :mod:`fit`, :mod:`align`,
-:mod:`refine`, :mod:`motion`, :mod:`motion_noise`, :mod:`morph`, :mod:`modal`, :mod:`store`,
+:mod:`refine`, :mod:`consensus`, :mod:`motion`, :mod:`motion_noise`, :mod:`morph`, :mod:`modal`, :mod:`store`,
 :mod:`accuracy`, :mod:`report`, :mod:`synth`). Every stage module has
 
 - a frozen ``Params`` dataclass with ``Params.from_config(config: Mapping) -> Params``, taking the

@@ -96,11 +96,13 @@ def aligned_mesh(
     data: Mapping[str, np.ndarray], take: str, source: str, refined: bool = False
 ) -> AlignedMesh:
     """A take's mesh in the neutral frame and its validity: the refined mesh (refine part, with
-    the refinement's confidence) or the aligned fit (fit and align parts)."""
+    the refinement's confidence; the consensus part's mesh where the takes' consensus moved it)
+    or the aligned fit (fit and align parts)."""
     if refined:
+        group = paths.consensus if paths.consensus(take, "vertices") in data else paths.refine
         return AlignedMesh(
-            need(data, paths.refine(take, "vertices"), source),
-            need(data, paths.refine(take, "valid"), source),
+            need(data, group(take, "vertices"), source),
+            need(data, group(take, "valid"), source),
             need(data, paths.refine(take, "confidence"), source),
         )
     return AlignedMesh(
@@ -119,7 +121,8 @@ def run(
     template, subject
         The base template and the subject (the contract of :mod:`scan2morph.stages`).
     data : mapping store path -> array
-        The fit and align parts of every take (and their refine parts with ``params.refined``).
+        The fit and align parts of every take (and their refine parts and the consensus part
+        with ``params.refined``).
     params : Params
 
     Returns

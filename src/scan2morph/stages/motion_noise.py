@@ -19,7 +19,7 @@ from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
 from scan2morph.stages.quality import modelled
 from scan2morph.store import paths
-from scan2morph.template import Template
+from scan2morph.template import Template, subdivide_template
 
 #: Config sections this stage reads (``refine`` and ``align``: the error bar of the refined
 #: correspondence, whose jaw prior uses the alignment's ICP settings).
@@ -78,9 +78,16 @@ def _refiner(
     """The refine stage as a function of a viseme's and the neutral's clicks (a click-noise
     draw): the take's fit to its clicks refined against the neutral seen through its clicks.
     ``by_shape``: take -> whether the pipeline refined it by the surface's shape (its texture
-    did not correlate); a take it does not name takes its first draw's verdict."""
+    did not correlate); a take it does not name takes its first draw's verdict. A take the
+    takes' consensus moved (its ``correction`` in ``data``) moves each draw's refined points by
+    that correction too, sampled as the consensus samples them."""
     neutral = subject.neutral
     by_shape = dict(by_shape or {})  # take -> its draws go to the shape straight away
+    # the takes' consensus moved these takes' refined points (stages.consensus): each draw's
+    # refined points move by the same correction, so the undisturbed clicks give the pipeline's
+    moves = {t: data.get(paths.consensus(t, "correction")) for t in subject.visemes}
+    moves = {t: m for t, m in moves.items() if m is not None}
+    faces = subdivide_template(template, params.levels).faces if moves else None
 
     def refiner(take, mesh, take_landmarks, neutral_landmarks):
         source = subject.source(take)
@@ -99,11 +106,11 @@ def _refiner(
         part = refine_stage.run(template, Take.of(subject, take, data=draw), p)
         by_shape.setdefault(take, bool(part.attrs[paths.refine_group(take)]["shape_used"]))
         d = part.datasets
-        return (
-            d[paths.refine(take, "vertices")],
-            d[paths.refine(take, "valid")],
-            d[paths.refine(take, "confidence")],
-        )
+        vertices, valid = d[paths.refine(take, "vertices")], d[paths.refine(take, "valid")]
+        if take in moves:
+            points = d[paths.refine(take, "points2d")] + moves[take]
+            vertices, valid = refine_stage.sample_points(draw, take, points, faces, p, source)
+        return vertices, valid, d[paths.refine(take, "confidence")]
 
     return refiner
 
@@ -123,7 +130,10 @@ def run(
         group attributes too (``paths.refine_group(take)`` -> mapping, :func:`shape_verdicts`):
         a viseme whose texture the pipeline found not correlating (``shape_used``) is refined
         by the surface's shape straight away in every draw, one it refined by its texture
-        tries the texture in every draw, and one without them takes its first draw's verdict.
+        tries the texture in every draw, and one without them takes its first draw's verdict;
+        and the consensus part (``/takes/{take}/consensus/correction`` of the visemes the takes'
+        consensus moved: each draw's refined points of such a viseme move by the same
+        correction, :mod:`scan2morph.stages.consensus`).
     params : Params
         (With ``params.refine``, each draw refines the visemes too:
         ``motion_noise.refine_draws`` draws.)

@@ -514,11 +514,15 @@ def _lip(
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
-    """Every take of a subject held in memory (nothing when ``refine.method`` is ``none``)."""
+    """Every take of a subject held in memory (nothing when ``refine.method`` is ``none``): its
+    datasets and its refine group's attributes (a mapping under
+    :func:`~scan2morph.store.paths.refine_group`, which the consensus and the click-noise draws
+    read as they read them from the part)."""
     if not enabled(run_.config["refine"]):
         return {}
     params = Params.from_config(run_.config)
     out = {}
     for take in run_.subject.kinds:
-        out |= run(run_.template, Take.of(run_.subject, take, data=data), params).datasets
+        part = run(run_.template, Take.of(run_.subject, take, data=data), params)
+        out |= part.datasets | part.attrs
     return out

@@ -2,7 +2,7 @@
 
 A take's stages (ingest, repair, landmarks, fit, align, refine: :data:`TAKE_STAGES`) run in one
 job per take, and a subject's own stages after its takes (:data:`SUBJECT_STAGES`: its template
-part, motion, click noise, morphable and modal models, store, head meshes, accuracy, figures and
+part, the takes' consensus, motion, click noise, morphable and modal models, store, head meshes, accuracy, figures and
 report) in one job per subject, each in one process, so that the interpreter and the imports are
 paid once a job instead of once a stage. A config change still re-runs only the stages it
 reaches: every stage's outputs are recorded with a *fingerprint*, the SHA-256 of the stage's
@@ -38,6 +38,7 @@ TAKE_STAGES = ("ingest", "repair", "landmarks", "fit", "align", "refine")
 #: ground truth has no ``accuracy``).
 SUBJECT_STAGES = (
     "template_part",
+    "consensus",
     "motion",
     "motion_noise",
     "morph",

@@ -23,6 +23,7 @@ STAGES = (
     "fit",
     "align",
     "refine",
+    "consensus",
     "motion",
     "motion_noise",
     "morph",
@@ -56,6 +57,7 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/takes/{take}/mesh", "fit", ("vertices", "uv", "valid", "points2d")),
     ("/takes/{take}/align", "align", ("transform", "vertices", "ok")),
     ("/takes/{take}/refine", "refine", ("vertices", "valid", "points2d", "confidence")),
+    ("/takes/{take}/consensus", "consensus", ("vertices", "valid", "points2d", "correction")),
     ("/mask", "motion", ("suppressed", "seeds")),
     ("/neutral", "motion", ("vertices", "filled")),
     ("/neutral", "morph", ("head_frame",)),
@@ -142,6 +144,8 @@ TAKES = "/takes"
 VISEMES = "/visemes"
 EXPRESSIONS = "/expressions"
 MOTION_NOISE = "/motion_noise"
+#: The takes' consensus (its attributes: whether it was used, why not, which takes).
+CONSENSUS = "/consensus"
 MASK = "/mask"
 PCA = "/pca"
 BLENDS = "/blends"
@@ -250,6 +254,17 @@ def refine(take_id: str, name: str) -> str:
     """``vertices`` (neutral frame), ``valid``, ``points2d`` or ``confidence`` of a take's
     correspondence refined by image correlation."""
     return _build("/takes/{take}/refine", name, take=take_id)
+
+
+def consensus_group(take_id: str) -> str:
+    """The takes' consensus group of a take (its attributes hold the move's statistics)."""
+    return f"{take(take_id)}/consensus"
+
+
+def consensus(take_id: str, name: str) -> str:
+    """``vertices`` (neutral frame), ``valid``, ``points2d`` or ``correction`` (px) of a take's
+    refined correspondence moved onto the skin points the subject's takes agree on."""
+    return _build("/takes/{take}/consensus", name, take=take_id)
 
 
 def mask(name: str) -> str:
