@@ -1280,3 +1280,34 @@ def test_the_page_links_its_products_and_keeps_the_navigation_in_view(report, ru
         and "white-space:nowrap}" not in text.split("caption{")[1][:80]
     )
     assert text.index('id="status"') < text.index('id="inputs"')  # warnings come first
+
+
+def test_a_takes_caption_says_how_its_correspondence_was_made(tmp_path):
+    """Refined by its texture, by its shape (and registered to the others by the takes'
+    consensus), or its template fit kept; nothing for a take without a verdict (the neutral)."""
+    from scan2morph.report.sections import correspondence
+    from scan2morph.store import write_part
+
+    store = tmp_path / "s.h5"
+    attrs = {
+        paths.refine_group("car"): {"used": True, "shape_used": False},
+        paths.refine_group("sad1"): {"used": True, "shape_used": True},
+        paths.refine_group("sad2"): {"used": True, "shape_used": True},
+        paths.refine_group("too"): {"used": False, "shape_used": False},
+        paths.CONSENSUS: {"used": True, "problem": "", "takes": ["sad1", "x", "y"]},
+    }
+    datasets = {
+        paths.refine("neutral", "valid"): np.ones(3, bool),
+        paths.consensus("sad1", "valid"): np.ones(3, bool),
+    }
+    write_part(store, datasets, attrs=attrs)
+    with h5py.File(store) as h5:
+        said = {t: correspondence(h5, t) for t in ("neutral", "car", "sad1", "sad2", "too")}
+    assert said == {
+        "neutral": "",
+        "car": "; refined by its texture",
+        "sad1": "; refined by its shape (its texture does not match the neutral's), registered "
+        "to 2 other such takes by their shared texture",
+        "sad2": "; refined by its shape (its texture does not match the neutral's)",
+        "too": "; template fit kept (see the warnings)",
+    }

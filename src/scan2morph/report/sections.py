@@ -199,9 +199,28 @@ def inputs(h5: h5py.File, takes: list[str], thumbnail_px: int) -> list[dict]:
         color = h5[paths.range_image(take, "color")][()]
         h, w = color.shape[:2]
         uri = data_uri(thumbnail_jpeg(color, thumbnail_px), "image/jpeg")
-        text = f"{take}: {kind} {label}, {modality}, {w}x{h} px"
+        text = f"{take}: {kind} {label}, {modality}, {w}x{h} px{correspondence(h5, take)}"
         items.append({"take": take, "uri": uri, "width": min(w, thumbnail_px), "text": text})
     return [{"kind": "thumbs", "thumbs": items}]
+
+
+def correspondence(h5: h5py.File, take: str) -> str:
+    """How a take's correspondence to the neutral was made, as the end of its caption: refined
+    by its texture or by its shape (the refine group's ``used``, ``shape_used``), and
+    registered to the subject's other such takes (the takes' consensus); ``""`` for a take
+    without a refinement's verdict (the neutral, ``refine.method: none``)."""
+    group = h5.get(paths.refine_group(take))
+    if group is None or "used" not in group.attrs:
+        return ""
+    if not bool(group.attrs["used"]):
+        return "; template fit kept (see the warnings)"
+    if not bool(group.attrs.get("shape_used", False)):
+        return "; refined by its texture"
+    text = "; refined by its shape (its texture does not match the neutral's)"
+    if paths.consensus_group(take) in h5:
+        others = len(json.loads(_attr(h5[paths.CONSENSUS], "takes", "[]"))) - 1
+        text += f", registered to {others} other such takes by their shared texture"
+    return text
 
 
 def figures(figures: Sequence[ReportFigure]) -> list[dict]:
