@@ -415,7 +415,7 @@ def test_rerun_refuses_bad_input(run):
     with pytest.raises(
         InputError,
         match=r"start stage: expected one of \('repair', 'landmarks', 'fit', 'align', 'refine', "
-        r"'motion', 'motion_noise'\)",
+        r"'consensus', 'motion', 'motion_noise'\)",
     ):
         rerun_accuracy(store, good, {}, "morph")
     with pytest.raises(InputError, match="/takes/neutral/raw/xyz: missing"):

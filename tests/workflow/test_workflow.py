@@ -513,7 +513,7 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
     copy = tmp_path / "wf"
     shutil.copytree(work, copy, symlinks=True)
     folder = copy / "results" / "alice"
-    kept = ("template", "motion", "motion_noise", "modal")
+    kept = ("template", "consensus", "motion", "motion_noise", "modal")
     before = {
         n: ((folder / f"{n}.h5").stat().st_ino, (folder / f"{n}.h5").read_bytes()) for n in kept
     }
@@ -525,6 +525,7 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
     summary = (copy / "logs" / "subject" / "alice.log").read_text().splitlines()
     assert summary == [
         "template_part: up to date, not run",
+        "consensus: up to date, not run",
         "motion: up to date, not run",
         "motion_noise: up to date, not run",
         "morph: run",
