@@ -95,3 +95,37 @@ def test_each_take_is_nearer_its_material_motion(run):
         assert after < 0.95 * before, take
     before, after = (sum(e[k] for e in errors.values()) for k in (0, 1))
     assert after < 0.85 * before
+
+
+def test_a_sweep_from_the_refinement_gives_the_runs_accuracy(run):
+    """A parameter sweep that starts at the refinement re-runs the consensus too (the refine
+    stage hands on its verdicts in memory): with the run's own settings its accuracy is the
+    run's, take by take."""
+    import yaml
+
+    from scan2morph.stages.part import Run, Subject
+    from scan2morph.sweep import rerun_accuracy, sweep_settings
+    from scan2morph.template import load_template
+
+    results = run / "results"
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    for key, value in yaml.safe_load((run / "cfg.yaml").read_text()).items():
+        config[key] = config[key] | value if isinstance(value, dict) else value
+    store = read_part(results / SUBJECT / f"{SUBJECT}.h5")
+    truths = {
+        t["take"]: read_truth(results / "synthetic" / SUBJECT / "truth" / f"{t['take']}.npz")
+        for t in TAKES
+    }
+    subject = Subject(
+        SUBJECT, {t["take"]: t["kind"] for t in TAKES}, {t["take"]: t["label"] for t in TAKES}
+    )
+    template = load_template(run / "resources" / "template.npz")
+    swept = rerun_accuracy(
+        store, Run(subject, template, sweep_settings(config, {})), truths, "refine"
+    )
+    ran = json.loads((results / SUBJECT / "accuracy.json").read_text())
+    for take in MEMBERS:
+        kind = "motion" if take == "too" else "expression"
+        assert swept["takes"][take][kind]["material_relative_error"] == pytest.approx(
+            ran["takes"][take][kind]["material_relative_error"], rel=1e-9
+        ), take
