@@ -285,6 +285,25 @@ def sweep_settings(config: Mapping, row: Mapping[str, object]) -> dict[str, dict
     return settings
 
 
+def read_store(path: str | Path) -> dict:
+    """A subject's store as a sweep re-runs it: its datasets, and each take's refine group
+    attributes (a mapping under :func:`scan2morph.store.paths.refine_group`: whether its texture
+    correlated, or its shape refined it), which the takes' consensus and the click-noise draws
+    read."""
+    import h5py
+
+    from scan2morph.store import read_attrs, read_part
+
+    data = read_part(path)
+    with h5py.File(path, "r") as h5:
+        takes = list(h5[paths.TAKES]) if paths.TAKES in h5 else []
+    for take in takes:
+        attrs = read_attrs(path, paths.refine_group(take), missing_ok=True)
+        if attrs:
+            data[paths.refine_group(take)] = attrs
+    return data
+
+
 def rerun_accuracy(
     store: Mapping[str, np.ndarray],
     run: Run,
@@ -302,7 +321,8 @@ def rerun_accuracy(
     Parameters
     ----------
     store : mapping store path -> array
-        The subject's store (``read_part(results/{subject}/{subject}.h5)``).
+        The subject's store (:func:`read_store`: its datasets and its refine groups'
+        attributes, which a start at ``consensus`` needs).
     run : Run
         The subject, the base template and the config sections with the combination's values
         (:func:`sweep_settings`).
@@ -326,6 +346,14 @@ def rerun_accuracy(
     source = run.subject.name
     if start not in STAGES:
         raise InputError(source, f"start stage: expected one of {STAGES}, got {start!r}")
+    refined = any(k.endswith("/refine/vertices") for k in store)
+    verdicts = any(isinstance(v, Mapping) for v in store.values())
+    if start == "consensus" and refined and not verdicts:
+        raise InputError(
+            source,
+            "start stage consensus: the store's refine verdicts are missing (read the store "
+            "with scan2morph.sweep.read_store)",
+        )
     step = paths.STAGES.index(start)
     drop = paths.written_by(paths.STAGES[step:])
     data = {k: v for k, v in store.items() if not drop.match(k)}

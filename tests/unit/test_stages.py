@@ -142,7 +142,7 @@ def test_sweep_stage_table_is_derived_from_the_stage_modules():
         "refine": "refine",
         "mask": "motion",
         "smoothing": "motion",
-        "quality": "motion",
+        "quality": "consensus",
         "motion_noise": "motion_noise",
     }
 

@@ -72,7 +72,8 @@ def run_consensus(j):
     parts read only when enough takes were: the verdicts alone say why not)."""
     reads, consensus = j.p.reads["consensus"], stage_module("consensus")
     data = refine_verdicts(reads)
-    if len(consensus.members(j.subject, data)) >= consensus.MIN_TAKES:
+    enough = len(consensus.members(j.subject, data)) >= consensus.MIN_TAKES
+    if j.params("consensus").use and enough:
         data |= read_parts(reads)
     part = consensus.run(j.template(), j.subject, data, j.params("consensus"))
     write_part(j.out.consensus, part.datasets, attrs=part.attrs)

@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
 from scan2morph.refine import RefineParams, compose_field, pull_back_field
 from scan2morph.refine.flow import fusion, measure_flow
@@ -38,6 +39,7 @@ def take_consensus(
     images: Mapping[str, np.ndarray],
     params: RefineParams,
     rounds: int = 2,
+    min_share: float = 0.0,
 ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
     """Move each take's refined pixel positions onto the skin points all the takes agree on.
 
@@ -45,12 +47,12 @@ def take_consensus(
     ----------
     grid : TemplateGrid
         The template grid the takes are compared on (the refinement's: the neutral's pixel
-        spacing).
+        spacing, with a margin around the template's outline).
     vertices2d : (V, 2) float
         The template's vertices, template units.
     points : mapping take -> (V, 2) float
-        Each take's refined pixel positions of the template's vertices in its own image, px
-        (NaN where it has none); at least :data:`MIN_TAKES` takes.
+        Each take's refined pixel positions of the template's vertices in its own image, px;
+        at least :data:`MIN_TAKES` takes.
     images : mapping take -> (H, W) float
         Each take's grey image, pixel to pixel with its range image (NaN where there is none).
     params : RefineParams
@@ -58,15 +60,19 @@ def take_consensus(
         ``flow_level``) and the fusion's (``flow_precision_px``, ``smooth_px``, ``fade_px``).
     rounds : int
         Measure-and-move rounds.
+    min_share : float
+        A take measured against the others' mean image with confidence above one half on less
+        than this share of the template (its texture is not theirs) is left out, and the
+        consensus made again without it.
 
     Returns
     -------
     points : dict take -> (V, 2) float64
-        The moved pixel positions, px (a take's own where its map has no value).
+        The moved pixel positions of the takes kept, px.
     report : dict take -> dict
-        ``confident_share``: the share of the template grid's points where the last round
-        measured the take with confidence above one half; ``median_correction_px``: the median
-        move of its vertices, px.
+        Every take's ``confident_share`` (the share of the template's grid points the last
+        round it took part in measured it with confidence above one half) and ``kept``; a kept
+        take's ``median_correction_px``, the median move of its vertices, px.
 
     Raises
     ------
@@ -78,16 +84,61 @@ def take_consensus(
         raise ValueError(f"a consensus needs at least {MIN_TAKES} takes, got {len(takes)}")
     if int(rounds) < 1:
         raise ValueError(f"rounds: expected at least 1, got {rounds!r}")
-    at_vertices = grid.to_grid(np.asarray(vertices2d, dtype=np.float64))
-    maps = {t: grid.interpolate(np.asarray(points[t], dtype=np.float64)) for t in takes}
+    v2 = np.asarray(vertices2d, dtype=np.float64)
+    maps = {t: extended_map(grid, v2, np.asarray(points[t], dtype=np.float64)) for t in takes}
     grey = {t: np.asarray(images[t], dtype=np.float32) for t in takes}
+    report: dict[str, dict] = {}
+    while True:
+        moved, shares = _rounds(grid, {t: maps[t] for t in takes}, grey, params, int(rounds))
+        low = [t for t in takes if shares[t] < min_share]
+        report |= {t: {"confident_share": shares[t], "kept": t not in low} for t in takes}
+        if not low or len(takes) - len(low) < MIN_TAKES:
+            break
+        takes = [t for t in takes if t not in low]  # made again without them
+    if low:  # too few kept: nothing moves
+        return {}, {t: r | {"kept": False} for t, r in report.items()}
+    at_vertices = grid.to_grid(v2)
+    out = {}
+    for take in takes:
+        old = np.asarray(points[take], dtype=np.float64)
+        new = pull_back_field(moved[take], at_vertices)
+        out[take] = np.where(np.isfinite(new).all(axis=1)[:, None], new, old)
+        report[take]["median_correction_px"] = float(
+            np.nanmedian(np.linalg.norm(out[take] - old, axis=1))
+        )
+    return out, report
+
+
+def extended_map(grid: TemplateGrid, vertices2d: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """A take's map from the grid to its pixels, (rows, columns, 2) px: piecewise linear over the
+    template through its vertices' pixel positions ``points`` (V, 2), and beyond (the grid's
+    margin, a triangle with a vertex without a position) the affine map that fits the vertices
+    best plus the nearest residual from it, so that an outline vertex can move outwards."""
+    ok = np.isfinite(points).all(axis=1)
+    affine = np.linalg.lstsq(
+        np.column_stack([vertices2d[ok], np.ones(ok.sum())]), points[ok], rcond=None
+    )[0]
+    plane = np.column_stack([vertices2d, np.ones(len(vertices2d))]) @ affine
+    residual = grid.interpolate(points - plane)
+    known = np.isfinite(residual).all(axis=-1)
+    if known.any() and not known.all():
+        rows, cols = distance_transform_edt(~known, return_distances=False, return_indices=True)
+        residual = residual[rows, cols]
+    where = grid.points()
+    return where @ affine[:2] + affine[2] + np.nan_to_num(residual)
+
+
+def _rounds(grid: TemplateGrid, maps: dict, grey: dict, params: RefineParams, rounds: int):
+    """:func:`take_consensus`'s rounds on the takes of ``maps``: their moved maps and each one's
+    share of the template's grid points measured with confidence above one half."""
+    takes = list(maps)
     w_data = 1.0 / params.flow_precision_px**2
     smooth = w_data * params.smooth_px**2
     prior = smooth / params.fade_px**2
-    confidence = {}
-    for _ in range(int(rounds)):
+    shares = {}
+    for _ in range(rounds):
         pulled = np.stack([pull_back(grey[t], maps[t]) for t in takes])
-        seen = np.isfinite(pulled)
+        seen = np.isfinite(pulled) & grid.domain
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = np.where(seen, pulled, 0.0).sum(axis=0) / seen.sum(axis=0)
         mean[seen.sum(axis=0) < MIN_TAKES] = np.nan
@@ -103,29 +154,17 @@ def take_consensus(
                 min_zncc=params.min_zncc,
                 level=params.flow_level,
             )
-            confidence[take] = conf
+            shares[take] = float(np.mean(conf[grid.inside] > 0.5))
             fields.append(fusion(conf * w_data, region, smooth, prior, coarsen=2)(flow))
         fields = np.stack(fields)
-        known = np.isfinite(fields).all(axis=-1)
+        # the takes' mean move where each is seen (the mean error cannot be seen)
+        weight = (seen & region).astype(np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
-            drift = (
-                np.where(known[..., None], fields, 0.0).sum(axis=0) / known.sum(axis=0)[..., None]
-            )
+            drift = np.einsum("krc,krcd->rcd", weight, fields) / weight.sum(axis=0)[..., None]
+        drift = np.nan_to_num(drift)
         for k, take in enumerate(takes):
-            move = np.where(known[k][..., None], fields[k] - drift, 0.0)
-            maps[take] = compose_field(maps[take], move)
-    out, report = {}, {}
-    for take in takes:
-        old = np.asarray(points[take], dtype=np.float64)
-        new = pull_back_field(maps[take], at_vertices)
-        new = np.where(np.isfinite(new).all(axis=1)[:, None], new, old)
-        out[take] = new
-        moved = np.linalg.norm(new - old, axis=1)
-        report[take] = {
-            "confident_share": float(np.mean(confidence[take][grid.domain] > 0.5)),
-            "median_correction_px": float(np.nanmedian(moved)) if np.isfinite(moved).any() else 0.0,
-        }
-    return out, report
+            maps[take] = compose_field(maps[take], fields[k] - drift)
+    return maps, shares
 
 
-__all__ = ["MIN_TAKES", "take_consensus"]
+__all__ = ["MIN_TAKES", "extended_map", "take_consensus"]

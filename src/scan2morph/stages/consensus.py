@@ -15,14 +15,16 @@ from scan2morph.refine.consensus import MIN_TAKES, take_consensus
 from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.failure import usable
 from scan2morph.stages.part import Part, Run, Subject, need
+from scan2morph.stages.quality import aligned_takes
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
 
 __all__ = ["MIN_TAKES", "Params", "apply", "members", "run"]
 
-#: Config sections this stage reads (the refinement's, whose flow and sampling it repeats).
-SECTIONS = ("refine", "template", "align")
+#: Config sections this stage reads (the refinement's, whose flow and sampling it repeats; the
+#: quality gate's, which takes the models keep).
+SECTIONS = ("refine", "template", "align", "quality")
 log = logging.getLogger("scan2morph")
 
 
@@ -38,12 +40,18 @@ class Params:
     rounds : int
         Measure-and-move rounds (``refine.consensus.rounds``).
     refine : scan2morph.stages.refine.Params
-        The refinement's: its flow's settings, the neutral's fiducials and the sampling rules.
+        The refinement's: its flow's settings, the neutral's fiducials, the sampling rules and
+        ``min_confident_share`` (a take that shares its texture with the others' on less of the
+        template is left out).
+    include_failed : bool
+        Takes whose alignment failed its gate take part too (``quality.include_failed_takes``,
+        as the motion stage models them).
     """
 
     use: bool
     rounds: int
     refine: refine_stage.Params
+    include_failed: bool = False
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -56,7 +64,8 @@ class Params:
             raise InputError(
                 "config", f"refine.consensus.rounds: expected an integer >= 1, got {rounds!r}"
             )
-        return cls(use, int(rounds), refine_stage.Params.from_config(config))
+        include_failed = bool(config.get("quality", {}).get("include_failed_takes", False))
+        return cls(use, int(rounds), refine_stage.Params.from_config(config), include_failed)
 
 
 def members(subject: Subject, data: Mapping) -> list[str]:
@@ -94,30 +103,41 @@ def run(
         ``correction`` (V, 2) px (the move from its refined points), ``vertices`` (V, 3) mm in
         the neutral frame (NaN where invalid) and ``valid`` (V,), with the move's
         ``confident_share`` and ``median_correction_px`` in the group's attributes; the
-        attributes of ``/consensus``: ``used``, ``problem`` (why not, ``""`` when used) and
-        ``takes`` (those registered).
+        attributes of ``/consensus``: ``used``, ``problem`` (why not, ``""`` when used),
+        ``takes`` (those registered) and ``left_out`` (members whose texture the others' shared
+        on less than ``refine.min_confident_share`` of the template, with that share).
+        Members are the takes refined by their shape whose alignment passed its gate (all of
+        them with ``quality.include_failed_takes``), as the motion stage models them.
     """
     subject = usable(subject, data)
     takes = members(subject, data)
-    problem = ""
-    if not params.use:
-        problem = "off (refine.consensus.use false, or refine.method none)"
-    elif len(takes) < MIN_TAKES:
-        problem = (
-            f"{len(takes)} take(s) refined by their shape (their texture does not correlate "
-            f"with the neutral's); a consensus needs at least {MIN_TAKES}"
-        )
+    if params.use:
+        takes = aligned_takes(data, takes, params.include_failed)
+    problem = _problem(params, takes)
     if problem:
-        return Part({}, attrs={paths.CONSENSUS: {"used": False, "problem": problem, "takes": []}})
+        return _unused(problem)
     rp = params.refine
     name, neutral = subject.name, subject.neutral
     fine = subdivide_template(template, rp.levels)
     landmarks = need(data, paths.landmarks(neutral), subject.source(neutral))
     neutral_map = fit_map(template, landmarks, rp.fit.fiducial_set("neutral"), name)
     grid = neutral_grid(fine.vertices, fine.faces, neutral_map, rp.flow.margin_px)
-    before = {t: np.asarray(data[paths.refine(t, "points2d")], dtype=np.float64) for t in takes}
+    before = {
+        t: np.asarray(need(data, paths.refine(t, "points2d"), subject.source(t)), float)
+        for t in takes
+    }
     images = {t: grey(need(data, paths.range_image(t, "color"), subject.source(t))) for t in takes}
-    moved, report = take_consensus(grid, fine.vertices, before, images, rp.flow, params.rounds)
+    moved, report = take_consensus(
+        grid, fine.vertices, before, images, rp.flow, params.rounds, rp.min_confident_share
+    )
+    left_out = [[t, report[t]["confident_share"]] for t in takes if not report[t]["kept"]]
+    if not moved:
+        problem = (
+            f"fewer than {MIN_TAKES} takes share their texture on refine.min_confident_share "
+            f"of the template: {left_out}"
+        )
+        return _unused(problem, left_out)
+    takes = list(moved)
     datasets, attrs = {}, {}
     for take in takes:
         correction = moved[take] - before[take]
@@ -131,10 +151,31 @@ def run(
             paths.consensus(take, "vertices"): vertices,
             paths.consensus(take, "valid"): ok,
         }
-        attrs[paths.consensus_group(take)] = report[take]
+        attrs[paths.consensus_group(take)] = {
+            k: report[take][k] for k in ("confident_share", "median_correction_px")
+        }
     log.info("%s: consensus of %s: %s", name, ", ".join(takes), report)
-    attrs[paths.CONSENSUS] = {"used": True, "problem": "", "takes": takes}
+    attrs[paths.CONSENSUS] = {"used": True, "problem": "", "takes": takes, "left_out": left_out}
     return Part(datasets, attrs=attrs)
+
+
+def _problem(params: Params, takes: list[str]) -> str:
+    """Why no consensus is made of ``takes`` (``""``: it is)."""
+    if not params.use:
+        return "off (refine.consensus.use false, or refine.method none)"
+    if len(takes) < MIN_TAKES:
+        return (
+            f"{len(takes)} take(s) refined by their shape (their texture does not correlate "
+            f"with the neutral's) whose alignment passed its gate; a consensus needs at least "
+            f"{MIN_TAKES}"
+        )
+    return ""
+
+
+def _unused(problem: str, left_out=()) -> Part:
+    """The part of a subject without a consensus: why not."""
+    attrs = {"used": False, "problem": problem, "takes": [], "left_out": list(left_out)}
+    return Part({}, attrs={paths.CONSENSUS: attrs})
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:
