@@ -292,16 +292,11 @@ def read_store(path: str | Path) -> dict:
     read."""
     import h5py
 
-    from scan2morph.store import read_attrs, read_part
+    from scan2morph.store import read_group_attrs, read_part
 
-    data = read_part(path)
     with h5py.File(path, "r") as h5:
         takes = list(h5[paths.TAKES]) if paths.TAKES in h5 else []
-    for take in takes:
-        attrs = read_attrs(path, paths.refine_group(take), missing_ok=True)
-        if attrs:
-            data[paths.refine_group(take)] = attrs
-    return data
+    return read_part(path) | read_group_attrs(dict.fromkeys(takes, path), paths.refine_group)
 
 
 def rerun_accuracy(

@@ -19,7 +19,7 @@ from scan2morph.errors import InputError
 from scan2morph.jobs import run_job, sha256_file, write_json
 from scan2morph.stages import Subject
 from scan2morph.stages.stage_job import fingerprint, part_fingerprint, run_stages
-from scan2morph.store import paths, read_attrs, read_part, read_parts, write_part
+from scan2morph.store import paths, read_group_attrs, read_part, read_parts, write_part
 from scan2morph.template import load_template
 
 #: The subject's own stages each stage reads (besides the take parts it reads: params.reads).
@@ -61,10 +61,7 @@ def refine_verdicts(files):
     it), from its refine part (``.../takes/{take}/refine.h5``), under the group's store path; a
     take left out has none."""
     refines = {Path(f).parent.name: f for f in files if Path(f).name == "refine.h5"}
-    verdicts = {
-        t: read_attrs(f, paths.refine_group(t), missing_ok=True) for t, f in refines.items()
-    }
-    return {paths.refine_group(t): v for t, v in verdicts.items() if v}
+    return read_group_attrs(refines, paths.refine_group)
 
 
 def run_consensus(j):

@@ -139,9 +139,10 @@ def _rounds(grid: TemplateGrid, maps: dict, grey: dict, params: RefineParams, ro
     for _ in range(rounds):
         pulled = np.stack([pull_back(grey[t], maps[t]) for t in takes])
         seen = np.isfinite(pulled) & grid.domain
+        count = seen.sum(axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(seen, pulled, 0.0).sum(axis=0) / seen.sum(axis=0)
-        mean[seen.sum(axis=0) < MIN_TAKES] = np.nan
+            mean = np.where(seen, pulled, 0.0).sum(axis=0) / count
+        mean[count < MIN_TAKES] = np.nan
         region = grid.domain & np.isfinite(mean)
         fields = []
         for k, take in enumerate(takes):

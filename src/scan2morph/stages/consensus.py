@@ -55,8 +55,8 @@ class Params:
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
-        """From the config's sections ``refine`` (``refine.consensus``), ``template`` and
-        ``align``."""
+        """From the config's sections ``refine`` (``refine.consensus``), ``template``, ``align``
+        and ``quality``."""
         section = dict(config["refine"].get("consensus", {}))
         use = bool(section.get("use", True)) and refine_stage.enabled(config["refine"])
         rounds = section.get("rounds", 2)
@@ -72,13 +72,8 @@ def members(subject: Subject, data: Mapping) -> list[str]:
     """The subject's takes (not its neutral) that its refinement refined by the surface's shape:
     their refine group's ``shape_used`` (a mapping under
     :func:`~scan2morph.store.paths.refine_group` in ``data``; a take without one is not)."""
-    out = []
-    for take in subject.kinds:
-        attrs = data.get(paths.refine_group(take))
-        if take != subject.neutral and isinstance(attrs, Mapping):
-            if bool(attrs.get("shape_used", False)):
-                out.append(take)
-    return out
+    others = [t for t in subject.kinds if t != subject.neutral]
+    return [t for t, by_shape in refine_stage.shape_verdicts(data, others).items() if by_shape]
 
 
 def run(
@@ -140,6 +135,8 @@ def run(
     takes = list(moved)
     datasets, attrs = {}, {}
     for take in takes:
+        # the refined points plus the correction, as a click-noise draw adds it to its own
+        # (stages.motion_noise): the undisturbed draw gives these points bit for bit
         correction = moved[take] - before[take]
         points = before[take] + correction
         vertices, ok = refine_stage.sample_points(

@@ -18,6 +18,7 @@ from scan2morph.stages import fit as fit_stage
 from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
 from scan2morph.stages.quality import modelled
+from scan2morph.stages.refine import shape_verdicts
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 
@@ -127,7 +128,7 @@ def run(
     data : mapping store path -> array
         The repair parts of the neutral and the visemes, their align parts and the motion
         part (the visemes it modelled, ``/mask``); when the run refines, each viseme's refine
-        group attributes too (``paths.refine_group(take)`` -> mapping, :func:`shape_verdicts`):
+        group attributes too (``paths.refine_group(take)`` -> mapping, :func:`~scan2morph.stages.refine.shape_verdicts`):
         a viseme whose texture the pipeline found not correlating (``shape_used``) is refined
         by the surface's shape straight away in every draw, one it refined by its texture
         tries the texture in every draw, and one without them takes its first draw's verdict;
@@ -184,18 +185,6 @@ def run(
     if not subject.visemes:
         attrs[paths.SKIPPED] = {"motion_noise": "no viseme takes: no click-noise error bar"}
     return Part(datasets, attrs=attrs, files={"table": table})
-
-
-def shape_verdicts(data: Mapping, visemes) -> dict[str, bool]:
-    """The pipeline's refinement of each viseme in ``data`` (its refine group's attributes,
-    a mapping under ``paths.refine_group(take)``): whether its texture did not correlate and
-    the surface's shape refined it (``shape_used``); a viseme without them is not named."""
-    out = {}
-    for take in visemes:
-        attrs = data.get(paths.refine_group(take))
-        if isinstance(attrs, Mapping) and "shape_used" in attrs:
-            out[take] = bool(attrs["shape_used"])
-    return out
 
 
 def apply(data: Mapping[str, np.ndarray], run_: Run) -> dict[str, np.ndarray]:

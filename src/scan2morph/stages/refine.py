@@ -146,6 +146,19 @@ def enabled(refine: Mapping) -> bool:
     return refine.get("method", "none") != "none"
 
 
+def shape_verdicts(data: Mapping, takes) -> dict[str, bool]:
+    """The pipeline's refinement of each of ``takes`` in ``data`` (its refine group's
+    attributes, a mapping under ``paths.refine_group(take)``): whether its texture did not
+    correlate and the surface's shape refined it (``shape_used``); a take without them is not
+    named."""
+    out = {}
+    for take in takes:
+        attrs = data.get(paths.refine_group(take))
+        if isinstance(attrs, Mapping) and "shape_used" in attrs:
+            out[take] = bool(attrs["shape_used"])
+    return out
+
+
 def sample_points(
     data: Mapping[str, np.ndarray],
     take: str,

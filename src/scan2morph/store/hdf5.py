@@ -157,6 +157,17 @@ def read_attrs(path: str | Path, name: str = "/", missing_ok: bool = False) -> d
         return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5[name].attrs.items()}
 
 
+def read_group_attrs(files: Mapping[str, str | Path], group) -> dict[str, dict]:
+    """The attributes of ``group(key)`` (a store path) in each key's file, under that path; a
+    file without the group, or without attributes on it, gives none."""
+    out = {}
+    for key, path in files.items():
+        attrs = read_attrs(path, group(key), missing_ok=True)
+        if attrs:
+            out[group(key)] = attrs
+    return out
+
+
 def merge_parts(
     path: str | Path,
     parts: Iterable[str | Path],
