@@ -12,10 +12,12 @@ from scan2morph.align.carry import carry_stable, track_points
 from scan2morph.refine import grey
 from scan2morph.refine.flow import measure_flow
 from scan2morph.scan import DEFAULT_REPAIR, repair_range
+from scan2morph.stages import fit as fit_stage
 from scan2morph.stages import landmarks
 from scan2morph.stages.part import Take
 from scan2morph.store import paths
 from scan2morph.synth.cohort import make_take
+from tests.support.configs import repo_config
 
 STABLE = (28, 37, 40, 43, 46)
 IDX = np.asarray(STABLE) - 1
@@ -180,3 +182,73 @@ def test_the_second_pass_tracks_on_grey_images(takes):
     before = np.linalg.norm(noisy - true_t, axis=1)[moved]
     after = np.linalg.norm(got.points - true_t, axis=1)[moved]
     assert np.median(after) < 0.6 * np.median(before)
+
+
+def _detected(takes, seed: int, template=None, params=None):
+    """The car take's second pass from a detection 8 px off (each axis, seeded), the neutral's
+    points its truth: the points, the attributes and the detection after the pass alone."""
+    (xyz_n, true_n, color_n), (xyz_t, true_t, color_t) = takes["neutral"], takes["car"]
+    data = {
+        paths.range_image("neutral", "xyz"): xyz_n,
+        paths.range_image("neutral", "color"): color_n,
+        paths.landmarks("neutral"): true_n,
+    }
+    noisy = true_t + np.random.default_rng(seed).normal(0.0, 8.0, size=true_t.shape)
+    found = landmarks.Landmarks(noisy, landmarks.DETECTED, np.full(68, 0.4), "d", "1")
+    take = Take("s1", "car", "viseme", "car", "neutral", data)
+    params = params or landmarks.Params.from_config(repo_config())
+    return landmarks.second_pass(found, take, (xyz_t, color_t), params, template)
+
+
+def test_a_detection_that_folds_the_fit_goes_towards_the_neutrals_points_carried_rigidly(takes):
+    """A detection 8 px off (a real face's, for the synthetic-trained detector) that folds the
+    car take's template fit after the second pass: without the fold test the fit leaves the
+    take out; with it the points go to the neutral's carried rigidly (the neutral's true
+    points, here), and the real fit (:func:`fit_take`, not the test's own
+    :func:`fit_folds`) then takes them, nearer the truth than before."""
+    from scan2morph.align.carry import carry_points
+    from scan2morph.errors import InputError
+    from scan2morph.template import build_template, fit_take
+
+    template = build_template()
+    fit_params = fit_stage.Params.from_config(repo_config())
+    (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
+    folding, attrs_off = _detected(takes, 2)
+    assert "landmarks_unfolded" not in attrs_off
+    with pytest.raises(InputError, match="landmarks fold the template"):
+        fit_take(template, folding.points, xyz_t, None, "open", fit_params.rules, "s1/car")
+    got, attrs = _detected(takes, 2, template)
+    share = attrs["landmarks_unfolded"]
+    assert share == landmarks.UNFOLD_STEPS[0]
+    mesh = fit_take(template, got.points, xyz_t, None, "open", fit_params.rules, "s1/car")
+    assert mesh["valid"].mean() > 0.9
+    # each point on its way from where the second pass put it to the neutral's carried place
+    noisy = true_t + np.random.default_rng(2).normal(0.0, 8.0, size=true_t.shape)
+    transform = carry_stable(xyz_t, noisy, xyz_n, true_n, STABLE, "s1/car").transform
+    carried = carry_points(xyz_t, xyz_n, true_n, transform)
+    found = np.isfinite(carried).all(axis=1)
+    assert found.all()
+    np.testing.assert_allclose(
+        got.points[found], (1 - share) * folding.points[found] + share * carried[found]
+    )
+    np.testing.assert_array_equal(got.points[~found], folding.points[~found])
+    before = np.median(np.linalg.norm(folding.points - true_t, axis=1))
+    after = np.median(np.linalg.norm(got.points - true_t, axis=1))
+    print(f"\nunfolded {share:.0%}: median error {before:.2f} -> {after:.2f} px")
+    assert after < before
+
+
+def test_a_detection_that_does_not_fold_is_left_as_it_is(takes):
+    """Seed 0's detection (as far off) does not fold the fit after the pass: the fold test
+    changes nothing; ``unfold: false`` switches the test off."""
+    from scan2morph.template import build_template
+
+    template = build_template()
+    plain, attrs_plain = _detected(takes, 0)
+    tested, attrs_tested = _detected(takes, 0, template)
+    np.testing.assert_array_equal(tested.points, plain.points)
+    np.testing.assert_equal(attrs_tested, attrs_plain)  # NaN shifts: points not carried
+    off = landmarks.Params.from_config(repo_config() | {"landmarks": {"unfold": False}})
+    assert off.unfold is False and off.fit is not None
+    folding, attrs_off = _detected(takes, 2, template, off)
+    assert "landmarks_unfolded" not in attrs_off

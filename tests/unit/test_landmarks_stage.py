@@ -5,11 +5,12 @@ from __future__ import annotations
 import h5py
 import numpy as np
 
-from scan2morph.stages import landmarks
+from scan2morph.stages import fit, landmarks
 from scan2morph.stages.part import Take
 from scan2morph.stages.quality import subject_warnings
 from scan2morph.store import paths, write_part
 from scan2morph.synth.cohort import make_take
+from tests.support.configs import repo_config
 
 SETTINGS = {"min_valid_fraction": 0.0, "include_failed_takes": False, "max_click_noise_px": 1.0}
 
@@ -70,3 +71,38 @@ def test_tracking_params_from_the_config():
     params = landmarks.Params.from_config({"landmarks": section})
     assert (params.track, params.min_track_confidence) == (False, 0.6)
     assert (params.max_track_px, params.track_weight) == (4.0, 1.0)
+
+
+def test_an_unfolded_detection_is_a_warning(monkeypatch):
+    """A detected take whose points the second pass moved towards the neutral's (the fit
+    would have folded) says so in ``doubtful``, beside a low confidence's reason, and the
+    stage hands the template to the second pass."""
+    r = make_take("s1", "car", "viseme", "car", 3, {"width": 320, "height": 240, "focal_px": 725.0})
+    data = {
+        paths.range_image("car", "xyz"): r["xyz"],
+        paths.range_image("car", "color"): r["color"],
+    }
+    found = landmarks.Landmarks(r["landmarks"], landmarks.DETECTED, np.full(68, 0.2), "d", "1")
+    seen = {}
+
+    def second_pass(found, take, grids, params, template=None):
+        seen["template"] = template
+        return found, {"landmarks_unfolded": 0.5}
+
+    monkeypatch.setattr(landmarks, "settle", lambda *a: found)
+    monkeypatch.setattr(landmarks, "second_pass", second_pass)
+    take = Take("s1", "car", "viseme", "car", "neutral", data)
+    part = landmarks.run("the template", take, landmarks.Params())
+    assert seen["template"] == "the template"
+    message = part.datasets[paths.landmark_info("car", "doubtful")]
+    assert message.startswith("the detected landmarks are doubtful: median confidence 0.20")
+    assert "; the detected landmarks fold the template's fit: moved 50% of the way" in message
+    assert part.attrs[paths.take("car")]["landmarks_unfolded"] == 0.5
+
+
+def test_the_fold_test_follows_the_fit_params():
+    config = {"landmarks": {"unfold": False}, "template": repo_config()["template"]}
+    params = landmarks.Params.from_config(config)
+    assert params.unfold is False
+    assert params.fit == fit.Params.from_config(config)
+    assert landmarks.Params.from_config({}).fit is None

@@ -137,7 +137,7 @@ def test_sweep_stage_table_is_derived_from_the_stage_modules():
     assert SECTION_STAGE == {
         "repair": "repair",
         "landmarks": "landmarks",
-        "template": "fit",
+        "template": "landmarks",  # the fold test of a detected take's points (unfold)
         "align": "align",
         "refine": "refine",
         "mask": "motion",

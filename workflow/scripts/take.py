@@ -62,7 +62,7 @@ def run_repair(j):
 def run_landmarks(j):
     """Settle the 68 landmarks (the neutral's carried over): its part and the .pts file."""
     take = _take(j, read_parts(j.reads["landmarks"]))
-    part = landmarks.run(None, take, j.params("landmarks"))
+    part = landmarks.run(j.template(), take, j.params("landmarks"))
     write_part(j.out.landmarks, part.datasets, attrs=part.attrs)
     write_pts(j.out.pts, part.files["pts"])
 
@@ -180,7 +180,7 @@ def stage_reads(j, stage, prints, neutral_prints, sources):
     if stage == "ingest":
         reads |= {"row": j.p.row, "roles": j.p.roles, "files": sources["files"]}
         reads["problem"] = j.problem
-    if stage in ("fit", "align", "refine"):
+    if stage in ("landmarks", "fit", "align", "refine"):
         reads["template"] = sources["template"]
     return reads
 

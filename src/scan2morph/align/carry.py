@@ -119,6 +119,58 @@ def carry_stable(
     return Carried(points, carried, transform, shift)
 
 
+def carry_points(
+    take_xyz: np.ndarray,
+    neutral_xyz: np.ndarray,
+    neutral_points: np.ndarray,
+    transform: np.ndarray,
+    source: str = "take",
+) -> np.ndarray:
+    """The neutral's points carried rigidly into the take.
+
+    Each point is lifted to the neutral's surface, moved by the inverse of ``transform`` and
+    found on the take's range image (:func:`~scan2morph.template.sample.range_pixels`); a point
+    the take's surface does not hold there (skin that moved: an opened mouth, a lowered jaw)
+    goes where the 2D affine map fitted to the found ones puts it, as :func:`track_points`
+    predicts the take's image.
+
+    Parameters
+    ----------
+    take_xyz, neutral_xyz : (H, W, 3) float
+        The repaired range images, mm, NaN where there is no surface.
+    neutral_points : (n, 2) float
+        Points on the neutral's grid, px.
+    transform : (4, 4) float
+        Take frame -> neutral frame, mm (:attr:`Carried.transform`).
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    (n, 2) float64
+        Pixels on the take's grid; all NaN when fewer than 3 points are found on its surface.
+    """
+    pn = np.asarray(neutral_points, dtype=np.float64)
+    predicted, affine = _rigid_prediction(take_xyz, neutral_xyz, pn, transform, source)
+    if affine is None:
+        return np.full((len(pn), 2), np.nan)
+    found = np.isfinite(predicted).all(axis=1)[:, None]
+    return np.where(found, predicted, pn @ affine[:, :2].T + affine[:, 2])
+
+
+def _rigid_prediction(t_xyz, n_xyz, pn, transform, source) -> tuple:
+    """The neutral's points ``pn`` (n, 2) px lifted, moved by the inverse of ``transform`` and
+    found on the take's grid, (n, 2) px (NaN: not found), and the 2D affine map (2, 3) that the
+    found ones fit (neutral px -> take px; None when fewer than 3 are found)."""
+    lifted = sample_range(n_xyz, pn, source, 0.5)[0]
+    predicted = range_pixels(t_xyz, transform_points(invert(transform), lifted), source=source)
+    ok = np.isfinite(predicted).all(axis=1)
+    if ok.sum() < 3:
+        return predicted, None
+    design = np.column_stack([pn[ok], np.ones(ok.sum())])
+    return predicted, np.linalg.lstsq(design, predicted[ok], rcond=None)[0].T
+
+
 def _near(xyz: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
     """The grid's points (with data) within ``radius`` of any of ``centres``, (n, 3)."""
     pts = xyz.reshape(-1, 3)
@@ -212,13 +264,9 @@ def track_points(
     (t_xyz, t_grey), (n_xyz, n_grey) = take, neutral
     pn = np.asarray(neutral_points, dtype=np.float64)
     n = len(pn)
-    lifted = sample_range(n_xyz, pn, source, 0.5)[0]
-    predicted = range_pixels(t_xyz, transform_points(invert(transform), lifted), source=source)
-    ok = np.isfinite(predicted).all(axis=1)
-    if ok.sum() < 3:
+    affine = _rigid_prediction(t_xyz, n_xyz, pn, transform, source)[1]  # (2, 3)
+    if affine is None:
         return Tracked(np.full((n, 2), np.nan), np.zeros(n), np.full((2, 3), np.nan))
-    design = np.column_stack([pn[ok], np.ones(ok.sum())])
-    affine = np.linalg.lstsq(design, predicted[ok], rcond=None)[0].T  # (2, 3)
     h, w = np.shape(n_grey)
     x0, y0 = np.maximum(np.floor(pn.min(axis=0)) - TRACK_MARGIN_PX, 0).astype(int)
     x1, y1 = np.minimum(np.ceil(pn.max(axis=0)) + TRACK_MARGIN_PX + 1, [w, h]).astype(int)
@@ -244,4 +292,4 @@ def track_points(
     return Tracked(points, at, affine)
 
 
-__all__ = ["Carried", "Tracked", "carry_stable", "track_points"]
+__all__ = ["Carried", "Tracked", "carry_points", "carry_stable", "track_points"]

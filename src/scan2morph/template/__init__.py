@@ -1,6 +1,6 @@
 """Correspondent face meshes: 2D template, thin-plate-spline fit, subdivision, sampling."""
 
-from scan2morph.template.fit import FitRules, fit_map, fit_take
+from scan2morph.template.fit import FitRules, fit_folds, fit_map, fit_take
 from scan2morph.template.mesh import (
     DEFAULT_FIDUCIAL_SET_BY_KIND,
     FIDUCIAL_SETS,
@@ -30,6 +30,7 @@ __all__ = [
     "Template",
     "build_template",
     "check_no_folds",
+    "fit_folds",
     "fit_map",
     "FitRules",
     "fit_take",

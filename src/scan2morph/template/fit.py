@@ -12,7 +12,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.template.regions import mouth_faces
 from scan2morph.template.rim import Rim, anchored_fiducials, still_affine
-from scan2morph.template.sample import check_no_folds, sample_mesh, texture_uv
+from scan2morph.template.sample import check_no_folds, fold_excess, sample_mesh, texture_uv
 from scan2morph.template.subdivide import subdivide_template
 from scan2morph.template.tps import TPS
 from scan2morph.tol import N_IBUG
@@ -142,10 +142,9 @@ def fit_take(
     """
     r = FitRules() if rules is None else rules
     landmarks, xyz, (width, height) = _checked_take(landmarks, xyz, image_size, source)
-    numbers, _ = template.fiducial_set(fiducial_set, source=source)
-    _check_inside(landmarks[numbers - 1], numbers, (width, height), source)
-    fine = subdivide_template(template, r.levels)
-    points = fit_map(template, landmarks, fiducial_set, source, image_size, rim)(fine.vertices)
+    fine, points = _warp(
+        template, landmarks, fiducial_set, (width, height), image_size, r, source, rim
+    )
     folded = check_no_folds(points, fine.faces, source, r.max_fold_fraction, mouth_faces(fine))
     exclude = np.unique(fine.faces[folded])
     vertices, valid = sample_mesh(
@@ -168,6 +167,54 @@ def fit_take(
         "faces": np.asarray(fine.faces, dtype=np.int64),
         "n_folded": int(folded.sum()),
     }
+
+
+def fit_folds(
+    template,
+    landmarks: np.ndarray,
+    image_size: tuple[int, int],
+    fiducial_set: str = "closed",
+    rules: FitRules | None = None,
+    source: str = "take",
+    rim: Rim | None = None,
+) -> bool:
+    """Whether :func:`fit_take` would refuse these landmarks for their warp: it folds more than
+    ``rules.max_fold_fraction`` of the triangles outside the lips, or the spline cannot be
+    fitted (fiducials outside the image, coincident or collinear). The range image's own checks
+    (valid vertices) are not made.
+
+    Parameters
+    ----------
+    template, landmarks, fiducial_set, rules, source, rim
+        As in :func:`fit_take`.
+    image_size : (width, height)
+        The take's grid, px.
+
+    Returns
+    -------
+    bool
+    """
+    r = FitRules() if rules is None else rules
+    landmarks = np.asarray(landmarks, dtype=np.float64)
+    if landmarks.shape != (N_IBUG, 2) or not np.isfinite(landmarks).all():
+        return True
+    size = tuple(int(n) for n in image_size)
+    try:
+        fine, points = _warp(template, landmarks, fiducial_set, size, size, r, source, rim)
+    except InputError:
+        return True
+    return fold_excess(points, fine.faces, r.max_fold_fraction, mouth_faces(fine))[2]
+
+
+def _warp(template, landmarks, fiducial_set, size, image_size, rules, source, rim) -> tuple:
+    """``(fine, points)``: the subdivided template (``rules.levels``) and its vertices warped by
+    :func:`fit_map` onto the take's grid of ``size`` (width, height), px; an InputError naming
+    ``source`` when a fiducial lies outside that grid (``image_size``: the spline's own check,
+    None for none)."""
+    numbers, _ = template.fiducial_set(fiducial_set, source=source)
+    _check_inside(landmarks[numbers - 1], numbers, size, source)
+    fine = subdivide_template(template, rules.levels)
+    return fine, fit_map(template, landmarks, fiducial_set, source, image_size, rim)(fine.vertices)
 
 
 def _checked_take(landmarks, xyz, image_size, source: str) -> tuple:

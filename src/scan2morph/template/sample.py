@@ -327,6 +327,33 @@ def folded_faces(points2d: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return signed_area2(points2d, faces) >= 0
 
 
+def fold_excess(
+    points2d: np.ndarray,
+    faces: np.ndarray,
+    max_fraction: float = 0.0,
+    tolerated: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The folded faces, the judged ones and whether too many of those folded
+    (:func:`check_no_folds`'s test, without the error).
+
+    Parameters
+    ----------
+    points2d, faces, max_fraction, tolerated
+        As in :func:`check_no_folds`.
+
+    Returns
+    -------
+    folded : (F,) bool
+    judged : (F,) bool
+        The faces outside ``tolerated``.
+    too_many : bool
+        More than ``max_fraction`` of the judged faces folded.
+    """
+    folded = folded_faces(points2d, faces)
+    judged = np.ones(len(faces), bool) if tolerated is None else ~np.asarray(tolerated, bool)
+    return folded, judged, int((folded & judged).sum()) > max_fraction * int(judged.sum())
+
+
 def check_no_folds(
     points2d: np.ndarray,
     faces: np.ndarray,
@@ -360,10 +387,9 @@ def check_no_folds(
     (F,) bool
         The folded faces.
     """
-    folded = folded_faces(points2d, faces)
-    judged = np.ones(len(faces), bool) if tolerated is None else ~np.asarray(tolerated, bool)
+    folded, judged, too_many = fold_excess(points2d, faces, max_fraction, tolerated)
     n_judged, n_out = int(judged.sum()), int((folded & judged).sum())
-    if n_out > max_fraction * n_judged:
+    if too_many:
         inside = int((folded & ~judged).sum())
         lips = f"; {inside} of {len(faces) - n_judged} in the lips, not judged" if inside else ""
         where = "" if tolerated is None else " outside the lips"
