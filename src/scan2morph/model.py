@@ -103,6 +103,23 @@ class Model:
     skipped: dict[str, str] = field(default_factory=dict)
     provenance: dict[str, object] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line of what the model holds (the dataclass's own repr prints every array)."""
+        k = 0 if self.pca_sigma is None else len(self.pca_sigma)
+        parts = [
+            f"{len(self.neutral)} vertices",
+            f"{len(self.faces)} faces",
+            f"visemes {sorted(self.visemes)}",
+            f"{k} PCA components",
+            f"{len(self.modes)} modes ({self.modal_preset or 'preset not recorded'})",
+            f"expressions {sorted(self.coordinates)}",
+        ]
+        if self.failed:
+            parts.append(f"left out {sorted(self.failed)}")
+        if self.warnings:
+            parts.append(f"{len(self.warnings)} warnings")
+        return f"Model({self.subject!r}: " + ", ".join(parts) + ")"
+
     def blend(self, weights: Mapping[str, float]) -> np.ndarray:
         """A blend shape (Eq. 1): ``(1 - sum w) S_0 + sum_l w_l S_l``.
 

@@ -285,7 +285,12 @@ def test_accuracy_and_cohort_name_the_takes_left_out(tmp_path_factory, tmp_path,
             h5.create_dataset(key, data=value, dtype=h5py.string_dtype())
     from scan2morph import load_model
 
-    assert load_model(copy).failed == {"too": record}  # the model API names it too
+    model = load_model(copy)
+    assert model.failed == {"too": record}  # the model API names it too
+    # its repr is one line of what it holds, not its arrays
+    text = repr(model)
+    assert text.startswith(f"Model({SUBJECT!r}: {len(model.neutral)} vertices, ")
+    assert "left out ['too']" in text and "\n" not in text and len(text) < 400
     with caplog.at_level("WARNING", logger="scan2morph"):
         table = write_cohort_summary({SUBJECT: copy}, {}, tmp_path / "t.tsv", tmp_path / "t.png")
     assert table["left_out"].tolist() == ["too (fit)"]

@@ -504,6 +504,14 @@ def test_distance_figure_colours_a_vertex_by_its_distance(store):
     title, top, bottom = _car_panel(fig_distance(known), 6.0)
     assert "RMS" in title
     assert top < 0.6 and bottom > 5.4
+    # against the refined correspondence where the store has it (the mesh the motion was
+    # measured from), and the takes' consensus before that: the same model is then exact
+    refined = dict(known) | {paths.refine("car", "vertices"): model}
+    title, top, bottom = _car_panel(fig_distance(refined), 6.0)
+    assert top < 0.6 and bottom < 0.6 and "RMS 0.00 mm" in title
+    agreed = refined | {paths.consensus("car", "vertices"): target}
+    title, top, bottom = _car_panel(fig_distance(agreed), 6.0)
+    assert top < 0.6 and bottom > 5.4
 
 
 def test_click_noise_figure_colours_each_viseme_by_its_error_bar(store):

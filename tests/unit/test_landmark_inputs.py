@@ -168,3 +168,51 @@ def test_a_51_point_mesh_landmark_file_projects_its_points_and_leaves_the_jaw(me
     u, v = np.rint(take.landmarks[[30, 36, 45]]).astype(int).T
     ref = scan["landmarks"][[30, 36, 45]]
     assert np.linalg.norm(take.xyz[v, u] - ref, axis=1).max() < 4.0
+
+
+def test_a_mesh_takes_points_come_back_as_its_landmark_file(mesh_files, tmp_path):
+    """The landmarks stage lifts a mesh take's points onto its render's surface: written in the
+    mesh's units (here metres), the file is a landmark file the mesh reader takes back (every
+    point on the mesh), and the points it projects agree with those of the true landmark file
+    where the true points are the surface seen at their pixel (the points were the truth's
+    projection onto the surface-only camera's image; a true point hidden behind the lips or the
+    chin is not, and the lifted one is the surface in front of it). A point off the render's
+    data takes the nearest surface pixel."""
+    import trimesh
+
+    from scan2morph.io import write_landmarks3d
+    from scan2morph.stages import landmarks
+    from scan2morph.stages.part import Take
+    from scan2morph.store import paths
+
+    scan, (ply, txt, _) = mesh_files
+    free = read_mesh_take(ply, None, None, TINY_CAMERA)
+    lm3 = read_landmarks3d(txt)
+    cam = lm3 @ free.pose[:3, :3].T + free.pose[:3, 3]
+    px = cam[:, :2] / cam[:, 2:] * np.diag(free.K)[:2] + free.K[:2, 2]
+    data = {
+        paths.range_image("she", "xyz"): free.xyz,
+        paths.range_image("she", "color"): free.color,
+        paths.clicks("she"): px,
+    }
+    take = Take("s1", "she", "viseme", "she", "neutral", data)
+    lifted = landmarks.run(None, take, landmarks.Params()).files["xyz"]
+    err = np.linalg.norm(lifted - lm3, axis=1)
+    seen = err < 2.0
+    print(f"\nlifted off the truth: median {np.median(err):.2f} mm, {seen.sum()} within 2 mm")
+    assert np.median(err) < 0.7 and seen.sum() >= 55
+    metres = tmp_path / "s_m.ply"
+    mesh = trimesh.load(ply, process=False)
+    mesh.apply_scale(0.001)
+    mesh.export(metres)
+    write_landmarks3d(tmp_path / "she.xyz", lifted / 1000.0)
+    back = read_mesh_take(metres, None, tmp_path / "she.xyz", TINY_CAMERA, 1000.0)
+    with_truth = read_mesh_take(ply, None, txt, TINY_CAMERA)
+    shift = np.linalg.norm(back.landmarks - with_truth.landmarks, axis=1)
+    assert np.median(shift[seen]) < 0.5 and shift[seen].max() < 1.5
+    # a point off the render's data goes to the nearest surface pixel
+    off = px.copy()
+    off[0] = [1.0, 1.0]
+    corner = landmarks.surface_points(free.xyz, off)[0]
+    assert np.isfinite(corner).all()
+    assert np.nanmin(np.linalg.norm(free.xyz.reshape(-1, 3) - corner, axis=1)) == 0.0

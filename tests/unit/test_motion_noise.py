@@ -345,3 +345,18 @@ def test_a_visemes_reference_places_its_rim_from_the_neutrals_clicks(template, t
         )["she"]["motion"]
         assert_allclose(got, motions[share], atol=1e-9)
     assert np.max(np.abs(motions[0.5] - motions[1.0])) > 1.0
+
+
+def test_detected_landmarks_say_the_noise_is_the_detectors_scatter_not_its_bias():
+    """The click-noise note names how many takes' landmarks were detected (their
+    ``landmark_detected`` in the store) and that the measured noise is not the detector's
+    bias; with only clicked takes it adds nothing."""
+    from scan2morph.motion.uncertainty import detected_note
+    from scan2morph.store import paths
+
+    takes = ["neutral", "car", "too"]
+    assert detected_note({}, takes) == ""
+    store = {paths.landmark_detected(t): np.zeros((68, 2)) for t in ("neutral", "too")}
+    note = detected_note(store, takes)
+    assert note.startswith("; 2 of 3 takes' landmarks were detected")
+    assert "not its bias" in note

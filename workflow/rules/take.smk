@@ -50,6 +50,7 @@ rule take:
         **TAKE_PARTS,
         repair_report=update("results/{subject}/takes/{take}/repair.json"),
         pts=update("results/{subject}/landmarks/{take}.pts"),
+        xyz=update("results/{subject}/landmarks/{take}.xyz"),
         obj=update("results/{subject}/meshes/{take}.obj"),
         mtl=update("results/{subject}/meshes/{take}.mtl"),
         texture=update("results/{subject}/meshes/{take}.png"),

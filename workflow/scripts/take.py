@@ -11,10 +11,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from scan2morph.errors import InputError
-from scan2morph.io import write_obj, write_pts
+from scan2morph.io import write_landmarks3d, write_obj, write_pts
 from scan2morph.io.obj import write_failed_obj
 from scan2morph.jobs import sha256_file, write_json
-from scan2morph.sheet import PATH_SEPARATOR
+from scan2morph.sheet import PATH_SEPARATOR, mm_per_unit
 from scan2morph.stages import Take, align, check, fit, ingest, landmarks, refine, repair
 from scan2morph.stages.failure import run_take_job
 from scan2morph.stages.stage_job import TAKE_STAGES, fingerprint, read_fingerprints, run_stages
@@ -60,11 +60,15 @@ def run_repair(j):
 
 
 def run_landmarks(j):
-    """Settle the 68 landmarks (the neutral's carried over): its part and the .pts file."""
+    """Settle the 68 landmarks (the neutral's carried over): its part, the .pts file and the
+    points on the surface (.xyz: a mesh take's in the mesh's units, as its landmark file takes
+    them; mm otherwise)."""
     take = _take(j, read_parts(j.reads["landmarks"]))
     part = landmarks.run(j.template(), take, j.params("landmarks"))
     write_part(j.out.landmarks, part.datasets, attrs=part.attrs)
     write_pts(j.out.pts, part.files["pts"])
+    unit = mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
+    write_landmarks3d(j.out.xyz, part.files["xyz"] / unit)
 
 
 def run_fit(j):
@@ -106,7 +110,9 @@ def on_failure(j, stage):
     out = j.out
     return {
         "repair": lambda record: write_json(out.repair_report, {"failed": str(record)}),
-        "landmarks": lambda record: Path(out.pts).write_text(f"# no landmarks: {record}\n"),
+        "landmarks": lambda record: [
+            Path(p).write_text(f"# no landmarks: {record}\n") for p in (out.pts, out.xyz)
+        ],
         "fit": lambda record: write_failed_obj(out.obj, str(record)),
     }.get(stage)
 
@@ -116,7 +122,7 @@ def outputs(j, stage):
     out = j.out
     extra = {
         "repair": [out.repair_report],
-        "landmarks": [out.pts],
+        "landmarks": [out.pts, out.xyz],
         "fit": [out.obj, out.mtl, out.texture],
     }
     return [out[stage], *extra.get(stage, [])]

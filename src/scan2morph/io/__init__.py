@@ -9,7 +9,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "depth_image": ("read_depth", "write_depth_png"),
         "gltf": ("read_glb_targets", "write_glb"),
         "image": ("read_color", "write_color"),
-        "landmarks": ("read_pts", "write_pts"),
+        "landmarks": ("read_pts", "write_landmarks3d", "write_pts"),
         "mesh_scan": ("MeshTake", "read_landmarks3d", "read_mesh", "read_mesh_take"),
         "obj": ("write_obj",),
         "range_image": ("read_abs", "read_npz_range", "read_range", "write_abs", "write_npz_range"),

@@ -166,3 +166,32 @@ def write_pts(path: str | Path, points: np.ndarray) -> None:
     lines.append("}")
     with writing(path):
         Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def write_landmarks3d(
+    path: str | Path, points: np.ndarray, comment: str | None = None, fmt: str = ".6g"
+) -> None:
+    """Write 3D points (N, 3) as ``x y z`` lines, one point a line in the given order: the form
+    a mesh take's landmark file takes (:func:`~scan2morph.io.mesh_scan.read_landmarks3d`), and
+    a point cloud MeshLab and CloudCompare open (``.xyz``, without ``comment``).
+
+    Parameters
+    ----------
+    path : str or Path
+    points : (N, 3) float
+        In the units and frame the reader is to get them in.
+    comment : str, optional
+        A first line ``# comment``.
+    fmt : str
+        Each coordinate's format spec (default 6 significant digits: 1 um of a face in mm or
+        in metres).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise InputError(path, f"points: expected an (N, 3) array, got shape {points.shape}")
+    if not np.all(np.isfinite(points)):
+        raise InputError(path, "points: non-finite coordinate")
+    lines = [] if comment is None else [f"# {comment}"]
+    lines += [" ".join(format(c, fmt) for c in p) for p in points]
+    with writing(path):
+        Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -392,6 +392,7 @@ def subject_motion_noise(
         recipe.fit_rules.max_slope_deg,
         source,
     )
+    noise["note"] += detected_note(store, list(takes))
     draws = settings["draws"] if recipe.refiner is None else settings["refine_draws"]
     result = click_noise_motion(
         template,
@@ -407,3 +408,22 @@ def subject_motion_noise(
     data[paths.motion_noise("click_noise_measured_px")] = np.float64(noise["measured_px"])
     data[paths.motion_noise("stable_points")] = np.array(points, dtype=np.int64)
     return data, result, noise
+
+
+def detected_note(store: Mapping[str, np.ndarray], takes: Sequence[str]) -> str:
+    """What the measured click noise means when some of ``takes`` had their landmarks detected
+    (``""`` when none had): the detector's scatter across the takes, not its bias.
+
+    A detector that misplaces a point alike on every take of a face (a face unlike its
+    training faces) scatters little across them, so the noise measured and the error bar
+    drawn from it are small while the fit sits off; only the detected points themselves (the
+    report's takes figure) show that.
+    """
+    detected = [t for t in takes if paths.landmark_detected(t) in store]
+    if not detected:
+        return ""
+    return (
+        f"; {len(detected)} of {len(takes)} takes' landmarks were detected: for those this is "
+        "the detector's scatter across the takes, not its bias, which no error bar here shows "
+        "(check the detected points in the takes figure)"
+    )

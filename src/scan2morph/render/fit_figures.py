@@ -167,7 +167,7 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
     """Color images with landmarks and with the fitted (warped) template (Fig. 1b, 2, 4).
 
     One row per take: the neutral and the viseme with the largest motion (else an expression).
-    Columns: the 68 landmarks; the warped template at the base (low) resolution when the store's
+    Columns: the 68 landmarks (clicked red, detected coloured by confidence); the warped template at the base (low) resolution when the store's
     mesh is a subdivision of it; the warped template as stored (high resolution), invalid vertices
     (no range data under them) marked with red crosses.
     """
@@ -204,8 +204,9 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
             ax.set_ylim(y1, y0)
             ax.set_xticks([])
             ax.set_yticks([])
-        axes[row, 0].scatter(marks[:, 0], marks[:, 1], s=7, c="red", edgecolors="none")
-        axes[row, 0].set_title(f"{take}: 68 landmarks", fontsize=8)
+        _landmark_dots(axes[row, 0], marks, store.get(paths.landmark_confidence(take)))
+        source = _text(store, paths.landmark_info(take, "source"), "clicked")
+        axes[row, 0].set_title(f"{take}: 68 landmarks, {source}", fontsize=8)
         for ax, (label, tri) in zip(axes[row, 1:], meshes, strict=True):
             tri = _valid_faces(pts, tri)
             lw = 0.35 if len(tri) < 1500 else 0.2

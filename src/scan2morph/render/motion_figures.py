@@ -198,11 +198,12 @@ def _viseme_fields(
 
 
 def fig_distance(store: Mapping[str, np.ndarray]) -> Figure:
-    """Each viseme model coloured by its distance to the aligned measured take (Fig. 9, 10)."""
+    """Each viseme model coloured by its distance to the measured take it was made from
+    (:func:`measured_take`; Fig. 9, 10)."""
     what = "the viseme distance figure"
 
     def distance(take, model):
-        d = np.linalg.norm(model - mesh(store, paths.align(take, "vertices"), what), axis=1)
+        d = np.linalg.norm(model - measured_take(store, take, what), axis=1)
         rms = float(np.sqrt(np.nanmean(d**2))) if np.isfinite(d).any() else float("nan")
         return d, f"{take}: RMS {rms:.2f} mm"
 
@@ -210,9 +211,24 @@ def fig_distance(store: Mapping[str, np.ndarray]) -> Figure:
         store,
         what,
         distance,
-        "distance to the aligned take (mm)",
+        "distance to the measured take (mm)",
         "Viseme models (neutral + processed motion) against the measured takes",
     )
+
+
+def measured_take(store: Mapping[str, np.ndarray], take: str, what: str) -> np.ndarray:
+    """(V, 3) mm, neutral frame: the take's mesh its motion was measured from: the takes'
+    consensus where it moved it, else the refined correspondence, else the aligned fit (a
+    store without refinement). The aligned fit alone would show how far the refinement moved
+    the landmarks' fit, not the model's error."""
+    for key in (
+        paths.consensus(take, "vertices"),
+        paths.refine(take, "vertices"),
+        paths.align(take, "vertices"),
+    ):
+        if key in store:
+            return mesh(store, key, what)
+    return mesh(store, paths.align(take, "vertices"), what)  # its missing-dataset message
 
 
 def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:

@@ -15,8 +15,10 @@ the detection: the take's landmarks then move with its skin relative to the neut
 of scattering by the detector's error. A detection whose confidence is low is *doubtful*: the take is
 still used, with a warning at the top of the report and in ``accuracy.json``.
 
-Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) that a
-user can correct and give back in the sheet's ``landmarks`` column.
+Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) and
+lifted onto the take's surface (``files["xyz"]``, :func:`surface_points`: a mesh take's landmark
+file, the pipeline's render being no image a user has), which a user can correct and give back
+in the sheet's ``landmarks`` column.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
 from scan2morph.align.carry import carry_points, carry_stable, track_points
 from scan2morph.io import check_face, check_handedness
@@ -36,7 +39,12 @@ from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.template import fit_folds
+from scan2morph.template.sample import sample_range
 
+#: A point whose neighbour pixels straddle a step steeper than this is lifted from one pixel,
+#: not from their bilinear mix in mid-air (degrees to the image plane; the fit's
+#: ``template.max_slope_deg`` default).
+LIFT_SLOPE_DEG = 80.0
 #: Config sections this stage reads (``template``: whether the fit would fold a detection).
 SECTIONS = ("landmarks", "template")
 #: ``source`` of a take's landmarks.
@@ -222,7 +230,8 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
         px, the detector's points before the second pass (:func:`second_pass`); the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
-        ``files["pts"]`` the points for the ``.pts`` file.
+        ``files["pts"]`` the points for the ``.pts`` file, ``files["xyz"]`` (68, 3) mm the
+        same points on the take's surface (:func:`surface_points`), in its frame.
     """
     t, data = take.take, take.data
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
@@ -253,8 +262,40 @@ def run(template, take: Take, params: Params) -> Part:
     return Part(
         datasets,
         attrs={paths.take(t): attrs | {"nose_depth_mm": nose_depth}},
-        files={"pts": found.points},
+        files={"pts": found.points, "xyz": surface_points(xyz, found.points, take.source)},
     )
+
+
+def surface_points(xyz: np.ndarray, points: np.ndarray, source: str = "take") -> np.ndarray:
+    """Landmarks lifted onto the take's surface: a mesh take's landmark file in 3D.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float
+        The repaired range image, mm, NaN where there is no surface.
+    points : (n, 2) float
+        Pixels on its grid.
+    source : str
+        ``subject/take``, for messages.
+
+    Returns
+    -------
+    (n, 3) float64
+        The range image's bilinear sample at each point (the fit's rules at the edge of the
+        data and at a depth step, :data:`LIFT_SLOPE_DEG`); a point without one (beyond the
+        face's outline, in a hole, across a step) takes the nearest pixel with data, so that
+        every point lies on the surface seen at it. All NaN when the image has no data.
+    """
+    lifted = sample_range(xyz, np.asarray(points, dtype=np.float64), source, 0.5, LIFT_SLOPE_DEG)[0]
+    missing = ~np.isfinite(lifted).all(axis=1)
+    has = np.isfinite(xyz).all(axis=2)
+    if missing.any() and has.any():
+        rows, cols = distance_transform_edt(~has, return_distances=False, return_indices=True)
+        h, w = has.shape
+        r = np.clip(np.rint(points[missing, 1]).astype(int), 0, h - 1)
+        c = np.clip(np.rint(points[missing, 0]).astype(int), 0, w - 1)
+        lifted[missing] = xyz[rows[r, c], cols[r, c]]
+    return lifted
 
 
 def second_pass(
@@ -417,5 +458,6 @@ __all__ = [
     "run",
     "second_pass",
     "settle",
+    "surface_points",
     "unfold",
 ]

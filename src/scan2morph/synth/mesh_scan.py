@@ -150,11 +150,11 @@ def make_mesh_take(
 
 
 def write_landmarks3d(path: str | PathLike[str], points: np.ndarray) -> None:
-    """Write 3D landmarks as lines ``x y z`` (mm, 4 decimals) after a ``#`` header line."""
-    lines = ["# iBUG-68 landmarks: x y z in the mesh's frame, mm"]
-    lines += [" ".join(f"{v:.4f}" for v in row) for row in np.asarray(points, float)]
-    with writing(path):
-        Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    """Write 3D landmarks as lines ``x y z`` (mm, 4 decimals) after a ``#`` header line
+    (:func:`scan2morph.io.landmarks.write_landmarks3d`)."""
+    from scan2morph.io.landmarks import write_landmarks3d as write
+
+    write(path, points, "iBUG-68 landmarks: x y z in the mesh's frame, mm", ".4f")
 
 
 def write_mesh_take(
