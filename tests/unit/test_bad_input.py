@@ -674,9 +674,15 @@ def test_mesh_landmarks_off_the_mesh_or_in_metres(mesh_files, tmp_path):
         InputError, match=r"landmarks: point \d+ lies [23]\d.* mm from the mesh m.ply"
     ):
         _mesh(mesh_files, landmarks=tmp_path / "off.txt")
-    write_landmarks3d(tmp_path / "m.txt", lm / 1000.0)
-    with pytest.raises(InputError, match="face size: .*looks like metres, not mm"):
-        _mesh(mesh_files, landmarks=tmp_path / "m.txt")
+    # in metres on a mesh in mm: the landmark file is named, not the mesh (whose unit is right)
+    write_landmarks3d(tmp_path / "lm_m.txt", lm / 1000.0)
+    with pytest.raises(
+        InputError,
+        match=r"lm_m.txt: face size: the outer eye corners \(iBUG 37, 46\) are 0.0\d+ units "
+        r"apart, expected 50-150 mm, on the mesh m.ply, which is \d+(\.\d+)? mm across \(the "
+        r"landmarks look like metres: give them in the mesh's frame and unit\)",
+    ):
+        _mesh(mesh_files, landmarks=tmp_path / "lm_m.txt")
     (tmp_path / "short.txt").write_text("# 67 points\n" + "1 2 3\n" * 67)
     with pytest.raises(
         InputError, match=r"got 67 points \(lines 'x y z'\); accepted: 68 \(iBUG-68\) or 51"
@@ -779,3 +785,22 @@ def test_mesh_unreadable_file(mesh_files, tmp_path):
         _mesh(mesh_files, mesh=tmp_path / "junk.glb")
     with pytest.raises(InputError, match="file not found"):
         _mesh(mesh_files, mesh=tmp_path / "absent.obj")
+
+
+def test_a_unit_given_to_a_mesh_in_mm_says_the_unit_is_wrong(mesh_files):
+    """``units: m`` on a mesh in mm said it 'looks like µm' (no unit the column takes): the
+    message says what the unit makes of it and that the data are in mm already."""
+    from scan2morph.io.check import take_file_problems
+
+    match = (
+        r"with the unit given \(1000 mm per unit\) it comes out [\d.e+]+ mm; without it, "
+        r"\d+(\.\d+)? mm, a face's size: the data are in mm already and the value in the sheet's "
+        r"units column is wrong \(leave it empty for mm\)"
+    )
+    (problem,) = take_file_problems("mesh", {"mesh": mesh_files["mesh"]}, 1000.0)
+    assert re.search(r"m.ply: mesh size: .* mm across in the sheet's unit, .*" + match, problem)
+    row = dict(ROW, modality="mesh", units="m")
+    for files in (mesh_files, {"mesh": mesh_files["mesh"]}):
+        files = {k: str(v) for k, v in files.items() if k != "scan"}
+        with pytest.raises(InputError, match=r"m.ply: (face|mesh) size: .*" + match):
+            _run_ingest(row, files, {"width": 160, "height": 120})

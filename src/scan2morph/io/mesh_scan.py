@@ -36,14 +36,18 @@ from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
+from scan2morph.io.mesh_units import (  # noqa: E402
+    MESH_EXTENT_MM,
+    check_landmark_units,
+    check_mesh_extents,
+    check_mesh_size,
+)
 from scan2morph.io.mesh_view import face_camera, face_view, surface_camera  # noqa: E402
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
-    EYE_SPAN_MM,
     RangeTake,
     check_face,
     check_landmarks_inside,
-    likely_unit,
 )
 from scan2morph.io.uv_orientation import orient_texture  # noqa: E402
 
@@ -60,10 +64,6 @@ DEFAULT_MESH_CAMERA = {
 }
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
-#: The largest extent of a face or head scan (a face-only crop to head and shoulders), mm.
-MESH_EXTENT_MM = (60.0, 1000.0)
-#: What the sheet's ``units`` column takes, for messages.
-UNIT_HELP = "mm, cm, m or mm per unit: 25.4 for inches"
 #: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
 #: is the surface's shading, no skin texture.
 SHADED = "shading"
@@ -269,65 +269,6 @@ def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> None:
             f"({int(far.sum())} points farther than {MAX_LANDMARK_OFFSET_MM:g} mm): are they of "
             "this mesh, in its frame and units?",
         )
-
-
-def _check_units(lm3: np.ndarray, mesh_path) -> None:
-    span = float(np.linalg.norm(lm3[45] - lm3[36]))
-    lo, hi = EYE_SPAN_MM
-    if not lo <= span <= hi:
-        unit = likely_unit(span, EYE_SPAN_MM)
-        likely = (
-            f"the mesh looks like {unit}, not mm: give its unit in the sheet's units column "
-            f"({UNIT_HELP})"
-            if unit
-            else "not a face in mm"
-        )
-        raise InputError(
-            mesh_path,
-            f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} units apart, "
-            f"expected {lo:g}-{hi:g} mm ({likely})",
-        )
-
-
-def check_mesh_size(mesh, mm_per_unit: float = 1.0, source: str | Path = "mesh") -> None:
-    """Refuse a mesh that is not face- or head-sized in mm (:data:`MESH_EXTENT_MM` at its
-    largest), naming the unit it looks like.
-
-    Without landmarks nothing else checks the unit before the surface searches, which assume mm
-    (a head in cm or inches makes their neighbourhoods hold the whole mesh).
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        As read, in its own unit.
-    mm_per_unit : float
-        The sheet's unit (``units`` column), mm.
-    source : str or path-like
-        The mesh file, for messages.
-
-    Raises
-    ------
-    InputError
-        Naming the mesh's size in mm and the unit it looks like.
-    """
-    extents = np.asarray(mesh.extents, dtype=np.float64) * mm_per_unit
-    largest = float(extents.max())
-    lo, hi = MESH_EXTENT_MM
-    if lo <= largest <= hi:
-        return
-    unit = likely_unit(largest, MESH_EXTENT_MM)
-    if unit:
-        likely = f"it looks like {unit}: give its unit in the sheet's units column ({UNIT_HELP})"
-    else:
-        likely = (
-            f"not a face or head in mm: give its scale in the sheet's units column ({UNIT_HELP})"
-        )
-    size = " x ".join(f"{e:.4g}" for e in extents)
-    raise InputError(
-        source,
-        f"mesh size: {size} mm across as read, expected a face or head {lo:g}-{hi:g} mm across at its "
-        f"largest ({likely})",
-    )
 
 
 def view_direction(mesh, lm3: np.ndarray | None = None, source: str = "mesh") -> np.ndarray:
@@ -537,20 +478,23 @@ def read_mesh_take(
     ------
     InputError
         From :func:`read_mesh` and :func:`read_landmarks3d`; a face not 50-150 mm across the
-        outer eye corners, or a mesh not 60-1000 mm across (names the unit it looks like);
-        landmarks off the mesh; landmarks
+        outer eye corners, or a mesh not 60-1000 mm across (names the unit it looks like, the
+        landmark file when the mesh is a face's size, or a wrong ``units`` value:
+        :mod:`~scan2morph.io.mesh_units`); landmarks off the mesh; landmarks
         whose surface faces away from the camera (mirrored: iBUG 37 must be the subject's right
         eye's outer corner); the face checks of :func:`~scan2morph.io.check_face`.
     """
     cfg = dict(DEFAULT_MESH_CAMERA) | dict(settings or {})
     mesh = read_mesh(mesh_path, texture_path)
+    as_read = np.asarray(mesh.extents, dtype=np.float64)
     if mm_per_unit != 1.0:
         mesh.apply_scale(mm_per_unit)
     lm3 = None if landmarks_path is None else read_landmarks3d(landmarks_path) * mm_per_unit
     if lm3 is not None:
-        _check_units(lm3, mesh_path)
+        check_landmark_units(lm3, mesh, mesh_path, landmarks_path, mm_per_unit)
+    check_mesh_extents(as_read, mm_per_unit, mesh_path)
+    if lm3 is not None:
         _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
-    check_mesh_size(mesh, 1.0, mesh_path)  # scaled to mm above
     view = face_view(mesh, None if lm3 is None else lm3[30], str(mesh_path))
     if complete(lm3):
         K, pose = virtual_camera(lm3, view.direction, cfg)
@@ -584,6 +528,7 @@ def read_mesh_take(
 
 __all__ = [
     "DEFAULT_MESH_CAMERA",
+    "MESH_EXTENT_MM",
     "MeshTake",
     "check_mesh_size",
     "read_landmarks3d",
