@@ -787,6 +787,25 @@ def test_mesh_unreadable_file(mesh_files, tmp_path):
         _mesh(mesh_files, mesh=tmp_path / "absent.obj")
 
 
+def test_check_refuses_a_mesh_without_triangles_of_area_as_the_ingest_does(mesh_files, tmp_path):
+    """Every triangle collapsed, or a single triangle: the check passed them, the ingest
+    refused them. Both now give the reader's one line."""
+    import trimesh
+
+    from scan2morph.io.check import take_file_problems
+
+    v, f = mesh_files["scan"]["vertices"], mesh_files["scan"]["faces"].copy()
+    f[:, 2] = f[:, 1]
+    trimesh.Trimesh(v, f, process=False).export(tmp_path / "flat.ply")
+    trimesh.Trimesh(v[:3], [[0, 1, 2]], process=False).export(tmp_path / "one.ply")
+    for name, n in (("flat.ply", 0), ("one.ply", 1)):
+        match = rf"{name}: mesh: {n} triangles of non-zero area \(expected a face\)"
+        (problem,) = take_file_problems("mesh", {"mesh": tmp_path / name})
+        assert re.search(match, problem), problem
+        with pytest.raises(InputError, match=match):
+            _mesh(mesh_files, mesh=tmp_path / name)
+
+
 def test_a_unit_given_to_a_mesh_in_mm_says_the_unit_is_wrong(mesh_files):
     """``units: m`` on a mesh in mm said it 'looks like µm' (no unit the column takes): the
     message says what the unit makes of it and that the data are in mm already."""

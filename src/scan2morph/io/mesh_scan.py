@@ -42,7 +42,12 @@ from scan2morph.io.mesh_units import (  # noqa: E402
     check_mesh_extents,
     check_mesh_size,
 )
-from scan2morph.io.mesh_view import face_camera, face_view, surface_camera  # noqa: E402
+from scan2morph.io.mesh_view import (  # noqa: E402
+    face_camera,
+    face_view,
+    nonzero_triangles,
+    surface_camera,
+)
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
     RangeTake,
@@ -130,7 +135,7 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     ------
     InputError
         Missing, empty or unreadable file, a face indexing past the vertices, no faces (a point
-        cloud), a NaN or infinite vertex, a texture the file references but that is missing, a
+        cloud), a NaN or infinite vertex, fewer than 3 triangles of non-zero area, a texture the file references but that is missing, a
         ``texture`` given for a mesh without UVs.
 
     Notes
@@ -174,6 +179,7 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
             f"vertices: {len(bad)} of {len(loaded.vertices)} have a NaN or infinite coordinate "
             f"(the first: vertex {bad[0] + 1}); expected finite numbers",
         )
+    nonzero_triangles(loaded, str(path))
     visual = loaded.visual
     if texture is not None:
         uv = getattr(visual, "uv", None)
