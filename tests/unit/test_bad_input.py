@@ -787,6 +787,64 @@ def test_mesh_unreadable_file(mesh_files, tmp_path):
         _mesh(mesh_files, mesh=tmp_path / "absent.obj")
 
 
+def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, tmp_path):
+    """A truncated OBJ (its last face line cut) lost its faces silently and was blamed on its
+    landmarks; 0-based faces were shifted by one vertex and wrapped to the last one. Both are
+    refused naming the face line, by the check and the ingest. Negative (relative) indices are
+    valid OBJ: they read as the same faces."""
+    import trimesh
+
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import read_mesh
+
+    scan = mesh_files["scan"]
+    trimesh.Trimesh(scan["vertices"], scan["faces"], process=False).export(tmp_path / "a.obj")
+    text = (tmp_path / "a.obj").read_text()
+    cut = text.rindex("\nf ", 0, int(len(text) * 0.6)) + 4  # within a face line
+    (tmp_path / "cut.obj").write_text(text[:cut])
+    line = text[:cut].count("\n") + 1
+    match = rf"cut.obj: face line {line}: 1 vertex, expected 3 or more: the file looks cut short"
+    (problem,) = take_file_problems("mesh", {"mesh": tmp_path / "cut.obj"})
+    assert re.search(match, problem), problem
+    with pytest.raises(InputError, match=match):
+        _mesh(mesh_files, mesh=tmp_path / "cut.obj")
+    v, f = scan["vertices"], scan["faces"]
+    vertices = "".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in v)
+    (tmp_path / "zero.obj").write_text(vertices + "".join(f"f {a} {b} {c}\n" for a, b, c in f))
+    with pytest.raises(
+        InputError,
+        match=rf"zero.obj: face line {len(v) + 1}: vertex index 0 \(OBJ indices start at 1",
+    ):
+        read_mesh(tmp_path / "zero.obj")
+    back = f - len(v)  # -1 is the last vertex above the face
+    (tmp_path / "rel.obj").write_text(vertices + "".join(f"f {a} {b} {c}\n" for a, b, c in back))
+    relative = read_mesh(tmp_path / "rel.obj")
+    np.testing.assert_array_equal(relative.vertices[relative.faces], v[f])
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1 0 0\nf -1 -2 -3\n")
+    with pytest.raises(InputError, match=r"far.obj: face line 3: vertex index -3 counts back"):
+        read_mesh(tmp_path / "far.obj")
+
+
+def test_mesh_file_of_another_format_or_cut_short(mesh_files, tmp_path):
+    """A PLY named .obj read as an OBJ without faces ('a point cloud?'); a binary PLY cut short
+    gave trimesh's words."""
+    import shutil
+
+    from scan2morph.io.mesh_scan import read_mesh
+
+    shutil.copy(mesh_files["mesh"], tmp_path / "face.obj")
+    with pytest.raises(
+        InputError,
+        match=r"face.obj: mesh: the file is not OBJ text \(it starts with 'ply': a PLY file\); "
+        r"name it .ply",
+    ):
+        read_mesh(tmp_path / "face.obj")
+    data = mesh_files["mesh"].read_bytes()
+    (tmp_path / "half.ply").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=r"half.ply: mesh: the file is shorter than its PLY"):
+        read_mesh(tmp_path / "half.ply")
+
+
 def test_check_refuses_a_mesh_without_triangles_of_area_as_the_ingest_does(mesh_files, tmp_path):
     """Every triangle collapsed, or a single triangle: the check passed them, the ingest
     refused them. Both now give the reader's one line."""

@@ -36,6 +36,7 @@ from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
+from scan2morph.io.mesh_file import check_format, check_obj_text, load_problem  # noqa: E402
 from scan2morph.io.mesh_units import (  # noqa: E402
     MESH_EXTENT_MM,
     check_landmark_units,
@@ -134,9 +135,11 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Raises
     ------
     InputError
-        Missing, empty or unreadable file, a face indexing past the vertices, no faces (a point
-        cloud), a NaN or infinite vertex, fewer than 3 triangles of non-zero area, a texture the file references but that is missing, a
-        ``texture`` given for a mesh without UVs.
+        Missing, empty or unreadable file, a file whose bytes are another format than its
+        suffix, an OBJ face line cut short or indexing vertex 0 (0-based faces) or past the
+        vertices, no faces (a point cloud), a NaN or infinite vertex, fewer than 3 triangles
+        of non-zero area, a texture the file references but that is missing, a ``texture``
+        given for a mesh without UVs.
 
     Notes
     -----
@@ -154,18 +157,13 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         raise InputError(
             path, "mesh: the file is empty (0 bytes; expected an OBJ, PLY or glTF/GLB)"
         )
+    check_format(path)
+    if path.suffix.lower() == ".obj":
+        check_obj_text(path)
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds on corrupt files
-        if isinstance(exc, IndexError) and path.suffix.lower() in (".obj", ".ply"):
-            # numpy's, from a face list indexing past the vertex list
-            problem = f"faces: a face refers to a vertex the file does not have ({exc})"
-        elif isinstance(exc, FileNotFoundError) and not Path(str(exc)).is_absolute():
-            # trimesh's, with the name a glTF gives one of its buffers or images
-            problem = f"mesh: the file names {str(exc)!r} (a buffer or image), which is missing"
-        else:
-            problem = f"mesh: cannot read: {str(exc)[:200]}"
-        raise InputError(path, problem) from None
+        raise InputError(path, load_problem(exc, path)) from None
     faces = getattr(loaded, "faces", None)
     if faces is None or len(faces) == 0:
         n = len(getattr(loaded, "vertices", []))
