@@ -787,6 +787,70 @@ def test_mesh_unreadable_file(mesh_files, tmp_path):
         _mesh(mesh_files, mesh=tmp_path / "absent.obj")
 
 
+def _textured_obj(scan, folder, uv=True):
+    """The scan as an OBJ (+ MTL + 8 x 8 texture) in ``folder``, with zero UVs or none."""
+    import trimesh
+    from PIL import Image
+
+    if uv:
+        coords = np.zeros((len(scan["vertices"]), 2))
+        visual = trimesh.visual.TextureVisuals(uv=coords, image=Image.new("RGB", (8, 8)))
+    else:
+        visual = None
+    mesh = trimesh.Trimesh(scan["vertices"], scan["faces"], visual=visual, process=False)
+    mesh.export(folder / "face.obj")
+    return folder / "face.obj"
+
+
+def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
+    mesh_files, tmp_path
+):
+    """trimesh puts a grey 2 x 2 placeholder in place of a missing MTL: the take rendered flat
+    grey and was recorded as textured. Refused naming the MTL; the sheet's texture reads it;
+    without UVs it is a geometry-only mesh."""
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import colour_source, read_mesh
+
+    obj = _textured_obj(mesh_files["scan"], tmp_path)
+    (tmp_path / "material.mtl").unlink()
+    match = (
+        r"face.obj: mtllib 'material.mtl' is missing \(the mesh has UVs but no material\); put "
+        r"the MTL beside the OBJ or give the texture in the sheet's texture column"
+    )
+    with pytest.raises(InputError, match=match):
+        read_mesh(obj)
+    (problem,) = take_file_problems("mesh", {"mesh": obj})
+    assert re.search(match, problem), problem
+    assert colour_source(read_mesh(obj, tmp_path / "material_0.png")) == "texture"
+    (tmp_path / "plain").mkdir()
+    plain = _textured_obj(mesh_files["scan"], tmp_path / "plain", uv=False)
+    plain.write_text("mtllib gone.mtl\nusemtl material_0\n" + plain.read_text())
+    assert colour_source(read_mesh(plain)) == "shading"
+
+
+def test_obj_whose_material_has_a_colour_and_no_image_is_shaded(mesh_files, tmp_path, caplog):
+    """An MTL with ``Kd`` and no ``map_Kd`` (a per-material colour) is no texture: the take is
+    shaded, with the geometry-only warning, with UVs or without."""
+    from scan2morph.io.mesh_scan import colour_source, read_mesh
+
+    for uv in (True, False):
+        folder = tmp_path / f"uv{uv}"
+        folder.mkdir()
+        obj = _textured_obj(mesh_files["scan"], folder, uv=uv)
+        if not uv:
+            obj.write_text("mtllib material.mtl\nusemtl material_0\n" + obj.read_text())
+        (folder / "material.mtl").write_text("newmtl material_0\nKd 0.8 0.2 0.2\n")
+        for png in folder.glob("*.png"):
+            png.unlink()
+        assert colour_source(read_mesh(obj)) == "shading"
+    with caplog.at_level("WARNING", logger="scan2morph"):
+        part = _mesh(mesh_files, mesh=obj)
+    assert "no texture and no vertex colours: rendered with shading" in caplog.text
+    from scan2morph.store import paths
+
+    assert part.datasets[paths.camera("neutral", "color_source")] == "shading"
+
+
 def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, tmp_path):
     """A truncated OBJ (its last face line cut) lost its faces silently and was blamed on its
     landmarks; 0-based faces were shifted by one vertex and wrapped to the last one. Both are

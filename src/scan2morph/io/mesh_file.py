@@ -1,12 +1,14 @@
 """A mesh file's own bytes and text, checked before and after trimesh reads it.
 
 trimesh reads what it can and is silent about the rest: a PLY file named ``.obj`` reads as an
-OBJ without faces, a face line cut short (a truncated download) is dropped and OBJ index 0
-(a 0-based exporter) wraps to the last vertex. These checks find such files from their text and name them.
+OBJ without faces, a face line cut short (a truncated download) is dropped, OBJ index 0 (a
+0-based exporter) wraps to the last vertex, and a missing MTL file is replaced by a placeholder
+material with a 2 x 2 grey image. These checks find such files from their text and name them.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from scan2morph.errors import InputError
@@ -110,4 +112,38 @@ def check_obj_text(path: Path) -> None:
         _relative_problem(path, lines)
 
 
-__all__ = ["check_format", "check_obj_text", "load_problem"]
+def _mtl_files(path: Path, text: str) -> list[tuple[str, Path | None]]:
+    """The ``mtllib`` names of an OBJ's text, each with its file (None: missing)."""
+    out = []
+    for name in re.findall(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M):
+        if (path.parent / name).is_file():  # one name, perhaps with spaces
+            out.append((name, path.parent / name))
+            continue
+        for part in name.split():  # several names
+            out.append((part, path.parent / part if (path.parent / part).is_file() else None))
+    return out
+
+
+def missing_mtl(path: Path) -> str | None:
+    """The first MTL file an OBJ names (``mtllib``) that is not beside it; None when all are."""
+    if path.suffix.lower() != ".obj":
+        return None
+    text = path.read_bytes().decode("utf-8", errors="replace")
+    return next((name for name, found in _mtl_files(path, text) if found is None), None)
+
+
+def referenced_textures(path: Path) -> list[str]:
+    """Texture files an OBJ's MTL files name (``map_Kd``), for the 'texture missing' message."""
+    names = []
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return names
+    for _, mtl_path in _mtl_files(path, text):
+        if mtl_path is not None:
+            mtl_text = mtl_path.read_text(encoding="utf-8", errors="replace")
+            names += re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", mtl_text, flags=re.M)
+    return names
+
+
+__all__ = ["check_format", "check_obj_text", "load_problem", "missing_mtl", "referenced_textures"]

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,7 +35,13 @@ from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
-from scan2morph.io.mesh_file import check_format, check_obj_text, load_problem  # noqa: E402
+from scan2morph.io.mesh_file import (  # noqa: E402
+    check_format,
+    check_obj_text,
+    load_problem,
+    missing_mtl,
+    referenced_textures,
+)
 from scan2morph.io.mesh_units import (  # noqa: E402
     MESH_EXTENT_MM,
     check_landmark_units,
@@ -101,21 +106,6 @@ class MeshTake(RangeTake):
     report: dict = field(default_factory=dict)
 
 
-def _referenced_textures(path: Path) -> list[str]:
-    """Texture files an OBJ's MTL files name (``map_Kd``), for the 'texture missing' message."""
-    names = []
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return names
-    for mtl in re.findall(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M):
-        mtl_path = path.parent / mtl
-        if mtl_path.is_file():
-            mtl_text = mtl_path.read_text(encoding="utf-8", errors="replace")
-            names += re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", mtl_text, flags=re.M)
-    return names
-
-
 def read_mesh(path: str | Path, texture: str | Path | None = None):
     """Read a textured or vertex-coloured triangle mesh.
 
@@ -138,13 +128,13 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         Missing, empty or unreadable file, a file whose bytes are another format than its
         suffix, an OBJ face line cut short or indexing vertex 0 (0-based faces) or past the
         vertices, no faces (a point cloud), a NaN or infinite vertex, fewer than 3 triangles
-        of non-zero area, a texture the file references but that is missing, a ``texture``
-        given for a mesh without UVs.
+        of non-zero area, an MTL or texture the file references but that is missing (unless
+        the sheet gives the texture), a ``texture`` given for a mesh without UVs.
 
     Notes
     -----
-    A mesh without texture and vertex colours (geometry only) is returned as it is:
-    :func:`read_mesh_take` renders it with shading.
+    A mesh without texture and vertex colours (geometry only, or a material with a colour and
+    no image) is returned without colour: :func:`read_mesh_take` renders it with shading.
     """
     import trimesh
 
@@ -178,34 +168,50 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
             f"(the first: vertex {bad[0] + 1}); expected finite numbers",
         )
     nonzero_triangles(loaded, str(path))
+    visual = _colour_visual(loaded, path, texture)
+    if visual is not loaded.visual:  # a vertex-coloured or geometry-only mesh is kept as read
+        loaded.visual = visual
+    return loaded
+
+
+def _colour_visual(loaded, path: Path, texture):
+    """The visuals :func:`read_mesh` returns: the sheet's ``texture`` on the mesh's UVs, the
+    file's own texture (unlit), its vertex colours, or none (geometry only: a material with a
+    colour, ``Kd``, and no image is no texture)."""
+    import trimesh
+
     visual = loaded.visual
+    uv = getattr(visual, "uv", None)
     if texture is not None:
-        uv = getattr(visual, "uv", None)
         if uv is None or len(uv) != len(loaded.vertices):
             raise InputError(
                 path, f"mesh: a texture ({Path(texture).name}) is given but the mesh has no UVs"
             )
         from PIL import Image
 
-        loaded.visual = _unlit_texture(uv, Image.fromarray(read_color(texture)))
-        return loaded
-    if visual.kind == "texture":
-        material = visual.material
-        image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
-        if image is not None:
-            loaded.visual = _unlit_texture(visual.uv, image)
-        elif names := _referenced_textures(path):
-            found = (path.parent / names[0]).is_file()
-            why = "which cannot be read as an image (corrupt?)" if found else "which is missing"
-            raise InputError(
-                path,
-                f"texture: the mesh has UVs but no texture image (the material names "
-                f"{names[0]!r}, {why}); put the texture beside the MTL or name it in "
-                "the sheet's texture column",
-            )
-        else:  # UVs but no texture named: geometry only
-            loaded.visual = trimesh.visual.ColorVisuals(loaded)
-    return loaded
+        return _unlit_texture(uv, Image.fromarray(read_color(texture)))
+    if visual.kind != "texture":
+        return visual
+    if uv is not None and (mtl := missing_mtl(path)):  # trimesh put a grey placeholder there
+        raise InputError(
+            path,
+            f"mtllib {mtl!r} is missing (the mesh has UVs but no material); put the MTL beside "
+            "the OBJ or give the texture in the sheet's texture column",
+        )
+    material = visual.material
+    image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
+    if image is not None:
+        return _unlit_texture(uv, image)
+    if names := referenced_textures(path):
+        found = (path.parent / names[0]).is_file()
+        why = "which cannot be read as an image (corrupt?)" if found else "which is missing"
+        raise InputError(
+            path,
+            f"texture: the mesh has UVs but no texture image (the material names "
+            f"{names[0]!r}, {why}); put the texture beside the MTL or name it in "
+            "the sheet's texture column",
+        )
+    return trimesh.visual.ColorVisuals(loaded)  # no texture named: geometry only
 
 
 def _unlit_texture(uv: np.ndarray, image):
