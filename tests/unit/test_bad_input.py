@@ -674,9 +674,15 @@ def test_mesh_landmarks_off_the_mesh_or_in_metres(mesh_files, tmp_path):
         InputError, match=r"landmarks: point \d+ lies [23]\d.* mm from the mesh m.ply"
     ):
         _mesh(mesh_files, landmarks=tmp_path / "off.txt")
-    write_landmarks3d(tmp_path / "m.txt", lm / 1000.0)
-    with pytest.raises(InputError, match="face size: .*looks like metres, not mm"):
-        _mesh(mesh_files, landmarks=tmp_path / "m.txt")
+    # in metres on a mesh in mm: the landmark file is named, not the mesh (whose unit is right)
+    write_landmarks3d(tmp_path / "lm_m.txt", lm / 1000.0)
+    with pytest.raises(
+        InputError,
+        match=r"lm_m.txt: face size: the outer eye corners \(iBUG 37, 46\) are 0.0\d+ units "
+        r"apart, expected 50-150 mm, on the mesh m.ply, which is \d+(\.\d+)? mm across \(the "
+        r"landmarks look like metres: give them in the mesh's frame and unit\)",
+    ):
+        _mesh(mesh_files, landmarks=tmp_path / "lm_m.txt")
     (tmp_path / "short.txt").write_text("# 67 points\n" + "1 2 3\n" * 67)
     with pytest.raises(
         InputError, match=r"got 67 points \(lines 'x y z'\); accepted: 68 \(iBUG-68\) or 51"
@@ -779,3 +785,163 @@ def test_mesh_unreadable_file(mesh_files, tmp_path):
         _mesh(mesh_files, mesh=tmp_path / "junk.glb")
     with pytest.raises(InputError, match="file not found"):
         _mesh(mesh_files, mesh=tmp_path / "absent.obj")
+
+
+def _textured_obj(scan, folder, uv=True):
+    """The scan as an OBJ (+ MTL + 8 x 8 texture) in ``folder``, with zero UVs or none."""
+    import trimesh
+    from PIL import Image
+
+    if uv:
+        coords = np.zeros((len(scan["vertices"]), 2))
+        visual = trimesh.visual.TextureVisuals(uv=coords, image=Image.new("RGB", (8, 8)))
+    else:
+        visual = None
+    mesh = trimesh.Trimesh(scan["vertices"], scan["faces"], visual=visual, process=False)
+    mesh.export(folder / "face.obj")
+    return folder / "face.obj"
+
+
+def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
+    mesh_files, tmp_path
+):
+    """trimesh puts a grey 2 x 2 placeholder in place of a missing MTL: the take rendered flat
+    grey and was recorded as textured. Refused naming the MTL; the sheet's texture reads it;
+    without UVs it is a geometry-only mesh."""
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import colour_source, read_mesh
+
+    obj = _textured_obj(mesh_files["scan"], tmp_path)
+    (tmp_path / "material.mtl").unlink()
+    match = (
+        r"face.obj: mtllib 'material.mtl' is missing \(the mesh has UVs but no material\); put "
+        r"the MTL beside the OBJ or give the texture in the sheet's texture column"
+    )
+    with pytest.raises(InputError, match=match):
+        read_mesh(obj)
+    (problem,) = take_file_problems("mesh", {"mesh": obj})
+    assert re.search(match, problem), problem
+    assert colour_source(read_mesh(obj, tmp_path / "material_0.png")) == "texture"
+    (tmp_path / "plain").mkdir()
+    plain = _textured_obj(mesh_files["scan"], tmp_path / "plain", uv=False)
+    plain.write_text("mtllib gone.mtl\nusemtl material_0\n" + plain.read_text())
+    assert colour_source(read_mesh(plain)) == "shading"
+
+
+def test_obj_whose_material_has_a_colour_and_no_image_is_shaded(mesh_files, tmp_path, caplog):
+    """An MTL with ``Kd`` and no ``map_Kd`` (a per-material colour) is no texture: the take is
+    shaded, with the geometry-only warning, with UVs or without."""
+    from scan2morph.io.mesh_scan import colour_source, read_mesh
+
+    for uv in (True, False):
+        folder = tmp_path / f"uv{uv}"
+        folder.mkdir()
+        obj = _textured_obj(mesh_files["scan"], folder, uv=uv)
+        if not uv:
+            obj.write_text("mtllib material.mtl\nusemtl material_0\n" + obj.read_text())
+        (folder / "material.mtl").write_text("newmtl material_0\nKd 0.8 0.2 0.2\n")
+        for png in folder.glob("*.png"):
+            png.unlink()
+        assert colour_source(read_mesh(obj)) == "shading"
+    with caplog.at_level("WARNING", logger="scan2morph"):
+        part = _mesh(mesh_files, mesh=obj)
+    assert "no texture and no vertex colours: rendered with shading" in caplog.text
+    from scan2morph.store import paths
+
+    assert part.datasets[paths.camera("neutral", "color_source")] == "shading"
+
+
+def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, tmp_path):
+    """A truncated OBJ (its last face line cut) lost its faces silently and was blamed on its
+    landmarks; 0-based faces were shifted by one vertex and wrapped to the last one. Both are
+    refused naming the face line, by the check and the ingest. Negative (relative) indices are
+    valid OBJ: they read as the same faces."""
+    import trimesh
+
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import read_mesh
+
+    scan = mesh_files["scan"]
+    trimesh.Trimesh(scan["vertices"], scan["faces"], process=False).export(tmp_path / "a.obj")
+    text = (tmp_path / "a.obj").read_text()
+    cut = text.rindex("\nf ", 0, int(len(text) * 0.6)) + 4  # within a face line
+    (tmp_path / "cut.obj").write_text(text[:cut])
+    line = text[:cut].count("\n") + 1
+    match = rf"cut.obj: face line {line}: 1 vertex, expected 3 or more: the file looks cut short"
+    (problem,) = take_file_problems("mesh", {"mesh": tmp_path / "cut.obj"})
+    assert re.search(match, problem), problem
+    with pytest.raises(InputError, match=match):
+        _mesh(mesh_files, mesh=tmp_path / "cut.obj")
+    v, f = scan["vertices"], scan["faces"]
+    vertices = "".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in v)
+    (tmp_path / "zero.obj").write_text(vertices + "".join(f"f {a} {b} {c}\n" for a, b, c in f))
+    with pytest.raises(
+        InputError,
+        match=rf"zero.obj: face line {len(v) + 1}: vertex index 0 \(OBJ indices start at 1",
+    ):
+        read_mesh(tmp_path / "zero.obj")
+    back = f - len(v)  # -1 is the last vertex above the face
+    (tmp_path / "rel.obj").write_text(vertices + "".join(f"f {a} {b} {c}\n" for a, b, c in back))
+    relative = read_mesh(tmp_path / "rel.obj")
+    np.testing.assert_array_equal(relative.vertices[relative.faces], v[f])
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1 0 0\nf -1 -2 -3\n")
+    with pytest.raises(InputError, match=r"far.obj: face line 3: vertex index -3 counts back"):
+        read_mesh(tmp_path / "far.obj")
+
+
+def test_mesh_file_of_another_format_or_cut_short(mesh_files, tmp_path):
+    """A PLY named .obj read as an OBJ without faces ('a point cloud?'); a binary PLY cut short
+    gave trimesh's words."""
+    import shutil
+
+    from scan2morph.io.mesh_scan import read_mesh
+
+    shutil.copy(mesh_files["mesh"], tmp_path / "face.obj")
+    with pytest.raises(
+        InputError,
+        match=r"face.obj: mesh: the file is not OBJ text \(it starts with 'ply': a PLY file\); "
+        r"name it .ply",
+    ):
+        read_mesh(tmp_path / "face.obj")
+    data = mesh_files["mesh"].read_bytes()
+    (tmp_path / "half.ply").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=r"half.ply: mesh: the file is shorter than its PLY"):
+        read_mesh(tmp_path / "half.ply")
+
+
+def test_check_refuses_a_mesh_without_triangles_of_area_as_the_ingest_does(mesh_files, tmp_path):
+    """Every triangle collapsed, or a single triangle: the check passed them, the ingest
+    refused them. Both now give the reader's one line."""
+    import trimesh
+
+    from scan2morph.io.check import take_file_problems
+
+    v, f = mesh_files["scan"]["vertices"], mesh_files["scan"]["faces"].copy()
+    f[:, 2] = f[:, 1]
+    trimesh.Trimesh(v, f, process=False).export(tmp_path / "flat.ply")
+    trimesh.Trimesh(v[:3], [[0, 1, 2]], process=False).export(tmp_path / "one.ply")
+    for name, n in (("flat.ply", 0), ("one.ply", 1)):
+        match = rf"{name}: mesh: {n} triangles of non-zero area \(expected a face\)"
+        (problem,) = take_file_problems("mesh", {"mesh": tmp_path / name})
+        assert re.search(match, problem), problem
+        with pytest.raises(InputError, match=match):
+            _mesh(mesh_files, mesh=tmp_path / name)
+
+
+def test_a_unit_given_to_a_mesh_in_mm_says_the_unit_is_wrong(mesh_files):
+    """``units: m`` on a mesh in mm said it 'looks like µm' (no unit the column takes): the
+    message says what the unit makes of it and that the data are in mm already."""
+    from scan2morph.io.check import take_file_problems
+
+    match = (
+        r"with the unit given \(1000 mm per unit\) it comes out [\d.e+]+ mm; without it, "
+        r"\d+(\.\d+)? mm, a face's size: the data are in mm already and the value in the sheet's "
+        r"units column is wrong \(leave it empty for mm\)"
+    )
+    (problem,) = take_file_problems("mesh", {"mesh": mesh_files["mesh"]}, 1000.0)
+    assert re.search(r"m.ply: mesh size: .* mm across in the sheet's unit, .*" + match, problem)
+    row = dict(ROW, modality="mesh", units="m")
+    for files in (mesh_files, {"mesh": mesh_files["mesh"]}):
+        files = {k: str(v) for k, v in files.items() if k != "scan"}
+        with pytest.raises(InputError, match=r"m.ply: (face|mesh) size: .*" + match):
+            _run_ingest(row, files, {"width": 160, "height": 120})

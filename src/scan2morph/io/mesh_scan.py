@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,14 +35,30 @@ from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
-from scan2morph.io.mesh_view import face_camera, face_view, surface_camera  # noqa: E402
+from scan2morph.io.mesh_file import (  # noqa: E402
+    check_format,
+    check_obj_text,
+    load_problem,
+    missing_mtl,
+    referenced_textures,
+)
+from scan2morph.io.mesh_units import (  # noqa: E402
+    MESH_EXTENT_MM,
+    check_landmark_units,
+    check_mesh_extents,
+    check_mesh_size,
+)
+from scan2morph.io.mesh_view import (  # noqa: E402
+    face_camera,
+    face_view,
+    nonzero_triangles,
+    surface_camera,
+)
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
 from scan2morph.io.take import (  # noqa: E402
-    EYE_SPAN_MM,
     RangeTake,
     check_face,
     check_landmarks_inside,
-    likely_unit,
 )
 from scan2morph.io.uv_orientation import orient_texture  # noqa: E402
 
@@ -60,10 +75,6 @@ DEFAULT_MESH_CAMERA = {
 }
 #: A landmark farther than this from the mesh surface is "off the mesh", mm.
 MAX_LANDMARK_OFFSET_MM = 5.0
-#: The largest extent of a face or head scan (a face-only crop to head and shoulders), mm.
-MESH_EXTENT_MM = (60.0, 1000.0)
-#: What the sheet's ``units`` column takes, for messages.
-UNIT_HELP = "mm, cm, m or mm per unit: 25.4 for inches"
 #: The colour source of a geometry-only mesh (``/takes/{take}/camera/color_source``): its render
 #: is the surface's shading, no skin texture.
 SHADED = "shading"
@@ -95,21 +106,6 @@ class MeshTake(RangeTake):
     report: dict = field(default_factory=dict)
 
 
-def _referenced_textures(path: Path) -> list[str]:
-    """Texture files an OBJ's MTL files name (``map_Kd``), for the 'texture missing' message."""
-    names = []
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return names
-    for mtl in re.findall(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M):
-        mtl_path = path.parent / mtl
-        if mtl_path.is_file():
-            mtl_text = mtl_path.read_text(encoding="utf-8", errors="replace")
-            names += re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", mtl_text, flags=re.M)
-    return names
-
-
 def read_mesh(path: str | Path, texture: str | Path | None = None):
     """Read a textured or vertex-coloured triangle mesh.
 
@@ -129,14 +125,16 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Raises
     ------
     InputError
-        Missing, empty or unreadable file, a face indexing past the vertices, no faces (a point
-        cloud), a NaN or infinite vertex, a texture the file references but that is missing, a
-        ``texture`` given for a mesh without UVs.
+        Missing, empty or unreadable file, a file whose bytes are another format than its
+        suffix, an OBJ face line cut short or indexing vertex 0 (0-based faces) or past the
+        vertices, no faces (a point cloud), a NaN or infinite vertex, fewer than 3 triangles
+        of non-zero area, an MTL or texture the file references but that is missing (unless
+        the sheet gives the texture), a ``texture`` given for a mesh without UVs.
 
     Notes
     -----
-    A mesh without texture and vertex colours (geometry only) is returned as it is:
-    :func:`read_mesh_take` renders it with shading.
+    A mesh without texture and vertex colours (geometry only, or a material with a colour and
+    no image) is returned without colour: :func:`read_mesh_take` renders it with shading.
     """
     import trimesh
 
@@ -149,18 +147,13 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         raise InputError(
             path, "mesh: the file is empty (0 bytes; expected an OBJ, PLY or glTF/GLB)"
         )
+    check_format(path)
+    if path.suffix.lower() == ".obj":
+        check_obj_text(path)
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds on corrupt files
-        if isinstance(exc, IndexError) and path.suffix.lower() in (".obj", ".ply"):
-            # numpy's, from a face list indexing past the vertex list
-            problem = f"faces: a face refers to a vertex the file does not have ({exc})"
-        elif isinstance(exc, FileNotFoundError) and not Path(str(exc)).is_absolute():
-            # trimesh's, with the name a glTF gives one of its buffers or images
-            problem = f"mesh: the file names {str(exc)!r} (a buffer or image), which is missing"
-        else:
-            problem = f"mesh: cannot read: {str(exc)[:200]}"
-        raise InputError(path, problem) from None
+        raise InputError(path, load_problem(exc, path)) from None
     faces = getattr(loaded, "faces", None)
     if faces is None or len(faces) == 0:
         n = len(getattr(loaded, "vertices", []))
@@ -174,34 +167,51 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
             f"vertices: {len(bad)} of {len(loaded.vertices)} have a NaN or infinite coordinate "
             f"(the first: vertex {bad[0] + 1}); expected finite numbers",
         )
+    nonzero_triangles(loaded, str(path))
+    visual = _colour_visual(loaded, path, texture)
+    if visual is not loaded.visual:  # a vertex-coloured or geometry-only mesh is kept as read
+        loaded.visual = visual
+    return loaded
+
+
+def _colour_visual(loaded, path: Path, texture):
+    """The visuals :func:`read_mesh` returns: the sheet's ``texture`` on the mesh's UVs, the
+    file's own texture (unlit), its vertex colours, or none (geometry only: a material with a
+    colour, ``Kd``, and no image is no texture)."""
+    import trimesh
+
     visual = loaded.visual
+    uv = getattr(visual, "uv", None)
     if texture is not None:
-        uv = getattr(visual, "uv", None)
         if uv is None or len(uv) != len(loaded.vertices):
             raise InputError(
                 path, f"mesh: a texture ({Path(texture).name}) is given but the mesh has no UVs"
             )
         from PIL import Image
 
-        loaded.visual = _unlit_texture(uv, Image.fromarray(read_color(texture)))
-        return loaded
-    if visual.kind == "texture":
-        material = visual.material
-        image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
-        if image is not None:
-            loaded.visual = _unlit_texture(visual.uv, image)
-        elif names := _referenced_textures(path):
-            found = (path.parent / names[0]).is_file()
-            why = "which cannot be read as an image (corrupt?)" if found else "which is missing"
-            raise InputError(
-                path,
-                f"texture: the mesh has UVs but no texture image (the material names "
-                f"{names[0]!r}, {why}); put the texture beside the MTL or name it in "
-                "the sheet's texture column",
-            )
-        else:  # UVs but no texture named: geometry only
-            loaded.visual = trimesh.visual.ColorVisuals(loaded)
-    return loaded
+        return _unlit_texture(uv, Image.fromarray(read_color(texture)))
+    if visual.kind != "texture":
+        return visual
+    if uv is not None and (mtl := missing_mtl(path)):  # trimesh put a grey placeholder there
+        raise InputError(
+            path,
+            f"mtllib {mtl!r} is missing (the mesh has UVs but no material); put the MTL beside "
+            "the OBJ or give the texture in the sheet's texture column",
+        )
+    material = visual.material
+    image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
+    if image is not None:
+        return _unlit_texture(uv, image)
+    if names := referenced_textures(path):
+        found = (path.parent / names[0]).is_file()
+        why = "which cannot be read as an image (corrupt?)" if found else "which is missing"
+        raise InputError(
+            path,
+            f"texture: the mesh has UVs but no texture image (the material names "
+            f"{names[0]!r}, {why}); put the texture beside the MTL or name it in "
+            "the sheet's texture column",
+        )
+    return trimesh.visual.ColorVisuals(loaded)  # no texture named: geometry only
 
 
 def _unlit_texture(uv: np.ndarray, image):
@@ -269,65 +279,6 @@ def _check_on_mesh(mesh, lm3: np.ndarray, mesh_path, landmarks_path) -> None:
             f"({int(far.sum())} points farther than {MAX_LANDMARK_OFFSET_MM:g} mm): are they of "
             "this mesh, in its frame and units?",
         )
-
-
-def _check_units(lm3: np.ndarray, mesh_path) -> None:
-    span = float(np.linalg.norm(lm3[45] - lm3[36]))
-    lo, hi = EYE_SPAN_MM
-    if not lo <= span <= hi:
-        unit = likely_unit(span, EYE_SPAN_MM)
-        likely = (
-            f"the mesh looks like {unit}, not mm: give its unit in the sheet's units column "
-            f"({UNIT_HELP})"
-            if unit
-            else "not a face in mm"
-        )
-        raise InputError(
-            mesh_path,
-            f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} units apart, "
-            f"expected {lo:g}-{hi:g} mm ({likely})",
-        )
-
-
-def check_mesh_size(mesh, mm_per_unit: float = 1.0, source: str | Path = "mesh") -> None:
-    """Refuse a mesh that is not face- or head-sized in mm (:data:`MESH_EXTENT_MM` at its
-    largest), naming the unit it looks like.
-
-    Without landmarks nothing else checks the unit before the surface searches, which assume mm
-    (a head in cm or inches makes their neighbourhoods hold the whole mesh).
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        As read, in its own unit.
-    mm_per_unit : float
-        The sheet's unit (``units`` column), mm.
-    source : str or path-like
-        The mesh file, for messages.
-
-    Raises
-    ------
-    InputError
-        Naming the mesh's size in mm and the unit it looks like.
-    """
-    extents = np.asarray(mesh.extents, dtype=np.float64) * mm_per_unit
-    largest = float(extents.max())
-    lo, hi = MESH_EXTENT_MM
-    if lo <= largest <= hi:
-        return
-    unit = likely_unit(largest, MESH_EXTENT_MM)
-    if unit:
-        likely = f"it looks like {unit}: give its unit in the sheet's units column ({UNIT_HELP})"
-    else:
-        likely = (
-            f"not a face or head in mm: give its scale in the sheet's units column ({UNIT_HELP})"
-        )
-    size = " x ".join(f"{e:.4g}" for e in extents)
-    raise InputError(
-        source,
-        f"mesh size: {size} mm across as read, expected a face or head {lo:g}-{hi:g} mm across at its "
-        f"largest ({likely})",
-    )
 
 
 def view_direction(mesh, lm3: np.ndarray | None = None, source: str = "mesh") -> np.ndarray:
@@ -537,20 +488,23 @@ def read_mesh_take(
     ------
     InputError
         From :func:`read_mesh` and :func:`read_landmarks3d`; a face not 50-150 mm across the
-        outer eye corners, or a mesh not 60-1000 mm across (names the unit it looks like);
-        landmarks off the mesh; landmarks
+        outer eye corners, or a mesh not 60-1000 mm across (names the unit it looks like, the
+        landmark file when the mesh is a face's size, or a wrong ``units`` value:
+        :mod:`~scan2morph.io.mesh_units`); landmarks off the mesh; landmarks
         whose surface faces away from the camera (mirrored: iBUG 37 must be the subject's right
         eye's outer corner); the face checks of :func:`~scan2morph.io.check_face`.
     """
     cfg = dict(DEFAULT_MESH_CAMERA) | dict(settings or {})
     mesh = read_mesh(mesh_path, texture_path)
+    as_read = np.asarray(mesh.extents, dtype=np.float64)
     if mm_per_unit != 1.0:
         mesh.apply_scale(mm_per_unit)
     lm3 = None if landmarks_path is None else read_landmarks3d(landmarks_path) * mm_per_unit
     if lm3 is not None:
-        _check_units(lm3, mesh_path)
+        check_landmark_units(lm3, mesh, mesh_path, landmarks_path, mm_per_unit)
+    check_mesh_extents(as_read, mm_per_unit, mesh_path)
+    if lm3 is not None:
         _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)
-    check_mesh_size(mesh, 1.0, mesh_path)  # scaled to mm above
     view = face_view(mesh, None if lm3 is None else lm3[30], str(mesh_path))
     if complete(lm3):
         K, pose = virtual_camera(lm3, view.direction, cfg)
@@ -584,6 +538,7 @@ def read_mesh_take(
 
 __all__ = [
     "DEFAULT_MESH_CAMERA",
+    "MESH_EXTENT_MM",
     "MeshTake",
     "check_mesh_size",
     "read_landmarks3d",

@@ -384,13 +384,25 @@ def face_view(mesh, tip: np.ndarray | None = None, source: str = "mesh") -> Face
     return view
 
 
-def _find_view(mesh, tip: np.ndarray | None, source: str) -> FaceView:
-    """:func:`face_view` without its memo."""
+def nonzero_triangles(mesh, source: str = "mesh") -> np.ndarray:
+    """The mask of a mesh's triangles of non-zero area.
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 such triangles (every triangle collapsed, a single one): not a face.
+    """
     keep = np.asarray(mesh.area_faces) > 0
     if keep.sum() < 3:
         raise InputError(
             source, f"mesh: {int(keep.sum())} triangles of non-zero area (expected a face)"
         )
+    return keep
+
+
+def _find_view(mesh, tip: np.ndarray | None, source: str) -> FaceView:
+    """:func:`face_view` without its memo."""
+    keep = nonzero_triangles(mesh, source)
     # the zero-area triangles dropped (a copy of the mesh only when there are some)
     centres, areas, normals, sign = outward_normals(
         mesh if keep.all() else mesh.submesh([keep], append=True)
@@ -518,6 +530,7 @@ __all__ = [
     "face_camera",
     "face_up",
     "face_view",
+    "nonzero_triangles",
     "nose_tip",
     "outward_normals",
     "surface_camera",
