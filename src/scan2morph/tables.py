@@ -310,7 +310,7 @@ COHORT = (
         "left_out",
         NO_UNIT,
         "takes left out of the subject, each as take (stage that refused it), '; '-separated, "
-        "empty when none; the reasons are in the subject's store (/failed) and at the top of "
+        "NA when none (the tables' missing value); the reasons are in the subject's store (/failed) and at the top of "
         "its report",
     ),
     Column(
