@@ -7,6 +7,7 @@ messages (:func:`schema_errors`, also used for the take sheet's rows) and the ke
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Mapping
 from os import PathLike
 
@@ -91,14 +92,16 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
 
     Defaults are set as :func:`snakemake.utils.validate` sets them: while validating, every
     property with a ``default`` missing from its object is set to (a copy of) that default,
-    and the default's own properties are then checked and filled in turn.
+    and the default's own properties are then checked and filled in turn. In the same pass an
+    integral float where the schema takes only integers (``subjects: 2.0``) becomes an ``int``.
 
     Raises
     ------
     InputError
         Naming ``source``, the first problem's key path and what is wrong (one line; the number
         of further problems is appended); a key that moved (:data:`RENAMED_KEYS`) is named with
-        its new path.
+        its new path. NaN is refused, and so is an infinity except where the key's schema has
+        ``x-infinite: true`` (:data:`INFINITE`).
     """
     from jsonschema import Draft202012Validator, validators
 
@@ -106,21 +109,32 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
     if moved:
         raise InputError(source, "; ".join(moved))
     schema_doc = load_schema(schema)
-    properties = Draft202012Validator.VALIDATORS["properties"]
+    keyword = Draft202012Validator.VALIDATORS
 
     def set_defaults(validator, props, instance, sub):
         if isinstance(instance, dict):
             for name, subschema in props.items():
                 if isinstance(subschema, dict) and "default" in subschema:
                     instance.setdefault(name, copy.deepcopy(subschema["default"]))
-        yield from properties(validator, props, instance, sub)
+                if name in instance:
+                    instance[name] = _integral(instance[name], subschema)
+        yield from keyword["properties"](validator, props, instance, sub)
 
-    filling = validators.extend(Draft202012Validator, {"properties": set_defaults})
+    def items_as_int(validator, items, instance, sub):
+        if isinstance(instance, list):
+            instance[:] = [_integral(item, items) for item in instance]
+        yield from keyword["items"](validator, items, instance, sub)
+
+    filling = validators.extend(
+        Draft202012Validator, {"properties": set_defaults, "items": items_as_int}
+    )
     for _ in filling(schema_doc).iter_errors(config):
         pass  # the errors are reported below, from a plain validator on the filled config
     problems = schema_errors(config, schema_doc)
-    if (nan := _nan_path(config)) is not None:  # the schema's 'number' takes it
-        problems.insert(0, (_key_path(nan), "expected a number, got nan"))
+    if (bad := _non_finite(config, schema_doc)) is not None:  # the schema's 'number' takes it
+        path, value = bad
+        word = "a number" if value != value else "a finite number"
+        problems.insert(0, (_key_path(path), f"expected {word}, got {value}"))
     if problems:
         key, problem = problems[0]
         more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""
@@ -128,14 +142,40 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
     return config
 
 
-def _nan_path(value: object, path: tuple = ()) -> tuple | None:
-    """The key path of the first NaN in a config (a number every comparison refuses: a
-    threshold of .nan would let everything through, or nothing), None when there is none."""
-    if isinstance(value, float) and value != value:
-        return path
-    items = value.items() if isinstance(value, dict) else ()
-    for key, item in enumerate(value) if isinstance(value, list) else items:
-        if (found := _nan_path(item, (*path, key))) is not None:
+def _integral(value: object, schema: object) -> object:
+    """``value`` as an ``int`` when it is an integral float (``2.0``, as YAML reads it) and
+    ``schema`` takes integers but no other numbers; else ``value`` unchanged.
+
+    JSON Schema counts 2.0 as an integer, so it passes ``type: integer``, but the code reading
+    the key needs an ``int`` (``range(2.0)`` raises).
+    """
+    if not (isinstance(value, float) and value.is_integer() and isinstance(schema, dict)):
+        return value
+    types = schema.get("type", ())
+    types = [types] if isinstance(types, str) else list(types)
+    return int(value) if "integer" in types and "number" not in types else value
+
+
+#: The schema's mark of a number for which ``.inf`` means something (no limit).
+INFINITE = "x-infinite"
+
+
+def _non_finite(value: object, schema: object, path: tuple = ()) -> tuple | None:
+    """The key path and value of the first number in a config that no comparison handles:
+    NaN (a threshold of .nan lets everything through, or nothing) or an infinity where the
+    key's schema has no ``x-infinite: true`` (a size of .inf mm); None when there is none."""
+    schema = schema if isinstance(schema, dict) else {}
+    if isinstance(value, float) and not math.isfinite(value):
+        return None if value == value and schema.get(INFINITE) else (path, value)
+    if isinstance(value, list):
+        pairs = [(k, item, schema.get("items")) for k, item in enumerate(value)]
+    elif isinstance(value, dict):
+        props, extra = schema.get("properties", {}), schema.get("additionalProperties")
+        pairs = [(k, item, props.get(k, extra)) for k, item in value.items()]
+    else:
+        pairs = []
+    for key, item, sub in pairs:
+        if (found := _non_finite(item, sub, (*path, key))) is not None:
             return found
     return None
 
@@ -171,5 +211,39 @@ def _problem(error) -> str:
         return f"expected a value {bound} {arg}, got {_short(value)}"
     if kind in ("minItems", "maxItems", "minLength", "maxLength"):
         return f"{kind} {arg}: got {_short(value)}"
+    if kind in ("anyOf", "oneOf") and all(isinstance(branch, dict) for branch in arg):
+        return f"expected {' or '.join(_accepts(branch) for branch in arg)}, got {_short(value)}"
     message = error.message
     return message if len(message) <= 160 else message[:157] + "..."
+
+
+_WORDS = {
+    "number": "a number",
+    "integer": "an integer",
+    "string": "a string",
+    "boolean": "true or false",
+    "null": "null",
+    "array": "a list",
+    "object": "a mapping",
+}
+_BOUNDS = (
+    ("minimum", ">="),
+    ("exclusiveMinimum", ">"),
+    ("maximum", "<="),
+    ("exclusiveMaximum", "<"),
+)
+
+
+def _accepts(branch: dict) -> str:
+    """What one branch of an ``anyOf`` or ``oneOf`` accepts, in words (``'auto'``, ``a number
+    > 0``, ``one of ['a', 'b']``), for a message listing every branch."""
+    if "const" in branch:
+        return repr(branch["const"])
+    if "enum" in branch:
+        return f"one of {list(branch['enum'])}"
+    types = branch.get("type", ())
+    types = [types] if isinstance(types, str) else list(types)
+    words = " or ".join(_WORDS.get(t, t) for t in types) or "a value"
+    bounds = " and ".join(f"{op} {branch[key]}" for key, op in _BOUNDS if key in branch)
+    pattern = f" matching {branch['pattern']!r}" if "pattern" in branch else ""
+    return f"{words}{pattern}{' ' + bounds if bounds else ''}"
