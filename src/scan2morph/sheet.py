@@ -86,28 +86,29 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     Raises
     ------
     InputError
-        The file is missing, a required column is missing or an id has forbidden characters
-        (these make the sheet unreadable as a whole, so the run stops before any job).
+        The file is missing (naming its resolved path), a column name is unknown or empty, a
+        required column is missing, a quote is not closed, an id has forbidden characters or a
+        subject id is one of :data:`RESERVED_SUBJECTS` (these make the sheet unreadable as a
+        whole, so the run stops before any job).
     """
     import pandas as pd
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "sheet not found (config key 'subjects')")
+        where = "" if path.is_absolute() else f" (relative to the working directory {Path.cwd()})"
+        raise InputError(
+            path, f"sheet not found (config key 'subjects'): no file {path.resolve()}{where}"
+        )
     try:
         text = tab_cells(path, sheet_text(path))
         df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
     except pd.errors.ParserError as exc:  # the text is decoded: sheet_text names bad bytes
-        raise InputError(path, f"not a tab-separated sheet: {' '.join(str(exc).split())}") from exc
+        raise InputError(path, _parser_problem(text, exc)) from exc
     df.columns = [c.strip() for c in df.columns]
-    missing = [c for c in REQUIRED if c not in df.columns]
-    if missing:
-        raise InputError(path, f"columns {missing} missing (expected {list(COLUMNS)})")
-    unknown = [c for c in df.columns if c not in COLUMNS]
-    if unknown:
-        raise InputError(path, f"unknown columns {unknown} (expected {list(COLUMNS)})")
+    if problem := column_problem(list(df.columns)):
+        raise InputError(path, problem)
     df = df.reindex(columns=list(COLUMNS), fill_value="").fillna("").apply(lambda c: c.str.strip())
     for row, rec in enumerate(df.itertuples(index=False), start=2):
         for col in ("subject", "take"):
@@ -115,6 +116,8 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
             if not _ID.match(value):
                 what = "is not an id (letters, digits, _ and -)"
                 raise InputError(path, f"row {row}, column '{col}': {value!r} {what}")
+        if rec.subject.lower() in RESERVED_SUBJECTS:
+            raise InputError(path, f"row {row}, column 'subject': {reserved_problem(rec.subject)}")
     base = path.resolve().parent
     for col in PATH_COLUMNS:
         df[col] = [_resolve(v, base, col in MULTI_PATH_COLUMNS) for v in df[col]]
@@ -122,6 +125,59 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     df["sheet"] = str(path)
     df["synthetic"] = False
     return df
+
+
+def column_problem(columns: list[str]) -> str | None:
+    """What is wrong with a sheet's column names, in one line, or None.
+
+    A name in other capitals (``Subject``) or close to a known one (``modalty``) is named with
+    the column it stands for; other unknown names with the known columns; then the required
+    columns still missing (the others may be left out).
+    """
+    import difflib
+
+    said, known = [], [c for c in columns if c in COLUMNS]
+    for name in (c for c in columns if c not in COLUMNS):
+        if name.lower() in COLUMNS:
+            said.append(f"column {name!r} should be {name.lower()!r} (names are lower case)")
+            known.append(name.lower())
+        elif close := difflib.get_close_matches(name.lower(), COLUMNS, n=1, cutoff=0.75):
+            said.append(f"unknown column {name!r} (did you mean {close[0]!r}?)")
+            known.append(close[0])
+        else:
+            said.append(f"unknown column {name!r} (known: {', '.join(COLUMNS)})")
+    if missing := [c for c in REQUIRED if c not in known]:
+        said.append(f"required columns {missing} missing")
+    return "; ".join(said) or None
+
+
+def _parser_problem(text: str, exc: Exception) -> str:
+    """pandas' complaint about a sheet's text as one line; an unclosed quote names its line
+    (pandas names a row of its own count, not the sheet's line)."""
+    if "EOF inside string" in str(exc):
+        for k, line in enumerate(text.splitlines(), start=1):
+            cells = line.split("\t")
+            start = next((i for i, c in enumerate(cells) if c.lstrip().startswith('"')), None)
+            if start is not None and "\t".join(cells[start:]).count('"') % 2:
+                return (
+                    f'line {k}: a cell opens a quote (") that is not closed on its line; close '
+                    "it or remove the quote"
+                )
+    return f"not a tab-separated sheet: {' '.join(str(exc).split())}"
+
+
+#: Folders the workflow writes directly under ``results/`` besides the subjects' own
+#: (``results/{subject}/``): a subject of one of these names would write into them (and
+#: empty them). Compared in lower case, as a case-insensitive file system does.
+RESERVED_SUBJECTS = ("cohort", "synthetic", "sweeps")
+
+
+def reserved_problem(subject: str, fix: str = "rename the subject") -> str:
+    """Why ``subject``, one of :data:`RESERVED_SUBJECTS`, cannot be a subject id."""
+    return (
+        f"{subject!r} names a folder the workflow writes under results/ (reserved: "
+        f"{', '.join(RESERVED_SUBJECTS)}); {fix}"
+    )
 
 
 def mm_per_unit(row) -> float:
@@ -211,6 +267,23 @@ def _check_switches(switches: Mapping, take_ids: list[str], n_subjects: int) -> 
             )
 
 
+def _check_cohort(takes: list[dict], n_subjects: int, prefix: str) -> None:
+    """The takes and ids of :func:`synthetic_rows` (a cohort of at least one subject): one
+    neutral, no take id twice (else every synthetic subject stops at its check job), no
+    generated id among :data:`RESERVED_SUBJECTS`."""
+    if n_subjects < 1:
+        return
+    source = "config: synthetic.takes"
+    if (n := [t.get("kind") for t in takes].count("neutral")) != 1:
+        raise InputError(source, f"expected exactly one take of kind 'neutral', found {n}")
+    ids = [t.get("take") for t in takes]
+    if twice := sorted({t for t in ids if ids.count(t) > 1}):
+        raise InputError(source, f"take ids {twice} appear more than once")
+    for subject in (f"{prefix}{i:02d}" for i in range(1, n_subjects + 1)):
+        if subject.lower() in RESERVED_SUBJECTS:
+            raise InputError("config: synthetic.prefix", reserved_problem(subject, "change it"))
+
+
 def _synthetic_files(modality: str, stem: str, frames: int) -> dict[str, str]:
     """A synthetic take's file columns (the landmarks' left empty): :data:`SYNTHETIC_FILES`,
     an RGB-D take's depth frames joined as in a sheet."""
@@ -277,12 +350,14 @@ def synthetic_rows(
     InputError
         ``{modality}.takes`` names a take that is not in ``takes`` (for a switch with a
         subject in the cohort), ``{modality}.subjects`` holds something other than positive
-        integers, or a take is listed twice.
+        integers, or a take is listed twice; ``takes`` has no neutral, or more than one, or a
+        take id twice; a subject id is one of :data:`RESERVED_SUBJECTS`.
     """
     import pandas as pd
 
     switches = {"stereo": stereo or {}, "mesh": mesh or {}, "rgbd": rgbd or {}}
     take_ids = [t["take"] for t in takes]
+    _check_cohort(takes, n_subjects, prefix)
     _check_switches(switches, take_ids, n_subjects)
     rows = []
     for i in range(1, n_subjects + 1):
