@@ -73,6 +73,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.jobs",
             "scan2morph.store",
             "scan2morph.sheet",
+            "scan2morph.config_schema",
             "scan2morph.sheet_text",
             "scan2morph.units",
             "scan2morph.tables",

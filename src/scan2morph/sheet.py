@@ -10,7 +10,6 @@ subject's jobs fail, with a message naming the file and the row.
 
 from __future__ import annotations
 
-import copy
 import io
 import re
 from collections.abc import Mapping
@@ -18,6 +17,11 @@ from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+# the config's checks are importable from here as well (``as``: re-exported)
+from scan2morph.config_schema import RENAMED_KEYS as RENAMED_KEYS
+from scan2morph.config_schema import load_schema, schema_errors
+from scan2morph.config_schema import renamed_keys as renamed_keys
+from scan2morph.config_schema import validate_config as validate_config
 from scan2morph.errors import InputError
 from scan2morph.sheet_text import sheet_text, tab_cells
 from scan2morph.units import unit_scale, units_problem
@@ -82,28 +86,29 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     Raises
     ------
     InputError
-        The file is missing, a required column is missing or an id has forbidden characters
-        (these make the sheet unreadable as a whole, so the run stops before any job).
+        The file is missing (naming its resolved path), a column name is unknown or empty, a
+        required column is missing, a quote is not closed, an id has forbidden characters or a
+        subject id is one of :data:`RESERVED_SUBJECTS` (these make the sheet unreadable as a
+        whole, so the run stops before any job).
     """
     import pandas as pd
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "sheet not found (config key 'subjects')")
+        where = "" if path.is_absolute() else f" (relative to the working directory {Path.cwd()})"
+        raise InputError(
+            path, f"sheet not found (config key 'subjects'): no file {path.resolve()}{where}"
+        )
     try:
         text = tab_cells(path, sheet_text(path))
         df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
     except pd.errors.ParserError as exc:  # the text is decoded: sheet_text names bad bytes
-        raise InputError(path, f"not a tab-separated sheet: {' '.join(str(exc).split())}") from exc
+        raise InputError(path, _parser_problem(text, exc)) from exc
     df.columns = [c.strip() for c in df.columns]
-    missing = [c for c in REQUIRED if c not in df.columns]
-    if missing:
-        raise InputError(path, f"columns {missing} missing (expected {list(COLUMNS)})")
-    unknown = [c for c in df.columns if c not in COLUMNS]
-    if unknown:
-        raise InputError(path, f"unknown columns {unknown} (expected {list(COLUMNS)})")
+    if problem := column_problem(list(df.columns)):
+        raise InputError(path, problem)
     df = df.reindex(columns=list(COLUMNS), fill_value="").fillna("").apply(lambda c: c.str.strip())
     for row, rec in enumerate(df.itertuples(index=False), start=2):
         for col in ("subject", "take"):
@@ -111,6 +116,8 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
             if not _ID.match(value):
                 what = "is not an id (letters, digits, _ and -)"
                 raise InputError(path, f"row {row}, column '{col}': {value!r} {what}")
+        if rec.subject.lower() in RESERVED_SUBJECTS:
+            raise InputError(path, f"row {row}, column 'subject': {reserved_problem(rec.subject)}")
     base = path.resolve().parent
     for col in PATH_COLUMNS:
         df[col] = [_resolve(v, base, col in MULTI_PATH_COLUMNS) for v in df[col]]
@@ -118,6 +125,59 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     df["sheet"] = str(path)
     df["synthetic"] = False
     return df
+
+
+def column_problem(columns: list[str]) -> str | None:
+    """What is wrong with a sheet's column names, in one line, or None.
+
+    A name in other capitals (``Subject``) or close to a known one (``modalty``) is named with
+    the column it stands for; other unknown names with the known columns; then the required
+    columns still missing (the others may be left out).
+    """
+    import difflib
+
+    said, known = [], [c for c in columns if c in COLUMNS]
+    for name in (c for c in columns if c not in COLUMNS):
+        if name.lower() in COLUMNS:
+            said.append(f"column {name!r} should be {name.lower()!r} (names are lower case)")
+            known.append(name.lower())
+        elif close := difflib.get_close_matches(name.lower(), COLUMNS, n=1, cutoff=0.75):
+            said.append(f"unknown column {name!r} (did you mean {close[0]!r}?)")
+            known.append(close[0])
+        else:
+            said.append(f"unknown column {name!r} (known: {', '.join(COLUMNS)})")
+    if missing := [c for c in REQUIRED if c not in known]:
+        said.append(f"required columns {missing} missing")
+    return "; ".join(said) or None
+
+
+def _parser_problem(text: str, exc: Exception) -> str:
+    """pandas' complaint about a sheet's text as one line; an unclosed quote names its line
+    (pandas names a row of its own count, not the sheet's line)."""
+    if "EOF inside string" in str(exc):
+        for k, line in enumerate(text.splitlines(), start=1):
+            cells = line.split("\t")
+            start = next((i for i, c in enumerate(cells) if c.lstrip().startswith('"')), None)
+            if start is not None and "\t".join(cells[start:]).count('"') % 2:
+                return (
+                    f'line {k}: a cell opens a quote (") that is not closed on its line; close '
+                    "it or remove the quote"
+                )
+    return f"not a tab-separated sheet: {' '.join(str(exc).split())}"
+
+
+#: Folders the workflow writes directly under ``results/`` besides the subjects' own
+#: (``results/{subject}/``): a subject of one of these names would write into them (and
+#: empty them). Compared in lower case, as a case-insensitive file system does.
+RESERVED_SUBJECTS = ("cohort", "synthetic", "sweeps")
+
+
+def reserved_problem(subject: str, fix: str = "rename the subject") -> str:
+    """Why ``subject``, one of :data:`RESERVED_SUBJECTS`, cannot be a subject id."""
+    return (
+        f"{subject!r} names a folder the workflow writes under results/ (reserved: "
+        f"{', '.join(RESERVED_SUBJECTS)}); {fix}"
+    )
 
 
 def mm_per_unit(row) -> float:
@@ -207,6 +267,23 @@ def _check_switches(switches: Mapping, take_ids: list[str], n_subjects: int) -> 
             )
 
 
+def _check_cohort(takes: list[dict], n_subjects: int, prefix: str) -> None:
+    """The takes and ids of :func:`synthetic_rows` (a cohort of at least one subject): one
+    neutral, no take id twice (else every synthetic subject stops at its check job), no
+    generated id among :data:`RESERVED_SUBJECTS`."""
+    if n_subjects < 1:
+        return
+    source = "config: synthetic.takes"
+    if (n := [t.get("kind") for t in takes].count("neutral")) != 1:
+        raise InputError(source, f"expected exactly one take of kind 'neutral', found {n}")
+    ids = [t.get("take") for t in takes]
+    if twice := sorted({t for t in ids if ids.count(t) > 1}):
+        raise InputError(source, f"take ids {twice} appear more than once")
+    for subject in (f"{prefix}{i:02d}" for i in range(1, n_subjects + 1)):
+        if subject.lower() in RESERVED_SUBJECTS:
+            raise InputError("config: synthetic.prefix", reserved_problem(subject, "change it"))
+
+
 def _synthetic_files(modality: str, stem: str, frames: int) -> dict[str, str]:
     """A synthetic take's file columns (the landmarks' left empty): :data:`SYNTHETIC_FILES`,
     an RGB-D take's depth frames joined as in a sheet."""
@@ -273,12 +350,14 @@ def synthetic_rows(
     InputError
         ``{modality}.takes`` names a take that is not in ``takes`` (for a switch with a
         subject in the cohort), ``{modality}.subjects`` holds something other than positive
-        integers, or a take is listed twice.
+        integers, or a take is listed twice; ``takes`` has no neutral, or more than one, or a
+        take id twice; a subject id is one of :data:`RESERVED_SUBJECTS`.
     """
     import pandas as pd
 
     switches = {"stereo": stereo or {}, "mesh": mesh or {}, "rgbd": rgbd or {}}
     take_ids = [t["take"] for t in takes]
+    _check_cohort(takes, n_subjects, prefix)
     _check_switches(switches, take_ids, n_subjects)
     rows = []
     for i in range(1, n_subjects + 1):
@@ -416,168 +495,6 @@ def subject_problems(
         subject: [problem for _, problem in problems]
         for subject, problems in sheet_problems(table, check_files, schema).items()
     }
-
-
-def load_schema(path: str | PathLike[str]) -> dict:
-    """A JSON schema from a YAML (or JSON) file (libyaml's parser where PyYAML has it: the
-    same document, about ten times faster than the pure-Python one on the config schema)."""
-    import yaml
-
-    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-    with open(path, encoding="utf-8") as fh:
-        return yaml.load(fh, Loader=loader)
-
-
-def schema_errors(data: object, schema: dict) -> list[tuple[str, str]]:
-    """Every way ``data`` breaks ``schema`` (JSON Schema draft 2020-12), as short
-    ``(key path, problem)`` pairs, shallowest first. ``key path`` is dotted (``a.b[2].c``),
-    ``<top>`` for the whole document; the problem never quotes more than 80 characters of
-    the value (jsonschema's own messages can hold a whole schema or config section).
-    """
-    from jsonschema import Draft202012Validator
-
-    validator = Draft202012Validator(schema)
-    errors = sorted(
-        validator.iter_errors(data), key=lambda e: (len(e.path), list(map(str, e.path)))
-    )
-    out = []
-    for e in errors:
-        path = list(e.absolute_path)
-        if e.validator == "additionalProperties" and isinstance(e.instance, dict):
-            known = e.schema.get("properties", {})
-            extra = [k for k in e.instance if k not in known]
-            allowed = ", ".join(sorted(known))
-            out += [(_key_path([*path, k]), f"unknown key (known: {allowed})") for k in extra]
-        else:
-            out.append((_key_path(path), _problem(e)))
-    return out
-
-
-#: The ICP settings of ``align.icp`` (before, keys of ``align`` itself).
-_ICP_KEYS = (
-    "method",
-    "max_correspondence_mm",
-    "max_iterations",
-    "robust_kernel",
-    "kernel_k_mm",
-    "kernel_noise_sigmas",
-    "trim_rounds",
-    "trim_radius_mm",
-    "trim_sigma",
-    "min_fitness",
-    "max_rmse_ratio",
-    "max_rmse_mm",
-    "min_inlier_fraction",
-)
-_LIP_KEYS = ("prior", "stretch", "min_contrast", "search", "max_shift", "min_share")
-#: Config keys that moved (old dotted path -> new): a config or sweep table still naming one
-#: is refused with one line naming the new key.
-RENAMED_KEYS = {
-    **{f"refine.jaw_{k}": f"refine.jaw.{k}" for k in ("prior", "start", "end", "max_rmse_ratio")},
-    **{f"refine.lip_{k}": f"refine.lip.{k}" for k in _LIP_KEYS},
-    **{f"refine.lower_lip_{k}": f"refine.lower_lip.{k}" for k in ("prior", "shrink")},
-    **{f"align.{k}": f"align.icp.{k}" for k in _ICP_KEYS},
-}
-
-
-def renamed_keys(config: Mapping) -> list[str]:
-    """The old keys of :data:`RENAMED_KEYS` that ``config`` still uses, each as
-    ``"{old}: renamed to {new}"``."""
-    found = []
-    for old, new in RENAMED_KEYS.items():
-        section, key = old.split(".")
-        if isinstance(config.get(section), Mapping) and key in config[section]:
-            found.append(f"{old}: renamed to {new}")
-    return found
-
-
-def validate_config(config: dict, schema: str | PathLike[str], source: str = "config") -> dict:
-    """Check a config against its schema and fill in the schema's defaults, in place.
-
-    Defaults are set as :func:`snakemake.utils.validate` sets them: while validating, every
-    property with a ``default`` missing from its object is set to (a copy of) that default,
-    and the default's own properties are then checked and filled in turn.
-
-    Raises
-    ------
-    InputError
-        Naming ``source``, the first problem's key path and what is wrong (one line; the number
-        of further problems is appended); a key that moved (:data:`RENAMED_KEYS`) is named with
-        its new path.
-    """
-    from jsonschema import Draft202012Validator, validators
-
-    moved = renamed_keys(config)
-    if moved:
-        raise InputError(source, "; ".join(moved))
-    schema_doc = load_schema(schema)
-    properties = Draft202012Validator.VALIDATORS["properties"]
-
-    def set_defaults(validator, props, instance, sub):
-        if isinstance(instance, dict):
-            for name, subschema in props.items():
-                if isinstance(subschema, dict) and "default" in subschema:
-                    instance.setdefault(name, copy.deepcopy(subschema["default"]))
-        yield from properties(validator, props, instance, sub)
-
-    filling = validators.extend(Draft202012Validator, {"properties": set_defaults})
-    for _ in filling(schema_doc).iter_errors(config):
-        pass  # the errors are reported below, from a plain validator on the filled config
-    problems = schema_errors(config, schema_doc)
-    if (nan := _nan_path(config)) is not None:  # the schema's 'number' takes it
-        problems.insert(0, (_key_path(nan), "expected a number, got nan"))
-    if problems:
-        key, problem = problems[0]
-        more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""
-        raise InputError(source, f"{key}: {problem}{more}")
-    return config
-
-
-def _nan_path(value: object, path: tuple = ()) -> tuple | None:
-    """The key path of the first NaN in a config (a number every comparison refuses: a
-    threshold of .nan would let everything through, or nothing), None when there is none."""
-    if isinstance(value, float) and value != value:
-        return path
-    items = value.items() if isinstance(value, dict) else ()
-    for key, item in enumerate(value) if isinstance(value, list) else items:
-        if (found := _nan_path(item, (*path, key))) is not None:
-            return found
-    return None
-
-
-def _key_path(path) -> str:
-    out = ""
-    for part in path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "<top>"
-
-
-def _short(value: object, limit: int = 80) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _problem(error) -> str:
-    """A short description of a jsonschema ValidationError."""
-    kind, arg, value = error.validator, error.validator_value, error.instance
-    if kind == "minLength" and value == "":
-        return "empty"
-    if kind == "required":
-        missing = [k for k in arg if isinstance(value, dict) and k not in value]
-        return f"missing key {', '.join(repr(k) for k in missing)}"
-    if kind == "type":
-        return f"expected {arg if isinstance(arg, str) else ' or '.join(arg)}, got {_short(value)}"
-    if kind == "enum":
-        return f"expected one of {list(arg)}, got {_short(value)}"
-    if kind == "pattern":
-        return f"{_short(value)} does not match {arg!r}"
-    if kind in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
-        bound = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">"}.get(kind, "<")
-        return f"expected a value {bound} {arg}, got {_short(value)}"
-    if kind in ("minItems", "maxItems", "minLength", "maxLength"):
-        return f"{kind} {arg}: got {_short(value)}"
-    message = error.message
-    return message if len(message) <= 160 else message[:157] + "..."
 
 
 def take_table(sheet: pd.DataFrame, synthetic: pd.DataFrame) -> pd.DataFrame:

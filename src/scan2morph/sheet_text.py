@@ -8,7 +8,8 @@ A base module (no pandas): the rules of a sheet's lines that pandas would get wr
 - Empty cells past the header's columns (a trailing tab, as spreadsheets export) are dropped.
 - A row with a filled cell past the header's columns is refused: pandas took the first column
   of such a sheet for its index and shifted every cell of every row one column left.
-- A header without a tab is refused naming what the sheet looks separated by.
+- A header without a tab is refused naming what the sheet looks separated by; so is a header
+  with an empty column name (a trailing tab: pandas would call the column ``Unnamed: 8``).
 - The text is UTF-8, or UTF-16 with its byte-order mark (:func:`sheet_text`).
 """
 
@@ -65,8 +66,9 @@ def tab_cells(path: str | Path, text: str) -> str:
     Raises
     ------
     InputError
-        A header without a tab; a row with a filled cell past the header's columns (names the
-        row: 2 is the first row after the header, comments and blank lines not counted).
+        A header without a tab or with an empty column name (names the line); a row with a
+        filled cell past the header's columns (names the row: 2 is the first row after the
+        header, comments and blank lines not counted).
     """
     lines, width, row = text.splitlines(), 0, 1
     for k, line in enumerate(lines):
@@ -83,6 +85,8 @@ def tab_cells(path: str | Path, text: str) -> str:
                 f"header: no tab between the column names ({cells[0][:60]!r}); expected a "
                 "tab-separated sheet (this one looks separated by commas or spaces)",
             )
+        if not width and (empty := [i for i, c in enumerate(cells) if not c.strip()]):
+            raise InputError(path, _unnamed(k + 1, empty[0], len(cells)))
         row, width = (row + 1, width) if width else (row, len(cells))
         if extra := [c for c in cells[width:] if c.strip()]:
             raise InputError(
@@ -92,6 +96,15 @@ def tab_cells(path: str | Path, text: str) -> str:
             )
         lines[k] = "\t".join(cells[:width])
     return "\n".join(lines) + "\n"
+
+
+def _unnamed(line: int, column: int, n_cells: int) -> str:
+    """The problem of a header whose column ``column`` (0-based) has no name."""
+    if column == n_cells - 1:
+        why = "a tab at the end of the header line"
+    else:
+        why = "two tabs in a row, or a tab at the start"
+    return f"header (line {line}): column {column + 1} has no name ({why}?); remove the tab"
 
 
 __all__ = ["sheet_text", "tab_cells"]

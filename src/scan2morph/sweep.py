@@ -24,9 +24,9 @@ import numpy as np
 import pandas as pd
 from jsonschema import Draft202012Validator, validators
 
+from scan2morph.config_schema import RENAMED_KEYS, load_schema
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
-from scan2morph.sheet import RENAMED_KEYS, load_schema
 from scan2morph.stages import (
     accuracy,
     align,

@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 
+from scan2morph import sheet
 from scan2morph.errors import InputError
 from scan2morph.sheet import (
+    RESERVED_SUBJECTS,
     input_roles,
     read_sheet,
     subject_problems,
     synthetic_rows,
     take_table,
 )
+from tests.support.configs import REPO
 
 HEADER = "subject\ttake\tkind\tlabel\tmodality\txyz\tcolor\tleft\tright\tcalibration\tlandmarks\n"
 
@@ -138,3 +144,107 @@ def test_synthetic_mesh_and_rgbd_takes():
     with pytest.raises(InputError, match="synthetic.rgbd: take 'car' of subject 1 is also listed"):
         synthetic_rows(1, "s", takes, "r", mesh=dict(subjects=[1], takes=["car"]),
                        rgbd=dict(subjects=[1], takes=["car"]))  # fmt: skip
+
+
+# --- bad sheets: one line naming the sheet and what was expected ---
+ROWS = "a\tneutral\tneutral\tneutral\trange\tn.abs\tn.png\t\t\t\tn.pts\n"
+
+
+def _read_error(path, text) -> str:
+    path.write_text(text)
+    with pytest.raises(InputError) as exc:
+        read_sheet(path)
+    assert "\n" not in str(exc.value)
+    return str(exc.value)
+
+
+def test_header_mistakes_name_the_column_meant(tmp_path):
+    """Before: a trailing tab gave "unknown columns ['Unnamed: 11']", ``Subject`` "columns
+    ['subject'] missing" and ``modalty`` "columns ['modality'] missing" with all 16 columns."""
+    path = tmp_path / "s.tsv"
+    assert _read_error(path, HEADER.replace("\n", "\t\n") + ROWS) == (
+        f"{path}: header (line 1): column 12 has no name (a tab at the end of the header line?); "
+        "remove the tab"
+    )
+    assert "column 3 has no name (two tabs in a row" in _read_error(
+        path, HEADER.replace("kind", "\tkind") + ROWS
+    )
+    assert _read_error(path, "Subject" + HEADER[7:] + ROWS) == (
+        f"{path}: column 'Subject' should be 'subject' (names are lower case)"
+    )
+    assert _read_error(path, HEADER.replace("modality", "modalty") + ROWS) == (
+        f"{path}: unknown column 'modalty' (did you mean 'modality'?)"
+    )
+    assert _read_error(path, "subject\ttake\tmesh\n") == (
+        f"{path}: required columns ['kind', 'label', 'modality'] missing"
+    )
+    assert "unknown column 'scan' (known: subject, take," in _read_error(
+        path, HEADER.replace("xyz", "scan") + ROWS
+    )
+
+
+def test_an_unclosed_quote_names_the_sheet_line(tmp_path):
+    """Before: pandas' 'EOF inside string starting at row 2', a row of its own count."""
+    path = tmp_path / "s.tsv"
+    text = "# comment\n" + HEADER + ROWS + ROWS.replace("a\tneutral", 'b\t"neutral')
+    assert _read_error(path, text) == (
+        f'{path}: line 4: a cell opens a quote (") that is not closed on its line; close it or '
+        "remove the quote"
+    )
+    path.write_text(HEADER + ROWS.replace("n.abs", '"n.abs"'))  # a closed quote is read
+    assert read_sheet(path).loc[0, "xyz"] == str(tmp_path / "n.abs")
+
+
+@pytest.mark.parametrize("subject", ["cohort", "synthetic", "sweeps", "Cohort"])
+def test_a_subject_named_as_a_workflow_folder_is_refused(tmp_path, subject):
+    """Before: accepted, and the subject wrote into (and emptied) results/{subject}/."""
+    path = tmp_path / "s.tsv"
+    message = _read_error(path, HEADER + ROWS + ROWS.replace("a\t", f"{subject}\t", 1))
+    assert message == (
+        f"{path}: row 3, column 'subject': {subject!r} names a folder the workflow writes under "
+        "results/ (reserved: cohort, synthetic, sweeps); rename the subject"
+    )
+
+
+def test_the_reserved_ids_are_the_folders_the_rules_write_under_results():
+    rules = [*(REPO / "workflow" / "rules").glob("*.smk"), REPO / "Snakefile"]
+    text = "\n".join(p.read_text() for p in rules)
+    folders = set(re.findall(r"results/([A-Za-z0-9_-]+)", text))  # not results/{subject}
+    assert folders == set(RESERVED_SUBJECTS)
+
+
+def test_a_synthetic_prefix_making_a_reserved_id_is_refused(monkeypatch):
+    """No reserved name ends in digits today, so no prefix reaches one; the check is on the
+    ids the cohort makes, should a folder name ending in digits be added."""
+    monkeypatch.setattr(sheet, "RESERVED_SUBJECTS", (*RESERVED_SUBJECTS, "runs02"))
+    takes = [dict(take="n", kind="neutral", label="n")]
+    assert len(synthetic_rows(1, "runs", takes, "r")) == 1
+    with pytest.raises(InputError, match=r"^config: synthetic\.prefix: 'runs02' names a folder"):
+        synthetic_rows(2, "runs", takes, "r")
+
+
+@pytest.mark.parametrize(
+    "takes, match",
+    [
+        ([("car", "viseme")], "expected exactly one take of kind 'neutral', found 0"),
+        ([("n", "neutral"), ("m", "neutral")], "expected exactly one take of kind 'neutral', found 2"),
+        ([("n", "neutral"), ("car", "viseme"), ("car", "viseme")], r"take ids \['car'\] appear more than once"),
+    ],
+)  # fmt: skip
+def test_synthetic_takes_that_would_stop_every_subject_are_one_config_line(takes, match):
+    """Before: accepted at load, then every synthetic subject stopped at its check job."""
+    takes = [dict(take=t, kind=k, label=t) for t, k in takes]
+    with pytest.raises(InputError, match=f"^config: synthetic.takes: {match}$"):
+        synthetic_rows(2, "s", takes, "r")
+    assert len(synthetic_rows(0, "s", takes, "r")) == 0  # no cohort: nothing stops
+
+
+def test_a_missing_sheet_names_its_resolved_path(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError) as exc:
+        read_sheet("my/subjects.tsv")
+    assert str(exc.value) == (
+        "my/subjects.tsv: sheet not found (config key 'subjects'): no file "
+        f"{tmp_path.resolve() / 'my' / 'subjects.tsv'} (relative to the working directory "
+        f"{Path.cwd()})"
+    )

@@ -6,15 +6,10 @@ import sys
 
 import pandas as pd
 
+from scan2morph.config_schema import validate_config
 from scan2morph.errors import InputError
 from scan2morph.jobs import config_sha256, memory_mb
-from scan2morph.sheet import (
-    read_sheet,
-    sheet_problems,
-    synthetic_rows,
-    take_table,
-    validate_config,
-)
+from scan2morph.sheet import read_sheet, sheet_problems, synthetic_rows, take_table
 from scan2morph.stages.stage_job import SUBJECT_STAGES, check_take_params
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
