@@ -177,6 +177,25 @@ def test_a_subject_in_metres_or_a_head_too_large(tmp_path, take, factor, match):
     _one_line(exc, files["xyz"])
 
 
+def test_the_subject_check_scales_a_range_take_by_its_units_column(tmp_path, take):
+    """The subject's check reads a range take in the sheet's unit as the ingest does: a scan in
+    metres with ``units: m`` passes, and a scan in mm given ``units: m`` is refused naming the
+    column (before, the check ignored the column both ways)."""
+    from scan2morph.io.check import take_file_problems
+
+    in_m = {k: str(v) for k, v in _write(tmp_path, take, xyz=take["xyz"] / 1000.0).items()}
+    assert take_file_problems("range", in_m, 1000.0) == []
+    assert _run_ingest(dict(ROW, units="m"), in_m) is not None
+    in_mm = {k: str(v) for k, v in _write(tmp_path, take, name="mm").items()}
+    (problem,) = take_file_problems("range", in_mm, 1000.0)
+    assert problem.startswith(in_mm["xyz"]) and "\n" not in problem
+    assert "the sheet's units column scaled the xyz by 1000 mm per unit" in problem
+    (problem,) = take_file_problems("range", in_m)
+    assert "look like metres" in problem and "the sheet's units column" in problem
+    with pytest.raises(InputError, match="units column scaled the xyz by 1000 mm"):
+        _run_ingest(dict(ROW, units="m"), in_mm)
+
+
 def _stereo_files(tmp_path, stereo, calib=None, swap=False):
     res = dict(stereo)
     if calib is not None:
