@@ -23,6 +23,7 @@ from scan2morph.errors import InputError, OutputError
 from scan2morph.io import (
     read_abs,
     read_color,
+    read_range,
     read_range_take,
     read_stereo_calibration,
     write_abs,
@@ -267,6 +268,37 @@ def test_abs_header_promising_a_huge_image_is_refused_before_reading(tmp_path):
     path.write_text("200000 rows\n300000 columns\npixels (flag X Y Z):\n1 0\n1 2\n3 4\n5 6\n")
     with pytest.raises(InputError, match=r"header: 200000 rows x 300000 columns = 6e\+10 pixels"):
         read_abs(path)
+
+
+@pytest.mark.parametrize("placeholder", [0.0, -999999.0])
+def test_a_placeholder_for_no_data_is_refused(tmp_path, take, placeholder):
+    """0 or FRGC's -999999 written where NaN was meant (in an ``.npz``, or at pixels an
+    ``.abs`` flags valid) is one line naming the file, the key and the point, not a scan of every
+    pixel (whose fit then spanned the scene)."""
+    xyz = take["xyz"].copy()
+    hole = ~np.isfinite(xyz).all(axis=-1)
+    share = f"{hole.mean():.0%}"
+    xyz[hole] = placeholder
+    np.savez(tmp_path / "p.npz", xyz=xyz)
+    point = rf"\({placeholder:g}, {placeholder:g}, {placeholder:g}\)"
+    with pytest.raises(InputError, match=rf"key 'xyz': {share} of the pixels are exactly {point}"):
+        read_range(tmp_path / "p.npz")
+    with pytest.raises(InputError, match="use NaN for no data") as exc:
+        _ingest(_write(tmp_path, take) | {"xyz": tmp_path / "p.npz"})
+    _one_line(exc, tmp_path / "p.npz")
+    write_abs(tmp_path / "p.abs", xyz)  # every pixel flagged valid
+    with pytest.raises(InputError, match=rf"X/Y/Z: {share} of the pixels flagged valid are"):
+        read_range(tmp_path / "p.abs")
+
+
+def test_gzip_range_text_reads_whatever_its_name(tmp_path, take):
+    """An upper-case ``.ABS.GZ`` and a compressed file named ``.abs`` read as their gzip data
+    (they failed with an 'ascii' codec error)."""
+    write_abs(tmp_path / "t.abs.gz", take["xyz"])
+    expected = read_range(tmp_path / "t.abs.gz")
+    for name in ("T.ABS.GZ", "g.abs"):
+        (tmp_path / name).write_bytes((tmp_path / "t.abs.gz").read_bytes())
+        np.testing.assert_array_equal(read_range(tmp_path / name), expected)
 
 
 # --- colour images -------------------------------------------------------------------------------
