@@ -32,6 +32,7 @@ from scan2morph.io import (
     write_pts,
     write_stereo_calibration,
 )
+from scan2morph.io.rgbd import read_rgbd_intrinsics
 from scan2morph.sheet import read_sheet, subject_problems, validate_config
 from scan2morph.stages import Take, ingest
 from scan2morph.stages import fit as fit_stage
@@ -644,6 +645,19 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
             "color.R: not a rotation",
         ),
         (lambda d: d.update(depth_scale_mm=0), "depth_scale_mm: expected > 0"),
+        (
+            lambda d: d["color"].update(T=[-0.015, 0.0, 0.0]),
+            r"color.T: \|T\| = 0.015 is below 1 mm; T must be in mm \(is it in metres\?\)",
+        ),
+        (
+            lambda d: d.update(fx=d["fx"] / 160, fy=d["fy"] / 120, cx=0.5, cy=0.5),
+            r"i.yaml: fx: 1.5625 px for a width of 160 px is a \d+° field of view .* normalised",
+        ),
+        (
+            lambda d: d["color"].update(cx=0, cy=0),
+            r"color.cx/color.cy: the principal point \(0, 0\) px is not near the centre of the "
+            r"160x120 image \(79.5, 59.5\)",
+        ),
     ],
 )
 def test_rgbd_intrinsics_that_do_not_fit(rgbd_files, tmp_path, edit, match):
@@ -651,6 +665,29 @@ def test_rgbd_intrinsics_that_do_not_fit(rgbd_files, tmp_path, edit, match):
     with pytest.raises(InputError, match=match) as exc:
         _rgbd(rgbd_files, intrinsics=bad)
     assert exc.value.source == str(bad)
+
+
+def test_rgbd_intrinsics_with_a_key_given_twice(rgbd_files, tmp_path):
+    """A pasted second value is refused naming the key (PyYAML kept the last silently), and a
+    colour camera at the depth camera (T = 0) stays valid."""
+    bad = tmp_path / "i.yaml"
+    bad.write_text(rgbd_files["intrinsics"].read_text() + "fx: 300.0\n")
+    with pytest.raises(InputError, match=r"line \d+: key 'fx' given twice \(first on line \d+\)"):
+        _rgbd(rgbd_files, intrinsics=bad)
+    same = _edit_yaml(
+        rgbd_files["intrinsics"], tmp_path / "t0.yaml", lambda d: d["color"].update(T=[0, 0, 0])
+    )
+    assert read_rgbd_intrinsics(same).T.tolist() == [0.0, 0.0, 0.0]
+
+
+def test_stereo_calibration_with_a_key_given_twice(tmp_path, stereo):
+    """OpenCV kept the first of two ``T`` keys silently."""
+    write_stereo_calibration(tmp_path / "c.yaml", stereo["calib"])
+    text = (tmp_path / "c.yaml").read_text()
+    t_block = text[text.index("T: !!opencv-matrix") :]
+    (tmp_path / "c.yaml").write_text(text + t_block.replace("T:", "T:", 1))
+    with pytest.raises(InputError, match=r"c.yaml: T: given twice; keep one value"):
+        read_stereo_calibration(tmp_path / "c.yaml")
 
 
 def test_rgbd_unreadable_or_wrong_depth_files(rgbd_files, tmp_path):
