@@ -503,16 +503,19 @@ def read_rgbd_take(
         return take
     hint = f"; check depth_scale_mm = {intr.depth_scale_mm:g} in {Path(intrinsics_path).name}"
     try:
-        check_face(xyz, landmarks, paths[0], landmarks_path, unit_hint=hint)
+        check_face(xyz, landmarks, paths[0], landmarks_path, unit_hint=hint, camera_frame=True)
     except InputError as exc:
         factor = _scale_factor(depth, intr, landmarks)
         if factor is None:
             raise
+        # a face-size problem is the scale's symptom; a landmark one would read as another cause
+        gives = exc.problem.split(";")[0] if exc.problem.startswith("face size") else ""
         raise InputError(
             intrinsics_path,
-            f"depth_scale_mm: {intr.depth_scale_mm:g} gives {exc.problem.split(';')[0]}; with "
-            f"depth_scale_mm = {intr.depth_scale_mm * factor:g} (x {factor:g}) the face has a "
-            "plausible size: is the depth scale in mm per unit?",
+            f"depth_scale_mm: {intr.depth_scale_mm:g} gives "
+            f"{gives or 'no plausible face at the landmarks'}; with depth_scale_mm = "
+            f"{intr.depth_scale_mm * factor:g} (x {factor:g}) the face has a plausible size: is "
+            "the depth scale in mm per unit?",
         ) from None
     return take
 
@@ -525,9 +528,8 @@ def _scale_factor(depth: np.ndarray, intr: RGBDIntrinsics, landmarks: np.ndarray
             intr.depth, intr.color, intr.R, intr.T, intr.depth_scale_mm * factor
         )
         try:
-            check_face(
-                depth_to_color_grid(depth * scaled.depth_scale_mm, scaled), landmarks, "", ""
-            )
+            xyz = depth_to_color_grid(depth * scaled.depth_scale_mm, scaled)
+            check_face(xyz, landmarks, "", "", camera_frame=True)
         except InputError:
             continue
         return factor
