@@ -45,4 +45,26 @@ def units_problem(value: str, modality: str) -> str:
     return ""
 
 
-__all__ = ["UNITS", "UNITS_MODALITIES", "unit_scale", "units_problem"]
+def units_hint(mm_per_unit: float) -> str:
+    """What a range take's face-size error adds about the sheet's ``units`` column: the scale it
+    applied, when it applied one (the xyz is then read as that unit), else where to give one.
+
+    Parameters
+    ----------
+    mm_per_unit : float
+        The take's unit as the ingest applies it (:func:`unit_scale`), mm.
+
+    Returns
+    -------
+    str
+        Starting with ``"; "``, to append to the error.
+    """
+    if mm_per_unit == 1.0:
+        return "; give the xyz's unit in the sheet's units column if it is not mm"
+    return (
+        f"; the sheet's units column scaled the xyz by {mm_per_unit:g} mm per unit: is that the "
+        "xyz's unit?"
+    )
+
+
+__all__ = ["UNITS", "UNITS_MODALITIES", "unit_scale", "units_hint", "units_problem"]

@@ -23,6 +23,7 @@ from scan2morph.errors import InputError, OutputError
 from scan2morph.io import (
     read_abs,
     read_color,
+    read_range,
     read_range_take,
     read_stereo_calibration,
     write_abs,
@@ -31,6 +32,7 @@ from scan2morph.io import (
     write_pts,
     write_stereo_calibration,
 )
+from scan2morph.io.rgbd import read_rgbd_intrinsics
 from scan2morph.sheet import read_sheet, subject_problems, validate_config
 from scan2morph.stages import Take, ingest
 from scan2morph.stages import fit as fit_stage
@@ -177,6 +179,25 @@ def test_a_subject_in_metres_or_a_head_too_large(tmp_path, take, factor, match):
     _one_line(exc, files["xyz"])
 
 
+def test_the_subject_check_scales_a_range_take_by_its_units_column(tmp_path, take):
+    """The subject's check reads a range take in the sheet's unit as the ingest does: a scan in
+    metres with ``units: m`` passes, and a scan in mm given ``units: m`` is refused naming the
+    column (before, the check ignored the column both ways)."""
+    from scan2morph.io.check import take_file_problems
+
+    in_m = {k: str(v) for k, v in _write(tmp_path, take, xyz=take["xyz"] / 1000.0).items()}
+    assert take_file_problems("range", in_m, 1000.0) == []
+    assert _run_ingest(dict(ROW, units="m"), in_m) is not None
+    in_mm = {k: str(v) for k, v in _write(tmp_path, take, name="mm").items()}
+    (problem,) = take_file_problems("range", in_mm, 1000.0)
+    assert problem.startswith(in_mm["xyz"]) and "\n" not in problem
+    assert "the sheet's units column scaled the xyz by 1000 mm per unit" in problem
+    (problem,) = take_file_problems("range", in_m)
+    assert "look like metres" in problem and "the sheet's units column" in problem
+    with pytest.raises(InputError, match="units column scaled the xyz by 1000 mm"):
+        _run_ingest(dict(ROW, units="m"), in_mm)
+
+
 def _stereo_files(tmp_path, stereo, calib=None, swap=False):
     res = dict(stereo)
     if calib is not None:
@@ -248,6 +269,37 @@ def test_abs_header_promising_a_huge_image_is_refused_before_reading(tmp_path):
     path.write_text("200000 rows\n300000 columns\npixels (flag X Y Z):\n1 0\n1 2\n3 4\n5 6\n")
     with pytest.raises(InputError, match=r"header: 200000 rows x 300000 columns = 6e\+10 pixels"):
         read_abs(path)
+
+
+@pytest.mark.parametrize("placeholder", [0.0, -999999.0])
+def test_a_placeholder_for_no_data_is_refused(tmp_path, take, placeholder):
+    """0 or FRGC's -999999 written where NaN was meant (in an ``.npz``, or at pixels an
+    ``.abs`` flags valid) is one line naming the file, the key and the point, not a scan of every
+    pixel (whose fit then spanned the scene)."""
+    xyz = take["xyz"].copy()
+    hole = ~np.isfinite(xyz).all(axis=-1)
+    share = f"{hole.mean():.0%}"
+    xyz[hole] = placeholder
+    np.savez(tmp_path / "p.npz", xyz=xyz)
+    point = rf"\({placeholder:g}, {placeholder:g}, {placeholder:g}\)"
+    with pytest.raises(InputError, match=rf"key 'xyz': {share} of the pixels are exactly {point}"):
+        read_range(tmp_path / "p.npz")
+    with pytest.raises(InputError, match="use NaN for no data") as exc:
+        _ingest(_write(tmp_path, take) | {"xyz": tmp_path / "p.npz"})
+    _one_line(exc, tmp_path / "p.npz")
+    write_abs(tmp_path / "p.abs", xyz)  # every pixel flagged valid
+    with pytest.raises(InputError, match=rf"X/Y/Z: {share} of the pixels flagged valid are"):
+        read_range(tmp_path / "p.abs")
+
+
+def test_gzip_range_text_reads_whatever_its_name(tmp_path, take):
+    """An upper-case ``.ABS.GZ`` and a compressed file named ``.abs`` read as their gzip data
+    (they failed with an 'ascii' codec error)."""
+    write_abs(tmp_path / "t.abs.gz", take["xyz"])
+    expected = read_range(tmp_path / "t.abs.gz")
+    for name in ("T.ABS.GZ", "g.abs"):
+        (tmp_path / name).write_bytes((tmp_path / "t.abs.gz").read_bytes())
+        np.testing.assert_array_equal(read_range(tmp_path / name), expected)
 
 
 # --- colour images -------------------------------------------------------------------------------
@@ -565,8 +617,15 @@ def test_rgbd_take_reads_and_records_its_camera(rgbd_files):
     assert part.datasets[paths.camera("neutral", "pose")][0, 3] == -15.0  # the baseline, mm
 
 
-@pytest.mark.parametrize("factor, expected", [(0.001, "x 1000"), (1000.0, "x 0.001")])
+@pytest.mark.parametrize(
+    "factor, expected",
+    [(0.001, "x 1000"), (1000.0, "x 0.001"), (0.1, "x 10"), (10.0, "x 0.1")],
+)
 def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, expected):
+    """Off by 10 too: the face then lands beside the clicked points on the colour grid, and one
+    outer eye corner on the background (whose distance to the other could look face-sized); the
+    message is the scale's alone, without the landmark check's text."""
+
     def edit(doc):
         doc["depth_scale_mm"] *= factor
 
@@ -574,6 +633,7 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
     with pytest.raises(InputError, match=f"depth_scale_mm: .*{expected}.*plausible") as exc:
         _rgbd(rgbd_files, intrinsics=bad)
     assert exc.value.source == str(bad)
+    assert "iBUG" not in exc.value.problem.replace("(iBUG 37, 46)", "")
 
 
 @pytest.mark.parametrize(
@@ -593,6 +653,19 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
             "color.R: not a rotation",
         ),
         (lambda d: d.update(depth_scale_mm=0), "depth_scale_mm: expected > 0"),
+        (
+            lambda d: d["color"].update(T=[-0.015, 0.0, 0.0]),
+            r"color.T: \|T\| = 0.015 is below 1 mm; T must be in mm \(is it in metres\?\)",
+        ),
+        (
+            lambda d: d.update(fx=d["fx"] / 160, fy=d["fy"] / 120, cx=0.5, cy=0.5),
+            r"i.yaml: fx: 1.5625 px for a width of 160 px is a \d+° field of view .* normalised",
+        ),
+        (
+            lambda d: d["color"].update(cx=0, cy=0),
+            r"color.cx/color.cy: the principal point \(0, 0\) px is not near the centre of the "
+            r"160x120 image \(79.5, 59.5\)",
+        ),
     ],
 )
 def test_rgbd_intrinsics_that_do_not_fit(rgbd_files, tmp_path, edit, match):
@@ -600,6 +673,29 @@ def test_rgbd_intrinsics_that_do_not_fit(rgbd_files, tmp_path, edit, match):
     with pytest.raises(InputError, match=match) as exc:
         _rgbd(rgbd_files, intrinsics=bad)
     assert exc.value.source == str(bad)
+
+
+def test_rgbd_intrinsics_with_a_key_given_twice(rgbd_files, tmp_path):
+    """A pasted second value is refused naming the key (PyYAML kept the last silently), and a
+    colour camera at the depth camera (T = 0) stays valid."""
+    bad = tmp_path / "i.yaml"
+    bad.write_text(rgbd_files["intrinsics"].read_text() + "fx: 300.0\n")
+    with pytest.raises(InputError, match=r"line \d+: key 'fx' given twice \(first on line \d+\)"):
+        _rgbd(rgbd_files, intrinsics=bad)
+    same = _edit_yaml(
+        rgbd_files["intrinsics"], tmp_path / "t0.yaml", lambda d: d["color"].update(T=[0, 0, 0])
+    )
+    assert read_rgbd_intrinsics(same).T.tolist() == [0.0, 0.0, 0.0]
+
+
+def test_stereo_calibration_with_a_key_given_twice(tmp_path, stereo):
+    """OpenCV kept the first of two ``T`` keys silently."""
+    write_stereo_calibration(tmp_path / "c.yaml", stereo["calib"])
+    text = (tmp_path / "c.yaml").read_text()
+    t_block = text[text.index("T: !!opencv-matrix") :]
+    (tmp_path / "c.yaml").write_text(text + t_block.replace("T:", "T:", 1))
+    with pytest.raises(InputError, match=r"c.yaml: T: given twice; keep one value"):
+        read_stereo_calibration(tmp_path / "c.yaml")
 
 
 def test_rgbd_unreadable_or_wrong_depth_files(rgbd_files, tmp_path):

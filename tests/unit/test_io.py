@@ -179,7 +179,8 @@ def test_color_round_trip_and_errors(tmp_path):
 
 
 def test_range_take_checks_sizes_and_landmarks(tmp_path):
-    xyz = np.zeros((20, 30, 3))
+    v, u = np.mgrid[0:20, 0:30].astype(np.float64)
+    xyz = np.dstack([u, v, np.full_like(u, 600.0)])  # a plane (all zeros is a placeholder)
     write_abs(tmp_path / "s.abs", xyz)
     write_color(tmp_path / "ok.png", np.zeros((20, 30, 3), np.uint8))
     write_color(tmp_path / "big.png", np.zeros((21, 30, 3), np.uint8))

@@ -187,7 +187,7 @@ def read_stereo_calibration(path: str | PathLike[str]) -> StereoCalibration:
     ------
     InputError
         Missing file; a file that FileStorage cannot parse or whose top level is not a map;
-        a missing or malformed matrix (names the key); any check of
+        a key given twice, a missing or malformed matrix (names the key); any check of
         :func:`validate_stereo_calibration`.
     """
     path = Path(path)
@@ -206,6 +206,8 @@ def read_stereo_calibration(path: str | PathLike[str]) -> StereoCalibration:
         if not fs.isOpened() or not root.isMap():
             raise InputError(path, not_calibration + _yaml_text_hint(path))
         keys = root.keys()
+        if twice := next((k for k in keys if keys.count(k) > 1), None):  # OpenCV keeps the first
+            raise InputError(path, f"{twice}: given twice; keep one value")
         values = {}
         for field, names in _KEYS.items():
             name = next((n for n in names if n in keys), None)

@@ -30,6 +30,7 @@ from scan2morph.io.take import (
     read_stereo_take,
 )
 from scan2morph.sheet import OPTIONAL_FILES
+from scan2morph.units import units_hint
 
 #: The reader of each file column, per modality (the ingest's own readers).
 READERS: dict[str, dict[str, Callable]] = {
@@ -64,7 +65,8 @@ def take_file_problems(
         The take's files (a column left out is reported by the sheet check, not here).
     mm_per_unit : float
         The take's unit (the sheet's ``units`` column), mm: a mesh must be face- or head-sized
-        in mm once scaled (:func:`~scan2morph.io.mesh_scan.check_mesh_size`).
+        in mm once scaled (:func:`~scan2morph.io.mesh_scan.check_mesh_size`), and a range
+        scan's face checked in mm once scaled (a wrong unit is named with the column).
 
     Returns
     -------
@@ -87,20 +89,25 @@ def take_file_problems(
     if problems or required - set(files):
         return problems
     try:
-        _cross_check(modality, files, loaded)
+        _cross_check(modality, files, loaded, mm_per_unit)
     except InputError as exc:
         problems.append(str(exc))
     return problems
 
 
-def _cross_check(modality: str, files: Mapping[str, str | Path], loaded: Mapping) -> None:
+def _cross_check(
+    modality: str, files: Mapping[str, str | Path], loaded: Mapping, mm_per_unit: float
+) -> None:
     """The checks between a take's files (sizes, landmarks inside the image, units), on the
-    files as their readers ``loaded`` them (a range scan is parsed once)."""
+    files as their readers ``loaded`` them (a range scan is parsed once, and scaled to mm by
+    the sheet's unit as the ingest scales it)."""
     if modality == "range":
         scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"), loaded)
         if complete(scan.landmarks):  # else checked once detected
-            check_face(scan.xyz, scan.landmarks, files["xyz"], files["landmarks"])
-            check_handedness(scan.xyz, scan.landmarks, files["xyz"])
+            xyz = scan.xyz * mm_per_unit
+            hint = units_hint(mm_per_unit)
+            check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"], unit_hint=hint)
+            check_handedness(xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":
         landmarks = files.get("landmarks")
         read_stereo_take(

@@ -34,6 +34,13 @@ ABS_INVALID = -999999.0
 #: Largest R*C an ``.abs`` header may promise (FRGC scans are 640x480; 50 Mpx allows any
 #: scanner): a larger header is refused before anything is read or allocated.
 MAX_ABS_PIXELS = 50_000_000
+#: The first two bytes of a gzip stream.
+GZIP_MAGIC = b"\x1f\x8b"
+#: Least share of a range image's pixels with data at which one exact point repeated at all of
+#: them is a placeholder for "no data" (0, or FRGC's -999999, written where NaN was meant): the
+#: pixels of a scanner see distinct points (only the rays' origin is common to them), so a real
+#: scan repeats no point at more than a few pixels.
+PLACEHOLDER_SHARE = 0.01
 
 _HEADER_RE = (
     re.compile(r"^\s*(\d+)\s+rows\s*$", re.IGNORECASE),
@@ -43,12 +50,19 @@ _HEADER_RE = (
 
 
 def _open_text(path: Path, mode: str):
-    if path.name.endswith(".gz"):
-        if mode == "w":  # mtime=0: the same data gives the same bytes (reproducible outputs)
+    """A range text file opened as text: gzip-compressed when written to a name ending in
+    ``.gz`` (any case), and when read from a file starting with gzip's magic bytes, whatever its
+    name (an ``.ABS.GZ``, or a compressed file named ``.abs``)."""
+    if mode == "w":
+        if path.name.lower().endswith(".gz"):  # mtime=0: the same data gives the same bytes
             # level 6 (gzip's own default): as small as 9 on range text, 3x faster (0.8 s a
             # 640 x 480 scan against 2.4 s)
             raw = gzip.GzipFile(path, "wb", compresslevel=6, mtime=0)
             return io.TextIOWrapper(raw, encoding="ascii", newline="\n")
+        return open(path, mode, encoding="ascii", newline="\n")
+    with open(path, "rb") as fh:
+        compressed = fh.read(2) == GZIP_MAGIC
+    if compressed:
         return gzip.open(path, mode + "t", encoding="ascii", newline="\n")
     return open(path, mode, encoding="ascii", newline="\n")
 
@@ -59,7 +73,7 @@ def read_abs(path: str | Path) -> np.ndarray:
     Parameters
     ----------
     path : str or Path
-        The file; gzip-compressed when the name ends in ``.gz``.
+        The file; read as gzip when it starts with gzip's magic bytes (whatever its name).
 
     Returns
     -------
@@ -122,6 +136,8 @@ def read_abs(path: str | Path) -> np.ndarray:
     if not np.all(np.isfinite(xyz[valid])):
         raise InputError(path, "X/Y/Z: non-finite value at a pixel flagged valid")
     xyz[~valid] = np.nan
+    # the format's own "no data" is the flag column: placeholders at pixels flagged 1 are refused
+    _check_placeholder(xyz, path, "X/Y/Z", "pixels flagged valid", "flag such pixels 0")
     return xyz
 
 
@@ -199,10 +215,49 @@ def _check_xyz(xyz: np.ndarray, source) -> np.ndarray:
     return xyz.astype(np.float64, copy=False)
 
 
+def _check_placeholder(xyz: np.ndarray, source, field: str, which: str, fix: str) -> None:
+    """Refuse a range image that holds one exact point at :data:`PLACEHOLDER_SHARE` or more of
+    its pixels with data: a placeholder for "no data" (0 or -999999), which would otherwise be
+    read as a valid point (the fit then spans the scene, 1-6 m deep).
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float64, NaN = no data
+    source : str or path-like
+        The file, named in the error.
+    field : str
+        The data's key or lines in the file (``key 'xyz'``, ``X/Y/Z``).
+    which, fix : str
+        The pixels counted (``pixels``) and what to do instead, for the message.
+
+    Raises
+    ------
+    InputError
+        Naming the point and its share of the image.
+    """
+    flat = xyz.reshape(-1, 3)
+    flat = flat[np.isfinite(flat).all(axis=1)]
+    least = max(2.0, PLACEHOLDER_SHARE * len(flat))
+    values, counts = np.unique(flat[:, 2], return_counts=True)  # a repeated point repeats its z
+    if not len(counts) or counts.max() < least:
+        return
+    point = flat[flat[:, 2] == values[np.argmax(counts)]][0]
+    same = int((flat == point).all(axis=1).sum())
+    if same >= least:
+        share = same / (xyz.shape[0] * xyz.shape[1])
+        coords = ", ".join(f"{v:g}" for v in point)
+        raise InputError(
+            source, f"{field}: {share:.0%} of the {which} are exactly ({coords}): {fix}"
+        )
+
+
 def read_npz_range(path: str | Path) -> np.ndarray:
     """Read a range image from an ``.npz`` with key ``xyz`` ((H, W, 3) float, mm, NaN = no data).
 
-    Infinite values are treated as an error, not as missing data.
+    Infinite values are treated as an error, not as missing data, and so is a placeholder for no
+    data (one exact point, such as (0, 0, 0) or -999999, at many pixels): ``.npz`` has no
+    convention but NaN for no data, and a guessed one would silently keep a converter's real
+    zeros or drop a scan's real points, so the user is asked for NaN.
     """
     path = Path(path)
     if not path.is_file():
@@ -222,6 +277,7 @@ def read_npz_range(path: str | Path) -> np.ndarray:
     # a pixel is valid only when all three coordinates are
     xyz = xyz.copy()
     xyz[~np.all(np.isfinite(xyz), axis=-1)] = np.nan
+    _check_placeholder(xyz, path, "key 'xyz'", "pixels", "use NaN for no data")
     return xyz
 
 

@@ -51,10 +51,12 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.io.calibration import MIN_BASELINE_MM
 from scan2morph.io.depth_image import depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.take import RangeTake, check_face, check_image_size, check_landmarks_inside
+from scan2morph.io.yaml_text import load_yaml, yaml_problem
 
 #: A triangle of neighbouring depth pixels steeper than this to the view ray spans a depth step
 #: and is not meshed, degrees (a face's steepest measured parts, nose sides, are ~75).
@@ -64,6 +66,13 @@ EDGE_SLOPE_DEG = 80.0
 MAX_TRIANGLE_PX = 8
 #: Largest ``max|R^T R - I|`` accepted for the depth -> colour rotation.
 ROTATION_TOL = 1e-4
+#: Widest field of view accepted for a camera, degrees (wide-angle depth sensors: ~120): a
+#: smaller focal length in px is one given normalised (divided by the image size) or in mm.
+MAX_FOV_DEG = 150.0
+#: Least distance of the principal point from the image's sides, as a share of its width
+#: (height): a lens's axis lies near the image's centre, so (0, 0) or (0.5, 0.5) are intrinsics
+#: in another convention (normalised, or the principal point given as an offset).
+PRINCIPAL_POINT_MARGIN = 0.1
 _DISTORTION = ("k1", "k2", "p1", "p2", "k3")
 _PINHOLE = ("width", "height", "fx", "fy", "cx", "cy")
 
@@ -156,19 +165,34 @@ def _camera(block, source, where: str) -> PinholeCamera:
     for k in ("width", "height"):
         if vals[k] != int(vals[k]):
             raise InputError(source, f"{where}{k}: expected an integer, got {block[k]!r}")
+    _check_pinhole(vals, source, where)
     K = np.array([[vals["fx"], 0, vals["cx"]], [0, vals["fy"], vals["cy"]], [0, 0, 1.0]])
     D = _distortion(block.get("distortion"), source, f"{where}distortion")
     return PinholeCamera(K, D, (int(vals["width"]), int(vals["height"])))
 
 
-def _yaml_problem(exc: Exception) -> str:
-    """PyYAML's problem and its line (its message's first line is only its context: 'while
-    scanning for the next token')."""
-    problem, mark = getattr(exc, "problem", None), getattr(exc, "problem_mark", None)
-    if problem is None or mark is None:
-        return str(exc).splitlines()[0]
-    problem = problem.replace("character '\\t'", "a tab (YAML indents with spaces)")
-    return f"line {mark.line + 1}: {problem}"
+def _check_pinhole(vals: dict, source, where: str) -> None:
+    """Refuse a focal length wider than :data:`MAX_FOV_DEG` or a principal point within
+    :data:`PRINCIPAL_POINT_MARGIN` of the image's sides (intrinsics normalised or in mm)."""
+    for f, side in (("fx", "width"), ("fy", "height")):
+        fov = 2.0 * np.degrees(np.arctan(vals[side] / 2.0 / vals[f]))
+        if fov > MAX_FOV_DEG:
+            raise InputError(
+                source,
+                f"{where}{f}: {vals[f]:g} px for a {side} of {vals[side]:g} px is a {fov:.0f}° "
+                f"field of view (at most {MAX_FOV_DEG:g}° expected): are the intrinsics "
+                "normalised (divided by the image size) or in mm? expected px",
+            )
+    w, h, cx, cy = (vals[k] for k in ("width", "height", "cx", "cy"))
+    m = PRINCIPAL_POINT_MARGIN
+    if not (m * w - 0.5 <= cx <= (1 - m) * w - 0.5 and m * h - 0.5 <= cy <= (1 - m) * h - 0.5):
+        raise InputError(
+            source,
+            f"{where}cx/{where}cy: the principal point ({cx:g}, {cy:g}) px is not near the "
+            f"centre of the {w:g}x{h:g} image ({(w - 1) / 2:g}, {(h - 1) / 2:g}) (at least "
+            f"{m:.0%} of it from each side expected): are the intrinsics in px, with (0, 0) "
+            "at the centre of the top-left pixel?",
+        )
 
 
 def _known_keys(block: dict, known: tuple[str, ...], source, where: str) -> None:
@@ -184,9 +208,11 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     Raises
     ------
     InputError
-        Missing file, not YAML, a key missing or not a number, an unknown key, a non-positive
-        focal length or size, ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3
-        numbers (names the key).
+        Missing file, not YAML, a key given twice, a key missing or not a number, an unknown
+        key, a non-positive focal length or size, a focal length of a field of view wider than
+        :data:`MAX_FOV_DEG` or a principal point near the image's side (normalised
+        intrinsics), ``depth_scale_mm`` <= 0, ``R`` not a rotation, ``T`` not 3 numbers or
+        under 1 mm but not 0 (in metres) (names the key).
     """
     import yaml
 
@@ -194,9 +220,9 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     if not path.is_file():
         raise InputError(path, "file not found (expected an RGB-D intrinsics YAML)")
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        doc = load_yaml(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(path, f"cannot read as YAML: {_yaml_problem(exc)}") from None
+        raise InputError(path, f"cannot read as YAML: {yaml_problem(exc)}") from None
     if not isinstance(doc, dict):
         raise InputError(path, f"expected a mapping with keys {list(_PINHOLE)}, got {doc!r:.60}")
     _known_keys(doc, (*_PINHOLE, "depth_scale_mm", "distortion", "color"), path, "")
@@ -209,6 +235,13 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
         _known_keys(block, (*_PINHOLE, "distortion", "R", "T"), path, "color.")
         R = _matrix(block.get("R", np.eye(3).tolist()), (3, 3), path, "color.R")
         T = _matrix(block.get("T", [0.0, 0.0, 0.0]), (3,), path, "color.T (mm)")
+        baseline = float(np.linalg.norm(T))
+        if 0.0 < baseline < MIN_BASELINE_MM:  # 0: the colour image is the depth camera's
+            raise InputError(
+                path,
+                f"color.T: |T| = {baseline:.6g} is below {MIN_BASELINE_MM:g} mm; T must be in mm "
+                "(is it in metres?), or 0 when the colour camera is the depth camera",
+            )
         if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOL or np.linalg.det(R) < 0:
             raise InputError(path, "color.R: not a rotation matrix (R^T R != I or det < 0)")
     return RGBDIntrinsics(depth, color, R, T, scale)
@@ -470,16 +503,19 @@ def read_rgbd_take(
         return take
     hint = f"; check depth_scale_mm = {intr.depth_scale_mm:g} in {Path(intrinsics_path).name}"
     try:
-        check_face(xyz, landmarks, paths[0], landmarks_path, unit_hint=hint)
+        check_face(xyz, landmarks, paths[0], landmarks_path, unit_hint=hint, camera_frame=True)
     except InputError as exc:
         factor = _scale_factor(depth, intr, landmarks)
         if factor is None:
             raise
+        # a face-size problem is the scale's symptom; a landmark one would read as another cause
+        gives = exc.problem.split(";")[0] if exc.problem.startswith("face size") else ""
         raise InputError(
             intrinsics_path,
-            f"depth_scale_mm: {intr.depth_scale_mm:g} gives {exc.problem.split(';')[0]}; with "
-            f"depth_scale_mm = {intr.depth_scale_mm * factor:g} (x {factor:g}) the face has a "
-            "plausible size: is the depth scale in mm per unit?",
+            f"depth_scale_mm: {intr.depth_scale_mm:g} gives "
+            f"{gives or 'no plausible face at the landmarks'}; with depth_scale_mm = "
+            f"{intr.depth_scale_mm * factor:g} (x {factor:g}) the face has a plausible size: is "
+            "the depth scale in mm per unit?",
         ) from None
     return take
 
@@ -492,9 +528,8 @@ def _scale_factor(depth: np.ndarray, intr: RGBDIntrinsics, landmarks: np.ndarray
             intr.depth, intr.color, intr.R, intr.T, intr.depth_scale_mm * factor
         )
         try:
-            check_face(
-                depth_to_color_grid(depth * scaled.depth_scale_mm, scaled), landmarks, "", ""
-            )
+            xyz = depth_to_color_grid(depth * scaled.depth_scale_mm, scaled)
+            check_face(xyz, landmarks, "", "", camera_frame=True)
         except InputError:
             continue
         return factor

@@ -35,6 +35,11 @@ _LIFT_RADIUS = (2, 0.03)
 #: A nose tip this far (mm) behind the plane of the outer eye corners and the mouth, seen from the
 #: scanner, is a mirrored frame; nearer the plane the test does not decide.
 MIRROR_MARGIN_MM = 5.0
+#: Most one outer eye corner's depth may be of the other's, in a camera's frame: the two lie on
+#: one face (a head turned 60 degrees at 30 cm: 1.3), a corner on the background behind it (the
+#: face displaced on the colour grid by a wrong depth scale, or landmarks of another view) lies
+#: further.
+MAX_EYE_DEPTH_RATIO = 1.5
 #: Units a face-size error may come from: (name, factor to mm).
 _UNITS = (("metres", 1000.0), ("cm", 10.0), ("inches", 25.4), ("0.1 mm", 0.1), ("µm", 1e-3))
 
@@ -368,6 +373,7 @@ def check_face(
     landmarks_source: str | Path,
     unit_hint: str = "",
     eye_span_mm: tuple[float, float] = EYE_SPAN_MM,
+    camera_frame: bool = False,
 ) -> float:
     """Check that the landmarks mark a plausible, roughly frontal face on range data in mm.
 
@@ -383,6 +389,11 @@ def check_face(
         Appended to a size error (e.g. what to check in a stereo calibration).
     eye_span_mm : (float, float)
         The outer eye corners' accepted 3D distance, mm (default :data:`EYE_SPAN_MM`).
+    camera_frame : bool
+        True when ``xyz`` is in a camera's frame (z the depth along its axis, as an RGB-D
+        take's): the outer eye corners must then lie at depths within
+        :data:`MAX_EYE_DEPTH_RATIO` of each other (one on the face and one on the background
+        can be 50-150 mm apart too).
 
     Returns
     -------
@@ -397,7 +408,7 @@ def check_face(
         left/right (eye corners and chin wind the wrong way); an outer eye corner has no range
         data around it (landmarks on the background, or of another scan); the outer eye
         corners are not ``eye_span_mm`` (50-150 mm) apart in 3D (names the value and the unit
-        it suggests).
+        it suggests); in a camera frame, one outer eye corner lies much deeper than the other.
     """
     lm = np.asarray(landmarks, dtype=np.float64)
     spread = float(np.ptp(lm, axis=0).max())
@@ -447,7 +458,23 @@ def check_face(
             f"face size: the outer eye corners (iBUG 37, 46) are {span:.4g} mm apart in 3D, "
             f"expected {lo:g}-{hi:g} mm ({likely}){unit_hint}",
         )
+    if camera_frame:
+        _check_eye_depths(lifted, landmarks_source)
     return span
+
+
+def _check_eye_depths(lifted: np.ndarray, source: str | Path) -> None:
+    """Refuse outer eye corners (``lifted``, (2, 3) mm in a camera's frame) of which one lies
+    more than :data:`MAX_EYE_DEPTH_RATIO` times as deep as the other (names ``source``, the
+    landmark file)."""
+    near, far = sorted(lifted[:, 2])
+    if near > 0 and far > MAX_EYE_DEPTH_RATIO * near:
+        raise InputError(
+            source,
+            f"landmarks: the outer eye corners (iBUG 37, 46) lie at depths {lifted[0, 2]:.4g} "
+            f"and {lifted[1, 2]:.4g} mm, not on one face (at most {MAX_EYE_DEPTH_RATIO:g} times "
+            "as deep as each other expected): are the landmarks on the face and of this scan?",
+        )
 
 
 def check_handedness(xyz: np.ndarray, landmarks: np.ndarray, source: str | Path) -> float:

@@ -38,6 +38,7 @@ from scan2morph.scan.view import shaded_image
 from scan2morph.sheet import FILES, MULTI_PATH_COLUMNS, PATH_SEPARATOR, mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.store import paths
+from scan2morph.units import units_hint
 
 if TYPE_CHECKING:  # a type only: the template (and scipy) stay unimported until used
     from scan2morph.template import Template
@@ -191,9 +192,11 @@ def _read_mesh(files, row, params: Params) -> _Scan:
 
 def _read_range(files, row, params: Params) -> _Scan:
     scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"))
-    xyz = scan.xyz * mm_per_unit(row)
+    scale = mm_per_unit(row)
+    xyz = scan.xyz * scale
     if complete(scan.landmarks):
-        check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"])
+        hint = units_hint(scale)
+        check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"], unit_hint=hint)
     if scan.color is not None:
         return _Scan(xyz, scan.color, scan.landmarks)
     log.warning(
