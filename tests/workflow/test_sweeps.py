@@ -88,7 +88,7 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         "mask_radius_mm",
         "template_fiducials_viseme",
     ]
-    assert table.first_stage == "fit"
+    assert table.first_stage == "landmarks"  # template.*: the fold test of detected points
     assert first_stage(["smoothing.w", "align.icp.kernel_k_mm"]) == "align"
     assert first_stage(["refine.jaw.end", "mask.radius_mm"]) == "refine"
     assert first_stage(["motion_noise.click_noise_px"]) == "motion_noise"
