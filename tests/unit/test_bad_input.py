@@ -663,8 +663,8 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
         ),
         (
             lambda d: d["color"].update(cx=0, cy=0),
-            r"color.cx/color.cy: the principal point \(0, 0\) px is not near the centre of the "
-            r"160x120 image \(79.5, 59.5\)",
+            r"color.cx/color.cy: the principal point \(0, 0\) px is the image's corner, not near "
+            r"the centre of the 160x120 image \(79.5, 59.5\)",
         ),
     ],
 )
@@ -686,6 +686,11 @@ def test_rgbd_intrinsics_with_a_key_given_twice(rgbd_files, tmp_path):
         rgbd_files["intrinsics"], tmp_path / "t0.yaml", lambda d: d["color"].update(T=[0, 0, 0])
     )
     assert read_rgbd_intrinsics(same).T.tolist() == [0.0, 0.0, 0.0]
+    # a YAML merge key ("<<: *anchor") is no key given twice
+    from scan2morph.io.yaml_text import load_yaml
+
+    text = "a: &a {fx: 500, fy: 510}\nb:\n  <<: *a\n  fy: 520\n"
+    assert load_yaml(text) == {"a": {"fx": 500, "fy": 510}, "b": {"fx": 500, "fy": 520}}
 
 
 def test_stereo_calibration_with_a_key_given_twice(tmp_path, stereo):
@@ -918,6 +923,22 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
     (problem,) = take_file_problems("mesh", {"mesh": obj})
     assert re.search(match, problem), problem
     assert colour_source(read_mesh(obj, tmp_path / "material_0.png")) == "texture"
+    # an MTL trimesh finds is the mesh's, named as exporters name it: an absolute path from
+    # another machine (found by its name beside the OBJ), a subfolder; a second mtllib that
+    # trimesh never reads is not asked for
+    for case, head in {
+        "absolute": "mtllib /elsewhere/on/another/disk/material.mtl",
+        "subfolder": "mtllib export/material.mtl",
+        "second": "mtllib material.mtl\nmtllib extra_not_here.mtl",
+    }.items():
+        folder = tmp_path / case
+        (folder / "export").mkdir(parents=True)
+        found = _textured_obj(mesh_files["scan"], folder)
+        if case == "subfolder":
+            (folder / "material.mtl").rename(folder / "export" / "material.mtl")
+        text = re.sub(r"(?m)^mtllib .*$", head, found.read_text(), count=1)
+        found.write_text(text)
+        assert colour_source(read_mesh(found)) == "texture", case
     (tmp_path / "plain").mkdir()
     plain = _textured_obj(mesh_files["scan"], tmp_path / "plain", uv=False)
     plain.write_text("mtllib gone.mtl\nusemtl material_0\n" + plain.read_text())
@@ -983,6 +1004,10 @@ def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, tmp_path
     (tmp_path / "far.obj").write_text("v 0 0 0\nv 1 0 0\nf -1 -2 -3\n")
     with pytest.raises(InputError, match=r"far.obj: face line 3: vertex index -3 counts back"):
         read_mesh(tmp_path / "far.obj")
+    # a stray 2-vertex face line inside a file (trimesh drops it: the rest is the mesh)
+    ones = "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f)
+    (tmp_path / "stray.obj").write_text(vertices + "f 1 2\n" + ones)
+    np.testing.assert_array_equal(read_mesh(tmp_path / "stray.obj").faces, f)
 
 
 def test_mesh_file_of_another_format_or_cut_short(mesh_files, tmp_path):
@@ -1041,3 +1066,11 @@ def test_a_unit_given_to_a_mesh_in_mm_says_the_unit_is_wrong(mesh_files):
         files = {k: str(v) for k, v in files.items() if k != "scan"}
         with pytest.raises(InputError, match=r"m.ply: (face|mesh) size: .*" + match):
             _run_ingest(row, files, {"width": 160, "height": 120})
+
+
+def test_rgbd_intrinsics_of_an_image_cropped_to_the_face_are_valid(rgbd_files, tmp_path):
+    """A crop moves the principal point off-centre (here 5% from the side): still valid."""
+    crop = _edit_yaml(
+        rgbd_files["intrinsics"], tmp_path / "crop.yaml", lambda d: d["color"].update(cx=8.0)
+    )
+    assert read_rgbd_intrinsics(crop).color.K[0, 2] == 8.0

@@ -215,12 +215,17 @@ def test_a_detection_that_folds_the_fit_goes_towards_the_neutrals_points_carried
     (xyz_n, true_n, _), (xyz_t, true_t, _) = takes["neutral"], takes["car"]
     folding, attrs_off = _detected(takes, 2)
     assert "landmarks_unfolded" not in attrs_off
+    # the fit stage's own fit: its rim placed from the neutral's points
+    rim = fit_params.rim(
+        Take("s1", "car", "viseme", "car", "neutral", {paths.landmarks("neutral"): true_n})
+    )
+    assert rim is not None
     with pytest.raises(InputError, match="landmarks fold the template"):
-        fit_take(template, folding.points, xyz_t, None, "open", fit_params.rules, "s1/car")
+        fit_take(template, folding.points, xyz_t, None, "open", fit_params.rules, "s1/car", rim)
     got, attrs = _detected(takes, 2, template)
     share = attrs["landmarks_unfolded"]
     assert share == landmarks.UNFOLD_STEPS[0]
-    mesh = fit_take(template, got.points, xyz_t, None, "open", fit_params.rules, "s1/car")
+    mesh = fit_take(template, got.points, xyz_t, None, "open", fit_params.rules, "s1/car", rim)
     assert mesh["valid"].mean() > 0.9
     # each point on its way from where the second pass put it to the neutral's carried place
     noisy = true_t + np.random.default_rng(2).normal(0.0, 8.0, size=true_t.shape)
@@ -232,6 +237,12 @@ def test_a_detection_that_folds_the_fit_goes_towards_the_neutrals_points_carried
         got.points[found], (1 - share) * folding.points[found] + share * carried[found]
     )
     np.testing.assert_array_equal(got.points[~found], folding.points[~found])
+    # a moved point's confidence: the share's of the neutral's (clicked: 1), as tracking does
+    moved = np.any(got.points != folding.points, axis=1)
+    assert moved.sum() > 30
+    np.testing.assert_allclose(
+        got.confidence[moved], share + (1 - share) * folding.confidence[moved]
+    )
     before = np.median(np.linalg.norm(folding.points - true_t, axis=1))
     after = np.median(np.linalg.norm(got.points - true_t, axis=1))
     print(f"\nunfolded {share:.0%}: median error {before:.2f} -> {after:.2f} px")
@@ -249,6 +260,6 @@ def test_a_detection_that_does_not_fold_is_left_as_it_is(takes):
     np.testing.assert_array_equal(tested.points, plain.points)
     np.testing.assert_equal(attrs_tested, attrs_plain)  # NaN shifts: points not carried
     off = landmarks.Params.from_config(repo_config() | {"landmarks": {"unfold": False}})
-    assert off.unfold is False and off.fit is not None
+    assert off.unfold is False and off.fit is None
     folding, attrs_off = _detected(takes, 2, template, off)
     assert "landmarks_unfolded" not in attrs_off

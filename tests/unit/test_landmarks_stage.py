@@ -96,13 +96,56 @@ def test_an_unfolded_detection_is_a_warning(monkeypatch):
     assert seen["template"] == "the template"
     message = part.datasets[paths.landmark_info("car", "doubtful")]
     assert message.startswith("the detected landmarks are doubtful: median confidence 0.20")
-    assert "; the detected landmarks fold the template's fit: moved 50% of the way" in message
+    assert "; the detected landmarks would make the template fit leave the take out" in message
+    assert "moved 50% of the way to the neutral's" in message
     assert part.attrs[paths.take("car")]["landmarks_unfolded"] == 0.5
 
 
 def test_the_fold_test_follows_the_fit_params():
     config = {"landmarks": {"unfold": False}, "template": repo_config()["template"]}
     params = landmarks.Params.from_config(config)
-    assert params.unfold is False
-    assert params.fit == fit.Params.from_config(config)
+    assert params.unfold is False and params.fit is None  # no test, no re-run on its keys
+    on = landmarks.Params.from_config(config | {"landmarks": {}})
+    full = fit.Params.from_config(config)
+    assert (on.fit.fiducials, on.fit.rim_share) == (full.fiducials, full.rim_share)
+    assert (on.fit.rules.levels, on.fit.rules.max_fold_fraction) == (
+        full.rules.levels,
+        full.rules.max_fold_fraction,
+    )
+    # the sampling rules do not reach the fold test: changing them changes no landmarks params
+    other = config | {"template": config["template"] | {"sample_min_weight": 0.9}}
+    assert landmarks.Params.from_config(other | {"landmarks": {}}) == on
+    no_carry = config | {"landmarks": {"carry_stable": False}}
+    assert landmarks.Params.from_config(no_carry).fit is None
     assert landmarks.Params.from_config({}).fit is None
+
+
+def test_points_on_made_up_surface_are_lifted_from_the_measured_one():
+    """The .xyz points lie on what the scan measured: a point in a hole the repair filled (or on
+    a replaced spike) takes the nearest measured pixel, not the made-up surface (a mesh reader
+    would refuse it more than 5 mm off the mesh)."""
+    r = make_take("s1", "car", "viseme", "car", 3, {"width": 320, "height": 240, "focal_px": 725.0})
+    xyz = np.array(r["xyz"], dtype=np.float64)
+    tip = r["landmarks"][30]  # the nose tip, iBUG 31
+    rows, cols = np.mgrid[: xyz.shape[0], : xyz.shape[1]]
+    hole = np.hypot(cols - tip[0], rows - tip[1]) < 6.0
+    filled = np.where(hole[..., None], xyz + [0.0, 0.0, 20.0], xyz)  # a made-up bump
+    data = {
+        paths.range_image("car", "xyz"): filled,
+        paths.range_image("car", "color"): r["color"],
+        paths.clicks("car"): r["landmarks"],
+        paths.range_image("car", "filled"): hole,
+    }
+    take = Take("s1", "car", "viseme", "car", "neutral", data)
+    lifted = landmarks.run(None, take, landmarks.Params()).files["xyz"]
+    measured = xyz[~hole & np.isfinite(xyz).all(axis=2)]
+    assert np.min(np.linalg.norm(measured - lifted[30], axis=1)) == 0.0  # a measured pixel
+    without = dict(data)
+    del without[paths.range_image("car", "filled")]
+    take = Take("s1", "car", "viseme", "car", "neutral", without)
+    bump = landmarks.run(None, take, landmarks.Params()).files["xyz"][30]
+    # the made-up surface, had the mask not said so: the bump 20 mm off the measured nose
+    from scan2morph.template.sample import sample_range
+
+    true_tip = sample_range(xyz, tip[None], "car", 0.5)[0][0]
+    np.testing.assert_allclose(bump, true_tip + [0.0, 0.0, 20.0], atol=0.5)

@@ -248,3 +248,15 @@ def test_a_missing_sheet_names_its_resolved_path(tmp_path, monkeypatch):
         f"{tmp_path.resolve() / 'my' / 'subjects.tsv'} (relative to the working directory "
         f"{Path.cwd()})"
     )
+
+
+def test_the_example_rows_of_the_default_sheet_read_under_its_header(tmp_path):
+    """config/subjects.tsv, which the README points to for the columns: its commented example
+    rows, uncommented under its header, are a sheet of every modality."""
+    lines = (REPO / "config" / "subjects.tsv").read_text().splitlines()
+    header = next(line for line in lines if line and not line.startswith("#"))
+    rows = [line[1:] for line in lines if line.startswith("#") and "\t" in line]
+    assert rows[0] == header  # the commented header is the real one
+    (tmp_path / "s.tsv").write_text("\n".join([header, *rows[1:]]) + "\n")
+    sheet = read_sheet(tmp_path / "s.tsv")
+    assert set(sheet["modality"]) == {"range", "stereo", "mesh", "rgbd"}

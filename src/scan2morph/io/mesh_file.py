@@ -89,16 +89,18 @@ def check_obj_text(path: Path) -> None:
     Raises
     ------
     InputError
-        Naming the line: a face with fewer than 3 vertices (a file cut short), vertex index 0
-        (0-based faces), a negative (relative) index counting back past the first vertex.
+        Naming the line: the file's last line a face with fewer than 3 vertices (a file cut
+        short; such a line elsewhere is a stray one trimesh drops), vertex index 0 (0-based
+        faces), a negative (relative) index counting back past the first vertex. Comments
+        (``#`` to the line's end) are not read.
     """
-    lines = path.read_bytes().split(b"\n")
+    lines = [line.split(b"#", 1)[0] for line in path.read_bytes().split(b"\n")]  # no comments
     faces = [i for i, line in enumerate(lines) if line.lstrip()[:2] in (b"f ", b"f\t")]
-    for i in faces:
-        refs = len(lines[i].split()) - 1
-        if refs < 3 and not lines[i].rstrip().endswith(b"\\"):  # not a continued line
-            last = i == len(lines) - 1 and lines[i].strip() != b""
-            raise InputError(path, f"face line {i + 1}: {_short_face(refs, last)}")
+    last = len(lines) - 1
+    if faces and faces[-1] == last and lines[last].strip():  # the file ends inside a face line
+        refs = len(lines[last].split()) - 1
+        if refs < 3 and not lines[last].rstrip().endswith(b"\\"):  # not a continued line
+            raise InputError(path, f"face line {last + 1}: {_short_face(refs, True)}")
     blob = b"\n".join([lines[i] for i in faces]).replace(b"\t", b" ") + b"\n"
     zeros = [k for k in (blob.find(z) for z in (b" 0 ", b" 0/", b" 0\n", b" 0\r")) if k >= 0]
     if zeros:
@@ -124,12 +126,35 @@ def _mtl_files(path: Path, text: str) -> list[tuple[str, Path | None]]:
     return out
 
 
-def missing_mtl(path: Path) -> str | None:
-    """The first MTL file an OBJ names (``mtllib``) that is not beside it; None when all are."""
-    if path.suffix.lower() != ".obj":
+def missing_mtl(path: Path, image) -> str | None:
+    """The MTL file an OBJ names that trimesh could not read, when its material's ``image`` is
+    trimesh's stand-in for it; None otherwise.
+
+    trimesh reads the first ``mtllib`` (beside the OBJ, or its own resolver's way: an absolute
+    path, a subfolder, the bare name) and, when it cannot, gives the faces a material whose image
+    is a 2 x 2 grey placeholder (:data:`PLACEHOLDER_RGBA`). Only that stand-in is refused: an MTL
+    trimesh found is the mesh's whatever its path, and a second ``mtllib`` it never reads is
+    not asked for.
+    """
+    if path.suffix.lower() != ".obj" or not _placeholder(image):
         return None
     text = path.read_bytes().decode("utf-8", errors="replace")
-    return next((name for name, found in _mtl_files(path, text) if found is None), None)
+    found = re.search(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M)
+    return None if found is None else found.group(1)
+
+
+#: The one colour of trimesh's stand-in image for an OBJ material it could not read (RGBA).
+PLACEHOLDER_RGBA = (100, 100, 100, 255)
+
+
+def _placeholder(image) -> bool:
+    """Whether ``image`` (PIL or None) is trimesh's 2 x 2 stand-in (:data:`PLACEHOLDER_RGBA`)."""
+    if image is None or getattr(image, "size", None) != (2, 2):
+        return False
+    import numpy as np
+
+    pixels = np.asarray(image.convert("RGBA")).reshape(-1, 4)
+    return bool((pixels == PLACEHOLDER_RGBA).all())
 
 
 def referenced_textures(path: Path) -> list[str]:

@@ -192,14 +192,14 @@ def _colour_visual(loaded, path: Path, texture):
         return _unlit_texture(uv, Image.fromarray(read_color(texture)))
     if visual.kind != "texture":
         return visual
-    if uv is not None and (mtl := missing_mtl(path)):  # trimesh put a grey placeholder there
+    material = visual.material
+    image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
+    if uv is not None and (mtl := missing_mtl(path, image)):  # trimesh's grey stand-in
         raise InputError(
             path,
             f"mtllib {mtl!r} is missing (the mesh has UVs but no material); put the MTL beside "
             "the OBJ or give the texture in the sheet's texture column",
         )
-    material = visual.material
-    image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
     if image is not None:
         return _unlit_texture(uv, image)
     if names := referenced_textures(path):

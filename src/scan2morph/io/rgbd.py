@@ -69,10 +69,10 @@ ROTATION_TOL = 1e-4
 #: Widest field of view accepted for a camera, degrees (wide-angle depth sensors: ~120): a
 #: smaller focal length in px is one given normalised (divided by the image size) or in mm.
 MAX_FOV_DEG = 150.0
-#: Least distance of the principal point from the image's sides, as a share of its width
-#: (height): a lens's axis lies near the image's centre, so (0, 0) or (0.5, 0.5) are intrinsics
-#: in another convention (normalised, or the principal point given as an offset).
-PRINCIPAL_POINT_MARGIN = 0.1
+#: A principal point within this of (0, 0), px, is one given as an offset from the image's
+#: centre (or left at a default): a lens's axis crosses its image well inside it. Anywhere else
+#: is accepted: an image cropped to the face may put it off-centre, even outside the crop.
+PRINCIPAL_POINT_AT_ORIGIN_PX = 1.0
 _DISTORTION = ("k1", "k2", "p1", "p2", "k3")
 _PINHOLE = ("width", "height", "fx", "fy", "cx", "cy")
 
@@ -172,8 +172,8 @@ def _camera(block, source, where: str) -> PinholeCamera:
 
 
 def _check_pinhole(vals: dict, source, where: str) -> None:
-    """Refuse a focal length wider than :data:`MAX_FOV_DEG` or a principal point within
-    :data:`PRINCIPAL_POINT_MARGIN` of the image's sides (intrinsics normalised or in mm)."""
+    """Refuse a focal length wider than :data:`MAX_FOV_DEG` (intrinsics normalised or in mm) or
+    a principal point at the image's corner (:data:`PRINCIPAL_POINT_AT_ORIGIN_PX`)."""
     for f, side in (("fx", "width"), ("fy", "height")):
         fov = 2.0 * np.degrees(np.arctan(vals[side] / 2.0 / vals[f]))
         if fov > MAX_FOV_DEG:
@@ -184,14 +184,13 @@ def _check_pinhole(vals: dict, source, where: str) -> None:
                 "normalised (divided by the image size) or in mm? expected px",
             )
     w, h, cx, cy = (vals[k] for k in ("width", "height", "cx", "cy"))
-    m = PRINCIPAL_POINT_MARGIN
-    if not (m * w - 0.5 <= cx <= (1 - m) * w - 0.5 and m * h - 0.5 <= cy <= (1 - m) * h - 0.5):
+    if max(abs(cx), abs(cy)) < PRINCIPAL_POINT_AT_ORIGIN_PX:
         raise InputError(
             source,
-            f"{where}cx/{where}cy: the principal point ({cx:g}, {cy:g}) px is not near the "
-            f"centre of the {w:g}x{h:g} image ({(w - 1) / 2:g}, {(h - 1) / 2:g}) (at least "
-            f"{m:.0%} of it from each side expected): are the intrinsics in px, with (0, 0) "
-            "at the centre of the top-left pixel?",
+            f"{where}cx/{where}cy: the principal point ({cx:g}, {cy:g}) px is the image's corner, "
+            f"not near the centre of the {w:g}x{h:g} image ({(w - 1) / 2:g}, {(h - 1) / 2:g}): is "
+            "it given as an offset from the centre? expected px, with (0, 0) at the centre of "
+            "the top-left pixel",
         )
 
 

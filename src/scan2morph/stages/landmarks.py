@@ -38,7 +38,7 @@ from scan2morph.refine.flow import measure_flow
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
-from scan2morph.template import fit_folds
+from scan2morph.template import FitRules, fit_folds
 from scan2morph.template.sample import sample_range
 
 #: A point whose neighbour pixels straddle a step steeper than this is lifted from one pixel,
@@ -90,8 +90,9 @@ class Params:
         would leave it out) is moved towards its neutral's points carried rigidly
         (:func:`unfold`).
     fit : scan2morph.stages.fit.Params or None
-        The fit's parameters (config section ``template``), which the fold test follows; None:
-        no test.
+        The fit's parameters the fold test follows (config section ``template``: its fiducial
+        sets, rim share, subdivisions and fold limit); None: no test (also with ``unfold`` or
+        ``carry_stable`` off).
     """
 
     min_confidence: float = 0.5
@@ -118,8 +119,22 @@ class Params:
             max_track_px=float(section.get("max_track_px", cls.max_track_px)),
             track_weight=float(section.get("track_weight", cls.track_weight)),
             unfold=bool(section.get("unfold", cls.unfold)),
-            fit=fit_stage.Params.from_config(config) if "template" in config else None,
+            fit=_fold_rules(config, section),
         )
+
+
+def _fold_rules(config: Mapping, section: Mapping) -> fit_stage.Params | None:
+    """The fit's parameters the fold test reads (the fiducial sets, the rim's share, the
+    subdivisions and the fold limit; the sampling rules left at their defaults, so that changing
+    them re-runs no landmarks stage), or None when no test is made: without ``template`` in the
+    config, ``unfold`` or ``carry_stable`` off (the rigid carry needs its alignment)."""
+    if "template" not in config or not section.get("unfold", True):
+        return None
+    if not section.get("carry_stable", True):
+        return None
+    fit = fit_stage.Params.from_config(config)
+    rules = FitRules(fit.rules.levels, max_fold_fraction=fit.rules.max_fold_fraction)
+    return replace(fit, rules=rules)
 
 
 @dataclass(frozen=True)
@@ -231,7 +246,8 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
         px, the detector's points before the second pass (:func:`second_pass`); the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
         ``files["pts"]`` the points for the ``.pts`` file, ``files["xyz"]`` (68, 3) mm the
-        same points on the take's surface (:func:`surface_points`), in its frame.
+        same points on the take's measured surface (:func:`surface_points` of
+        :func:`measured`: a mesh take's lie on the mesh), in its frame.
     """
     t, data = take.take, take.data
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
@@ -244,7 +260,8 @@ def run(template, take: Take, params: Params) -> Part:
     doubtful = [found.doubtful(params.min_confidence)]
     if attrs.get("landmarks_unfolded"):
         doubtful.append(
-            f"the detected landmarks fold the template's fit: moved "
+            "the detected landmarks would make the template fit leave the take out (its "
+            "triangles fold, or a point falls outside the image): moved "
             f"{attrs['landmarks_unfolded']:.0%} of the way to the neutral's, carried rigidly "
             "into the take; check them in the report"
         )
@@ -262,8 +279,19 @@ def run(template, take: Take, params: Params) -> Part:
     return Part(
         datasets,
         attrs={paths.take(t): attrs | {"nose_depth_mm": nose_depth}},
-        files={"pts": found.points, "xyz": surface_points(xyz, found.points, take.source)},
+        files={"pts": found.points, "xyz": surface_points(measured(xyz, take), found.points)},
     )
+
+
+def measured(xyz: np.ndarray, take: Take) -> np.ndarray:
+    """The repaired range image with the pixels the repair made up (filled holes, replaced
+    spikes: no surface the scan measured) set to NaN, (H, W, 3) mm."""
+    made_up = np.zeros(xyz.shape[:2], dtype=bool)
+    for key in ("filled", "spikes"):
+        mask = take.data.get(paths.range_image(take.take, key))
+        if mask is not None and np.shape(mask) == made_up.shape:
+            made_up |= np.asarray(mask, dtype=bool)
+    return np.where(made_up[..., None], np.nan, xyz) if made_up.any() else xyz
 
 
 def surface_points(xyz: np.ndarray, points: np.ndarray, source: str = "take") -> np.ndarray:
@@ -344,6 +372,9 @@ def second_pass(
     )
     attrs: dict = {"landmarks_carried_px": [float(v) for v in carried.shift_px]}
     points, confidence = carried.points, found.confidence
+    neutral_conf = data.get(paths.landmark_confidence(neutral))  # clicked: none, i.e. sure
+    neutral_conf = np.ones(len(points)) if neutral_conf is None else np.asarray(neutral_conf)
+    neutral_conf = np.nan_to_num(neutral_conf, nan=1.0)
     if params.track:
         neutral_color = need(data, paths.range_image(neutral, "color"), take.source)
         tracked = track_points(
@@ -365,20 +396,21 @@ def second_pass(
             np.linalg.norm(tracked.points - found.points, axis=1) <= params.max_track_px
         )
         use[np.asarray(params.stable_points) - 1] = False  # carried already
-        neutral_conf = data.get(paths.landmark_confidence(neutral))
-        neutral_conf = np.ones(len(use)) if neutral_conf is None else np.asarray(neutral_conf)
         w = params.track_weight
         points = np.where(use[:, None], w * tracked.points + (1 - w) * points, points)
-        neutral_conf = np.nan_to_num(neutral_conf, nan=1.0)
         confidence = np.where(use, w * neutral_conf + (1 - w) * confidence, confidence)
         attrs["landmarks_tracked"] = int(use.sum())
     if template is not None and params.unfold and params.fit is not None:
         rigid = partial(
             carry_points, xyz, neutral_xyz, neutral_points, carried.transform, take.source
         )
-        points, share = unfold(template, take, points, rigid, xyz.shape[1::-1], params.fit)
+        moved, share = unfold(template, take, points, rigid, xyz.shape[1::-1], params.fit)
         if share > 0:  # not NaN: no share unfolds them, and the fit says why
             attrs["landmarks_unfolded"] = share
+            # a moved point inherits the neutral's error in that share, as a tracked one does
+            went = np.any(moved != points, axis=1)
+            confidence = np.where(went, share * neutral_conf + (1 - share) * confidence, confidence)
+            points = moved
     return replace(found, points=points, confidence=confidence), attrs
 
 
@@ -431,6 +463,8 @@ def unfold(template, take: Take, points, rigid, size, fit: fit_stage.Params) -> 
         return points, 0.0
     carried = rigid()
     found = np.isfinite(carried).all(axis=1)[:, None]
+    if not found.any():  # nothing to go towards
+        return points, float("nan")
     for share in UNFOLD_STEPS:
         trial = np.where(found, (1.0 - share) * points + share * carried, points)
         if not folds(trial):
