@@ -214,7 +214,8 @@ MODAL_RECONSTRUCTION = (
         "modes_to_target",
         "count",
         "fewest lowest modes whose total RMS error is at most modal.target_rms_mm "
-        "(/modal/reconstruction_target_mm); NA when no K of the basis reaches it; store "
+        "(/modal/reconstruction_target_mm); 0 when the expression itself moves less; NA when "
+        "no K of the basis reaches it; store "
         "/expressions/{take}/modes_to_target",
     ),
 )

@@ -164,7 +164,8 @@ class ReconstructionSplit:
         neutral's vertex normal, and of its part tangent to the surface (sliding), mm;
         ``total_mm**2 = normal_mm**2 + tangential_mm**2``.
     modes_to_target : float
-        Smallest K (1 .. k) whose ``total`` error is at most the target, NaN when no K reaches it.
+        Smallest K (0 .. k) whose ``total`` error is at most the target: 0 for an expression
+        that moves the face less than the target (no mode is needed), NaN when no K reaches it.
     """
 
     ks: NDArray[np.int64]
@@ -231,13 +232,13 @@ def reconstruction_split(
         total[kk] = np.sqrt(np.mean(np.sum(e**2, axis=1)))
         normal[kk] = np.sqrt(np.mean(along**2))
         tangential[kk] = np.sqrt(np.mean(np.sum((e - along[:, None] * n) ** 2, axis=1)))
-    reached = np.flatnonzero(total[1:] <= target_mm)
+    reached = np.flatnonzero(total <= target_mm)  # K = 0: the expression is within it already
     return ReconstructionSplit(
         ks_arr.astype(np.int64),
         total[ks_arr],
         normal[ks_arr],
         tangential[ks_arr],
-        float(reached[0] + 1) if reached.size else float("nan"),
+        float(reached[0]) if reached.size else float("nan"),
     )
 
 
