@@ -367,6 +367,14 @@ def render_rig_scene(rig: dict | None = None, seed: int = 7, noise: float = 1.0)
     return StereoScene(images[0], images[1], calib, xyz, surface, rays_cam)
 
 
+def _cast_in_blocks(cast, origin: np.ndarray, dirs: np.ndarray, size: int = 16384) -> tuple:
+    """``cast(origin, dirs)`` over blocks of ``size`` rays whose temporaries stay in the CPU's
+    cache: each ray's answers are its own, so the same numbers as one call over all of them."""
+    rays = dirs.reshape(-1, 3)
+    parts = [cast(origin, rays[i : i + size]) for i in range(0, len(rays), size)]
+    return tuple(np.concatenate(p).reshape(dirs.shape[:-1]) for p in zip(*parts, strict=True))
+
+
 def _render(cams, cast, rng, width, height, noise):
     """Both views (2x2 supersampled, sensor noise) and the left pixel centres' truth.
 
@@ -379,7 +387,7 @@ def _render(cams, cast, rng, width, height, noise):
         sub = np.array([-0.25, 0.25])
         ys, xs, dy, dx = np.meshgrid(np.arange(height), np.arange(width), sub, sub, indexing="ij")
         rays = _rotate(pixel_rays(xs + dx, ys + dy, cam["K"], cam["D"]), cam["R"])
-        _, _, intensity = cast(cam["C"], rays)
+        _, _, intensity = _cast_in_blocks(cast, cam["C"], rays)
         img = intensity.mean(axis=(2, 3)) + noise * rng.standard_normal((height, width))
         grey = np.clip(np.rint(img), 0, 255).astype(np.uint8)
         images.append(np.repeat(grey[..., None], 3, axis=2))
@@ -387,7 +395,7 @@ def _render(cams, cast, rng, width, height, noise):
     c1 = cams[0]
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
     rays_cam = pixel_rays(xs, ys, c1["K"], c1["D"])
-    t, surface, _ = cast(c1["C"], _rotate(rays_cam, c1["R"]))
+    t, surface, _ = _cast_in_blocks(cast, c1["C"], _rotate(rays_cam, c1["R"]))
     xyz = np.where((surface >= 0)[..., None], t[..., None] * rays_cam, np.nan)
     return images, xyz, surface, rays_cam
 
