@@ -728,6 +728,18 @@ def mesh_files(tmp_path_factory):
     return {"mesh": d / "m.ply", "landmarks": d / "m.txt", "scan": res}
 
 
+@pytest.fixture(scope="module")
+def small_scan():
+    """A head-sized mesh of 162 vertices (an icosphere 180 mm across), for the mesh file's own
+    refusals (its format, material, texture and face lines), which the reader gives before it
+    looks at the shape or the number of vertices: the same messages as on the 54k-vertex face
+    scan, at a fraction of its write and read time."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=90.0)
+    return {"vertices": np.asarray(sphere.vertices), "faces": np.asarray(sphere.faces)}
+
+
 def _mesh(files, **changed):
     files = {k: str(v) for k, v in (files | changed).items() if k != "scan"}
     return _run_ingest(dict(ROW, modality="mesh"), files, {"width": 160, "height": 120})
@@ -750,11 +762,11 @@ def test_mesh_without_faces(mesh_files, tmp_path):
         _mesh(mesh_files, mesh=tmp_path / "cloud.ply")
 
 
-def test_mesh_texture_missing_names_the_file(mesh_files, tmp_path):
+def test_mesh_texture_missing_names_the_file(mesh_files, small_scan, tmp_path):
     import trimesh
     from PIL import Image
 
-    scan = mesh_files["scan"]
+    scan = small_scan
     uv = np.zeros((len(scan["vertices"]), 2))
     visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.new("RGB", (8, 8)))
     trimesh.Trimesh(scan["vertices"], scan["faces"], visual=visual, process=False).export(
@@ -904,7 +916,7 @@ def _textured_obj(scan, folder, uv=True):
 
 
 def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
-    mesh_files, tmp_path
+    small_scan, tmp_path
 ):
     """trimesh puts a grey 2 x 2 placeholder in place of a missing MTL: the take rendered flat
     grey and was recorded as textured. Refused naming the MTL; the sheet's texture reads it;
@@ -912,7 +924,7 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
     from scan2morph.io.check import take_file_problems
     from scan2morph.io.mesh_scan import colour_source, read_mesh
 
-    obj = _textured_obj(mesh_files["scan"], tmp_path)
+    obj = _textured_obj(small_scan, tmp_path)
     (tmp_path / "material.mtl").unlink()
     match = (
         r"face.obj: mtllib 'material.mtl' is missing \(the mesh has UVs but no material\); put "
@@ -940,26 +952,35 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
         found.write_text(text)
         assert colour_source(read_mesh(found)) == "texture", case
     (tmp_path / "plain").mkdir()
-    plain = _textured_obj(mesh_files["scan"], tmp_path / "plain", uv=False)
+    plain = _textured_obj(small_scan, tmp_path / "plain", uv=False)
     plain.write_text("mtllib gone.mtl\nusemtl material_0\n" + plain.read_text())
     assert colour_source(read_mesh(plain)) == "shading"
 
 
-def test_obj_whose_material_has_a_colour_and_no_image_is_shaded(mesh_files, tmp_path, caplog):
-    """An MTL with ``Kd`` and no ``map_Kd`` (a per-material colour) is no texture: the take is
-    shaded, with the geometry-only warning, with UVs or without."""
+def _colour_only_obj(scan, folder, uv):
+    """The scan as an OBJ in ``folder`` whose MTL gives a colour (``Kd``) and no image."""
+    folder.mkdir()
+    obj = _textured_obj(scan, folder, uv=uv)
+    if not uv:
+        obj.write_text("mtllib material.mtl\nusemtl material_0\n" + obj.read_text())
+    (folder / "material.mtl").write_text("newmtl material_0\nKd 0.8 0.2 0.2\n")
+    for png in folder.glob("*.png"):
+        png.unlink()
+    return obj
+
+
+def test_obj_whose_material_has_a_colour_and_no_image_is_shaded(
+    mesh_files, small_scan, tmp_path, caplog
+):
+    """An MTL with ``Kd`` and no ``map_Kd`` (a per-material colour) is no texture: the mesh
+    reads as shaded with UVs or without, and the face scan's take is shaded, with the
+    geometry-only warning."""
     from scan2morph.io.mesh_scan import colour_source, read_mesh
 
     for uv in (True, False):
-        folder = tmp_path / f"uv{uv}"
-        folder.mkdir()
-        obj = _textured_obj(mesh_files["scan"], folder, uv=uv)
-        if not uv:
-            obj.write_text("mtllib material.mtl\nusemtl material_0\n" + obj.read_text())
-        (folder / "material.mtl").write_text("newmtl material_0\nKd 0.8 0.2 0.2\n")
-        for png in folder.glob("*.png"):
-            png.unlink()
+        obj = _colour_only_obj(small_scan, tmp_path / f"uv{uv}", uv)
         assert colour_source(read_mesh(obj)) == "shading"
+    obj = _colour_only_obj(mesh_files["scan"], tmp_path / "face", uv=False)
     with caplog.at_level("WARNING", logger="scan2morph"):
         part = _mesh(mesh_files, mesh=obj)
     assert "no texture and no vertex colours: rendered with shading" in caplog.text
@@ -968,7 +989,7 @@ def test_obj_whose_material_has_a_colour_and_no_image_is_shaded(mesh_files, tmp_
     assert part.datasets[paths.camera("neutral", "color_source")] == "shading"
 
 
-def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, tmp_path):
+def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, small_scan, tmp_path):
     """A truncated OBJ (its last face line cut) lost its faces silently and was blamed on its
     landmarks; 0-based faces were shifted by one vertex and wrapped to the last one. Both are
     refused naming the face line, by the check and the ingest. Negative (relative) indices are
@@ -978,10 +999,11 @@ def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, tmp_path
     from scan2morph.io.check import take_file_problems
     from scan2morph.io.mesh_scan import read_mesh
 
-    scan = mesh_files["scan"]
+    scan = small_scan
     trimesh.Trimesh(scan["vertices"], scan["faces"], process=False).export(tmp_path / "a.obj")
     text = (tmp_path / "a.obj").read_text()
-    cut = text.rindex("\nf ", 0, int(len(text) * 0.6)) + 4  # within a face line
+    middle = (text.index("\nf ") + len(text)) // 2  # of the face lines
+    cut = text.rindex("\nf ", 0, middle) + 4  # within a face line
     (tmp_path / "cut.obj").write_text(text[:cut])
     line = text[:cut].count("\n") + 1
     match = rf"cut.obj: face line {line}: 1 vertex, expected 3 or more: the file looks cut short"

@@ -112,13 +112,35 @@ def mesh_files(tmp_path_factory):
     return scan, files
 
 
-def test_a_mesh_take_without_landmarks_is_rendered_upright_and_frontal(mesh_files):
+def _read_only(take):
+    for a in (take.xyz, take.color, take.landmarks, take.K, take.pose):
+        if a is not None:
+            a.setflags(write=False)
+    return take
+
+
+@pytest.fixture(scope="module")
+def surface_take(mesh_files):
+    """The scan read without landmarks (its camera from the surface alone); read-only, shared."""
+    _, (ply, _, _) = mesh_files
+    return _read_only(read_mesh_take(ply, None, None, TINY_CAMERA))
+
+
+@pytest.fixture(scope="module")
+def landmark_take(mesh_files):
+    """The scan read with its true landmark file; read-only, shared."""
+    _, (ply, txt, _) = mesh_files
+    return _read_only(read_mesh_take(ply, None, txt, TINY_CAMERA))
+
+
+def test_a_mesh_take_without_landmarks_is_rendered_upright_and_frontal(
+    mesh_files, surface_take, landmark_take
+):
     """The surface-only camera against the landmark camera of the same scan: the face upright
     (eyes above the mouth, the subject's right eye on the image's left), centred, the same size
     within a few per cent, the view direction the same."""
-    scan, (ply, txt, _) = mesh_files
-    free = read_mesh_take(ply, None, None, TINY_CAMERA)
-    with_lm = read_mesh_take(ply, None, txt, TINY_CAMERA)
+    _, (_, txt, _) = mesh_files
+    free, with_lm = surface_take, landmark_take
     assert free.landmarks is None
     lm3 = read_landmarks3d(txt)
     cam = lm3 @ free.pose[:3, :3].T + free.pose[:3, 3]
@@ -170,7 +192,9 @@ def test_a_51_point_mesh_landmark_file_projects_its_points_and_leaves_the_jaw(me
     assert np.linalg.norm(take.xyz[v, u] - ref, axis=1).max() < 4.0
 
 
-def test_a_mesh_takes_points_come_back_as_its_landmark_file(mesh_files, tmp_path):
+def test_a_mesh_takes_points_come_back_as_its_landmark_file(
+    mesh_files, surface_take, landmark_take, tmp_path
+):
     """The landmarks stage lifts a mesh take's points onto its render's surface: written in the
     mesh's units (here metres), the file is a landmark file the mesh reader takes back (every
     point on the mesh), and the points it projects agree with those of the true landmark file
@@ -185,8 +209,8 @@ def test_a_mesh_takes_points_come_back_as_its_landmark_file(mesh_files, tmp_path
     from scan2morph.stages.part import Take
     from scan2morph.store import paths
 
-    scan, (ply, txt, _) = mesh_files
-    free = read_mesh_take(ply, None, None, TINY_CAMERA)
+    _, (ply, txt, _) = mesh_files
+    free = surface_take
     lm3 = read_landmarks3d(txt)
     cam = lm3 @ free.pose[:3, :3].T + free.pose[:3, 3]
     px = cam[:, :2] / cam[:, 2:] * np.diag(free.K)[:2] + free.K[:2, 2]
@@ -207,7 +231,7 @@ def test_a_mesh_takes_points_come_back_as_its_landmark_file(mesh_files, tmp_path
     mesh.export(metres)
     write_landmarks3d(tmp_path / "she.xyz", lifted / 1000.0)
     back = read_mesh_take(metres, None, tmp_path / "she.xyz", TINY_CAMERA, 1000.0)
-    with_truth = read_mesh_take(ply, None, txt, TINY_CAMERA)
+    with_truth = landmark_take
     shift = np.linalg.norm(back.landmarks - with_truth.landmarks, axis=1)
     assert np.median(shift[seen]) < 0.5 and shift[seen].max() < 1.5
     # a point off the render's data goes to the nearest surface pixel

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import h5py
 import numpy as np
+import pytest
 
 from scan2morph.stages import fit, landmarks
 from scan2morph.stages.part import Take
@@ -15,8 +16,17 @@ from tests.support.configs import repo_config
 SETTINGS = {"min_valid_fraction": 0.0, "include_failed_takes": False, "max_click_noise_px": 1.0}
 
 
-def test_a_clicked_take_keeps_its_clicks():
+@pytest.fixture(scope="module")
+def car():
+    """A 320 x 240 car take (read-only: shared by the module's tests)."""
     r = make_take("s1", "car", "viseme", "car", 3, {"width": 320, "height": 240, "focal_px": 725.0})
+    for key in ("xyz", "color", "landmarks"):
+        r[key].setflags(write=False)
+    return r
+
+
+def test_a_clicked_take_keeps_its_clicks(car):
+    r = car
     data = {
         paths.range_image("car", "xyz"): r["xyz"],
         paths.range_image("car", "color"): r["color"],
@@ -73,11 +83,11 @@ def test_tracking_params_from_the_config():
     assert (params.max_track_px, params.track_weight) == (4.0, 1.0)
 
 
-def test_an_unfolded_detection_is_a_warning(monkeypatch):
+def test_an_unfolded_detection_is_a_warning(car, monkeypatch):
     """A detected take whose points the second pass moved towards the neutral's (the fit
     would have folded) says so in ``doubtful``, beside a low confidence's reason, and the
     stage hands the template to the second pass."""
-    r = make_take("s1", "car", "viseme", "car", 3, {"width": 320, "height": 240, "focal_px": 725.0})
+    r = car
     data = {
         paths.range_image("car", "xyz"): r["xyz"],
         paths.range_image("car", "color"): r["color"],
