@@ -945,7 +945,7 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
     }.items():
         folder = tmp_path / case
         (folder / "export").mkdir(parents=True)
-        found = _textured_obj(mesh_files["scan"], folder)
+        found = _textured_obj(small_scan, folder)
         if case == "subfolder":
             (folder / "material.mtl").rename(folder / "export" / "material.mtl")
         text = re.sub(r"(?m)^mtllib .*$", head, found.read_text(), count=1)
