@@ -240,3 +240,20 @@ def test_a_mesh_takes_points_come_back_as_its_landmark_file(
     corner = landmarks.surface_points(free.xyz, off)[0]
     assert np.isfinite(corner).all()
     assert np.nanmin(np.linalg.norm(free.xyz.reshape(-1, 3) - corner, axis=1)) == 0.0
+
+
+def test_a_landmark_point_cloud_saved_with_normals_or_colours_reads_as_its_points(tmp_path):
+    """The .xyz corrected in MeshLab or CloudCompare comes back with normals and colours after
+    each point: the points are read; a line of 2 or 4 numbers is refused."""
+    points = np.random.default_rng(3).normal(0.0, 40.0, size=(68, 3))
+    normals = np.tile([0.0, 0.0, 1.0], (68, 1))
+    rgb = np.full((68, 3), 200.0)
+    for extra in ([normals], [rgb], [normals, rgb], [rgb, np.full((68, 1), 255.0)]):
+        rows = np.hstack([points, *extra])
+        (tmp_path / "p.xyz").write_text("\n".join(" ".join(f"{v:.6f}" for v in r) for r in rows))
+        np.testing.assert_allclose(read_landmarks3d(tmp_path / "p.xyz"), points, atol=1e-6)
+    for cols in (2, 4):
+        rows = np.hstack([points, np.zeros((68, 3))])[:, :cols]
+        (tmp_path / "q.xyz").write_text("\n".join(" ".join(f"{v:.3f}" for v in r) for r in rows))
+        with pytest.raises(InputError, match=r"q.xyz: line 1: expected 3 finite numbers \(x y z\)"):
+            read_landmarks3d(tmp_path / "q.xyz")

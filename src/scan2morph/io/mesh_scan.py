@@ -225,9 +225,15 @@ def _unlit_texture(uv: np.ndarray, image):
     return trimesh.visual.TextureVisuals(uv=uv, material=material)
 
 
+#: Numbers a landmark line may hold: ``x y z``, and the point clouds MeshLab and CloudCompare
+#: save (``.xyz``) with normals (``nx ny nz``), colours (``r g b`` or ``r g b a``) or both after it.
+POINT_COLUMNS = (3, 6, 7, 9, 10)
+
+
 def read_landmarks3d(path: str | Path) -> np.ndarray:
     """Read 3D landmarks: 68 (iBUG-68) or 51 (without the jawline) lines ``x y z`` (``#``
-    comments and blank lines skipped).
+    comments and blank lines skipped; normals or colours after them, as a point cloud saved by
+    MeshLab or CloudCompare holds them, are not read: :data:`POINT_COLUMNS`).
 
     Returns
     -------
@@ -255,9 +261,11 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
             raise InputError(
                 path, f"line {number}: expected 'x y z' numbers, got {line[:40]!r}{hint * pts}"
             ) from None
-        if len(values) != 3 or not np.isfinite(values).all():
-            raise InputError(path, f"line {number}: expected 3 finite numbers, got {line[:40]!r}")
-        rows.append(values)
+        if len(values) not in POINT_COLUMNS or not np.isfinite(values[:3]).all():
+            raise InputError(
+                path, f"line {number}: expected 3 finite numbers (x y z), got {line[:40]!r}"
+            )
+        rows.append(values[:3])
     if problem := count_problem(len(rows), "points (lines 'x y z')"):
         raise InputError(path, f"got {problem}")
     return as_ibug68(np.array(rows, dtype=np.float64))
