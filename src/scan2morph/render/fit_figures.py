@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from textwrap import fill
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -249,6 +250,10 @@ def _text(store: Mapping, key: str, default: str) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
+#: Characters of a 9 pt title (7 pt: a few more) that fit an inch of the figure.
+TITLE_CHARS_PER_INCH = 13
+
+
 def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
     """Every take's image with its 68 landmarks, as the fit saw them: a range or RGB-D take's
     colour image, a stereo take's left image, a mesh take's render through its virtual camera
@@ -274,12 +279,15 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         source = _text(store, paths.landmark_info(take, "source"), "clicked")
         doubtful = _text(store, paths.landmark_info(take, "doubtful"), "")
         note = ", ".join(n for n in (modality, shown, source, "DOUBTFUL" if doubtful else "") if n)
-        ax.set_title(f"{take} ({note})", fontsize=8, color="darkred" if doubtful else "black")
-    fig.suptitle(
+        # the take on one line, how it was seen on the next: side by side they overlapped
+        title = f"{take}\n{fill(note, int(TITLE_CHARS_PER_INCH * 2.3))}"
+        ax.set_title(title, fontsize=7, color="darkred" if doubtful else "black")
+    text = (
         "Each take's image and landmarks (mesh takes: rendered by the virtual camera); clicked "
-        "points red, detected ones coloured by confidence (yellow high, purple low)",
-        fontsize=9,
+        "points red, detected ones coloured by confidence (yellow high, purple low)"
     )
+    # wrapped to the figure's width (one row of four takes cut it at both ends)
+    fig.suptitle(fill(text, int(TITLE_CHARS_PER_INCH * 2.3 * ncols)), fontsize=9)
     return fig
 
 
