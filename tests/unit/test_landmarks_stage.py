@@ -68,6 +68,28 @@ def test_low_confidence_is_doubtful_and_a_warning(tmp_path):
     assert "doubtful" in warnings[0].message
 
 
+def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
+    """The neutral's doubtful points place the template; another take's error is taken up
+    where its refinement followed the skin (its share and median correction, from the refine
+    group's attributes); without a refinement nothing is added."""
+    message = "the detected landmarks are doubtful"
+    data = {paths.landmark_info(t, "doubtful"): message for t in ("n", "s", "v")}
+    data |= {paths.align(t, "ok"): True for t in ("n", "s", "v")}
+    refine = {"confident_share": 0.568, "median_correction_px": 4.26, "used": True}
+    attrs = {paths.take("n"): {"kind": "neutral"}, paths.take("s"): {"kind": "expression"}}
+    attrs |= {paths.take("v"): {"kind": "viseme"}, paths.refine_group("s"): refine}
+    path = tmp_path / "store.h5"
+    write_part(path, data | {paths.refine("s", "valid"): np.ones(3, bool)}, attrs=attrs)
+    with h5py.File(path) as h5:
+        said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+    assert said["n"].startswith(message + "; the neutral's points place the template")
+    assert said["s"] == (
+        message + "; its refinement followed the skin from the neutral on 57% of the face, a "
+        "median 4.3 px from the landmarks' fit: there the take's own detection error is taken up"
+    )
+    assert said["v"] == message
+
+
 def test_params_from_the_whole_config():
     params = landmarks.Params.from_config(
         {"landmarks": {"min_confidence": 0.3, "carry_stable": False, "stable_points": [28, 40]}}

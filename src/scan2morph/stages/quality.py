@@ -96,7 +96,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
-            out.append(Warning("landmarks", take, doubtful.asstr()[()]))
+            out.append(Warning("landmarks", take, doubtful.asstr()[()] + _what_it_does(h5, take)))
     for take in takes:
         group = h5.get(paths.refine_group(take))
         problem = group.attrs.get("problem", "") if group is not None else ""
@@ -104,6 +104,28 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             out.append(Warning("refine", take, str(problem)))
     out += _motion_noise_warnings(h5, settings)
     return out
+
+
+def _what_it_does(h5: h5py.File, take: str) -> str:
+    """What a doubtful detection's error does to the model, for the report's warning: the
+    neutral's points place the template on the face; another take's error is taken up where its
+    refinement followed the skin from the neutral (``""`` when it did not run)."""
+    if str(h5[paths.TAKES][take].attrs.get("kind", "")) == "neutral":
+        return (
+            "; the neutral's points place the template on the face: their error moves which "
+            "skin each vertex is (a mouth-corner vertex off the corner), not the takes' motions"
+        )
+    group = h5.get(paths.refine_group(take))
+    attrs = group.attrs if group is not None else {}
+    share = float(attrs.get("confident_share", np.nan))
+    moved = float(attrs.get("median_correction_px", np.nan))
+    if not (bool(attrs.get("used", False)) and np.isfinite(share) and np.isfinite(moved)):
+        return ""
+    return (
+        f"; its refinement followed the skin from the neutral on {share:.0%} of the face, a "
+        f"median {moved:.1f} px from the landmarks' fit: there the take's own detection error "
+        "is taken up"
+    )
 
 
 def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
