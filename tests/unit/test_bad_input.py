@@ -663,7 +663,7 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
         ),
         (
             lambda d: d["color"].update(cx=0, cy=0),
-            r"color.cx/color.cy: the principal point \(0, 0\) px is the image's corner, not near "
+            r"color.cx/color.cy: the principal point \(0, 0\) px lies at the image's corner, not near "
             r"the centre of the 160x120 image \(79.5, 59.5\)",
         ),
     ],
@@ -928,7 +928,7 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
     (tmp_path / "material.mtl").unlink()
     match = (
         r"face.obj: mtllib 'material.mtl' is missing \(the mesh has UVs but no material\); put "
-        r"the MTL beside the OBJ or give the texture in the sheet's texture column"
+        r"the MTL and its texture beside the OBJ or give the texture in the sheet's texture column"
     )
     with pytest.raises(InputError, match=match):
         read_mesh(obj)
@@ -951,6 +951,17 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
         text = re.sub(r"(?m)^mtllib .*$", head, found.read_text(), count=1)
         found.write_text(text)
         assert colour_source(read_mesh(found)) == "texture", case
+    # trimesh's stand-in in the other ways it falls back, each named: an OBJ with UVs and no
+    # mtllib, an MTL without the faces' material
+    bare = _textured_obj(small_scan, tmp_path / "absolute")
+    bare.write_text(re.sub(r"(?m)^mtllib .*\n", "", bare.read_text()))
+    with pytest.raises(InputError, match=r"the mesh has UVs but names no material \(no mtllib"):
+        read_mesh(bare)
+    other = _textured_obj(small_scan, tmp_path / "second")
+    mtl = other.parent / "material.mtl"
+    mtl.write_text(mtl.read_text().replace("newmtl material_0", "newmtl something_else"))
+    with pytest.raises(InputError, match=r"mtllib 'material.mtl' holds no material the faces"):
+        read_mesh(other)
     (tmp_path / "plain").mkdir()
     plain = _textured_obj(small_scan, tmp_path / "plain", uv=False)
     plain.write_text("mtllib gone.mtl\nusemtl material_0\n" + plain.read_text())
@@ -1011,6 +1022,10 @@ def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, small_sc
     assert re.search(match, problem), problem
     with pytest.raises(InputError, match=match):
         _mesh(mesh_files, mesh=tmp_path / "cut.obj")
+    # cut, then ended by a newline (a tool that finishes what it wrote) and a blank line
+    (tmp_path / "cut.obj").write_text(text[:cut] + "\n\n")
+    with pytest.raises(InputError, match=match):
+        read_mesh(tmp_path / "cut.obj")
     v, f = scan["vertices"], scan["faces"]
     vertices = "".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in v)
     (tmp_path / "zero.obj").write_text(vertices + "".join(f"f {a} {b} {c}\n" for a, b, c in f))
@@ -1091,8 +1106,14 @@ def test_a_unit_given_to_a_mesh_in_mm_says_the_unit_is_wrong(mesh_files):
 
 
 def test_rgbd_intrinsics_of_an_image_cropped_to_the_face_are_valid(rgbd_files, tmp_path):
-    """A crop moves the principal point off-centre (here 5% from the side): still valid."""
+    """A crop moves the principal point off-centre (here 5% from the side): still valid; an
+    offset from the centre (3, -2) px is refused as (0, 0) is."""
     crop = _edit_yaml(
         rgbd_files["intrinsics"], tmp_path / "crop.yaml", lambda d: d["color"].update(cx=8.0)
     )
     assert read_rgbd_intrinsics(crop).color.K[0, 2] == 8.0
+    offset = _edit_yaml(
+        rgbd_files["intrinsics"], tmp_path / "off.yaml", lambda d: d["color"].update(cx=3, cy=-2)
+    )
+    with pytest.raises(InputError, match=r"color.cx/color.cy: the principal point \(3, -2\)"):
+        read_rgbd_intrinsics(offset)

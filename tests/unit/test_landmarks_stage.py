@@ -84,8 +84,8 @@ def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
         said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
     assert said["n"].startswith(message + "; the neutral's points place the template")
     assert said["s"] == (
-        message + "; its refinement followed the skin from the neutral on 57% of the face, a "
-        "median 4.3 px from the landmarks' fit: there the take's own detection error is taken up"
+        message + "; its refinement measured where its skin went on 57% of the face, a median "
+        "4.3 px from the landmarks' fit: there the take's own detection error is taken up"
     )
     assert said["v"] == message
 

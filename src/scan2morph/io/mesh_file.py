@@ -96,8 +96,9 @@ def check_obj_text(path: Path) -> None:
     """
     lines = [line.split(b"#", 1)[0] for line in path.read_bytes().split(b"\n")]  # no comments
     faces = [i for i, line in enumerate(lines) if line.lstrip()[:2] in (b"f ", b"f\t")]
-    last = len(lines) - 1
-    if faces and faces[-1] == last and lines[last].strip():  # the file ends inside a face line
+    filled = [i for i, line in enumerate(lines) if line.strip()]
+    last = filled[-1] if filled else -1  # the last line with text: a cut may end in a newline
+    if faces and faces[-1] == last:  # the file ends inside a face line
         refs = len(lines[last].split()) - 1
         if refs < 3 and not lines[last].rstrip().endswith(b"\\"):  # not a continued line
             raise InputError(path, f"face line {last + 1}: {_short_face(refs, True)}")
@@ -126,21 +127,29 @@ def _mtl_files(path: Path, text: str) -> list[tuple[str, Path | None]]:
     return out
 
 
-def missing_mtl(path: Path, image) -> str | None:
-    """The MTL file an OBJ names that trimesh could not read, when its material's ``image`` is
-    trimesh's stand-in for it; None otherwise.
+def stand_in_problem(path: Path, image) -> str | None:
+    """Why a mesh's material ``image`` is trimesh's stand-in for a texture it could not read,
+    or None when it is not that stand-in.
 
-    trimesh reads the first ``mtllib`` (beside the OBJ, or its own resolver's way: an absolute
-    path, a subfolder, the bare name) and, when it cannot, gives the faces a material whose image
-    is a 2 x 2 grey placeholder (:data:`PLACEHOLDER_RGBA`). Only that stand-in is refused: an MTL
-    trimesh found is the mesh's whatever its path, and a second ``mtllib`` it never reads is
-    not asked for.
+    trimesh gives faces whose material or image it cannot read a 2 x 2 grey image
+    (:data:`PLACEHOLDER_RGBA`): an OBJ whose first ``mtllib`` (the one it reads, beside the OBJ
+    or by its own resolver: an absolute path, a subfolder, the bare name) is missing or lacks
+    the material the faces use, an OBJ with UVs and no ``mtllib``, a PLY whose texture file is
+    missing. Only that stand-in is refused: an MTL trimesh read is the mesh's, whatever its path.
     """
-    if path.suffix.lower() != ".obj" or not _placeholder(image):
+    if not _placeholder(image):
         return None
+    if path.suffix.lower() != ".obj":
+        return "the mesh has UVs but its texture image could not be read"
     text = path.read_bytes().decode("utf-8", errors="replace")
     found = re.search(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M)
-    return None if found is None else found.group(1)
+    if found is None:
+        return "the mesh has UVs but names no material (no mtllib line)"
+    name = found.group(1)
+    there = any(p.is_file() for p in (path.parent / name, path.parent / Path(name).name))
+    if there:
+        return f"mtllib {name!r} holds no material the faces use (usemtl)"
+    return f"mtllib {name!r} is missing (the mesh has UVs but no material)"
 
 
 #: The one colour of trimesh's stand-in image for an OBJ material it could not read (RGBA).
@@ -171,4 +180,10 @@ def referenced_textures(path: Path) -> list[str]:
     return names
 
 
-__all__ = ["check_format", "check_obj_text", "load_problem", "missing_mtl", "referenced_textures"]
+__all__ = [
+    "check_format",
+    "check_obj_text",
+    "load_problem",
+    "stand_in_problem",
+    "referenced_textures",
+]

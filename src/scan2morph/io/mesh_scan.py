@@ -39,8 +39,8 @@ from scan2morph.io.mesh_file import (  # noqa: E402
     check_format,
     check_obj_text,
     load_problem,
-    missing_mtl,
     referenced_textures,
+    stand_in_problem,
 )
 from scan2morph.io.mesh_units import (  # noqa: E402
     MESH_EXTENT_MM,
@@ -194,11 +194,11 @@ def _colour_visual(loaded, path: Path, texture):
         return visual
     material = visual.material
     image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
-    if uv is not None and (mtl := missing_mtl(path, image)):  # trimesh's grey stand-in
+    if uv is not None and (why := stand_in_problem(path, image)):  # trimesh's grey stand-in
         raise InputError(
             path,
-            f"mtllib {mtl!r} is missing (the mesh has UVs but no material); put the MTL beside "
-            "the OBJ or give the texture in the sheet's texture column",
+            f"{why}; put the MTL and its texture beside the OBJ or give the texture in the "
+            "sheet's texture column",
         )
     if image is not None:
         return _unlit_texture(uv, image)

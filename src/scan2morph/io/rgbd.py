@@ -69,10 +69,10 @@ ROTATION_TOL = 1e-4
 #: Widest field of view accepted for a camera, degrees (wide-angle depth sensors: ~120): a
 #: smaller focal length in px is one given normalised (divided by the image size) or in mm.
 MAX_FOV_DEG = 150.0
-#: A principal point within this of (0, 0), px, is one given as an offset from the image's
-#: centre (or left at a default): a lens's axis crosses its image well inside it. Anywhere else
-#: is accepted: an image cropped to the face may put it off-centre, even outside the crop.
-PRINCIPAL_POINT_AT_ORIGIN_PX = 1.0
+#: A principal point within this share of the width (height) of (0, 0) is one given as an
+#: offset from the image's centre (or left at a default): a lens's axis crosses its image well
+#: inside it. Anywhere else is accepted: an image cropped to the face may put it off-centre.
+PRINCIPAL_POINT_AT_ORIGIN = 0.05
 _DISTORTION = ("k1", "k2", "p1", "p2", "k3")
 _PINHOLE = ("width", "height", "fx", "fy", "cx", "cy")
 
@@ -173,7 +173,7 @@ def _camera(block, source, where: str) -> PinholeCamera:
 
 def _check_pinhole(vals: dict, source, where: str) -> None:
     """Refuse a focal length wider than :data:`MAX_FOV_DEG` (intrinsics normalised or in mm) or
-    a principal point at the image's corner (:data:`PRINCIPAL_POINT_AT_ORIGIN_PX`)."""
+    a principal point near (0, 0) (:data:`PRINCIPAL_POINT_AT_ORIGIN`)."""
     for f, side in (("fx", "width"), ("fy", "height")):
         fov = 2.0 * np.degrees(np.arctan(vals[side] / 2.0 / vals[f]))
         if fov > MAX_FOV_DEG:
@@ -184,10 +184,11 @@ def _check_pinhole(vals: dict, source, where: str) -> None:
                 "normalised (divided by the image size) or in mm? expected px",
             )
     w, h, cx, cy = (vals[k] for k in ("width", "height", "cx", "cy"))
-    if max(abs(cx), abs(cy)) < PRINCIPAL_POINT_AT_ORIGIN_PX:
+    m = PRINCIPAL_POINT_AT_ORIGIN
+    if abs(cx) < m * w and abs(cy) < m * h:
         raise InputError(
             source,
-            f"{where}cx/{where}cy: the principal point ({cx:g}, {cy:g}) px is the image's corner, "
+            f"{where}cx/{where}cy: the principal point ({cx:g}, {cy:g}) px lies at the image's corner, "
             f"not near the centre of the {w:g}x{h:g} image ({(w - 1) / 2:g}, {(h - 1) / 2:g}): is "
             "it given as an offset from the centre? expected px, with (0, 0) at the centre of "
             "the top-left pixel",

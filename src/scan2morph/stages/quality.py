@@ -122,9 +122,9 @@ def _what_it_does(h5: h5py.File, take: str) -> str:
     if not (bool(attrs.get("used", False)) and np.isfinite(share) and np.isfinite(moved)):
         return ""
     return (
-        f"; its refinement followed the skin from the neutral on {share:.0%} of the face, a "
-        f"median {moved:.1f} px from the landmarks' fit: there the take's own detection error "
-        "is taken up"
+        f"; its refinement measured where its skin went on {share:.0%} of the face, a median "
+        f"{moved:.1f} px from the landmarks' fit: there the take's own detection error is taken "
+        "up"
     )
 
 
