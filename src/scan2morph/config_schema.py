@@ -207,8 +207,7 @@ def _problem(error) -> str:
     if kind == "pattern":
         return f"{_short(value)} does not match {arg!r}"
     if kind in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
-        bound = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">"}.get(kind, "<")
-        return f"expected a value {bound} {arg}, got {_short(value)}"
+        return f"expected a value {dict(_BOUNDS)[kind]} {arg}, got {_short(value)}"
     if kind in ("minItems", "maxItems", "minLength", "maxLength"):
         return f"{kind} {arg}: got {_short(value)}"
     if kind in ("anyOf", "oneOf") and all(isinstance(branch, dict) for branch in arg):

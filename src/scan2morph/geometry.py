@@ -390,7 +390,26 @@ def harmonic_fill(
     return out
 
 
+def affine_fit(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The least-squares affine map from 2D points to points (n, d): ``target ~ [x, y, 1] @ A``.
+
+    Parameters
+    ----------
+    source : (n, 2) float
+        Finite points, n >= 3 not on one line.
+    target : (n, d) float
+
+    Returns
+    -------
+    (3, d) float64
+        ``A``: its first two rows the linear part, its last the offset.
+    """
+    design = np.column_stack([source, np.ones(len(source))])
+    return np.linalg.lstsq(design, target, rcond=None)[0]
+
+
 __all__ = [
+    "affine_fit",
     "check_vertex_array",
     "edge_adjacency",
     "face_normals",

@@ -35,7 +35,7 @@ from scipy.ndimage import map_coordinates
 
 from scan2morph.align.point_plane import PointToPlane
 from scan2morph.align.rigid import invert, kabsch, transform_points
-from scan2morph.geometry import surface_normals
+from scan2morph.geometry import affine_fit, surface_normals
 from scan2morph.template.sample import range_pixels, sample_range
 
 #: Surface around the lifted stable points that the ICP aligns, mm.
@@ -167,8 +167,7 @@ def _rigid_prediction(t_xyz, n_xyz, pn, transform, source) -> tuple:
     ok = np.isfinite(predicted).all(axis=1)
     if ok.sum() < 3:
         return predicted, None
-    design = np.column_stack([pn[ok], np.ones(ok.sum())])
-    return predicted, np.linalg.lstsq(design, predicted[ok], rcond=None)[0].T
+    return predicted, affine_fit(pn[ok], predicted[ok]).T
 
 
 def _near(xyz: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:

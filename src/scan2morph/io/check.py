@@ -23,14 +23,13 @@ from scan2morph.io.mesh_scan import check_mesh_size, read_landmarks3d, read_mesh
 from scan2morph.io.range_image import read_range
 from scan2morph.io.rgbd import check_rgbd_files, read_rgbd_intrinsics
 from scan2morph.io.take import (
-    check_face,
     check_handedness,
     check_landmarks_inside,
+    range_in_mm,
     read_range_take,
     read_stereo_take,
 )
 from scan2morph.sheet import OPTIONAL_FILES
-from scan2morph.units import units_hint
 
 #: The reader of each file column, per modality (the ingest's own readers).
 READERS: dict[str, dict[str, Callable]] = {
@@ -103,10 +102,8 @@ def _cross_check(
     the sheet's unit as the ingest scales it)."""
     if modality == "range":
         scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"), loaded)
+        xyz = range_in_mm(scan, mm_per_unit, files["xyz"], files.get("landmarks"))
         if complete(scan.landmarks):  # else checked once detected
-            xyz = scan.xyz * mm_per_unit
-            hint = units_hint(mm_per_unit)
-            check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"], unit_hint=hint)
             check_handedness(xyz, scan.landmarks, files["xyz"])
     elif modality == "stereo":
         landmarks = files.get("landmarks")

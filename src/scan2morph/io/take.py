@@ -11,8 +11,9 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import StereoCalibration, read_stereo_calibration
 from scan2morph.io.image import read_color
-from scan2morph.io.landmarks import read_pts
+from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.range_image import read_range
+from scan2morph.units import units_hint
 
 #: Smallest range or colour image accepted, px (width and height).
 MIN_IMAGE_PX = 16
@@ -112,6 +113,20 @@ def read_range_take(
         raise InputError(xyz_path, "xyz: no valid pixel in the range image")
     landmarks = _read_clicks(landmarks_path, loaded, xyz.shape[1], xyz.shape[0])
     return RangeTake(xyz=xyz, color=color, landmarks=landmarks)
+
+
+def range_in_mm(
+    scan: RangeTake, mm_per_unit: float, xyz_path: str | Path, landmarks_path: str | Path | None
+) -> np.ndarray:
+    """A range take's xyz in mm, scaled by the sheet's unit, (H, W, 3) float64; with a complete
+    landmark file its face checked in mm (:func:`check_face`: a size error says what the sheet's
+    ``units`` column did, :func:`~scan2morph.units.units_hint`). The ingest and the subject's
+    check read a range take alike through it."""
+    xyz = scan.xyz * mm_per_unit
+    if complete(scan.landmarks):
+        hint = units_hint(mm_per_unit)
+        check_face(xyz, scan.landmarks, xyz_path, landmarks_path, unit_hint=hint)
+    return xyz
 
 
 def _read_clicks(

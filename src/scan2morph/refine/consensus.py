@@ -24,6 +24,7 @@ from collections.abc import Mapping
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from scan2morph.geometry import affine_fit
 from scan2morph.refine import RefineParams, compose_field, pull_back_field
 from scan2morph.refine.flow import fusion, measure_flow
 from scan2morph.refine.template_space import TemplateGrid, pull_back
@@ -115,9 +116,7 @@ def extended_map(grid: TemplateGrid, vertices2d: np.ndarray, points: np.ndarray)
     margin, a triangle with a vertex without a position) the affine map that fits the vertices
     best plus the nearest residual from it, so that an outline vertex can move outwards."""
     ok = np.isfinite(points).all(axis=1)
-    affine = np.linalg.lstsq(
-        np.column_stack([vertices2d[ok], np.ones(ok.sum())]), points[ok], rcond=None
-    )[0]
+    affine = affine_fit(vertices2d[ok], points[ok])
     plane = np.column_stack([vertices2d, np.ones(len(vertices2d))]) @ affine
     residual = grid.interpolate(points - plane)
     known = np.isfinite(residual).all(axis=-1)

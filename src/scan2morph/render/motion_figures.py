@@ -221,14 +221,8 @@ def measured_take(store: Mapping[str, np.ndarray], take: str, what: str) -> np.n
     consensus where it moved it, else the refined correspondence, else the aligned fit (a
     store without refinement). The aligned fit alone would show how far the refinement moved
     the landmarks' fit, not the model's error."""
-    for key in (
-        paths.consensus(take, "vertices"),
-        paths.refine(take, "vertices"),
-        paths.align(take, "vertices"),
-    ):
-        if key in store:
-            return mesh(store, key, what)
-    return mesh(store, paths.align(take, "vertices"), what)  # its missing-dataset message
+    refined = paths.refined(take, store)(take, "vertices")
+    return mesh(store, refined if refined in store else paths.align(take, "vertices"), what)
 
 
 def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:

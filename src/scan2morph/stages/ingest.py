@@ -31,6 +31,7 @@ from scan2morph.io.depth_image import depth_frame_paths
 from scan2morph.io.landmarks import complete
 from scan2morph.io.mesh_scan import SHADED, read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
+from scan2morph.io.take import range_in_mm
 from scan2morph.jobs import sha256_file
 from scan2morph.scan import reconstruct_stereo
 from scan2morph.scan.fusion import FusionParams, fuse_depth_frames
@@ -38,7 +39,6 @@ from scan2morph.scan.view import shaded_image
 from scan2morph.sheet import FILES, MULTI_PATH_COLUMNS, PATH_SEPARATOR, mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.store import paths
-from scan2morph.units import units_hint
 
 if TYPE_CHECKING:  # a type only: the template (and scipy) stay unimported until used
     from scan2morph.template import Template
@@ -192,11 +192,7 @@ def _read_mesh(files, row, params: Params) -> _Scan:
 
 def _read_range(files, row, params: Params) -> _Scan:
     scan = read_range_take(files["xyz"], files.get("color"), files.get("landmarks"))
-    scale = mm_per_unit(row)
-    xyz = scan.xyz * scale
-    if complete(scan.landmarks):
-        hint = units_hint(scale)
-        check_face(xyz, scan.landmarks, files["xyz"], files["landmarks"], unit_hint=hint)
+    xyz = range_in_mm(scan, mm_per_unit(row), files["xyz"], files.get("landmarks"))
     if scan.color is not None:
         return _Scan(xyz, scan.color, scan.landmarks)
     log.warning(

@@ -99,7 +99,7 @@ def aligned_mesh(
     the refinement's confidence; the consensus part's mesh where the takes' consensus moved it)
     or the aligned fit (fit and align parts)."""
     if refined:
-        group = paths.consensus if paths.consensus(take, "vertices") in data else paths.refine
+        group = paths.refined(take, data)
         return AlignedMesh(
             need(data, group(take, "vertices"), source),
             need(data, group(take, "valid"), source),

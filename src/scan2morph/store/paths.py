@@ -13,7 +13,7 @@ Paths are absolute HDF5 paths (``/takes/car/mesh/vertices``); ``{take}`` is a ta
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Container, Iterable
 
 #: Pipeline stages in the order they run (each writes the datasets :data:`DATASETS` gives it).
 STAGES = (
@@ -265,6 +265,12 @@ def consensus(take_id: str, name: str) -> str:
     """``vertices`` (neutral frame), ``valid``, ``points2d`` or ``correction`` (px) of a take's
     refined correspondence moved onto the skin points the subject's takes agree on."""
     return _build("/takes/{take}/consensus", name, take=take_id)
+
+
+def refined(take_id: str, keys: Container[str]) -> Callable[[str, str], str]:
+    """The group of a take's refined correspondence among ``keys`` (the store's, or a mapping
+    of parts): :func:`consensus` where the takes' consensus moved it, else :func:`refine`."""
+    return consensus if consensus(take_id, "vertices") in keys else refine
 
 
 def mask(name: str) -> str:
