@@ -32,8 +32,15 @@ VARIANTS: dict[str, dict] = {
     "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0, "tether_normal_n_per_mm3": 0.0},
     "skin_tangential_tether": {"preset": "skin", "tether_normal_n_per_mm3": 0.0},
     "skin_free_outline": {"preset": "skin", "fixed_outline": "none"},
-    "skin_stiff_upper": {"preset": "skin", "stiff_factor": 3.0, "youngs_modulus_mpa": 1.0},
-    "skin_vertex_mass": {"preset": "skin", "mass": "vertex"},
+    # (the shells and a vertex's mass have no membrane mass per area for the mimic skin to weigh:
+    # its factor is 1 in these three, as when they were first measured, before the skin preset had it)
+    "skin_stiff_upper": {
+        "preset": "skin",
+        "stiff_factor": 3.0,
+        "youngs_modulus_mpa": 1.0,
+        "mimic_mass_factor": 1.0,
+    },
+    "skin_vertex_mass": {"preset": "skin", "mass": "vertex", "mimic_mass_factor": 1.0},
     "skin_stable_tether": {  # the skin preset as first measured: a light tie on the stable face
         "preset": "skin",
         "foundation_n_per_mm3": 0.005,
@@ -43,7 +50,8 @@ VARIANTS: dict[str, dict] = {
         "coordinates": "mass",
         "fixed_outline": "none",
     },
-    "skin_soft_shell": {"preset": "skin", "youngs_modulus_mpa": 0.01},  # skin until the membrane
+    # skin until the membrane
+    "skin_soft_shell": {"preset": "skin", "youngs_modulus_mpa": 0.01, "mimic_mass_factor": 1.0},
     "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
     "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},
     # The skin varying over the face (the mimic skin of scan2morph.modal.skin), measured with

@@ -298,6 +298,26 @@ def test_presets_resolve_and_overrides_win():
     assert paper_plain.modal.mimic_mass_factor == 1.0  # the paper's shell is untouched
 
 
+def test_every_configuration_of_the_span_benchmark_is_one_the_stage_accepts():
+    """``benchmarks/bench_modal_span.py`` measures every configuration of
+    ``modal_span_variants.VARIANTS`` by default: each must resolve through the stage's own
+    config checks (a variant the checks refuse stopped the whole benchmark), with its keys set
+    on the stage's parameters."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "modal_span_variants.py"
+    spec = importlib.util.spec_from_file_location("modal_span_variants", path)
+    variants = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(variants)
+    cfg = _config(SECTION)
+    for name, variant in variants.VARIANTS.items():
+        params = variants.variant_params(cfg, variant)
+        expected = {k: v for k, v in variant.items() if k in params.physics}
+        assert {k: params.physics[k] for k in expected} == expected, name
+        assert params.modal.clamp_strip_mm == float(variant.get("clamp_strip_mm", 0.0)), name
+
+
 @pytest.fixture(scope="module")
 def template():
     from scan2morph.template import build_template
