@@ -960,12 +960,58 @@ def test_obj_whose_mtl_is_missing_is_refused_unless_the_sheet_gives_the_texture(
     other = _textured_obj(small_scan, tmp_path / "second")
     mtl = other.parent / "material.mtl"
     mtl.write_text(mtl.read_text().replace("newmtl material_0", "newmtl something_else"))
+    with pytest.raises(InputError, match=r"usemtl 'material_0' is not in mtllib 'material.mtl'"):
+        read_mesh(other)
+    other.write_text(re.sub(r"(?m)^usemtl .*\n", "", other.read_text()))  # faces name none
     with pytest.raises(InputError, match=r"mtllib 'material.mtl' holds no material the faces"):
         read_mesh(other)
     (tmp_path / "plain").mkdir()
     plain = _textured_obj(small_scan, tmp_path / "plain", uv=False)
     plain.write_text("mtllib gone.mtl\nusemtl material_0\n" + plain.read_text())
     assert colour_source(read_mesh(plain)) == "shading"
+
+
+def _split_material(obj, second: str):
+    """Give the last half of an OBJ's faces the material ``second`` (a ``usemtl`` line)."""
+    lines = obj.read_text().splitlines()
+    faces = [k for k, line in enumerate(lines) if line.startswith("f ")]
+    lines.insert(faces[len(faces) // 2], f"usemtl {second}")
+    obj.write_text("\n".join(lines) + "\n")
+
+
+def test_obj_materials_are_checked_against_their_mtl(small_scan, tmp_path):
+    """trimesh packs an OBJ's materials into one image: a material the MTL lacks became a tile
+    of its grey stand-in (those faces rendered flat grey, the mesh read as textured), and two
+    colour-only materials (``Kd``) became an image of flat tiles (read as a texture). A name the
+    MTL lacks is refused, naming the line, the material and the MTL's materials; colour-only
+    materials, however many, are shading; several materials with images are a texture. The
+    word ``mtllib`` in a comment above the mtllib line (trimesh takes the name after its
+    first occurrence) does not lose the material."""
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import colour_source, read_mesh
+
+    (tmp_path / "undefined").mkdir()
+    obj = _textured_obj(small_scan, tmp_path / "undefined")
+    _split_material(obj, "zz")
+    line = obj.read_text().splitlines().index("usemtl zz") + 1
+    match = rf"face.obj: line {line}: usemtl 'zz' is not in mtllib 'material.mtl' \(its materials: 'material_0'\)"
+    with pytest.raises(InputError, match=match):
+        read_mesh(obj)
+    (problem,) = take_file_problems("mesh", {"mesh": obj})
+    assert re.search(match, problem), problem
+    mtl = obj.parent / "material.mtl"
+    second = mtl.read_text().replace("newmtl material_0", "newmtl zz")
+    mtl.write_text(mtl.read_text() + "\n" + second)
+    assert colour_source(read_mesh(obj)) == "texture"  # both materials have the image
+    colours = _colour_only_obj(small_scan, tmp_path / "colours", uv=True)
+    _split_material(colours, "green")
+    mtl = colours.parent / "material.mtl"
+    mtl.write_text(mtl.read_text() + "newmtl green\nKd 0.2 0.8 0.2\n")
+    assert colour_source(read_mesh(colours)) == "shading"
+    (tmp_path / "comment").mkdir()
+    commented = _textured_obj(small_scan, tmp_path / "comment")
+    commented.write_text("# converted by mtllib-tool 2.1\n" + commented.read_text())
+    assert colour_source(read_mesh(commented)) == "texture"
 
 
 def _colour_only_obj(scan, folder, uv):

@@ -200,7 +200,9 @@ def _detected(takes, seed: int, template=None, params=None):
     return landmarks.second_pass(found, take, (xyz_t, color_t), params, template)
 
 
-def test_a_detection_that_folds_the_fit_goes_towards_the_neutrals_points_carried_rigidly(takes):
+def test_a_detection_that_folds_the_fit_goes_towards_the_neutrals_points_carried_rigidly(
+    takes, monkeypatch
+):
     """A detection 8 px off (a real face's, for the synthetic-trained detector) that folds the
     car take's template fit after the second pass: without the fold test the fit leaves the
     take out; with it the points go to the neutral's carried rigidly (the neutral's true
@@ -247,6 +249,19 @@ def test_a_detection_that_folds_the_fit_goes_towards_the_neutrals_points_carried
     after = np.median(np.linalg.norm(got.points - true_t, axis=1))
     print(f"\nunfolded {share:.0%}: median error {before:.2f} -> {after:.2f} px")
     assert after < before
+    # part of the way (the steps' first share folds no more here): each moved point and its
+    # confidence a blend of the detection's (0.4, or 0.7 where tracking blended it) and the
+    # neutral's (1), not either alone
+    monkeypatch.setattr(landmarks, "UNFOLD_STEPS", (0.5,))
+    half, attrs = _detected(takes, 2, template)
+    assert attrs["landmarks_unfolded"] == 0.5
+    np.testing.assert_allclose(
+        half.points[found], 0.5 * folding.points[found] + 0.5 * carried[found]
+    )
+    moved = np.any(half.points != folding.points, axis=1)
+    np.testing.assert_allclose(half.confidence[moved], 0.5 + 0.5 * folding.confidence[moved])
+    assert (folding.confidence[moved] < half.confidence[moved]).all()
+    assert (half.confidence[moved] < 1.0).all()
 
 
 def test_a_detection_that_does_not_fold_is_left_as_it_is(takes):

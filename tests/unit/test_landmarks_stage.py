@@ -84,10 +84,26 @@ def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
         said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
     assert said["n"].startswith(message + "; the neutral's points place the template")
     assert said["s"] == (
-        message + "; its refinement measured where its skin went on 57% of the face, a median "
-        "4.3 px from the landmarks' fit: there the take's own detection error is taken up"
+        message + "; its refinement (by its texture) measured where its skin went on 57% of the "
+        "face, a median 4.3 px from the landmarks' fit: there the take's own detection error is "
+        "taken up"
     )
     assert said["v"] == message
+    # refined by the surface's shape, it says so; moved by the takes' consensus, the
+    # consensus's numbers are the ones that count (motion reads its mesh)
+    shape = refine | {"shape_used": True}
+    consensus = {"confident_share": 0.81, "median_correction_px": 1.94}
+    for extra, expected in (
+        ({paths.refine_group("s"): shape}, "its refinement (by the surface's shape) measured where "
+         "its skin went on 57% of the face, a median 4.3 px"),
+        ({paths.refine_group("s"): shape, paths.consensus_group("s"): consensus}, "the takes' "
+         "consensus (their shared texture) measured where its skin went on 81% of the face, a "
+         "median 1.9 px"),
+    ):  # fmt: skip
+        write_part(path, data, attrs=attrs | extra)
+        with h5py.File(path) as h5:
+            said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+        assert said["s"].startswith(message + "; " + expected), said["s"]
 
 
 def test_params_from_the_whole_config():

@@ -36,7 +36,9 @@ from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
 from scan2morph.io.mesh_file import (  # noqa: E402
+    ObjMaterials,
     check_format,
+    check_obj_materials,
     check_obj_text,
     load_problem,
     referenced_textures,
@@ -136,7 +138,6 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     A mesh without texture and vertex colours (geometry only, or a material with a colour and
     no image) is returned without colour: :func:`read_mesh_take` renders it with shading.
     """
-    import trimesh
 
     path = Path(path)
     if not path.is_file():
@@ -148,10 +149,12 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
             path, "mesh: the file is empty (0 bytes; expected an OBJ, PLY or glTF/GLB)"
         )
     check_format(path)
+    materials = None
     if path.suffix.lower() == ".obj":
         check_obj_text(path)
+        materials = check_obj_materials(path)
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        loaded = _load(path, materials)
     except Exception as exc:  # trimesh raises many kinds on corrupt files
         raise InputError(path, load_problem(exc, path)) from None
     faces = getattr(loaded, "faces", None)
@@ -168,16 +171,33 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
             f"(the first: vertex {bad[0] + 1}); expected finite numbers",
         )
     nonzero_triangles(loaded, str(path))
-    visual = _colour_visual(loaded, path, texture)
+    visual = _colour_visual(loaded, path, texture, materials)
     if visual is not loaded.visual:  # a vertex-coloured or geometry-only mesh is kept as read
         loaded.visual = visual
     return loaded
 
 
-def _colour_visual(loaded, path: Path, texture):
+def _load(path: Path, materials: ObjMaterials | None):
+    """trimesh's mesh of the file; an OBJ whose text holds ``mtllib`` before its ``mtllib`` line
+    (a comment: ``# converted by mtllib-tool``) read with that line put first (trimesh takes the
+    name after the text's first ``mtllib``, and would read no material)."""
+    import io
+
+    import trimesh
+
+    if materials is None or not materials.misread or materials.mtllib is None:
+        return trimesh.load(path, force="mesh", process=False)
+    text = f"mtllib {materials.mtllib}\n".encode() + path.read_bytes()
+    resolver = trimesh.resolvers.FilePathResolver(path)
+    return trimesh.load(
+        io.BytesIO(text), file_type="obj", resolver=resolver, force="mesh", process=False
+    )
+
+
+def _colour_visual(loaded, path: Path, texture, materials: ObjMaterials | None = None):
     """The visuals :func:`read_mesh` returns: the sheet's ``texture`` on the mesh's UVs, the
-    file's own texture (unlit), its vertex colours, or none (geometry only: a material with a
-    colour, ``Kd``, and no image is no texture)."""
+    file's own texture (unlit), its vertex colours, or none (geometry only: an OBJ whose
+    materials give colours, ``Kd``, and no image is no texture, however many they are)."""
     import trimesh
 
     visual = loaded.visual
@@ -192,6 +212,8 @@ def _colour_visual(loaded, path: Path, texture):
         return _unlit_texture(uv, Image.fromarray(read_color(texture)))
     if visual.kind != "texture":
         return visual
+    if materials is not None and materials.colour_only:
+        return trimesh.visual.ColorVisuals(loaded)
     material = visual.material
     image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
     if uv is not None and (why := stand_in_problem(path, image)):  # trimesh's grey stand-in

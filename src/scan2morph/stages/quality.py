@@ -109,20 +109,30 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
 def _what_it_does(h5: h5py.File, take: str) -> str:
     """What a doubtful detection's error does to the model, for the report's warning: the
     neutral's points place the template on the face; another take's error is taken up where its
-    refinement followed the skin from the neutral (``""`` when it did not run)."""
+    refinement followed the skin from the neutral (by the skin's texture, or by the surface's
+    shape where the refinement said so), and for a take the takes' consensus moved, where that
+    consensus did, with its own numbers (``""`` when neither ran)."""
     if str(h5[paths.TAKES][take].attrs.get("kind", "")) == "neutral":
         return (
             "; the neutral's points place the template on the face: their error moves which "
             "skin each vertex is (a mouth-corner vertex off the corner), not the takes' motions"
         )
     group = h5.get(paths.refine_group(take))
-    attrs = group.attrs if group is not None else {}
+    refine = group.attrs if group is not None else {}
+    consensus = h5.get(paths.consensus_group(take))
+    if consensus is not None and "confident_share" in consensus.attrs:
+        attrs, what = consensus.attrs, "the takes' consensus (their shared texture)"
+    elif bool(refine.get("used", False)):
+        by = "the surface's shape" if bool(refine.get("shape_used", False)) else "its texture"
+        attrs, what = refine, f"its refinement (by {by})"
+    else:
+        return ""
     share = float(attrs.get("confident_share", np.nan))
     moved = float(attrs.get("median_correction_px", np.nan))
-    if not (bool(attrs.get("used", False)) and np.isfinite(share) and np.isfinite(moved)):
+    if not (np.isfinite(share) and np.isfinite(moved)):
         return ""
     return (
-        f"; its refinement measured where its skin went on {share:.0%} of the face, a median "
+        f"; {what} measured where its skin went on {share:.0%} of the face, a median "
         f"{moved:.1f} px from the landmarks' fit: there the take's own detection error is taken "
         "up"
     )
