@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 from jsonschema import Draft202012Validator, validators
 
-from scan2morph.config_schema import RENAMED_KEYS, load_schema
+from scan2morph.config_schema import INFINITE, RENAMED_KEYS, integral_value, load_schema
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
 from scan2morph.stages import (
@@ -139,8 +139,15 @@ def _subschema(schema: dict, column: str, source: str) -> dict:
     return node
 
 
+#: A cell's spellings of infinity (YAML's and Python's), for a key whose schema allows it.
+_INFINITIES = {".inf": math.inf, "+.inf": math.inf, "-.inf": -math.inf}
+
+
 def _parse_value(text: str):
-    """A cell's text as int, float, bool or str (YAML-like, but 1e-3 is a float)."""
+    """A cell's text as int, float, bool or str (YAML-like, but 1e-3 is a float; ``.inf`` as
+    YAML writes infinity)."""
+    if text.lower() in _INFINITIES:
+        return _INFINITIES[text.lower()]
     for convert in (int, float):
         try:
             value = convert(text)
@@ -237,8 +244,12 @@ def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTab
             where = f"line {n}, column {column!r}"
             if not cell:
                 raise InputError(source, f"{where}: empty value")
-            value = _parse_value(cell)
-            if isinstance(value, float) and not math.isfinite(value):
+            sub = checks[column].schema
+            # as the config takes them: an integral float at an integer key is the integer
+            # (10.0, 1e1), and an infinity only where the key says what it means (.inf: no limit)
+            value = integral_value(_parse_value(cell), sub)
+            infinite = isinstance(value, float) and not math.isfinite(value)
+            if infinite and (value != value or not sub.get(INFINITE)):
                 raise InputError(source, f"{where}: {cell!r} is not a finite number")
             error = next(iter(checks[column].iter_errors(value)), None)
             if error is not None:
