@@ -14,6 +14,7 @@ comes from the stage modules (``SECTIONS``), which datasets a stage writes from
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -40,6 +41,8 @@ from scan2morph.stages import (
 )
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
+
+log = logging.getLogger("scan2morph")
 
 #: The stages a sweep can re-run, in pipeline order (the accuracy stage always follows).
 _MODULES = {
@@ -369,3 +372,15 @@ def rerun_accuracy(
     data |= accuracy.truth_datasets(truths)
     params = accuracy.Params.from_config(run.config)
     return accuracy.run(run.template, run.subject, data, params).files["accuracy"]
+
+
+def combination_accuracy(*args, **kwargs) -> dict:
+    """:func:`rerun_accuracy`, or, when a stage refuses the subject with the combination's
+    values (a stricter fit that leaves the neutral out), ``{"summary": {}, "refused": why}``:
+    the combination's row of the summary then has no metrics and says why, and the other
+    combinations are still summarised (the same arguments as :func:`rerun_accuracy`)."""
+    try:
+        return rerun_accuracy(*args, **kwargs)
+    except InputError as exc:
+        log.warning("the combination is refused: %s", exc)
+        return {"summary": {}, "refused": str(exc)}

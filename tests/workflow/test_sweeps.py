@@ -389,6 +389,37 @@ def test_the_sweep_summary_table_carries_its_dictionary(tmp_path):
     assert dictionary.loc["stereo_coverage_min", "unit"] == "fraction"
 
 
+def test_a_combination_whose_stages_refuse_the_subject_is_a_row_that_says_why(
+    tmp_path, monkeypatch
+):
+    """A stage refusing the subject with a combination's values (a stricter fit leaving the
+    neutral out) stopped the whole sweep, and the previous table's summary stayed in place: the
+    combination is now a row with no metrics and the reason, and the others are summarised."""
+    from scan2morph import sweep as sweep_lib
+
+    def refuse(*args, **kwargs):
+        raise InputError("synth01/neutral", "only 89.7% of the template's vertices fall on range")
+
+    monkeypatch.setattr(sweep_lib, "rerun_accuracy", refuse)
+    refused = sweep_lib.combination_accuracy({}, None, {}, "repair")
+    assert refused == {
+        "summary": {},
+        "refused": "synth01/neutral: only 89.7% of the template's vertices fall on range",
+    }
+    results = _results()
+    results[2] = (results[2][0], results[2][1], refused)
+    table = write_sweep_summary(
+        results, _PARAMS, tmp_path / "summary.tsv", tmp_path / "summary.png", _DEFAULTS
+    )
+    assert table.columns[-1] == "refused"
+    assert table["refused"].iloc[2].startswith("synth01/neutral: only 89.7%")
+    assert table["refused"].drop(index=2).isna().all()
+    assert table.drop(columns=[*_PARAMS, "subject", "refused"]).iloc[2].isna().all()
+    back = pd.read_csv(tmp_path / "summary.tsv", sep="\t", comment="#")
+    pd.testing.assert_frame_equal(back, table, check_dtype=False)
+    assert (tmp_path / "summary.png").stat().st_size > 0
+
+
 @pytest.mark.slow
 def test_sweeps_are_not_part_of_the_default_target(sweep):
     res = _snakemake(sweep.work, sweep.configfile, "-n", "--quiet", "rules")
