@@ -117,12 +117,12 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
                 if isinstance(subschema, dict) and "default" in subschema:
                     instance.setdefault(name, copy.deepcopy(subschema["default"]))
                 if name in instance:
-                    instance[name] = _integral(instance[name], subschema)
+                    instance[name] = integral_value(instance[name], subschema)
         yield from keyword["properties"](validator, props, instance, sub)
 
     def items_as_int(validator, items, instance, sub):
         if isinstance(instance, list):
-            instance[:] = [_integral(item, items) for item in instance]
+            instance[:] = [integral_value(item, items) for item in instance]
         yield from keyword["items"](validator, items, instance, sub)
 
     filling = validators.extend(
@@ -142,7 +142,7 @@ def validate_config(config: dict, schema: str | PathLike[str], source: str = "co
     return config
 
 
-def _integral(value: object, schema: object) -> object:
+def integral_value(value: object, schema: object) -> object:
     """``value`` as an ``int`` when it is an integral float (``2.0``, as YAML reads it) and
     ``schema`` takes integers but no other numbers; else ``value`` unchanged.
 

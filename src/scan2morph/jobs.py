@@ -12,7 +12,7 @@ import math
 import os
 import secrets
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -186,6 +186,15 @@ def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
         for block in iter(lambda: fh.read(chunk), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def files_sha256(files: Mapping[str, str | Path | Sequence[str | Path]]) -> dict[str, list[str]]:
+    """:func:`sha256_file` of a take's input files, by sheet column (a column of several files,
+    an RGB-D take's depth frames: one each, in order)."""
+    return {
+        role: [sha256_file(f) for f in ([paths] if isinstance(paths, (str, Path)) else paths)]
+        for role, paths in files.items()
+    }
 
 
 def config_sha256(config: dict) -> str:

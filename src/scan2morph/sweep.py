@@ -14,6 +14,7 @@ comes from the stage modules (``SECTIONS``), which datasets a stage writes from
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -24,7 +25,7 @@ import numpy as np
 import pandas as pd
 from jsonschema import Draft202012Validator, validators
 
-from scan2morph.config_schema import RENAMED_KEYS, load_schema
+from scan2morph.config_schema import INFINITE, RENAMED_KEYS, integral_value, load_schema
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import Truth
 from scan2morph.stages import (
@@ -40,6 +41,8 @@ from scan2morph.stages import (
 )
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
+
+log = logging.getLogger("scan2morph")
 
 #: The stages a sweep can re-run, in pipeline order (the accuracy stage always follows).
 _MODULES = {
@@ -139,8 +142,15 @@ def _subschema(schema: dict, column: str, source: str) -> dict:
     return node
 
 
+#: A cell's spellings of infinity (YAML's and Python's), for a key whose schema allows it.
+_INFINITIES = {".inf": math.inf, "+.inf": math.inf, "-.inf": -math.inf}
+
+
 def _parse_value(text: str):
-    """A cell's text as int, float, bool or str (YAML-like, but 1e-3 is a float)."""
+    """A cell's text as int, float, bool or str (YAML-like, but 1e-3 is a float; ``.inf`` as
+    YAML writes infinity)."""
+    if text.lower() in _INFINITIES:
+        return _INFINITIES[text.lower()]
     for convert in (int, float):
         try:
             value = convert(text)
@@ -237,8 +247,12 @@ def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTab
             where = f"line {n}, column {column!r}"
             if not cell:
                 raise InputError(source, f"{where}: empty value")
-            value = _parse_value(cell)
-            if isinstance(value, float) and not math.isfinite(value):
+            sub = checks[column].schema
+            # as the config takes them: an integral float at an integer key is the integer
+            # (10.0, 1e1), and an infinity only where the key says what it means (.inf: no limit)
+            value = integral_value(_parse_value(cell), sub)
+            infinite = isinstance(value, float) and not math.isfinite(value)
+            if infinite and (value != value or not sub.get(INFINITE)):
                 raise InputError(source, f"{where}: {cell!r} is not a finite number")
             error = next(iter(checks[column].iter_errors(value)), None)
             if error is not None:
@@ -358,3 +372,15 @@ def rerun_accuracy(
     data |= accuracy.truth_datasets(truths)
     params = accuracy.Params.from_config(run.config)
     return accuracy.run(run.template, run.subject, data, params).files["accuracy"]
+
+
+def combination_accuracy(*args, **kwargs) -> dict:
+    """:func:`rerun_accuracy`, or, when a stage refuses the subject with the combination's
+    values (a stricter fit that leaves the neutral out), ``{"summary": {}, "refused": why}``:
+    the combination's row of the summary then has no metrics and says why, and the other
+    combinations are still summarised (the same arguments as :func:`rerun_accuracy`)."""
+    try:
+        return rerun_accuracy(*args, **kwargs)
+    except InputError as exc:
+        log.warning("the combination is refused: %s", exc)
+        return {"summary": {}, "refused": str(exc)}

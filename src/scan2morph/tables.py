@@ -429,7 +429,13 @@ def sweep_dictionary(
                 f"(schemas/config.schema.yaml){default}",
             )
         )
-    return (*swept, SUBJECT, *(accuracy_column(m) for m in metrics))
+    refused = Column(
+        "refused",
+        "-",
+        "why the combination's stages refused the subject (its metrics are then NA); NA when "
+        "they did not",
+    )
+    return (*swept, SUBJECT, *(accuracy_column(m) for m in metrics), refused)
 
 
 def describe(columns: Iterable[str], dictionary: Sequence[Column]) -> list[Column]:

@@ -112,7 +112,6 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
             r"line 2, column 'smoothing.iterations': 3.5 is not of type 'integer'",
         ),
         ("smoothing.iterations\nmany\n", r"'many' is not of type 'integer'"),
-        ("smoothing.iterations\n30.0\n", r"30.0 is not of type 'integer'"),
         ("smoothing.w\n1.5\n", r"1.5 is greater than the maximum of 1"),
         ("smoothing.max_stretch\n1\n", r"1 is less than or equal to the minimum of 1"),
         ("smoothing.confidence_relief\n1.5\n", r"1.5 is greater than the maximum of 1"),
@@ -138,6 +137,9 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
         ("smoothing.iterations\tsmoothing.w\n30\t\n", r"line 2, column 'smoothing.w': empty value"),
         ("smoothing.w\tsmoothing.w\n0.1\t0.2\n", r"header: repeated column"),
         ("smoothing.w\nnan\n", r"'nan' is not a finite number"),
+        ("smoothing.iterations\n.inf\n", r"'.inf' is not a finite number"),
+        ("mask.radius_mm\ninf\n", r"'inf' is not a finite number"),
+        ("smoothing.max_stretch\n-.inf\n", r"-inf is less than or equal to the minimum of 1"),
         ("motion_noise.draws\n1\n", r"1 is less than the minimum of 2"),
         ("motion_noise.click_noise_px\n0\n", r"0 is not valid under any of the given schemas"),
         ("motion_noise.click_noise_px\nmeasured\n", r"'measured' is not valid under any"),
@@ -146,6 +148,19 @@ def test_a_good_table_is_read_with_typed_values(tmp_path):
 def test_a_bad_table_is_refused_naming_line_column_and_rule(tmp_path, text, message):
     with pytest.raises(InputError, match=message):
         read_sweep_table(_table(tmp_path, text), SCHEMA)
+
+
+def test_a_table_takes_values_as_the_config_takes_them(tmp_path):
+    """An integral float at an integer key is the integer (10.0 and 1e1 are 10, the same row as
+    10), and ``.inf`` is taken where the key's schema says what it means (``x-infinite``:
+    ``smoothing.max_stretch``, no limit), as the config takes them."""
+    table = read_sweep_table(_table(tmp_path, "smoothing.iterations\n10.0\n30\n"), SCHEMA)
+    assert table.rows == ({"smoothing.iterations": 10}, {"smoothing.iterations": 30})
+    assert type(table.rows[0]["smoothing.iterations"]) is int
+    with pytest.raises(InputError, match=r"line 3: repeats the combination of line 2"):
+        read_sweep_table(_table(tmp_path, "smoothing.iterations\n10\n1e1\n"), SCHEMA)
+    table = read_sweep_table(_table(tmp_path, "smoothing.max_stretch\n.inf\n1.5\n"), SCHEMA)
+    assert [r["smoothing.max_stretch"] for r in table.rows] == [np.inf, 1.5]
 
 
 def test_a_string_value_must_fit_in_a_folder_name(tmp_path):
@@ -372,6 +387,37 @@ def test_the_sweep_summary_table_carries_its_dictionary(tmp_path):
     assert dictionary.loc["mask.radius_mm", "unit"] == "mm"
     assert dictionary.loc["align_rotation_deg_max", "unit"] == "deg"
     assert dictionary.loc["stereo_coverage_min", "unit"] == "fraction"
+
+
+def test_a_combination_whose_stages_refuse_the_subject_is_a_row_that_says_why(
+    tmp_path, monkeypatch
+):
+    """A stage refusing the subject with a combination's values (a stricter fit leaving the
+    neutral out) stopped the whole sweep, and the previous table's summary stayed in place: the
+    combination is now a row with no metrics and the reason, and the others are summarised."""
+    from scan2morph import sweep as sweep_lib
+
+    def refuse(*args, **kwargs):
+        raise InputError("synth01/neutral", "only 89.7% of the template's vertices fall on range")
+
+    monkeypatch.setattr(sweep_lib, "rerun_accuracy", refuse)
+    refused = sweep_lib.combination_accuracy({}, None, {}, "repair")
+    assert refused == {
+        "summary": {},
+        "refused": "synth01/neutral: only 89.7% of the template's vertices fall on range",
+    }
+    results = _results()
+    results[2] = (results[2][0], results[2][1], refused)
+    table = write_sweep_summary(
+        results, _PARAMS, tmp_path / "summary.tsv", tmp_path / "summary.png", _DEFAULTS
+    )
+    assert table.columns[-1] == "refused"
+    assert table["refused"].iloc[2].startswith("synth01/neutral: only 89.7%")
+    assert table["refused"].drop(index=2).isna().all()
+    assert table.drop(columns=[*_PARAMS, "subject", "refused"]).iloc[2].isna().all()
+    back = pd.read_csv(tmp_path / "summary.tsv", sep="\t", comment="#")
+    pd.testing.assert_frame_equal(back, table, check_dtype=False)
+    assert (tmp_path / "summary.png").stat().st_size > 0
 
 
 @pytest.mark.slow

@@ -14,6 +14,7 @@ import pytest
 import trimesh
 import yaml
 
+from scan2morph.jobs import sha256_file
 from scan2morph.synth.mesh_scan import make_mesh_take
 from tests.support.workflow_api import run_workflow
 
@@ -39,7 +40,9 @@ def test_a_mesh_in_cm_passes_the_check_with_its_unit_and_stops_its_subject_witho
     assert not run_workflow(tmp_path, config, targets)  # the subject without its unit stops
     for subject in ("given", "given_as_number"):
         report = json.loads((tmp_path / "results" / subject / "check.json").read_text())
+        files = report.pop("files")  # the checksums of the files each verdict was found on
         assert report == {"subject": subject, "problems": [], "takes": {}}
+        assert files == {"neutral": {"mesh": [sha256_file(tmp_path / "head_cm.ply")]}}
     assert not (tmp_path / "results" / "missing" / "check.json").exists()
     log = (tmp_path / "logs" / "check_subject" / "missing.log").read_text()
     assert "head_cm.ply: mesh size: " in log

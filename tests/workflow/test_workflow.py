@@ -471,6 +471,42 @@ def test_a_config_change_reruns_only_the_stages_it_reaches(cohort, tmp_path):
         )
 
 
+def test_a_scan_changed_after_a_run_is_taken_up_by_the_next_run(cohort, tmp_path):
+    """A take's file cut short after a run, then mended: each time one run re-runs that take
+    and its subject (before, it re-ran only the subject's check and ended successfully with the
+    old results: Snakemake skipped a take whose ancient input's job re-ran, until a second run),
+    and a run after that changes nothing."""
+    work, _, _ = cohort
+    copy = tmp_path / "wf"
+    shutil.copytree(work, copy, symlinks=True)
+    cfg = yaml.safe_load((copy / "tiny.yaml").read_text())
+    cfg["subjects"] = str(copy / "scans" / "subjects.tsv")  # the copy's own scans
+    (copy / "mine.yaml").write_text(yaml.safe_dump(cfg))
+    store = copy / "results" / "alice" / "alice.h5"
+    targets = [str(store.relative_to(copy))]
+    assert run_workflow(copy, copy / "mine.yaml", targets=targets)
+    car = copy / "scans" / "alice" / "car.abs.gz"
+    good = car.read_bytes()
+
+    def failed():
+        with open_store(store) as h5:
+            group = h5.get(paths.FAILED)
+            return {t: group[t]["reason"].asstr()[()] for t in group} if group else {}
+
+    car.write_bytes(good[:3000])
+    assert run_workflow(copy, copy / "mine.yaml", targets=targets)
+    (reason,) = failed().values()
+    assert "car.abs.gz: truncated gzip stream" in reason
+    car.write_bytes(good)
+    assert run_workflow(copy, copy / "mine.yaml", targets=targets)
+    assert failed() == {}
+    with open_store(store) as h5:
+        assert set(h5["takes"]) == {"neutral", "car"}
+    built = store.stat().st_mtime_ns
+    assert run_workflow(copy, copy / "mine.yaml", targets=targets)
+    assert store.stat().st_mtime_ns == built
+
+
 # --- one job per subject: its stages' files, logs and benchmarks; re-runs; a failed stage ---
 def test_each_stage_of_a_subject_job_keeps_its_log_and_benchmark(cohort):
     """A subject's own stages run in one job (rule subject; subject_synthetic with its

@@ -101,6 +101,11 @@ def get_subject_problems(wildcards):
     return PROBLEMS.get(wildcards.subject, [])
 
 
+def get_take_problems(wildcards):
+    """The sheet's problems of one take (its job's verdict when there are any)."""
+    return [p for t, p in PROBLEMS.get(wildcards.subject, []) if t == wildcards.take]
+
+
 def get_subject_rows(wildcards):
     """subject, take, kind, label, modality and units of each of the subject's rows (its check
     job's params: the units scale a mesh before its size is checked)."""

@@ -20,7 +20,9 @@ TAKE_PARTS = {
 rule check_subject:
     """Check every sheet row and input file of a subject at once (cheap reads): stop the subject on its own or its neutral's problems, name the takes to leave out."""
     input:
-        get_subject_files_flat,
+        # ancient: a file's new content is checked by its own take's job (check.take_verdict),
+        # which re-runs for it; this job re-runs for a new sheet row or file
+        ancient(get_subject_files_flat),
     output:
         "results/{subject}/check.json",
     log:
@@ -43,8 +45,11 @@ rule take:
     """Run one take's stages in one process, each only when its part is out of date; the other takes of the subject wait for the neutral's."""
     input:
         unpack(get_take_job_inputs),
-        # ancient: a rewritten check.json (another take's file changed) re-ingests no take
-        check=ancient("results/{subject}/check.json"),
+        # not ancient: Snakemake (9.27) skipped a take whose ancient input's job re-ran, even
+        # when the take's own file had changed, until a second run; check.json is rewritten only
+        # when the sheet's rows or files change (and a take whose parts are up to date then
+        # runs no stage)
+        check="results/{subject}/check.json",
         template="resources/template.npz",
     output:
         **TAKE_PARTS,
@@ -64,6 +69,7 @@ rule take:
         runtime=12,
     params:
         row=take_row,
+        problems=get_take_problems,
         roles=get_take_roles,
         stereo=get_stereo_params,
         mesh_camera=get_mesh_camera_params,

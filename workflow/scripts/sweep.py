@@ -5,7 +5,7 @@ from scan2morph.evaluate.truth import read_truth
 from scan2morph.jobs import run_job, write_json
 from scan2morph.stages import Run, Subject
 from scan2morph.store import read_parts
-from scan2morph.sweep import read_store, rerun_accuracy
+from scan2morph.sweep import combination_accuracy, read_store
 from scan2morph.template import load_template
 
 
@@ -15,7 +15,9 @@ def main(snakemake):
         subject = Subject(f"{w.subject} ({w.params})", p.kinds, p.labels)
         run = Run(subject, load_template(inp.template), p.settings)
         truths = {t: read_truth(f) for t, f in zip(p.kinds, inp.truths, strict=True)}
-        report = rerun_accuracy(read_store(inp.store), run, truths, p.start, read_parts(inp.raw))
+        report = combination_accuracy(
+            read_store(inp.store), run, truths, p.start, read_parts(inp.raw)
+        )
         write_json(snakemake.output[0], report | {"sweep": dict(p.row)})
 
     run_job(snakemake.log[0], job)

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 from scan2morph.errors import InputError
 from scan2morph.io import write_landmarks3d, write_obj, write_pts
 from scan2morph.io.obj import write_failed_obj
-from scan2morph.jobs import sha256_file, write_json
+from scan2morph.jobs import files_sha256, sha256_file, write_json
 from scan2morph.sheet import PATH_SEPARATOR, mm_per_unit
 from scan2morph.stages import Take, align, check, fit, ingest, landmarks, refine, repair
 from scan2morph.stages.failure import run_take_job
@@ -167,8 +167,6 @@ def job_context(snakemake):
         inp=inp,
         out=out,
         own=own,
-        # the subject's check job's verdict on the take ('': none)
-        problem=check.take_problem(json.loads(Path(inp.check).read_text()), w.take),
         params=functools.cache(lambda stage: MODULES[stage].Params.from_config(snakemake.config)),
         config=snakemake.config,
         reads=reads,
@@ -213,15 +211,20 @@ def print_params(j, stage):
 def file_checksums(j, scriptdir):
     """SHA-256 of the files the stages read besides parts: this script, the template and the
     take's input files (by sheet role, those given)."""
-
-    def each(files):
-        return [sha256_file(f) for f in ([files] if isinstance(files, str) else files)]
-
     return {
         "script": sha256_file(Path(scriptdir) / "take.py"),
         "template": sha256_file(j.inp.template),
         # the files that exist (a missing one is the check's problem: ingest refuses the take)
-        "files": {role: each(j.inp[role]) for role in j.p.roles if hasattr(j.inp, role)},
+        "files": files_sha256(input_files(j)),
+    }
+
+
+def input_files(j):
+    """The take's input files that exist, by sheet column (a column of several: a list)."""
+    return {
+        role: j.inp[role] if isinstance(j.inp[role], str) else list(j.inp[role])
+        for role in j.p.roles
+        if hasattr(j.inp, role)
     }
 
 
@@ -241,6 +244,10 @@ def run_stage(j, stage):
 def main(snakemake):
     j = job_context(snakemake)
     sources = file_checksums(j, snakemake.scriptdir)
+    # the verdict on the take ('': none): the subject's check job's, when it read these files
+    take = Take.from_row(j.p.row, files=input_files(j))
+    report = json.loads(Path(j.inp.check).read_text())
+    j.problem = check.take_verdict(report, take, j.p.problems, sources["files"])
     # the neutral's fingerprints: its job's record (for the neutral: this job's own, as it goes)
     neutral_prints = {} if j.own else read_fingerprints(j.inp.get("neutral_stages", ""))
 

@@ -83,10 +83,16 @@ def one_at_a_time(
     return default, {p: differs[p] & (n_diff == 1) for p in params}
 
 
+#: The summary's column saying why a combination's stages refused the subject ('' when they did
+#: not: :func:`scan2morph.sweep.combination_accuracy`).
+REFUSED = "refused"
+
+
 def sweep_summary(
     results: Sequence[tuple[Mapping[str, object], str, Mapping]],
 ) -> pd.DataFrame:
-    """One row per combination and subject: the swept values, ``subject``, the accuracy summary.
+    """One row per combination and subject: the swept values, ``subject``, the accuracy summary
+    and :data:`REFUSED`.
 
     Parameters
     ----------
@@ -101,8 +107,10 @@ def sweep_summary(
         for key, value in accuracy.get("summary", {}).items():
             if value is None or isinstance(value, (int, float)):
                 rec[key] = float("nan") if value is None else float(value)
+        rec[REFUSED] = accuracy.get(REFUSED) or np.nan  # NA: not refused
         records.append(rec)
-    return pd.DataFrame.from_records(records)
+    table = pd.DataFrame.from_records(records)
+    return table[[c for c in table.columns if c != REFUSED] + [REFUSED]]
 
 
 def plot_sweep(
@@ -134,7 +142,7 @@ def plot_sweep(
         The config's value of each swept key (:func:`config_values`); default: the table's first
         row (the sweep table's convention: the papers' values first).
     """
-    metrics = [c for c in table.columns if c not in (*params, "subject")]
+    metrics = [c for c in table.columns if c not in (*params, "subject", REFUSED)]
     if not metrics or not params or table.empty:
         raise InputError("sweep summary", "no accuracy metric or no swept key to plot")
     if defaults is None:
@@ -176,7 +184,7 @@ def write_sweep_summary(
     if not results:
         raise InputError("sweep summary", "no sweep results to summarise")
     table = sweep_summary(results)
-    metrics = [c for c in table.columns if c not in (*params, "subject")]
+    metrics = [c for c in table.columns if c not in (*params, "subject", REFUSED)]
     write_table(table_path, table, sweep_dictionary(params, metrics, defaults))
     plot_sweep(table, params, plot_path, defaults)
     return table

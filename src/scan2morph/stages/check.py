@@ -119,4 +119,39 @@ def take_problem(check: Mapping, take: str) -> str:
     return "; ".join(check.get("takes", {}).get(take, []))
 
 
+def take_verdict(
+    check: Mapping, take: Take, sheet: Sequence[str], checksums: Mapping[str, Sequence[str]]
+) -> str:
+    """A take's problems now, joined into one line ('' if none), for its own job.
+
+    The subject's check job re-runs for a new sheet row or file, not for a file's new content
+    (its files are ``ancient``: a rewritten ``check.json`` would otherwise re-run every take of
+    the subject, and Snakemake, re-running the check, did not re-run the take whose file changed
+    until a second run). So its verdict counts only for the very files it read.
+
+    Parameters
+    ----------
+    check : mapping
+        ``check.json``: the verdicts and, under ``files``, the checksums of the files each
+        take's verdict was found on.
+    take : Take
+        Its ``row`` and ``files`` (the input files that exist), for a check of its own.
+    sheet : sequence of str
+        The sheet's problems of the take (found when the workflow starts: always current).
+    checksums : mapping sheet column -> list of str
+        The SHA-256 of the take's files now (:func:`scan2morph.jobs.files_sha256`).
+
+    Returns
+    -------
+    str
+        The sheet's problems; else the check job's verdict when it read these files; else the
+        take's files checked again (:func:`run`).
+    """
+    if sheet:
+        return "; ".join(sheet)
+    if check.get("files", {}).get(take.take) == {k: list(v) for k, v in checksums.items()}:
+        return take_problem(check, take.take)
+    return "; ".join(run(None, take, Params()).files["problems"])
+
+
 __all__ = ["Params", "check_subject", "run", "take_problem"]

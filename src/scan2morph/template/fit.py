@@ -156,7 +156,7 @@ def fit_take(
         raise InputError(
             source,
             f"only {100 * share:.1f}% of the template's vertices fall on range data (expected at "
-            f"least {100 * min_valid_fraction:.0f}%): the face region has no range data or the "
+            f"least {100 * min_valid_fraction:g}%): the face region has no range data or the "
             "landmarks do not belong to this scan",
         )
     return {
