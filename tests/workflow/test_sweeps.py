@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 
 from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import read_truth
@@ -418,6 +419,24 @@ def test_a_combination_whose_stages_refuse_the_subject_is_a_row_that_says_why(
     back = pd.read_csv(tmp_path / "summary.tsv", sep="\t", comment="#")
     pd.testing.assert_frame_equal(back, table, check_dtype=False)
     assert (tmp_path / "summary.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_another_sweep_table_reruns_no_subject(sweep, tmp_path):
+    """Another table (``sweeps:`` in an extra config file, as docs/configuration.md says) runs
+    its combinations only: the table's path changed the config's hash, and every subject's
+    store, figures and report were built again, and the earlier tables' results went out of
+    date with them."""
+    table = tmp_path / "mine.tsv"
+    table.write_text("smoothing.iterations\n30\n5\n")
+    mine = tmp_path / "mine.yaml"
+    mine.write_text(
+        yaml.safe_dump(yaml.safe_load(sweep.configfile.read_text()) | {"sweeps": str(table)})
+    )
+    res = _snakemake(sweep.work, mine, "sweep_all", "-n", "--quiet", "rules")
+    assert res.returncode == 0, res.stderr
+    rules = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
+    assert "sweep" in rules and not {r for r in rules if r.startswith("subject")}, rules
 
 
 @pytest.mark.slow

@@ -62,7 +62,9 @@ if not SUBJECTS:  # else the run does nothing and says nothing
 PROBLEMS = sheet_problems(
     pd.concat([SHEET, SYNTH]), schema=SCHEMAS / "sheet.schema.yaml"
 )
-CONFIG_SHA256 = config_sha256(config)
+# a subject job's trigger on the config (its stages' fingerprints decide what runs): the sweep
+# table's path reaches no subject stage, and switching tables re-ran every subject
+CONFIG_SHA256 = config_sha256(config, ["sweeps"])
 
 
 # --- lookups in the take table ---

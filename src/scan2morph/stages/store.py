@@ -21,6 +21,10 @@ from scan2morph.template import Template
 
 #: Config section this stage reads.
 SECTIONS = ("quality",)
+#: The config's top-level keys that never reach a store: the report page's settings and the
+#: sweep table's path (left out of the store's ``config_sha256``, so that changing them does not
+#: rebuild the store and every stage after it).
+UNSTORED = ("report", "sweeps")
 log = logging.getLogger("scan2morph")
 
 
@@ -33,7 +37,8 @@ class Params:
     quality : mapping
         The config section ``quality`` (:func:`scan2morph.stages.quality.subject_warnings`).
     config_sha256 : str
-        The run's config hash (:func:`scan2morph.jobs.config_sha256`), a root attribute.
+        The run's config hash without :data:`UNSTORED` (:func:`scan2morph.jobs.config_sha256`),
+        a root attribute.
     layout : mapping
         ``schemas/store.layout.yaml``, loaded (:meth:`with_layout`): the store is described and
         checked by it.
@@ -45,8 +50,9 @@ class Params:
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
-        """From the config's section ``quality`` and the whole config's hash (no layout yet)."""
-        return cls(dict(config["quality"]), config_sha256(config))
+        """From the config's section ``quality`` and the config's hash without :data:`UNSTORED`
+        (no layout yet)."""
+        return cls(dict(config["quality"]), config_sha256(config, UNSTORED))
 
     def with_layout(self, layout: Mapping) -> Params:
         """The same parameters with the store layout."""
