@@ -10,6 +10,7 @@ import json
 import logging
 import math
 import os
+import re
 import secrets
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -61,6 +62,28 @@ def run_job(log_path: str | Path | None, func: Callable[[], object]) -> None:
         log.exception("job failed")
         logging.shutdown()
         raise
+
+
+#: A job log's error line (:func:`run_job`'s format): its time stamp and its message.
+_ERROR_LINE = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ ERROR (.*)$")
+
+
+def job_error(logs: Iterable[str | Path], since: float) -> tuple[str, Path] | None:
+    """The last error a job wrote in this run: the message of the last ``ERROR`` line of the
+    first of ``logs`` written at or after ``since`` (seconds since the epoch) that has one
+    (``bad input: `` left off), and that log; None when none has.
+
+    For the run's last console lines: a subject its check or its own job stopped says why, not
+    Snakemake's ``message: None``.
+    """
+    for path in map(Path, logs):
+        if not path.is_file() or path.stat().st_mtime < since:
+            continue
+        errors = [m.group(1) for m in map(_ERROR_LINE.match, path.read_text().splitlines()) if m]
+        if errors:
+            message = errors[-1]
+            return message.removeprefix("bad input: "), path
+    return None
 
 
 #: Environment variable naming a folder: every job then writes its cProfile statistics there

@@ -53,6 +53,27 @@ def test_bad_input_is_one_line_and_exit_status_1(tmp_path):
     assert "Traceback" not in res.stderr and "bad input" in log
 
 
+def test_a_logs_last_error_is_found_in_this_runs_logs_only(tmp_path):
+    """The run's last console lines name why a subject's job stopped: the last error a job
+    wrote (``bad input: `` left off), from the first of its logs written in this run that has
+    one; a log written before the run, or without an error, says nothing."""
+    import os
+
+    from scan2morph.jobs import job_error
+
+    res, _ = _run(tmp_path, "bad")
+    assert res.returncode == 1
+    log, quiet = tmp_path / "job.log", tmp_path / "quiet.log"
+    quiet.write_text("2026-12-06 15:19:26,823 WARNING car: alignment failed its quality gate\n")
+    since = log.stat().st_mtime
+    assert job_error([quiet, tmp_path / "none.log", log], since) == (
+        "alice/car.pts: n_points: expected 68 (iBUG-68), got 67",
+        log,
+    )
+    os.utime(log, (since - 60, since - 60))  # an earlier run's
+    assert job_error([quiet, log], since) is None
+
+
 def test_a_full_disk_is_one_line(tmp_path):
     res, log = _run(tmp_path, "full")
     assert res.returncode == 1

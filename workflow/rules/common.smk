@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import sys
+import time
 
 import pandas as pd
 
@@ -65,6 +66,8 @@ PROBLEMS = sheet_problems(
 # a subject job's trigger on the config (its stages' fingerprints decide what runs): the sweep
 # table's path reaches no subject stage, and switching tables re-ran every subject
 CONFIG_SHA256 = config_sha256(config, ["sweeps"])
+# when this run started: a job log written since is this run's (report_left_out)
+RUN_START = time.time()
 
 
 # --- lookups in the take table ---
@@ -138,14 +141,24 @@ def synth_files(pattern, takes, modality=None):
 
 
 def report_left_out():
-    """The run's last console lines: every take left out of its subject (from the stores made)."""
+    """The run's last console lines: every subject its check or its own job stopped in this run,
+    and why (its store, report and cohort row, if any, are an earlier run's); every take left
+    out of its subject (from the stores made)."""
     import h5py
 
+    from scan2morph.jobs import job_error
     from scan2morph.store.warnings import read_failures
 
     for subject in SUBJECTS:
         store = Path(f"results/{subject}/{subject}.h5")
-        if store.is_file():
+        logs = [f"logs/check_subject/{subject}.log", f"logs/subject/{subject}.log"]
+        if stopped := job_error(logs, RUN_START):
+            earlier = " (its store, report and cohort row are an earlier run's)"
+            message, log = stopped
+            sys.stderr.write(
+                f"stopped: {subject}: {message} ({log}){earlier if store.is_file() else ''}\n"
+            )
+        elif store.is_file():
             with h5py.File(store, "r") as h5:
                 for failure in read_failures(h5).values():
                     sys.stderr.write(f"left out: {subject}/{failure}\n")

@@ -123,15 +123,17 @@ def get_subject_files(wildcards):
     }
 
 
-def get_subject_files_flat(wildcards):
-    return sorted(
-        {
-            f
-            for files in get_subject_files(wildcards).values()
-            for value in files.values()
-            for f in ([value] if isinstance(value, str) else value)
-        }
-    )
+def get_check_inputs(wildcards):
+    """The subject check job's input files: its neutral's as they are (a neutral whose file
+    changes is checked again, and a problem stops the subject before its takes run), the other
+    takes' ``ancient`` (their job checks a changed file itself: check.take_verdict)."""
+    neutral = get_neutral_take(wildcards)
+    out = set()
+    for take, files in get_subject_files(wildcards).items():
+        for value in files.values():
+            for f in [value] if isinstance(value, str) else value:
+                out.add(f if take == neutral else ancient(f))
+    return sorted(out)
 
 
 def get_neutral_take(wildcards):

@@ -20,9 +20,10 @@ TAKE_PARTS = {
 rule check_subject:
     """Check every sheet row and input file of a subject at once (cheap reads): stop the subject on its own or its neutral's problems, name the takes to leave out."""
     input:
-        # ancient: a file's new content is checked by its own take's job (check.take_verdict),
-        # which re-runs for it; this job re-runs for a new sheet row or file
-        ancient(get_subject_files_flat),
+        # the takes' files ancient: a file's new content is checked by its own take's job
+        # (check.take_verdict), which re-runs for it; this job re-runs for a new sheet row or
+        # file, and for the neutral's new content (a problem of it stops the subject)
+        get_check_inputs,
     output:
         "results/{subject}/check.json",
     log:
