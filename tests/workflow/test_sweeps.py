@@ -231,6 +231,10 @@ def test_a_bad_table_stops_the_run_before_any_job(tmp_path, text, message):
     assert res.returncode != 0
     assert message in res.stderr + res.stdout
     assert not (tmp_path / "results").exists() and not (tmp_path / "logs").exists()
+    # one line, as a bad config's: no stack frames around it
+    (line,) = [x for x in res.stderr.splitlines() if message in x]
+    assert line.startswith("Error: ") and "Traceback" not in res.stderr
+    assert 'File "' not in res.stderr, res.stderr
 
 
 # --- a tiny sweep end to end ---

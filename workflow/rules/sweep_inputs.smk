@@ -9,13 +9,16 @@ from snakemake.utils import Paramspace
 from scan2morph.errors import InputError
 from scan2morph.sweep import read_sweep_table, sweep_settings
 
-SWEEP_TABLE = (
-    read_sweep_table(
-        config["sweeps"], Path(workflow.basedir) / "schemas" / "config.schema.yaml"
+try:  # a bad table stops the run as a bad config does: one line, no traceback
+    SWEEP_TABLE = (
+        read_sweep_table(
+            config["sweeps"], Path(workflow.basedir) / "schemas" / "config.schema.yaml"
+        )
+        if Path(config["sweeps"]).is_file()
+        else None
     )
-    if Path(config["sweeps"]).is_file()
-    else None
-)
+except InputError as exc:
+    stop_run(exc)
 # one folder per combination, results/sweeps/{column}~{value}/.../ (Paramspace instance patterns)
 SWEEP_SPACE = Paramspace(
     SWEEP_TABLE.frame() if SWEEP_TABLE else pd.DataFrame(), single_wildcard="params"
