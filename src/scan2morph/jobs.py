@@ -223,7 +223,8 @@ def files_sha256(files: Mapping[str, str | Path | Sequence[str | Path]]) -> dict
 def config_sha256(config: Mapping, leave_out: Iterable[str] = ()) -> str:
     """SHA-256 of a configuration, independent of key order, without its top-level keys
     ``leave_out`` (those that do not reach what the hash stands for)."""
-    kept = {k: v for k, v in config.items() if k not in set(leave_out)}
+    drop = set(leave_out)
+    kept = {k: v for k, v in config.items() if k not in drop}
     return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()
 
 

@@ -41,6 +41,7 @@ from scan2morph.stages import (
 )
 from scan2morph.stages.part import Run
 from scan2morph.store import paths
+from scan2morph.tables import REFUSED
 
 log = logging.getLogger("scan2morph")
 
@@ -383,4 +384,4 @@ def combination_accuracy(*args, **kwargs) -> dict:
         return rerun_accuracy(*args, **kwargs)
     except InputError as exc:
         log.warning("the combination is refused: %s", exc)
-        return {"summary": {}, "refused": str(exc)}
+        return {"summary": {}, REFUSED: str(exc)}

@@ -412,6 +412,11 @@ def accuracy_column(name: str) -> Column:
     )
 
 
+#: The sweep summary's column saying why a combination's stages refused the subject
+#: (:func:`scan2morph.sweep.combination_accuracy`; NA when they did not).
+REFUSED = "refused"
+
+
 def sweep_dictionary(
     params: Sequence[str], metrics: Iterable[str], defaults: Mapping[str, object] | None = None
 ) -> tuple[Column, ...]:
@@ -430,7 +435,7 @@ def sweep_dictionary(
             )
         )
     refused = Column(
-        "refused",
+        REFUSED,
         "-",
         "why the combination's stages refused the subject (its metrics are then NA); NA when "
         "they did not",

@@ -208,14 +208,14 @@ def print_params(j, stage):
     }
 
 
-def file_checksums(j, scriptdir):
+def file_checksums(j, scriptdir, files):
     """SHA-256 of the files the stages read besides parts: this script, the template and the
-    take's input files (by sheet role, those given)."""
+    take's input ``files`` (:func:`input_files`)."""
     return {
         "script": sha256_file(Path(scriptdir) / "take.py"),
         "template": sha256_file(j.inp.template),
         # the files that exist (a missing one is the check's problem: ingest refuses the take)
-        "files": files_sha256(input_files(j)),
+        "files": files_sha256(files),
     }
 
 
@@ -243,9 +243,10 @@ def run_stage(j, stage):
 
 def main(snakemake):
     j = job_context(snakemake)
-    sources = file_checksums(j, snakemake.scriptdir)
+    files = input_files(j)
+    sources = file_checksums(j, snakemake.scriptdir, files)
     # the verdict on the take ('': none): the subject's check job's, when it read these files
-    take = Take.from_row(j.p.row, files=input_files(j))
+    take = Take.from_row(j.p.row, files=files)
     report = json.loads(Path(j.inp.check).read_text())
     j.problem = check.take_verdict(report, take, j.p.problems, sources["files"])
     # the neutral's fingerprints: its job's record (for the neutral: this job's own, as it goes)

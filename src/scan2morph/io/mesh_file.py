@@ -233,7 +233,7 @@ def check_obj_materials(path: Path) -> ObjMaterials:
     return found
 
 
-def stand_in_problem(path: Path, image) -> str | None:
+def stand_in_problem(path: Path, image, materials: ObjMaterials | None = None) -> str | None:
     """Why a mesh's material ``image`` is trimesh's stand-in for a texture it could not read,
     or None when it is not that stand-in.
 
@@ -242,20 +242,18 @@ def stand_in_problem(path: Path, image) -> str | None:
     or by its own resolver: an absolute path, a subfolder, the bare name) is missing or lacks
     the material the faces use, an OBJ with UVs and no ``mtllib``, a PLY whose texture file is
     missing. Only that stand-in is refused: an MTL trimesh read is the mesh's, whatever its path.
+    ``materials``: the OBJ's (:func:`obj_materials`), when already read.
     """
     if not _placeholder(image):
         return None
     if path.suffix.lower() != ".obj":
         return "the mesh has UVs but its texture image could not be read"
-    text = path.read_bytes().decode("utf-8", errors="replace")
-    found = re.search(r"^\s*mtllib\s+(.+?)\s*$", text, flags=re.M)
-    if found is None:
+    materials = materials or obj_materials(path)
+    if materials.mtllib is None:
         return "the mesh has UVs but names no material (no mtllib line)"
-    name = found.group(1)
-    there = any(p.is_file() for p in (path.parent / name, path.parent / Path(name).name))
-    if there:
-        return f"mtllib {name!r} holds no material the faces use (usemtl)"
-    return f"mtllib {name!r} is missing (the mesh has UVs but no material)"
+    if materials.mtl is not None:
+        return f"mtllib {materials.mtllib!r} holds no material the faces use (usemtl)"
+    return f"mtllib {materials.mtllib!r} is missing (the mesh has UVs but no material)"
 
 
 #: The one colour of trimesh's stand-in image for an OBJ material it could not read (RGBA).
@@ -291,8 +289,8 @@ __all__ = [
     "check_format",
     "check_obj_materials",
     "check_obj_text",
-    "obj_materials",
     "load_problem",
-    "stand_in_problem",
+    "obj_materials",
     "referenced_textures",
+    "stand_in_problem",
 ]

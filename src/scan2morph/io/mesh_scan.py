@@ -216,7 +216,7 @@ def _colour_visual(loaded, path: Path, texture, materials: ObjMaterials | None =
         return trimesh.visual.ColorVisuals(loaded)
     material = visual.material
     image = getattr(material, "image", None) or getattr(material, "baseColorTexture", None)
-    if uv is not None and (why := stand_in_problem(path, image)):  # trimesh's grey stand-in
+    if uv is not None and (why := stand_in_problem(path, image, materials)):  # its grey stand-in
         raise InputError(
             path,
             f"{why}; put the MTL and its texture beside the OBJ or give the texture in the "

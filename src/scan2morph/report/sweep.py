@@ -15,7 +15,7 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
 from scan2morph.errors import InputError, writing
-from scan2morph.tables import accuracy_column, sweep_dictionary, write_table
+from scan2morph.tables import REFUSED, accuracy_column, sweep_dictionary, write_table
 
 #: Panel rows of the plot, one per unit: unit -> axis label (other units follow, by name).
 UNIT_LABELS = {"mm": "mm", "deg": "degrees", "fraction": "fraction", "px": "px", "Hz": "Hz"}
@@ -83,11 +83,6 @@ def one_at_a_time(
     return default, {p: differs[p] & (n_diff == 1) for p in params}
 
 
-#: The summary's column saying why a combination's stages refused the subject ('' when they did
-#: not: :func:`scan2morph.sweep.combination_accuracy`).
-REFUSED = "refused"
-
-
 def sweep_summary(
     results: Sequence[tuple[Mapping[str, object], str, Mapping]],
 ) -> pd.DataFrame:
@@ -111,6 +106,12 @@ def sweep_summary(
         records.append(rec)
     table = pd.DataFrame.from_records(records)
     return table[[c for c in table.columns if c != REFUSED] + [REFUSED]]
+
+
+def _metrics(table: pd.DataFrame, params: Sequence[str]) -> list[str]:
+    """The accuracy metrics among a summary's columns (not the swept keys, ``subject`` or
+    :data:`~scan2morph.tables.REFUSED`)."""
+    return [c for c in table.columns if c not in (*params, "subject", REFUSED)]
 
 
 def plot_sweep(
@@ -142,7 +143,7 @@ def plot_sweep(
         The config's value of each swept key (:func:`config_values`); default: the table's first
         row (the sweep table's convention: the papers' values first).
     """
-    metrics = [c for c in table.columns if c not in (*params, "subject", REFUSED)]
+    metrics = _metrics(table, params)
     if not metrics or not params or table.empty:
         raise InputError("sweep summary", "no accuracy metric or no swept key to plot")
     if defaults is None:
@@ -184,7 +185,7 @@ def write_sweep_summary(
     if not results:
         raise InputError("sweep summary", "no sweep results to summarise")
     table = sweep_summary(results)
-    metrics = [c for c in table.columns if c not in (*params, "subject", REFUSED)]
+    metrics = _metrics(table, params)
     write_table(table_path, table, sweep_dictionary(params, metrics, defaults))
     plot_sweep(table, params, plot_path, defaults)
     return table

@@ -124,10 +124,10 @@ def take_verdict(
 ) -> str:
     """A take's problems now, joined into one line ('' if none), for its own job.
 
-    The subject's check job re-runs for a new sheet row or file, not for a file's new content
-    (its files are ``ancient``: a rewritten ``check.json`` would otherwise re-run every take of
-    the subject, and Snakemake, re-running the check, did not re-run the take whose file changed
-    until a second run). So its verdict counts only for the very files it read.
+    The subject's check job re-runs for a new sheet row or file and for its neutral's new
+    content, not for another take's (those files are ``ancient`` inputs of it: a rewritten
+    ``check.json`` would otherwise re-run every take of the subject). So its verdict counts only
+    for the very files it read.
 
     Parameters
     ----------
@@ -154,4 +154,4 @@ def take_verdict(
     return "; ".join(run(None, take, Params()).files["problems"])
 
 
-__all__ = ["Params", "check_subject", "run", "take_problem"]
+__all__ = ["Params", "check_subject", "run", "take_problem", "take_verdict"]
