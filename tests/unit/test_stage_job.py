@@ -7,6 +7,7 @@ per-stage benchmark files of a run) are tested end to end in ``tests/workflow/te
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -124,7 +125,9 @@ def _job(tmp_path, prints, fail=None):
 
     log = tmp_path / "job.log"
     benchmarks = {s: tmp_path / "bench" / f"{s}.tsv" for s in ("a", "b")}
-    run_stages("abc", plan, run, tmp_path / "stages.json", log, benchmarks=benchmarks)
+    done = tmp_path / "job.json"
+    done.unlink(missing_ok=True)  # a plain output: Snakemake deletes it when the job starts
+    run_stages("abc", plan, run, tmp_path / "stages.json", log, benchmarks, done)
     return ran, log.read_text().splitlines()
 
 
@@ -140,6 +143,11 @@ def test_a_job_runs_only_the_stages_a_change_reaches(tmp_path):
     ran, log = _job(tmp_path, prints | {"b": 2})
     assert ran == ["b", "c"]
     assert log == ["a: up to date, not run", "b: run", "c: run"]
+    # the record of the finished run
+    assert json.loads((tmp_path / "job.json").read_text()) == {
+        "run": ["b", "c"],
+        "up_to_date": ["a"],
+    }
     # c's setting: c alone; an output gone: its stage alone (made from the same, it has the
     # same fingerprint: what reads it is kept)
     assert _job(tmp_path, prints | {"b": 2, "c": 2})[0] == ["c"]
@@ -154,6 +162,9 @@ def test_a_failed_stage_stops_the_job_and_runs_again_next_time(tmp_path):
         _job(tmp_path, prints | {"a": 2}, fail="b")
     log = (tmp_path / "job.log").read_text().splitlines()
     assert log == ["a: run", "b: failed"]  # c after it not run
+    # no record of a finished run: the workflow runs the job again (its update() files, put
+    # back by Snakemake with a new time, would otherwise be taken for current)
+    assert not (tmp_path / "job.json").exists()
     # b's record is gone (its old output is not taken for the new one), a's is the new one
     recorded = read_fingerprints(tmp_path / "stages.json")
     assert "b" not in recorded and set(recorded) == {"a", "c"}

@@ -544,7 +544,8 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
     """A morph setting changed: the subject's job runs morph and what reads it (the store and
     what reads the store), its other stages' files stay as they were (same file, same bytes).
     Then a stage that fails (a truth file without its arrays) stops the job with a line naming
-    the subject and the stage, and every file of the job is as it was before the job."""
+    the subject and the stage, and every file of the job is as it was before the job; the next
+    run runs the job again, until the file is mended."""
     work, _, _ = cohort
     copy = tmp_path / "wf"
     shutil.copytree(work, copy, symlinks=True)
@@ -581,11 +582,29 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
         p: p.read_bytes()
         for p in (synth / "synth01.h5", synth / "accuracy.json", synth / "stages.json")
     }
-    np.savez(copy / "results" / "synthetic" / "synth01" / "truth" / "car.npz", nothing=np.zeros(1))
-    assert not run_workflow(copy, copy / "tiny2.yaml", targets=["results/synth01/accuracy.json"])
+    truth = copy / "results" / "synthetic" / "synth01" / "truth" / "car.npz"
+    good = truth.read_bytes()
+    np.savez(truth, nothing=np.zeros(1))
+    job = synth / "job.json"  # the default target's record of the subject's finished job
+    assert not run_workflow(copy, copy / "tiny2.yaml", targets=[str(job.relative_to(copy))])
     summary = (copy / "logs" / "subject" / "synth01.log").read_text().splitlines()
     assert summary[-2:] == ["head_meshes: run", "accuracy: failed"]
     log = (copy / "logs" / "accuracy" / "synth01.log").read_text()
     assert "car.npz" in log and "Traceback" not in log
     for path, data in files.items():
         assert path.read_bytes() == data, path
+    # the files put back are newer than the truth file, but the job left no record: the next
+    # run runs it again and fails again (it used to find nothing to do and end successfully
+    # with the old accuracy), and with the truth mended one run finishes it
+    assert not job.exists()
+    assert not run_workflow(copy, copy / "tiny2.yaml", targets=[str(job.relative_to(copy))])
+    assert (copy / "logs" / "subject" / "synth01.log").read_text().splitlines()[-1] == (
+        "accuracy: failed"
+    )
+    truth.write_bytes(good)
+    assert run_workflow(copy, copy / "tiny2.yaml", targets=[str(job.relative_to(copy))])
+    record = json.loads(job.read_text())  # tiny2's morph: its stage and those after it run
+    assert record == {
+        "run": ["morph", "store", "head_meshes", "accuracy", "figures", "report_subject"],
+        "up_to_date": ["template_part", "consensus", "motion", "motion_noise", "modal"],
+    }

@@ -5,6 +5,8 @@ rule cohort:
     """Summarise every subject in one cohort table and comparison plot."""
     input:
         stores=expand("results/{subject}/{subject}.h5", subject=SUBJECTS),
+        # each subject's job finished (a failed one's files are put back as they were)
+        jobs=expand("results/{subject}/job.json", subject=SUBJECTS),
         accuracy=expand("results/{subject}/accuracy.json", subject=synthetic_subjects()),
     output:
         table=report(

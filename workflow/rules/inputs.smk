@@ -242,6 +242,15 @@ def get_subject_take_records(wildcards):
     )
 
 
+def get_subject_take_jobs(wildcards):
+    """The take jobs' records of their last finished runs (``job.json``)."""
+    return _take_files(
+        "results/{subject}/takes/{take}/job.json",
+        wildcards.subject,
+        takes_of(wildcards.subject),
+    )
+
+
 def get_subject_stage_reads(wildcards):
     """The take parts each stage of the subject's job reads (stage -> paths), in the order the
     stage reads them."""
@@ -281,14 +290,17 @@ def get_truth_files(wildcards):
 def get_take_job_inputs(wildcards):
     """A take job's input files (:func:`take_inputs`) and, for a take other than the neutral,
     the neutral's parts its stages read (``neutral_repair``, ``neutral_landmarks``,
-    ``neutral_fit``) and their fingerprints (``neutral_stages``)."""
+    ``neutral_fit``), their fingerprints (``neutral_stages``) and the record of the neutral's
+    finished job (``neutral_job``)."""
     files = take_inputs(wildcards.subject, wildcards.take)
     neutral = get_neutral_take(wildcards)
     if not neutral or wildcards.take == neutral:
         return files
     folder = f"results/{wildcards.subject}/takes/{neutral}"
     parts = {f"neutral_{s}": f"{folder}/{s}.h5" for s in ("repair", "landmarks", "fit")}
-    return files | parts | {"neutral_stages": f"{folder}/stages.json"}
+    # the neutral's fingerprints and the record of its finished job (a failed one runs again)
+    records = {"neutral_stages": f"{folder}/stages.json", "neutral_job": f"{folder}/job.json"}
+    return files | parts | records
 
 
 def stage_files(pattern, stages):

@@ -79,13 +79,18 @@ def subject_stage_outputs(truth):
 
 def subject_outputs(truth):
     """Every output of a subject's job, kept when the job starts (update: a stage that is up to
-    date keeps its files), and the record of its stages' fingerprints."""
+    date keeps its files), the record of its stages' fingerprints and the record of its last
+    finished run (not update: deleted when the job starts, so a job that failed, its update()
+    files put back with a new time, runs again)."""
     files = {
         name: update(path)
         for stage in subject_stage_outputs(truth).values()
         for name, path in stage.items()
     }
-    return files | {"stages": update("results/{subject}/stages.json")}
+    return files | {
+        "stages": update("results/{subject}/stages.json"),
+        "job": "results/{subject}/job.json",
+    }
 
 
 def get_figure_outputs():
@@ -97,6 +102,7 @@ def get_figure_outputs():
 def get_final_outputs():
     return (
         expand("results/{subject}/{subject}.h5", subject=SUBJECTS)
+        + expand("results/{subject}/job.json", subject=SUBJECTS)
         + expand("results/{subject}/meshes/head", subject=SUBJECTS)
         + expand("results/{subject}/accuracy.json", subject=synthetic_subjects())
         + get_figure_outputs()

@@ -22,6 +22,7 @@ rule subject:
         parts=get_subject_take_parts,
         # the take jobs' fingerprints of their parts (what a stage read)
         records=get_subject_take_records,
+        jobs=get_subject_take_jobs,
         template="resources/template.npz",
         layout=LAYOUT,
         captions=get_figure_captions,
@@ -64,6 +65,7 @@ use rule subject as subject_synthetic with:
     input:
         parts=get_subject_take_parts,
         records=get_subject_take_records,
+        jobs=get_subject_take_jobs,
         template="resources/template.npz",
         layout=LAYOUT,
         captions=get_figure_captions,

@@ -11,6 +11,7 @@ rule sweep:
     """Re-run the stages of one synthetic subject with one sweep combination's config values and measure the accuracy."""
     input:
         store="results/{subject}/{subject}.h5",
+        job="results/{subject}/job.json",
         raw=get_sweep_raw,
         truths=get_truth_files,
         template="resources/template.npz",

@@ -61,6 +61,9 @@ rule take:
         mtl=update("results/{subject}/meshes/{take}.mtl"),
         texture=update("results/{subject}/meshes/{take}.png"),
         stages=update("results/{subject}/takes/{take}/stages.json"),
+        # not update: deleted when the job starts, so a job that failed (its update() files put
+        # back with a new time) runs again
+        job="results/{subject}/takes/{take}/job.json",
     log:
         "logs/take/{subject}/{take}.log",
     benchmark:

@@ -286,6 +286,7 @@ def main(snakemake):
         j.out.stages,
         snakemake.log[0],
         benchmarks=j.p.benchmarks,
+        done=j.out.job,
     )
 
 
