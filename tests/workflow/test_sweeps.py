@@ -349,8 +349,9 @@ def test_rows_are_sorted_into_one_key_at_a_time_slices():
     assert varied["mask.radius_mm"].tolist() == [False] * 6 + [True] * 2 + [False] * 2
 
 
-def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_path, monkeypatch):
-    table = sweep_summary(_results())
+def _drawn_axes(monkeypatch) -> dict:
+    """``{"axes": ...}``, filled with the axes of the next figure :mod:`~scan2morph.report.sweep`
+    saves."""
     drawn = {}
     real = sweep_module.Figure.savefig
 
@@ -359,6 +360,12 @@ def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_p
         return real(fig, path, **kwargs)
 
     monkeypatch.setattr(sweep_module.Figure, "savefig", savefig)
+    return drawn
+
+
+def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_path, monkeypatch):
+    table = sweep_summary(_results())
+    drawn = _drawn_axes(monkeypatch)
     plot_sweep(table, _PARAMS, tmp_path / "s.png", _DEFAULTS)
     axes = np.array(drawn["axes"]).reshape(-1, len(_PARAMS))
     # mm, degrees, fraction, px; the all-NA metric is left out
@@ -385,14 +392,7 @@ def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_p
 def test_an_integer_key_drawn_at_one_value_has_one_integer_tick(tmp_path, monkeypatch):
     """Only the config's value of an integer key drawn: its ticks are integers, that one among
     them (it used to get fractional ticks, 0.945 ... 1.05)."""
-    drawn = {}
-    real = sweep_module.Figure.savefig
-
-    def savefig(fig, path, **kwargs):
-        drawn["axes"] = fig.axes
-        return real(fig, path, **kwargs)
-
-    monkeypatch.setattr(sweep_module.Figure, "savefig", savefig)
+    drawn = _drawn_axes(monkeypatch)
     results = [
         ({**row, "smoothing.iterations": 1}, subject, accuracy)
         for row, subject, accuracy in _results()
