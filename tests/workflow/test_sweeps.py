@@ -349,8 +349,9 @@ def test_rows_are_sorted_into_one_key_at_a_time_slices():
     assert varied["mask.radius_mm"].tolist() == [False] * 6 + [True] * 2 + [False] * 2
 
 
-def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_path, monkeypatch):
-    table = sweep_summary(_results())
+def _drawn_axes(monkeypatch) -> dict:
+    """``{"axes": ...}``, filled with the axes of the next figure :mod:`~scan2morph.report.sweep`
+    saves."""
     drawn = {}
     real = sweep_module.Figure.savefig
 
@@ -359,6 +360,12 @@ def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_p
         return real(fig, path, **kwargs)
 
     monkeypatch.setattr(sweep_module.Figure, "savefig", savefig)
+    return drawn
+
+
+def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_path, monkeypatch):
+    table = sweep_summary(_results())
+    drawn = _drawn_axes(monkeypatch)
     plot_sweep(table, _PARAMS, tmp_path / "s.png", _DEFAULTS)
     axes = np.array(drawn["axes"]).reshape(-1, len(_PARAMS))
     # mm, degrees, fraction, px; the all-NA metric is left out
@@ -375,10 +382,28 @@ def test_the_sweep_plot_has_one_panel_row_per_unit_and_the_varied_key_on_x(tmp_p
         assert len(data) == 2  # two subjects, one metric
         for ln in data:
             assert np.asarray(ln.get_xdata(), float).tolist() == xs
+            assert ln.get_linestyle() != "--"  # the subjects' lines are not the config's
     # the row off the config in two keys (rotation 0.2) is drawn nowhere
     ys = np.concatenate([ln.get_ydata() for ax in degrees for ln in ax.get_lines()])
     assert not np.isclose(ys.astype(float), 0.2).any()
     assert (tmp_path / "s.png").stat().st_size > 0
+
+
+def test_an_integer_key_drawn_at_one_value_has_one_integer_tick(tmp_path, monkeypatch):
+    """Only the config's value of an integer key drawn: its ticks are integers, that one among
+    them (it used to get fractional ticks, 0.945 ... 1.05)."""
+    drawn = _drawn_axes(monkeypatch)
+    results = [
+        ({**row, "smoothing.iterations": 1}, subject, accuracy)
+        for row, subject, accuracy in _results()
+        if row["smoothing.iterations"] == 30
+    ]
+    defaults = {**_DEFAULTS, "smoothing.iterations": 1}
+    plot_sweep(sweep_summary(results), _PARAMS, tmp_path / "s.png", defaults)
+    ax = np.array(drawn["axes"]).reshape(-1, len(_PARAMS))[-1, 0]
+    lo, hi = ax.get_xlim()
+    ticks = [t for t in ax.get_xticks() if lo <= t <= hi]
+    assert 1.0 in ticks and all(float(t).is_integer() for t in ticks), ticks
 
 
 def test_the_sweep_summary_table_carries_its_dictionary(tmp_path):
@@ -387,6 +412,11 @@ def test_the_sweep_summary_table_carries_its_dictionary(tmp_path):
     )
     back = pd.read_csv(tmp_path / "summary.tsv", sep="\t", comment="#")
     pd.testing.assert_frame_equal(back, table, check_dtype=False)
+    # each swept value as its folder spells it (str: mask_radius_mm~20.0), not as the table's
+    # float format (20)
+    text = pd.read_csv(tmp_path / "summary.tsv", sep="\t", comment="#", dtype=str)
+    assert text["mask.radius_mm"].tolist() == [str(r["mask.radius_mm"]) for r, _, _ in _results()]
+    assert text["mask.radius_mm"].iloc[0] == "20.0"
     dictionary = read_dictionary(tmp_path / "summary.tsv").set_index("column")
     assert dictionary.index.tolist() == list(table.columns)
     assert dictionary.loc["mask.radius_mm", "unit"] == "mm"

@@ -20,7 +20,8 @@ from scan2morph.tables import REFUSED, accuracy_column, sweep_dictionary, write_
 #: Panel rows of the plot, one per unit: unit -> axis label (other units follow, by name).
 UNIT_LABELS = {"mm": "mm", "deg": "degrees", "fraction": "fraction", "px": "px", "Hz": "Hz"}
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X")
-_LINES = ("-", "--", ":", "-.")
+#: Line styles of the subjects: not dashed (the config's value) nor dotted (the config's row).
+_LINES = ("-", "-.", (0, (3, 1, 1, 1, 1, 1)))
 
 
 def config_values(config: Mapping, params: Sequence[str]) -> dict[str, object]:
@@ -186,7 +187,10 @@ def write_sweep_summary(
         raise InputError("sweep summary", "no sweep results to summarise")
     table = sweep_summary(results)
     metrics = _metrics(table, params)
-    write_table(table_path, table, sweep_dictionary(params, metrics, defaults))
+    # each swept value as its combination's folder spells it (``mask_radius_mm~20.0``: the
+    # table's float format would write 20)
+    spelt = table.assign(**{p: [str(row[p]) for row, _, _ in results] for p in params})
+    write_table(table_path, spelt, sweep_dictionary(params, metrics, defaults))
     plot_sweep(table, params, plot_path, defaults)
     return table
 
@@ -251,14 +255,14 @@ def _draw_column(plot: _SweepPlot, axes, param: str, first: bool, last: bool) ->
                     ax.axhline(ref, color=plot.colour[metric], ls=":", lw=0.8, alpha=0.7)
         if not numeric:
             ax.set_xticks(range(len(cats)), cats)
-        elif all(float(v).is_integer() for v in values):
-            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        elif all(float(v).is_integer() for v in values):  # a single value: its tick alone
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
         if i == 0:
             n = int(plot.varied[param].sum() // max(len(plot.subjects), 1))
             other = f"{n} other value{'s' if n != 1 else ''}"
             ax.set_title(f"{param} varied ({other})", fontsize="medium")
         if i == len(plot.units) - 1:
-            ax.set_xlabel(f"{param} (dashed: the config's {defaults[param]})")
+            ax.set_xlabel(f"{param} (grey dashed: the config's {defaults[param]})")
         if first:
             ax.set_ylabel(UNIT_LABELS.get(unit, unit))
         ax.margins(x=0.08)  # the config's value is often at an end
@@ -291,7 +295,8 @@ def _finish(fig: Figure, plot: _SweepPlot) -> None:
     drawn = plot.default.sum() + sum(v.sum() for v in plot.varied.values())
     left_out = int(len(plot.table) - drawn)
     if left_out:
-        notes.append(f"{left_out} rows differ from the config in two or more keys (not drawn)")
+        rows = "row differs" if left_out == 1 else "rows differ"
+        notes.append(f"{left_out} {rows} from the config in two or more keys (not drawn)")
     if not plot.default.any():
         notes.append("no row equals the config (no reference lines)")
     fig.suptitle(
