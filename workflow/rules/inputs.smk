@@ -299,7 +299,10 @@ def get_take_job_inputs(wildcards):
     folder = f"results/{wildcards.subject}/takes/{neutral}"
     parts = {f"neutral_{s}": f"{folder}/{s}.h5" for s in ("repair", "landmarks", "fit")}
     # the neutral's fingerprints and the record of its finished job (a failed one runs again)
-    records = {"neutral_stages": f"{folder}/stages.json", "neutral_job": f"{folder}/job.json"}
+    records = {
+        "neutral_stages": f"{folder}/stages.json",
+        "neutral_job": f"{folder}/job.json",
+    }
     return files | parts | records
 
 
