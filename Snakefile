@@ -48,4 +48,4 @@ onsuccess:
 
 
 onerror:
-    report_left_out()
+    summarise_finished_subjects(report_left_out())

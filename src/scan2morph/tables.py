@@ -315,6 +315,12 @@ COHORT = (
         "its report",
     ),
     Column(
+        "stopped",
+        NO_UNIT,
+        "why the subject did not finish in the run that wrote the table (its check or one of "
+        "its jobs stopped it; its other columns are then NA), NA when it finished",
+    ),
+    Column(
         "material_relative_error_viseme_{label}",
         "fraction",
         "error of a viseme's final motion against the material motion of the skin (where each "

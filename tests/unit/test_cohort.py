@@ -169,6 +169,7 @@ def test_cohort_table_fills_missing_columns_with_nan(stores):
         "n_visemes",
         "n_expressions",
         "left_out",
+        "stopped",
         "motion_rms_all_mm_car",
         "motion_rms_all_mm_too",  # paper order of the visemes
         "noise_relative_unmasked_car",
@@ -206,6 +207,7 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
         "n_visemes",
         "n_expressions",
         "left_out",
+        "stopped",
         "motion_rms_all_mm_{label}",
         "noise_relative_unmasked_{label}",
         "ccr_{k}",
@@ -217,6 +219,24 @@ def test_write_cohort_summary_round_trips_and_plots(stores, tmp_path):
     assert dictionary.loc["mesh_rms_mm_max", "unit"] == "mm"
     img = cv2.imread(str(out_png))
     assert img is not None and img.shape[0] > 100 and img.shape[1] > 300
+
+
+def test_a_stopped_subject_is_a_row_that_says_why(stores, tmp_path):
+    """The subjects that finished as before, then a row per stopped subject with its reason
+    and nothing else (a run whose subject stopped writes the others' summary)."""
+    alice, bob, _ = stores
+    out_tsv, out_png = tmp_path / "summary.tsv", tmp_path / "summary.png"
+    finished = write_cohort_summary({"alice": alice}, {}, out_tsv, out_png)
+    table = write_cohort_summary(
+        {"alice": alice}, {}, out_tsv, out_png, {"bob": "neutral.pts: n_points: 67"}
+    )
+    assert table["subject"].tolist() == ["alice", "bob"]
+    pd.testing.assert_frame_equal(table.iloc[:1], finished, check_dtype=False)
+    assert table["stopped"].isna().tolist() == [True, False]
+    assert table["stopped"].iloc[1] == "neutral.pts: n_points: 67"
+    assert table.iloc[1].drop(["subject", "stopped"]).isna().all()
+    back = pd.read_csv(out_tsv, sep="\t", comment="#")
+    pd.testing.assert_frame_equal(back, table, check_dtype=False, rtol=1e-5)
 
 
 def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
@@ -279,8 +299,10 @@ def test_bad_inputs_are_named(stores, tmp_path):
         subject_summary(alice)
     with pytest.raises(InputError, match="store not found"):
         subject_summary(tmp_path / "nobody.h5")
-    with pytest.raises(InputError, match="no subjects to summarise"):
+    with pytest.raises(InputError, match="no subject to summarise"):
         write_cohort_summary({}, {}, tmp_path / "a.tsv", tmp_path / "a.png")
+    with pytest.raises(InputError, match=r"no subject to summarise \(stopped: bob: bad neutral\)"):
+        write_cohort_summary({}, {}, tmp_path / "a.tsv", tmp_path / "a.png", {"bob": "bad neutral"})
     assert np.isnan(motion_rms(np.full((4, 3), np.nan)))
 
 

@@ -18,6 +18,7 @@ import shutil
 
 import h5py
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 
@@ -246,6 +247,29 @@ def test_a_broken_sheet_or_neutral_stops_only_its_subject(cohort, subject, messa
     assert "Traceback" not in log
 
 
+def test_the_cohort_summarises_the_subjects_that_finished(cohort):
+    """The stopped subjects do not hold back the cohort summary (they used to: its job never
+    ran while one was stopped): it summarises the subjects that finished, then a row for each
+    stopped one saying why, and nothing else in it."""
+    work, _, bad = cohort
+    table = read_table(work / "results" / "cohort" / "summary.tsv")
+    subjects = table["subject"].tolist()
+    assert sorted(subjects) == sorted(["alice", *PARTIAL, "broken", "synth01", *bad])
+    assert set(subjects[-len(bad) :]) == set(bad)  # after those that finished
+    rows = table.set_index("subject")
+    assert rows.loc[list(bad), "stopped"].notna().all()
+    assert re.search(
+        r"sheet rows are inconsistent: \S+subjects\.tsv: take 'car' appears more than once",
+        rows.loc["duplicate", "stopped"],
+    )
+    assert re.search(r"not built: \S+neutral\.pts: n_points: 67", rows.loc["badneutral", "stopped"])
+    assert rows.loc[list(bad)].drop(columns="stopped").isna().all().all()
+    finished = rows.drop(index=list(bad))
+    assert finished["stopped"].isna().all() and (finished["n_takes"] >= 1).all()
+    assert finished.loc["synth01", "material_relative_error_viseme_car"] > 0
+    assert (work / "results" / "cohort" / "summary.png").stat().st_size > 0
+
+
 def test_broken_takes_are_left_out_and_the_subject_built_from_the_rest(cohort):
     """Every bad take file of a subject is found by one check job (one run, one line each); each
     broken take is left out with its reason in the store and at the top of the report; the
@@ -377,7 +401,6 @@ TAKE_STAGES = ("ingest", "repair", "landmarks", "fit", "align", "refine")
 def test_each_stage_of_a_take_job_keeps_its_part_log_and_benchmark(cohort):
     """A take's stages run in one job, each still with its own part, log and benchmark file
     (Snakemake's format), which the report's run-time table reads per stage."""
-    import pandas as pd
 
     from scan2morph.report.provenance import stage_timings
 
@@ -512,7 +535,6 @@ def test_each_stage_of_a_subject_job_keeps_its_log_and_benchmark(cohort):
     """A subject's own stages run in one job (rule subject; subject_synthetic with its
     accuracy), each still with its own log and benchmark file (but the report: its page lists
     the others), which the report's run-time table reads per stage."""
-    import pandas as pd
 
     from scan2morph.report.provenance import stage_timings
     from scan2morph.stages.stage_job import SUBJECT_STAGES, read_fingerprints
@@ -597,10 +619,14 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
     # run runs it again and fails again (it used to find nothing to do and end successfully
     # with the old accuracy), and with the truth mended one run finishes it
     assert not job.exists()
-    assert not run_workflow(copy, copy / "tiny2.yaml", targets=[str(job.relative_to(copy))])
+    assert not run_workflow(copy, copy / "tiny2.yaml")  # the default target: the cohort too
     assert (copy / "logs" / "subject" / "synth01.log").read_text().splitlines()[-1] == (
         "accuracy: failed"
     )
+    # the cohort summary of the others, and why synth01 stopped: its failed stage's log's error
+    rows = read_table(copy / "results" / "cohort" / "summary.tsv").set_index("subject")
+    assert "car.npz" in rows.loc["synth01", "stopped"]
+    assert pd.isna(rows.loc["alice", "stopped"])
     truth.write_bytes(good)
     assert run_workflow(copy, copy / "tiny2.yaml", targets=[str(job.relative_to(copy))])
     record = json.loads(job.read_text())  # tiny2's morph: its stage and those after it run

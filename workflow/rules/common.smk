@@ -142,23 +142,92 @@ def synth_files(pattern, takes, modality=None):
 
 def report_left_out():
     """The run's last console lines: every subject its check or its own job stopped in this run,
-    and why (its store, report and cohort row, if any, are an earlier run's); every take left
-    out of its subject (from the stores made)."""
+    and why (its store and report, if any, are an earlier run's); every take left out of its
+    subject (from the stores made). Returns the subjects stopped: subject -> why."""
     import h5py
 
     from scan2morph.jobs import job_error
     from scan2morph.store.warnings import read_failures
 
+    stopped = {}
     for subject in SUBJECTS:
         store = Path(f"results/{subject}/{subject}.h5")
-        logs = [f"logs/check_subject/{subject}.log", f"logs/subject/{subject}.log"]
-        if stopped := job_error(logs, RUN_START):
-            earlier = " (its store, report and cohort row are an earlier run's)"
-            message, log = stopped
+        if error := job_error(stop_logs(subject), RUN_START):
+            earlier = " (its store and report are an earlier run's)"
+            stopped[subject], log = error
             sys.stderr.write(
-                f"stopped: {subject}: {message} ({log}){earlier if store.is_file() else ''}\n"
+                f"stopped: {subject}: {stopped[subject]} ({log})"
+                f"{earlier if store.is_file() else ''}\n"
             )
         elif store.is_file():
             with h5py.File(store, "r") as h5:
                 for failure in read_failures(h5).values():
                     sys.stderr.write(f"left out: {subject}/{failure}\n")
+    return stopped
+
+
+def stop_logs(subject):
+    """The logs that say why a subject stopped: its check's, and that of the stage its job
+    stopped at (the job's own log lists its stages, the last ``{stage}: failed``)."""
+    logs = [f"logs/check_subject/{subject}.log"]
+    summary = Path(f"logs/subject/{subject}.log")
+    last = summary.read_text().splitlines()[-1:] if summary.is_file() else []
+    if last and last[0].endswith(": failed"):
+        logs.append(f"logs/{last[0].removesuffix(': failed')}/{subject}.log")
+    return logs
+
+
+def subject_finished(subject):
+    """The subject's store is this run's: its job and every take's finished (their job.json:
+    a failed job leaves none) and, for a synthetic subject, its accuracy is written."""
+    files = [f"results/{subject}/{subject}.h5", f"results/{subject}/job.json"]
+    files += _take_files(
+        "results/{subject}/takes/{take}/job.json", subject, takes_of(subject)
+    )
+    if subject in synthetic_subjects():
+        files.append(f"results/{subject}/accuracy.json")
+    return all(Path(f).is_file() for f in files)
+
+
+def summarise_finished_subjects(stopped):
+    """When subjects stopped and so the cohort summary could not run: the summary of those that
+    finished, with a row for each other saying why (``stopped``: subject -> why, from
+    :func:`report_left_out`), so that one bad subject does not hold back the others'."""
+    import json
+    import logging
+
+    from scan2morph.errors import InputError
+    from scan2morph.report import write_cohort_summary
+
+    if not any(job.rule.name == "cohort" for job in workflow.dag.needrun_jobs()):
+        return  # not asked for in this run, or written
+    done = [s for s in SUBJECTS if s not in stopped and subject_finished(s)]
+    why = "did not finish in this run (a job of it failed: see the run's log)"
+    others = {s: stopped.get(s, why) for s in SUBJECTS if s not in done}
+    if not others:  # every subject finished: the cohort job failed on its own
+        return
+    accuracy = {
+        s: json.loads(Path(f"results/{s}/accuracy.json").read_text())
+        for s in done
+        if s in synthetic_subjects()
+    }
+    quiet = logging.getLogger("scan2morph")  # its left-out takes: listed above already
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)
+    try:
+        write_cohort_summary(
+            {s: f"results/{s}/{s}.h5" for s in done},
+            accuracy,
+            "results/cohort/summary.tsv",
+            "results/cohort/summary.png",
+            others,
+        )
+    except InputError as exc:
+        sys.stderr.write(f"cohort: not written: {exc}\n")
+        return
+    finally:
+        quiet.setLevel(level)
+    sys.stderr.write(
+        f"cohort: results/cohort/summary.tsv summarises the {len(done)} subjects that finished; "
+        f"stopped: {', '.join(others)} (its column 'stopped' says why)\n"
+    )

@@ -215,7 +215,7 @@ def cohort_table(summaries: Sequence[SubjectSummary]) -> pd.DataFrame:
     for prefix in (*MATERIAL_PREFIXES, MOTION_PREFIX, NOISE_PREFIX):
         group = [c for c in columns if c.startswith(prefix) and _family(c) == prefix]
         motion += sorted(group, key=lambda c: _label_order(c.removeprefix(prefix)))
-    head = ["subject", "n_takes", "n_visemes", "n_expressions", "left_out"]
+    head = ["subject", "n_takes", "n_visemes", "n_expressions", "left_out", "stopped"]
     fixed = [f"ccr_{i + 1}" for i in range(N_CCR)] + ["modal_f1_hz"]
     rest = [c for c in columns if c not in head + motion + fixed]
     return pd.DataFrame([s.row for s in summaries], columns=head + motion + fixed + rest)
@@ -372,6 +372,7 @@ def write_cohort_summary(
     accuracies: Mapping[str, Mapping],
     table_path: str | Path,
     plot_path: str | Path,
+    stopped: Mapping[str, str] | None = None,
 ) -> pd.DataFrame:
     """Summarise subjects into ``table_path`` (TSV with its column dictionary on top) and
     ``plot_path`` (PNG).
@@ -380,6 +381,9 @@ def write_cohort_summary(
     ----------
     stores : mapping subject -> store path, in table order
     accuracies : mapping subject -> accuracy.json content (subjects with ground truth)
+    stopped : mapping subject -> why, optional
+        Subjects that did not finish: a row each after the others, with the reason in its
+        ``stopped`` column and nothing else; the plot leaves them out.
 
     Returns
     -------
@@ -387,7 +391,10 @@ def write_cohort_summary(
         The table written.
     """
     if not stores:
-        raise InputError("cohort", "no subjects to summarise")
+        why = "; ".join(f"{s}: {w}" for s, w in (stopped or {}).items())
+        raise InputError(
+            "cohort", "no subject to summarise" + (f" (stopped: {why})" if why else "")
+        )
     summaries = {s: subject_summary(p, accuracies.get(s)) for s, p in stores.items()}
     for subject, path in stores.items():
         with open_store(path) as h5:
@@ -395,6 +402,9 @@ def write_cohort_summary(
                 log.warning("%s/%s", subject, failure)
     table = cohort_table(list(summaries.values()))
     dictionary = [*COHORT, *(accuracy_column(c) for c in accuracy_columns(table))]
-    write_table(table_path, table, dictionary)
     plot_cohort(table, {str(v.row["subject"]): v.ccr for v in summaries.values()}, plot_path)
+    if stopped:
+        rows = pd.DataFrame([{"subject": s, "stopped": w} for s, w in stopped.items()])
+        table = pd.concat([table, rows.reindex(columns=table.columns)], ignore_index=True)
+    write_table(table_path, table, dictionary)
     return table

@@ -102,14 +102,16 @@ def check_subject(subject: str, takes: Sequence[Take], sheet: Sequence[tuple[str
     stopping = own + [p for t in neutral for p in found.get(t, [])]
     if stopping:
         n = len(own) + sum(map(len, found.values()))
-        raise InputError(
+        more = f" (and {len(stopping) - 1} more above)" if len(stopping) > 1 else ""
+        raise InputError(  # the first problem that stops it quoted: the run's last lines say it
             f"subject {subject}",
             f"{n} problem{'s' * (n != 1)} (each above, one line); "
             + (
                 "the subject's sheet rows are inconsistent"
                 if own
                 else f"its neutral take {neutral[0]} cannot be read, so the subject is not built"
-            ),
+            )
+            + f": {stopping[0]}{more}",
         )
     return {"subject": subject, "problems": [], "takes": found}
 
