@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -120,16 +121,36 @@ def test_same_seed_same_numbers_other_seed_other_numbers(template, takes):
         ({"draws": 1}, "draws: expected an integer >= 2"),
         ({"draws": 2.5}, "draws: expected an integer >= 2"),
         ({"suppressed": np.zeros(3, bool)}, r"suppressed: expected \(441,\)"),
-        (
-            {"click_noise_px": 60.0},
-            r"subj/neutral: click_noise_px 60.0: only \d of 8 perturbed fits succeeded .*"
-            r"first refusal, draw \d+: subj/neutral: ",
-        ),
     ],
 )
 def test_bad_input_is_named(template, takes, kw, match):
     with pytest.raises(InputError, match=match):
         _run(template, takes, **kw)
+
+
+def test_a_take_the_noise_folds_has_no_error_bar_and_the_others_theirs(template, takes, caplog):
+    """A viseme whose clicks lie close together (a small face) folds the template under a
+    click noise the others take: it has no error bar (NaN, every draw refused, a warning naming
+    it and quoting the first refusal) and the others' are as without it, bit for bit (it used
+    to stop the subject). A noise that folds the neutral leaves every viseme without one."""
+    neutral, visemes = takes
+    small = np.array([320.0, 230.0]) + 10.0 * template.ibug_xy
+    eel = replace(visemes["she"], landmarks=small)
+    both = _run(template, (neutral, visemes | {"eel": eel}), click_noise_px=2.0)
+    alone = _run(template, takes, click_noise_px=2.0)
+    assert_array_equal(both["she"]["rms_mm"], alone["she"]["rms_mm"])
+    assert both["she"]["failed_draws"] == 0 and np.isfinite(both["she"]["relative"])
+    assert both["eel"]["failed_draws"] == 8
+    assert np.isnan(both["eel"]["rms_mm"]).all() and np.isnan(both["eel"]["relative"])
+    assert np.isnan(both["eel"]["rms_error_mm"])
+    assert re.search(
+        r"subj/eel has no click-noise error bar: click_noise_px 2: only \d of 8 perturbed fits "
+        r"of eel succeeded .*first refusal, draw \d+: subj/eel: landmarks fold",
+        caplog.text,
+    )
+    folded = _run(template, takes, click_noise_px=60.0)["she"]
+    assert folded["failed_draws"] == 8 and np.isnan(folded["relative"])
+    assert "perturbed fits of neutral succeeded" in caplog.text
 
 
 def test_a_bad_take_is_named(template, takes):

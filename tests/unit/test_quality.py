@@ -33,8 +33,8 @@ def store(tmp_path):
         paths.align("n", "ok"): np.bool_(True),
         paths.align("car", "ok"): np.bool_(True),
         paths.align("smile", "ok"): np.bool_(False),
-        paths.motion_noise("takes"): ["car"],
-        paths.motion_noise("failed_draws"): np.array([3]),
+        paths.motion_noise("takes"): ["car", "eel"],
+        paths.motion_noise("failed_draws"): np.array([3, 16]),
         paths.motion_noise("click_noise_measured_px"): np.float64(2.25),
     }
     attrs = {
@@ -57,6 +57,8 @@ def test_every_gate_gives_one_line(store):
         "[fit] smile: only 30% of the template has data",
         "[align] smile: ICP did not converge (50 iterations): left out of the models",
         "[motion_noise] car: 3 of 16 click-noise refits refused: its error bar is partial",
+        "[motion_noise] eel: all 16 click-noise refits refused (the click noise is too large for "
+        "the template; the motion_noise log says why): it has no error bar",
         "[motion_noise] the landmark clicks scatter by 2.25 px, above 1.5 px: the motion of "
         "small visemes is not to be trusted",
     ]
@@ -93,6 +95,6 @@ def test_the_report_shows_warnings_and_skipped_stages_first(store):
     write_datasets(store, warning_datasets(warnings))  # as the store stage does
     with h5py.File(store) as h5:
         html = _status_section(h5)
-    assert html.startswith('<div class="warnings">') and "5 warnings" in html
+    assert html.startswith('<div class="warnings">') and "6 warnings" in html
     assert "ICP did not converge (50 iterations): left out of the models" in html
     assert "no viseme takes" in html  # the skipped stages' table

@@ -14,6 +14,7 @@ On the synthetic cohort the estimate is checked against the error that the groun
 
 from __future__ import annotations
 
+import logging
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -29,6 +30,8 @@ from scan2morph.motion.vectors import motion_vectors
 from scan2morph.store import paths
 from scan2morph.template.fit import FitRules, fit_take
 from scan2morph.template.rim import Rim
+
+log = logging.getLogger(__name__)
 
 #: ``refiner(take, fit, take_landmarks, neutral_landmarks) -> (vertices, valid, confidence)``: a
 #: take's refined correspondence from those clicks (``fit``: :func:`fit_take`'s result for them),
@@ -182,8 +185,10 @@ def click_noise_motion(
     InputError
         ``noise.px`` <= 0, ``noise.draws`` < 2, a mask of the wrong length, or a take's own
         fit error with its clicks (naming it). Fewer than half of the draws of the neutral or of
-        a take fitted is an error too, naming that take and quoting the first refusal: the click
-        noise is then too large for the template.
+        a take fitted is no error (the error bar is a diagnostic; it used to stop the subject):
+        the click noise is then too large for the template, and the take has no error bar
+        (``rms_mm``, ``relative`` and ``rms_error_mm`` NaN, every draw in ``failed_draws``; a
+        warning in the log names the take and quotes the first refusal).
     """
     draws = _checked_draws(noise, source)
     suppressed = np.asarray(suppressed, dtype=bool)
@@ -200,19 +205,21 @@ def click_noise_motion(
         take: _reference(template, take, data, neutral, (n_base, n_mesh), recipe, smooth, source)
         for take, data in visemes.items()
     }
-    n_fits = _perturbed(template, "neutral", neutral, [0], noise, draws, recipe, source)
+    n_fits, n_problem = _perturbed(template, "neutral", neutral, [0], noise, draws, recipe, source)
     # each draw's viseme fit places its rim from that draw's neutral clicks
     partners = [neutral if f is None else replace(neutral, landmarks=f[2]) for f in n_fits]
     out = {}
     for take, data in visemes.items():
         stream = [1, zlib.crc32(take.encode())]
-        t_fits = _perturbed(
+        t_fits, problem = _perturbed(
             template, take, data, stream, noise, draws, recipe, source, partners
         )  # fmt: skip
+        if problem := n_problem or problem:  # the error bar is a diagnostic: the take stays
+            log.warning("%s/%s has no click-noise error bar: %s", source, take, problem)
         sq, count = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64)
         used = 0
         for n_fit, t_fit in zip(n_fits, t_fits, strict=True):
-            if n_fit is None or t_fit is None:
+            if problem or n_fit is None or t_fit is None:
                 continue
             where = f"{source}/{take} (click-noise draw)"
             v, valid, conf = _corresponded(recipe.refiner, take, t_fit, t_fit[2], n_fit[2])
@@ -293,10 +300,12 @@ def _corresponded(refiner, take, t_fit, t_landmarks, n_landmarks):
 
 def _perturbed(
     template, name, data, stream, noise: ClickNoise, draws, recipe, source, partners=None
-) -> list:
+) -> tuple[list, str]:
     """The take's ``draws`` fits with perturbed clicks (None where refused), each with its
     clicks; its own noise stream (``noise.seed`` and ``stream``); ``partners``: each draw's
-    neutral (its clicks), whose rim a viseme's fit follows."""
+    neutral (its clicks), whose rim a viseme's fit follows. Also why the take has no error bar:
+    fewer than half of its draws fitted (the noise is too large for the template; quoting the
+    first refusal), else ``""``."""
     rng = np.random.default_rng([int(noise.seed), *stream])
     fits, first = [], None
     for k in range(draws):
@@ -310,12 +319,11 @@ def _perturbed(
             first = first or f"draw {k}: {err}"
     done = sum(f is not None for f in fits)
     if done < max(2, draws / 2):
-        raise InputError(
-            f"{source}/{name}",
-            f"click_noise_px {noise.px}: only {done} of {draws} perturbed fits "
-            f"succeeded (the noise is too large for the template; first refusal, {first})",
+        return fits, (
+            f"click_noise_px {noise.px:g}: only {done} of {draws} perturbed fits of {name} "
+            f"succeeded (the noise is too large for the template; first refusal, {first})"
         )
-    return fits
+    return fits, ""
 
 
 def _spread(sq: np.ndarray, count: np.ndarray, motion: np.ndarray, free: np.ndarray) -> dict:

@@ -240,6 +240,8 @@ def fig_click_noise(store: Mapping[str, np.ndarray]) -> Figure:
         if take not in bars:
             return values, take
         bar = bars[take]
+        if not np.isfinite(bar["rms_error_mm"]):  # every refit refused (the stage's warning)
+            return values, f"{take}: no error bar"
         return (
             values,
             f"{take}: {bar['rms_error_mm']:.2f} mm, {100 * bar['relative']:.0f}% of the motion",

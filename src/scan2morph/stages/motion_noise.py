@@ -168,7 +168,8 @@ def run(
             "%s/%s: landmark %d is %.1f px off the others (mis-click?)", subject.name, take, name, r
         )
     for take, r in result.items():
-        log.info("%s: click noise moves the motion by %.1f%%", take, 100 * r["relative"])
+        if np.isfinite(r["relative"]):
+            log.info("%s: click noise moves the motion by %.1f%%", take, 100 * r["relative"])
     attrs = {
         paths.MOTION_NOISE: {
             "draws": noise_cfg["refine_draws" if refiner else "draws"],

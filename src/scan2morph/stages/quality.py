@@ -145,11 +145,15 @@ def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
         failed = h5[paths.motion_noise("failed_draws")][()]
         draws = int(h5[paths.MOTION_NOISE].attrs.get("draws", 0))
         for take, n in zip(names, failed, strict=True):
-            if n:
-                message = (
-                    f"{int(n)} of {draws} click-noise refits refused: its error bar is partial"
-                )
-                out.append(Warning("motion_noise", str(take), message))
+            if not n:
+                continue
+            message = (
+                f"all {draws} click-noise refits refused (the click noise is too large for the "
+                "template; the motion_noise log says why): it has no error bar"
+                if draws and n >= draws
+                else f"{int(n)} of {draws} click-noise refits refused: its error bar is partial"
+            )
+            out.append(Warning("motion_noise", str(take), message))
     key = paths.motion_noise("click_noise_measured_px")
     if key in h5:
         measured = float(h5[key][()])
