@@ -72,6 +72,9 @@ PATH_COLUMNS = tuple(c for c in COLUMNS if c not in REQUIRED and c != "units")
 #: Columns whose cell may name several files separated by ``;`` (or a folder): an RGB-D take's
 #: depth frames (:func:`scan2morph.io.depth_image.depth_frame_paths`).
 MULTI_PATH_COLUMNS = ("depth",)
+#: Columns the reader adds to say where a row came from (for messages): which sheet, which line.
+#: Not what the take is: moving the sheet or deleting rows above leaves its results current.
+ROW_LOCATION = ("sheet_row", "sheet")
 #: The separator of several files in one cell.
 PATH_SEPARATOR = ";"
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")

@@ -14,7 +14,7 @@ from scan2morph.errors import InputError
 from scan2morph.io import write_landmarks3d, write_obj, write_pts
 from scan2morph.io.obj import write_failed_obj
 from scan2morph.jobs import files_sha256, sha256_file, write_json
-from scan2morph.sheet import PATH_SEPARATOR, mm_per_unit
+from scan2morph.sheet import PATH_SEPARATOR, ROW_LOCATION, mm_per_unit
 from scan2morph.stages import Take, align, check, fit, ingest, landmarks, refine, repair
 from scan2morph.stages.failure import run_take_job
 from scan2morph.stages.stage_job import TAKE_STAGES, fingerprint, read_fingerprints, run_stages
@@ -181,8 +181,9 @@ def stage_reads(j, stage, prints, neutral_prints, sources):
     reads = {"take": j.p.take, "script": sources["script"]}
     reads |= {s: prints.get(s) for s in READS[stage][0]}
     reads |= {f"neutral_{s}": neutral_prints.get(s) for s in neutral_reads(j.own, stage)}
-    if stage == "ingest":
-        reads |= {"row": j.p.row, "roles": j.p.roles, "files": sources["files"]}
+    if stage == "ingest":  # the row as it is, not where it is in which sheet
+        row = {k: v for k, v in j.p.row.items() if k not in ROW_LOCATION}
+        reads |= {"row": row, "roles": j.p.roles, "files": sources["files"]}
         reads["problem"] = j.problem
     if stage in ("landmarks", "fit", "align", "refine"):
         reads["template"] = sources["template"]
