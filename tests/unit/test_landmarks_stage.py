@@ -6,11 +6,13 @@ import h5py
 import numpy as np
 import pytest
 
+from scan2morph.errors import InputError
 from scan2morph.stages import fit, landmarks
 from scan2morph.stages.part import Take
 from scan2morph.stages.quality import subject_warnings
 from scan2morph.store import paths, write_part
 from scan2morph.synth.cohort import make_take
+from scan2morph.template import build_template
 from tests.support.configs import repo_config
 
 SETTINGS = {"min_valid_fraction": 0.0, "include_failed_takes": False, "max_click_noise_px": 1.0}
@@ -197,3 +199,22 @@ def test_points_on_made_up_surface_are_lifted_from_the_measured_one():
 
     true_tip = sample_range(xyz, tip[None], "car", 0.5)[0][0]
     np.testing.assert_allclose(bump, true_tip + [0.0, 0.0, 20.0], atol=0.5)
+
+
+@pytest.mark.parametrize("source", ["clicked", "detected"])
+def test_a_fit_refusing_detected_landmarks_says_they_were_detected(car, source):
+    """Landmarks that fold the template: clicked ones are refused as before, detected ones with
+    a word that the user gave none, and where the points are to correct and give back (the
+    refusal used to read as about the user's clicks)."""
+    points = np.array(car["landmarks"], dtype=float)
+    points[[36, 45]] = points[[45, 36]]  # the outer eye corners swapped: the fit folds
+    data = {
+        paths.range_image("car", "xyz"): car["xyz"],
+        paths.landmarks("car"): points,
+        paths.landmark_info("car", "source"): source,
+    }
+    take = Take("s1", "car", "neutral", "neutral", "car", data)  # its own neutral
+    with pytest.raises(InputError, match="fold") as refused:
+        fit.run(build_template(), take, fit.Params.from_config(repo_config()))
+    hint = "its landmarks were detected, not given: correct them in landmarks/car.pts"
+    assert (hint in str(refused.value)) == (source == "detected"), refused.value

@@ -184,11 +184,9 @@ def click_noise_motion(
     ------
     InputError
         ``noise.px`` <= 0, ``noise.draws`` < 2, a mask of the wrong length, or a take's own
-        fit error with its clicks (naming it). Fewer than half of the draws of the neutral or of
-        a take fitted is no error (the error bar is a diagnostic; it used to stop the subject):
-        the click noise is then too large for the template, and the take has no error bar
-        (``rms_mm``, ``relative`` and ``rms_error_mm`` NaN, every draw in ``failed_draws``; a
-        warning in the log names the take and quotes the first refusal).
+        fit error with its clicks (naming it). Fewer than half of a take's draws fitted (the
+        neutral's: every take's) is no error: that take has no error bar (NaN ``rms_mm``,
+        ``relative``, ``rms_error_mm``; every draw in ``failed_draws``; a warning says why).
     """
     draws = _checked_draws(noise, source)
     suppressed = np.asarray(suppressed, dtype=bool)
@@ -216,8 +214,7 @@ def click_noise_motion(
         )  # fmt: skip
         if problem := n_problem or problem:  # the error bar is a diagnostic: the take stays
             log.warning("%s/%s has no click-noise error bar: %s", source, take, problem)
-        sq, count = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64)
-        used = 0
+        sq, count, used = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64), 0
         for n_fit, t_fit in zip(n_fits, t_fits, strict=True):
             if problem or n_fit is None or t_fit is None:
                 continue

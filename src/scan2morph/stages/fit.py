@@ -9,8 +9,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scan2morph.errors import InputError
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
+from scan2morph.store.warnings import text_value
 from scan2morph.template import FitRules, Template, fit_take, subdivide_template
 from scan2morph.template.rim import Rim
 
@@ -117,15 +119,26 @@ def run(template: Template, take: Take, params: Params) -> Part:
     fiducials = params.fiducial_set(take.kind)
     rim = params.rim(take)
     share = 1.0 if rim is None else rim.share
-    mesh = fit_take(
-        template,
-        need(data, paths.landmarks(name), source),
-        need(data, paths.range_image(name, "xyz"), source),
-        fiducial_set=fiducials,
-        rules=params.rules,
-        source=source,
-        rim=rim,
-    )
+    try:
+        mesh = fit_take(
+            template,
+            need(data, paths.landmarks(name), source),
+            need(data, paths.range_image(name, "xyz"), source),
+            fiducial_set=fiducials,
+            rules=params.rules,
+            source=source,
+            rim=rim,
+        )
+    except InputError as exc:  # detected landmarks refused: say so, and how to give others
+        detected = text_value(data.get(paths.landmark_info(name, "source"), "clicked"))
+        if "detected" not in detected:
+            raise
+        raise InputError(
+            exc.source,
+            f"{exc.problem} (its landmarks were {detected}, not given: correct them in "
+            f"landmarks/{name}.pts of the subject's results and give that file in the sheet's "
+            "landmarks column)",
+        ) from None
     log.info(
         "%s: %d vertices, %.1f%% valid, %d folded triangles",
         name,
