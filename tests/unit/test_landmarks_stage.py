@@ -76,6 +76,7 @@ def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
     group's attributes); without a refinement nothing is added."""
     message = "the detected landmarks are doubtful"
     data = {paths.landmark_info(t, "doubtful"): message for t in ("n", "s", "v")}
+    data |= {paths.landmark_info(t, "source"): "detected" for t in ("n", "s", "v")}
     data |= {paths.align(t, "ok"): True for t in ("n", "s", "v")}
     refine = {"confident_share": 0.568, "median_correction_px": 4.26, "used": True}
     attrs = {paths.take("n"): {"kind": "neutral"}, paths.take("s"): {"kind": "expression"}}
@@ -218,3 +219,31 @@ def test_a_fit_refusing_detected_landmarks_says_they_were_detected(car, source):
         fit.run(build_template(), take, fit.Params.from_config(repo_config()))
     hint = "its landmarks were detected, not given: correct them in landmarks/car.pts"
     assert (hint in str(refused.value)) == (source == "detected"), refused.value
+
+
+def test_a_doubtful_detection_beside_given_landmarks_says_its_error_is_in_the_motion(tmp_path):
+    """A subject mixing given and detected landmarks: a doubtful detection's error is not in
+    the given takes' points, so the warning no longer says it stays out of the motions (on the
+    real head a clicked smile beside a detected neutral moved 25 times the skin's error of both
+    detected)."""
+    message = "the detected landmarks are doubtful"
+    data = {paths.landmark_info(t, "doubtful"): message for t in ("n", "s")}
+    data |= {paths.landmark_info("c", "doubtful"): ""}
+    data |= {paths.landmark_info(t, "source"): "detected" for t in ("n", "s")}
+    data |= {paths.landmark_info("c", "source"): "clicked"}
+    data |= {paths.align(t, "ok"): True for t in ("n", "s", "c")}
+    refine = {"confident_share": 0.568, "median_correction_px": 4.26, "used": True}
+    attrs = {paths.take("n"): {"kind": "neutral"}, paths.take("s"): {"kind": "expression"}}
+    attrs |= {paths.take("c"): {"kind": "viseme"}, paths.refine_group("s"): refine}
+    path = tmp_path / "store.h5"
+    write_part(path, data | {paths.refine("s", "valid"): np.ones(3, bool)}, attrs=attrs)
+    with h5py.File(path) as h5:
+        said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+    mixed = (
+        "; the subject mixes detected and given landmarks (given: c): this detection's error is "
+        "not in theirs, so it is in the motion between them where no refinement follows the "
+        "skin; give this take's landmarks too, or none for any take"
+    )
+    assert said["n"] == message + mixed
+    assert said["s"].startswith(message + mixed + "; its refinement (by its texture) measured")
+    assert "c" not in said

@@ -23,6 +23,7 @@ from scan2morph.store.warnings import (
     read_failures,
     read_warnings,
     skipped_stages,
+    text_value,
     warning_datasets,
 )
 
@@ -93,10 +94,12 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
                 else "left out of the models"
             )
             out.append(Warning("align", take, f"{'; '.join(problems)}: {fate}"))
+    given = [t for t in takes if _landmark_source(h5, t).startswith("clicked")]
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
-            out.append(Warning("landmarks", take, doubtful.asstr()[()] + _what_it_does(h5, take)))
+            said = doubtful.asstr()[()] + _what_it_does(h5, take, [t for t in given if t != take])
+            out.append(Warning("landmarks", take, said))
     for take in takes:
         group = h5.get(paths.refine_group(take))
         problem = group.attrs.get("problem", "") if group is not None else ""
@@ -106,17 +109,41 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     return out
 
 
-def _what_it_does(h5: h5py.File, take: str) -> str:
+def _landmark_source(h5: h5py.File, take: str) -> str:
+    """``clicked``, ``detected`` or ``clicked+detected jawline`` (a store from before the
+    landmarks stage: ``clicked``)."""
+    value = h5.get(paths.landmark_info(take, "source"))
+    return "clicked" if value is None else text_value(value)
+
+
+def _what_it_does(h5: h5py.File, take: str, given: list[str]) -> str:
     """What a doubtful detection's error does to the model, for the report's warning: the
     neutral's points place the template on the face; another take's error is taken up where its
     refinement followed the skin from the neutral (by the skin's texture, or by the surface's
     shape where the refinement said so), and for a take the takes' consensus moved, where that
-    consensus did, with its own numbers (``""`` when neither ran)."""
-    if str(h5[paths.TAKES][take].attrs.get("kind", "")) == "neutral":
+    consensus did, with its own numbers (``""`` when neither ran). When the subject mixes
+    detected and given landmarks (``given``: the other takes whose landmarks were given), the
+    detection's error is not shared by theirs: it is in the motion between them, and it says
+    so (a clicked take beside a detected neutral, or the reverse, moved 2-30 times the error of
+    both detected on the real head)."""
+    neutral = str(h5[paths.TAKES][take].attrs.get("kind", "")) == "neutral"
+    if given:
+        return (
+            f"; the subject mixes detected and given landmarks (given: {', '.join(given)}): this "
+            "detection's error is not in theirs, so it is in the motion between them where no "
+            "refinement follows the skin; give this take's landmarks too, or none for any take"
+            + ("" if neutral else _taken_up(h5, take))
+        )
+    if neutral:
         return (
             "; the neutral's points place the template on the face: their error moves which "
             "skin each vertex is (a mouth-corner vertex off the corner), not the takes' motions"
         )
+    return _taken_up(h5, take)
+
+
+def _taken_up(h5: h5py.File, take: str) -> str:
+    """Where a take's refinement or the takes' consensus took up its detection error."""
     group = h5.get(paths.refine_group(take))
     refine = group.attrs if group is not None else {}
     consensus = h5.get(paths.consensus_group(take))
