@@ -70,21 +70,43 @@ def test_low_confidence_is_doubtful_and_a_warning(tmp_path):
     assert "doubtful" in warnings[0].message
 
 
+DOUBTFUL = "the detected landmarks are doubtful"
+#: A take's refinement that followed its skin (the refine group's attributes).
+REFINED = {"confident_share": 0.568, "median_correction_px": 4.26, "used": True}
+
+
+def _doubtful_subject(viseme: str, source: str) -> tuple[dict, dict]:
+    """A store's datasets and attributes: the neutral ``n`` and the expression ``s`` detected
+    and doubtful (``s`` refined by its texture, :data:`REFINED`), a viseme whose landmarks came
+    from ``source`` (doubtful when detected)."""
+    sources = {"n": "detected", "s": "detected", viseme: source}
+    data = {paths.landmark_info(t, "source"): src for t, src in sources.items()}
+    data |= {
+        paths.landmark_info(t, "doubtful"): DOUBTFUL if src == "detected" else ""
+        for t, src in sources.items()
+    }
+    data |= {paths.align(t, "ok"): True for t in sources}
+    data |= {paths.refine("s", "valid"): np.ones(3, bool)}
+    attrs = {paths.take("n"): {"kind": "neutral"}, paths.take("s"): {"kind": "expression"}}
+    attrs |= {paths.take(viseme): {"kind": "viseme"}, paths.refine_group("s"): REFINED}
+    return data, attrs
+
+
+def _said(path, data: dict, attrs: dict) -> dict[str, str]:
+    """The subject's warnings by take, of a store written with ``data`` and ``attrs``."""
+    write_part(path, data, attrs=attrs)
+    with h5py.File(path) as h5:
+        return {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+
+
 def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
     """The neutral's doubtful points place the template; another take's error is taken up
     where its refinement followed the skin (its share and median correction, from the refine
     group's attributes); without a refinement nothing is added."""
-    message = "the detected landmarks are doubtful"
-    data = {paths.landmark_info(t, "doubtful"): message for t in ("n", "s", "v")}
-    data |= {paths.landmark_info(t, "source"): "detected" for t in ("n", "s", "v")}
-    data |= {paths.align(t, "ok"): True for t in ("n", "s", "v")}
-    refine = {"confident_share": 0.568, "median_correction_px": 4.26, "used": True}
-    attrs = {paths.take("n"): {"kind": "neutral"}, paths.take("s"): {"kind": "expression"}}
-    attrs |= {paths.take("v"): {"kind": "viseme"}, paths.refine_group("s"): refine}
+    message = DOUBTFUL
+    data, attrs = _doubtful_subject("v", "detected")
     path = tmp_path / "store.h5"
-    write_part(path, data | {paths.refine("s", "valid"): np.ones(3, bool)}, attrs=attrs)
-    with h5py.File(path) as h5:
-        said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+    said = _said(path, data, attrs)
     assert said["n"].startswith(message + "; the neutral's points place the template")
     assert said["s"] == (
         message + "; its refinement (by its texture) measured where its skin went on 57% of the "
@@ -94,7 +116,7 @@ def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
     assert said["v"] == message
     # refined by the surface's shape, it says so; moved by the takes' consensus, the
     # consensus's numbers are the ones that count (motion reads its mesh)
-    shape = refine | {"shape_used": True}
+    shape = REFINED | {"shape_used": True}
     consensus = {"confident_share": 0.81, "median_correction_px": 1.94}
     for extra, expected in (
         ({paths.refine_group("s"): shape}, "its refinement (by the surface's shape) measured where "
@@ -103,9 +125,7 @@ def test_a_doubtful_warning_says_what_the_error_does(tmp_path):
          "consensus (their shared texture) measured where its skin went on 81% of the face, a "
          "median 1.9 px"),
     ):  # fmt: skip
-        write_part(path, data, attrs=attrs | extra)
-        with h5py.File(path) as h5:
-            said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+        said = _said(path, data, attrs | extra)
         assert said["s"].startswith(message + "; " + expected), said["s"]
 
 
@@ -226,19 +246,8 @@ def test_a_doubtful_detection_beside_given_landmarks_says_its_error_is_in_the_mo
     the given takes' points, so the warning no longer says it stays out of the motions (on the
     real head a clicked smile beside a detected neutral moved 25 times the skin's error of both
     detected)."""
-    message = "the detected landmarks are doubtful"
-    data = {paths.landmark_info(t, "doubtful"): message for t in ("n", "s")}
-    data |= {paths.landmark_info("c", "doubtful"): ""}
-    data |= {paths.landmark_info(t, "source"): "detected" for t in ("n", "s")}
-    data |= {paths.landmark_info("c", "source"): "clicked"}
-    data |= {paths.align(t, "ok"): True for t in ("n", "s", "c")}
-    refine = {"confident_share": 0.568, "median_correction_px": 4.26, "used": True}
-    attrs = {paths.take("n"): {"kind": "neutral"}, paths.take("s"): {"kind": "expression"}}
-    attrs |= {paths.take("c"): {"kind": "viseme"}, paths.refine_group("s"): refine}
-    path = tmp_path / "store.h5"
-    write_part(path, data | {paths.refine("s", "valid"): np.ones(3, bool)}, attrs=attrs)
-    with h5py.File(path) as h5:
-        said = {w.take: w.message for w in subject_warnings(h5, SETTINGS)}
+    message = DOUBTFUL
+    said = _said(tmp_path / "store.h5", *_doubtful_subject("c", "clicked"))
     mixed = (
         "; the subject mixes detected and given landmarks (given: c): this detection's error is "
         "not in theirs, so it is in the motion between them where no refinement follows the "
