@@ -47,6 +47,25 @@ def test_other_counts_are_refused_naming_the_accepted_ones(tmp_path, count):
         read_landmarks3d(tmp_path / "bad.txt")
 
 
+@pytest.mark.parametrize("name", ["car.pts", "car.xyz"])
+def test_the_record_of_a_take_left_out_given_back_says_what_it_is(tmp_path, name):
+    """The file the pipeline writes for a take left out at its landmarks, given back in the
+    sheet as the docs suggest for every take's points: it holds none, and says so (it was
+    refused as a .pts without its '{')."""
+    from scan2morph.io.landmarks import LEFT_OUT
+
+    path = tmp_path / name
+    path.write_text(f"{LEFT_OUT}car left out at landmarks: s1/car: face too small\n")
+    read = read_pts if name.endswith(".pts") else read_landmarks3d
+    with pytest.raises(
+        InputError,
+        match=rf"{name}: the pipeline's record of a take left out at its landmarks \(car left "
+        r"out at landmarks: s1/car: face too small\), with no points to give back: leave the "
+        r"sheet's landmarks cell empty to detect them again, or give clicked ones",
+    ):
+        read(path)
+
+
 def test_as_ibug68_keeps_a_full_set_and_pads_an_inner_one():
     full = _points(68)
     assert as_ibug68(full) is not None and np.array_equal(as_ibug68(full), full)

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 from scan2morph.errors import InputError
 from scan2morph.io import write_landmarks3d, write_obj, write_pts
+from scan2morph.io.landmarks import LEFT_OUT
 from scan2morph.io.obj import write_failed_obj
 from scan2morph.jobs import files_sha256, sha256_file, write_json
 from scan2morph.sheet import PATH_SEPARATOR, ROW_LOCATION, mm_per_unit
@@ -111,7 +112,7 @@ def on_failure(j, stage):
     return {
         "repair": lambda record: write_json(out.repair_report, {"failed": str(record)}),
         "landmarks": lambda record: [
-            Path(p).write_text(f"# no landmarks: {record}\n") for p in (out.pts, out.xyz)
+            Path(p).write_text(f"{LEFT_OUT}{record}\n") for p in (out.pts, out.xyz)
         ],
         "fit": lambda record: write_failed_obj(out.obj, str(record)),
     }.get(stage)

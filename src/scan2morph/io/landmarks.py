@@ -65,6 +65,30 @@ def complete(points: np.ndarray | None) -> bool:
     return points is not None and bool(np.isfinite(points).all())
 
 
+#: The first line of the landmark files the pipeline writes for a take left out at its
+#: landmarks (``results/{subject}/landmarks/{take}.pts`` and ``.xyz``): no points, the reason.
+LEFT_OUT = "# no landmarks: "
+
+
+def refuse_left_out(path: str | Path, text: str) -> None:
+    """Refuse a landmark file that is the pipeline's record of a take left out at its landmarks
+    (:data:`LEFT_OUT`): it holds no points to give back.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the reason it records, and what to give instead.
+    """
+    if text.startswith(LEFT_OUT):
+        reason = text.splitlines()[0].removeprefix(LEFT_OUT).strip()
+        raise InputError(
+            path,
+            f"the pipeline's record of a take left out at its landmarks ({reason[:200]}), with "
+            "no points to give back: leave the sheet's landmarks cell empty to detect them "
+            "again, or give clicked ones",
+        )
+
+
 def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
     """Read an iBUG ``.pts`` file.
 
@@ -89,6 +113,7 @@ def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as text: {exc}") from exc
+    refuse_left_out(path, text)
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     if not lines:
         raise InputError(path, "the file is empty (expected an iBUG .pts landmark file)")

@@ -33,7 +33,12 @@ import numpy as np  # noqa: E402
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
-from scan2morph.io.landmarks import as_ibug68, complete, count_problem  # noqa: E402
+from scan2morph.io.landmarks import (  # noqa: E402
+    as_ibug68,
+    complete,
+    count_problem,
+    refuse_left_out,
+)
 from scan2morph.io.mesh_distance import surface_distance  # noqa: E402
 from scan2morph.io.mesh_file import (  # noqa: E402
     ObjMaterials,
@@ -269,6 +274,7 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
         text = path.read_text(encoding="utf-8-sig")  # a BOM, as Windows editors save
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read as text: {exc}") from None
+    refuse_left_out(path, text)
     rows = []
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
