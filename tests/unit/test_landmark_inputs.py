@@ -66,6 +66,18 @@ def test_the_record_of_a_take_left_out_given_back_says_what_it_is(tmp_path, name
         read(path)
 
 
+def test_a_mesh_takes_3d_points_given_for_an_image_take_say_so(tmp_path):
+    """An .xyz (lines 'x y z') given where a .pts belongs: the message says which file to give."""
+    path = tmp_path / "car.xyz"
+    path.write_text("".join(f"{x} {y} 1000.5\n" for x, y in _points(68)))
+    with pytest.raises(InputError, match=r"is a point.*3D points 'x y z' are for a mesh take"):
+        read_pts(path)
+    (tmp_path / "car2.pts").write_text("".join(f"{x} {y}\n" for x, y in _points(68)))
+    with pytest.raises(InputError, match=r"is a point, but an iBUG .pts starts with") as plain:
+        read_pts(tmp_path / "car2.pts")
+    assert "mesh take" not in str(plain.value)  # 2D points: no word of mesh takes
+
+
 def test_as_ibug68_keeps_a_full_set_and_pads_an_inner_one():
     full = _points(68)
     assert as_ibug68(full) is not None and np.array_equal(as_ibug68(full), full)

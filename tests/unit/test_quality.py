@@ -66,6 +66,15 @@ def test_every_gate_gives_one_line(store):
     assert "kept in the models (quality.include_failed_takes)" in kept[2].message
 
 
+def test_the_scatter_of_detected_landmarks_is_not_called_clicks(store):
+    """Where some takes' landmarks were detected, the measured scatter is the detector's: the
+    warning speaks of the landmark points, not of clicks."""
+    with h5py.File(store, "a") as h5:
+        h5.create_dataset(paths.landmark_info("car", "source"), data="detected")
+        said = [str(w) for w in subject_warnings(h5, SETTINGS)]
+    assert said[-1].startswith("[motion_noise] the landmark points scatter by 2.25 px")
+
+
 def test_warnings_round_trip_through_the_store(store, tmp_path):
     warnings = [Warning("align", "smile", "bad"), Warning("motion_noise", "", "noisy")]
     write_part(tmp_path / "w.h5", warning_datasets(warnings))

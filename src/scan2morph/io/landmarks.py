@@ -122,10 +122,17 @@ def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
     while i < len(lines) and lines[i] != "{":
         key, sep, value = lines[i].partition(":")
         if not sep and _numbers(lines[i]):
+            xyz = len(lines[i].replace(",", " ").split()) == 3  # 'x y z': a mesh take's file
             raise InputError(
                 path,
                 f"header: {lines[i][:40]!r} is a point, but an iBUG .pts starts with a header "
-                "('version: 1', 'n_points: 68', '{'; the points, then '}')",
+                "('version: 1', 'n_points: 68', '{'; the points, then '}')"
+                + (
+                    "; 3D points 'x y z' are for a mesh take: give this take its .pts of image "
+                    "points"
+                    if xyz
+                    else ""
+                ),
             )
         if not sep:
             raise InputError(path, f"header line {lines[i][:40]!r}: expected 'key: value' or '{{'")

@@ -144,7 +144,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
         log.info("%s: %s", name, attrs[paths.align_group(name)])
         if not ok:
             log.warning(
-                "%s: alignment failed its quality gate: %s", name, "; ".join(result.problems)
+                "%s: alignment failed its quality gate: %s", source, "; ".join(result.problems)
             )
     return Part(
         {

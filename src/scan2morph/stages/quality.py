@@ -185,10 +185,12 @@ def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     if key in h5:
         measured = float(h5[key][()])
         limit = float(settings["max_click_noise_px"])
+        takes = h5.get(paths.TAKES, {})
+        detected = any("detected" in _landmark_source(h5, t) for t in takes)
         if np.isfinite(measured) and measured > limit:
             message = (
-                f"the landmark clicks scatter by {measured:.2f} px, above {limit:g} px: the motion "
-                "of small visemes is not to be trusted"
+                f"the landmark {'points' if detected else 'clicks'} scatter by {measured:.2f} px, "
+                f"above {limit:g} px: the motion of small visemes is not to be trusted"
             )
             out.append(Warning("motion_noise", "", message))
     return out
