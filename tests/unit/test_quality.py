@@ -8,6 +8,7 @@ import pytest
 
 from scan2morph.stages import Subject
 from scan2morph.stages.quality import (
+    SHAPE_REFINED,
     Warning,
     aligned_takes,
     modelled,
@@ -73,6 +74,18 @@ def test_the_scatter_of_detected_landmarks_is_not_called_clicks(store):
         h5.create_dataset(paths.landmark_info("car", "source"), data="detected")
         said = [str(w) for w in subject_warnings(h5, SETTINGS)]
     assert said[-1].startswith("[motion_noise] the landmark points scatter by 2.25 px")
+
+
+def test_takes_refined_by_their_shape_are_one_warning(store):
+    """Takes whose texture did not correlate with the neutral's, refined by the surface's shape
+    (about three times the error of a texture-refined take): one warning naming them; a take
+    refined by its texture or not refined gives none (it used to say nothing at all)."""
+    with h5py.File(store, "a") as h5:
+        for take, shape in (("car", True), ("smile", False)):
+            h5.require_group(paths.refine_group(take)).attrs["shape_used"] = shape
+        said = [w for w in subject_warnings(h5, SETTINGS) if w.stage == "refine"]
+    assert [str(w) for w in said] == ["[refine] " + SHAPE_REFINED.format(takes="car")]
+    assert said[0].message.startswith("car: refined by the surface's shape")
 
 
 def test_warnings_round_trip_through_the_store(store, tmp_path):

@@ -1306,8 +1306,8 @@ def test_a_takes_caption_says_how_its_correspondence_was_made(tmp_path):
     assert said == {
         "neutral": "",
         "car": "; refined by its texture",
-        "sad1": "; refined by its shape (its texture does not match the neutral's), registered "
-        "to 2 other such takes by their shared texture",
-        "sad2": "; refined by its shape (its texture does not match the neutral's)",
+        "sad1": "; refined by its shape (its texture does not correlate with the neutral's), "
+        "registered to 2 other such takes by their shared texture",
+        "sad2": "; refined by its shape (its texture does not correlate with the neutral's)",
         "too": "; template fit kept (see the warnings)",
     }

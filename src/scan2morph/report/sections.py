@@ -216,7 +216,7 @@ def correspondence(h5: h5py.File, take: str) -> str:
         return "; template fit kept (see the warnings)"
     if not bool(group.attrs.get("shape_used", False)):
         return "; refined by its texture"
-    text = "; refined by its shape (its texture does not match the neutral's)"
+    text = "; refined by its shape (its texture does not correlate with the neutral's)"
     if paths.consensus_group(take) in h5:
         others = len(json.loads(_attr(h5[paths.CONSENSUS], "takes", "[]"))) - 1
         text += f", registered to {others} other such takes by their shared texture"

@@ -32,6 +32,15 @@ GREY = (
     "the colour image is grey-scale: the lip priors, which find the lips by their redness, are "
     "not used, and the refinement correlates grey texture only"
 )
+#: The warning of a subject whose takes the surface's shape refined (their texture did not
+#: correlate with the neutral's), ``{takes}`` listed.
+SHAPE_REFINED = (
+    "{takes}: refined by the surface's shape, as their texture does not correlate with the "
+    "neutral's (other lighting or exposure, another sensor's texture, or a texture too dark or "
+    "flat): skin that slides without changing its shape is followed less well (a darkened "
+    "texture on the real head: 2.9 times the motion error); a neutral whose colour image "
+    "matches its takes' is refined by the skin"
+)
 #: Config section this module reads.
 SECTIONS = ("quality",)
 
@@ -105,8 +114,16 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
         problem = group.attrs.get("problem", "") if group is not None else ""
         if problem:
             out.append(Warning("refine", take, str(problem)))
+    if shaped := [t for t in takes if _shape_refined(h5, t)]:
+        out.append(Warning("refine", "", SHAPE_REFINED.format(takes=", ".join(shaped))))
     out += _motion_noise_warnings(h5, settings)
     return out
+
+
+def _shape_refined(h5: h5py.File, take: str) -> bool:
+    """The take's texture did not correlate with the neutral's: its shape refined it."""
+    group = h5.get(paths.refine_group(take))
+    return group is not None and bool(group.attrs.get("shape_used", False))
 
 
 def _landmark_source(h5: h5py.File, take: str) -> str:
