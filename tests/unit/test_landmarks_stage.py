@@ -256,3 +256,61 @@ def test_a_doubtful_detection_beside_given_landmarks_says_its_error_is_in_the_mo
     assert said["n"] == message + mixed
     assert said["s"].startswith(message + mixed + "; its refinement (by its texture) measured")
     assert "c" not in said
+
+
+def test_a_refused_detection_carries_its_points_to_correct(car, tmp_path):
+    """Detected points that a face check refuses (an outer eye corner where the scan has a
+    hole): the take is left out, and the refusal carries the detection and its points on the
+    surface, which the take's job writes for the user to correct and give back (it used to
+    write a file with no points). The .pts with its note reads back as the points."""
+    from scan2morph.io import read_pts, write_pts
+
+    xyz = np.array(car["xyz"])
+    rows, cols = np.mgrid[: xyz.shape[0], : xyz.shape[1]]
+    x, y = car["landmarks"][45]
+    xyz[(abs(cols - x) < 16) & (abs(rows - y) < 16)] = np.nan  # a hole over iBUG 46
+    data = {paths.range_image("car", "xyz"): xyz, paths.range_image("car", "color"): car["color"]}
+    take = Take("s1", "car", "neutral", "neutral", "car", data)
+    with pytest.raises(landmarks.RefusedDetection, match="iBUG 46 .* lies where the range") as no:
+        landmarks.run(None, take, landmarks.Params())
+    refused = no.value
+    assert isinstance(refused, InputError)
+    assert refused.points.shape == (68, 2) and np.isfinite(refused.points).all()
+    assert np.median(np.linalg.norm(refused.points - car["landmarks"], axis=1)) < 3.0
+    assert refused.surface.shape == (68, 3) and np.isfinite(refused.surface).all()
+    path = tmp_path / "car.pts"
+    write_pts(path, refused.points, comment="detected landmarks refused (car left out): correct")
+    assert path.read_text().startswith("# detected landmarks refused")
+    np.testing.assert_allclose(read_pts(path), refused.points, atol=1e-4)
+
+
+def test_the_take_job_writes_a_refused_detection_and_a_record_without_points(tmp_path):
+    """The take job's files for a take left out at its landmarks: a refused detection's points
+    (the .pts with a first line saying why, the .xyz as MeshLab opens it), which read back as
+    landmark files; without points (no face found) the record alone, which says what it is."""
+    import importlib.util
+    from types import SimpleNamespace
+
+    from scan2morph.io import read_pts
+    from scan2morph.io.mesh_scan import read_landmarks3d
+    from scan2morph.store.warnings import Failure
+    from tests.support.workflow_api import REPO
+
+    spec = importlib.util.spec_from_file_location("take_job", REPO / "workflow/scripts/take.py")
+    job = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(job)
+    rng = np.random.default_rng(5)
+    refused = landmarks.RefusedDetection(
+        InputError("s1/car", "iBUG 46 lies off"), rng.random((68, 2))
+    )
+    refused.surface = rng.random((68, 3)) * 100.0
+    out = SimpleNamespace(pts=tmp_path / "car.pts", xyz=tmp_path / "car.xyz")
+    j = SimpleNamespace(out=out, p=SimpleNamespace(row={"modality": "range"}))
+    record = Failure("car", "landmarks", "s1/car: iBUG 46 lies off")
+    job.write_left_out_landmarks(j, record, refused)
+    assert out.pts.read_text().startswith("# detected landmarks refused (car left out at")
+    np.testing.assert_allclose(read_pts(out.pts), refused.points, atol=1e-4)
+    np.testing.assert_allclose(read_landmarks3d(out.xyz), refused.surface, rtol=1e-5)
+    job.write_left_out_landmarks(j, record, None)
+    with pytest.raises(InputError, match="the pipeline's record of a take left out"):
+        read_pts(out.pts)

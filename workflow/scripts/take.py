@@ -110,12 +110,25 @@ def on_failure(j, stage):
     """Writes a failed take's other outputs of ``stage`` (None: it has none)."""
     out = j.out
     return {
-        "repair": lambda record: write_json(out.repair_report, {"failed": str(record)}),
-        "landmarks": lambda record: [
-            Path(p).write_text(f"{LEFT_OUT}{record}\n") for p in (out.pts, out.xyz)
-        ],
-        "fit": lambda record: write_failed_obj(out.obj, str(record)),
+        "repair": lambda record, _: write_json(out.repair_report, {"failed": str(record)}),
+        "landmarks": lambda record, error: write_left_out_landmarks(j, record, error),
+        "fit": lambda record, _: write_failed_obj(out.obj, str(record)),
     }.get(stage)
+
+
+def write_left_out_landmarks(j, record, error):
+    """A take left out at its landmarks: its refused detection, to correct and give back, with
+    a first line saying why; else (no points: no face found, a record handed on) the record
+    alone (:data:`~scan2morph.io.landmarks.LEFT_OUT`)."""
+    points = getattr(error, "points", None)
+    if points is None:
+        for path in (j.out.pts, j.out.xyz):
+            Path(path).write_text(f"{LEFT_OUT}{record}\n")
+        return
+    note = f"detected landmarks refused ({record}): correct them and give this file back"
+    write_pts(j.out.pts, points, comment=note)
+    unit = mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
+    write_landmarks3d(j.out.xyz, error.surface / unit)  # no comment: MeshLab opens it
 
 
 def outputs(j, stage):

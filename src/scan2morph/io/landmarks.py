@@ -120,6 +120,9 @@ def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
     header = {}
     i = 0
     while i < len(lines) and lines[i] != "{":
+        if lines[i].startswith("#"):  # a comment (the pipeline's note on refused points)
+            i += 1
+            continue
         key, sep, value = lines[i].partition(":")
         if not sep and _numbers(lines[i]):
             xyz = len(lines[i].replace(",", " ").split()) == 3  # 'x y z': a mesh take's file
@@ -186,14 +189,16 @@ def _numbers(line: str) -> bool:
     return len(parts) in (2, 3)
 
 
-def write_pts(path: str | Path, points: np.ndarray) -> None:
-    """Write 0-based pixel coordinates (N, 2) as an iBUG ``.pts`` file (1-based)."""
+def write_pts(path: str | Path, points: np.ndarray, comment: str | None = None) -> None:
+    """Write 0-based pixel coordinates (N, 2) as an iBUG ``.pts`` file (1-based); ``comment``:
+    a first line ``# comment`` (:func:`read_pts` skips it)."""
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 2:
         raise InputError(path, f"points: expected an (N, 2) array, got shape {points.shape}")
     if not np.all(np.isfinite(points)):
         raise InputError(path, "points: non-finite coordinate")
-    lines = ["version: 1", f"n_points: {len(points)}", "{"]
+    lines = [f"# {comment}"] if comment else []
+    lines += ["version: 1", f"n_points: {len(points)}", "{"]
     lines += [f"{x + 1.0:.4f} {y + 1.0:.4f}" for x, y in points]
     lines.append("}")
     with writing(path):

@@ -74,7 +74,7 @@ def run_take_job(
     stage: str,
     inputs: Iterable[str | Path],
     part: str | Path,
-    on_failure: Callable[[Failure], None] | None = None,
+    on_failure: Callable[[Failure, InputError | None], None] | None = None,
 ) -> None:
     """Run a per-take stage's job with take isolation (see the module docstring).
 
@@ -92,7 +92,9 @@ def run_take_job(
     part : str or Path
         The job's part, written as the failure record when the take fails.
     on_failure : callable, optional
-        Writes the job's other outputs for a failed take (e.g. the fit's OBJ saying why).
+        ``on_failure(record, error)`` writes the job's other outputs for a failed take (e.g.
+        the fit's OBJ saying why); ``error`` is the stage's refusal (None for a record handed
+        on), which may carry what the user can mend (a refused detection's points).
 
     Notes
     -----
@@ -101,7 +103,7 @@ def run_take_job(
     """
 
     def isolated():
-        inherited = part_failures(inputs)
+        inherited, error = part_failures(inputs), None
         if inherited:
             record = inherited.get(take) or next(iter(inherited.values()))
             log.info("%s: not run, %s", take, record)
@@ -112,11 +114,11 @@ def run_take_job(
             except OutputError:
                 raise
             except InputError as exc:
-                record = Failure(take, stage, str(exc))
+                record, error = Failure(take, stage, str(exc)), exc
                 log.warning("%s is left out of its subject: %s", take, exc)
         write_part(part, record.datasets())
         if on_failure is not None:
-            on_failure(record)
+            on_failure(record, error)
 
     run_job(log_path, isolated)
 

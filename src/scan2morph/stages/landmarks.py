@@ -31,6 +31,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from scan2morph.align.carry import carry_points, carry_stable, track_points
+from scan2morph.errors import InputError
 from scan2morph.io import check_face, check_handedness
 from scan2morph.io.landmarks import complete
 from scan2morph.refine import RefineParams, grey
@@ -218,10 +219,32 @@ def settle(clicks: np.ndarray | None, color: np.ndarray, xyz: np.ndarray, source
         # the clicks' band (:data:`~scan2morph.io.take.EYE_SPAN_MM`) catches a detection far off
         # too (the real head's, 8 px off, puts them 68 mm apart against its annotation's 76 mm:
         # it goes on, flagged doubtful, and the report shows it for correction)
-        check_face(xyz, out.points, source, f"{source} (detected landmarks)", hint)
+        try:
+            check_face(xyz, out.points, source, f"{source} (detected landmarks)", hint)
+        except InputError as exc:  # the take is left out: its points written for correction
+            raise RefusedDetection(exc, out.points) from None
     else:  # the eye corners are clicked (a 51-point file): the clicks' band
         check_face(xyz, out.points, source, f"{source} (detected jawline)")
     return out
+
+
+class RefusedDetection(InputError):
+    """Detected landmarks that a face check refused (the take is left out), with the points,
+    so that the user can correct them and give them back.
+
+    Attributes
+    ----------
+    points : (68, 2) float64
+        The detection, px on the take's grid.
+    surface : (68, 3) float64 or None
+        The same points on the take's measured surface, mm (:func:`surface_points`), once
+        :func:`run` has added them.
+    """
+
+    def __init__(self, refusal: InputError, points: np.ndarray):
+        super().__init__(refusal.source, refusal.problem)
+        self.points = np.asarray(points, dtype=np.float64)
+        self.surface: np.ndarray | None = None
 
 
 def run(template, take: Take, params: Params) -> Part:
@@ -252,7 +275,11 @@ def run(template, take: Take, params: Params) -> Part:
     t, data = take.take, take.data
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
     color = need(data, paths.range_image(t, "color"), take.source)
-    found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
+    try:
+        found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
+    except RefusedDetection as exc:
+        exc.surface = surface_points(measured(xyz, take), exc.points)
+        raise
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
         detected = found.points
