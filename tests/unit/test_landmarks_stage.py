@@ -314,3 +314,19 @@ def test_the_take_job_writes_a_refused_detection_and_a_record_without_points(tmp
     job.write_left_out_landmarks(j, record, None)
     with pytest.raises(InputError, match="the pipeline's record of a take left out"):
         read_pts(out.pts)
+
+
+def test_a_doubtful_detection_beside_a_given_neutral_says_it_follows_the_neutral(tmp_path):
+    """A detected take whose neutral's landmarks were given follows them through the skin (the
+    second pass, all the way): the warning says so, not that its error is in the motion."""
+    data, attrs = _doubtful_subject("v", "detected")
+    data[paths.landmark_info("n", "source")] = "clicked"
+    data[paths.landmark_info("n", "doubtful")] = ""
+    said = _said(tmp_path / "store.h5", data, attrs)
+    assert "n" not in said
+    assert said["v"] == DOUBTFUL + (
+        "; its neutral's landmarks were given: where the skin's texture correlates its points "
+        "follow the neutral's, elsewhere this detection's error is in its motion (give this "
+        "take's landmarks too, or none for any take)"
+    )
+    assert said["s"].endswith("there the take's own detection error is taken up")

@@ -141,9 +141,18 @@ def _what_it_does(h5: h5py.File, take: str, given: list[str]) -> str:
     consensus did, with its own numbers (``""`` when neither ran). When the subject mixes
     detected and given landmarks (``given``: the other takes whose landmarks were given), the
     detection's error is not shared by theirs: it is in the motion between them, and it says
-    so (a clicked take beside a detected neutral, or the reverse, moved 2-30 times the error of
-    both detected on the real head)."""
-    neutral = str(h5[paths.TAKES][take].attrs.get("kind", "")) == "neutral"
+    so (a clicked take beside a detected neutral moved 25 times the error of both detected on
+    the real head). A detected take whose neutral's landmarks were given follows them through
+    the skin where the texture correlates (:func:`scan2morph.stages.landmarks.second_pass`),
+    and it says that instead."""
+    kinds = {t: str(h5[paths.TAKES][t].attrs.get("kind", "")) for t in h5[paths.TAKES]}
+    neutral = kinds[take] == "neutral"
+    if any(kinds[t] == "neutral" for t in given):
+        return (
+            "; its neutral's landmarks were given: where the skin's texture correlates its "
+            "points follow the neutral's, elsewhere this detection's error is in its motion "
+            "(give this take's landmarks too, or none for any take)" + _taken_up(h5, take)
+        )
     if given:
         return (
             f"; the subject mixes detected and given landmarks (given: {', '.join(given)}): this "
