@@ -311,6 +311,11 @@ def test_the_take_job_writes_a_refused_detection_and_a_record_without_points(tmp
     assert out.pts.read_text().startswith("# detected landmarks refused (car left out at")
     np.testing.assert_allclose(read_pts(out.pts), refused.points, atol=1e-4)
     np.testing.assert_allclose(read_landmarks3d(out.xyz), refused.surface, rtol=1e-5)
+    refused.surface[3] = np.nan  # a point off the data: the .xyz is the record, the .pts kept
+    job.write_left_out_landmarks(j, record, refused)
+    np.testing.assert_allclose(read_pts(out.pts), refused.points, atol=1e-4)
+    with pytest.raises(InputError, match="the pipeline's record of a take left out"):
+        read_landmarks3d(out.xyz)
     job.write_left_out_landmarks(j, record, None)
     with pytest.raises(InputError, match="the pipeline's record of a take left out"):
         read_pts(out.pts)
@@ -322,6 +327,9 @@ def test_a_doubtful_detection_beside_a_given_neutral_says_it_follows_the_neutral
     data, attrs = _doubtful_subject("v", "detected")
     data[paths.landmark_info("n", "source")] = "clicked"
     data[paths.landmark_info("n", "doubtful")] = ""
+    untracked = _said(tmp_path / "store.h5", data, attrs)  # landmarks.track off: no following
+    assert "the subject mixes detected and given landmarks (given: n)" in untracked["v"]
+    attrs[paths.take("v")] = attrs[paths.take("v")] | {"landmarks_tracked": 30}
     said = _said(tmp_path / "store.h5", data, attrs)
     assert "n" not in said
     assert said["v"] == DOUBTFUL + (

@@ -143,6 +143,9 @@ def test_a_take_the_noise_folds_has_no_error_bar_and_the_others_theirs(template,
     assert both["eel"]["failed_draws"] == 8
     assert np.isnan(both["eel"]["rms_mm"]).all() and np.isnan(both["eel"]["relative"])
     assert np.isnan(both["eel"]["rms_error_mm"])
+    motion = both["eel"]["motion"]  # its motion's RMS all the same (no mask here)
+    rms = np.sqrt(np.mean(np.sum(motion[np.isfinite(motion).all(axis=1)] ** 2, axis=1)))
+    assert both["eel"]["motion_rms_mm"] == pytest.approx(rms, rel=1e-12) and rms > 0
     assert re.search(
         r"subj/eel has no click-noise error bar: click_noise_px 2: only \d of 8 perturbed fits "
         r"of eel succeeded .*first refusal, draw \d+: subj/eel: landmarks fold",

@@ -58,8 +58,9 @@ def test_every_gate_gives_one_line(store):
         "[fit] smile: only 30% of the template has data",
         "[align] smile: ICP did not converge (50 iterations): left out of the models",
         "[motion_noise] car: 3 of 16 click-noise refits refused: its error bar is partial",
-        "[motion_noise] eel: all 16 click-noise refits refused (the click noise is too large for "
-        "the template; the motion_noise log says why): it has no error bar",
+        "[motion_noise] eel: too few of its 16 click-noise refits fitted (or of its neutral's: "
+        "the click noise is too large for the template; the motion_noise log says why): it has "
+        "no error bar",
         "[motion_noise] the landmark clicks scatter by 2.25 px, above 1.5 px: the motion of "
         "small visemes is not to be trusted",
     ]

@@ -1,9 +1,9 @@
 # Shared tables: config validation, the subject sheet, the synthetic cohort and the take table,
 # and lookups over them by subject. Included first; the other helper files and the rules use these.
-from pathlib import Path
-
+import os
 import sys
 import time
+from pathlib import Path
 
 import pandas as pd
 
@@ -199,10 +199,19 @@ def summarise_finished_subjects(stopped):
     from scan2morph.errors import InputError
     from scan2morph.report import write_cohort_summary
 
-    if not any(job.rule.name == "cohort" for job in workflow.dag.needrun_jobs()):
+    pending = workflow.dag.needrun_jobs()  # the jobs that were due and did not finish
+    if not any(job.rule.name == "cohort" for job in pending):
         return  # not asked for in this run, or written
-    done = [s for s in SUBJECTS if s not in stopped and subject_finished(s)]
-    why = "did not finish in this run (a job of it failed: see the run's log)"
+    # a subject with a job left to run is not this run's (its files are an earlier run's)
+    left = {
+        job.wildcards.get("subject") for job in pending if "subject" in job.wildcards
+    }
+    done = [
+        s
+        for s in SUBJECTS
+        if s not in stopped and s not in left and subject_finished(s)
+    ]
+    why = "not finished in this run (a job of it or before it failed, or the run was stopped)"
     others = {s: stopped.get(s, why) for s in SUBJECTS if s not in done}
     if not others:  # every subject finished: the cohort job failed on its own
         return
@@ -214,19 +223,18 @@ def summarise_finished_subjects(stopped):
     quiet = logging.getLogger("scan2morph")  # its left-out takes: listed above already
     level = quiet.level
     quiet.setLevel(logging.ERROR)
+    outputs = ("results/cohort/summary.tsv", "results/cohort/summary.png")
     try:
         write_cohort_summary(
-            {s: f"results/{s}/{s}.h5" for s in done},
-            accuracy,
-            "results/cohort/summary.tsv",
-            "results/cohort/summary.png",
-            others,
+            {s: f"results/{s}/{s}.h5" for s in done}, accuracy, *outputs, others
         )
     except InputError as exc:
         sys.stderr.write(f"cohort: not written: {exc}\n")
         return
     finally:
         quiet.setLevel(level)
+    for path in outputs:  # provisional: the cohort job writes it again once it can run
+        os.utime(path, (0, 0))
     sys.stderr.write(
         f"cohort: results/cohort/summary.tsv summarises the {len(done)} subjects that finished; "
         f"stopped: {', '.join(others)} (its column 'stopped' says why)\n"

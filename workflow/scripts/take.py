@@ -10,6 +10,8 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
+
 from scan2morph.errors import InputError
 from scan2morph.io import write_landmarks3d, write_obj, write_pts
 from scan2morph.io.landmarks import LEFT_OUT
@@ -120,15 +122,21 @@ def write_left_out_landmarks(j, record, error):
     """A take left out at its landmarks: its refused detection, to correct and give back, with
     a first line saying why; else (no points: no face found, a record handed on) the record
     alone (:data:`~scan2morph.io.landmarks.LEFT_OUT`)."""
-    points = getattr(error, "points", None)
-    if points is None:
-        for path in (j.out.pts, j.out.xyz):
-            Path(path).write_text(f"{LEFT_OUT}{record}\n")
-        return
+    points, surface = getattr(error, "points", None), getattr(error, "surface", None)
     note = f"detected landmarks refused ({record}): correct them and give this file back"
-    write_pts(j.out.pts, points, comment=note)
-    unit = mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
-    write_landmarks3d(j.out.xyz, error.surface / unit)  # no comment: MeshLab opens it
+    if _finite(points):
+        write_pts(j.out.pts, points, comment=note)
+    else:
+        Path(j.out.pts).write_text(f"{LEFT_OUT}{record}\n")
+    if _finite(points) and _finite(surface):
+        unit = mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
+        write_landmarks3d(j.out.xyz, surface / unit)  # no comment: MeshLab opens it
+    else:
+        Path(j.out.xyz).write_text(f"{LEFT_OUT}{record}\n")
+
+
+def _finite(values) -> bool:
+    return values is not None and bool(np.isfinite(values).all())
 
 
 def outputs(j, stage):

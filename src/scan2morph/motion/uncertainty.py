@@ -327,9 +327,12 @@ def _spread(sq: np.ndarray, count: np.ndarray, motion: np.ndarray, free: np.ndar
     """A take's per-vertex RMS change over the draws and its share of the motion."""
     rms = np.full(len(sq), np.nan)
     rms[count > 0] = np.sqrt(sq[count > 0] / count[count > 0])
-    where = free & np.isfinite(rms) & np.isfinite(motion).all(axis=1)
+    moving = free & np.isfinite(motion).all(axis=1)
+    where = moving & np.isfinite(rms)
     err = float(np.sqrt(np.mean(rms[where] ** 2))) if where.any() else float("nan")
-    ref = float(np.sqrt(np.mean(np.sum(motion[where] ** 2, axis=1)))) if where.any() else 0.0
+    # a take without an error bar (no draw fitted): the motion's RMS all the same
+    over = where if where.any() else moving
+    ref = float(np.sqrt(np.mean(np.sum(motion[over] ** 2, axis=1)))) if over.any() else 0.0
     return {
         "rms_mm": rms,
         "motion": motion,

@@ -144,7 +144,8 @@ def subject_summary(store_path: str | Path, accuracy: Mapping | None = None) -> 
         for label in sorted(by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
             row[f"{MOTION_PREFIX}{label}"] = float(np.mean(by_label[label]))
         for label in sorted(noise_by_label, key=lambda lab: (order.get(lab, len(order)), lab)):
-            row[f"{NOISE_PREFIX}{label}"] = float(np.mean(noise_by_label[label]))
+            bars = [v for v in noise_by_label[label] if np.isfinite(v)]  # a take without: NaN
+            row[f"{NOISE_PREFIX}{label}"] = float(np.mean(bars)) if bars else float("nan")
         ccr = np.asarray(h5[paths.pca("ccr")][()] if paths.pca("ccr") in h5 else [], dtype=float)
         for i in range(N_CCR):
             row[f"ccr_{i + 1}"] = float(ccr[i]) if i < len(ccr) else float("nan")

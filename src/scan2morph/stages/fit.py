@@ -133,11 +133,16 @@ def run(template: Template, take: Take, params: Params) -> Part:
         detected = text_value(data.get(paths.landmark_info(name, "source"), "clicked"))
         if "detected" not in detected:
             raise
+        what = (
+            "its landmarks were detected, not given"
+            if detected == "detected"
+            else f"its landmarks were {detected} (the jawline detected, the others given)"
+        )
         raise InputError(
             exc.source,
-            f"{exc.problem} (its landmarks were {detected}, not given: correct them in "
-            f"landmarks/{name}.pts of the subject's results and give that file in the sheet's "
-            "landmarks column)",
+            f"{exc.problem} ({what}: correct them in landmarks/{name}.pts, or {name}.xyz for a "
+            "mesh take, of the subject's results and give that file in the sheet's landmarks "
+            "column)",
         ) from None
     log.info(
         "%s: %d vertices, %.1f%% valid, %d folded triangles",

@@ -147,7 +147,8 @@ def _what_it_does(h5: h5py.File, take: str, given: list[str]) -> str:
     and it says that instead."""
     kinds = {t: str(h5[paths.TAKES][t].attrs.get("kind", "")) for t in h5[paths.TAKES]}
     neutral = kinds[take] == "neutral"
-    if any(kinds[t] == "neutral" for t in given):
+    tracked = "landmarks_tracked" in h5[paths.TAKES][take].attrs  # its second pass tracked
+    if tracked and any(kinds[t] == "neutral" for t in given):
         return (
             "; its neutral's landmarks were given: where the skin's texture correlates its "
             "points follow the neutral's, elsewhere this detection's error is in its motion "
@@ -201,8 +202,9 @@ def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             if not n:
                 continue
             message = (
-                f"all {draws} click-noise refits refused (the click noise is too large for the "
-                "template; the motion_noise log says why): it has no error bar"
+                f"too few of its {draws} click-noise refits fitted (or of its neutral's: the "
+                "click noise is too large for the template; the motion_noise log says why): it "
+                "has no error bar"
                 if draws and n >= draws
                 else f"{int(n)} of {draws} click-noise refits refused: its error bar is partial"
             )

@@ -181,12 +181,14 @@ def run_stages(
         A stage's benchmark file (:func:`benchmarked`), written when it runs; a stage without
         one has none.
     done : str or Path, optional
-        The job's record of a finished run, ``{"run": [...], "up_to_date": [...]}`` (its
-        stages in order), written once every stage is done. The workflow declares it a plain
-        output, so Snakemake deletes it when the job starts, and a job that fails leaves none:
-        the next run runs the job again. (The stages' files are ``update()`` outputs, which
-        Snakemake puts back when their job fails, with a new modification time: without this
-        record the next run would take them for current and do nothing.)
+        The job's record of a finished run, ``{"stages": {stage: fingerprint}}``, written once
+        every stage is done: the same bytes whenever the stages are as before (the job's log
+        says which ran), so that a job that re-ran with nothing to do re-runs nothing after
+        it. The workflow declares it a plain output, so Snakemake deletes it when the job
+        starts, and a job that fails leaves none: the next run runs the job again. (The stages'
+        files are ``update()`` outputs, which Snakemake puts back when their job fails, with a
+        new modification time: without this record the next run would take them for current
+        and do nothing.)
 
     Returns
     -------
@@ -214,9 +216,8 @@ def run_stages(
             write_fingerprints(record, recorded)
             lines.append(f"{stage}: run")
         _write_lines(summary, lines)
-    if done is not None:  # the stages in order: those run and those up to date
-        ran = [s for s, line in zip(prints, lines, strict=True) if line.endswith(": run")]
-        write_json(done, {"run": ran, "up_to_date": [s for s in prints if s not in ran]})
+    if done is not None:  # the same bytes when nothing changed: what reads it is not re-run
+        write_json(done, {"stages": prints})
     return prints
 
 
