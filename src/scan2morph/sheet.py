@@ -395,7 +395,7 @@ def synthetic_rows(
                     synthetic=True,
                 )
             )
-    return pd.DataFrame(rows, columns=[*COLUMNS, "sheet_row", "sheet", "synthetic"])
+    return pd.DataFrame(rows, columns=[*COLUMNS, *ROW_LOCATION, "synthetic"])
 
 
 def sheet_problems(

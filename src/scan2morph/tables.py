@@ -442,7 +442,7 @@ def sweep_dictionary(
         )
     refused = Column(
         REFUSED,
-        "-",
+        NO_UNIT,
         "why the combination's stages refused the subject (its metrics are then NA); NA when "
         "they did not",
     )

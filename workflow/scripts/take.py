@@ -70,8 +70,7 @@ def run_landmarks(j):
     part = landmarks.run(j.template(), take, j.params("landmarks"))
     write_part(j.out.landmarks, part.datasets, attrs=part.attrs)
     write_pts(j.out.pts, part.files["pts"])
-    unit = mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
-    write_landmarks3d(j.out.xyz, part.files["xyz"] / unit)
+    write_landmarks3d(j.out.xyz, part.files["xyz"] / landmarks_unit(j))
 
 
 def run_fit(j):
@@ -123,20 +122,26 @@ def write_left_out_landmarks(j, record, error):
     a first line saying why; else (no points: no face found, a record handed on) the record
     alone (:data:`~scan2morph.io.landmarks.LEFT_OUT`)."""
     points, surface = getattr(error, "points", None), getattr(error, "surface", None)
+    has_points = _finite(points)
     note = f"detected landmarks refused ({record}): correct them and give this file back"
-    if _finite(points):
+    if has_points:
         write_pts(j.out.pts, points, comment=note)
     else:
         Path(j.out.pts).write_text(f"{LEFT_OUT}{record}\n")
-    if _finite(points) and _finite(surface):
-        unit = mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
-        write_landmarks3d(j.out.xyz, surface / unit)  # no comment: MeshLab opens it
+    if has_points and _finite(surface):  # no comment: MeshLab opens it
+        write_landmarks3d(j.out.xyz, surface / landmarks_unit(j))
     else:
         Path(j.out.xyz).write_text(f"{LEFT_OUT}{record}\n")
 
 
 def _finite(values) -> bool:
     return values is not None and bool(np.isfinite(values).all())
+
+
+def landmarks_unit(j) -> float:
+    """mm per unit of the take's ``.xyz`` landmark file: a mesh take's in its mesh's units (as
+    its landmarks column takes them), mm otherwise."""
+    return mm_per_unit(j.p.row) if j.p.row.get("modality") == "mesh" else 1.0
 
 
 def outputs(j, stage):

@@ -10,7 +10,7 @@ from scan2morph.evaluate.modality import grid_view
 from scan2morph.evaluate.truth import Truth
 from scan2morph.io.landmarks import JAWLINE
 from scan2morph.store import paths
-from scan2morph.store.warnings import text_value
+from scan2morph.store.warnings import landmark_source
 
 #: 0-based rows of the jawline (iBUG 1-17) and of the 51 inner-face points.
 _JAW = np.asarray(JAWLINE) - 1
@@ -63,8 +63,7 @@ def take_landmarks(store: Mapping[str, np.ndarray], truths: Mapping[str, Truth])
             continue
         view = grid_view(truth, store, take)[0]
         errors = landmark_errors(store[paths.landmarks(take)], view.landmarks2d)
-        source = store.get(paths.landmark_info(take, "source"), "clicked")
-        out[take] = {"source": text_value(source)} | errors
+        out[take] = {"source": landmark_source(store, take)} | errors
     return out
 
 

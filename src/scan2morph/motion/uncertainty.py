@@ -215,8 +215,8 @@ def click_noise_motion(
         if problem := n_problem or problem:  # the error bar is a diagnostic: the take stays
             log.warning("%s/%s has no click-noise error bar: %s", source, take, problem)
         sq, count, used = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64), 0
-        for n_fit, t_fit in zip(n_fits, t_fits, strict=True):
-            if problem or n_fit is None or t_fit is None:
+        for n_fit, t_fit in () if problem else zip(n_fits, t_fits, strict=True):
+            if n_fit is None or t_fit is None:
                 continue
             where = f"{source}/{take} (click-noise draw)"
             v, valid, conf = _corresponded(recipe.refiner, take, t_fit, t_fit[2], n_fit[2])

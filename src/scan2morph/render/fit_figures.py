@@ -31,6 +31,7 @@ from scan2morph.render.views import (
     subplots,
 )
 from scan2morph.store import paths
+from scan2morph.store.warnings import landmark_source
 from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIP_CORNERS, INNER_LIPS
 
 #: Colour of the wireframe's edges (sRGB).
@@ -206,7 +207,7 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
             ax.set_xticks([])
             ax.set_yticks([])
         _landmark_dots(axes[row, 0], marks, store.get(paths.landmark_confidence(take)))
-        source = _text(store, paths.landmark_info(take, "source"), "clicked")
+        source = landmark_source(store, take)
         axes[row, 0].set_title(f"{take}: 68 landmarks, {source}", fontsize=8)
         for ax, (label, tri) in zip(axes[row, 1:], meshes, strict=True):
             tri = _valid_faces(pts, tri)
@@ -276,7 +277,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
         _landmark_dots(ax, marks, store.get(paths.landmark_confidence(take)))
-        source = _text(store, paths.landmark_info(take, "source"), "clicked")
+        source = landmark_source(store, take)
         doubtful = _text(store, paths.landmark_info(take, "doubtful"), "")
         note = ", ".join(n for n in (modality, shown, source, "DOUBTFUL" if doubtful else "") if n)
         # the take on one line, how it was seen on the next: side by side they overlapped

@@ -12,7 +12,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
-from scan2morph.store.warnings import text_value
+from scan2morph.store.warnings import landmark_source
 from scan2morph.template import FitRules, Template, fit_take, subdivide_template
 from scan2morph.template.rim import Rim
 
@@ -130,7 +130,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
             rim=rim,
         )
     except InputError as exc:  # detected landmarks refused: say so, and how to give others
-        detected = text_value(data.get(paths.landmark_info(name, "source"), "clicked"))
+        detected = landmark_source(data, name)
         if "detected" not in detected:
             raise
         what = (

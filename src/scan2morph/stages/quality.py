@@ -20,10 +20,10 @@ import numpy as np
 from scan2morph.store import paths
 from scan2morph.store.warnings import (
     Warning,
+    landmark_source,
     read_failures,
     read_warnings,
     skipped_stages,
-    text_value,
     warning_datasets,
 )
 
@@ -103,11 +103,14 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
                 else "left out of the models"
             )
             out.append(Warning("align", take, f"{'; '.join(problems)}: {fate}"))
-    given = [t for t in takes if _landmark_source(h5, t).startswith("clicked")]
+    sources = {t: landmark_source(h5, t) for t in takes}
+    given = [t for t, source in sources.items() if source.startswith("clicked")]
+    neutral = next((t for t in takes if str(takes[t].attrs.get("kind", "")) == "neutral"), "")
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
-            said = doubtful.asstr()[()] + _what_it_does(h5, take, [t for t in given if t != take])
+            others = [t for t in given if t != take]
+            said = doubtful.asstr()[()] + _what_it_does(h5, take, neutral, others)
             out.append(Warning("landmarks", take, said))
     for take in takes:
         group = h5.get(paths.refine_group(take))
@@ -116,7 +119,8 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             out.append(Warning("refine", take, str(problem)))
     if shaped := [t for t in takes if _shape_refined(h5, t)]:
         out.append(Warning("refine", "", SHAPE_REFINED.format(takes=", ".join(shaped))))
-    out += _motion_noise_warnings(h5, settings)
+    detected = any("detected" in source for source in sources.values())
+    out += _motion_noise_warnings(h5, settings, detected)
     return out
 
 
@@ -126,29 +130,21 @@ def _shape_refined(h5: h5py.File, take: str) -> bool:
     return group is not None and bool(group.attrs.get("shape_used", False))
 
 
-def _landmark_source(h5: h5py.File, take: str) -> str:
-    """``clicked``, ``detected`` or ``clicked+detected jawline`` (a store from before the
-    landmarks stage: ``clicked``)."""
-    value = h5.get(paths.landmark_info(take, "source"))
-    return "clicked" if value is None else text_value(value)
-
-
-def _what_it_does(h5: h5py.File, take: str, given: list[str]) -> str:
+def _what_it_does(h5: h5py.File, take: str, neutral: str, given: list[str]) -> str:
     """What a doubtful detection's error does to the model, for the report's warning: the
     neutral's points place the template on the face; another take's error is taken up where its
     refinement followed the skin from the neutral (by the skin's texture, or by the surface's
     shape where the refinement said so), and for a take the takes' consensus moved, where that
     consensus did, with its own numbers (``""`` when neither ran). When the subject mixes
-    detected and given landmarks (``given``: the other takes whose landmarks were given), the
+    detected and given landmarks (``given``: the other takes whose landmarks were given;
+    ``neutral``: the subject's neutral take), the
     detection's error is not shared by theirs: it is in the motion between them, and it says
     so (a clicked take beside a detected neutral moved 25 times the error of both detected on
     the real head). A detected take whose neutral's landmarks were given follows them through
     the skin where the texture correlates (:func:`scan2morph.stages.landmarks.second_pass`),
     and it says that instead."""
-    kinds = {t: str(h5[paths.TAKES][t].attrs.get("kind", "")) for t in h5[paths.TAKES]}
-    neutral = kinds[take] == "neutral"
     tracked = "landmarks_tracked" in h5[paths.TAKES][take].attrs  # its second pass tracked
-    if tracked and any(kinds[t] == "neutral" for t in given):
+    if tracked and neutral in given:
         return (
             "; its neutral's landmarks were given: where the skin's texture correlates its "
             "points follow the neutral's, elsewhere this detection's error is in its motion "
@@ -159,9 +155,9 @@ def _what_it_does(h5: h5py.File, take: str, given: list[str]) -> str:
             f"; the subject mixes detected and given landmarks (given: {', '.join(given)}): this "
             "detection's error is not in theirs, so it is in the motion between them where no "
             "refinement follows the skin; give this take's landmarks too, or none for any take"
-            + ("" if neutral else _taken_up(h5, take))
+            + ("" if take == neutral else _taken_up(h5, take))
         )
-    if neutral:
+    if take == neutral:
         return (
             "; the neutral's points place the template on the face: their error moves which "
             "skin each vertex is (a mouth-corner vertex off the corner), not the takes' motions"
@@ -192,7 +188,9 @@ def _taken_up(h5: h5py.File, take: str) -> str:
     )
 
 
-def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
+def _motion_noise_warnings(h5: h5py.File, settings: Mapping, detected: bool) -> list[Warning]:
+    """The error bar's warnings: takes whose refits were refused, a scatter above the limit
+    (``detected``: some takes' landmarks were detected, so it is not the clicks')."""
     out = []
     if paths.motion_noise("failed_draws") in h5:
         names = h5[paths.motion_noise("takes")].asstr()[()]
@@ -213,8 +211,6 @@ def _motion_noise_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     if key in h5:
         measured = float(h5[key][()])
         limit = float(settings["max_click_noise_px"])
-        takes = h5.get(paths.TAKES, {})
-        detected = any("detected" in _landmark_source(h5, t) for t in takes)
         if np.isfinite(measured) and measured > limit:
             message = (
                 f"the landmark {'points' if detected else 'clicks'} scatter by {measured:.2f} px, "

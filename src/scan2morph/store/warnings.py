@@ -117,6 +117,16 @@ def text_value(value) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
+def landmark_source(store: Mapping, take: str) -> str:
+    """How a take's landmarks were found (``landmark_source``): ``clicked``, ``detected`` or
+    ``clicked+detected jawline``; ``clicked`` for a store from before the landmarks stage.
+    ``store``: an open store, a part's datasets or a merged mapping of them."""
+    value = store.get(paths.landmark_info(take, "source"))
+    if value is None:
+        return "clicked"
+    return text_value(value.item() if isinstance(value, np.ndarray) else value)
+
+
 def skipped_stages(h5: h5py.File) -> dict[str, str]:
     """Stages (or parts of them) a subject skipped: name -> why."""
     group = h5.get(paths.SKIPPED)
