@@ -288,3 +288,53 @@ def test_a_landmark_point_cloud_saved_with_normals_or_colours_reads_as_its_point
         (tmp_path / "q.xyz").write_text("\n".join(" ".join(f"{v:.3f}" for v in r) for r in rows))
         with pytest.raises(InputError, match=r"q.xyz: line 1: expected 3 finite numbers \(x y z\)"):
             read_landmarks3d(tmp_path / "q.xyz")
+
+
+def _landmarks_of(mesh, landmark_file, config):
+    """A mesh take (as the sheet's neutral) through ingest, repair and landmarks: the stage's
+    part, its ``.xyz`` points (mm) and the repaired range image (H, W, 3) mm."""
+    from scan2morph.stages import ingest, landmarks, repair
+    from scan2morph.stages.part import Take
+    from scan2morph.store import paths
+
+    row = dict(subject="s1", take="neutral", kind="neutral", label="neutral", modality="mesh")
+    files = {"mesh": str(mesh)} | ({"landmarks": str(landmark_file)} if landmark_file else {})
+    raw = ingest.run(None, Take.from_row(row, files=files), ingest.Params.from_config(config))
+    attrs = raw.attrs[paths.take("neutral")]
+    fixed = repair.run(
+        None, Take.from_row(row, data=raw.datasets, attrs=attrs), repair.Params.from_config(config)
+    )
+    take = Take.from_row(row, "neutral", data=fixed.datasets, attrs=attrs)
+    part = landmarks.run(None, take, landmarks.Params.from_config(config))
+    return part, part.files["xyz"], fixed.datasets[paths.range_image("neutral", "xyz")]
+
+
+def test_a_mesh_takes_landmark_file_given_back_comes_back_as_given(mesh_files, tmp_path):
+    """The loop the docs describe: a mesh take's detected points written to its ``.xyz``, given
+    back in the sheet, are written again as given, round after round (the audit's M4: the chin's
+    points, lifted on the surface camera's render, lay under the chin, which the landmark
+    camera's render hides; lifted again, they came back about 40 mm away, on the chin's front).
+    A 51-point file's jawline is detected and lifted; its given points are written as given."""
+    from tests.support.configs import repo_config
+
+    config = repo_config() | {"mesh_camera": dict(TINY_CAMERA)}
+    _, (ply, _, _) = mesh_files
+    first, detected, _ = _landmarks_of(ply, None, config)
+    assert first.datasets["/takes/neutral/landmark_source"] == "detected"
+    write_landmarks3d(tmp_path / "round1.xyz", detected)
+    given = read_landmarks3d(tmp_path / "round1.xyz")
+    part, again, grid = _landmarks_of(ply, tmp_path / "round1.xyz", config)
+    assert part.datasets["/takes/neutral/landmark_source"] == "clicked"
+    np.testing.assert_array_equal(again, given)
+    # the case is the audit's: lifted on this render, some given points move far
+    from scan2morph.stages.landmarks import surface_points
+
+    lifted = surface_points(np.asarray(grid), part.datasets["/takes/neutral/landmarks"])
+    moved = np.linalg.norm(lifted - given, axis=1)
+    print(f"\nlifted again, the given points would move up to {moved.max():.1f} mm")
+    assert moved.max() > 2.0  # the lift itself is within 0.6 mm of a point it sees
+    # a 51-point file: its points as given, the jawline detected on the surface
+    write_landmarks3d(tmp_path / "inner.xyz", given[17:])
+    _, inner, _ = _landmarks_of(ply, tmp_path / "inner.xyz", config)
+    np.testing.assert_array_equal(inner[17:], given[17:])
+    assert np.isfinite(inner[JAW]).all()

@@ -105,12 +105,16 @@ class MeshTake(RangeTake):
         Vertex and face counts, the colour source (``texture``, ``vertex colours`` or
         ``shading``), the coverage, the pixel size (mm), the
         camera's view direction (mesh frame) and the face's symmetry residual (mm).
+    landmarks_3d : (68, 3) float64 or None
+        The landmark file's points, mm in the mesh's frame (NaN rows for the jawline of a
+        51-point file); None without a landmark file.
     """
 
     K: np.ndarray = field(default_factory=lambda: np.eye(3))
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))
     size: tuple[int, int] = (0, 0)
     report: dict = field(default_factory=dict)
+    landmarks_3d: np.ndarray | None = None
 
 
 def read_mesh(path: str | Path, texture: str | Path | None = None):
@@ -568,7 +572,14 @@ def read_mesh_take(
         "symmetry_mm": view.symmetry_mm,
     }
     return MeshTake(
-        xyz=xyz, color=color, landmarks=landmarks, K=K, pose=pose, size=size, report=report
+        xyz=xyz,
+        color=color,
+        landmarks=landmarks,
+        K=K,
+        pose=pose,
+        size=size,
+        report=report,
+        landmarks_3d=lm3,
     )
 
 

@@ -103,7 +103,8 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
     -------
     Part
         ``raw/xyz`` (H, W, 3) mm, ``raw/color`` (H, W, 3) uint8, ``clicks`` (68, 2) px (when
-        the take has a landmark file) and ``camera/*`` of the take; the take group's attributes
+        the take has a landmark file; a mesh take's also ``clicks_3d`` (68, 3) mm, the file's
+        points) and ``camera/*`` of the take; the take group's attributes
         hold the row, input checksums, ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`,
         with all 68 clicked points) and ``grey_color``.
 
@@ -122,6 +123,8 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
     if complete(scan.landmarks):
         attrs["nose_depth_mm"] = check_handedness(scan.xyz, scan.landmarks, files.get(first, first))
     clicks = {} if scan.landmarks is None else {paths.clicks(name): scan.landmarks}
+    if scan.landmarks_3d is not None:
+        clicks[paths.clicks_3d(name)] = scan.landmarks_3d
     # a geometry-only mesh is shaded grey on purpose (its own warning says so)
     shaded = scan.camera.get("color_source") == "shading"
     attrs["grey_color"] = bool(_grey(scan.color)) and not shaded
@@ -146,6 +149,7 @@ class _Scan(NamedTuple):
     landmarks: np.ndarray | None
     camera: dict = {}
     attrs: dict = {}
+    landmarks_3d: np.ndarray | None = None  # a mesh take's landmark file, mm
 
 
 def _read_rgbd(files, row, params: Params) -> _Scan:
@@ -187,7 +191,9 @@ def _read_mesh(files, row, params: Params) -> _Scan:
         pose=scan.pose,
         size=scan.size,
     )
-    return _Scan(scan.xyz, scan.color, scan.landmarks, camera, {"mesh": scan.report})
+    return _Scan(
+        scan.xyz, scan.color, scan.landmarks, camera, {"mesh": scan.report}, scan.landmarks_3d
+    )
 
 
 def _read_range(files, row, params: Params) -> _Scan:

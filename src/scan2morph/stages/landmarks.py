@@ -16,9 +16,9 @@ of scattering by the detector's error. A detection whose confidence is low is *d
 still used, with a warning at the top of the report and in ``accuracy.json``.
 
 Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) and
-lifted onto the take's surface (``files["xyz"]``, :func:`surface_points`: a mesh take's landmark
-file, the pipeline's render being no image a user has), which a user can correct and give back
-in the sheet's ``landmarks`` column.
+lifted onto the take's surface (``files["xyz"]``, :func:`written_points`: a mesh take's landmark
+file, the pipeline's render being no image a user has; its given points as given), which a user
+can correct and give back in the sheet's ``landmarks`` column.
 """
 
 from __future__ import annotations
@@ -237,7 +237,7 @@ class RefusedDetection(InputError):
     points : (68, 2) float64
         The detection, px on the take's grid.
     surface : (68, 3) float64 or None
-        The same points on the take's measured surface, mm (:func:`surface_points`), once
+        The same points on the take's measured surface, mm (:func:`written_points`), once
         :func:`run` has added them.
     """
 
@@ -269,8 +269,8 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
         px, the detector's points before the second pass (:func:`second_pass`); the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
         ``files["pts"]`` the points for the ``.pts`` file, ``files["xyz"]`` (68, 3) mm the
-        same points on the take's measured surface (:func:`surface_points` of
-        :func:`measured`: a mesh take's lie on the mesh), in its frame.
+        same points on the take's measured surface (:func:`written_points`: a mesh take's lie
+        on the mesh, its given points as given), in its frame.
     """
     t, data = take.take, take.data
     xyz = np.asarray(need(data, paths.range_image(t, "xyz"), take.source), dtype=np.float64)
@@ -278,7 +278,7 @@ def run(template, take: Take, params: Params) -> Part:
     try:
         found = settle(data.get(paths.clicks(t)), color, xyz, take.source)
     except RefusedDetection as exc:
-        exc.surface = surface_points(measured(xyz, take), exc.points)
+        exc.surface = written_points(xyz, take, exc.points)
         raise
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
@@ -306,8 +306,39 @@ def run(template, take: Take, params: Params) -> Part:
     return Part(
         datasets,
         attrs={paths.take(t): attrs | {"nose_depth_mm": nose_depth}},
-        files={"pts": found.points, "xyz": surface_points(measured(xyz, take), found.points)},
+        files={"pts": found.points, "xyz": written_points(xyz, take, found.points)},
     )
+
+
+def written_points(xyz: np.ndarray, take: Take, points: np.ndarray) -> np.ndarray:
+    """The take's landmarks for its ``.xyz`` file: each on the take's measured surface
+    (:func:`surface_points` of :func:`measured`), except a mesh take's given points, which are
+    written as its landmark file gives them (``clicks_3d``). A given point may lie where the
+    render does not see it (the underside of the chin, seen from below on the render of another
+    camera): lifted, it would come back as the surface in front of it, and a file given back
+    would move with every round.
+
+    Parameters
+    ----------
+    xyz : (H, W, 3) float
+        The take's repaired range image, mm.
+    take : Take
+        Its ``data`` may hold ``clicks_3d`` (68, 3) mm.
+    points : (68, 2) float
+        The take's landmarks, px.
+
+    Returns
+    -------
+    (68, 3) float64
+        mm, in the take's frame (a mesh take's: the mesh's).
+    """
+    out = surface_points(measured(xyz, take), points)
+    given = take.data.get(paths.clicks_3d(take.take))
+    if given is not None:
+        given = np.asarray(given, dtype=np.float64)
+        rows = np.isfinite(given).all(axis=1)
+        out[rows] = given[rows]
+    return out
 
 
 def measured(xyz: np.ndarray, take: Take) -> np.ndarray:
@@ -529,4 +560,5 @@ __all__ = [
     "settle",
     "surface_points",
     "unfold",
+    "written_points",
 ]

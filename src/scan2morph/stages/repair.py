@@ -93,9 +93,10 @@ def _modality(data: Mapping[str, np.ndarray], attrs: Mapping, take: str) -> str:
 
 
 def _clicks(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:
-    """The take's clicked landmarks, passed on when its ingest part has them."""
-    key = paths.clicks(take)
-    return {key: data[key]} if key in data else {}
+    """The take's clicked landmarks (and a mesh take's 3D points), passed on when its ingest
+    part has them."""
+    keys = (paths.clicks(take), paths.clicks_3d(take))
+    return {key: data[key] for key in keys if key in data}
 
 
 def camera_datasets(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:

@@ -35,7 +35,7 @@ STAGES = (
 _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("/takes/{take}/raw", "ingest", ("xyz", "color")),
     ("/takes/{take}/range", "repair", ("xyz", "color", "spikes", "filled")),
-    ("/takes/{take}", "ingest", ("clicks",)),
+    ("/takes/{take}", "ingest", ("clicks", "clicks_3d")),
     (
         "/takes/{take}",
         "landmarks",
@@ -211,6 +211,13 @@ def clicks(take_id: str) -> str:
     """A take's landmarks as its landmark file gives them (68, 2), 0-based pixels; NaN rows for
     the points a 51-point file leaves out. Absent for a take without a landmark file."""
     return _build("/takes/{take}", "clicks", take=take_id)
+
+
+def clicks_3d(take_id: str) -> str:
+    """A mesh take's landmarks as its landmark file gives them (68, 3), mm in the mesh's frame;
+    NaN rows for the points a 51-point file leaves out. Absent for other takes and for a mesh
+    take without a landmark file."""
+    return _build("/takes/{take}", "clicks_3d", take=take_id)
 
 
 def camera(take_id: str, name: str) -> str:
