@@ -291,6 +291,13 @@ def test_broken_takes_are_left_out_and_the_subject_built_from_the_rest(cohort):
         warnings = read_warnings(h5)
     left = [w for w in warnings if w.message.startswith("left out of the subject")]
     assert sorted(w.take for w in left) == sorted(BROKEN)
+    # the store job logs them for its log, not for the console (their take jobs and the run's
+    # last lines print them); the subject's other warnings stay warnings
+    store_log = (work / "logs" / "store" / "broken.log").read_text().splitlines()
+    for take in BROKEN:
+        lines = [x for x in store_log if f"] {take}: left out of the subject" in x]
+        assert len(lines) == 1 and " INFO broken: " in lines[0], (take, lines)
+    assert any(" WARNING broken: " in x and "grey-scale" in x for x in store_log)
     assert warnings[: len(left)] == left  # first
     assert any(w.take == "grey" and "grey-scale" in w.message for w in warnings)
     html = (work / "results" / "broken" / "report.html").read_text()

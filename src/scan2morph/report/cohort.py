@@ -399,8 +399,8 @@ def write_cohort_summary(
     summaries = {s: subject_summary(p, accuracies.get(s)) for s, p in stores.items()}
     for subject, path in stores.items():
         with open_store(path) as h5:
-            for failure in left_out(h5).values():
-                log.warning("%s/%s", subject, failure)
+            for failure in left_out(h5).values():  # in the job's log; the run's last lines
+                log.info("%s/%s", subject, failure)  # print them (once for the whole run)
     table = cohort_table(list(summaries.values()))
     dictionary = [*COHORT, *(accuracy_column(c) for c in accuracy_columns(table))]
     plot_cohort(table, {str(v.row["subject"]): v.ccr for v in summaries.values()}, plot_path)
