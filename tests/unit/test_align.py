@@ -666,6 +666,11 @@ def test_icp_params_bad_input(change, match):
         ({"faces": np.array([[0, 1, 10**6]])}, "faces: vertex index out of range"),
         ({"dst_vertices": np.zeros((5, 3))}, "dst_vertices: expected 2520 vertices"),
         ({"src_valid": np.ones(3, dtype=bool)}, r"src_valid: expected \(2520,\) bool"),
+        ({"src_noise_gain": 0.5}, "src_noise_gain: expected a finite number >= 1, got 0.5"),
+        (
+            {"dst_noise_gain": float("nan")},
+            "dst_noise_gain: expected a finite number >= 1, got nan",
+        ),
     ],
 )
 def test_align_take_bad_input(change, match):
@@ -682,7 +687,7 @@ def test_align_take_bad_input(change, match):
         params=None,
     )
     kw.update(change)
-    meshes = AlignMeshes(**{f.name: kw.pop(f.name) for f in fields(AlignMeshes)})
+    meshes = AlignMeshes(**{f.name: kw.pop(f.name) for f in fields(AlignMeshes) if f.name in kw})
     with pytest.raises(InputError, match=f"^s01/too: .*{match}"):
         align_take(meshes, **kw, source="s01/too")
 

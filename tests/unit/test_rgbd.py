@@ -167,3 +167,43 @@ def test_smooth_depth_reduces_noise_and_keeps_a_step():
     # the points stay on their rays
     ray = xyz / np.linalg.norm(xyz, axis=-1, keepdims=True)
     assert_allclose(out / np.linalg.norm(out, axis=-1, keepdims=True), ray, atol=1e-12)
+
+
+def test_a_depth_cameras_fit_carries_the_gain_of_its_smoothed_noise(rgbd_take, tmp_path):
+    """Ingest, repair and fit of the synthetic sensor's take: the fit records how much its
+    roughness under-reads the depth noise the repair smoothed (``mesh/noise_gain``, > 1,
+    :func:`scan2morph.align.noise.smoothing_gain`); the same grid taken as a range scan (no
+    smoothing) has none, nor has a depth camera's whose smoothing is off."""
+    from scan2morph.stages import fit, ingest, repair
+    from scan2morph.stages.part import Take
+    from scan2morph.store import paths
+    from scan2morph.template import build_template
+    from tests.support.configs import repo_config
+
+    files = [tmp_path / f for f in ("d.png", "c.png", "i.yaml", "l.pts", "t.npz")]
+    write_rgbd_take(rgbd_take, *files)
+    row = dict(subject="s1", take="neutral", kind="neutral", label="neutral", modality="rgbd")
+    roles = dict(
+        zip(("depth", "color", "intrinsics", "landmarks"), map(str, files[:4]), strict=True)
+    )
+    config = repo_config()
+    raw = ingest.run(None, Take.from_row(row, files=roles), ingest.Params.from_config(config))
+    attrs = raw.attrs[paths.take("neutral")]
+    fixed = repair.run(
+        None, Take.from_row(row, data=raw.datasets, attrs=attrs), repair.Params.from_config(config)
+    )
+    data = dict(fixed.datasets)
+    data[paths.landmarks("neutral")] = data[paths.clicks("neutral")]
+    template = build_template()
+    gain_key = paths.mesh("neutral", "noise_gain")
+
+    def fitted(modality, cfg):
+        take = Take.from_row(row, "neutral", data=data, attrs=attrs | {"modality": modality})
+        return fit.run(template, take, fit.Params.from_config(cfg)).datasets
+
+    gain = float(fitted("rgbd", config)[gain_key])
+    print(f"\nnoise gain of the 160 x 120 depth camera's fit: {gain:.2f}")
+    assert 1.0 < gain <= 10.0
+    assert gain_key not in fitted("range", config)
+    off = config | {"repair": config["repair"] | {"depth_smooth_sigma_px": 0.0}}
+    assert gain_key not in fitted("rgbd", off)

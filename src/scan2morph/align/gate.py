@@ -15,6 +15,7 @@ from scan2morph.align.settings import (
     check_indices,
     check_mesh,
     icp_settings,
+    noise_gains,
 )
 from scan2morph.align.surface import SampledSurface
 from scan2morph.align.trim import trim_moving
@@ -94,8 +95,9 @@ def rmse_gate(
     if p_idx.size < 3 or np.count_nonzero(target) < 3:
         raise InputError(source, "icp_indices: fewer than 3 valid region vertices")
     q_idx = np.flatnonzero(target)
-    noise_take = mesh_noise(src, sv, at=p_idx, source=source).region(p_idx)
-    noise_neutral = mesh_noise(dst, dv, at=q_idx, source=source).region(q_idx)
+    gains = noise_gains(meshes, source)
+    noise_take = mesh_noise(src, sv, at=p_idx, source=source).region(p_idx) * gains[0]
+    noise_neutral = mesh_noise(dst, dv, at=q_idx, source=source).region(q_idx) * gains[1]
     plane = SampledSurface(dst[target], normals[target], source).plane
     p = src[p_idx]
     t = np.asarray(transform, dtype=np.float64)

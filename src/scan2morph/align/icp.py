@@ -66,6 +66,7 @@ from scan2morph.align.settings import (
     check_mesh,
     icp_settings,
     kernel_weights,
+    noise_gains,
 )
 from scan2morph.align.still import still_skin
 from scan2morph.align.surface import SampledSurface
@@ -284,6 +285,7 @@ def align_take(
     initial, note = _initial_pose(src, sv, dst, dv, pairs, upper, source)
     recovery = [note] if note else []
     s = _icp_problem((src, sv), (dst, dv, faces), upper, cand, prm.method, source)
+    s = replace(s, gains=noise_gains(meshes, source))
     known = s.expected if np.isfinite(s.expected) else 0.0
     prm = replace(prm, kernel_k_mm=max(prm.kernel_k_mm, prm.kernel_noise_sigmas * known))
 
@@ -315,8 +317,10 @@ class _IcpProblem:
     """The points of one take's alignment: the take's candidate vertices ``p`` (n, 3), mm (the
     region's and those it may grow into: ``in_region`` (n,) bool), their template indices
     ``p_idx``; the neutral's ``q`` (m, 3), ``q_normals`` and ``q_idx``; the measured noise of
-    both regions and the RMSE they explain (``expected``), mm; ``plane``, the signed distance
-    of points to the neutral's surface, mm."""
+    both regions as their roughness reads it and the RMSE they explain (``expected``, which
+    sets the robust kernel's scale), mm; ``gains``, how many times each side's noise exceeds
+    that reading (the gate's expected RMSE: :attr:`AlignMeshes.src_noise_gain`); ``plane``, the
+    signed distance of points to the neutral's surface, mm."""
 
     p_idx: np.ndarray
     q_idx: np.ndarray
@@ -328,6 +332,7 @@ class _IcpProblem:
     noise_neutral: float
     expected: float
     plane: Callable[[np.ndarray], np.ndarray]
+    gains: tuple[float, float] = (1.0, 1.0)
 
 
 def _check_faces(faces, n_v: int, source: str) -> np.ndarray:
@@ -449,7 +454,8 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
             s.p[in_region], s.q[in_region], t, prm.max_correspondence_mm
         )
     judged = s.p[keep & judge]  # the region's kept vertices (grown ones are still by choice)
-    gate = residual_gate(s.plane(transform_points(t, judged)), s.noise_take, s.noise_neutral, prm)
+    noise_take, noise_neutral = s.noise_take * s.gains[0], s.noise_neutral * s.gains[1]
+    gate = residual_gate(s.plane(transform_points(t, judged)), noise_take, noise_neutral, prm)
     kept = float(keep[share].mean())
     problems = _verdict(conv, iterations, fitness, kept, recovery, prm)
     problems += [gate.problem] if gate.problem else []
@@ -467,9 +473,9 @@ def _judged(s: _IcpProblem, t, initial, keep, run: tuple, recovery, prm) -> Alig
         ok=not problems,
         problems=problems,
         recovery=recovery,
-        noise_take=s.noise_take,
-        noise_neutral=s.noise_neutral,
-        expected_rmse=s.expected,
+        noise_take=noise_take,
+        noise_neutral=noise_neutral,
+        expected_rmse=float(np.hypot(noise_take, noise_neutral)),
         rmse_limit=gate.limit,
         rmse_limit_kind=gate.kind,
         kernel_k=prm.kernel_k_mm,

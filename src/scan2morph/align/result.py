@@ -46,7 +46,8 @@ class AlignResult:
         What was done beyond the plain refinement: trimming, re-initialisation, kernel change.
     noise_take, noise_neutral : float
         Measurement noise of the take's and the neutral's ICP region, mm (standard deviation,
-        estimated from each mesh's roughness; NaN if too few vertices).
+        estimated from each mesh's roughness, times its noise gain for a depth camera's
+        smoothed noise; NaN if too few vertices).
     expected_rmse : float
         ``sqrt(noise_take^2 + noise_neutral^2)``: the point-to-plane RMSE of a right
         alignment, mm.
@@ -57,7 +58,8 @@ class AlignResult:
         ``"relative"`` or ``"absolute"`` (``max_rmse_mm`` set).
     kernel_k : float
         Final scale of the robust kernel used, mm (``kernel_k_mm`` widened to
-        ``kernel_noise_sigmas * expected_rmse``).
+        ``kernel_noise_sigmas`` times the RMSE the roughness alone explains, without the
+        noise gains).
     kept_indices : (k,) int64
         Template vertex indices of the take the final refinement used: the region's kept
         vertices and the still ones it grew into.

@@ -165,6 +165,10 @@ class AlignMeshes:
         Valid vertices of the neutral mesh.
     faces : (F, 3) int
         Template faces (the target's vertex normals).
+    src_noise_gain, dst_noise_gain : float
+        How many times each mesh's noise exceeds what its roughness reads (a depth camera's
+        smoothed noise: :func:`~scan2morph.align.noise.smoothing_gain`); 1 for white noise.
+        The RMSE gate's expected RMSE uses the noise read times the gain.
     """
 
     src_vertices: np.ndarray
@@ -172,6 +176,8 @@ class AlignMeshes:
     dst_vertices: np.ndarray
     dst_valid: np.ndarray
     faces: np.ndarray
+    src_noise_gain: float = 1.0
+    dst_noise_gain: float = 1.0
 
 
 def icp_settings(params: IcpParams | None, source: str) -> IcpParams:
@@ -193,6 +199,15 @@ def check_indices(idx: np.ndarray, n_vertices: int, name: str, source: str) -> n
             source, f"{name}: vertex index {int(a[bad][0])} out of range [0, {n_vertices})"
         )
     return a.astype(np.int64)
+
+
+def noise_gains(meshes: AlignMeshes, source: str) -> tuple[float, float]:
+    """The meshes' checked noise gains ``(src, dst)``: finite numbers >= 1."""
+    gains = (meshes.src_noise_gain, meshes.dst_noise_gain)
+    for side, g in zip(("src", "dst"), gains, strict=True):
+        if isinstance(g, bool) or not (isinstance(g, numbers.Real) and np.isfinite(g) and g >= 1):
+            raise InputError(source, f"{side}_noise_gain: expected a finite number >= 1, got {g!r}")
+    return float(gains[0]), float(gains[1])
 
 
 def check_mesh(vertices, valid, name: str, source: str, n_vertices: int | None = None) -> tuple:

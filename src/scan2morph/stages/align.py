@@ -82,7 +82,8 @@ def run(template: Template, take: Take, params: Params) -> Part:
         The base template.
     take : Take
         Its ``neutral`` (the take itself: the identity) and ``data`` (the fit parts of both:
-        ``mesh/vertices``, ``mesh/valid``).
+        ``mesh/vertices``, ``mesh/valid``, and ``mesh/noise_gain`` where a depth camera's
+        smoothed noise reads low: the RMSE gate's expected RMSE is corrected by it).
     params : Params
 
     Returns
@@ -111,6 +112,7 @@ def run(template: Template, take: Take, params: Params) -> Part:
             need(data, paths.mesh(neutral, "vertices"), source),
             need(data, paths.mesh(neutral, "valid"), source),
             fine.faces,
+            *(float(data.get(paths.mesh(t, "noise_gain"), 1.0)) for t in (name, neutral)),
         )
         result = align_take(
             meshes,

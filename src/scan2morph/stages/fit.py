@@ -9,7 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scan2morph.align.noise import smoothing_gain
 from scan2morph.errors import InputError
+from scan2morph.scan import DEFAULT_DEPTH_REPAIR
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
 from scan2morph.store.warnings import landmark_source
@@ -41,11 +43,15 @@ class Params:
         Share of a take's own spline motion its forehead rim keeps (``template.rim_share``;
         :mod:`scan2morph.template.rim`): 0 places it from the neutral's by the eyes and nose,
         1 is the plain spline.
+    depth_smooth_sigma_px : float
+        The smoothing of a depth camera's noise at repair (``repair.depth_smooth_sigma_px``),
+        px: a depth camera's take gets its ``mesh/noise_gain`` from it.
     """
 
     fiducials: Mapping[str, str]
     rules: FitRules
     rim_share: float = 0.5
+    depth_smooth_sigma_px: float = 0.0
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -58,7 +64,13 @@ class Params:
             section["sample_min_weight"],
             section["max_slope_deg"],
         )
-        return cls(dict(section["fiducials"]), rules, float(section["rim_share"]))
+        repair = {**DEFAULT_DEPTH_REPAIR, **config.get("repair", {})}
+        return cls(
+            dict(section["fiducials"]),
+            rules,
+            float(section["rim_share"]),
+            float(repair["depth_smooth_sigma_px"]),
+        )
 
     def fiducial_set(self, kind: str) -> str:
         """The fiducial set of a take of ``kind``."""
@@ -112,7 +124,9 @@ def run(template: Template, take: Take, params: Params) -> Part:
     -------
     Part
         ``mesh/vertices`` (V, 3) mm (NaN where invalid), ``mesh/uv`` (V, 2), ``mesh/valid`` (V,),
-        ``mesh/points2d`` (V, 2) px; ``files`` holds ``faces`` (F, 3) and ``texture`` (the
+        ``mesh/points2d`` (V, 2) px, and for a depth camera's take whose noise the repair
+        smoothed ``mesh/noise_gain`` (:func:`~scan2morph.align.noise.smoothing_gain`: how many
+        times its noise exceeds what its roughness reads); ``files`` holds ``faces`` (F, 3) and ``texture`` (the
         colour image) for the take's OBJ.
     """
     name, data, source = take.take, take.data, take.source
@@ -151,8 +165,13 @@ def run(template: Template, take: Take, params: Params) -> Part:
         100 * mesh["valid"].mean(),
         mesh["n_folded"],
     )
+    datasets = {paths.mesh(name, k): mesh[k] for k in ("vertices", "uv", "valid", "points2d")}
+    sigma = params.depth_smooth_sigma_px
+    if take.modality == "rgbd" and sigma > 0:  # the roughness reads its smoothed noise low
+        gain = smoothing_gain(mesh["vertices"], mesh["valid"], mesh["points2d"], sigma)
+        datasets[paths.mesh(name, "noise_gain")] = np.float64(gain)
     return Part(
-        {paths.mesh(name, k): mesh[k] for k in ("vertices", "uv", "valid", "points2d")},
+        datasets,
         attrs={
             paths.take(name): dict(take.attrs)
             | {"fiducial_set": fiducials, "n_folded": mesh["n_folded"], "rim_share": share}

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.store import paths
 
 if TYPE_CHECKING:  # a type only: the template (and scipy) stay unimported until used
     from scan2morph.template import Template
@@ -136,6 +137,15 @@ class Take:
     def source(self) -> str:
         """``subject/take``, for messages."""
         return f"{self.subject}/{self.take}"
+
+    @property
+    def modality(self) -> str:
+        """The take's modality (``range``, ``stereo``, ``mesh``, ``rgbd``): the take group's
+        attribute, else its ``camera/modality`` dataset (ingest writes it), else ``range``."""
+        if "modality" in self.attrs:
+            return str(self.attrs["modality"])
+        value = self.data.get(paths.camera(self.take, "modality"), "range")
+        return value.decode() if isinstance(value, bytes) else str(value)
 
 
 @dataclass(frozen=True)

@@ -65,7 +65,7 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
         need(data, paths.raw(name, "xyz"), source),
         dict(params.settings),
         source=source,
-        depth_camera=_modality(data, take.attrs, name) == "rgbd",
+        depth_camera=take.modality == "rgbd",
     )
     filled, spikes = report.pop("filled"), report.pop("spikes")
     report.pop("flying", None)
@@ -82,14 +82,6 @@ def run(template: Template | None, take: Take, params: Params) -> Part:
         attrs={paths.take(name): dict(take.attrs) | {"repair": report}},
         files={"report": report},
     )
-
-
-def _modality(data: Mapping[str, np.ndarray], attrs: Mapping, take: str) -> str:
-    """The take's modality: the take group's attribute, else the ingest part's dataset."""
-    if "modality" in attrs:
-        return str(attrs["modality"])
-    value = data.get(paths.camera(take, "modality"), "range")
-    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def _clicks(data: Mapping[str, np.ndarray], take: str) -> dict[str, np.ndarray]:

@@ -27,7 +27,7 @@ from scan2morph.jobs import atomic_output
 from scan2morph.version import __version__
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
-FORMAT_VERSION = "1.9.0"
+FORMAT_VERSION = "1.10.0"
 #: Datasets at least this large are chunked and gzip-compressed.
 _COMPRESS_BYTES = 1 << 16
 

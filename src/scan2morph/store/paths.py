@@ -54,7 +54,7 @@ _GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
         ("modality", "model", "color_source", "K", "distortion", "pose", "size"),
     ),
     ("/template", "fit", ("faces", "vertices2d", "fiducials/names", "fiducials/indices")),
-    ("/takes/{take}/mesh", "fit", ("vertices", "uv", "valid", "points2d")),
+    ("/takes/{take}/mesh", "fit", ("vertices", "uv", "valid", "points2d", "noise_gain")),
     ("/takes/{take}/align", "align", ("transform", "vertices", "ok")),
     ("/takes/{take}/refine", "refine", ("vertices", "valid", "points2d", "confidence")),
     ("/takes/{take}/consensus", "consensus", ("vertices", "valid", "points2d", "correction")),
