@@ -185,9 +185,13 @@ MODAL_COORDINATES = (
     Column(
         "q{k}",
         "mm*t^0.5",
-        "modal coordinate of the expression's displacement field (all vertices) on mode k "
-        "(ascending natural frequency): q = Q^T M v, mass-orthonormal modes Q, FEM mass matrix "
-        "M in tonnes, v in mm (paper Eq. 7); store /expressions/{take}/coordinates",
+        "modal coordinate of the expression's displacement field (all vertices) on vector k of "
+        "the natural basis (in the natural modes' order, ascending frequency): q = Q^T W v, v "
+        "in mm, W-orthonormal vectors Q, W in tonnes as the store's /modal/physics coordinates "
+        "says: 'mass', the FEM mass matrix (paper Eq. 7); 'vertex' (the skin preset), the "
+        "model's mass shared equally by the vertices, the natural modes orthonormalised in "
+        "order in it (the least-squares fit on the first K, uniform weight per vertex); store "
+        "/expressions/{take}/coordinates",
     ),
 )
 

@@ -424,7 +424,10 @@ def test_eigen_figure_names_its_sigma_and_stays_near_the_models(store):
     titles = " ".join(t.get_text() for t in fig.findobj(lambda o: hasattr(o, "get_text")))
     assert "sample std of the coefficients" in titles
     sigma = store[paths.pca("sigma")]
-    assert f"PC1: σ = {sigma[0]:.1f} mm" in titles
+    # the length of the whole field, and what a vertex moves (the audit's F4: "130.9 mm" read
+    # as a displacement)
+    per_vertex = np.sqrt(np.mean(np.sum((sigma[0] * store[paths.pca("components")][0]) ** 2, 1)))
+    assert f"PC1: σ = {sigma[0]:.1f} mm, {per_vertex:.2f} mm RMS a vertex" in titles
     paper = {k: v for k, v in store.items() if k != paths.pca("sigma")}
     titles = " ".join(
         t.get_text() for t in fig_eigen(paper).findobj(lambda o: hasattr(o, "get_text"))

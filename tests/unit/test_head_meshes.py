@@ -69,3 +69,57 @@ def test_head_obj_opens_in_meshlab_whole(tmp_path):
     mesh = ms.current_mesh()
     np.testing.assert_array_equal(mesh.face_matrix(), f)
     assert_allclose(mesh.vertex_matrix(), (v + [0.0, 0.0, 2.0]) * 1e-3, atol=1e-6)
+
+
+def test_a_takes_head_obj_is_the_correspondence_the_models_are_built_from(tmp_path):
+    """The audit's F1: a take's head OBJ held its template fit, before the refinement, while the
+    models, the glTF and the store's motion are built from the refined mesh (or the takes'
+    consensus): shape keys made from the OBJs were 31-130% off the skin's motion. Each take's
+    head OBJ is now its refined mesh (the consensus where one moved it, the aligned fit where no
+    refinement ran), textured at the points the refined mesh samples."""
+    from scan2morph.store import paths
+    from scan2morph.template.sample import texture_uv
+
+    v, f = grid_mesh(8, 7, z=lambda x, y: 0.02 * x * y)
+    rng = np.random.default_rng(3)
+    color = rng.integers(0, 255, (40, 50, 3), dtype=np.uint8)
+    store = tmp_path / "s.h5"
+    expect = {}
+    with h5py.File(store, "w") as h5:
+        h5.attrs["format_version"] = "1.0"
+        h5[paths.neutral("head_frame")] = FRAME
+        h5[paths.neutral("vertices")] = v
+        h5[paths.template("faces")] = f
+        for take, groups in (
+            ("neutral", ("refine",)),
+            ("car", ("refine",)),
+            ("too", ("refine", "consensus")),
+            ("eel", ()),
+        ):
+            h5.create_group(paths.take(take)).attrs["kind"] = (
+                "neutral" if take == "neutral" else "viseme"
+            )
+            fit = v + rng.normal(0, 1.0, v.shape)
+            valid = np.ones(len(v), dtype=bool)
+            h5[paths.align(take, "vertices")] = fit
+            h5[paths.mesh(take, "valid")] = valid
+            h5[paths.mesh(take, "uv")] = rng.uniform(0, 1, (len(v), 2))
+            h5[paths.range_image(take, "color")] = color
+            expect[take] = (fit, h5[paths.mesh(take, "uv")][()])
+            for group in groups:
+                build = paths.refine if group == "refine" else paths.consensus
+                moved = v + rng.normal(0, 1.0, v.shape)
+                ok = valid.copy()
+                ok[[5, 6]] = False
+                points = rng.uniform(0, 40, (len(v), 2))
+                h5[build(take, "vertices")] = np.where(ok[:, None], moved, np.nan)
+                h5[build(take, "valid")] = ok
+                h5[build(take, "points2d")] = points
+                expect[take] = (np.where(ok[:, None], moved, np.nan), texture_uv(points, 50, 40))
+    write_head_meshes(store, tmp_path / "head")
+    for take, (vertices, uv) in expect.items():
+        mesh = read_obj(tmp_path / "head" / f"{take}.obj")
+        measured = np.isfinite(vertices).all(axis=1)
+        assert_allclose(mesh["vertices"][measured], vertices[measured] * 1e-3, atol=5e-7)
+        assert np.flatnonzero(mesh["filled"]).tolist() == np.flatnonzero(~measured).tolist()
+        assert_allclose(mesh["uv"], uv, atol=1e-6)

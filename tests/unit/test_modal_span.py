@@ -362,6 +362,15 @@ def test_the_stage_records_its_preset(template, preset):
         np.mean(np.sum(smile**2, axis=1))
     )
     assert left < (0.8 if preset == "skin" else 1.0)
+    # the reconstruction table's mode count is a count (the audit's F8: it read "83.0000")
+    table = part.files["reconstruction"]
+    assert str(table["modes_to_target"].dtype) == "Int64"
+    count = d[paths.expression("sm1", "modes_to_target")]
+    assert (
+        table["modes_to_target"].isna().all()
+        if np.isnan(count)
+        else (table["modes_to_target"] == int(count)).all()
+    )
 
 
 def test_still_skin_is_where_every_take_stays_within_still_mm():

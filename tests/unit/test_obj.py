@@ -80,6 +80,16 @@ def test_invalid_vertices_keep_their_slot_and_lose_their_faces(tmp_path, face):
     unused = np.setdiff1d(np.arange(len(v)), f[keep].ravel())
     assert len(mesh.faces) == keep.sum() + len(unused)
     np.testing.assert_array_equal(mesh.faces[keep.sum() :], np.repeat(unused[:, None], 3, axis=1))
+    # the header counts both kinds of face (the audit's F6: it counted the real ones alone), and
+    # says that the listed vertex numbers are OBJ's, from 1 (F2)
+    lines = text.splitlines()
+    assert lines[0] == (
+        f"# scan2morph mesh: {len(v)} vertices (mm), {keep.sum()} faces and {len(unused)} "
+        "zero-area faces, one on each vertex no face uses"
+    )
+    assert sum(x.startswith("f ") for x in lines) == keep.sum() + len(unused)
+    assert lines[1].startswith("# vertex numbers below are OBJ's, from 1")
+    assert lines[2] == "# invalid: 6 101 701"
 
 
 def test_bad_input(tmp_path, face):

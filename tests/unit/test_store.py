@@ -143,3 +143,13 @@ def test_read_attrs_of_a_group_a_part_lacks(tmp_path):
     assert read_attrs(part, "takes/too/refine", missing_ok=True) == {}
     with pytest.raises(KeyError):
         read_attrs(part, "takes/too/refine")
+
+
+def test_the_layout_names_the_format_it_describes():
+    """The layout file is the stores' contract: its own format_version is the one the stores
+    are written with (it said 1.4.0 while the stores were 1.8.0)."""
+    from scan2morph.store import load_layout
+    from tests.support.workflow_api import REPO
+
+    layout = load_layout(REPO / "schemas" / "store.layout.yaml")
+    assert layout["format_version"] == FORMAT_VERSION

@@ -74,14 +74,21 @@ def write_obj(
             raise InputError(path, f"valid: expected ({len(vertices)},), got {np.shape(valid)}")
         ok &= np.asarray(valid, dtype=bool)
     keep = ok[faces].all(axis=1)
-    lines = [f"# scan2morph mesh: {len(vertices)} vertices ({units}), {int(keep.sum())} faces"]
-    if not ok.all():
-        lines.append("# invalid: " + " ".join(str(i) for i in np.flatnonzero(~ok) + 1))
-    if filled is not None:
-        if np.shape(filled) != (len(vertices),):
-            raise InputError(path, f"filled: expected ({len(vertices)},), got {np.shape(filled)}")
-        if np.any(filled):
-            lines.append("# filled: " + " ".join(str(i) for i in np.flatnonzero(filled) + 1))
+    referenced = np.zeros(len(vertices), dtype=bool)
+    referenced[faces[keep].ravel()] = True
+    lonely = np.flatnonzero(~referenced) + 1  # one degenerate face each keeps them everywhere
+    header = f"# scan2morph mesh: {len(vertices)} vertices ({units}), {int(keep.sum())} faces"
+    if lonely.size:
+        header += f" and {lonely.size} zero-area faces, one on each vertex no face uses"
+    lines = [header]
+    if filled is not None and np.shape(filled) != (len(vertices),):
+        raise InputError(path, f"filled: expected ({len(vertices)},), got {np.shape(filled)}")
+    listed = {"invalid": ~ok, "filled": np.zeros(len(vertices), bool) if filled is None else filled}
+    if any(np.any(rows) for rows in listed.values()):
+        lines.append("# vertex numbers below are OBJ's, from 1: template vertex i is number i + 1")
+    for name, rows in listed.items():
+        if np.any(rows):
+            lines.append(f"# {name}: " + " ".join(str(i) for i in np.flatnonzero(rows) + 1))
     if texture is not None:
         if uv is None:
             raise InputError(path, "texture given without uv")
@@ -95,9 +102,6 @@ def write_obj(
     v = np.where(finite[:, None], vertices, centre)
     lines += [f"v {a:.6f} {b:.6f} {c:.6f}" for a, b, c in v]
     f1 = faces[keep] + 1
-    referenced = np.zeros(len(vertices), dtype=bool)
-    referenced[faces[keep].ravel()] = True
-    lonely = np.flatnonzero(~referenced) + 1  # one degenerate face each keeps them everywhere
     corner = "{0}/{0}" if uv is not None else "{0}"
     if uv is not None:
         uv = np.asarray(uv, dtype=np.float64)

@@ -6,8 +6,11 @@ left out). Beside them, ``meshes/head/`` holds the same meshes as a DCC tool wan
 glTF's head frame (:func:`scan2morph.morph.frame.head_frame`: metres, +X to the subject's left,
 +Y up, +Z out of the face, origin between the eyes), every take aligned to the neutral:
 
-- ``head/{take}.obj``: the take's fitted mesh aligned to the neutral
-  (``/takes/{take}/align/vertices``), textured with its own colour image;
+- ``head/{take}.obj``: the take's mesh in correspondence with the neutral, the one the models
+  are built from (:func:`correspondence`: the refined mesh, ``/takes/{take}/refine`` or where
+  the takes' consensus moved it ``/takes/{take}/consensus``; the aligned template fit,
+  ``/takes/{take}/align/vertices``, where the refinement did not run), textured with its own
+  colour image at the points it samples;
 - ``head/models/{name}.obj``: the neutral, each viseme model, blend and PCA blend (as
   ``meshes/models``), textured with the neutral's image;
 - ``head/expressions/{take}_measured.obj`` and ``{take}_synthesized.obj``: the neutral plus the
@@ -34,6 +37,7 @@ from scan2morph.geometry import harmonic_fill
 from scan2morph.io.obj import write_obj
 from scan2morph.morph.frame import apply_frame
 from scan2morph.store import open_store, paths
+from scan2morph.template.sample import texture_uv
 
 #: The folder under ``results/{subject}/meshes`` that holds the head-frame meshes.
 HEAD_FOLDER = "head"
@@ -108,6 +112,39 @@ def write_head_obj(
     write_obj(path, head, faces, uv=uv, texture=texture, filled=missing, units="m")
 
 
+def correspondence(h5: h5py.File, take: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """A take's mesh in correspondence with the neutral, as the motion stage takes it.
+
+    Parameters
+    ----------
+    h5 : h5py.File
+        The subject's store.
+    take : str
+
+    Returns
+    -------
+    vertices : (V, 3) float64, mm, neutral frame
+        The refined mesh (``/takes/{take}/refine``, or ``consensus`` where the takes' consensus
+        moved it; NaN where invalid), else the aligned template fit (``align/vertices``, NaN
+        where the fit is invalid).
+    uv : (V, 2) float64 or None
+        Image-convention texture coordinates into the take's colour image of the points the
+        vertices sample (the refined mesh's ``points2d``, else the fit's ``mesh/uv``).
+    """
+    if paths.refine(take, "vertices") in h5:
+        group = paths.refined(take, h5)
+        vertices = h5[group(take, "vertices")][()]
+        valid = h5[group(take, "valid")][()].astype(bool)
+        color = _read(h5, paths.range_image(take, "color"))
+        points = h5[group(take, "points2d")][()]
+        uv = None if color is None else texture_uv(points, color.shape[1], color.shape[0])
+    else:
+        vertices = h5[paths.align(take, "vertices")][()]
+        valid = h5[paths.mesh(take, "valid")][()].astype(bool)
+        uv = _read(h5, paths.mesh(take, "uv"))
+    return np.where(valid[:, None], vertices, np.nan), uv
+
+
 def _read(h5: h5py.File, key: str):
     return h5[key][()] if key in h5 else None
 
@@ -161,10 +198,10 @@ def write_head_meshes(store: str | PathLike[str], folder: str | PathLike[str]) -
             written.append(path)
 
         for take in _names(h5, paths.TAKES, "align/vertices"):
-            uv = _read(h5, paths.mesh(take, "uv"))
+            vertices, uv = correspondence(h5, take)
             color = _read(h5, paths.range_image(take, "color"))
             own = {"uv": uv, "texture": color} if uv is not None and color is not None else skin
-            write(take, h5[paths.align(take, "vertices")][()], own)
+            write(take, vertices, own)
         write("models/neutral", neutral, skin, _read(h5, paths.neutral("filled")))
         for take in _names(h5, paths.VISEMES, "model"):
             write(f"models/{take}", h5[paths.viseme(take, "model")][()], skin)
@@ -183,4 +220,4 @@ def write_head_meshes(store: str | PathLike[str], folder: str | PathLike[str]) -
     return written
 
 
-__all__ = ["HEAD_FOLDER", "fill_from", "write_head_meshes", "write_head_obj"]
+__all__ = ["HEAD_FOLDER", "correspondence", "fill_from", "write_head_meshes", "write_head_obj"]

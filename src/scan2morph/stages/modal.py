@@ -409,7 +409,7 @@ def run(
         "coordinates": pd.DataFrame.from_dict(coords, orient="index", columns=columns),
         "reconstruction": pd.DataFrame(
             rows, columns=["take", "part", *[f"K={k}" for k in ks], "modes_to_target"]
-        ),
+        ).astype({"modes_to_target": "Int64"}),  # a count (NA where no K reaches the target)
         "faces": fine.faces,
         "meshes": meshes,
     }
