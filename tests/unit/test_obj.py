@@ -110,3 +110,30 @@ def test_bad_input(tmp_path, face):
     (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
     with pytest.raises(InputError, match="quad.obj: line 5: expected a triangle, got 4"):
         read_obj(tmp_path / "quad.obj")
+
+
+def test_meshes_of_a_folder_share_one_material(tmp_path, face):
+    """The models of a subject share the neutral's texture: one PNG and one MTL for the folder
+    (the outputs audit's F7: 56 copies, half of a subject's meshes), each OBJ textured by it in
+    trimesh as with a texture of its own."""
+    from scan2morph.io.obj import write_material
+
+    v, f, uv = face
+    tex = np.random.default_rng(2).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    mtl = write_material(tmp_path, "neutral_texture", tex)
+    assert mtl == "neutral_texture.mtl"
+    for name in ("a", "b"):
+        write_obj(tmp_path / f"{name}.obj", v + len(name), f, uv=uv, texture=mtl)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.obj",
+        "b.obj",
+        "neutral_texture.mtl",
+        "neutral_texture.png",
+    ]
+    mesh = trimesh.load(tmp_path / "b.obj", process=False)
+    np.testing.assert_array_equal(np.asarray(mesh.visual.material.image.convert("RGB")), tex)
+    np.testing.assert_allclose(mesh.visual.uv, uv * [1, -1] + [0, 1], atol=1e-6)
+    with pytest.raises(InputError, match=r"c.obj: texture: no material other.mtl beside the OBJ"):
+        write_obj(tmp_path / "c.obj", v, f, uv=uv, texture="other.mtl")
+    with pytest.raises(InputError, match="texture given without uv"):
+        write_obj(tmp_path / "d.obj", v, f, texture=mtl)

@@ -95,13 +95,24 @@ def test_head_meshes_of_the_workflow_are_the_store_meshes_in_the_head_frame(run,
     )
     for take in ("car", "smile1"):
         mesh = read_obj(head / f"{take}.obj")
-        aligned = store[paths.align(take, "vertices")]
+        # the take's correspondence, as the models take it: its refined mesh
+        group = paths.refined(take, store)
+        aligned = np.where(
+            store[group(take, "valid")][:, None], store[group(take, "vertices")], np.nan
+        )
+        assert not np.array_equal(aligned, store[paths.align(take, "vertices")], equal_nan=True)
         measured = np.isfinite(aligned).all(axis=1)
         assert np.array_equal(mesh["filled"], ~measured) and (~measured).sum() > 50
         assert mesh["valid"].all() and len(mesh["faces"]) == len(model.faces)
         want = apply_frame(frame, aligned[measured])
         np.testing.assert_allclose(mesh["vertices"][measured], want, rtol=0, atol=6e-7)
         assert (head / f"{take}.png").is_file() and "(m)" in (head / f"{take}.obj").read_text()[:60]
+    # the models and the expressions share the neutral's texture, once a folder
+    for sub in ("models", "expressions"):
+        assert [p.name for p in (head / sub).glob("*.png")] == ["neutral_texture.png"]
+        assert all(
+            "mtllib neutral_texture.mtl" in p.read_text() for p in (head / sub).glob("*.obj")
+        )
     pose = read_obj(head / "models" / "pca_blend1.obj")["vertices"]
     np.testing.assert_allclose(
         pose, apply_frame(frame, store[paths.pca_blend("pca_blend1")]), rtol=0, atol=6e-7

@@ -11,7 +11,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "image": ("read_color", "write_color"),
         "landmarks": ("read_pts", "write_landmarks3d", "write_pts"),
         "mesh_scan": ("MeshTake", "read_landmarks3d", "read_mesh", "read_mesh_take"),
-        "obj": ("write_obj",),
+        "obj": ("write_material", "write_obj"),
         "range_image": ("read_abs", "read_npz_range", "read_range", "write_abs", "write_npz_range"),
         "rgbd": (
             "RGBDIntrinsics",

@@ -23,9 +23,44 @@ import numpy as np
 from scan2morph.errors import InputError, writing
 from scan2morph.io.image import write_color
 
+#: The material the models and expressions of a folder share: the neutral's texture, once.
+NEUTRAL_MATERIAL = "neutral_texture"
+
+
+def write_material(folder, name: str, texture) -> str:
+    """Write one textured material that several OBJs of ``folder`` share (:func:`write_obj`'s
+    ``material``): ``{name}.mtl`` and ``{name}.png``, the texture once instead of a copy a mesh.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Where the OBJs are (created).
+    name : str
+        File stem of the MTL and the PNG.
+    texture : (H, W, 3) uint8
+
+    Returns
+    -------
+    str
+        The MTL's file name, for the OBJs' ``mtllib`` lines.
+    """
+    png = Path(folder) / f"{name}.png"
+    png.parent.mkdir(parents=True, exist_ok=True)
+    write_color(png, np.asarray(texture, dtype=np.uint8))
+    mtl = png.with_suffix(".mtl")
+    _write_text(mtl, f"newmtl face\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {png.name}\n")
+    return mtl.name
+
 
 def write_obj(
-    path, vertices, faces, uv=None, texture=None, valid=None, filled=None, units: str = "mm"
+    path,
+    vertices,
+    faces,
+    uv=None,
+    texture=None,
+    valid=None,
+    filled=None,
+    units: str = "mm",
 ) -> None:
     """Write a mesh as OBJ, with MTL and PNG texture beside it when ``texture`` is given.
 
@@ -37,7 +72,9 @@ def write_obj(
     faces : (F, 3) int
     uv : (V, 2) float, optional
         Image-convention texture coordinates (top-left origin); written as ``vt u 1-v``.
-    texture : (H, W, 3) uint8, optional
+    texture : (H, W, 3) uint8 or str, optional
+        The image, written beside the OBJ; or the file name of a material beside it that
+        several meshes share (:func:`write_material`).
     valid : (V,) bool, optional
         Faces touching an invalid (or non-finite) vertex are not written.
     filled : (V,) bool, optional
@@ -92,12 +129,11 @@ def write_obj(
     if texture is not None:
         if uv is None:
             raise InputError(path, "texture given without uv")
-        write_color(path.with_suffix(".png"), np.asarray(texture, dtype=np.uint8))
-        _write_text(
-            path.with_suffix(".mtl"),
-            f"newmtl face\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nillum 1\nmap_Kd {path.with_suffix('.png').name}\n",
-        )
-        lines += [f"mtllib {path.with_suffix('.mtl').name}", "usemtl face"]
+        if isinstance(texture, str) and not (path.parent / texture).is_file():
+            raise InputError(path, f"texture: no material {texture} beside the OBJ")
+        if not isinstance(texture, str):
+            texture = write_material(path.parent, path.stem, texture)
+        lines += [f"mtllib {texture}", "usemtl face"]
     centre = vertices[finite].mean(axis=0) if finite.any() else np.zeros(3)
     v = np.where(finite[:, None], vertices, centre)
     lines += [f"v {a:.6f} {b:.6f} {c:.6f}" for a, b, c in v]

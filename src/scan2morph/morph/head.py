@@ -12,10 +12,11 @@ glTF's head frame (:func:`scan2morph.morph.frame.head_frame`: metres, +X to the 
   ``/takes/{take}/align/vertices``, where the refinement did not run), textured with its own
   colour image at the points it samples;
 - ``head/models/{name}.obj``: the neutral, each viseme model, blend and PCA blend (as
-  ``meshes/models``), textured with the neutral's image;
+  ``meshes/models``), textured with the neutral's image (``neutral_texture.png``, once for
+  the folder);
 - ``head/expressions/{take}_measured.obj`` and ``{take}_synthesized.obj``: the neutral plus the
   expression's measured displacement and plus its modal synthesis (as ``meshes/expressions``),
-  textured with the neutral's image.
+  textured with the neutral's image (once for the folder).
 
 Vertex i is template vertex i in every file, and every face is written: a vertex without a
 measurement (outside the take's valid region) is placed on the hole-filled surface, the
@@ -34,7 +35,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import harmonic_fill
-from scan2morph.io.obj import write_obj
+from scan2morph.io.obj import NEUTRAL_MATERIAL, write_material, write_obj
 from scan2morph.morph.frame import apply_frame
 from scan2morph.store import open_store, paths
 from scan2morph.template.sample import texture_uv
@@ -88,7 +89,9 @@ def write_head_obj(
         Neutral frame (mm) -> head frame (m), ``/neutral/head_frame``.
     uv : (V, 2) float, optional
         Image-convention texture coordinates.
-    texture : (H, W, 3) uint8, optional
+    texture : (H, W, 3) uint8 or str, optional
+        The image; or a material beside the OBJ that several meshes share
+        (:func:`~scan2morph.io.obj.write_material`).
     reference : (V, 3) float, mm, optional
         Required when ``vertices`` has NaN rows.
     filled : (V,) bool, optional
@@ -191,6 +194,17 @@ def write_head_meshes(store: str | PathLike[str], folder: str | PathLike[str]) -
         tex0 = _read(h5, paths.range_image(base[0], "color")) if base else None
         skin = {"uv": uv0, "texture": tex0 if uv0 is not None else None}
 
+        shared: dict[str, dict] = {}
+
+        def neutral_look(sub: str) -> dict:
+            """The neutral's texture, written once for the folder ``sub`` and shared."""
+            if skin["texture"] is None:
+                return skin
+            if sub not in shared:
+                mtl = write_material(folder / sub, NEUTRAL_MATERIAL, skin["texture"])
+                shared[sub] = {"uv": skin["uv"], "texture": mtl}
+            return shared[sub]
+
         def write(name: str, vertices, look: dict, filled=None) -> None:
             path = folder / f"{name}.obj"
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -202,21 +216,23 @@ def write_head_meshes(store: str | PathLike[str], folder: str | PathLike[str]) -
             color = _read(h5, paths.range_image(take, "color"))
             own = {"uv": uv, "texture": color} if uv is not None and color is not None else skin
             write(take, vertices, own)
-        write("models/neutral", neutral, skin, _read(h5, paths.neutral("filled")))
+        models = neutral_look("models")
+        write("models/neutral", neutral, models, _read(h5, paths.neutral("filled")))
         for take in _names(h5, paths.VISEMES, "model"):
-            write(f"models/{take}", h5[paths.viseme(take, "model")][()], skin)
+            write(f"models/{take}", h5[paths.viseme(take, "model")][()], models)
         for root, key in ((paths.BLENDS, paths.blend), (paths.PCA_BLENDS, paths.pca_blend)):
             for name in _names(h5, root, "vertices"):
-                write(f"models/{name}", h5[key(name)][()], skin)
+                write(f"models/{name}", h5[key(name)][()], models)
         for take in _names(h5, paths.EXPRESSIONS, "displacement"):
+            look = neutral_look("expressions")
             write(
                 f"expressions/{take}_measured",
                 neutral + h5[paths.expression(take, "displacement")][()],
-                skin,
+                look,
             )
             synth = _read(h5, paths.expression(take, "synthesized"))
             if synth is not None:
-                write(f"expressions/{take}_synthesized", neutral + synth, skin)
+                write(f"expressions/{take}_synthesized", neutral + synth, look)
     return written
 
 

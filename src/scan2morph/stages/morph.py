@@ -11,8 +11,9 @@ import numpy as np
 import pandas as pd
 
 from scan2morph.geometry import TexturedMesh
-from scan2morph.io import write_glb, write_obj
+from scan2morph.io import write_glb, write_material, write_obj
 from scan2morph.io.gltf import MorphTargets
+from scan2morph.io.obj import NEUTRAL_MATERIAL
 from scan2morph.morph import pca_tables
 from scan2morph.morph.frame import HEAD_FRAME_NAME, head_frame
 from scan2morph.morph.pca import SIGMA_CONVENTIONS, PCAModel
@@ -184,5 +185,6 @@ def write_files(part: Part, eigen: str, coefficients: str, glb: str, models: str
     write_glb(glb, TexturedMesh(base, f["faces"], f["uv"], f["texture"]), f["targets"])
     folder = Path(models)
     folder.mkdir(parents=True, exist_ok=True)
+    skin = write_material(folder, NEUTRAL_MATERIAL, f["texture"])  # one texture for every model
     for name, shape in f["shapes"].items():
-        write_obj(folder / f"{name}.obj", shape, f["faces"], uv=f["uv"], texture=f["texture"])
+        write_obj(folder / f"{name}.obj", shape, f["faces"], uv=f["uv"], texture=skin)
