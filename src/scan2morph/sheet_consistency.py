@@ -16,8 +16,9 @@ if TYPE_CHECKING:
     import pandas as pd
 
 #: The columns that hold a take's own scan: one file may serve one take only (a calibration or
-#: intrinsics file serves a whole rig, a landmark file may be copied on purpose).
-SCAN_COLUMNS = ("xyz", "color", "left", "right", "mesh", "texture", "depth")
+#: intrinsics file serves a whole rig, a landmark file may be copied on purpose, and meshes of
+#: one head exported from a rig may share one texture map).
+SCAN_COLUMNS = ("xyz", "color", "left", "right", "mesh", "depth")
 #: Names of a subject's model outputs (``meshes/models/{name}.obj``, the glTF's morph targets)
 #: that a take other than the neutral may not take: its own model would be overwritten.
 MODEL_NAMES = ("neutral", "pca_mean")
