@@ -32,7 +32,8 @@ included. Encoded as it stands, with these additions and one correction:
   package (``store.paths`` builds every store path; ``hdf5``, ``warnings``, ``layout`` and
   ``compare`` read and write the store) are used by every layer, and themselves import only
   each other: they come before ``io``, not after ``stages``. ``sheet`` (the sample sheet, with
-  ``units``, its units column, and ``sheet_text``, its text cell by cell) and
+  ``units``, its units column, ``sheet_text``, its text cell by cell, and ``sheet_consistency``,
+  its checks across rows) and
   ``tables`` (the result tables) import only the base and are placed in it, and so is
   ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
   mesh-scan reader and the figures), ``open3d_light`` (open3d imported without its web viewer,
@@ -75,6 +76,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.sheet",
             "scan2morph.config_schema",
             "scan2morph.sheet_text",
+            "scan2morph.sheet_consistency",
             "scan2morph.units",
             "scan2morph.tables",
             "scan2morph.offscreen",

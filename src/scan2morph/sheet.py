@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import io
 import re
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -23,6 +23,7 @@ from scan2morph.config_schema import load_schema, schema_errors
 from scan2morph.config_schema import renamed_keys as renamed_keys
 from scan2morph.config_schema import validate_config as validate_config
 from scan2morph.errors import InputError
+from scan2morph.sheet_consistency import shared_scan_problems, take_name_problems
 from scan2morph.sheet_text import sheet_text, tab_cells
 from scan2morph.units import unit_scale, units_problem
 
@@ -402,12 +403,15 @@ def sheet_problems(
     table: pd.DataFrame,
     check_files: bool = True,
     schema: str | PathLike[str] | None = None,
+    reserved: Collection[str] = (),
 ) -> dict[str, list[tuple[str, str]]]:
     """The sheet's problems per subject, each with the take it belongs to.
 
     Checks: kind and modality known, the modality's files named (and present when
-    ``check_files``, for user rows), take ids unique per subject, exactly one neutral take, and,
-    with ``schema`` (``schemas/sheet.schema.yaml``), every user row against it (e.g. an empty
+    ``check_files``, for user rows), take ids unique per subject, exactly one neutral take, no
+    take id that names a model output (:func:`take_name_problems`; ``reserved``: the config's
+    blend names), no scan file serving two rows (:func:`shared_scan_problems`), and, with
+    ``schema`` (``schemas/sheet.schema.yaml``), every user row against it (e.g. an empty
     ``label``). Each problem is one line naming the sheet row and the column.
 
     Returns
@@ -475,6 +479,7 @@ def sheet_problems(
                     f"{subject!r}",
                 )
             )
+        out += take_name_problems(rows, reserved) + shared_scan_problems(rows)
         n_neutral = int((rows["kind"] == "neutral").sum())
         if n_neutral != 1:
             out.append(

@@ -657,6 +657,10 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
             lambda d: d["color"].update(T=[-0.015, 0.0, 0.0]),
             r"color.T: \|T\| = 0.015 is below 1 mm; T must be in mm \(is it in metres\?\)",
         ),
+        (  # the bad-input audit's F1b: read as a zero baseline, the colour was 19 mm RMS off
+            lambda d: d["color"].pop("T"),
+            r"i.yaml: color.T: missing \(the depth -> colour translation, mm",
+        ),
         (
             lambda d: d.update(fx=d["fx"] / 160, fy=d["fy"] / 120, cx=0.5, cy=0.5),
             r"i.yaml: fx: 1.5625 px for a width of 160 px is a \d+° field of view .* normalised",

@@ -207,15 +207,15 @@ def test_a_missing_frame_is_named(tmp_path):
 
 def test_the_sheet_resolves_each_frame_and_names_a_missing_one(tmp_path):
     (tmp_path / "scans").mkdir()
-    for name in ("n_depth.png", "n.png", "n.yaml", "n_depth2.png"):
+    for name in ("n_depth.png", "n.png", "n.yaml", "n_depth2.png", "c_depth.png", "c.png"):
         (tmp_path / "scans" / name).write_bytes(b"")
     sheet = tmp_path / "sheet.tsv"
     rows = [
         ["s1", "neutral", "neutral", "neutral", "rgbd", "scans/n_depth.png; scans/n_depth2.png"],
-        ["s1", "car", "viseme", "car", "rgbd", "scans/n_depth.png;scans/gone.png"],
+        ["s1", "car", "viseme", "car", "rgbd", "scans/c_depth.png;scans/gone.png"],
     ]
     table = pd.DataFrame(rows, columns=["subject", "take", "kind", "label", "modality", "depth"])
-    table["color"], table["intrinsics"] = "scans/n.png", "scans/n.yaml"
+    table["color"], table["intrinsics"] = ["scans/n.png", "scans/c.png"], "scans/n.yaml"
     table.to_csv(sheet, sep="\t", index=False)
     df = read_sheet(sheet)
     first = df["depth"].iloc[0].split(";")

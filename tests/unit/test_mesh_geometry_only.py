@@ -179,7 +179,7 @@ def test_a_bad_unit_is_refused_naming_the_row_and_the_column(tmp_path, scans):
     assert f"{sheet} row 5 (s1/car3): column 'units': '-2.5' unknown {expected}" in (
         "\n".join(problems)
     )
-    assert not any("row 6 " in p for p in problems)  # 25.4 mm per unit (inches)
+    assert not any("row 6 " in p and "units" in p for p in problems)  # 25.4 mm a unit (inches)
     assert any(
         p.startswith(f"{sheet} row 4 (s1/car2): column 'units': 'cm' is for mesh and range takes")
         for p in problems

@@ -260,3 +260,49 @@ def test_the_example_rows_of_the_default_sheet_read_under_its_header(tmp_path):
     (tmp_path / "s.tsv").write_text("\n".join([header, *rows[1:]]) + "\n")
     sheet = read_sheet(tmp_path / "s.tsv")
     assert set(sheet["modality"]) == {"range", "stereo", "mesh", "rgbd"}
+
+
+def test_a_scan_file_serving_two_takes_of_a_subject_leaves_the_later_out(tmp_path):
+    """A cell copied from another row (the bad-input audit's F1: another take's colour image of
+    the same size was taken without a word, and the refinement followed it tens of mm off): the
+    later take is left out, naming the earlier row. Two subjects may share scans (the same
+    scans run twice to compare landmarks), and landmark files may be copied."""
+    _files(tmp_path, "n.abs", "n.png", "n.pts", "c.abs", "c.png", "s.abs")
+    rows = [
+        ["a", "neutral", "neutral", "neutral", "range", "n.abs", "n.png", "", "", "", "n.pts"],
+        ["a", "car", "viseme", "car", "range", "c.abs", "c.png", "", "", "", "n.pts"],
+        ["a", "smile1", "expression", "smile", "range", "s.abs", "c.png", "", "", "", ""],
+        ["b", "neutral", "neutral", "neutral", "range", "n.abs", "n.png", "", "", "", ""],
+        ["b", "car", "viseme", "car", "range", "n.abs", "c.png", "", "", "", ""],
+    ]
+    path = _sheet(tmp_path, rows)
+    problems = sheet.sheet_problems(read_sheet(path))
+    assert problems["a"] == [
+        (
+            "smile1",
+            f"{path} row 4 (a/smile1): column 'color': {tmp_path / 'c.png'} is also the color of "
+            "row 3 (car): each take needs its own scan (a cell copied from another row?)",
+        )
+    ]
+    assert [(t, p.split(": ")[1]) for t, p in problems["b"]] == [("car", "column 'xyz'")]
+
+
+@pytest.mark.parametrize("take", ["neutral", "pca_mean", "pca_2_neg", "car_30"])
+def test_a_take_named_as_a_model_of_its_subject_is_left_out(tmp_path, take):
+    """The bad-input audit's F3: a viseme take called 'neutral', 'car_30' (a blend of the
+    config) or 'pca_mean' had its model OBJ or glTF target overwritten without a word."""
+    _files(tmp_path, "n.abs", "c.abs")
+    rows = [
+        ["s", "n0", "neutral", "neutral", "range", "n.abs", "", "", "", "", ""],
+        ["s", take, "viseme", "car", "range", "c.abs", "", "", "", "", ""],
+    ]
+    problems = sheet.sheet_problems(read_sheet(_sheet(tmp_path, rows)), reserved=["car_30"])
+    ((name, problem),) = problems["s"]
+    assert name == take and f"take id {take!r} is also the name of " in problem
+    assert problem.endswith(
+        "(meshes/models/" + take + ".obj, the glTF's morph target); rename the take"
+    )
+    # the neutral itself may be called 'neutral'
+    rows[0][1] = "neutral"
+    rows[1][1] = "car"
+    assert sheet.sheet_problems(read_sheet(_sheet(tmp_path, rows)))["s"] == []

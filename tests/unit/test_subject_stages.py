@@ -115,7 +115,7 @@ def test_expression_displacement_smoothing_removes_noise_not_the_expression(face
     np.testing.assert_allclose(kept, raw, atol=1e-12)
 
 
-def test_subject_morph_pca_blends_and_labels(face):
+def test_subject_morph_pca_blends_and_labels(face, caplog):
     v, _ = face
     rng = np.random.default_rng(3)
     models = {
@@ -146,8 +146,24 @@ def test_subject_morph_pca_blends_and_labels(face):
         v, models, labels, {"eel": {"eel": 0.5}}, {"needs5": [0, 0, 0, 0, 1.0]}, 3.0, "s"
     )
     assert b2 == {} and p2 == {}  # a missing paper viseme / missing components: not applicable
-    with pytest.raises(InputError, match="unknown viseme 'caar'"):
-        subject_morph(v, models, labels, {"typo": {"caar": 0.5}}, {}, 3.0, "s")
+    # a label the subject has no usable take of (the bad-input audit's F2: its only take left
+    # out stopped the whole subject): the blend is left out with a warning, the rest is built;
+    # a misspelt label is the config's error when the run starts (blend_label_problem)
+    with caplog.at_level("WARNING", logger="scan2morph"):
+        _, b3, _ = subject_morph(
+            v, models, labels, {"oo_50": {"oo": 0.5}, "half_car": {"car": 0.5}}, {}, 3.0, "s"
+        )
+    assert list(b3) == ["half_car"]
+    assert "s: blend oo_50 not built: no usable take labelled 'oo' (known: ['car', 'too'])" in (
+        caplog.text
+    )
+    from scan2morph.sheet_consistency import blend_label_problem
+
+    assert blend_label_problem({"oo_50": {"oo": 0.5}, "c": {"car": 1.0}}, ["oo", "neutral"]) is None
+    assert blend_label_problem({"typo": {"caar": 0.5}}, ["car", "neutral"]) == (
+        "morph.blends.typo: label 'caar' is no take's label in the sheet (labels: ['car', "
+        "'neutral']; the paper's visemes: ['car', 'man', 'she', 'eel', 'too'])"
+    )
     with pytest.raises(InputError, match="no viseme takes"):
         subject_morph(v, {}, {}, {}, {}, 3.0, "s")
 

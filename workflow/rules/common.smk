@@ -11,6 +11,7 @@ from scan2morph.config_schema import validate_config
 from scan2morph.errors import InputError
 from scan2morph.jobs import config_sha256, memory_mb
 from scan2morph.sheet import read_sheet, sheet_problems, synthetic_rows, take_table
+from scan2morph.sheet_consistency import blend_label_problem
 from scan2morph.stages.stage_job import SUBJECT_STAGES, check_take_params
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
@@ -47,6 +48,8 @@ try:
         config["synthetic"]["landmarks"],
     )
     TAKES = take_table(SHEET, SYNTH)
+    if _problem := blend_label_problem(config["morph"]["blends"], TAKES["label"]):
+        raise InputError("config", _problem)
 except InputError as _exc:
     stop_run(_exc)
 SUBJECTS = list(dict.fromkeys(TAKES["subject"]))
@@ -61,7 +64,9 @@ if not SUBJECTS:  # else the run does nothing and says nothing
 # a row that breaks the sheet's schema (e.g. an empty label): its take is left out (its subject
 # stops when it is the neutral's); reported with the files' problems by the subject's check job
 PROBLEMS = sheet_problems(
-    pd.concat([SHEET, SYNTH]), schema=SCHEMAS / "sheet.schema.yaml"
+    pd.concat([SHEET, SYNTH]),
+    schema=SCHEMAS / "sheet.schema.yaml",
+    reserved=[*config["morph"]["blends"], *config["morph"]["pca_blends"]],
 )
 # a subject job's trigger on the config (its stages' fingerprints decide what runs): the sweep
 # table's path reaches no subject stage, and switching tables re-ran every subject

@@ -234,7 +234,13 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
         color = _camera(block, path, "color.")
         _known_keys(block, (*_PINHOLE, "distortion", "R", "T"), path, "color.")
         R = _matrix(block.get("R", np.eye(3).tolist()), (3, 3), path, "color.R")
-        T = _matrix(block.get("T", [0.0, 0.0, 0.0]), (3,), path, "color.T (mm)")
+        if "T" not in block:  # a zero baseline read for a missing one puts the colour mm off
+            raise InputError(
+                path,
+                "color.T: missing (the depth -> colour translation, mm, e.g. [15.0, 0.0, 0.0]; "
+                "[0, 0, 0] when the colour camera sits at the depth camera's centre)",
+            )
+        T = _matrix(block["T"], (3,), path, "color.T (mm)")
         baseline = float(np.linalg.norm(T))
         if 0.0 < baseline < MIN_BASELINE_MM:  # 0: the colour image is the depth camera's
             raise InputError(

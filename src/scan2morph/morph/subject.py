@@ -6,6 +6,7 @@ takes of one label, the label's model is the mean of those takes' models.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -14,6 +15,8 @@ from scan2morph.errors import InputError
 from scan2morph.morph.blend import blend
 from scan2morph.morph.pca import ALPHA_LIMIT, PCAModel, pca, synthesize
 from scan2morph.tol import VISEMES
+
+log = logging.getLogger(__name__)
 
 
 def label_models(
@@ -61,8 +64,10 @@ def subject_morph(
     model : PCAModel
         Over ``["neutral", *models]`` in that order.
     blend_shapes : dict name -> (V, 3)
-        Blends naming a paper viseme (``tol.VISEMES``) the subject has no take of are left out;
-        any other unknown label is an error.
+        A blend naming a label the subject has no (usable) take of is left out, with a warning:
+        a paper viseme (``tol.VISEMES``) it was not scanned with, or a label whose takes were
+        left out. (A label no take of the sheet has is the config's error, found when the run
+        starts: :func:`scan2morph.sheet_consistency.blend_label_problem`.)
     pca_shapes : dict name -> (V, 3)
     """
     if not models:
@@ -77,8 +82,13 @@ def subject_morph(
     blend_shapes = {}
     for name, weights in blends.items():
         missing = [lab for lab in weights if lab not in per_label]
-        if missing and all(lab in VISEMES for lab in missing):
-            continue  # a paper viseme this subject was not scanned with: the blend does not apply
+        if missing:  # not scanned with, or its takes were left out: the blend does not apply
+            paper = all(lab in VISEMES for lab in missing)
+            (log.info if paper else log.warning)(
+                "%s: blend %s not built: no usable take labelled %s (known: %s)",
+                source, name, ", ".join(map(repr, missing)), sorted(per_label),
+            )  # fmt: skip
+            continue
         blend_shapes[name] = blend(
             neutral, per_label, dict(weights), source=f"{source}/morph.blends.{name}"
         )
