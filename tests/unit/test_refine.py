@@ -1,6 +1,8 @@
 """Dense correspondence refinement: template space, flow measurement and fusion, and the whole
 refinement against a known displacement (the oracle)."""
 
+import re
+
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter, map_coordinates
@@ -673,3 +675,42 @@ def test_a_slide_along_edges_is_taken_from_the_textured_skin_beside_them():
     b = w * np.concatenate([across[..., 0].ravel(), across[..., 1].ravel()])
     direct = spsolve(A.tocsc(), b).reshape(2, rows, cols).transpose(1, 2, 0)
     np.testing.assert_allclose(fixed, direct, atol=1e-3)
+
+
+def test_a_refinement_that_would_move_the_skin_far_from_the_fit_is_not_used():
+    """The bad-input audit's F1: a take given another take's colour image (of the same size)
+    was refined to follow it, 20 mm RMS off. Here the take's image is its skin shifted by 20 px
+    (14 mm on the plane) against its range data: the refinement would move the skin that far,
+    so the take keeps its template fit, the problem named; with a limit above it, it is used."""
+    from dataclasses import replace
+
+    from scan2morph.stages import refine
+    from scan2morph.store import paths
+
+    config = repo_config()
+    template = build_template()
+    rename = lambda d, t: {k.replace("/takes/t/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: E731
+    data = rename(_plane_take(template, 21, config), "neutral")
+    take_data = rename(_plane_take(template, 21, config), "she")
+    color = paths.range_image("she", "color")
+    take_data[color] = np.roll(take_data[color], 20, axis=1)
+    data |= take_data
+    params = refine.Params.from_config(config)
+    assert params.max_correction_rms_mm == config["refine"]["max_correction_rms_mm"] == 8.0
+    take = Take("x", "she", "viseme", "she", "neutral", data=data)
+    part = refine.run(template, take, params)
+    attrs = part.attrs[paths.refine_group("she")]
+    assert not attrs["used"]
+    assert re.match(
+        r"it would move the skin \d+\.\d mm RMS from the template fit \(more than "
+        r"refine\.max_correction_rms_mm 8\): the colour image does not follow the range data",
+        attrs["problem"],
+    ), attrs["problem"]
+    rms = float(attrs["problem"].split(" mm RMS")[0].rsplit(" ", 1)[1])
+    assert 12.0 < rms < 16.0  # the 14 mm shift
+    np.testing.assert_array_equal(
+        part.datasets[paths.refine("she", "points2d")], data[paths.mesh("she", "points2d")]
+    )
+    assert not part.datasets[paths.refine("she", "confidence")].any()
+    loose = refine.run(template, take, replace(params, max_correction_rms_mm=100.0))
+    assert loose.attrs[paths.refine_group("she")]["used"]
