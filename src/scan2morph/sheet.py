@@ -79,6 +79,9 @@ ROW_LOCATION = ("sheet_row", "sheet")
 #: The separator of several files in one cell.
 PATH_SEPARATOR = ";"
 _ID = re.compile(r"^[A-Za-z0-9_-]+$")
+#: The longest subject or take id: an id names files and folders (a 256-character one crashed
+#: the scheduler with "File name too long").
+MAX_ID_LENGTH = 64
 
 
 def read_sheet(path: str | Path) -> pd.DataFrame:
@@ -110,6 +113,9 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
         df = pd.DataFrame(columns=list(COLUMNS))
     except pd.errors.ParserError as exc:  # the text is decoded: sheet_text names bad bytes
         raise InputError(path, _parser_problem(text, exc)) from exc
+    header = [c.strip() for c in (text.splitlines() or [""])[0].split("\t")]
+    if twice := sorted({c for c in header if c and header.count(c) > 1}):
+        raise InputError(path, f"column {twice[0]!r} appears more than once in the header")
     df.columns = [c.strip() for c in df.columns]
     if problem := column_problem(list(df.columns)):
         raise InputError(path, problem)
@@ -120,6 +126,12 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
             if not _ID.match(value):
                 what = "is not an id (letters, digits, _ and -)"
                 raise InputError(path, f"row {row}, column '{col}': {value!r} {what}")
+            if len(value) > MAX_ID_LENGTH:
+                raise InputError(
+                    path,
+                    f"row {row}, column '{col}': {value[:24]!r}... has {len(value)} characters "
+                    f"(at most {MAX_ID_LENGTH}: an id names files and folders)",
+                )
         if rec.subject.lower() in RESERVED_SUBJECTS:
             raise InputError(path, f"row {row}, column 'subject': {reserved_problem(rec.subject)}")
     base = path.resolve().parent
@@ -467,9 +479,12 @@ def sheet_problems(
                     for part in split_paths(value) if several else [value]:
                         found = Path(part).is_file() or (several and Path(part).is_dir())
                         if not found:
-                            out.append(
-                                (rec.take, f"{where}: column '{col}': file not found: {part}")
+                            what = (
+                                f"{part} is a folder, not a file"
+                                if Path(part).is_dir()
+                                else f"file not found: {part}"
                             )
+                            out.append((rec.take, f"{where}: column '{col}': {what}"))
         dup = rows["take"][rows["take"].duplicated()].unique()
         for take in dup:
             out.append(

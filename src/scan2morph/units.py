@@ -19,8 +19,8 @@ def unit_scale(value) -> float | None:
     positive number of mm per unit (a scan in inches: 25.4; a photogrammetry mesh of unknown
     scale: the factor that makes it mm); None when the cell is neither."""
     value = str(value or "").strip()
-    if value in UNITS:
-        return UNITS[value]
+    if value.lower() in UNITS:  # MM, Cm, M as well
+        return UNITS[value.lower()]
     try:
         scale = float(value)
     except ValueError:

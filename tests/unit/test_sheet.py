@@ -306,3 +306,35 @@ def test_a_take_named_as_a_model_of_its_subject_is_left_out(tmp_path, take):
     rows[0][1] = "neutral"
     rows[1][1] = "car"
     assert sheet.sheet_problems(read_sheet(_sheet(tmp_path, rows)))["s"] == []
+
+
+def test_header_ids_and_cells_the_bad_input_audit_found_misleading(tmp_path):
+    """A column given twice was "unknown column 'color.1'"; a 256-character take id crashed the
+    scheduler; a folder in a file column was "file not found"; MM and Cm were unknown units."""
+    _files(tmp_path, "n.abs", "c.abs")
+    (tmp_path / "scans").mkdir()
+    twice = tmp_path / "twice.tsv"
+    twice.write_text(HEADER.replace("\tcolor\t", "\tcolor\tcolor\t"))
+    with pytest.raises(InputError, match=r"twice.tsv: column 'color' appears more than once"):
+        read_sheet(twice)
+    rows = [
+        ["s", "neutral", "neutral", "neutral", "range", "n.abs", "", "", "", "", ""],
+        ["s", "x" * 256, "viseme", "car", "range", "c.abs", "", "", "", "", ""],
+    ]
+    with pytest.raises(InputError, match=r"row 3, column 'take': 'xxx.*'... has 256 characters"):
+        read_sheet(_sheet(tmp_path, rows))
+    rows[1][1], rows[1][5] = "car", "scans"
+    problems = subject_problems(read_sheet(_sheet(tmp_path, rows)))["s"]
+    assert problems == [
+        f"{tmp_path / 'sheet.tsv'} row 3 (s/car): column 'xyz': {tmp_path / 'scans'} is a folder, "
+        "not a file"
+    ]
+    from scan2morph.units import unit_scale
+
+    assert [unit_scale(u) for u in ("MM", "Cm", "M", "mm", "furlongs")] == [
+        1.0,
+        10.0,
+        1000.0,
+        1.0,
+        None,
+    ]
