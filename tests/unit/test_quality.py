@@ -121,3 +121,35 @@ def test_the_report_shows_warnings_and_skipped_stages_first(store):
     assert html.startswith('<div class="warnings">') and "6 warnings" in html
     assert "ICP did not converge (50 iterations): left out of the models" in html
     assert "no viseme takes" in html  # the skipped stages' table
+
+
+def test_a_scan_with_no_data_under_its_mouth_and_nose_points_is_a_warning(store):
+    """The bad-input audit's F4: a smile whose scan lost its lower half (an occlusion, a cut
+    scan) kept 68% of its template valid, above quality.min_valid_fraction, and its mouth's
+    motion was filled in without a word. More than 8 of the 41 eye, nose and mouth points on no
+    data is now a warning naming them; brows on unseen hair and a few points over an open
+    mouth are not."""
+    from scan2morph.stages.quality import MAX_UNMEASURED_POINTS, unmeasured_landmarks
+
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(100, 220, 68), rng.uniform(40, 200, 68)])
+    points[27:48, 1] = rng.uniform(60, 110, 21)  # nose bridge and eyes: upper half
+    points[48:, 1] = rng.uniform(130, 170, 20)  # mouth: lower half
+    xyz = np.ones((240, 320, 3))
+    with h5py.File(store, "a") as h5:
+        for take in ("car", "smile"):
+            h5[paths.landmarks(take)] = points
+        h5[paths.range_image("car", "xyz")] = xyz
+        cut = xyz.copy()
+        cut[120:] = np.nan  # the lower half lost
+        cut[:, :2] = np.nan  # and a few points out of the image
+        h5[paths.range_image("smile", "xyz")] = cut
+        assert unmeasured_landmarks(h5, "car") == []
+        off = unmeasured_landmarks(h5, "smile")
+        warnings = [str(w) for w in subject_warnings(h5, SETTINGS) if "no data" in str(w)]
+    assert off == list(range(49, 69)) and len(off) > MAX_UNMEASURED_POINTS
+    assert warnings == [
+        "[fit] smile: 20 of its 41 eye, nose and mouth landmarks (iBUG 49-68) lie where its scan "
+        "has no data: the template there is filled in from the measured skin around it, not "
+        "measured"
+    ]
