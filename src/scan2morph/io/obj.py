@@ -28,8 +28,9 @@ NEUTRAL_MATERIAL = "neutral_texture"
 
 
 def write_material(folder, name: str, texture) -> str:
-    """Write one textured material that several OBJs of ``folder`` share (:func:`write_obj`'s
-    ``material``): ``{name}.mtl`` and ``{name}.png``, the texture once instead of a copy a mesh.
+    """Write one textured material that several OBJs of ``folder`` share (its name is their
+    :func:`write_obj` ``texture``): ``{name}.mtl`` and ``{name}.png``, the texture once instead
+    of a copy a mesh.
 
     Parameters
     ----------

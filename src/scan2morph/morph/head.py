@@ -138,7 +138,7 @@ def correspondence(h5: h5py.File, take: str) -> tuple[np.ndarray, np.ndarray | N
         group = paths.refined(take, h5)
         vertices = h5[group(take, "vertices")][()]
         valid = h5[group(take, "valid")][()].astype(bool)
-        color = _read(h5, paths.range_image(take, "color"))
+        color = h5.get(paths.range_image(take, "color"))  # its size only: the caller reads it
         points = h5[group(take, "points2d")][()]
         uv = None if color is None else texture_uv(points, color.shape[1], color.shape[0])
     else:

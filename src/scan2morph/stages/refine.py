@@ -134,7 +134,9 @@ class Params:
             align_stage.icp_params(align),
             str(align["icp_region"]),
             _settings(ShapeParams, refine, "shape"),
-            max_correction_rms_mm=float(refine.get("max_correction_rms_mm", 8.0)),
+            max_correction_rms_mm=float(
+                refine.get("max_correction_rms_mm", cls.max_correction_rms_mm)
+            ),
         )
 
 
