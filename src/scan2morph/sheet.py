@@ -113,7 +113,9 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
         df = pd.DataFrame(columns=list(COLUMNS))
     except pd.errors.ParserError as exc:  # the text is decoded: sheet_text names bad bytes
         raise InputError(path, _parser_problem(text, exc)) from exc
-    header = [c.strip() for c in (text.splitlines() or [""])[0].split("\t")]
+    # the header is the first line that is not blank (tab_cells leaves a comment line empty)
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    header = [c.strip() for c in first.split("\t")]
     if twice := sorted({c for c in header if c and header.count(c) > 1}):
         raise InputError(path, f"column {twice[0]!r} appears more than once in the header")
     df.columns = [c.strip() for c in df.columns]

@@ -314,9 +314,10 @@ def test_header_ids_and_cells_the_bad_input_audit_found_misleading(tmp_path):
     _files(tmp_path, "n.abs", "c.abs")
     (tmp_path / "scans").mkdir()
     twice = tmp_path / "twice.tsv"
-    twice.write_text(HEADER.replace("\tcolor\t", "\tcolor\tcolor\t"))
-    with pytest.raises(InputError, match=r"twice.tsv: column 'color' appears more than once"):
-        read_sheet(twice)
+    for comment in ("", "# a comment first\n\n"):  # the header after comments and blank lines
+        twice.write_text(comment + HEADER.replace("\tcolor\t", "\tcolor\tcolor\t"))
+        with pytest.raises(InputError, match=r"twice.tsv: column 'color' appears more than once"):
+            read_sheet(twice)
     rows = [
         ["s", "neutral", "neutral", "neutral", "range", "n.abs", "", "", "", "", ""],
         ["s", "x" * 256, "viseme", "car", "range", "c.abs", "", "", "", "", ""],
