@@ -111,7 +111,7 @@ def run_modal(j):
     """Modal basis of the neutral face and expression coordinates."""
     out, modal = j.out, stage_module("modal")
     params = j.params("modal").with_threads(j.threads)
-    part = modal.run(j.template(), j.subject, read_part(out.motion), params)
+    part = modal.run(j.template(), j.subject, read_parts([out.motion, *j.p.reads["modal"]]), params)
     write_part(out.modal, part.datasets, attrs=part.attrs)
     modal.write_files(part, out.coordinates, out.reconstruction, out.expressions)
 
