@@ -9,6 +9,7 @@ import pandas as pd
 
 from scan2morph.config_schema import validate_config
 from scan2morph.errors import InputError
+from scan2morph.io.yaml_text import config_file_problem
 from scan2morph.jobs import config_sha256, memory_mb
 from scan2morph.sheet import read_sheet, sheet_problems, synthetic_rows, take_table
 from scan2morph.sheet_consistency import blend_label_problem
@@ -19,11 +20,19 @@ SCHEMAS = Path(workflow.basedir) / "schemas"
 
 
 def stop_run(exc):
-    """Stop the whole run on a config or sheet error: one line, no traceback."""
+    """Stop the whole run on a config or sheet error (an exception or its line): one line, no
+    traceback."""
     sys.stderr.write(f"Error: {exc}\n")
     sys.exit(1)
 
 
+# the config files Snakemake read (config/config.yaml, each --configfile) read as
+# tools/check_config.py reads them, once a run: a key given twice, which Snakemake takes
+# silently (the last value), is the same line on every entry point, not only under make run
+if workflow.is_main_process:
+    for _file in workflow.configfiles:
+        if _problem := config_file_problem(_file):
+            stop_run(_problem)
 try:
     validate_config(config, SCHEMAS / "config.schema.yaml", source="config")
     # once a run, not again in each cluster job's Snakemake
