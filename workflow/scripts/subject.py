@@ -259,7 +259,12 @@ def run_stage(j, stage):
 
 
 def main(snakemake):
+    from scan2morph.report import clear_stale
+
     j = job_context(snakemake)
+    # the banner an earlier run's stop put on the page (common.smk, report_left_out) comes off:
+    # the page is this job's again, rewritten when out of date, else kept as it was written
+    clear_stale(j.out.report)
     sources = {
         "script": sha256_file(Path(snakemake.scriptdir) / "subject.py"),
         "template": sha256_file(j.inp.template),
