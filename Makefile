@@ -74,7 +74,8 @@ $(VALIDATOR_STAMP): $(VALIDATOR)/package.json $(VALIDATOR)/package-lock.json | $
 	@touch $@
 
 # `make run CONFIG=my.yaml`: your own config file on top of config/config.yaml (its keys win).
-# a CONFIG that is missing, not YAML or gives a key twice: one line naming it (tools/check_config.py)
+# a CONFIG that is missing, not YAML or gives a key twice: one line naming it (tools/check_config.py;
+# Snakemake meets the first two before the workflow loads, the workflow checks the third again)
 run: setup
 	$(if $(CONFIG),@$(BIN)/python tools/check_config.py $(CONFIG))
 	$(BIN)/snakemake --cores $(CORES) --keep-going --rerun-incomplete $(if $(CONFIG),--configfile $(CONFIG))

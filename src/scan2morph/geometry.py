@@ -160,6 +160,31 @@ def finite_points(points: np.ndarray) -> np.ndarray:
     return out
 
 
+def plane_spread(points: np.ndarray) -> tuple[float, float]:
+    """How deep and how wide points lie about their least-squares plane: the spreads (1st to
+    99th percentile) of their coordinates along the plane's normal and along its longest axis.
+
+    Parameters
+    ----------
+    points : (..., 3) float
+        A range grid (H, W, 3) or a point list (N, 3), mm; points with a NaN are left out (any
+        frame: the measure is frame-free).
+
+    Returns
+    -------
+    depth, width : float
+        In the points' unit (a flat board's depth is its noise); 0 with fewer than 3 points.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    pts = pts[finite_points(pts)]
+    if len(pts) < 3:
+        return 0.0, 0.0
+    centred = pts - pts.mean(axis=0)
+    axes = np.linalg.svd(centred, full_matrices=False)[2]
+    lo, hi = np.percentile(centred @ axes[[2, 0]].T, [1.0, 99.0], axis=0)
+    return float(hi[0] - lo[0]), float(hi[1] - lo[1])
+
+
 def in_blocks(func, points: np.ndarray, size: int) -> np.ndarray:
     """``func(points)`` for a ``func`` whose value at each point (row) depends on that point
     alone, computed over blocks of ``size`` rows whose temporaries stay in the CPU's cache: the
@@ -417,6 +442,7 @@ __all__ = [
     "finite_points",
     "harmonic_fill",
     "lengths_2d",
+    "plane_spread",
     "unique_edges",
     "vertex_normals",
 ]

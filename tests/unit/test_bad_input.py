@@ -252,6 +252,51 @@ def test_profile_view(tmp_path, take):
     _one_line(exc, files["landmarks"])
 
 
+def _board(take, diamond: bool) -> np.ndarray:
+    """A flat board where the take's face is: the plane through its points (an affine map of
+    the pixel grid, so in its scanner frame and scale), over the whole grid or a diamond (whose
+    side corners stuck out of the outline like a nose in profile)."""
+    from scan2morph.geometry import affine_fit
+
+    xyz = take["xyz"]
+    rows, cols = np.indices(xyz.shape[:2])
+    pixels = np.column_stack([cols.ravel(), rows.ravel()]).astype(np.float64)
+    ok = np.isfinite(xyz).all(axis=2).ravel()
+    board = np.column_stack([pixels, np.ones(len(pixels))]) @ affine_fit(
+        pixels[ok], xyz.reshape(-1, 3)[ok]
+    )
+    board = board.reshape(xyz.shape)
+    if diamond:
+        h, w = xyz.shape[:2]
+        board[np.abs(cols - w / 2) + np.abs(rows - h / 2) > 0.4 * h] = np.nan
+    return board
+
+
+def test_a_flat_scan_is_named_flat_not_a_profile_view(tmp_path, take):
+    """A board given as a take (the audit: "a profile view") is refused as flat, naming the take
+    or file: by the detector (a diamond-shaped board: its corners stuck out sideways like a nose
+    in profile), with clicked landmarks (they went through) and as a mesh."""
+    import trimesh
+
+    from scan2morph.landmarks import detect
+
+    flat = r"no face relief: the surface is flat \(\d\.\d mm deep about its best-fitting plane"
+    with pytest.raises(InputError, match=r"^s1/board: " + flat) as exc:
+        detect(take["color"], _board(take, diamond=True), "s1/board")
+    assert "profile" not in str(exc.value) and "no nose-like peak" in str(exc.value)
+    files = _write(tmp_path, take, xyz=_board(take, diamond=False))
+    with pytest.raises(InputError, match=flat + r".*, though its landmarks mark a face") as exc:
+        _ingest(files)
+    _one_line(exc, files["xyz"])
+    trimesh.creation.box(extents=(180.0, 220.0, 2.0)).export(tmp_path / "board.ply")
+    with pytest.raises(InputError, match=r"board.ply: mesh: " + flat):
+        _run_ingest(
+            dict(ROW, modality="mesh"),
+            {"mesh": str(tmp_path / "board.ply")},
+            {"width": 160, "height": 120},
+        )
+
+
 def test_one_pixel_and_all_invalid_scans(tmp_path):
     write_abs(tmp_path / "one.abs", np.ones((1, 1, 3)))
     write_color(tmp_path / "one.png", np.zeros((1, 1, 3), np.uint8))
@@ -564,14 +609,19 @@ def test_settings_that_contradict_each_other_are_one_config_line(jaw, match):
             "refine:\n  jaw:\n    fade_rmse_ratio: 1.0\n",
             "Error: config: refine.jaw: fade_rmse_ratio: expected at least max_rmse_ratio",
         ),
+        (  # Snakemake keeps the last silently: refused as tools/check_config.py refuses it
+            "modal:\n  modes: 10\nmodal:\n  preset: paper\n",
+            "Error: {path}: line 3: key 'modal' given twice (first on line 1): keep one value",
+        ),
     ],
 )
 def test_a_bad_config_stops_snakemake_in_a_few_lines(tmp_path, text, line):
+    """``snakemake --configfile`` directly, without make run's tools/check_config.py first."""
     (tmp_path / "bad.yaml").write_text(text)
     status, lines = snakemake_dry_run(tmp_path, "bad.yaml")
     assert status != 0
     assert len(lines) <= 3
-    assert lines[-1].startswith(line), lines[-1]
+    assert lines[-1].startswith(line.format(path=tmp_path / "bad.yaml")), lines[-1]
 
 
 # --- RGB-D and mesh takes (issue #18) ---

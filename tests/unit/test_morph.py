@@ -261,6 +261,14 @@ def test_sigma_is_the_sample_std_of_the_coefficients_by_default():
         pca(shapes, sigma="population")
 
 
+def test_pca_target_weights_are_never_negative_zero():
+    """An alpha of 0 (or -0.0, as ``-np.zeros`` gives) weighs both its targets +0.0: a -0.0
+    printed or written reads as a negative shape-key value."""
+    weights = pca_target_weights([0.0, -0.0, 1.5, -1.5])
+    assert weights["pca_3_pos"] == 0.5 and weights["pca_4_neg"] == 0.5
+    assert not any(np.signbit(w) for w in weights.values()), weights
+
+
 def test_pca_targets_add_up_to_the_synthesis():
     """neutral + sum_k w_k (target_k - neutral) is Eq. 2 for several weights at once."""
     shapes = _face_set(22)

@@ -35,7 +35,9 @@ from scan2morph.io import read_glb_targets
 from scan2morph.report import (
     ReportFigure,
     ReportPage,
+    clear_stale,
     image_uri,
+    mark_stale,
     read_caption,
     sections,
     software_versions,
@@ -1311,3 +1313,24 @@ def test_a_takes_caption_says_how_its_correspondence_was_made(tmp_path):
         "sad2": "; refined by its shape (its texture does not correlate with the neutral's)",
         "too": "; template fit kept (see the warnings)",
     }
+
+
+def test_a_stale_banner_goes_on_top_of_the_page_and_comes_off_byte_for_byte(tmp_path):
+    """A stopped subject's earlier page gets one banner right after ``<body>`` (its note
+    escaped; marking again replaces it), and taking it off gives the page back as written,
+    line ends and all; no page: nothing to mark."""
+    page = tmp_path / "report.html"
+    written = (
+        "<!DOCTYPE html>\r\n<html><head></head><body><header><h1>s1</h1></header>\n</body></html>\n"
+    )
+    page.write_bytes(written.encode())
+    assert mark_stale(page, "s1 stopped: <neutral> unreadable & more")
+    text = page.read_text()
+    assert text.startswith("<!DOCTYPE html>\n<html><head></head><body><!-- scan2morph: stale -->")
+    assert "s1 stopped: &lt;neutral&gt; unreadable &amp; more</div>" in text
+    assert mark_stale(page, "s1 stopped again")
+    text = page.read_text()
+    assert text.count('role="alert"') == 1 and "stopped again" in text and "&lt;neutral" not in text
+    assert clear_stale(page) and page.read_bytes() == written.encode()
+    assert not clear_stale(page) and page.read_bytes() == written.encode()
+    assert not mark_stale(tmp_path / "none.html", "x") and not clear_stale(tmp_path / "none.html")

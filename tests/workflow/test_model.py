@@ -123,3 +123,23 @@ def test_head_meshes_of_the_workflow_are_the_store_meshes_in_the_head_frame(run,
     )
     neutral = read_obj(head / "models" / "neutral.obj")
     assert np.array_equal(neutral["filled"], store[paths.neutral("filled")].astype(bool))
+
+
+def test_every_scanner_frame_mesh_opens_textured(run):
+    """results/{subject}/meshes: each take's fit, each model and each expression (measured and
+    synthesised) opens in trimesh with texture coordinates and its texture image; the models and
+    the expressions share the neutral's material, once a folder (the expressions had none)."""
+    import trimesh
+
+    meshes = run.path("results", SUBJECT, "meshes")
+    objs = sorted(p for sub in ("", "models", "expressions") for p in (meshes / sub).glob("*.obj"))
+    assert {"smile1_measured.obj", "smile1_synthesized.obj"} <= {p.name for p in objs}
+    for path in objs:
+        mesh = trimesh.load(path, process=False)
+        uv = getattr(mesh.visual, "uv", None)  # a mesh without a texture has ColorVisuals
+        assert uv is not None and uv.shape == (len(mesh.vertices), 2), path
+        assert mesh.visual.material.image is not None, path
+    for sub in ("models", "expressions"):
+        assert [p.name for p in (meshes / sub).glob("*.png")] == ["neutral_texture.png"]
+        text = [p.read_text() for p in (meshes / sub).glob("*.obj")]
+        assert all("mtllib neutral_texture.mtl" in t for t in text), sub

@@ -503,17 +503,24 @@ def test_a_config_change_reruns_only_the_stages_it_reaches(cohort, tmp_path):
         )
 
 
+def _own_copy(cohort, tmp_path):
+    """A copy of the cohort's run whose config ``mine.yaml`` names the copy's own scans (the
+    cohort's sheet names the original's), for a test that changes them."""
+    work, _, _ = cohort
+    copy = tmp_path / "wf"
+    shutil.copytree(work, copy, symlinks=True)
+    cfg = yaml.safe_load((copy / "tiny.yaml").read_text())
+    cfg["subjects"] = str(copy / "scans" / "subjects.tsv")
+    (copy / "mine.yaml").write_text(yaml.safe_dump(cfg))
+    return copy
+
+
 def test_a_scan_changed_after_a_run_is_taken_up_by_the_next_run(cohort, tmp_path):
     """A take's file cut short after a run, then mended: each time one run re-runs that take
     and its subject (before, it re-ran only the subject's check and ended successfully with the
     old results: Snakemake skipped a take whose ancient input's job re-ran, until a second run),
     and a run after that changes nothing."""
-    work, _, _ = cohort
-    copy = tmp_path / "wf"
-    shutil.copytree(work, copy, symlinks=True)
-    cfg = yaml.safe_load((copy / "tiny.yaml").read_text())
-    cfg["subjects"] = str(copy / "scans" / "subjects.tsv")  # the copy's own scans
-    (copy / "mine.yaml").write_text(yaml.safe_dump(cfg))
+    copy = _own_copy(cohort, tmp_path)
     store = copy / "results" / "alice" / "alice.h5"
     targets = [str(store.relative_to(copy))]
     assert run_workflow(copy, copy / "mine.yaml", targets=targets)
@@ -649,9 +656,13 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
     # the cohort summary of the others, and why synth01 stopped: its failed stage's log's error
     rows = read_table(copy / "results" / "cohort" / "summary.tsv").set_index("subject")
     assert "car.npz" in rows.loc["synth01", "stopped"]
+    assert "store and report are an earlier run's" in rows.loc["synth01", "stopped"]
     assert pd.isna(rows.loc["alice", "stopped"])
+    # its page, the earlier run's, says so at its top
+    assert re.search(r"Out of date: synth01 stopped in the run of .*car\.npz", _banner(synth))
     truth.write_bytes(good)
     assert run_workflow(copy, copy / "tiny2.yaml", targets=[str(job.relative_to(copy))])
+    assert _banner(synth) is None
     # tiny2's morph: its stage and those after it run; the record holds every stage's print
     summary = (copy / "logs" / "subject" / "synth01.log").read_text().splitlines()
     assert [line.split(":")[0] for line in summary if line.endswith(": run")] == [
@@ -666,3 +677,42 @@ def test_a_subject_job_reruns_only_the_stages_a_change_reaches(cohort, tmp_path)
 
     record = json.loads(job.read_text())["stages"]
     assert record == read_fingerprints(synth / "stages.json") and len(record) == 11
+
+
+def _banner(folder):
+    """The out-of-date banner's text at the top of ``folder/report.html``, or None."""
+    page = (folder / "report.html").read_text()
+    found = re.search(r'<!-- scan2morph: stale --><div role="alert"[^>]*>(.*?)</div>', page)
+    return found and found.group(1)
+
+
+def test_a_stopped_subjects_earlier_report_says_it_is_out_of_date(cohort, tmp_path):
+    """alice finished, then her neutral's landmark file breaks: her check stops her, and her
+    earlier run's files stay, none deleted, but her page says at its top that it is out of
+    date, when and why, as do the run's last lines and the cohort summary. Once the file is
+    mended, the next run takes the banner off: the page is the one her job wrote, byte for
+    byte (her parts come out the same, so no stage of hers runs)."""
+    copy = _own_copy(cohort, tmp_path)
+    folder = copy / "results" / "alice"
+    job = ["results/alice/job.json"]
+    assert run_workflow(copy, copy / "mine.yaml", targets=job)
+    files = sorted(p for p in folder.rglob("*") if p.is_file())
+    before = {p: p.read_bytes() for p in files}
+    pts = copy / "scans" / "alice" / "neutral.pts"
+    good = pts.read_bytes()
+    _break_pts(pts)
+    assert not run_workflow(copy, copy / "mine.yaml")  # the default target: the cohort too
+    banner = _banner(folder)
+    assert re.search(
+        r"^Out of date: alice stopped in the run of \d{4}-\d\d-\d\d \d\d:\d\d: ", banner
+    )
+    assert "neutral.pts: n_points: 67" in banner and "earlier run&#39;s" in banner
+    rows = read_table(copy / "results" / "cohort" / "summary.tsv").set_index("subject")
+    assert "store and report are an earlier run's" in rows.loc["alice", "stopped"]
+    for path, data in before.items():  # nothing deleted, nothing but the page changed (and
+        # the failed check's own check.json, which Snakemake removes as a failed job's output)
+        assert path.name in ("report.html", "check.json") or path.read_bytes() == data, path
+    pts.write_bytes(good)
+    assert run_workflow(copy, copy / "mine.yaml", targets=job)
+    assert _banner(folder) is None
+    assert (folder / "report.html").read_bytes() == before[folder / "report.html"]

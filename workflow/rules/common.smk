@@ -9,6 +9,7 @@ import pandas as pd
 
 from scan2morph.config_schema import validate_config
 from scan2morph.errors import InputError
+from scan2morph.io.yaml_text import config_file_problem
 from scan2morph.jobs import config_sha256, memory_mb
 from scan2morph.sheet import read_sheet, sheet_problems, synthetic_rows, take_table
 from scan2morph.sheet_consistency import blend_label_problem
@@ -19,11 +20,19 @@ SCHEMAS = Path(workflow.basedir) / "schemas"
 
 
 def stop_run(exc):
-    """Stop the whole run on a config or sheet error: one line, no traceback."""
+    """Stop the whole run on a config or sheet error (an exception or its line): one line, no
+    traceback."""
     sys.stderr.write(f"Error: {exc}\n")
     sys.exit(1)
 
 
+# the config files Snakemake read (config/config.yaml, each --configfile) read as
+# tools/check_config.py reads them, once a run: a key given twice, which Snakemake takes
+# silently (the last value), is the same line on every entry point, not only under make run
+if workflow.is_main_process:
+    for _file in workflow.configfiles:
+        if _problem := config_file_problem(_file):
+            stop_run(_problem)
 try:
     validate_config(config, SCHEMAS / "config.schema.yaml", source="config")
     # once a run, not again in each cluster job's Snakemake
@@ -147,8 +156,10 @@ def synth_files(pattern, takes, modality=None):
 
 def report_left_out():
     """The run's last console lines: every subject its check or its own job stopped in this run,
-    and why (its store and report, if any, are an earlier run's); every take left out of its
-    subject (from the stores made). Returns the subjects stopped: subject -> why."""
+    and why (its store and report, if any, are an earlier run's: :func:`flag_earlier_run`);
+    every take left out of its subject (from the stores made). Returns the subjects stopped:
+    subject -> why (and that its files are an earlier run's, for the cohort summary's column).
+    """
     import h5py
 
     from scan2morph.jobs import job_error
@@ -158,17 +169,61 @@ def report_left_out():
     for subject in SUBJECTS:
         store = Path(f"results/{subject}/{subject}.h5")
         if error := job_error(stop_logs(subject), RUN_START):
-            earlier = " (its store and report are an earlier run's)"
-            stopped[subject], log = error
-            sys.stderr.write(
-                f"stopped: {subject}: {stopped[subject]} ({log})"
-                f"{earlier if store.is_file() else ''}\n"
-            )
+            why, log = error
+            earlier = flag_earlier_run(subject, why, log) if store.is_file() else ""
+            stopped[subject] = why + earlier
+            sys.stderr.write(f"stopped: {subject}: {why} ({log}){earlier}\n")
         elif store.is_file():
             with h5py.File(store, "r") as h5:
                 for failure in read_failures(h5).values():
                     sys.stderr.write(f"left out: {subject}/{failure}\n")
+    clear_current_reports(stopped)
     return stopped
+
+
+def flag_earlier_run(subject, why, log):
+    """A subject that stopped keeps its earlier run's files (none is deleted): a banner at the top
+    of its report.html says they are out of date, when and why it stopped. Returns the note
+    for the console line."""
+    from scan2morph.report import mark_stale
+
+    started = time.strftime("%Y-%m-%d %H:%M", time.localtime(RUN_START))
+    note = (
+        f"Out of date: {subject} stopped in the run of {started}: {why} ({log}). This page, the "
+        "store and the other files beside it are an earlier run's; they are made again once "
+        "the subject runs through."
+    )
+    if mark_stale(f"results/{subject}/report.html", note):
+        return " (its store and report are an earlier run's: report.html says so at its top)"
+    return " (its store and report are an earlier run's)"
+
+
+def clear_current_reports(stopped):
+    """Take :func:`flag_earlier_run`'s banner off the report of every subject whose files are
+    current again: not stopped in this run, no job of it left to run, its check and its job
+    finished (``check.json``, ``job.json``: a failed check or subject job leaves none). The
+    subject's job takes it off too when it runs; a mended neutral whose parts come out the same
+    runs none."""
+    from scan2morph.report import clear_stale
+
+    left = pending_subjects()
+    for subject in SUBJECTS:
+        done = (f"results/{subject}/check.json", f"results/{subject}/job.json")
+        if (
+            subject not in stopped
+            and subject not in left
+            and all(map(os.path.isfile, done))
+        ):
+            clear_stale(f"results/{subject}/report.html")
+
+
+def pending_subjects():
+    """The subjects with a job that was due in this run and did not finish (their files are an
+    earlier run's)."""
+    pending = workflow.dag.needrun_jobs()
+    return {
+        job.wildcards.get("subject") for job in pending if "subject" in job.wildcards
+    }
 
 
 def stop_logs(subject):
@@ -204,13 +259,10 @@ def summarise_finished_subjects(stopped):
     from scan2morph.errors import InputError
     from scan2morph.report import write_cohort_summary
 
-    pending = workflow.dag.needrun_jobs()  # the jobs that were due and did not finish
-    if not any(job.rule.name == "cohort" for job in pending):
+    # the jobs that were due and did not finish
+    if not any(job.rule.name == "cohort" for job in workflow.dag.needrun_jobs()):
         return  # not asked for in this run, or written
-    # a subject with a job left to run is not this run's (its files are an earlier run's)
-    left = {
-        job.wildcards.get("subject") for job in pending if "subject" in job.wildcards
-    }
+    left = pending_subjects()  # their files are an earlier run's
     done = [
         s
         for s in SUBJECTS

@@ -274,6 +274,7 @@ def get_subject_stage_reads(wildcards):
         + get_viseme_aligns(wildcards)
         + (get_viseme_refines(wildcards) if REFINE else []),
         "morph": [f for f in neutral if f],
+        "modal": [f for f in neutral if f],  # the expression meshes' texture
         "store": get_subject_take_parts(wildcards),
     }
 

@@ -111,7 +111,7 @@ def run_modal(j):
     """Modal basis of the neutral face and expression coordinates."""
     out, modal = j.out, stage_module("modal")
     params = j.params("modal").with_threads(j.threads)
-    part = modal.run(j.template(), j.subject, read_part(out.motion), params)
+    part = modal.run(j.template(), j.subject, read_parts([out.motion, *j.p.reads["modal"]]), params)
     write_part(out.modal, part.datasets, attrs=part.attrs)
     modal.write_files(part, out.coordinates, out.reconstruction, out.expressions)
 
@@ -259,7 +259,12 @@ def run_stage(j, stage):
 
 
 def main(snakemake):
+    from scan2morph.report import clear_stale
+
     j = job_context(snakemake)
+    # the banner an earlier run's stop put on the page (common.smk, report_left_out) comes off:
+    # the page is this job's again, rewritten when out of date, else kept as it was written
+    clear_stale(j.out.report)
     sources = {
         "script": sha256_file(Path(snakemake.scriptdir) / "subject.py"),
         "template": sha256_file(j.inp.template),

@@ -51,6 +51,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from scan2morph.errors import InputError
+from scan2morph.io.take import flat_surface
 
 #: Neighbourhood radius of the protrusion that finds the nose tip, mm.
 PROTRUSION_RADIUS_MM = 35.0
@@ -446,7 +447,8 @@ def face_up(vertices: np.ndarray, view: FaceView, source: str = "mesh") -> np.nd
     Raises
     ------
     InputError
-        The profile has no surface on one side of the nose tip.
+        The profile has no surface on one side of the nose tip (a flat mesh named so:
+        :func:`~scan2morph.io.take.flat_surface`).
     """
     along = _unit(np.cross(view.direction, view.left_right))
     rel = np.asarray(vertices, dtype=np.float64) - view.tip
@@ -457,6 +459,8 @@ def face_up(vertices: np.ndarray, view: FaceView, source: str = "mesh") -> np.nd
     for side in (1.0, -1.0):
         near = (side * s > lo) & (side * s < hi)
         if not near.any():
+            if flat := flat_surface(vertices):  # its "nose tip" is a corner of a board
+                raise InputError(source, f"mesh: {flat}: expected a scan of a face")
             across = float(np.ptp(np.asarray(vertices, dtype=np.float64), axis=0).max())
             raise InputError(
                 source,

@@ -9,10 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.geometry import plane_spread
 from scan2morph.io.calibration import StereoCalibration, read_stereo_calibration
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.range_image import read_range
+from scan2morph.tol import MIN_FACE_RELIEF_MM, MIN_FACE_RELIEF_SHARE
 from scan2morph.units import units_hint
 
 #: Smallest range or colour image accepted, px (width and height).
@@ -381,6 +383,32 @@ def lift_landmarks(xyz: np.ndarray, landmarks: np.ndarray, numbers) -> np.ndarra
     return out
 
 
+def flat_surface(points: np.ndarray) -> str | None:
+    """Why a scan's surface is no face because it is flat (a board: no relief for a nose), or
+    None.
+
+    Parameters
+    ----------
+    points : (..., 3) float
+        A range grid (H, W, 3) or a mesh's vertices (N, 3), mm, NaN = no data.
+
+    Returns
+    -------
+    str or None
+        ``no face relief: the surface is flat (...)``, naming its depth and width, when it is
+        less than :data:`~scan2morph.tol.MIN_FACE_RELIEF_MM` deep and than
+        :data:`~scan2morph.tol.MIN_FACE_RELIEF_SHARE` of its width.
+    """
+    depth, width = plane_spread(points)
+    if depth >= MIN_FACE_RELIEF_MM or depth >= MIN_FACE_RELIEF_SHARE * width:
+        return None
+    return (
+        f"no face relief: the surface is flat ({depth:.1f} mm deep about its best-fitting plane "
+        f"over {width:.0f} mm across, 1st to 99th percentile; a face is at least "
+        f"{MIN_FACE_RELIEF_MM:g} mm deep)"
+    )
+
+
 def check_face(
     xyz: np.ndarray,
     landmarks: np.ndarray,
@@ -423,7 +451,8 @@ def check_face(
         left/right (eye corners and chin wind the wrong way); an outer eye corner has no range
         data around it (landmarks on the background, or of another scan); the outer eye
         corners are not ``eye_span_mm`` (50-150 mm) apart in 3D (names the value and the unit
-        it suggests); in a camera frame, one outer eye corner lies much deeper than the other.
+        it suggests); in a camera frame, one outer eye corner lies much deeper than the other;
+        the surface is flat (:func:`flat_surface`: a board, a photo of a face).
     """
     lm = np.asarray(landmarks, dtype=np.float64)
     spread = float(np.ptp(lm, axis=0).max())
@@ -475,6 +504,10 @@ def check_face(
         )
     if camera_frame:
         _check_eye_depths(lifted, landmarks_source)
+    if flat := flat_surface(np.asarray(xyz)[::4, ::4]):  # every 4th pixel: the spread is the same
+        raise InputError(
+            xyz_source, f"{flat}, though its landmarks mark a face: expected a scan of a face"
+        )
     return span
 
 

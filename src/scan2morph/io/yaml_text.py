@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from os import PathLike
+from pathlib import Path
+
 
 def load_yaml(text: str):
     """YAML ``text`` as Python objects, by PyYAML's safe loader, refusing a key given twice in
@@ -69,4 +72,39 @@ def yaml_problem(exc: Exception) -> str:
     return f"line {mark.line + 1}: {problem}"
 
 
-__all__ = ["load_yaml", "yaml_problem"]
+def config_file_problem(path: str | PathLike[str]) -> str | None:
+    """Why a config file cannot be read as one (one line naming it), or None.
+
+    What Snakemake's own reading lets through or says without the file and the line: a file
+    that is missing or a folder, not YAML (with the line), a key or section given twice
+    (Snakemake keeps the last silently), not a mapping of config sections. ``tools/
+    check_config.py`` (``make run CONFIG=...``) and the workflow when it loads both ask this.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The config file, named in the message as given.
+
+    Returns
+    -------
+    str or None
+        ``{path}: problem``.
+    """
+    import yaml
+
+    file = Path(path)
+    if not file.is_file():
+        what = "is a folder" if file.is_dir() else "not found"
+        return f"{path}: config file {what} (expected a YAML file, e.g. make run CONFIG=my.yaml)"
+    try:
+        doc = load_yaml(file.read_text(encoding="utf-8-sig"))
+    except (OSError, UnicodeDecodeError) as exc:
+        return f"{path}: cannot read the config file: {exc}"
+    except yaml.YAMLError as exc:
+        return f"{path}: {yaml_problem(exc)}"
+    if doc is not None and not isinstance(doc, dict):
+        return f"{path}: expected a mapping of config sections, got {type(doc).__name__}"
+    return None
+
+
+__all__ = ["config_file_problem", "load_yaml", "yaml_problem"]

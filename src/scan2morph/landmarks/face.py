@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.io.take import flat_surface
 from scan2morph.landmarks.camera import GridCamera, grid_camera
 
 #: Distance of the eight depth probes around a nose-tip candidate, mm.
@@ -226,8 +227,9 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
     Raises
     ------
     InputError
-        No face found (too little data, no nose-like peak), more than one face, a face too
-        small, a profile view (yaw beyond :data:`MAX_YAW_DEG`).
+        No face found (too little data, no nose-like peak), no face relief (a flat surface:
+        :func:`~scan2morph.io.take.flat_surface`), more than one face, a face too small, a profile view
+        (yaw beyond :data:`MAX_YAW_DEG`).
     """
     xyz = np.asarray(xyz, dtype=np.float64)
     if xyz.ndim != 3 or xyz.shape[2] != 3:
@@ -246,6 +248,12 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
     height, zs = _peaks(coarse, scale / stride)
     if not np.isfinite(height).any() or np.nanmax(height) < MIN_PEAK_MM:
         best = float(np.nanmax(height)) if np.isfinite(height).any() else 0.0
+        if flat := flat_surface(coarse):  # a flat outline's corner is no nose in profile
+            raise InputError(
+                source,
+                f"{flat} and has no nose-like peak (highest {best:.1f} mm, at least "
+                f"{MIN_PEAK_MM:g} mm above its surroundings): is this take a scan of a face?",
+            )
         bump = silhouette_bump(np.isfinite(coarse).all(axis=2), scale / stride)
         if bump >= MIN_PEAK_MM:
             raise InputError(

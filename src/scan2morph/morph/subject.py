@@ -176,12 +176,14 @@ def pca_target_weights(
     -------
     dict name -> weight
         ``pca_mean`` 1 and, per component, ``alpha_k / sigmas`` on ``pca_k_pos`` when
-        ``alpha_k >= 0``, else ``-alpha_k / sigmas`` on ``pca_k_neg`` (the other one 0).
+        ``alpha_k >= 0``, else ``-alpha_k / sigmas`` on ``pca_k_neg`` (the other one 0.0, never
+        -0.0: a weight printed or written as ``-0.0`` reads as a negative one).
     """
     out = {PCA_MEAN_TARGET: 1.0}
     for k, a in enumerate(np.asarray(alphas, dtype=np.float64).ravel(), start=1):
-        out[pca_target_name(k, 1)] = max(float(a), 0.0) / sigmas
-        out[pca_target_name(k, -1)] = max(-float(a), 0.0) / sigmas
+        # 0.0 first: max keeps the first of equal values, so alpha 0 (or -0) weighs 0.0, not -0.0
+        out[pca_target_name(k, 1)] = max(0.0, float(a)) / sigmas
+        out[pca_target_name(k, -1)] = max(0.0, -float(a)) / sigmas
     return out
 
 

@@ -12,7 +12,13 @@ from scan2morph.report.cohort import (
     subject_summary,
     write_cohort_summary,
 )
-from scan2morph.report.html import ReportPage, subject_report_html, write_subject_report
+from scan2morph.report.html import (
+    ReportPage,
+    clear_stale,
+    mark_stale,
+    subject_report_html,
+    write_subject_report,
+)
 from scan2morph.report.provenance import software_versions, stage_timings, store_provenance
 from scan2morph.report.sections import (
     ReportFigure,
@@ -26,8 +32,10 @@ from scan2morph.report.sweep import plot_sweep, sweep_summary, write_sweep_summa
 __all__ = [
     "ReportFigure",
     "SubjectSummary",
+    "clear_stale",
     "cohort_table",
     "image_uri",
+    "mark_stale",
     "motion_rms",
     "plot_cohort",
     "plot_sweep",

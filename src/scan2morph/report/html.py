@@ -198,6 +198,85 @@ def write_subject_report(
     write_html(path, subject_report_html(store_path, page))
 
 
+#: The banner :func:`mark_stale` puts at the top of a stopped subject's page, between these two
+#: comments, so that :func:`clear_stale` takes exactly it out again (the page as it was written).
+STALE_BEGIN = "<!-- scan2morph: stale -->"
+STALE_END = "<!-- /scan2morph: stale -->"
+_STALE_STYLE = (
+    "margin:0 0 1em;padding:.8em 1em;border:3px solid #c00;background:#fee;color:#800;"
+    "font-weight:bold"
+)
+
+
+def mark_stale(path: str | Path, note: str) -> bool:
+    """Put a banner saying why a page is out of date at the top of a subject's report page (a
+    banner there already is replaced).
+
+    For a subject that stopped in a later run: its page, and the store beside it, stay as the
+    earlier run wrote them (no result is deleted), and would otherwise look current.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``results/{subject}/report.html``.
+    note : str
+        The banner's text (HTML-escaped here), e.g. when and why the subject stopped.
+
+    Returns
+    -------
+    bool
+        False when there is no page to mark.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return False
+    from markupsafe import escape
+
+    text = _without_banner(_read_page(path))
+    at = text.find("<body>")
+    at = 0 if at < 0 else at + len("<body>")
+    banner = (
+        f'{STALE_BEGIN}<div role="alert" style="{_STALE_STYLE}">{escape(note)}</div>{STALE_END}'
+    )
+    write_html(path, text[:at] + banner + text[at:])
+    return True
+
+
+def clear_stale(path: str | Path) -> bool:
+    """Take :func:`mark_stale`'s banner out of a report page again, leaving the page as it was
+    written: its subject runs again (a stage that is up to date keeps its page).
+
+    Returns
+    -------
+    bool
+        Whether the page had a banner.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return False
+    text = _read_page(path)
+    clean = _without_banner(text)
+    if clean == text:
+        return False
+    write_html(path, clean)
+    return True
+
+
+def _read_page(path: Path) -> str:
+    """A page's text as it is on disk (line ends kept: the page comes back byte for byte)."""
+    with open(path, encoding="utf-8", newline="") as fh:
+        return fh.read()
+
+
+def _without_banner(text: str) -> str:
+    """A page's text without :func:`mark_stale`'s banner."""
+    start = text.find(STALE_BEGIN)
+    end = text.find(STALE_END, start)
+    if start < 0 or end < 0:
+        return text
+    return text[:start] + text[end + len(STALE_END) :]
+
+
 def write_html(path: str | Path, text: str) -> None:
     """Write a report page's text to ``path`` (UTF-8, replaced atomically)."""
     path = Path(path)

@@ -13,7 +13,8 @@ import numpy as np
 import pandas as pd
 
 from scan2morph.errors import InputError
-from scan2morph.io import write_obj
+from scan2morph.io import write_material, write_obj
+from scan2morph.io.obj import NEUTRAL_MATERIAL
 from scan2morph.modal import ModalBasis, ModalParams, ShellMaterial
 from scan2morph.modal.boundary import POLICIES, OutlineChoice, still_outline, still_skin
 from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
@@ -348,7 +349,9 @@ def run(
     data : mapping store path -> array
         The motion part (``/neutral/vertices``, ``/expressions/{take}/displacement``, and
         ``/visemes/{take}/motion``, which with the expressions tells which outline vertices
-        stay still).
+        stay still) and, for textured expression meshes, the neutral's fit part (``mesh/uv``)
+        and repair part (``range/color``), as the morph stage reads them (the subject job gives
+        them; without them the meshes are written without a texture).
     params : Params
 
     Returns
@@ -357,8 +360,10 @@ def run(
         ``/modal/*`` (with ``/modal/preset`` and ``/modal/physics``, the resolved physics as
         JSON) and ``/expressions/{take}/coordinates|reconstruction_rms_mm|
         reconstruction_normal_rms_mm|reconstruction_tangential_rms_mm|modes_to_target|
-        outline_rms_mm|clamped_rms_mm|synthesized|semantic_coordinates``; ``files``: the ``coordinates`` and ``reconstruction`` tables, and
-        the measured and synthesised expression ``meshes`` with their ``faces``.
+        outline_rms_mm|clamped_rms_mm|synthesized|semantic_coordinates``; ``files``: the
+        ``coordinates`` and ``reconstruction`` tables, and the measured and synthesised
+        expression ``meshes`` with their ``faces`` and the neutral's ``uv`` and ``texture``
+        (None when ``data`` has not got them).
     """
     subject = modelled(subject, data)
     fine = subdivide_template(template, params.levels)
@@ -412,6 +417,10 @@ def run(
         ).astype({"modes_to_target": "Int64"}),  # a count (NA where no K reaches the target)
         "faces": fine.faces,
         "meshes": meshes,
+        # the neutral's skin, as the models wear it (stages.morph): vertex i is the same
+        # template vertex in every expression mesh
+        "uv": data.get(paths.mesh(subject.neutral, "uv")),
+        "texture": data.get(paths.range_image(subject.neutral, "color")),
     }
     attrs = {} if takes else {paths.SKIPPED: {"modal_coordinates": NO_EXPRESSIONS}}
     return Part(datasets, attrs=attrs, files=files)
@@ -420,7 +429,8 @@ def run(
 def write_files(part: Part, coordinates: str, reconstruction: str, meshes: str) -> None:
     """Write the coordinate and reconstruction tables (TSV with their column dictionaries, one
     row per expression take) and the measured and synthesised expression meshes (OBJ) into the
-    folder ``meshes``."""
+    folder ``meshes``, textured with the neutral's texture when the part has it (one material
+    the folder's meshes share, as the models')."""
     from scan2morph.tables import MODAL_COORDINATES, MODAL_RECONSTRUCTION, write_table
 
     f = part.files
@@ -429,5 +439,9 @@ def write_files(part: Part, coordinates: str, reconstruction: str, meshes: str) 
     write_table(reconstruction, f["reconstruction"], MODAL_RECONSTRUCTION, float_format="%.4f")
     folder = Path(meshes)
     folder.mkdir(parents=True, exist_ok=True)
+    skin = None
+    if f["texture"] is not None and f["meshes"]:
+        skin = write_material(folder, NEUTRAL_MATERIAL, f["texture"])
+    uv = f["uv"] if skin else None
     for name, vertices in f["meshes"].items():
-        write_obj(folder / f"{name}.obj", vertices, f["faces"])
+        write_obj(folder / f"{name}.obj", vertices, f["faces"], uv=uv, texture=skin)
