@@ -336,10 +336,15 @@ def _mimic_by_measure(template, xy_mm, lines=None, mm_per_unit: float = 45.0):
     return mimic_weight(xy_mm, lines)
 
 
-def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]:
+def realdata_rows(
+    real: dict, cfg: dict, name: str, variant: dict, still: str = "measure"
+) -> list[dict]:
     """Rows of the real head's smile for one configuration: clamped where the preset clamps
-    (its whole boundary: no takes say which part is still), free otherwise; tethered on the
-    stable face where the preset tethers."""
+    (its whole boundary), free otherwise; tethered where the preset tethers. ``still``: which
+    skin counts as still, ``measure`` the stable face placed by measure (no takes say which),
+    ``smile`` where the smile moves it less than ``modal.still_mm``, as the stage takes it from
+    a subject's expressions (the smile is its one expression). With a strip (``outline_strip_mm``)
+    the rim off the still skin is held by it, as the outline the takes move."""
     from scan2morph.geometry import vertex_normals
     from scan2morph.modal import Held, modal_basis, project, reconstruct
     from scan2morph.modal.fem import boundary_vertices
@@ -349,11 +354,12 @@ def realdata_rows(real: dict, cfg: dict, name: str, variant: dict) -> list[dict]
     v, f = real["vertices"], real["faces"]
     rim = boundary_vertices(f, len(v))
     fixed = rim if params.fixed_outline != "none" else np.zeros(len(v), bool)
-    # no takes say which skin is still: the stable face, placed by measure, for "still" too;
-    # with a strip, the rim off the stable face is held by it (as the rim the takes move)
-    tethered = real["stable"] if params.tether_region in ("still", "stable") else None
+    stable = real["stable"]
+    if still == "smile":
+        stable = np.linalg.norm(real["smile"], axis=1) < params.still_mm
+    tethered = {"still": stable, "stable": real["stable"]}.get(params.tether_region)
     if params.modal.clamp_strip_mm and params.fixed_outline != "all":
-        sprung = rim & ~real["stable"] if params.fixed_outline != "none" else rim
+        sprung = rim & ~stable if params.fixed_outline != "none" else rim
         fixed = Held(fixed & ~sprung, sprung)
     t0 = time.perf_counter()
     m = params.modal
@@ -456,6 +462,13 @@ def main() -> None:
     )
     ap.add_argument("--realdata", action="store_true", help="also the real head's test smile")
     ap.add_argument(
+        "--real-still",
+        choices=["measure", "smile"],
+        default="measure",
+        help="the real head's still skin: the stable face placed by measure, or where the smile "
+        "leaves it still (as the stage takes it from a subject's expressions)",
+    )
+    ap.add_argument(
         "--truth",
         action="store_true",
         help="also the true material displacement and the error (measured - true); the anchor "
@@ -501,7 +514,7 @@ def main() -> None:
         mesh = (real["vertices"], real["faces"])
         rows += anchor_rows("lee-perry-smith", rim_fields, valid, mesh, rim, anchor_ks)
         for name in args.configs:
-            rows += realdata_rows(real, cfg, name, VARIANTS[name])
+            rows += realdata_rows(real, cfg, name, VARIANTS[name], args.real_still)
     table = pd.DataFrame(rows)
     if args.tsv:
         table.to_csv(args.tsv, sep="\t", index=False, float_format="%.4f")
