@@ -14,6 +14,8 @@ VARIANTS: dict[str, dict] = {
     "paper": {"preset": "paper"},
     "clamped_still": {"preset": "clamped_still"},
     "skin": {"preset": "skin"},
+    "skin_v1": {"preset": "skin_v1"},
+    # the variants below were measured on the first skin preset (skin_v1)
     "free_steel": {"preset": "paper", "fixed_outline": "none"},
     "free_thick_soft_membrane": {
         "preset": "paper",
@@ -24,25 +26,29 @@ VARIANTS: dict[str, dict] = {
         "rotary_inertia": False,
     },
     "skin_tension_only": {
-        "preset": "skin",
+        "preset": "skin_v1",
         "foundation_n_per_mm3": 0.0,
         "tether_n_per_mm3": 0.0,
         "tether_normal_n_per_mm3": 0.0,
     },
-    "skin_no_tether": {"preset": "skin", "tether_n_per_mm3": 0.0, "tether_normal_n_per_mm3": 0.0},
-    "skin_tangential_tether": {"preset": "skin", "tether_normal_n_per_mm3": 0.0},
-    "skin_free_outline": {"preset": "skin", "fixed_outline": "none"},
+    "skin_no_tether": {
+        "preset": "skin_v1",
+        "tether_n_per_mm3": 0.0,
+        "tether_normal_n_per_mm3": 0.0,
+    },
+    "skin_tangential_tether": {"preset": "skin_v1", "tether_normal_n_per_mm3": 0.0},
+    "skin_free_outline": {"preset": "skin_v1", "fixed_outline": "none"},
     # (the shells and a vertex's mass have no membrane mass per area for the mimic skin to weigh:
     # its factor is 1 in these three, as when they were first measured, before the skin preset had it)
     "skin_stiff_upper": {
-        "preset": "skin",
+        "preset": "skin_v1",
         "stiff_factor": 3.0,
         "youngs_modulus_mpa": 1.0,
         "mimic_mass_factor": 1.0,
     },
-    "skin_vertex_mass": {"preset": "skin", "mass": "vertex", "mimic_mass_factor": 1.0},
+    "skin_vertex_mass": {"preset": "skin_v1", "mass": "vertex", "mimic_mass_factor": 1.0},
     "skin_stable_tether": {  # the skin preset as first measured: a light tie on the stable face
-        "preset": "skin",
+        "preset": "skin_v1",
         "foundation_n_per_mm3": 0.005,
         "tether_n_per_mm3": 0.003,
         "tether_normal_n_per_mm3": 0.01,
@@ -51,9 +57,9 @@ VARIANTS: dict[str, dict] = {
         "fixed_outline": "none",
     },
     # skin until the membrane
-    "skin_soft_shell": {"preset": "skin", "youngs_modulus_mpa": 0.01, "mimic_mass_factor": 1.0},
-    "skin_still_no_foundation": {"preset": "skin", "foundation_n_per_mm3": 0.0},
-    "skin_still_tension_0.5": {"preset": "skin", "tension_n_per_mm": 0.5},
+    "skin_soft_shell": {"preset": "skin_v1", "youngs_modulus_mpa": 0.01, "mimic_mass_factor": 1.0},
+    "skin_still_no_foundation": {"preset": "skin_v1", "foundation_n_per_mm3": 0.0},
+    "skin_still_tension_0.5": {"preset": "skin_v1", "tension_n_per_mm": 0.5},
     # The skin varying over the face (the mimic skin of scan2morph.modal.skin), measured with
     # brows1 and frown1 in the cohort against skin before it (uniform): the share left of the
     # worst expression moves by -0.14 (synth01 frown1, K = 25) to +0.08 at K = 25 / 50 / 100,
@@ -64,49 +70,65 @@ VARIANTS: dict[str, dict] = {
     # normal part and costs sad faces up to +0.02. With the forehead (frontalis) in the mimic
     # skin too, mass 1.2-1.4 moves no expression by more than +0.004 and takes synth01 at
     # K = 50 from 0.40 to 0.34 (the skin preset's mimic_mass_factor).
-    "skin_uniform": {"preset": "skin", "mimic_mass_factor": 1.0},
-    "skin_mimic_mass_2": {"preset": "skin", "mimic_mass_factor": 2.0},
-    "skin_mimic_mass_4": {"preset": "skin", "mimic_mass_factor": 4.0},
-    "skin_mimic_tension_0.5": {"preset": "skin", "mimic_tension_factor": 0.5},
-    "skin_mimic_foundation_0.3": {"preset": "skin", "mimic_foundation_factor": 0.3},
+    "skin_uniform": {"preset": "skin_v1", "mimic_mass_factor": 1.0},
+    "skin_mimic_mass_2": {"preset": "skin_v1", "mimic_mass_factor": 2.0},
+    "skin_mimic_mass_4": {"preset": "skin_v1", "mimic_mass_factor": 4.0},
+    "skin_mimic_tension_0.5": {"preset": "skin_v1", "mimic_tension_factor": 0.5},
+    "skin_mimic_foundation_0.3": {"preset": "skin_v1", "mimic_foundation_factor": 0.3},
     "skin_mimic_mass_1.5_foundation_0.5": {
-        "preset": "skin",
+        "preset": "skin_v1",
         "mimic_mass_factor": 1.5,
         "mimic_foundation_factor": 0.5,
     },
     # over the skin preset's mimic mass 1.4: neither leaves less on every expression (softer:
     # synth01 frown1 +0.15 at K = 25; the foundation: synth03 frown1 +0.04 at K = 25)
-    "skin_mimic_tension_0.8": {"preset": "skin", "mimic_tension_factor": 0.8},
-    "skin_mimic_foundation_0.8": {"preset": "skin", "mimic_foundation_factor": 0.8},
-    "skin_still_0.5": {"preset": "skin", "still_mm": 0.5},  # tied and clamped: less skin
-    "skin_still_2": {"preset": "skin", "still_mm": 2.0},  # more skin
-    "skin_foundation_0.003": {"preset": "skin", "foundation_n_per_mm3": 0.003},
-    "skin_foundation_0.03": {"preset": "skin", "foundation_n_per_mm3": 0.03},
+    "skin_mimic_tension_0.8": {"preset": "skin_v1", "mimic_tension_factor": 0.8},
+    "skin_mimic_foundation_0.8": {"preset": "skin_v1", "mimic_foundation_factor": 0.8},
+    "skin_still_0.5": {"preset": "skin_v1", "still_mm": 0.5},  # tied and clamped: less skin
+    "skin_still_2": {"preset": "skin_v1", "still_mm": 2.0},  # more skin
+    "skin_foundation_0.003": {"preset": "skin_v1", "foundation_n_per_mm3": 0.003},
+    "skin_foundation_0.03": {"preset": "skin_v1", "foundation_n_per_mm3": 0.03},
     # the clamp replaced by the skin beyond the cut, a strip l mm wide held at its far edge
     # (ModalParams.clamp_strip_mm, a library parameter, no config key; see bench_modal_span.py's docstring)
-    "skin_strip_3": {"preset": "skin", "clamp_strip_mm": 3.0},
-    "skin_strip_10": {"preset": "skin", "clamp_strip_mm": 10.0},
+    "skin_strip_3": {"preset": "skin_v1", "clamp_strip_mm": 3.0},
+    "skin_strip_10": {"preset": "skin_v1", "clamp_strip_mm": 10.0},
     # the strip only where the smiles move the outline, or the brows heavier beside it (issue
     # #37; bench keys, BENCH_KEYS): none is within +0.005 of skin everywhere (bench_modal_span.py)
     "skin_strip_3_below_eyes": {
-        "preset": "skin",
+        "preset": "skin_v1",
         "clamp_strip_mm": 3.0,
         "strip_below": "eye_r_outer",
     },
-    "skin_strip_3_below_nose": {"preset": "skin", "clamp_strip_mm": 3.0, "strip_below": "nose_tip"},
+    "skin_strip_3_below_nose": {
+        "preset": "skin_v1",
+        "clamp_strip_mm": 3.0,
+        "strip_below": "nose_tip",
+    },
     "skin_strip_10_below_nose": {
-        "preset": "skin",
+        "preset": "skin_v1",
         "clamp_strip_mm": 10.0,
         "strip_below": "nose_tip",
     },
-    "skin_strip_3_brow_2": {"preset": "skin", "clamp_strip_mm": 3.0, "brow_mass_factor": 2.0},
-    "skin_brow_2": {"preset": "skin", "brow_mass_factor": 2.0},
-    "skin_strip_1_brow_1.6": {"preset": "skin", "clamp_strip_mm": 1.0, "brow_mass_factor": 1.6},
-    "skin_strip_0.5_brow_1.6": {"preset": "skin", "clamp_strip_mm": 0.5, "brow_mass_factor": 1.6},
-    "skin_strip_3_mimic_1.6": {"preset": "skin", "clamp_strip_mm": 3.0, "mimic_mass_factor": 1.6},
-    "skin_strip_1_mimic_1.6": {"preset": "skin", "clamp_strip_mm": 1.0, "mimic_mass_factor": 1.6},
+    "skin_strip_3_brow_2": {"preset": "skin_v1", "clamp_strip_mm": 3.0, "brow_mass_factor": 2.0},
+    "skin_brow_2": {"preset": "skin_v1", "brow_mass_factor": 2.0},
+    "skin_strip_1_brow_1.6": {"preset": "skin_v1", "clamp_strip_mm": 1.0, "brow_mass_factor": 1.6},
+    "skin_strip_0.5_brow_1.6": {
+        "preset": "skin_v1",
+        "clamp_strip_mm": 0.5,
+        "brow_mass_factor": 1.6,
+    },
+    "skin_strip_3_mimic_1.6": {
+        "preset": "skin_v1",
+        "clamp_strip_mm": 3.0,
+        "mimic_mass_factor": 1.6,
+    },
+    "skin_strip_1_mimic_1.6": {
+        "preset": "skin_v1",
+        "clamp_strip_mm": 1.0,
+        "mimic_mass_factor": 1.6,
+    },
     "skin_strip_3_mimic_1.6_brow_1.6": {
-        "preset": "skin",
+        "preset": "skin_v1",
         "clamp_strip_mm": 3.0,
         "mimic_mass_factor": 1.6,
         "brow_mass_factor": 1.6,
@@ -122,9 +144,11 @@ def variant_params(cfg: dict, variant: dict):
     from scan2morph.stages import modal
 
     keys = {k: x for k, x in variant.items() if k not in BENCH_KEYS}
-    strip = float(keys.pop("clamp_strip_mm", 0.0))
+    strip = keys.pop("clamp_strip_mm", None)
     params = modal.Params.from_config(cfg | {"modal": dict(cfg["modal"]) | keys}).with_threads(2)
-    return replace(params, modal=replace(params.modal, clamp_strip_mm=strip))
+    if strip is None:  # the preset's outline_strip_mm
+        return params
+    return replace(params, modal=replace(params.modal, clamp_strip_mm=float(strip)))
 
 
 #: Variant keys the bench applies itself (no config key, no stage parameter): ``strip_below``,
@@ -160,8 +184,8 @@ def strip_only(mask):
 
     original = lib._strip
 
-    def partial(v, f, fixed, k_mat, p, source):
-        k_out, kept = original(v, f, fixed & mask, k_mat, p, source)
+    def partial(v, f, fixed, k_mat, p, source, sprung=None):
+        k_out, kept = original(v, f, fixed & mask, k_mat, p, source, sprung)
         return k_out, kept | (fixed & ~mask)
 
     if mask is not None:
@@ -198,8 +222,8 @@ def custom_basis(case: dict, params, variant: dict):
             fine.faces,
             params.modal,
             upper_face(fine, params.stiff_above),
-            fixed=outline.fixed,
-            tethered=modal.tethered(fine, params, modal.takes_motion(subj, data, fields)),
+            fixed=modal.held(outline, params),
+            tethered=modal.tethered(fine, params, modal.still_fields(subj, data, fields, params)),
             mimic=weight,
             source=subj.name,
         )

@@ -70,8 +70,8 @@ class Model:
     head_frame : (4, 4) float or None
         Neutral frame (mm) -> glTF head frame (m).
     modal_preset : str or None
-        The physics of the modal basis (``modal.preset``: ``skin``, ``clamped_still``,
-        ``paper``); None in a store written before format 1.4.
+        The physics of the modal basis (``modal.preset``: ``skin``, ``skin_v1``,
+        ``clamped_still``, ``paper``); None in a store written before format 1.4.
     failed : dict take -> Failure
         The takes left out of the subject (bad input or a quality gate at a per-take stage), with
         the stage that refused each and why.

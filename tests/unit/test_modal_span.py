@@ -5,7 +5,8 @@ flat square membrane under isotropic tension with a free edge, in plane and out 
 without a foundation under it (the ``skin`` physics); a simply supported steel plate whose first
 mode is the bending mode sin(pi x / a) sin(pi y / a) (the ``paper`` physics spans it and not the
 same shape in plane); a square membrane whose edge the skin beyond the cut holds (a Robin edge:
-the wavenumbers of a string with spring-held ends). Least squares against numpy's.
+the wavenumbers of a string with spring-held ends), wholly or on one side with the others
+clamped. Least squares against numpy's.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from numpy.testing import assert_allclose
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import vertex_normals
-from scan2morph.modal import ModalParams, ShellMaterial, modal_basis, project, reconstruct
+from scan2morph.modal import Held, ModalParams, ShellMaterial, modal_basis, project, reconstruct
 from scan2morph.modal.basis import vertex_orthonormal
 from scan2morph.modal.fem import (
     assemble,
@@ -270,10 +271,17 @@ def test_presets_resolve_and_overrides_win():
     assert still.fixed_outline == "still" and still.modal == paper.modal
     skin = modal.Params.from_config(_config(SECTION))  # the default
     assert skin.physics["preset"] == modal.DEFAULT_PRESET == "skin"
-    assert skin.fixed_outline == "still" and skin.tether_region == "still"
+    assert skin.fixed_outline == "every_still" and skin.tether_region == "still"
+    assert skin.still_from == "expressions" and skin.modal.clamp_strip_mm == 6.0
     assert skin.modal.tension_n_per_mm == 1.0 and not skin.modal.material.rotary_inertia
     assert skin.modal.tether_normal_n_per_mm3 == 0.1 and skin.modal.coordinates == "vertex"
     assert paper.modal.coordinates == "mass" and paper.tether_region == "none"
+    assert paper.still_from == "takes" and paper.modal.clamp_strip_mm == 0.0
+    # the first skin preset, kept: clamped where the median take (visemes too) leaves the
+    # outline still, free elsewhere
+    v1 = modal.Params.from_config(_config(SECTION | {"preset": "skin_v1"}))
+    assert (v1.fixed_outline, v1.still_from, v1.modal.clamp_strip_mm) == ("still", "takes", 0.0)
+    assert v1.modal == replace(skin.modal, clamp_strip_mm=0.0)
     over = modal.Params.from_config(
         _config(SECTION | {"preset": "paper", "fixed_outline": "none", "thickness_mm": None})
     )
@@ -285,6 +293,11 @@ def test_presets_resolve_and_overrides_win():
         modal.Params.from_config(_config(SECTION | {"fixed_outline": "some"}))
     with pytest.raises(InputError, match="tether_region"):
         modal.Params.from_config(_config(SECTION | {"tether_region": "chin"}))
+    with pytest.raises(InputError, match="still_from: expected one of"):
+        modal.Params.from_config(_config(SECTION | {"still_from": "visemes"}))
+    for bad in (-1.0, "6", True, float("inf")):
+        with pytest.raises(InputError, match="outline_strip_mm: expected a number >= 0"):
+            modal.Params.from_config(_config(SECTION | {"outline_strip_mm": bad}))
     # the mimic skin's mass weighs a membrane's mass per area: a shell or equal vertex masses
     # would ignore it, so the config says so before any job runs
     heavier = {"mimic_mass_factor": 2.0}
@@ -315,7 +328,8 @@ def test_every_configuration_of_the_span_benchmark_is_one_the_stage_accepts():
         params = variants.variant_params(cfg, variant)
         expected = {k: v for k, v in variant.items() if k in params.physics}
         assert {k: params.physics[k] for k in expected} == expected, name
-        assert params.modal.clamp_strip_mm == float(variant.get("clamp_strip_mm", 0.0)), name
+        strip = variant.get("clamp_strip_mm", params.physics["outline_strip_mm"])
+        assert params.modal.clamp_strip_mm == float(strip), name
 
 
 @pytest.fixture(scope="module")
@@ -577,3 +591,110 @@ def test_the_strip_needs_a_tension_and_a_positive_width(coarse_plate):
     clamp = modal_basis(v, f, membrane_params(3))
     stiff = modal_basis(v, f, replace(membrane_params(3), clamp_strip_mm=1e-4))
     assert_allclose(stiff.frequencies_hz, clamp.frequencies_hz, rtol=1e-3)
+
+
+def test_one_side_held_by_the_skin_beyond_the_cut_the_others_clamped():
+    """A 100 mm square membrane clamped on three sides and held on the fourth (x = a) by a
+    strip l wide (a :class:`Held`): its modes are sin(k x) sin(pi y / a) with tan(k a) = -k l
+    (X(0) = 0, X'(a) = -X(a) / l), omega^2 rho h = T (k^2 + (pi / a)^2), along x, y and z
+    alike: the first three within 1 % on a 24 x 24 grid, between the square clamped all round
+    and the one free on that side; the sprung side moves and is not fixed."""
+    from scipy.optimize import brentq
+
+    v, f = plate_mesh(24)
+    rim = boundary_vertices(f, len(v))
+    side = rim & np.isclose(v[:, 0], A_MM) & (v[:, 1] > 1e-9) & (v[:, 1] < A_MM - 1e-9)
+    params = replace(membrane_params(3), clamp_strip_mm=10.0)
+    basis = modal_basis(v, f, params, fixed=Held(rim & ~side, side))
+    k = brentq(lambda x: np.tan(x * A_MM) + x * 10.0, np.pi / (2 * A_MM) + 1e-9, np.pi / A_MM)
+    speed = np.sqrt(T_N_PER_MM / (RHO * H_MM)) / (2 * np.pi)
+    assert_allclose(basis.frequencies_hz, speed * np.hypot(k, np.pi / A_MM), rtol=0.01)
+    assert speed * np.hypot(0.5, 1.0) * np.pi / A_MM < basis.frequencies_hz[0]  # free side
+    assert basis.frequencies_hz[0] < speed * np.sqrt(2) * np.pi / A_MM  # clamped all round
+    assert not (basis.fixed_vertices & side).any() and (basis.fixed_vertices == rim & ~side).all()
+    assert np.abs(basis.modes[:3, side]).max() > 0.1 * np.abs(basis.modes[:3]).max()
+
+
+def test_a_held_boundary_is_checked(coarse_plate):
+    """Springs need a strip, lie on the boundary, and the masks have the mesh's shape."""
+    v, f = coarse_plate
+    rim = boundary_vertices(f, len(v))
+    none = np.zeros(len(v), bool)
+    with pytest.raises(InputError, match="sprung: the skin beyond the cut needs a clamp_strip_mm"):
+        modal_basis(v, f, membrane_params(3), fixed=Held(none, rim))
+    strip = replace(membrane_params(3), clamp_strip_mm=5.0)
+    with pytest.raises(InputError, match="sprung: vertex .* is not on the mesh's boundary"):
+        modal_basis(v, f, strip, fixed=Held(rim, ~rim))
+    with pytest.raises(InputError, match=rf"clamped: expected a \({len(v)},\) bool mask"):
+        modal_basis(v, f, strip, fixed=Held(rim[:-1], none))
+    # no springs: the clamped vertices alone, as a plain mask gives them
+    plain = modal_basis(v, f, membrane_params(3), fixed=rim)
+    held = modal_basis(v, f, membrane_params(3), fixed=Held(rim, none))
+    assert_allclose(held.frequencies_hz, plain.frequencies_hz, rtol=1e-12)
+
+
+def test_every_still_clamps_only_the_outline_no_take_moves():
+    """``every_still`` clamps an outline vertex when the largest of the takes' displacements
+    there is below still_mm; ``still`` when the median is. One take of three moving a stretch
+    of the loop unclamps it under the first only."""
+    from scan2morph.modal.boundary import outline_motion, still_outline
+
+    n = 40
+    loop = np.arange(n)
+    takes = [np.zeros((n, 3)) for _ in range(3)]
+    takes[0][10:20, 1] = 2.0  # one take moves vertices 10-19 by 2 mm
+    takes[1][:, 0] = 0.3
+    median = still_outline(loop, takes, n, "still", 1.0, 0.25)
+    every = still_outline(loop, takes, n, "every_still", 1.0, 0.25)
+    assert median.fixed.all()
+    assert every.fixed.tolist() == [not 10 <= i < 20 for i in range(n)]
+    assert_allclose(every.motion_mm[12:18], 2.0) and assert_allclose(median.motion_mm, 0.0)
+    assert_allclose(outline_motion(loop, takes, n, reduce="max")[:5], 0.3)
+    with pytest.raises(InputError, match="reduce: expected"):
+        outline_motion(loop, takes, n, reduce="mean")
+    # at least min_fixed_share stays clamped, the stillest
+    takes[2][:, 2] = 5.0
+    takes[2][:4, 2] = 1.5
+    least = still_outline(loop, takes, n, "every_still", 1.0, 0.1)
+    assert least.fixed.sum() == 4 and least.fixed[:4].all()
+
+
+def test_the_skin_preset_takes_its_stillness_from_the_expressions(template):
+    """With ``still_from: expressions`` a viseme that moves the chin's outline (the jaw) neither
+    unclamps it nor unties the skin there; with ``takes`` it does. The outline the expressions
+    move is held by the strip's springs (not clamped, not free)."""
+    from scan2morph.template import subdivide_template
+
+    fine = subdivide_template(template, 1)
+    neutral, smile = _face(template)
+    jaw = np.zeros_like(smile)
+    low = neutral[:, 1] < np.percentile(neutral[:, 1], 20)  # the lowest fifth of the face
+    jaw[low, 1] = -6.0
+    data = {
+        paths.neutral("vertices"): neutral,
+        paths.expression("sm1", "displacement"): smile,
+        paths.viseme("car", "motion"): jaw,
+    }
+    kinds = {"n": "neutral", "car": "viseme", "sm1": "expression"}
+    subject = Subject("s", kinds, {"n": "neutral", "car": "car", "sm1": "smile"})
+    fields = {"sm1": smile}
+    skin = modal.Params.from_config(_config(SECTION))
+    takes = modal.Params.from_config(_config(SECTION | {"still_from": "takes"}))
+    assert len(modal.still_fields(subject, data, fields, skin)) == 1
+    assert len(modal.still_fields(subject, data, fields, takes)) == 2
+    assert len(modal.still_fields(subject, data, {}, skin)) == 1  # no expressions: every take
+    outline = np.zeros(fine.n_vertices, bool)
+    outline[fine.boundary] = True
+    chin = outline & low & (np.linalg.norm(smile, axis=1) < 0.5)
+    assert chin.sum() >= 4
+    by_expr = modal.outline_choice(fine, subject, data, fields, skin)
+    by_takes = modal.outline_choice(fine, subject, data, fields, takes)
+    assert by_expr.fixed[chin].all() and not by_takes.fixed[chin].any()
+    tie_expr = modal.tethered(fine, skin, modal.still_fields(subject, data, fields, skin))
+    tie_takes = modal.tethered(fine, takes, modal.still_fields(subject, data, fields, takes))
+    assert tie_expr[chin].all() and not tie_takes[chin].any()
+    hold = modal.held(by_expr, skin)
+    assert (hold.sprung == outline & ~by_expr.fixed).all() and hold.sprung.any()
+    basis, _ = modal.natural_basis(fine, subject, data, fields, skin)
+    assert (basis.fixed_vertices[fine.boundary] == by_expr.fixed[fine.boundary]).all()
+    assert np.abs(basis.modes[:, hold.sprung]).max() > 0

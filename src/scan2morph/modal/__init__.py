@@ -11,7 +11,7 @@ squares on its first K fields) and builds the smooth intrinsic anchor (Laplace-B
 eigenfunctions per axis). Units: mm, N, tonne, s (frequencies in Hz).
 """
 
-from scan2morph.modal.basis import ModalBasis, ModalParams, modal_basis
+from scan2morph.modal.basis import Held, ModalBasis, ModalParams, modal_basis
 from scan2morph.modal.eigen import SolverOptions, solve_modes
 from scan2morph.modal.fem import (
     ShellMaterial,
@@ -33,6 +33,7 @@ from scan2morph.modal.skin import mimic_skin, skin_stiffness
 
 __all__ = [
     "CoordinateStats",
+    "Held",
     "ModalBasis",
     "ModalParams",
     "ShellMaterial",

@@ -166,6 +166,38 @@ class ModalBasis:
         return self.vectors.T.reshape(self.n_modes, self.n_vertices, fem.DOF)
 
 
+@dataclass(frozen=True)
+class Held:
+    """How the boundary is held: vertices clamped, and boundary vertices held elastically by
+    the skin beyond the cut (:func:`skin.edge_springs`, a strip ``ModalParams.clamp_strip_mm``
+    wide) instead.
+
+    Attributes
+    ----------
+    clamped : (V,) bool
+        Vertices clamped.
+    sprung : (V,) bool
+        Vertices on the mesh's boundary held by the springs (a vertex in both is sprung).
+    """
+
+    clamped: NDArray[np.bool_]
+    sprung: NDArray[np.bool_]
+
+    def checked_sprung(self, n_vertices: int, boundary: np.ndarray, source: str) -> np.ndarray:
+        """``sprung`` after checking both masks' shapes and that it lies on the boundary."""
+        for name in ("clamped", "sprung"):
+            mask = np.asarray(getattr(self, name))
+            if mask.shape != (n_vertices,) or mask.dtype != np.bool_:
+                raise InputError(
+                    source, f"{name}: expected a ({n_vertices},) bool mask, got {mask.shape}"
+                )
+        sprung = np.asarray(self.sprung)
+        if (sprung & ~boundary).any():
+            inner = int(np.flatnonzero(sprung & ~boundary)[0])
+            raise InputError(source, f"sprung: vertex {inner} is not on the mesh's boundary")
+        return sprung
+
+
 def modal_basis(
     vertices: ArrayLike,
     faces: ArrayLike,
@@ -186,13 +218,15 @@ def modal_basis(
     params : ModalParams, optional
     upper_face : (V,) bool, optional
         Vertices of the upper face, thickened by ``params.upper_thickness_factor``.
-    fixed : (V,) bool, optional
-        Vertices held fixed; default every boundary vertex. A face template has two boundary
+    fixed : (V,) bool or Held, optional
+        Vertices held fixed; default every boundary vertex. A :class:`Held` clamps its
+        ``clamped`` vertices and holds its ``sprung`` ones elastically (below). A face template has two boundary
         loops, the outline and the mouth: the paper fixes the outline, and the lips must stay
         free (fixing the mouth loop clamps the lips, and no mode can then move them). An
         all-False mask leaves the model free: its rigid-body motion, unless a skin term holds
         it, comes first as modes of (numerically) zero frequency. ``params.clamp_strip_mm``
-        holds those on the mesh's boundary elastically instead (not in ``fixed_vertices``).
+        holds those on the mesh's boundary elastically instead (not in ``fixed_vertices``), or
+        only the ``sprung`` ones of a :class:`Held`.
     tethered : (V,) bool, optional
         Vertices whose skin is tied tangentially (``params.tether_n_per_mm3``).
     mimic : (V,) float in [0, 1], optional
@@ -221,25 +255,13 @@ def modal_basis(
             source, f"coordinates: expected one of {COORDINATES}, got {p.coordinates!r}"
         )
     n_v = v.shape[0]
-    boundary = fem.boundary_vertices(f, n_v)
-    if fixed is not None:
-        fixed_mask = np.asarray(fixed, dtype=bool)
-        if fixed_mask.shape != (n_v,):
-            raise InputError(
-                source, f"fixed: expected a ({n_v},) bool mask, got shape {fixed_mask.shape}"
-            )
-        boundary = fixed_mask
-    free_model = fixed is not None and not boundary.any()
-    if not boundary.any() and not free_model:
-        raise InputError(
-            source, "faces: the mesh has no boundary edge (closed surface); nothing to fix"
-        )
-    if not free_model:
-        _check_every_part_held(f, n_v, boundary, source)
+    boundary, sprung, free_model = _held(fixed, f, n_v, source)
     thickness = fem.thickness_map(f, p.thickness_mm, upper_face, p.upper_thickness_factor, source)
     k_mat, m_mat = _matrices(v, f, thickness, p, (tethered, mimic), source)
     if p.clamp_strip_mm and not free_model:  # the skin beyond the cut holds them, elastically
-        k_mat, boundary = _strip(v, f, boundary, k_mat, p, source)
+        k_mat, boundary = _strip(v, f, boundary, k_mat, p, source, sprung)
+    elif sprung is not None and sprung.any():
+        raise InputError(source, "sprung: the skin beyond the cut needs a clamp_strip_mm > 0")
     unused = np.ones(n_v, dtype=bool)
     unused[f.ravel()] = False
     fixed = boundary | unused
@@ -366,14 +388,43 @@ def _matrices(v, f, thickness, p: ModalParams, regions, source: str):
     return k_mat, m_mat
 
 
-def _strip(v, f, fixed, k_mat, p: ModalParams, source: str):
+def _held(fixed, f, n_v: int, source: str):
+    """The vertices held (a mask, or a :class:`Held`'s clamped and sprung together; default the
+    mesh's boundary), the sprung ones (None without a :class:`Held`) and whether nothing is
+    held (a free model), after checking them."""
+    boundary = fem.boundary_vertices(f, n_v)
+    sprung = None
+    if isinstance(fixed, Held):
+        sprung = fixed.checked_sprung(n_v, boundary, source)
+        fixed = np.asarray(fixed.clamped, dtype=bool) | sprung
+    if fixed is not None:
+        fixed_mask = np.asarray(fixed, dtype=bool)
+        if fixed_mask.shape != (n_v,):
+            raise InputError(
+                source, f"fixed: expected a ({n_v},) bool mask, got shape {fixed_mask.shape}"
+            )
+        boundary = fixed_mask
+    free_model = fixed is not None and not boundary.any()
+    if not boundary.any() and not free_model:
+        raise InputError(
+            source, "faces: the mesh has no boundary edge (closed surface); nothing to fix"
+        )
+    if not free_model:
+        _check_every_part_held(f, n_v, boundary, source)
+    return boundary, sprung, free_model
+
+
+def _strip(v, f, fixed, k_mat, p: ModalParams, source: str, sprung=None):
     """The stiffness with :func:`skin.edge_springs` (``p.clamp_strip_mm`` > 0) on the fixed
-    vertices of the mesh's boundary, and the fixed vertices left clamped (those inside)."""
+    vertices of the mesh's boundary (those of ``sprung`` only, when given), and the fixed
+    vertices left clamped."""
     if not (np.isfinite(p.clamp_strip_mm) and p.clamp_strip_mm > 0):
         raise InputError(source, f"clamp_strip_mm: expected >= 0, got {p.clamp_strip_mm}")
     if not p.tension_n_per_mm > 0:
         raise InputError(source, "clamp_strip_mm: the strip needs a tension_n_per_mm > 0")
     on_cut = fixed & fem.boundary_vertices(f, len(v))
+    if sprung is not None:
+        on_cut &= sprung
     springs = skin.edge_springs(v, f, on_cut, p.tension_n_per_mm, p.clamp_strip_mm, source)
     return (k_mat + springs).tocsc(), fixed & ~on_cut
 

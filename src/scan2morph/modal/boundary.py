@@ -9,7 +9,8 @@ rebuild. :func:`still_outline` measures, per outline vertex, how far the subject
 (median over the takes of the displacement's length, then a running median along the loop so
 that one noisy vertex does not flip its neighbours) and clamps the vertices below a threshold;
 when fewer than a minimum share of the outline is still, the stillest ones are clamped so that
-the model stays held.
+the model stays held. The policy ``every_still`` takes the longest displacement over the takes
+instead of the median: a vertex any take moves stays unclamped.
 """
 
 from __future__ import annotations
@@ -22,9 +23,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from scan2morph.errors import InputError
 
-#: Boundary policies: clamp every outline vertex (the paper), only the still ones, or none (a
-#: free model).
-POLICIES = ("all", "still", "none")
+#: Boundary policies: clamp every outline vertex (the paper), the ones the median take leaves
+#: still, the ones every take leaves still, or none (a free model).
+POLICIES = ("all", "still", "every_still", "none")
+#: How :func:`outline_motion` sums up the takes at a vertex, by policy (``median`` otherwise).
+REDUCTIONS = {"every_still": "max"}
 
 
 @dataclass(frozen=True)
@@ -38,11 +41,11 @@ class OutlineChoice:
     outline : (V,) bool
         The whole outline (what the paper clamps).
     motion_mm : (V,) float
-        Per outline vertex: median over the takes of the length of its displacement, smoothed
-        by a running median along the loop, mm; NaN off the outline (and on the outline when
-        no take gives it a value).
+        Per outline vertex: median (policy ``every_still``: the largest) over the takes of the
+        length of its displacement, smoothed by a running median along the loop, mm; NaN off
+        the outline (and on the outline when no take gives it a value).
     policy : str
-        ``"all"``, ``"still"`` or ``"none"``.
+        One of :data:`POLICIES`.
     """
 
     fixed: NDArray[np.bool_]
@@ -52,7 +55,11 @@ class OutlineChoice:
 
 
 def outline_motion(
-    loop: ArrayLike, fields: Sequence[ArrayLike], n_vertices: int, window: int = 2
+    loop: ArrayLike,
+    fields: Sequence[ArrayLike],
+    n_vertices: int,
+    window: int = 2,
+    reduce: str = "median",
 ) -> NDArray[np.float64]:
     """How far the takes move each vertex of a closed outline loop.
 
@@ -66,13 +73,17 @@ def outline_motion(
         V.
     window : int
         Half-width (vertices along the loop) of the running median.
+    reduce : {"median", "max"}
+        How the takes' displacement lengths at a vertex are summed up.
 
     Returns
     -------
     (V,) float, mm
-        The median over the takes of the displacement length, then the median over the
-        ``2 window + 1`` loop neighbours; NaN off the loop and where no take has a value.
+        The median (or largest) over the takes of the displacement length, then the median over
+        the ``2 window + 1`` loop neighbours; NaN off the loop and where no take has a value.
     """
+    if reduce not in ("median", "max"):
+        raise InputError("outline", f"reduce: expected 'median' or 'max', got {reduce!r}")
     loop = np.asarray(loop, dtype=np.int64)
     out = np.full(int(n_vertices), np.nan)
     if not fields or loop.size == 0:
@@ -86,7 +97,8 @@ def outline_motion(
     stack = np.stack(lengths)
     finite = np.isfinite(stack).any(axis=0)
     per_vertex = np.full(loop.size, np.nan)
-    per_vertex[finite] = np.nanmedian(stack[:, finite], axis=0)
+    summary = np.nanmax if reduce == "max" else np.nanmedian
+    per_vertex[finite] = summary(stack[:, finite], axis=0)
     w = max(int(window), 0)
     shifts = np.stack([np.roll(per_vertex, s) for s in range(-w, w + 1)])
     smooth = np.full(loop.size, np.nan)
@@ -116,10 +128,12 @@ def still_outline(
         The subject's measured displacement fields (viseme motion, expression displacement).
     n_vertices : int
         V.
-    policy : {"all", "still", "none"}
+    policy : {"all", "still", "every_still", "none"}
         ``"all"``: the whole outline (the paper). ``"still"``: the outline vertices whose
-        :func:`outline_motion` is below ``still_mm``; a vertex without any measurement counts
-        as still. ``"none"``: no vertex (a free model).
+        :func:`outline_motion` (the median over the takes) is below ``still_mm``; a vertex
+        without any measurement counts as still. ``"every_still"``: the same with the largest
+        displacement over the takes (still in every take). ``"none"``: no vertex (a free
+        model).
     still_mm : float
         Motion below which an outline vertex is still, mm.
     min_fixed_share : float
@@ -147,7 +161,7 @@ def still_outline(
         raise InputError(source, f"outline: expected vertex indices in [0, {n_vertices - 1}]")
     outline = np.zeros(n_vertices, dtype=bool)
     outline[loop] = True
-    motion = outline_motion(loop, fields, n_vertices, window)
+    motion = outline_motion(loop, fields, n_vertices, window, REDUCTIONS.get(policy, "median"))
     if policy == "none":
         return OutlineChoice(np.zeros_like(outline), outline, motion, policy)
     if policy == "all" or not fields:

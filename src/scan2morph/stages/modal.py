@@ -15,7 +15,7 @@ import pandas as pd
 from scan2morph.errors import InputError
 from scan2morph.io import write_material, write_obj
 from scan2morph.io.obj import NEUTRAL_MATERIAL
-from scan2morph.modal import ModalBasis, ModalParams, ShellMaterial
+from scan2morph.modal import Held, ModalBasis, ModalParams, ShellMaterial
 from scan2morph.modal.boundary import POLICIES, OutlineChoice, still_outline, still_skin
 from scan2morph.modal.subject import ExpressionFields, NeutralShell, subject_modal
 from scan2morph.stages.part import Part, Subject, need
@@ -40,15 +40,20 @@ log = logging.getLogger("scan2morph")
 #: the same name overrides one value. ``paper``: the modal-analysis paper's steel shell, 1 mm,
 #: three times thicker above the nose tip, whole outline clamped. ``clamped_still``: the same
 #: shell clamped only where the takes leave the outline still (this pipeline's basis before
-#: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation, clamped where the takes
-#: leave the outline still (as ``clamped_still``): a 1 mm membrane (no shell: E = 0, the
-#: rotations held) under an isotropic tension of 1 N/mm, on tissue that resists normal motion
-#: (0.01 N/mm^3) and, where every take leaves the skin still (``tether_region: still``, within
-#: ``still_mm``), ties it to the bone against sliding (0.1 N/mm^3) and normal motion (another
-#: 0.1 N/mm^3), its mass per area 1.4 times higher in the mimic skin (round the mouth, cheeks,
-#: brows and forehead, :func:`~scan2morph.modal.skin.mimic_skin`) than on the nose, the jaw's
-#: sides and the chin; its coordinates are the least squares fit (``coordinates: vertex``).
-#: Chosen by ``benchmarks/bench_modal_span.py`` (docs/outputs.md, "The modal basis's physics").
+#: ``skin``). ``skin``: a pre-tensioned skin on an elastic foundation: a 1 mm membrane (no
+#: shell: E = 0, the rotations held) under an isotropic tension of 1 N/mm, on tissue that
+#: resists normal motion (0.01 N/mm^3) and, where every expression leaves the skin still
+#: (``tether_region: still``, ``still_from: expressions``, within ``still_mm``), ties it to the
+#: bone against sliding (0.1 N/mm^3) and normal motion (another 0.1 N/mm^3), its mass per area
+#: 1.4 times higher in the mimic skin (round the mouth, cheeks, brows and forehead,
+#: :func:`~scan2morph.modal.skin.mimic_skin`) than on the nose, the jaw's sides and the chin;
+#: its outline clamped where every expression leaves it still (``fixed_outline: every_still``)
+#: and elsewhere held by the skin beyond the cut, a strip 6 mm wide under the same tension
+#: (``outline_strip_mm``: a Robin edge, :func:`~scan2morph.modal.skin.edge_springs`); its
+#: coordinates are the least squares fit (``coordinates: vertex``). ``skin_v1``: the skin as
+#: first adopted, the clamp and the tether chosen from every take (visemes too), the outline
+#: clamped where the median take leaves it still and free elsewhere. Chosen by
+#: ``benchmarks/bench_modal_span.py`` (docs/outputs.md, "The modal basis's physics").
 PRESETS: dict[str, dict] = {
     "paper": {
         "fixed_outline": "all",
@@ -70,11 +75,13 @@ PRESETS: dict[str, dict] = {
         "mimic_foundation_factor": 1.0,
         "mimic_mass_factor": 1.0,
         "coordinates": "mass",
+        "still_from": "takes",
+        "outline_strip_mm": 0.0,
     },
 }
 PRESETS["clamped_still"] = PRESETS["paper"] | {"fixed_outline": "still"}
 PRESETS["skin"] = PRESETS["paper"] | {
-    "fixed_outline": "still",
+    "fixed_outline": "every_still",
     "youngs_modulus_mpa": 0.0,
     "density_t_per_mm3": 1.1e-9,
     "stiff_factor": 1.0,
@@ -86,12 +93,23 @@ PRESETS["skin"] = PRESETS["paper"] | {
     "tether_region": "still",
     "mimic_mass_factor": 1.4,
     "coordinates": "vertex",
+    "still_from": "expressions",
+    "outline_strip_mm": 6.0,
+}
+PRESETS["skin_v1"] = PRESETS["skin"] | {
+    "fixed_outline": "still",
+    "still_from": "takes",
+    "outline_strip_mm": 0.0,
 }
 #: The preset used when the config names none.
 DEFAULT_PRESET = "skin"
-#: Outline policies: clamp the whole outline, its still part, or nothing (a free model).
+#: Outline policies: clamp the whole outline, the part the median take leaves still, the part
+#: every take leaves still, or nothing (a free model).
 FIXED_OUTLINE = POLICIES
 TETHER_REGIONS = ("still", "stable", "none")
+#: Whose stillness chooses the clamped outline and the tethered skin: the expressions' (when the
+#: subject has any; the modes are there to rebuild them), or every take's (visemes too).
+STILL_FROM = ("expressions", "takes")
 
 
 def physics(modal: Mapping, source: str = "config modal") -> dict:
@@ -123,6 +141,13 @@ def physics(modal: Mapping, source: str = "config modal") -> dict:
         raise InputError(
             source, f"tether_region: expected one of {TETHER_REGIONS}, got {out['tether_region']!r}"
         )
+    if out["still_from"] not in STILL_FROM:
+        raise InputError(
+            source, f"still_from: expected one of {STILL_FROM}, got {out['still_from']!r}"
+        )
+    strip = out["outline_strip_mm"]
+    if isinstance(strip, bool) or not isinstance(strip, int | float) or not 0 <= strip < np.inf:
+        raise InputError(source, f"outline_strip_mm: expected a number >= 0 (mm), got {strip!r}")
     heavier = float(out["mimic_mass_factor"]) != 1.0
     if heavier and (float(out["youngs_modulus_mpa"]) != 0.0 or out["mass"] == "vertex"):
         raise InputError(
@@ -151,9 +176,10 @@ class Params:
         Expression labels whose first take becomes a semantic mode.
     reconstruction_k : list of int
         Numbers of modes at which the reconstruction error is reported.
-    fixed_outline : {"still", "all", "none"}
-        Outline vertices clamped: those the takes do not move (``still``), all (the paper) or
-        none (a free model).
+    fixed_outline : {"still", "every_still", "all", "none"}
+        Outline vertices clamped: those the median take does not move (``still``), those no
+        take moves (``every_still``), all (the paper) or none (a free model); the takes are
+        those of ``still_from``.
     still_mm : float
         Median displacement over the takes below which an outline vertex is still
         (``fixed_outline: still``), and the longest displacement below which a vertex is still
@@ -163,8 +189,11 @@ class Params:
     target_rms_mm : float
         Reconstruction error whose mode count is reported, mm.
     tether_region : {"still", "stable", "none"}
-        Vertices whose skin is tied to the bone: those the takes leave still (within
-        ``still_mm``), the template's stable face, or none.
+        Vertices whose skin is tied to the bone: those the takes (of ``still_from``) leave
+        still (within ``still_mm``), the template's stable face, or none.
+    still_from : {"expressions", "takes"}
+        Whose stillness chooses the clamped outline and the tethered skin: the expressions'
+        (when the subject has any, else every take's), or every take's.
     physics : dict
         The resolved physics (:func:`physics`: the preset's name and every value), recorded
         in the store.
@@ -181,6 +210,7 @@ class Params:
     target_rms_mm: float = 0.5
     tether_region: str = "none"
     physics: dict = field(default_factory=dict)
+    still_from: str = "takes"
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -210,6 +240,7 @@ class Params:
             mimic_tension_factor=float(phys["mimic_tension_factor"]),
             mimic_foundation_factor=float(phys["mimic_foundation_factor"]),
             mimic_mass_factor=float(phys["mimic_mass_factor"]),
+            clamp_strip_mm=float(phys["outline_strip_mm"]),
             coordinates=str(phys["coordinates"]),
         )
         return cls(
@@ -224,6 +255,7 @@ class Params:
             float(modal.get("target_rms_mm", 0.5)),
             str(phys["tether_region"]),
             phys,
+            str(phys["still_from"]),
         )
 
     def with_threads(self, threads: int) -> Params:
@@ -249,14 +281,15 @@ def outline_choice(
     params: Params,
 ) -> OutlineChoice:
     """The outline vertices the shell model clamps (:func:`still_outline` on the subdivided
-    template's outer loop, from the visemes' motion and the expressions' ``fields``).
+    template's outer loop, from the fields of :func:`still_fields`).
 
     The paper fixes the face's outline; the mouth loop (the lips) stays free. With
-    ``fixed_outline: still``, only the part of the outline that the takes do not move.
+    ``fixed_outline: still`` (``every_still``), only the part of the outline that the median
+    take (every take) does not move.
     """
     return still_outline(
         fine.boundary,
-        takes_motion(subject, data, fields),
+        still_fields(subject, data, fields, params),
         fine.n_vertices,
         params.fixed_outline,
         params.still_mm,
@@ -295,12 +328,19 @@ def natural_basis(
         fine.faces,
         params.modal,
         upper_face(fine, params.stiff_above),
-        fixed=outline.fixed,
-        tethered=tethered(fine, params, takes_motion(subject, data, fields)),
+        fixed=held(outline, params),
+        tethered=tethered(fine, params, still_fields(subject, data, fields, params)),
         mimic=mimic(fine, params),
         source=subject.name,
     )
     return basis, outline
+
+
+def held(outline: OutlineChoice, params: Params) -> Held:
+    """The clamped outline, and the rest of the outline held by the skin beyond the cut when
+    the physics has a strip (``outline_strip_mm`` > 0; else it is free)."""
+    sprung = outline.outline & ~outline.fixed if params.modal.clamp_strip_mm else None
+    return Held(outline.fixed, np.zeros_like(outline.fixed) if sprung is None else sprung)
 
 
 def mimic(fine: Template, params: Params) -> np.ndarray | None:
@@ -325,10 +365,21 @@ def takes_motion(
     return [*moved, *fields.values()]
 
 
+def still_fields(
+    subject: Subject, data: Mapping[str, np.ndarray], fields: Mapping[str, np.ndarray], params
+) -> list[np.ndarray]:
+    """The fields whose stillness chooses the clamped outline and the tethered skin: the
+    expressions' displacement ``fields`` (``still_from: expressions``, when there are any),
+    else every take's (:func:`takes_motion`)."""
+    if params.still_from == "expressions" and fields:
+        return list(fields.values())
+    return takes_motion(subject, data, fields)
+
+
 def tethered(fine: Template, params: Params, moved: list | None = None) -> np.ndarray | None:
     """Vertices whose skin is tied to the bone (``modal.tether_region``), or None.
 
-    ``still``: the vertices every take in ``moved`` (:func:`takes_motion`) leaves within
+    ``still``: the vertices every take in ``moved`` (:func:`still_fields`) leaves within
     ``modal.still_mm`` (:func:`~scan2morph.modal.boundary.still_skin`), the template's stable
     face when there are no takes; ``stable``: the template's stable face.
     """
@@ -372,12 +423,15 @@ def run(
     fields = {t: need(data, paths.expression(t, "displacement"), name) for t in subject.expressions}
     natural, outline = natural_basis(fine, subject, data, fields, params)
     log.info(
-        "%s: preset %s, %d of %d outline vertices clamped (fixed_outline: %s)",
+        "%s: preset %s, %d of %d outline vertices clamped (fixed_outline: %s), %d held by the "
+        "skin beyond the outline (outline_strip_mm: %g)",
         name,
         params.physics.get("preset", "?"),
         int(outline.fixed.sum()),
         int(outline.outline.sum()),
         params.fixed_outline,
+        int(held(outline, params).sprung.sum()),
+        params.modal.clamp_strip_mm,
     )
     shell = NeutralShell(base, fine.faces, upper_face(fine, params.stiff_above))
     expressions = ExpressionFields(
