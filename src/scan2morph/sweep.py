@@ -275,6 +275,28 @@ def read_sweep_table(path: str | Path, schema: Mapping | str | Path) -> SweepTab
     return SweepTable(source, columns, tuple(rows))
 
 
+def check_sweep_rows(table: SweepTable, config: Mapping) -> None:
+    """Check each combination's settings as a config's are checked when a run loads
+    (:func:`~scan2morph.stages.stage_job.check_stage_params` on the config with the
+    combination set), so that a combination whose settings contradict each other (a swept
+    ``refine.jaw.start`` above the config's ``end``) stops the run at its start, naming it,
+    instead of giving a result row that says the stages refused the subject.
+
+    Raises
+    ------
+    InputError
+        Naming the table, the combination (its number and values) and the config's own line.
+    """
+    from scan2morph.stages.stage_job import check_stage_params
+
+    for number, row in enumerate(table.rows, start=1):
+        try:
+            check_stage_params(dict(config) | sweep_settings(config, row))
+        except InputError as exc:
+            values = ", ".join(f"{k} = {v}" for k, v in row.items())
+            raise InputError(table.source, f"combination {number} ({values}): {exc}") from exc
+
+
 def sweep_settings(config: Mapping, row: Mapping[str, object]) -> dict[str, dict]:
     """The config sections a sweep reads (:data:`SECTION_STAGE`) with one combination set.
 

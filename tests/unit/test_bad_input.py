@@ -36,7 +36,7 @@ from scan2morph.io.rgbd import read_rgbd_intrinsics
 from scan2morph.sheet import read_sheet, subject_problems, validate_config
 from scan2morph.stages import Take, ingest
 from scan2morph.stages import fit as fit_stage
-from scan2morph.stages.stage_job import check_take_params
+from scan2morph.stages.stage_job import check_stage_params
 from scan2morph.synth import make_stereo_take, make_take, write_stereo_take, write_take
 from scan2morph.template import build_template, fit_take
 from scan2morph.template.sample import SCANNER_FRAME, scanner_view
@@ -593,11 +593,21 @@ def test_settings_that_contradict_each_other_are_one_config_line(jaw, match):
     take stages' parameters built from the config (the repo's passes)."""
     config = repo_config()
     validate_config(config, ROOT / "schemas" / "config.schema.yaml")
-    check_take_params(config)
+    check_stage_params(config)
     config["refine"]["jaw"] |= jaw
     validate_config(config, ROOT / "schemas" / "config.schema.yaml")  # each value is valid alone
     with pytest.raises(InputError, match=match):
-        check_take_params(config)
+        check_stage_params(config)
+
+
+def test_a_subject_stages_contradicting_settings_stop_the_run_at_load():
+    """The subject stages' parameters are built at load too: a membrane's mimic mass on the
+    paper's steel shell stopped every subject in its own job; it is now one config line."""
+    config = repo_config()
+    config["modal"] = config["modal"] | {"preset": "paper", "mimic_mass_factor": 2.0}
+    validate_config(config, ROOT / "schemas" / "config.schema.yaml")  # each value is valid alone
+    with pytest.raises(InputError, match=r"^config modal: mimic_mass_factor: 2\.0 .* set it to 1"):
+        check_stage_params(config)
 
 
 @pytest.mark.slow  # starts Snakemake: not in make test-fast

@@ -30,7 +30,13 @@ from scan2morph.report.sweep import (
 )
 from scan2morph.stages import Run, Subject
 from scan2morph.store import paths, read_part
-from scan2morph.sweep import first_stage, read_sweep_table, rerun_accuracy, sweep_settings
+from scan2morph.sweep import (
+    check_sweep_rows,
+    first_stage,
+    read_sweep_table,
+    rerun_accuracy,
+    sweep_settings,
+)
 from scan2morph.tables import read_dictionary
 from scan2morph.template import load_template
 from tests.support.configs import repo_config
@@ -198,6 +204,21 @@ def test_sweep_settings_override_a_copy():
     }
 
 
+def test_a_combination_that_contradicts_the_config_is_named(tmp_path):
+    """Each value may be valid alone and a combination still contradict the config (the jaw
+    prior's start above its end): the table's check names the combination and the rule, as the
+    config's own check names the rule; the combinations that agree pass."""
+    good = read_sweep_table(_table(tmp_path, "refine.jaw.start\n0.0\n0.2\n"), SCHEMA)
+    check_sweep_rows(good, CONFIG)
+    bad = read_sweep_table(_table(tmp_path, "refine.jaw.start\n0.0\n0.5\n"), SCHEMA)
+    with pytest.raises(
+        InputError,
+        match=r"sweeps\.tsv: combination 2 \(refine\.jaw\.start = 0\.5\): config: refine\.jaw: "
+        r"start, end: expected 0 <= start < end <= 1, got 0\.5 and 0\.3$",
+    ):
+        check_sweep_rows(bad, CONFIG)
+
+
 # --- load-time validation through Snakemake ---
 def _snakemake(work: Path, configfile: Path, *args) -> subprocess.CompletedProcess:
     cmd = [
@@ -222,6 +243,7 @@ def _snakemake(work: Path, configfile: Path, *args) -> subprocess.CompletedProce
     [
         ("smoothing.iteration\n30\n", "column 'smoothing.iteration': names no config key"),
         ("mask.radius_mm\ntwenty\n", "column 'mask.radius_mm': 'twenty' is not of type 'number'"),
+        ("refine.jaw.start\n0.5\n", "combination 1 (refine.jaw.start = 0.5): config: refine.jaw"),
     ],
 )
 def test_a_bad_table_stops_the_run_before_any_job(tmp_path, text, message):

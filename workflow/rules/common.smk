@@ -13,7 +13,7 @@ from scan2morph.io.yaml_text import config_file_problem
 from scan2morph.jobs import config_sha256, memory_mb
 from scan2morph.sheet import read_sheet, sheet_problems, synthetic_rows, take_table
 from scan2morph.sheet_consistency import blend_label_problem
-from scan2morph.stages.stage_job import SUBJECT_STAGES, check_take_params
+from scan2morph.stages.stage_job import SUBJECT_STAGES, check_stage_params
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
 SCHEMAS = Path(workflow.basedir) / "schemas"
@@ -37,7 +37,7 @@ try:
     validate_config(config, SCHEMAS / "config.schema.yaml", source="config")
     # once a run, not again in each cluster job's Snakemake
     if workflow.is_main_process:
-        check_take_params(config)
+        check_stage_params(config)
 except InputError as _exc:
     stop_run(_exc)
 

@@ -7,7 +7,7 @@ import pandas as pd
 from snakemake.utils import Paramspace
 
 from scan2morph.errors import InputError
-from scan2morph.sweep import read_sweep_table, sweep_settings
+from scan2morph.sweep import check_sweep_rows, read_sweep_table, sweep_settings
 
 try:  # a bad table stops the run as a bad config does: one line, no traceback
     SWEEP_TABLE = (
@@ -17,6 +17,9 @@ try:  # a bad table stops the run as a bad config does: one line, no traceback
         if Path(config["sweeps"]).is_file()
         else None
     )
+    # each combination's settings as a config's (one against another), once a run
+    if SWEEP_TABLE is not None and workflow.is_main_process:
+        check_sweep_rows(SWEEP_TABLE, config)
 except InputError as exc:
     stop_run(exc)
 # one folder per combination, results/sweeps/{column}~{value}/.../ (Paramspace instance patterns)

@@ -291,11 +291,14 @@ def benchmarked(path: str | Path) -> Iterator[None]:
         write_benchmark(path, wall, cpu, _peak_rss_mb())
 
 
-def check_take_params(config: Mapping) -> None:
-    """Build the take stages' ``Params`` from a (schema-checked) ``config`` once, so that what a
+def check_stage_params(config: Mapping) -> None:
+    """Build every stage's ``Params`` from a (schema-checked) ``config`` once, so that what a
     schema cannot check, one setting against another (``refine.jaw.start`` below ``end``,
-    ``fade_rmse_ratio`` not below ``max_rmse_ratio``), stops a run at its start: in a take's job
-    it would leave every take out alike, each with the same line.
+    ``fade_rmse_ratio`` not below ``max_rmse_ratio``, a membrane's mimic mass on a shell),
+    stops a run at its start: in a take's job it would leave every take out alike, each with
+    the same line, and in a subject's job stop every subject. The take stages and the subject
+    stages with a module of their own (the others, the figures, the report and the head
+    meshes, are drawn from what those write).
 
     Raises
     ------
@@ -303,9 +306,12 @@ def check_take_params(config: Mapping) -> None:
         The parameters' own one line (``config: refine.jaw: ...``).
     """
     import importlib
+    import importlib.util
 
-    for stage in TAKE_STAGES:
-        importlib.import_module(f"scan2morph.stages.{stage}").Params.from_config(config)
+    for stage in (*TAKE_STAGES, *SUBJECT_STAGES):
+        name = f"scan2morph.stages.{stage}"
+        if importlib.util.find_spec(name) is not None:
+            importlib.import_module(name).Params.from_config(config)
 
 
 __all__ = [
@@ -313,7 +319,7 @@ __all__ = [
     "SUBJECT_STAGES",
     "TAKE_STAGES",
     "benchmarked",
-    "check_take_params",
+    "check_stage_params",
     "fingerprint",
     "part_fingerprint",
     "read_fingerprints",
