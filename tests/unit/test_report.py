@@ -1108,8 +1108,20 @@ def test_modal_section_splits_the_reconstruction_and_shows_the_outline():
         ["e2", "tangential", "3", "2.5", "n/a"],
     ]
     rim = _table(page, "Displacement on the face's outline")
-    assert "6 outline vertices, 4 clamped" in next(n for n in page.tables if n.startswith("Disp"))
+    caption = next(n for n in page.tables if n.startswith("Disp"))
+    assert "6 outline vertices, 4 clamped" in caption and "strip" not in caption
     assert rim[1:] == [["e1 (smile)", "1.5", "0.25"], ["e2", "1.5", "0.25"]]
+    # the skin preset holds the rest of the outline by the skin beyond it: the caption says so
+    with h5py.File("modal.h5", "w", driver="core", backing_store=False) as h5:
+        h5[paths.modal("reconstruction_k")] = [1, 2]
+        h5[paths.modal("fixed_vertices")], h5[paths.modal("outline_vertices")] = fixed, outline
+        h5[paths.modal("physics")] = json.dumps({"preset": "skin", "outline_strip_mm": 6.0})
+        h5[paths.expression("e1", "outline_rms_mm")] = 1.5
+        h5[paths.expression("e1", "clamped_rms_mm")] = 0.25
+        caption = _parse(report_html.render_blocks(sections._outline(h5, ["e1"], {"e1": ""})))
+    (caption,) = [n for n in caption.tables if n.startswith("Disp")]
+    assert "4 clamped" in caption and "the other 2 are held by the skin beyond the" in caption
+    assert "a strip 6 mm wide" in caption
 
 
 def test_viewer_data_decodes_to_the_store_within_half_a_step():

@@ -6,15 +6,15 @@ Each section function returns a list of blocks, dicts with a ``kind`` that
 ``columns`` (a TSV's column dictionary folded under its table: ``name``, ``table``),
 ``thumbs`` (``thumbs``: ``take``, ``uri``, ``width``, ``text``), ``figures`` (``groups``:
 ``title`` and ``figures`` of ``stem``, ``uri``, ``caption``) and ``viewer`` (the 3D viewer's
-context, :func:`scan2morph.report.viewer.viewer_context`). Numbers are formatted here (4
-significant digits, ``n/a`` for missing or non-finite values); escaping is the templates'.
+context, :func:`scan2morph.report.viewer.viewer_context`). Tables and notes are built by
+:mod:`scan2morph.report.blocks` (numbers to 4 significant digits, ``n/a`` for missing or
+non-finite values); escaping is the templates'.
 """
 
 from __future__ import annotations
 
 import base64
 import json
-import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -25,6 +25,7 @@ import h5py
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.report.blocks import note_block, table_block
 from scan2morph.store import paths
 from scan2morph.store.warnings import read_warnings, skipped_stages
 
@@ -137,37 +138,6 @@ def thumbnail_jpeg(color: np.ndarray, width_px: int, quality: int = 85) -> bytes
     return buf.tobytes()
 
 
-def _fmt(value: object, spec: str = ".4g") -> str:
-    if value is None:
-        return "n/a"
-    if isinstance(value, (bool, np.bool_)):
-        return "yes" if value else "no"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        return "n/a" if not math.isfinite(value) else format(float(value), spec)
-    return str(value)
-
-
-def _table(columns: Sequence[str], rows: Sequence[Sequence[object]], caption: str = "") -> dict:
-    """A table block: cells as text (numbers formatted, right-aligned by the template)."""
-    cells = [
-        [
-            {
-                "text": _fmt(cell),
-                "numeric": isinstance(cell, (int, float, np.number)) and not isinstance(cell, bool),
-            }
-            for cell in row
-        ]
-        for row in rows
-    ]
-    return {"kind": "table", "table": {"columns": list(columns), "rows": cells, "caption": caption}}
-
-
-def _note(text: str) -> dict:
-    return {"kind": "note", "text": text}
-
-
 def _attr(obj: h5py.HLObject, key: str, default: str = "") -> str:
     value = obj.attrs.get(key, default)
     return value.decode() if isinstance(value, bytes) else str(value)
@@ -187,7 +157,7 @@ def inputs(h5: h5py.File, takes: list[str], thumbnail_px: int) -> list[dict]:
     """A JPEG thumbnail (``thumbnail_px`` wide) of each take's color image, with kind, label,
     modality and size."""
     if not takes:
-        return [_note("The store holds no takes.")]
+        return [note_block("The store holds no takes.")]
     items = []
     for take in takes:
         group = h5[paths.take(take)]
@@ -226,7 +196,7 @@ def correspondence(h5: h5py.File, take: str) -> str:
 def figures(figures: Sequence[ReportFigure]) -> list[dict]:
     """The figures embedded byte for byte, grouped by stage (the stem's prefix)."""
     if not figures:
-        return [_note("No figures were drawn for this subject.")]
+        return [note_block("No figures were drawn for this subject.")]
     groups: dict[str, list[dict]] = {}
     for fig in figures:
         stem = Path(fig.path).stem
@@ -249,12 +219,12 @@ def status(h5: h5py.File) -> list[dict]:
     parts = []
     if warnings:
         rows = [(w.stage, w.take or "(subject)", w.message) for w in warnings]
-        table = _table(["stage", "take", "warning"], rows, f"{len(warnings)} warnings")
+        table = table_block(["stage", "take", "warning"], rows, f"{len(warnings)} warnings")
         parts.append(table | {"cls": "warnings"})
     else:
-        parts.append(_note("No warnings: every take passed the quality gates."))
+        parts.append(note_block("No warnings: every take passed the quality gates."))
     if skipped:
-        parts.append(_table(["skipped", "why"], sorted(skipped.items()), "Stages not run"))
+        parts.append(table_block(["skipped", "why"], sorted(skipped.items()), "Stages not run"))
     return parts
 
 
@@ -271,20 +241,20 @@ def _columns(table: str) -> dict:
         "modal_reconstruction": tables.MODAL_RECONSTRUCTION,
     }[table]
     rows = [[c.name, c.unit, c.definition] for c in dictionary]
-    columns = _table(["column", "unit", "definition"], rows, f"Column dictionary: {table}.tsv")
+    columns = table_block(["column", "unit", "definition"], rows, f"Column dictionary: {table}.tsv")
     return {"kind": "columns", "name": table, "table": columns["table"]}
 
 
 def pca(h5: h5py.File) -> list[dict]:
     """Tables 1 (eigenvalues, CR, CCR) and 2 (coefficients, mm) of the PCA."""
     if paths.pca("eigenvalues") not in h5:
-        return [_note("The store holds no PCA.")]
+        return [note_block("The store holds no PCA.")]
     eig, cr, ccr = (h5[paths.pca(k)][()] for k in ("eigenvalues", "cr", "ccr"))
     rows1 = [
         [i + 1, float(e), float(100 * c), float(100 * cc)]
         for i, (e, c, cc) in enumerate(zip(eig, cr, ccr, strict=True))
     ]
-    table1 = _table(
+    table1 = table_block(
         ["component", "eigenvalue (mm^2)", "CR (%)", "CCR (%)"],
         rows1,
         "Table 1: eigenvalues, contribution rate (CR) and cumulative contribution rate (CCR)",
@@ -292,7 +262,7 @@ def pca(h5: h5py.File) -> list[dict]:
     coeff = h5[paths.pca("coefficients")][()]
     names = h5[paths.pca("takes")].asstr()[()]
     rows2 = [[str(t), *map(float, row)] for t, row in zip(names, coeff, strict=True)]
-    table2 = _table(
+    table2 = table_block(
         ["model", *[f"w{i + 1}" for i in range(coeff.shape[1])]],
         rows2,
         "Table 2: PCA coefficients of each model (mm)",
@@ -303,7 +273,7 @@ def pca(h5: h5py.File) -> list[dict]:
 def motion_noise(h5: h5py.File) -> list[dict]:
     """The click-noise error of each viseme's motion (mm and % of the motion)."""
     if paths.motion_noise("relative") not in h5:
-        return [_note("The store holds no click-noise estimate.")]
+        return [note_block("The store holds no click-noise estimate.")]
     group = h5[paths.MOTION_NOISE]
     names = h5[paths.motion_noise("takes")].asstr()[()]
     rel, err = h5[paths.motion_noise("relative")][()], h5[paths.motion_noise("rms_error_mm")][()]
@@ -320,14 +290,14 @@ def motion_noise(h5: h5py.File) -> list[dict]:
         "clicking"
     )
     columns = ["viseme", "click-noise error (mm)", "of the motion (%)", "refits refused"]
-    return [_table(columns, rows, caption), _columns("motion_noise")]
+    return [table_block(columns, rows, caption), _columns("motion_noise")]
 
 
 def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
     """The first ``n_coordinates`` natural frequencies, the expressions' modal coordinates and
     their reconstruction error against the number of modes."""
     if paths.modal("frequencies_hz") not in h5:
-        return [_note("The store holds no modal basis.")]
+        return [note_block("The store holds no modal basis.")]
     freqs = h5[paths.modal("frequencies_hz")][()]
     n = min(int(n_coordinates), len(freqs))
     preset = paths.modal("preset")
@@ -337,7 +307,7 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
             f" (physics: preset {h5[preset].asstr()[()]}, config modal.preset; /modal/physics)"
         )
     out = [
-        _table(
+        table_block(
             ["", *[f"mode {i + 1}" for i in range(n)]],
             [["frequency (Hz)", *map(float, freqs[:n])]],
             f"Natural frequencies of the first {n} of {len(freqs)} modes{physics}",
@@ -345,7 +315,7 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
     ]
     exprs = list(h5[paths.EXPRESSIONS]) if paths.EXPRESSIONS in h5 else []
     if not exprs:
-        return [*out, _note("The subject has no expression takes.")]
+        return [*out, note_block("The subject has no expression takes.")]
     label = {t: _attr(h5[paths.take(t)], "label", "") if paths.take(t) in h5 else "" for t in exprs}
     rows = [
         [
@@ -356,7 +326,7 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
         if paths.expression(t, "coordinates") in h5
     ]
     out.append(
-        _table(
+        table_block(
             ["expression", *[f"q{i + 1}" for i in range(n)]],
             rows,
             f"Modal coordinates q = Q^T M v of each expression, first {n} modes",
@@ -407,7 +377,7 @@ def _reconstruction(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -
         caption += (
             f"; the fewest modes that rebuild it to {target:g} mm RMS (n/a: none of the basis)"
         )
-    return [_table(columns, rows, caption), _columns("modal_reconstruction")]
+    return [table_block(columns, rows, caption), _columns("modal_reconstruction")]
 
 
 def _outline(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -> list[dict]:
@@ -434,8 +404,17 @@ def _outline(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -> list[
         f"vertices, {int((fixed & outline).sum())} clamped (config modal.fixed_outline; no mode "
         "moves a clamped vertex, so what an expression moves there no K rebuilds)"
     )
+    key = paths.modal("physics")
+    physics = json.loads(h5[key].asstr()[()]) if key in h5 else {}
+    strip = float(physics.get("outline_strip_mm", 0.0) or 0.0)
+    if strip > 0 and (outline & ~fixed).any():
+        caption += (
+            f"; the other {int((outline & ~fixed).sum())} are held by the skin beyond the "
+            f"outline, a strip {strip:g} mm wide (config modal.outline_strip_mm): the modes move "
+            "them"
+        )
     columns = ["expression", "on the outline (mm)", "on the clamped vertices (mm)"]
-    return [_table(columns, rows, caption)]
+    return [table_block(columns, rows, caption)]
 
 
 def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
@@ -506,7 +485,7 @@ def material_tables(takes: Mapping) -> list[dict]:
             "neutral's normal (a wrong surface) and along the surface (skin that slid); second "
             "line: against the method-ideal motion (what exact clicks would give)"
         )
-        out.append(_table(MATERIAL_COLUMNS, rows, caption))
+        out.append(table_block(MATERIAL_COLUMNS, rows, caption))
     rows = [
         _error_row(take, "material motion", entry["expression"], MATERIAL_KEYS)
         for take, entry in takes.items()
@@ -517,7 +496,7 @@ def material_tables(takes: Mapping) -> list[dict]:
             "Expression displacement fields: error against the material motion of the skin "
             "(over all vertices), total and its normal and tangential parts"
         )
-        out.append(_table(MATERIAL_COLUMNS, rows, caption))
+        out.append(table_block(MATERIAL_COLUMNS, rows, caption))
     return out
 
 
@@ -526,15 +505,15 @@ def accuracy(accuracy: Mapping | None) -> list[dict]:
     expression (:func:`material_tables`), then its units, its summary and one row per take
     (None: no ground truth)."""
     if accuracy is None:
-        return [_note("No ground truth: accuracy is measured on synthetic subjects only.")]
+        return [note_block("No ground truth: accuracy is measured on synthetic subjects only.")]
     out = material_tables(accuracy.get("takes", {}))
     units = accuracy.get("units")
     if isinstance(units, Mapping):
-        out.append(_note("Units: " + ", ".join(f"{k} in {v}" for k, v in units.items()) + "."))
+        out.append(note_block("Units: " + ", ".join(f"{k} in {v}" for k, v in units.items()) + "."))
     summary = accuracy.get("summary", {})
     if isinstance(summary, Mapping) and summary:
         out.append(
-            _table(
+            table_block(
                 ["metric", "value"],
                 [[k, v] for k, v in _flatten(summary).items()],
                 "Summary (worst take)",
@@ -547,8 +526,8 @@ def accuracy(accuracy: Mapping | None) -> list[dict]:
         }
         columns = list(dict.fromkeys(k for row in flat.values() for k in row))
         rows = [[t, *[row.get(c) for c in columns]] for t, row in flat.items()]
-        out.append(_table(["take", *columns], rows, "Per take"))
-    return out or [_note("The accuracy file holds no numbers.")]
+        out.append(table_block(["take", *columns], rows, "Per take"))
+    return out or [note_block("The accuracy file holds no numbers.")]
 
 
 def provenance(
@@ -558,15 +537,15 @@ def provenance(
     timings: Sequence[Mapping[str, object]],
 ) -> list[dict]:
     """Store attributes, input checksums, software versions and run time per stage."""
-    out = [_table(["attribute", "value"], [[k, v] for k, v in attrs.items()], "Store")]
+    out = [table_block(["attribute", "value"], [[k, v] for k, v in attrs.items()], "Store")]
     rows = [[t, r, h] for t, roles in checksums.items() for r, h in roles.items()]
     out.append(
-        _table(["take", "file", "SHA-256"], rows, "Input checksums")
+        table_block(["take", "file", "SHA-256"], rows, "Input checksums")
         if rows
-        else _note("The store lists no input checksums.")
+        else note_block("The store lists no input checksums.")
     )
     out.append(
-        _table(
+        table_block(
             ["software", "version"],
             [[k, v] for k, v in versions.items()],
             "Software (at report time)",
@@ -586,12 +565,12 @@ def provenance(
             ]
         )
         out.append(
-            _table(
+            table_block(
                 ["stage", "jobs", "wall time (s)", "max RSS (MB)"],
                 rows,
                 "Run time per stage (Snakemake benchmarks)",
             )
         )
     else:
-        out.append(_note("No benchmark files were found for this subject."))
+        out.append(note_block("No benchmark files were found for this subject."))
     return out
