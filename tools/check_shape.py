@@ -37,7 +37,7 @@ included. Encoded as it stands, with these additions and one correction:
   ``tables`` (the result tables) import only the base and are placed in it, and so is
   ``offscreen`` (the process's headless OpenGL contexts, shared by the synthetic scanners, the
   mesh-scan reader and the figures), ``open3d_light`` (open3d imported without its web viewer,
-  for every layer that registers or samples point clouds), ``version`` (the installed version the store records) and ``lazy`` (packages whose names are imported when first used).
+  for every layer that registers or samples point clouds), ``version`` (the installed version the store records), ``lazy`` (packages whose names are imported when first used) and ``provenance`` (which code made a result: code fingerprints, git commit, versions).
 - **synth** (the synthetic scanners) writes takes in ``io``'s formats: after ``io``.
 - **landmarks** (the detector, trained on synthetic heads, reading a take's repaired grid) uses
   ``synth`` and ``scan``: after ``template``, before ``align``.
@@ -83,6 +83,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "scan2morph.open3d_light",
             "scan2morph.version",
             "scan2morph.lazy",
+            "scan2morph.provenance",
         ),
     ),
     ("io", ("scan2morph.io",)),

@@ -8,6 +8,7 @@ per-stage benchmark files of a run) are tested end to end in ``tests/workflow/te
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -34,11 +35,16 @@ from scan2morph.stages import (
 )
 from scan2morph.stages.stage_job import (
     BENCHMARK_COLUMNS,
+    STAGE_CODE,
+    SUBJECT_STAGES,
+    TAKE_STAGES,
     benchmarked,
+    code_fingerprints,
     fingerprint,
     part_fingerprint,
     read_fingerprints,
     run_stages,
+    stage_code,
     up_to_date,
     write_benchmark,
     write_fingerprints,
@@ -207,3 +213,78 @@ def test_a_timed_block_records_its_own_wall_and_cpu_time(tmp_path):
     with pytest.raises(ZeroDivisionError), benchmarked(path):  # written on an error too
         raise ZeroDivisionError
     assert pd.read_csv(path, sep="\t").iloc[0]["s"] < 0.05
+
+
+#: Stages whose code fingerprints the tests below compare (a representative few: the store's
+#: covers the modules of every stage that makes it).
+CODE_STAGES = ("ingest", "repair", "refine", "morph", "modal", "store", "report_subject")
+
+
+@pytest.fixture
+def library_copy(tmp_path):
+    """A copy of the library in ``tmp_path/src/scan2morph`` (its folder), without the viewer
+    bundle beside it (``tmp_path/tools``)."""
+    from scan2morph.provenance import PACKAGE_DIR
+
+    copy = tmp_path / "src" / "scan2morph"
+    shutil.copytree(PACKAGE_DIR, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    return copy
+
+
+def test_a_code_change_re_runs_the_stages_that_run_it_and_no_other(library_copy):
+    """A change of code in ``scan2morph.morph.pca`` changes the code fingerprint of morph, of the
+    store (made from morph's part) and of the report (which reads the PCA tables), not those
+    of the take stages or the modal stage; a docstring or comment edit changes none."""
+    before = code_fingerprints(CODE_STAGES, library_copy)
+    assert len(set(before.values())) == len(CODE_STAGES)
+    pca = library_copy / "morph" / "pca.py"
+    text = pca.read_text()
+    first = text.index('"""', text.index("def ")) + 3  # into the first function's docstring
+    edited = text[:first] + "Edited docstring. " + text[first:] + "\n# a comment\n"
+    pca.write_text(edited)
+    assert code_fingerprints(CODE_STAGES, library_copy) == before
+    pca.write_text(edited + "\nEXTRA_CONSTANT = 1\n")
+    after = code_fingerprints(CODE_STAGES, library_copy)
+    changed = {s for s in CODE_STAGES if after[s] != before[s]}
+    assert changed == {"morph", "store", "report_subject"}
+
+
+def test_the_reports_fingerprint_follows_the_viewer_bundle(library_copy):
+    """A report written without the 3D viewer is written again once the bundle is there, and
+    again when it is rebuilt differently; no other stage re-runs for it."""
+    from scan2morph.provenance import repository_dir
+
+    without = code_fingerprints(CODE_STAGES, library_copy)
+    bundle = repository_dir(library_copy) / "tools" / "viewer" / "dist" / "viewer.js"
+    bundle.parent.mkdir(parents=True)
+    bundle.write_text("export const viewer = 1;\n")
+    built = code_fingerprints(CODE_STAGES, library_copy)
+    bundle.write_text("export const viewer = 2;\n")
+    rebuilt = code_fingerprints(CODE_STAGES, library_copy)
+    assert len({without["report_subject"], built["report_subject"], rebuilt["report_subject"]}) == 3
+    for stage in set(CODE_STAGES) - {"report_subject"}:
+        assert without[stage] == built[stage] == rebuilt[stage]
+
+
+def test_package_data_re_runs_the_stages_that_read_it(library_copy):
+    """The landmark detector's model (``landmarks/model.npz``) and the report's templates are
+    part of the code of the stages that use them."""
+    stages = ("landmarks", *CODE_STAGES)
+    before = code_fingerprints(stages, library_copy)
+    with open(library_copy / "landmarks" / "model.npz", "ab") as f:
+        f.write(b"\0")
+    after = code_fingerprints(stages, library_copy)
+    assert {s for s in stages if after[s] != before[s]} == {"landmarks", "store"}
+    (library_copy / "report" / "templates" / "report.css").write_text("body {}\n")
+    again = code_fingerprints(stages, library_copy)
+    assert {s for s in stages if again[s] != after[s]} == {"report_subject"}
+
+
+def test_every_stage_names_the_modules_it_runs():
+    from scan2morph.provenance import module_file
+
+    assert set(STAGE_CODE) == {*TAKE_STAGES, *SUBJECT_STAGES}
+    for stage in STAGE_CODE:
+        assert all(module_file(m) for m in stage_code(stage)), stage
+    # the store's code is that of every stage that makes what it holds
+    assert set(stage_code("morph")) | set(stage_code("ingest")) <= set(stage_code("store"))

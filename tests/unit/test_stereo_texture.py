@@ -9,6 +9,8 @@ the skin, ``benchmarks/bench_real_user.py``) is in ``tests/workflow/test_real_us
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -72,6 +74,15 @@ def test_the_texture_shot_is_the_takes_colour_and_its_depth_is_the_pairs(small):
     assert paths.camera("neutral", "color_source") not in plain.datasets  # the store as before
     attrs = shot_part.attrs[paths.take("neutral")]
     assert len(attrs["input_sha256_color"]) == 64
+
+
+def test_the_stored_stereo_report_holds_no_wall_clock_timings(small):
+    """The take's ``stereo`` attribute (the reconstruction's report, copied into the store) is
+    the same in any two runs: its timings stay in the log."""
+    without = {r: p for r, p in small[2].items() if r not in ("color", "truth")}
+    reports = [_ingest(without)[0].attrs[paths.take("neutral")]["stereo"] for _ in range(2)]
+    assert "timings_s" not in reports[0] and reports[0]["coverage"] > 0.1
+    assert json.dumps(reports[0], sort_keys=True) == json.dumps(reports[1], sort_keys=True)
 
 
 def _only_its_own_shot_correlates(res: dict, shot: dict) -> None:

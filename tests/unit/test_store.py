@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import stat
@@ -13,6 +14,7 @@ import pytest
 
 from scan2morph import __version__
 from scan2morph.errors import InputError
+from scan2morph.provenance import run_provenance
 from scan2morph.store import (
     FORMAT_VERSION,
     load_layout,
@@ -58,10 +60,12 @@ def test_merge_and_validate(tmp_path):
     _take_part(tmp_path / "a.h5", "neutral")
     _take_part(tmp_path / "b.h5", "car", h=6, w=7)  # takes may differ in image size
     out = tmp_path / "s" / "s.h5"
-    merge_parts(out, [tmp_path / "a.h5", tmp_path / "b.h5"], "s", "cd" * 32)
+    provenance = run_provenance("ef" * 32)
+    merge_parts(out, [tmp_path / "a.h5", tmp_path / "b.h5"], "s", "cd" * 32, (), provenance)
     assert validate_store(out, _range_layout()) == []
     with open_store(out) as h5:
         assert h5.attrs["format_version"] == FORMAT_VERSION
+        assert h5.attrs["code_sha256"] == "ef" * 32
         assert h5.attrs["scan2morph_version"] == __version__
         assert h5.attrs["subject"] == "s"
         assert json.loads(h5.attrs["input_sha256"]) == {
@@ -153,3 +157,30 @@ def test_the_layout_names_the_format_it_describes():
 
     layout = load_layout(REPO / "schemas" / "store.layout.yaml")
     assert layout["format_version"] == FORMAT_VERSION
+
+
+def test_the_store_says_which_code_made_it(tmp_path):
+    """The store stage writes the code fingerprint of the stages that made it (the workflow's,
+    or its own without one), the git commit of the checkout (with whether it was dirty) and the
+    dependencies' versions; every root attribute it writes is one the layout names."""
+    from scan2morph.provenance import git_state
+    from scan2morph.stages import Subject, store
+    from scan2morph.stages.stage_job import code_fingerprints
+
+    write_part(tmp_path / "a.h5", {"/template/faces": np.zeros((1, 3), np.int64)})
+    layout = _range_layout()
+    params = store.Params.from_config({"quality": {}}).with_layout(layout)
+    subject = Subject("s", {"neutral": "neutral"}, {"neutral": "neutral"})
+    given = store.run(
+        None, subject, {"parts": [tmp_path / "a.h5"], "code_sha256": "ab" * 32}, params
+    )
+    own = store.run(None, subject, {"parts": [tmp_path / "a.h5"]}, params)
+    for part, code in ((given, "ab" * 32), (own, code_fingerprints(["store"])["store"])):
+        with h5py.File(io.BytesIO(part.files["store"]), "r") as h5:
+            attrs = dict(h5.attrs)
+        assert attrs["code_sha256"] == code
+        assert json.loads(attrs["dependencies"])["numpy"] == np.__version__
+        assert {k: attrs.get(k) for k in git_state()} == git_state()  # absent outside git
+        named = {*layout["root_attributes"], *layout["optional_root_attributes"]}
+        assert set(attrs) <= named
+        assert set(layout["root_attributes"]) <= set(attrs)

@@ -1,5 +1,6 @@
 # Input and params functions of the stage rules (ingest to accuracy): each takes the job's
 # wildcards and looks the subject or take up in the take table of common.smk.
+import functools
 from pathlib import Path
 
 from scan2morph.sheet import (
@@ -10,6 +11,7 @@ from scan2morph.sheet import (
     split_paths,
     synthetic_depth_frames,
 )
+from scan2morph.stages import stage_job
 
 
 # --- one take ---
@@ -316,3 +318,24 @@ def stage_files(pattern, stages):
         return {s: pattern.format(stage=s, **dict(wildcards.items())) for s in stages}
 
     return files
+
+
+@functools.cache
+def _code_fingerprints():
+    """Every stage's code fingerprint, computed once a run (about 1 CPU-s: the library's
+    modules parsed in this process, not in each job)."""
+    return stage_job.code_fingerprints(
+        [*stage_job.TAKE_STAGES, *stage_job.SUBJECT_STAGES]
+    )
+
+
+def code_prints(stages):
+    """A params function: the code fingerprint of each of ``stages``, stage -> hex
+    (:func:`scan2morph.stages.stage_job.code_fingerprints`). A job's stages take it into their
+    fingerprints, and as a param it makes Snakemake run the job again when the code one of its
+    stages runs has changed."""
+
+    def prints(wildcards):
+        return {s: _code_fingerprints()[s] for s in stages}
+
+    return prints

@@ -55,6 +55,7 @@ rule subject:
         config_sha256=CONFIG_SHA256,
         timings="benchmarks/rules",
         stage_order=get_rule_order,
+        code=code_prints(SUBJECT_STAGES),
         logs=stage_files("logs/{stage}/{subject}.log", SUBJECT_STAGES),
         benchmarks=SUBJECT_BENCHMARKS,
     script:

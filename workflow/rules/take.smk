@@ -83,6 +83,7 @@ rule take:
         template=config["template"],
         align=config["align"],
         refine=config["refine"],
+        code=code_prints(TAKE_STAGES),
         logs=stage_files("logs/{stage}/{subject}/{take}.log", TAKE_STAGES),
         benchmarks=stage_files(
             "benchmarks/rules/{stage}/{subject}/{take}.tsv", TAKE_STAGES

@@ -124,7 +124,7 @@ def run_store(j):
     out = j.out
     own = [out.template_part, out.consensus, out.motion, out.motion_noise, out.morph, out.modal]
     params = j.params("store").with_layout(load_layout(j.inp.layout))
-    data = {"parts": [*j.p.reads["store"], *own]}
+    data = {"parts": [*j.p.reads["store"], *own], "code_sha256": j.p.code["store"]}
     part = stage_module("store").run(None, j.subject, data, params)
     write_file(out.store, part.files["store"])
 
@@ -227,9 +227,10 @@ def print_params(j, stage):
 
 def stage_reads(j, stage, prints, sources):
     """What a stage's fingerprint is made of besides its Params: the subject's takes, this
-    script's checksum, the fingerprints of the subject's stages and the take parts it reads,
+    script's checksum, its code's fingerprint (``params.code``), the fingerprints of the subject's stages and the take parts it reads,
     and the checksums of the other files it reads (template, layout, truths, captions)."""
     reads = {"kinds": j.p.kinds, "labels": j.p.labels, "script": sources["script"]}
+    reads["code"] = j.p.code[stage]
     reads |= {s: prints.get(s) for s in OWN_READS[stage]}
     reads["parts"] = [part_fingerprint(f) for f in j.p.reads.get(stage, ())]
     if stage in TEMPLATE:

@@ -204,8 +204,9 @@ def job_context(snakemake):
 def stage_reads(j, stage, prints, neutral_prints, sources):
     """What a stage's fingerprint is made of besides its Params: its take's ids, the
     fingerprints of the parts it reads (the neutral's under ``neutral_``), the files' checksums
-    (``sources``: the input files for ingest, the template and this script for all)."""
-    reads = {"take": j.p.take, "script": sources["script"]}
+    (``sources``: the input files for ingest, the template and this script for all) and its
+    code's fingerprint (``params.code``)."""
+    reads = {"take": j.p.take, "script": sources["script"], "code": j.p.code[stage]}
     reads |= {s: prints.get(s) for s in READS[stage][0]}
     reads |= {f"neutral_{s}": neutral_prints.get(s) for s in neutral_reads(j.own, stage)}
     if stage == "ingest":  # the row as it is, not where it is in which sheet

@@ -10,14 +10,14 @@ from __future__ import annotations
 import json
 import platform
 import sys
-from collections.abc import Iterable, Sequence
-from importlib.metadata import PackageNotFoundError, version
+from collections.abc import Iterable
 from pathlib import Path
 
 import h5py
 import pandas as pd
 
 from scan2morph.errors import InputError
+from scan2morph.provenance import distribution_version
 
 #: The dependencies whose versions a report lists (display name -> distribution names tried).
 DEPENDENCIES: dict[str, tuple[str, ...]] = {
@@ -40,17 +40,16 @@ DEPENDENCIES: dict[str, tuple[str, ...]] = {
 }
 
 #: Root attributes of the store shown as provenance (docs/outputs.md).
-STORE_ATTRIBUTES = ("subject", "format_version", "scan2morph_version", "config_sha256", "units")
-
-
-def distribution_version(names: Sequence[str]) -> str | None:
-    """Version of the first installed distribution among ``names`` (None: none installed)."""
-    for name in names:
-        try:
-            return version(name)
-        except PackageNotFoundError:
-            continue
-    return None
+STORE_ATTRIBUTES = (
+    "subject",
+    "format_version",
+    "scan2morph_version",
+    "config_sha256",
+    "units",
+    "code_sha256",
+    "git_commit",
+    "git_dirty",
+)
 
 
 def software_versions(dependencies: dict[str, tuple[str, ...]] | None = None) -> dict[str, str]:

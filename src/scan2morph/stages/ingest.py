@@ -226,6 +226,8 @@ def _read_stereo(files, row, params: Params) -> _Scan:
             raise InputError(exc.source, f"{exc.problem}; {hint}") from None
         raise
     log.info("%s: stereo %s", row["take"], report)
+    # the wall-clock timings stay in the log: in the store two identical runs would differ
+    report = {k: v for k, v in report.items() if k != "timings_s"}
     # the colour's source is recorded when it is not the left image (the store as before)
     camera = {} if pair.color is None else {"color_source": TEXTURE_SHOT}
     if not complete(pair.landmarks):

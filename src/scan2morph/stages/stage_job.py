@@ -7,8 +7,9 @@ report) in one job per subject, each in one process, so that the interpreter and
 paid once a job instead of once a stage. A config change still re-runs only the stages it
 reaches: every stage's outputs are recorded with a *fingerprint*, the SHA-256 of the stage's
 name, its ``Params`` and what it reads (the fingerprints of the parts it reads, the checksums of
-the input files, the template's). A stage whose outputs exist with the fingerprint it would have
-now is not run: they are kept as they are, byte for byte. The fingerprints of a job's stages are
+the input files, the template's, and its code's fingerprint: :func:`code_fingerprints` of the
+library modules it runs, :data:`STAGE_CODE`). A stage whose outputs exist with the fingerprint
+it would have now is not run: they are kept as they are, byte for byte. The fingerprints of a job's stages are
 kept beside its parts in ``stages.json`` (:func:`read_fingerprints`, :func:`write_fingerprints`;
 another job reads a part's with :func:`part_fingerprint`); :func:`run_stages` runs a job's
 stages in order, each only when it is out of date.
@@ -49,6 +50,34 @@ SUBJECT_STAGES = (
     "figures",
     "report_subject",
 )
+
+#: The library modules each stage runs (its stage module and what the workflow's job calls
+#: for it); its code fingerprint covers these and every module they import
+#: (:func:`scan2morph.provenance.code_fingerprint`), besides :data:`TAKE_CODE` or
+#: :data:`SUBJECT_CODE`.
+STAGE_CODE: dict[str, tuple[str, ...]] = {
+    "ingest": ("scan2morph.stages.ingest",),
+    "repair": ("scan2morph.stages.repair",),
+    "landmarks": ("scan2morph.stages.landmarks", "scan2morph.io.landmarks"),
+    "fit": ("scan2morph.stages.fit", "scan2morph.io.obj"),
+    "align": ("scan2morph.stages.align",),
+    "refine": ("scan2morph.stages.refine",),
+    "template_part": ("scan2morph.stages.fit",),
+    "consensus": ("scan2morph.stages.consensus",),
+    "motion": ("scan2morph.stages.motion",),
+    "motion_noise": ("scan2morph.stages.motion_noise", "scan2morph.tables"),
+    "morph": ("scan2morph.stages.morph",),
+    "modal": ("scan2morph.stages.modal",),
+    "store": ("scan2morph.stages.store", "scan2morph.store.layout"),
+    "head_meshes": ("scan2morph.morph.head",),
+    "accuracy": ("scan2morph.stages.accuracy", "scan2morph.evaluate.truth"),
+    "figures": ("scan2morph.render.figures",),
+    "report_subject": ("scan2morph.stages.report", "scan2morph.report"),
+}
+#: What every take stage's job runs besides the stage: parts, template, take isolation.
+TAKE_CODE = ("scan2morph.store.hdf5", "scan2morph.template", "scan2morph.stages.failure")
+#: What every subject stage's job runs besides the stage: parts, template, the job's log.
+SUBJECT_CODE = ("scan2morph.store.hdf5", "scan2morph.template", "scan2morph.jobs")
 
 
 #: Columns of Snakemake's benchmark files (``benchmark:`` of a rule), in its order.
@@ -105,6 +134,44 @@ def fingerprint(stage: str, params: object, reads: Mapping[str, object]) -> str:
         default=repr,
     )
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def stage_code(stage: str) -> tuple[str, ...]:
+    """The library modules a stage runs (:data:`STAGE_CODE` with its job's :data:`TAKE_CODE` or
+    :data:`SUBJECT_CODE`); the store's are those of every stage that makes what it holds (the
+    take stages and the subject's up to the store), so that its ``code_sha256`` names them."""
+    if stage == "store":
+        makers = [*TAKE_STAGES, *SUBJECT_STAGES[: SUBJECT_STAGES.index("store") + 1]]
+        return tuple(sorted({m for s in makers if s != "store" for m in stage_code(s)}))
+    common = TAKE_CODE if stage in TAKE_STAGES else SUBJECT_CODE
+    return (*STAGE_CODE[stage], *common)
+
+
+def code_fingerprints(stages: Iterable[str], package_dir: Path | None = None) -> dict[str, str]:
+    """Each stage's code fingerprint: what its result depends on besides its settings and
+    inputs.
+
+    Parameters
+    ----------
+    stages : iterable of str
+        Stage names (:data:`STAGE_CODE`).
+    package_dir : Path, optional
+        The library's folder (default: this one's; tests give a copy).
+
+    Returns
+    -------
+    dict of str to str
+        Stage -> hex SHA-256 of the code of the modules it runs (:func:`stage_code`, with
+        every module they import, their package data and the files outside the package they
+        read, such as the report's viewer bundle: :func:`scan2morph.provenance.code_fingerprint`).
+        A module's docstrings and comments do not count. The
+        modules are parsed once per process (about 1 CPU-s for all of them): the workflow
+        computes these once a run and hands them to the jobs (``params.code``), where
+        :func:`fingerprint` takes them among a stage's reads.
+    """
+    from scan2morph.provenance import PACKAGE_DIR, code_fingerprint
+
+    return {s: code_fingerprint(stage_code(s), package_dir or PACKAGE_DIR) for s in stages}
 
 
 def read_fingerprints(path: str | Path) -> dict[str, str]:
@@ -319,11 +386,14 @@ __all__ = [
     "SUBJECT_STAGES",
     "TAKE_STAGES",
     "benchmarked",
+    "STAGE_CODE",
     "check_stage_params",
+    "code_fingerprints",
     "fingerprint",
     "part_fingerprint",
     "read_fingerprints",
     "run_stages",
+    "stage_code",
     "up_to_date",
     "write_benchmark",
     "write_fingerprints",

@@ -11,9 +11,11 @@ import h5py
 
 from scan2morph.errors import InputError
 from scan2morph.jobs import config_sha256
+from scan2morph.provenance import run_provenance
 from scan2morph.stages.failure import part_failures
 from scan2morph.stages.part import Part, Subject
 from scan2morph.stages.quality import subject_warnings, warning_datasets
+from scan2morph.stages.stage_job import code_fingerprints
 from scan2morph.store import paths, validate_store
 from scan2morph.store.hdf5 import merge_into, write_into
 from scan2morph.store.layout import describe
@@ -74,7 +76,10 @@ def run(
         ``parts``: the paths of every stage part of the subject (the store merges their files,
         attributes and failure records, not only their datasets). A take left out of its
         subject (a failure record in its parts, :mod:`scan2morph.stages.failure`) keeps only
-        that record in the store.
+        that record in the store. ``code_sha256`` (optional): the code fingerprint of the
+        stages that made the parts (the workflow's, computed once a run), else computed here
+        (:func:`scan2morph.stages.stage_job.code_fingerprints`); a root attribute with the
+        git commit and the dependencies' versions (:func:`scan2morph.provenance.run_provenance`).
     params : Params
 
     Returns
@@ -94,7 +99,7 @@ def run(
     buffer = io.BytesIO()
     with h5py.File(buffer, "w") as h5:
         exclude = [paths.take(t) for t in failed]
-        merge_into(h5, parts, subject.name, params.config_sha256, exclude=exclude)
+        merge_into(h5, parts, subject.name, params.config_sha256, exclude, _provenance(data))
         warnings = subject_warnings(h5, params.quality)
         write_into(h5, warning_datasets(warnings))
         describe(h5, dict(params.layout))
@@ -109,3 +114,9 @@ def run(
             "does not match schemas/store.layout.yaml: " + "; ".join(problems),
         )
     return Part(files={"store": buffer.getvalue(), "warnings": warnings})
+
+
+def _provenance(data: Mapping) -> dict[str, object]:
+    """The root attributes that say which code made the store."""
+    code = data.get("code_sha256") or code_fingerprints(["store"])["store"]
+    return run_provenance(code)

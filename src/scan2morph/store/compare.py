@@ -25,7 +25,14 @@ import numpy as np
 from scan2morph.store.hdf5 import attr_value, read_part
 
 #: Root attributes that describe the run rather than its numbers.
-RUN_ATTRIBUTES = ("scan2morph_version", "config_sha256")
+RUN_ATTRIBUTES = (
+    "scan2morph_version",
+    "config_sha256",
+    "code_sha256",
+    "dependencies",
+    "git_commit",
+    "git_dirty",
+)
 #: Attribute keys holding wall-clock times (they differ between any two runs).
 TIMING_KEYS = ("timings_s",)
 

@@ -27,7 +27,7 @@ from scan2morph.jobs import atomic_output
 from scan2morph.version import __version__
 
 #: Semantic version of the store layout (``schemas/store.layout.yaml``).
-FORMAT_VERSION = "1.10.0"
+FORMAT_VERSION = "1.11.0"
 #: Datasets at least this large are chunked and gzip-compressed.
 _COMPRESS_BYTES = 1 << 16
 
@@ -174,6 +174,7 @@ def merge_parts(
     subject: str,
     config_sha256: str,
     exclude: Iterable[str] = (),
+    provenance: Mapping[str, object] | None = None,
 ) -> None:
     """Merge stage parts into the subject's versioned store.
 
@@ -189,6 +190,9 @@ def merge_parts(
         Hash of the configuration the run used (root attribute).
     exclude : iterable of str, optional
         Groups left out of the store (e.g. ``/takes/car`` of a take left out of its subject).
+    provenance : mapping, optional
+        More root attributes: which code made the store
+        (:func:`scan2morph.provenance.run_provenance`).
 
     Notes
     -----
@@ -197,7 +201,7 @@ def merge_parts(
     take -> role -> hex digest.
     """
     with hdf5_output(path) as out:
-        merge_into(out, parts, subject, config_sha256, exclude)
+        merge_into(out, parts, subject, config_sha256, exclude, provenance)
 
 
 def merge_into(
@@ -206,6 +210,7 @@ def merge_into(
     subject: str,
     config_sha256: str,
     exclude: Iterable[str] = (),
+    provenance: Mapping[str, object] | None = None,
 ) -> None:
     """:func:`merge_parts` into an open (e.g. in-memory, :func:`hdf5_output`) file."""
     for part in parts:
@@ -216,6 +221,8 @@ def merge_into(
     out.attrs["config_sha256"] = config_sha256
     out.attrs["subject"] = subject
     out.attrs["units"] = "mm"
+    for key, value in (provenance or {}).items():
+        out.attrs[key] = value
     checksums = {
         take: {
             key.removeprefix("input_sha256_"): str(value)
