@@ -14,8 +14,10 @@ name comes from. A package's ``__init__`` counts only where something imports fr
 A module's code is its syntax tree without docstrings (``ast.dump``): an edit of a comment, a
 docstring or the layout changes nothing; any change of code changes the fingerprint (so does a
 new Python version, whose syntax trees may differ). Each module is parsed once per process and
-source (about 1 CPU-s for the whole library, so the workflow computes the stages' fingerprints
-once a run, in its main process, and hands them to the jobs).
+source, and what a parse found is kept between processes by the source's SHA-256
+(:func:`cache_file`, one file per Python version): parsing the whole library takes about 1
+CPU-s, reading it back a few ms, which every Snakemake (the run's, and under SLURM each job's)
+pays when it computes the stages' fingerprints.
 
 The store also records the git commit of the checkout the library runs from (with whether its
 tracked files differ from it) and the versions of its main dependencies (:func:`run_provenance`).
@@ -27,8 +29,10 @@ import ast
 import functools
 import hashlib
 import json
+import os
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
@@ -172,12 +176,64 @@ def _lazy_exports(tree: ast.AST, module: str) -> dict[str, str]:
     return out
 
 
+def cache_file() -> Path:
+    """Where parses are kept between processes: ``$XDG_CACHE_HOME/scan2morph`` (default
+    ``~/.cache/scan2morph``), ``parsed-{python}.json`` (syntax trees differ between versions)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "scan2morph" / f"parsed-{sys.implementation.cache_tag}.json"
+
+
+@functools.cache
+def _disk_cache() -> dict:
+    """The parses kept on disk (key -> [code, imports, lazy]); empty when there are none or
+    the file cannot be read (it is only a cache)."""
+    try:
+        data = json.loads(cache_file().read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _save_disk_cache() -> None:
+    """Write the parses to :func:`cache_file` (atomically; an unwritable place is no error);
+    past :data:`CACHE_ENTRIES` entries only those this process used are kept."""
+    kept = _disk_cache()
+    if len(kept) > CACHE_ENTRIES:
+        kept = {k: v for k, v in kept.items() if k in _PARSED_USED}
+    path = cache_file()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False) as tmp:
+            json.dump(kept, tmp)
+        os.replace(tmp.name, path)
+    except OSError:
+        pass
+    _PARSED_NEW.clear()
+
+
 @functools.cache
 def _parse(source: bytes, module: str, is_package: bool) -> tuple:
-    """A module's code hash, imports and lazy exports, parsed once per process and source."""
+    """A module's code hash, imports and lazy exports, parsed once per process and source, and
+    kept on disk by the source's SHA-256 (:func:`cache_file`)."""
+    key = f"{module}:{int(is_package)}:{hashlib.sha256(source).hexdigest()}"
+    _PARSED_USED.add(key)
+    kept = _disk_cache().get(key)
+    if isinstance(kept, list) and len(kept) == 3:
+        code, records, lazy = kept
+        return code, tuple((t, None if n is None else tuple(n)) for t, n in records), lazy
     tree = ast.parse(source)
     records = tuple(_import_records(tree, module, is_package))
-    return _tree_sha256(tree), records, _lazy_exports(tree, module)
+    parsed = (_tree_sha256(tree), records, _lazy_exports(tree, module))
+    _disk_cache()[key] = [parsed[0], [[t, n] for t, n in records], parsed[2]]
+    _PARSED_NEW.append(key)
+    return parsed
+
+
+#: Keys parsed in this process and not yet written to :func:`cache_file`; keys used by it.
+_PARSED_NEW: list[str] = []
+_PARSED_USED: set[str] = set()
+#: Entries the parse cache keeps before it drops those the writing process did not use.
+CACHE_ENTRIES = 5000
 
 
 def _parsed(module: str, package_dir: Path = PACKAGE_DIR) -> _Module | None:
@@ -305,6 +361,8 @@ def code_fingerprint(roots: Iterable[str], package_dir: Path = PACKAGE_DIR) -> s
         same for the same code in any process.
     """
     parsed = dict(sorted(_closure(roots, package_dir).items()))
+    if _PARSED_NEW:
+        _save_disk_cache()
     folders = sorted({p.folder for p in parsed.values()})
     data = {
         f"{folder.relative_to(package_dir).as_posix()}/{name}": digest

@@ -9,9 +9,11 @@ import subprocess
 
 import pytest
 
+from scan2morph import provenance
 from scan2morph.provenance import (
     OUTSIDE_FILES,
     PACKAGE_DIR,
+    cache_file,
     code_fingerprint,
     code_sha256,
     dependency_versions,
@@ -52,6 +54,17 @@ LIBRARY = {
     "lazy_pkg/g.py": "def other(x):\n    return x\n",
     "lazy_pkg/table.csv": "a,b\n",
 }
+
+
+@pytest.fixture(autouse=True)
+def parse_cache(tmp_path, monkeypatch):
+    """Each test with a parse cache of its own (the disk cache under ``tmp_path``), empty."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    provenance._parse.cache_clear()
+    provenance._disk_cache.cache_clear()
+    yield
+    provenance._parse.cache_clear()
+    provenance._disk_cache.cache_clear()
 
 
 @pytest.fixture
@@ -164,3 +177,28 @@ def test_run_provenance_names_the_code_the_commit_and_the_versions(tmp_path):
     assert json.loads(attrs["dependencies"])["numpy"]
     if (repository_dir() / ".git").exists() and shutil.which("git"):
         assert len(run_provenance("x")["git_commit"]) == 40
+
+
+def test_parses_are_kept_on_disk_and_a_bad_cache_is_only_a_cache(library, monkeypatch):
+    """A second process reads the parses back (here: no parse at all, the same fingerprint);
+    a changed module is parsed again; a cache file that is not JSON is ignored."""
+    first = code_fingerprint(["scan2morph.a"], library)
+    assert cache_file().is_file() and len(json.loads(cache_file().read_text())) >= 5
+    provenance._parse.cache_clear()  # a new process
+    provenance._disk_cache.cache_clear()
+
+    def no_parse(*args, **kwargs):
+        raise AssertionError("parsed again")
+
+    with monkeypatch.context() as m:
+        m.setattr(provenance.ast, "parse", no_parse)
+        assert code_fingerprint(["scan2morph.a"], library) == first
+        (library / "b.py").write_text("def one(x):\n    return x + 2\n")
+        with pytest.raises(AssertionError, match="parsed again"):
+            code_fingerprint(["scan2morph.a"], library)
+    changed = code_fingerprint(["scan2morph.a"], library)
+    assert changed != first
+    cache_file().write_text("not json")
+    provenance._parse.cache_clear()
+    provenance._disk_cache.cache_clear()
+    assert code_fingerprint(["scan2morph.a"], library) == changed

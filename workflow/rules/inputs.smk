@@ -322,8 +322,8 @@ def stage_files(pattern, stages):
 
 @functools.cache
 def _code_fingerprints():
-    """Every stage's code fingerprint, computed once a run (about 1 CPU-s: the library's
-    modules parsed in this process, not in each job)."""
+    """Every stage's code fingerprint, computed once a run (the library's modules parsed in
+    this process, not in each job: about 1 CPU-s, 0.08 with the parses kept on disk)."""
     return stage_job.code_fingerprints(
         [*stage_job.TAKE_STAGES, *stage_job.SUBJECT_STAGES]
     )

@@ -165,7 +165,8 @@ def code_fingerprints(stages: Iterable[str], package_dir: Path | None = None) ->
         every module they import, their package data and the files outside the package they
         read, such as the report's viewer bundle: :func:`scan2morph.provenance.code_fingerprint`).
         A module's docstrings and comments do not count. The
-        modules are parsed once per process (about 1 CPU-s for all of them): the workflow
+        modules are parsed once (about 1 CPU-s for all of them; kept on disk after that,
+        :func:`scan2morph.provenance.cache_file`): the workflow
         computes these once a run and hands them to the jobs (``params.code``), where
         :func:`fingerprint` takes them among a stage's reads.
     """
