@@ -189,7 +189,7 @@ def _disk_cache() -> dict:
     the file cannot be read (it is only a cache)."""
     try:
         data = json.loads(cache_file().read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RuntimeError):  # RuntimeError: no home folder
         return {}
     return data if isinstance(data, dict) else {}
 
@@ -200,13 +200,13 @@ def _save_disk_cache() -> None:
     kept = _disk_cache()
     if len(kept) > CACHE_ENTRIES:
         kept = {k: v for k, v in kept.items() if k in _PARSED_USED}
-    path = cache_file()
     try:
+        path = cache_file()
         path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False) as tmp:
             json.dump(kept, tmp)
         os.replace(tmp.name, path)
-    except OSError:
+    except (OSError, RuntimeError):
         pass
     _PARSED_NEW.clear()
 
