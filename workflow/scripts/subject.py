@@ -227,8 +227,9 @@ def print_params(j, stage):
 
 def stage_reads(j, stage, prints, sources):
     """What a stage's fingerprint is made of besides its Params: the subject's takes, this
-    script's checksum, its code's fingerprint (``params.code``), the fingerprints of the subject's stages and the take parts it reads,
-    and the checksums of the other files it reads (template, layout, truths, captions)."""
+    script's checksum, its code's fingerprint (``params.code``), the fingerprints of the
+    subject's stages and the take parts it reads, and the checksums of the other files it reads
+    (template, layout, truths, captions)."""
     reads = {"kinds": j.p.kinds, "labels": j.p.labels, "script": sources["script"]}
     reads["code"] = j.p.code[stage]
     reads |= {s: prints.get(s) for s in OWN_READS[stage]}

@@ -220,9 +220,10 @@ def modal_basis(
         Vertices of the upper face, thickened by ``params.upper_thickness_factor``.
     fixed : (V,) bool or Held, optional
         Vertices held fixed; default every boundary vertex. A :class:`Held` clamps its
-        ``clamped`` vertices and holds its ``sprung`` ones elastically (below). A face template has two boundary
-        loops, the outline and the mouth: the paper fixes the outline, and the lips must stay
-        free (fixing the mouth loop clamps the lips, and no mode can then move them). An
+        ``clamped`` vertices and holds its ``sprung`` ones elastically (below). A face template
+        has two boundary loops, the outline and the mouth: the paper fixes the outline, and the
+        lips must stay free (fixing the mouth loop clamps the lips, and no mode can then move
+        them). An
         all-False mask leaves the model free: its rigid-body motion, unless a skin term holds
         it, comes first as modes of (numerically) zero frequency. ``params.clamp_strip_mm``
         holds those on the mesh's boundary elastically instead (not in ``fixed_vertices``), or

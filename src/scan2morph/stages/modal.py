@@ -339,8 +339,8 @@ def natural_basis(
 def held(outline: OutlineChoice, params: Params) -> Held:
     """The clamped outline, and the rest of the outline held by the skin beyond the cut when
     the physics has a strip (``outline_strip_mm`` > 0; else it is free)."""
-    sprung = outline.outline & ~outline.fixed if params.modal.clamp_strip_mm else None
-    return Held(outline.fixed, np.zeros_like(outline.fixed) if sprung is None else sprung)
+    free = outline.outline & ~outline.fixed
+    return Held(outline.fixed, free if params.modal.clamp_strip_mm else np.zeros_like(free))
 
 
 def mimic(fine: Template, params: Params) -> np.ndarray | None:
@@ -366,7 +366,10 @@ def takes_motion(
 
 
 def still_fields(
-    subject: Subject, data: Mapping[str, np.ndarray], fields: Mapping[str, np.ndarray], params
+    subject: Subject,
+    data: Mapping[str, np.ndarray],
+    fields: Mapping[str, np.ndarray],
+    params: Params,
 ) -> list[np.ndarray]:
     """The fields whose stillness chooses the clamped outline and the tethered skin: the
     expressions' displacement ``fields`` (``still_from: expressions``, when there are any),
