@@ -34,12 +34,41 @@ def take_inputs(subject, take):
         if role in MULTI_PATH_COLUMNS:  # several files (or a folder): a list
             parts = split_paths(row[role])
             if parts and (row["synthetic"] or all(Path(p).exists() for p in parts)):
-                files[role] = parts
+                files[role] = parts if row["synthetic"] else frame_files(parts)
             continue
         path = row[role]
         if path and (row["synthetic"] or Path(path).is_file()):
             files[role] = path
     return files
+
+
+def frame_files(parts):
+    """The files a user's depth cell names, a folder's frames listed: each is tracked (a frame
+    replaced inside the folder re-runs its take) and checksummed. As named when they name no
+    frame (the subject's check job says why). Imported here: it imports OpenCV."""
+    from scan2morph.io.depth_image import depth_frame_paths
+
+    try:
+        return [str(p) for p in depth_frame_paths(parts)]
+    except InputError:
+        return parts
+
+
+def get_take_stamps(wildcards):
+    """Size (bytes) and modification time (ns) of each of a user take's input files, by sheet
+    column. Snakemake re-runs a take whose file is newer than its results; as a param, a file
+    replaced by one with an older time (``rsync -a``, ``cp -p``, an archive unpacked) re-runs it
+    too, and its stages, fingerprinted by the files' checksums, compute what the new content
+    changes. A synthetic take's files are the workflow's own outputs: none."""
+    if TAKES.loc[(wildcards.subject, wildcards.take), "synthetic"]:
+        return {}
+    return {
+        role: [
+            [os.stat(f).st_size, os.stat(f).st_mtime_ns]
+            for f in ([value] if isinstance(value, str) else value)
+        ]
+        for role, value in take_inputs(wildcards.subject, wildcards.take).items()
+    }
 
 
 def get_stereo_params(wildcards):
