@@ -1,11 +1,15 @@
-"""A user's RGB-D take whose ``depth`` names a folder of frames, through the workflow.
+"""A user's inputs as the workflow tracks them: an RGB-D take whose ``depth`` names a folder of
+frames, a textured OBJ mesh take (its MTL and texture beside it), files replaced by ones dated
+older than the results.
 
 docs/inputs.md: a take's depth may be one file, files separated by ``;`` or a folder (its depth
 files in name order). A folder reached the subject's check job as it was named, and checksumming
 it (a folder is not a file) stopped the subject with a traceback. The workflow now lists the
 folder's frames as the take's inputs: each is tracked, so a frame replaced inside the folder re-runs
 the take, also when its time is older than the results (as ``rsync -a``, ``cp -p`` or an archive
-leave it). A folder without frames leaves its take out with one line.
+leave it). A folder without frames leaves its take out with one line. An OBJ's MTL and texture
+were neither inputs of its take's job nor in its stages' fingerprints: a texture retouched (the
+OBJ the same, or written again unchanged) kept the old results.
 """
 
 from __future__ import annotations
@@ -17,16 +21,22 @@ from pathlib import Path
 
 import cv2
 import h5py
+import numpy as np
 import pytest
+import trimesh
 import yaml
+from PIL import Image
+from scipy.spatial import cKDTree
 
+from scan2morph.store import paths
+from scan2morph.synth.mesh_scan import make_mesh_take, write_landmarks3d
 from scan2morph.synth.rgbd import make_rgbd_take, write_rgbd_take
 from tests.support.configs import SMALL_RGBD
 from tests.support.workflow_api import REPO, run_workflow
 
 pytestmark = pytest.mark.slow
 
-HEADER = "subject\ttake\tkind\tlabel\tmodality\tdepth\tcolor\tintrinsics\tlandmarks\n"
+HEADER = "subject\ttake\tkind\tlabel\tmodality\tdepth\tcolor\tintrinsics\tmesh\tlandmarks\n"
 #: take, kind, frames (1: one file, else a folder of that many)
 TAKES = [("neutral", "neutral", 1), ("car", "viseme", 2)]
 
@@ -45,8 +55,32 @@ def _write_subject(scans, subject, empty_folder=False):
             for f in depth:
                 f.unlink()
             (folder / "depth" / "notes.txt").write_text("the frames were not copied\n")
-        own = [f"{subject}/{take}/{n}" for n in ("color.png", "intrinsics.yaml", "take.pts")]
+        own = [f"{subject}/{take}/{n}" for n in ("color.png", "intrinsics.yaml", "", "take.pts")]
         rows.append("\t".join([subject, take, kind, take, "rgbd", cell, *own]) + "\n")
+    return rows
+
+
+def _write_mesh_subject(scans, subject):
+    """A neutral and a viseme as OBJ + MTL + PNG, the vertex colours baked into the texture
+    through a cylindrical UV map, and their 3D landmarks."""
+    rows = []
+    for take, kind, _ in TAKES:
+        scan = make_mesh_take(subject, take, kind, take, seed=3)
+        folder = scans / subject / take
+        folder.mkdir(parents=True)
+        v = scan["vertices"]
+        centre = v.mean(axis=0)
+        u = np.arctan2(v[:, 0] - centre[0], v[:, 2] - centre[2]) / (2 * np.pi) + 0.5
+        uv = np.column_stack([u, (v[:, 1] - v[:, 1].min()) / np.ptp(v[:, 1])])
+        texel = (np.arange(256) + 0.5) / 256
+        tu, tv = np.meshgrid(texel, 1.0 - texel)  # image rows run down: row 0 at v = 1
+        _, nearest = cKDTree(uv).query(np.column_stack([tu.ravel(), tv.ravel()]))
+        image = Image.fromarray(scan["colors"][nearest].reshape(256, 256, 3))
+        visual = trimesh.visual.TextureVisuals(uv=uv, image=image)
+        trimesh.Trimesh(v, scan["faces"], visual=visual, process=False).export(folder / "scan.obj")
+        write_landmarks3d(folder / "scan.txt", scan["landmarks"])
+        cells = ["", "", "", f"{subject}/{take}/scan.obj", f"{subject}/{take}/scan.txt"]
+        rows.append("\t".join([subject, take, kind, take, "mesh", *cells]) + "\n")
     return rows
 
 
@@ -63,12 +97,13 @@ def run(tmp_path_factory):
     work = tmp_path_factory.mktemp("frames")
     scans = work / "scans"
     rows = _write_subject(scans, "bob") + _write_subject(scans, "eve", empty_folder=True)
+    rows += _write_mesh_subject(scans, "max")
     (scans / "subjects.tsv").write_text(HEADER + "".join(rows))
     configfile = work / "frames.yaml"
     configfile.write_text(
         yaml.safe_dump({"subjects": str(scans / "subjects.tsv"), "synthetic": {"subjects": 0}})
     )
-    targets = [f"results/{s}/{s}.h5" for s in ("bob", "eve")]
+    targets = [f"results/{s}/{s}.h5" for s in ("bob", "eve", "max")]
     ok = run_workflow(work, configfile, targets=targets)
     return work, configfile, targets, ok
 
@@ -77,7 +112,7 @@ def test_a_folder_of_frames_is_fused_and_each_frame_checksummed(run):
     work, _, _, ok = run
     assert ok
     with h5py.File(work / "results" / "bob" / "takes" / "car" / "ingest.h5") as h5:
-        attrs = h5["takes/car"].attrs
+        attrs = h5[paths.take("car")].attrs
         assert int(attrs["depth_frames"]) == 2
         assert len(str(attrs["input_sha256_depth"]).split(";")) == 2
 
@@ -110,3 +145,29 @@ def test_a_frame_replaced_with_an_older_time_reruns_its_take(run):
     assert car[0] == "ingest: run", car
     assert parts["car"].stat().st_mtime_ns != before["car"]
     assert parts["neutral"].stat().st_mtime_ns == before["neutral"]  # its job did not run
+
+
+def test_a_texture_retouched_beside_its_obj_reruns_its_take(run):
+    """The texture changed, the OBJ written again unchanged (newer, same bytes): the take's
+    ingest reads the new texture. Its MTL and texture are the job's inputs, and in the
+    fingerprint of its stages with the OBJ's checksum."""
+    work, configfile, targets, _ = run
+    folder = work / "scans" / "max" / "car"
+    (texture,) = folder.glob("*.png")
+    part = work / "results" / "max" / "takes" / "car" / "ingest.h5"
+    with h5py.File(part) as h5:
+        before = np.asarray(h5[paths.raw("car", "color")])
+    image = np.asarray(Image.open(texture)).copy()
+    image[..., 2] = 255 - image[..., 2]
+    Image.fromarray(image).save(texture)
+    plan = _snakemake(work, configfile, *targets, "-n", "--quiet", "rules")
+    assert "take" in plan.stdout, plan.stdout
+    obj = folder / "scan.obj"
+    obj.write_bytes(obj.read_bytes())  # written again: newer, the same bytes
+    assert run_workflow(work, configfile, targets=targets)
+    log = (work / "logs" / "take" / "max" / "car.log").read_text().splitlines()
+    assert log[0] == "ingest: run", log
+    with h5py.File(part) as h5:
+        after = np.asarray(h5[paths.raw("car", "color")])
+    face = (before > 0).any(axis=2)
+    assert np.abs(after[face].astype(int) - before[face].astype(int))[:, 2].mean() > 50
