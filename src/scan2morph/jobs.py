@@ -213,11 +213,22 @@ def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
 
 def files_sha256(files: Mapping[str, str | Path | Sequence[str | Path]]) -> dict[str, list[str]]:
     """:func:`sha256_file` of a take's input files, by sheet column (a column of several files,
-    an RGB-D take's depth frames: one each, in order)."""
+    an RGB-D take's depth frames: one each, in order). A folder (one that holds no frame its
+    reader takes, which the take's checks report) gets the SHA-256 of its files' names and
+    checksums, in name order."""
     return {
-        role: [sha256_file(f) for f in ([paths] if isinstance(paths, (str, Path)) else paths)]
+        role: [_sha256_path(f) for f in ([paths] if isinstance(paths, (str, Path)) else paths)]
         for role, paths in files.items()
     }
+
+
+def _sha256_path(path: str | Path) -> str:
+    if not Path(path).is_dir():
+        return sha256_file(path)
+    listing = "".join(
+        f"{f.name}\0{sha256_file(f)}\n" for f in sorted(Path(path).iterdir()) if f.is_file()
+    )
+    return hashlib.sha256(listing.encode()).hexdigest()
 
 
 def config_sha256(config: Mapping, leave_out: Iterable[str] = ()) -> str:

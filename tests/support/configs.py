@@ -15,6 +15,16 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+#: A 320 x 240 RGB-D sensor (the default optics at half the resolution; params of
+#: :func:`scan2morph.synth.rgbd.make_rgbd_take`), for quick takes.
+SMALL_RGBD = {
+    "width": 320,
+    "height": 240,
+    "focal_px": 300.0,
+    "color_width": 320,
+    "color_height": 240,
+    "color_focal_px": 310.0,
+}
 
 
 def load_yaml(path: str | Path) -> object:

@@ -15,16 +15,8 @@ from scan2morph.scan.fusion import FusionParams, fuse_depth_frames
 from scan2morph.sheet import read_sheet, sheet_problems
 from scan2morph.stages import Take, ingest
 from scan2morph.synth.rgbd import make_rgbd_take, write_rgbd_take
+from tests.support.configs import SMALL_RGBD
 
-#: A 320 x 240 sensor (the default's optics at half the resolution), for speed.
-SMALL = {
-    "width": 320,
-    "height": 240,
-    "focal_px": 300.0,
-    "color_width": 320,
-    "color_height": 240,
-    "color_focal_px": 310.0,
-}
 FRAMES = 3
 TAKE = ("s1", "smile", "expression", "smile1", 3)
 
@@ -32,14 +24,14 @@ TAKE = ("s1", "smile", "expression", "smile1", 3)
 @pytest.fixture(scope="module")
 def take():
     """A smile of three depth frames with the head moving between them."""
-    return make_rgbd_take(*TAKE, SMALL | {"frames": FRAMES})
+    return make_rgbd_take(*TAKE, SMALL_RGBD | {"frames": FRAMES})
 
 
 @pytest.fixture(scope="module")
 def true_depth():
     """The first frame's depth without noise, flying pixels or quantisation (same pose), mm."""
     r = make_rgbd_take(
-        *TAKE, SMALL | {"noise_mm_at_1m": 0.0, "flying_fraction": 0.0, "depth_unit_mm": 0.02}
+        *TAKE, SMALL_RGBD | {"noise_mm_at_1m": 0.0, "flying_fraction": 0.0, "depth_unit_mm": 0.02}
     )
     z = r["depth"].astype(float) * 0.02
     return np.where((z > 0) & (z < 1000.0), z, np.nan)  # the head, not the wall

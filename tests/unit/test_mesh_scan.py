@@ -3,6 +3,8 @@ camera into a range take, checked against the mesh itself and the synthetic trut
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -208,3 +210,44 @@ def test_skin_texture_is_fixed_to_the_skin(scan):
     # and there is detail to correlate: freckles and mottling of a few per cent and more
     assert np.median(np.abs(r_neutral[ok] - 1.0)) > 0.02
     assert np.percentile(r_neutral[ok], 1) < 0.9  # freckles: red down by up to 27 %
+
+
+def test_a_meshs_companion_files_are_the_ones_its_reader_reads(textured, tmp_path):
+    """An OBJ's MTL and texture (a comment naming another MTL is not read), a glTF's external
+    buffer and image (not its data: URI), none for a GLB: each changes the take's checksum."""
+    from scan2morph.io.mesh_file import companion_files
+    from scan2morph.stages.check import input_checksums
+
+    d, _, _ = textured
+    obj = d / "face.obj"
+    (mtl,) = d.glob("*.mtl")
+    (png,) = d.glob("*.png")
+    assert companion_files(obj) == [mtl, png]
+    assert companion_files(d / "face.glb") == [] and companion_files(d / "absent.obj") == []
+    commented = tmp_path / "commented.obj"
+    commented.write_bytes(b"# mtllib other.mtl\n" + obj.read_bytes())
+    (tmp_path / "other.mtl").write_text("newmtl x\n")
+    assert companion_files(commented) == []  # its own mtllib names a file not beside it
+    gltf = tmp_path / "face.gltf"
+    (tmp_path / "mesh data.bin").write_bytes(b"\0" * 8)
+    (tmp_path / "skin.png").write_bytes(png.read_bytes())
+    doc = {
+        "buffers": [
+            {"uri": "mesh%20data.bin"},
+            {"uri": "data:application/octet-stream;base64,AA=="},
+        ],
+        "images": [{"uri": "skin.png"}, {"uri": "absent.png"}],
+    }
+    gltf.write_text(json.dumps(doc))
+    assert companion_files(gltf) == [tmp_path / "mesh data.bin", tmp_path / "skin.png"]
+    before = input_checksums({"mesh": str(obj)})
+    assert input_checksums({"mesh": str(d / "face.glb")})["mesh"] != before["mesh"]
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for f in (obj, mtl, png):
+        copy.joinpath(f.name).write_bytes(f.read_bytes())
+    assert input_checksums({"mesh": str(copy / obj.name)}) == before  # content, not place
+    image = np.asarray(Image.open(copy / png.name)).copy()
+    image[0, 0] = 255 - image[0, 0]
+    Image.fromarray(image).save(copy / png.name)
+    assert input_checksums({"mesh": str(copy / obj.name)}) != before

@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from scan2morph.jobs import sha256_file
+from scan2morph.jobs import files_sha256, sha256_file
 from scan2morph.report.provenance import stage_timings
 from scan2morph.sheet import validate_config
 from scan2morph.stages import (
@@ -288,3 +288,19 @@ def test_every_stage_names_the_modules_it_runs():
         assert all(module_file(m) for m in stage_code(stage)), stage
     # the store's code is that of every stage that makes what it holds
     assert set(stage_code("morph")) | set(stage_code("ingest")) <= set(stage_code("store"))
+
+
+def test_a_folder_named_as_an_input_is_checksummed_by_its_files(tmp_path):
+    """A depth folder that holds no frame reaches the checks as the folder (they say why the take
+    is left out): its checksum is its files' names and contents, and reading it as a file
+    (IsADirectoryError) stopped the subject's check job with a traceback."""
+    folder = tmp_path / "depth"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("no frames\n")
+    one = tmp_path / "one.png"
+    one.write_bytes(b"png")
+    before = files_sha256({"depth": [str(folder)], "color": str(one)})
+    assert before["color"] == [sha256_file(one)] and len(before["depth"][0]) == 64
+    assert files_sha256({"depth": [folder]}) == {"depth": before["depth"]}
+    (folder / "notes.txt").write_text("no frames yet\n")
+    assert files_sha256({"depth": [folder]})["depth"] != before["depth"]

@@ -90,19 +90,21 @@ def test_fiducial_set_of_each_kind():
 
 
 def test_the_stores_config_hash_leaves_out_what_never_reaches_a_store():
-    """The report page's settings and the sweep table's path reach no store: changing them
-    leaves the store's parameters (and so its fingerprint: it is not rebuilt, nor is any stage
-    after it) as they were; a key a stage reads changes them."""
+    """The report page's settings, the sweep table's path and the sheet's path reach no store:
+    changing them (moving the sheet) leaves the store's parameters (and so its fingerprint: it
+    is not rebuilt, nor is any stage after it) as they were; a key a stage reads changes them."""
     from scan2morph.jobs import config_sha256
     from scan2morph.stages import store
 
     base = store.Params.from_config(CONFIG)
     report = CONFIG | {"report": CONFIG["report"] | {"thumbnail_px": 120}}
     swept = CONFIG | {"sweeps": "my_sweeps.tsv"}
+    moved = CONFIG | {"subjects": "/elsewhere/subjects.tsv"}
     assert store.Params.from_config(report) == base == store.Params.from_config(swept)
+    assert store.Params.from_config(moved) == base
     smoother = CONFIG | {"smoothing": CONFIG["smoothing"] | {"iterations": 10}}
     assert store.Params.from_config(smoother) != base
-    kept = {k: v for k, v in CONFIG.items() if k not in ("report", "sweeps")}
+    kept = {k: v for k, v in CONFIG.items() if k not in ("report", "sweeps", "subjects")}
     assert base.config_sha256 == config_sha256(kept)
     assert config_sha256(CONFIG, ["sweeps"]) != config_sha256(CONFIG)
 

@@ -8,6 +8,7 @@ accuracy (the oracle), a changed one changes only what it should.
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -493,6 +494,24 @@ def test_another_sweep_table_reruns_no_subject(sweep, tmp_path):
     assert res.returncode == 0, res.stderr
     rules = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
     assert "sweep" in rules and not {r for r in rules if r.startswith("subject")}, rules
+
+
+@pytest.mark.slow
+def test_a_moved_sheet_reruns_no_subject(sweep, tmp_path):
+    """The same sheet in another folder (``subjects:`` naming it): nothing to compute, so no
+    subject job runs. The sheet's path was in the config's hash, and moving the sheet re-ran
+    every subject job and rebuilt every store, report and figure after it."""
+    moved = tmp_path / "elsewhere" / "subjects.tsv"
+    moved.parent.mkdir()
+    shutil.copy(sweep.path("subjects.tsv"), moved)
+    mine = tmp_path / "moved.yaml"
+    mine.write_text(
+        yaml.safe_dump(yaml.safe_load(sweep.configfile.read_text()) | {"subjects": str(moved)})
+    )
+    res = _snakemake(sweep.work, mine, "-n", "--quiet", "rules")
+    assert res.returncode == 0, res.stderr
+    rules = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
+    assert not {r for r in rules if r.startswith(("subject", "check", "take"))}, res.stdout
 
 
 @pytest.mark.slow

@@ -78,8 +78,9 @@ PROBLEMS = sheet_problems(
     reserved=[*config["morph"]["blends"], *config["morph"]["pca_blends"]],
 )
 # a subject job's trigger on the config (its stages' fingerprints decide what runs): the sweep
-# table's path reaches no subject stage, and switching tables re-ran every subject
-CONFIG_SHA256 = config_sha256(config, ["sweeps"])
+# table's path and the sheet's reach no subject stage (a take's rows and files are its jobs' own
+# inputs), and switching tables or moving the sheet re-ran every subject
+CONFIG_SHA256 = config_sha256(config, ["sweeps", "subjects"])
 # when this run started: a job log written since is this run's (report_left_out)
 RUN_START = time.time()
 

@@ -3,6 +3,7 @@
 import functools
 from pathlib import Path
 
+from scan2morph.io.mesh_file import companion_files
 from scan2morph.sheet import (
     MULTI_PATH_COLUMNS,
     SYNTHETIC_LANDMARKS,
@@ -34,12 +35,55 @@ def take_inputs(subject, take):
         if role in MULTI_PATH_COLUMNS:  # several files (or a folder): a list
             parts = split_paths(row[role])
             if parts and (row["synthetic"] or all(Path(p).exists() for p in parts)):
-                files[role] = parts
+                files[role] = parts if row["synthetic"] else frame_files(parts)
             continue
         path = row[role]
         if path and (row["synthetic"] or Path(path).is_file()):
             files[role] = path
     return files
+
+
+def frame_files(parts):
+    """The files a user's depth cell names, a folder's frames listed: each is tracked (a frame
+    replaced inside the folder re-runs its take) and checksummed. As named when they name no
+    frame (the subject's check job says why). Imported here: it imports OpenCV."""
+    from scan2morph.io.depth_image import depth_frame_paths
+
+    try:
+        return [str(p) for p in depth_frame_paths(parts)]
+    except InputError:
+        return parts
+
+
+def companions(subject, take):
+    """The files a user's mesh file names (an OBJ's MTL and texture, a glTF's buffers and
+    images: ``scan2morph.io.mesh_file.companion_files``), as the take input ``companions``
+    (none for other takes): a texture changed beside its mesh re-runs the take."""
+    if TAKES.loc[(subject, take), "synthetic"]:
+        return {}
+    mesh = take_inputs(subject, take).get("mesh")
+    found = companion_files(mesh) if mesh else []
+    return {"companions": [str(f) for f in found]} if found else {}
+
+
+def get_take_stamps(wildcards):
+    """Size (bytes) and modification time (ns) of each of a user take's input files (with its
+    mesh's :func:`companions`), by sheet column. Snakemake re-runs a take whose file is newer
+    than its results; as a param, a file replaced by one with an older time (``rsync -a``,
+    ``cp -p``, an archive unpacked) re-runs it too, and its stages, fingerprinted by the files'
+    checksums, compute what the new content changes. A synthetic take's files are the
+    workflow's own outputs: none."""
+    subject, take = wildcards.subject, wildcards.take
+    if TAKES.loc[(subject, take), "synthetic"]:
+        return {}
+    files = take_inputs(subject, take) | companions(subject, take)
+    return {
+        role: [
+            [os.stat(f).st_size, os.stat(f).st_mtime_ns]
+            for f in ([value] if isinstance(value, str) else value)
+        ]
+        for role, value in files.items()
+    }
 
 
 def get_stereo_params(wildcards):
@@ -291,11 +335,12 @@ def get_truth_files(wildcards):
 
 # --- the take job ---
 def get_take_job_inputs(wildcards):
-    """A take job's input files (:func:`take_inputs`) and, for a take other than the neutral,
-    the neutral's parts its stages read (``neutral_repair``, ``neutral_landmarks``,
-    ``neutral_fit``), their fingerprints (``neutral_stages``) and the record of the neutral's
-    finished job (``neutral_job``)."""
+    """A take job's input files (:func:`take_inputs`, a mesh's :func:`companions`) and, for a
+    take other than the neutral, the neutral's parts its stages read (``neutral_repair``,
+    ``neutral_landmarks``, ``neutral_fit``), their fingerprints (``neutral_stages``) and the
+    record of the neutral's finished job (``neutral_job``)."""
     files = take_inputs(wildcards.subject, wildcards.take)
+    files |= companions(wildcards.subject, wildcards.take)
     neutral = get_neutral_take(wildcards)
     if not neutral or wildcards.take == neutral:
         return files

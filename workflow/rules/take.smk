@@ -73,6 +73,7 @@ rule take:
         runtime=12,
     params:
         row=take_row,
+        stamps=get_take_stamps,
         problems=get_take_problems,
         roles=get_take_roles,
         stereo=get_stereo_params,

@@ -16,7 +16,7 @@ from scan2morph.errors import InputError
 from scan2morph.io import write_landmarks3d, write_obj, write_pts
 from scan2morph.io.landmarks import LEFT_OUT
 from scan2morph.io.obj import write_failed_obj
-from scan2morph.jobs import files_sha256, sha256_file, write_json
+from scan2morph.jobs import sha256_file, write_json
 from scan2morph.sheet import PATH_SEPARATOR, ROW_LOCATION, mm_per_unit
 from scan2morph.stages import Take, align, check, fit, ingest, landmarks, refine, repair
 from scan2morph.stages.failure import run_take_job
@@ -243,8 +243,9 @@ def file_checksums(j, scriptdir, files):
     return {
         "script": sha256_file(Path(scriptdir) / "take.py"),
         "template": sha256_file(j.inp.template),
-        # the files that exist (a missing one is the check's problem: ingest refuses the take)
-        "files": files_sha256(files),
+        # the files that exist (a missing one is the check's problem: ingest refuses the take),
+        # a mesh's MTL and texture with it
+        "files": check.input_checksums(files),
     }
 
 

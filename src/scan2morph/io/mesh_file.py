@@ -8,9 +8,11 @@ material with a 2 x 2 grey image. These checks find such files from their text a
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import unquote
 
 from scan2morph.errors import InputError
 
@@ -279,9 +281,80 @@ def referenced_textures(path: Path) -> list[str]:
         return names
     for _, mtl_path in _mtl_files(path, text):
         if mtl_path is not None:
-            mtl_text = mtl_path.read_text(encoding="utf-8", errors="replace")
-            names += re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", mtl_text, flags=re.M)
+            names += _map_kd(mtl_path)
     return names
+
+
+def _map_kd(mtl: Path) -> list[str]:
+    """The texture names of an MTL file's ``map_Kd`` lines (their options left out)."""
+    text = mtl.read_text(encoding="utf-8", errors="replace")
+    return re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", text, flags=re.M)
+
+
+def companion_files(path: str | Path) -> list[Path]:
+    """The files besides a mesh file that its reader reads, those that exist: an OBJ's MTL files
+    (``mtllib``) and their textures (``map_Kd``), a glTF's external buffers and images. A
+    change to any of them changes the take (the workflow tracks them with the mesh file).
+
+    Parameters
+    ----------
+    path : str or Path
+        The mesh file (another format, or a file that cannot be read: none).
+
+    Returns
+    -------
+    list of Path
+        In the order the file names them, each once.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return []
+    suffix = path.suffix.lower()
+    found = _obj_companions(path, data) if suffix == ".obj" else []
+    if suffix == ".gltf":
+        found = _gltf_companions(path, data)
+    return list(dict.fromkeys(f for f in found if f.is_file()))
+
+
+def _obj_companions(path: Path, data: bytes) -> list[Path]:
+    """An OBJ's MTL files and their textures, found by a scan of its bytes (no decoding: the
+    workflow asks this of every mesh take when it builds its jobs)."""
+    names, at = [], data.find(b"mtllib")
+    while at >= 0:
+        start = data.rfind(b"\n", 0, at) + 1
+        end = data.find(b"\n", at)
+        if not data[start:at].strip():  # the statement begins its line
+            line = data[at + 6 : len(data) if end < 0 else end].split(b"#", 1)[0]
+            names.append(line.decode("utf-8", errors="replace").strip())
+        at = data.find(b"mtllib", at + 6)
+    out = []
+    for _, mtl in _mtl_files(path, "".join(f"mtllib {n}\n" for n in names if n)):
+        if mtl is not None:
+            out.append(mtl)
+            for name in _map_kd(mtl):
+                out += [mtl.parent / name, mtl.parent / Path(name).name]
+    return out
+
+
+def _gltf_companions(path: Path, data: bytes) -> list[Path]:
+    """A glTF's external buffers and images (``uri`` not a ``data:`` URI)."""
+    try:
+        doc = json.loads(data)
+    except ValueError:
+        return []
+    if not isinstance(doc, dict):
+        return []
+    uris = [
+        item.get("uri")
+        for key in ("buffers", "images")
+        for item in (doc.get(key) or [])
+        if isinstance(item, dict)
+    ]
+    return [
+        path.parent / unquote(u) for u in uris if isinstance(u, str) and not u.startswith("data:")
+    ]
 
 
 __all__ = [
@@ -289,6 +362,7 @@ __all__ = [
     "check_format",
     "check_obj_materials",
     "check_obj_text",
+    "companion_files",
     "load_problem",
     "obj_materials",
     "referenced_textures",

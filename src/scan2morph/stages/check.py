@@ -12,12 +12,15 @@ subject; a problem of another take leaves that take out (its ingest records why,
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from scan2morph.errors import InputError
 from scan2morph.io.check import take_file_problems
+from scan2morph.io.mesh_file import companion_files
+from scan2morph.jobs import files_sha256, sha256_file
 from scan2morph.sheet import mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.template import Template
@@ -141,7 +144,7 @@ def take_verdict(
     sheet : sequence of str
         The sheet's problems of the take (found when the workflow starts: always current).
     checksums : mapping sheet column -> list of str
-        The SHA-256 of the take's files now (:func:`scan2morph.jobs.files_sha256`).
+        The SHA-256 of the take's files now (:func:`input_checksums`).
 
     Returns
     -------
@@ -156,4 +159,29 @@ def take_verdict(
     return "; ".join(run(None, take, Params()).files["problems"])
 
 
-__all__ = ["Params", "check_subject", "run", "take_problem", "take_verdict"]
+def input_checksums(files: Mapping[str, object]) -> dict[str, list[str]]:
+    """SHA-256 of a take's input files as their readers read them, by sheet column
+    (:func:`scan2morph.jobs.files_sha256`): a mesh file's with the files it names folded in
+    (:func:`scan2morph.io.mesh_file.companion_files`: an OBJ's MTL and texture, a glTF's
+    buffers and images), so that a texture changed beside an unchanged OBJ changes the take.
+
+    Parameters
+    ----------
+    files : mapping sheet column -> path or list of paths
+        The take's input files that exist.
+
+    Returns
+    -------
+    dict of str to list of str
+        Hex digests; one per file, in order.
+    """
+    out = files_sha256(files)
+    mesh = files.get("mesh")
+    others = companion_files(mesh) if isinstance(mesh, str) else []
+    if others:
+        text = out["mesh"][0] + "".join(f"\n{f.name}\0{sha256_file(f)}" for f in others)
+        out["mesh"] = [hashlib.sha256(text.encode()).hexdigest()]
+    return out
+
+
+__all__ = ["Params", "check_subject", "input_checksums", "run", "take_problem", "take_verdict"]

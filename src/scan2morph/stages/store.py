@@ -23,10 +23,11 @@ from scan2morph.template import Template
 
 #: Config section this stage reads.
 SECTIONS = ("quality",)
-#: The config's top-level keys that never reach a store: the report page's settings and the
-#: sweep table's path (left out of the store's ``config_sha256``, so that changing them does not
-#: rebuild the store and every stage after it).
-UNSTORED = ("report", "sweeps")
+#: The config's top-level keys that never reach a store: the report page's settings, the sweep
+#: table's path and the sheet's path (a take's rows and files reach it as the take's own inputs;
+#: left out of the store's ``config_sha256``, so that changing them, or moving the sheet, does
+#: not rebuild the store and every stage after it).
+UNSTORED = ("report", "sweeps", "subjects")
 log = logging.getLogger("scan2morph")
 
 
