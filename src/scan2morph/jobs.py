@@ -6,6 +6,7 @@ The workflow's adapter scripts call :func:`run_job`; it never imports snakemake.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import logging
 import math
@@ -13,6 +14,7 @@ import os
 import re
 import secrets
 import sys
+import zipfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -209,6 +211,32 @@ def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
         for block in iter(lambda: fh.read(chunk), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def write_npz(path: str | os.PathLike[str], arrays: Mapping[str, object]) -> None:
+    """Write a compressed ``.npz`` with fixed zip timestamps, so equal arrays give equal bytes
+    (``numpy.savez_compressed`` stamps each member with the time of writing).
+
+    Deflate level 1: a take's truth (55k vertices) in 0.04 s instead of level 6's 0.13 s, 2%
+    larger.
+
+    Parameters
+    ----------
+    path : str or path-like
+    arrays : mapping str -> array-like
+        Written as ``{name}.npy`` members, in the mapping's order (no pickles).
+    """
+    import numpy as np  # here: most of this module's users need no numpy
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in arrays:
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            data = io.BytesIO()
+            np.lib.format.write_array(data, np.asarray(arrays[name]), allow_pickle=False)
+            zf.writestr(info, data.getvalue(), compresslevel=1)
+    Path(path).write_bytes(buf.getvalue())
 
 
 def files_sha256(files: Mapping[str, str | Path | Sequence[str | Path]]) -> dict[str, list[str]]:

@@ -35,6 +35,7 @@ from scan2morph.stages import (
 )
 from scan2morph.stages.stage_job import (
     BENCHMARK_COLUMNS,
+    JOB_CODE,
     STAGE_CODE,
     SUBJECT_STAGES,
     TAKE_STAGES,
@@ -249,6 +250,25 @@ def test_a_code_change_re_runs_the_stages_that_run_it_and_no_other(library_copy)
     assert changed == {"morph", "store", "report_subject"}
 
 
+def test_the_jobs_outside_takes_and_subjects_follow_their_code(library_copy):
+    """The synthetic subjects' generator, the template's builder and the cohort's summary: a
+    change to the code they run re-runs them (a changed generator regenerated nothing, so the
+    default cohort kept the old scans). The generator's reaches no take's or subject's stage
+    (the landmark detector's writer imported it, so every take's landmarks, and all after them,
+    followed the generator's code)."""
+    jobs = [*JOB_CODE, *CODE_STAGES]
+    before = code_fingerprints(jobs, library_copy)
+    skin = library_copy / "synth" / "skin.py"
+    skin.write_text(skin.read_text() + "\nEXTRA_CONSTANT = 1\n")
+    after = code_fingerprints(jobs, library_copy)
+    assert {s for s in jobs if after[s] != before[s]} == {"synth"}  # no take's, no subject's
+    mesh = library_copy / "template" / "mesh.py"
+    mesh.write_text(mesh.read_text() + "\nEXTRA_CONSTANT = 1\n")
+    again = code_fingerprints(jobs, library_copy)
+    assert {"template", "ingest", "refine"} <= {s for s in jobs if again[s] != after[s]}
+    assert again["cohort"] == after["cohort"]
+
+
 def test_the_reports_fingerprint_follows_the_viewer_bundle(library_copy):
     """A report written without the 3D viewer is written again once the bundle is there, and
     again when it is rebuilt differently; no other stage re-runs for it."""
@@ -284,7 +304,8 @@ def test_every_stage_names_the_modules_it_runs():
     from scan2morph.provenance import module_file
 
     assert set(STAGE_CODE) == {*TAKE_STAGES, *SUBJECT_STAGES}
-    for stage in STAGE_CODE:
+    assert not set(JOB_CODE) & set(STAGE_CODE)
+    for stage in [*STAGE_CODE, *JOB_CODE]:
         assert all(module_file(m) for m in stage_code(stage)), stage
     # the store's code is that of every stage that makes what it holds
     assert set(stage_code("morph")) | set(stage_code("ingest")) <= set(stage_code("store"))

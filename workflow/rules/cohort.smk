@@ -26,5 +26,6 @@ rule cohort:
     params:
         subjects=SUBJECTS,
         accuracy_subjects=synthetic_subjects(),
+        code=code_prints(["cohort"]),
     script:
         "../scripts/cohort.py"

@@ -370,7 +370,7 @@ def _code_fingerprints():
     """Every stage's code fingerprint, computed once a run (the library's modules parsed in
     this process, not in each job: about 1 CPU-s, 0.08 with the parses kept on disk)."""
     return stage_job.code_fingerprints(
-        [*stage_job.TAKE_STAGES, *stage_job.SUBJECT_STAGES]
+        [*stage_job.TAKE_STAGES, *stage_job.SUBJECT_STAGES, *stage_job.JOB_CODE]
     )
 
 

@@ -66,5 +66,6 @@ for _group in synth_groups():
             rig=config["synthetic"]["stereo"]["rig"],
             rgbd=config["synthetic"]["rgbd"]["sensor"],
             mesh=config["synthetic"]["mesh"]["scanner"],
+            code=code_prints(["synth"]),
         script:
             "../scripts/synth_subject.py"

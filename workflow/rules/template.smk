@@ -16,5 +16,6 @@ rule template:
     params:
         # the library's fiducial sets, saved with the template: a change rebuilds it
         fiducial_sets=FIDUCIAL_SETS,
+        code=code_prints(["template"]),
     script:
         "../scripts/template.py"

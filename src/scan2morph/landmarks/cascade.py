@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.jobs import write_npz
 from scan2morph.tol import N_IBUG
 
 #: iBUG-68 index of each point's mirror image (0-based).
@@ -244,8 +245,6 @@ def ridge_path(
 def save(model: Cascade, path: str | Path) -> None:
     """Write a cascade as ``.npz`` (weights float16, the training record as JSON text; the
     patterns' sides only when one is not 3, so the committed model's file is as before)."""
-    from scan2morph.synth.cohort import write_npz
-
     arrays = {"init": model.init, "radii": np.array([s.radius for s in model.stages])}
     if any(s.side != 3 for s in model.stages):
         arrays["sides"] = np.array([s.side for s in model.stages])

@@ -74,6 +74,14 @@ STAGE_CODE: dict[str, tuple[str, ...]] = {
     "figures": ("scan2morph.render.figures",),
     "report_subject": ("scan2morph.stages.report", "scan2morph.report"),
 }
+#: The jobs outside a take's and a subject's, by name, and the library modules they run (with
+#: every module those import, as :data:`STAGE_CODE`'s): the synthetic subjects' generator, the
+#: template's builder, the cohort's summary. A change to their code runs them again.
+JOB_CODE: dict[str, tuple[str, ...]] = {
+    "synth": ("scan2morph.stages.synth",),
+    "template": ("scan2morph.template",),
+    "cohort": ("scan2morph.report",),
+}
 #: What every take stage's job runs besides the stage: parts, template, take isolation.
 TAKE_CODE = ("scan2morph.store.hdf5", "scan2morph.template", "scan2morph.stages.failure")
 #: What every subject stage's job runs besides the stage: parts, template, the job's log.
@@ -139,10 +147,13 @@ def fingerprint(stage: str, params: object, reads: Mapping[str, object]) -> str:
 def stage_code(stage: str) -> tuple[str, ...]:
     """The library modules a stage runs (:data:`STAGE_CODE` with its job's :data:`TAKE_CODE` or
     :data:`SUBJECT_CODE`); the store's are those of every stage that makes what it holds (the
-    take stages and the subject's up to the store), so that its ``code_sha256`` names them."""
+    take stages and the subject's up to the store), so that its ``code_sha256`` names them; a
+    job of :data:`JOB_CODE`'s, its modules."""
     if stage == "store":
         makers = [*TAKE_STAGES, *SUBJECT_STAGES[: SUBJECT_STAGES.index("store") + 1]]
         return tuple(sorted({m for s in makers if s != "store" for m in stage_code(s)}))
+    if stage in JOB_CODE:
+        return (*JOB_CODE[stage], "scan2morph.jobs")
     common = TAKE_CODE if stage in TAKE_STAGES else SUBJECT_CODE
     return (*STAGE_CODE[stage], *common)
 
@@ -384,6 +395,7 @@ def check_stage_params(config: Mapping) -> None:
 
 __all__ = [
     "BENCHMARK_COLUMNS",
+    "JOB_CODE",
     "SUBJECT_STAGES",
     "TAKE_STAGES",
     "benchmarked",

@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from scan2morph.errors import InputError, writing
 from scan2morph.geometry import vertex_normals
+from scan2morph.jobs import write_npz
 from scan2morph.synth.cohort import (
     AIM,
     _check_result,
@@ -32,7 +33,6 @@ from scan2morph.synth.cohort import (
     articulated_head,
     check_take,
     numeric_params,
-    write_npz,
 )
 from scan2morph.synth.convention import landmark_vertices
 from scan2morph.synth.features import SEG_BROW, SEG_EYE, SEG_HAIR, SEG_SKIN

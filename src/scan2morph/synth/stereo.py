@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import vertex_normals  # noqa: E402
 from scan2morph.io.calibration import StereoCalibration  # noqa: E402
+from scan2morph.jobs import write_npz
 from scan2morph.open3d_light import open3d, triangle_scene  # noqa: E402
 from scan2morph.synth.cohort import (  # noqa: E402
     AIM,
@@ -48,7 +49,6 @@ from scan2morph.synth.cohort import (  # noqa: E402
     check_take,
     numeric_params,
     text_seed,
-    write_npz,
 )
 from scan2morph.synth.convention import landmark_vertices  # noqa: E402
 from scan2morph.synth.head import SEG_SKIN, HeadModel, Identity  # noqa: E402

@@ -8,25 +8,27 @@ from pathlib import Path
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.jobs import write_npz
 from scan2morph.template.mesh import TEMPLATE_FORMAT, Template
 
 
 def save_template(path: str | Path, template: Template) -> None:
-    """Write a template as ``.npz`` (arrays + JSON for the dicts)."""
+    """Write a template as ``.npz`` (arrays + JSON for the dicts): the same template gives the
+    same bytes (:func:`scan2morph.jobs.write_npz`), so that building it again re-runs no take."""
     fid = {k: [v[0].tolist(), v[1].tolist()] for k, v in template.fiducials.items()}
-    np.savez_compressed(
-        Path(path),
-        format=np.int64(TEMPLATE_FORMAT),
-        vertices=template.vertices,
-        faces=template.faces,
-        ibug_xy=template.ibug_xy,
-        ibug_vertex=template.ibug_vertex,
-        boundary=template.boundary,
-        mouth_boundary=template.mouth_boundary,
-        level=np.int64(template.level),
-        fiducials=json.dumps(fid),
-        named=json.dumps(template.named),
-    )
+    arrays = {
+        "format": np.int64(TEMPLATE_FORMAT),
+        "vertices": template.vertices,
+        "faces": template.faces,
+        "ibug_xy": template.ibug_xy,
+        "ibug_vertex": template.ibug_vertex,
+        "boundary": template.boundary,
+        "mouth_boundary": template.mouth_boundary,
+        "level": np.int64(template.level),
+        "fiducials": json.dumps(fid),
+        "named": json.dumps(template.named),
+    }
+    write_npz(Path(path), arrays)
 
 
 def load_template(path: str | Path) -> Template:
