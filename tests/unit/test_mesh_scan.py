@@ -228,6 +228,17 @@ def test_a_meshs_companion_files_are_the_ones_its_reader_reads(textured, tmp_pat
     commented.write_bytes(b"# mtllib other.mtl\n" + obj.read_bytes())
     (tmp_path / "other.mtl").write_text("newmtl x\n")
     assert companion_files(commented) == []  # its own mtllib names a file not beside it
+    # a bounded scan (the workflow's, each time it builds its jobs) reads the head only: an
+    # mtllib line beyond it, and a larger glTF, give none; a PLY or GLB is not read at all
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for f in (obj, mtl, png):
+        copy.joinpath(f.name).write_bytes(f.read_bytes())
+    late = copy / "late.obj"
+    late.write_bytes(b"# a long header\n" * 100 + obj.read_bytes())  # mtllib after 1600 bytes
+    assert companion_files(late) == [copy / mtl.name, copy / png.name]
+    assert companion_files(late, max_bytes=1000) == []
+    assert companion_files(obj, max_bytes=1000) == [mtl, png]
     gltf = tmp_path / "face.gltf"
     (tmp_path / "mesh data.bin").write_bytes(b"\0" * 8)
     (tmp_path / "skin.png").write_bytes(png.read_bytes())
@@ -240,12 +251,9 @@ def test_a_meshs_companion_files_are_the_ones_its_reader_reads(textured, tmp_pat
     }
     gltf.write_text(json.dumps(doc))
     assert companion_files(gltf) == [tmp_path / "mesh data.bin", tmp_path / "skin.png"]
+    assert companion_files(gltf, max_bytes=10) == []
     before = input_checksums({"mesh": str(obj)})
     assert input_checksums({"mesh": str(d / "face.glb")})["mesh"] != before["mesh"]
-    copy = tmp_path / "copy"
-    copy.mkdir()
-    for f in (obj, mtl, png):
-        copy.joinpath(f.name).write_bytes(f.read_bytes())
     assert input_checksums({"mesh": str(copy / obj.name)}) == before  # content, not place
     image = np.asarray(Image.open(copy / png.name)).copy()
     image[0, 0] = 255 - image[0, 0]

@@ -55,6 +55,10 @@ def frame_files(parts):
         return parts
 
 
+# how much of each mesh file a Snakemake start reads for its MTL (a scan may be hundreds of MB)
+COMPANION_SCAN_BYTES = 1 << 20
+
+
 def companions(subject, take):
     """The files a user's mesh file names (an OBJ's MTL and texture, a glTF's buffers and
     images: ``scan2morph.io.mesh_file.companion_files``), as the take input ``companions``
@@ -62,7 +66,7 @@ def companions(subject, take):
     if TAKES.loc[(subject, take), "synthetic"]:
         return {}
     mesh = take_inputs(subject, take).get("mesh")
-    found = companion_files(mesh) if mesh else []
+    found = companion_files(mesh, max_bytes=COMPANION_SCAN_BYTES) if mesh else []
     return {"companions": [str(f) for f in found]} if found else {}
 
 

@@ -291,7 +291,7 @@ def _map_kd(mtl: Path) -> list[str]:
     return re.findall(r"^\s*map_Kd\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", text, flags=re.M)
 
 
-def companion_files(path: str | Path) -> list[Path]:
+def companion_files(path: str | Path, max_bytes: int | None = None) -> list[Path]:
     """The files besides a mesh file that its reader reads, those that exist: an OBJ's MTL files
     (``mtllib``) and their textures (``map_Kd``), a glTF's external buffers and images. A
     change to any of them changes the take (the workflow tracks them with the mesh file).
@@ -300,6 +300,11 @@ def companion_files(path: str | Path) -> list[Path]:
     ----------
     path : str or Path
         The mesh file (another format, or a file that cannot be read: none).
+    max_bytes : int, optional
+        Read at most this much of the file (the workflow asks this of every mesh take each
+        time it builds its jobs, and a scan can be hundreds of MB): an OBJ's ``mtllib`` lines
+        in its first ``max_bytes`` (exporters write them at the top), and a larger glTF's
+        none. Default: the whole file.
 
     Returns
     -------
@@ -307,20 +312,22 @@ def companion_files(path: str | Path) -> list[Path]:
         In the order the file names them, each once.
     """
     path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".obj", ".gltf"):
+        return []
     try:
-        data = path.read_bytes()
+        if suffix == ".gltf" and max_bytes is not None and path.stat().st_size > max_bytes:
+            return []
+        with open(path, "rb") as fh:
+            data = fh.read(-1 if max_bytes is None else max_bytes)
     except OSError:
         return []
-    suffix = path.suffix.lower()
-    found = _obj_companions(path, data) if suffix == ".obj" else []
-    if suffix == ".gltf":
-        found = _gltf_companions(path, data)
+    found = _obj_companions(path, data) if suffix == ".obj" else _gltf_companions(path, data)
     return list(dict.fromkeys(f for f in found if f.is_file()))
 
 
 def _obj_companions(path: Path, data: bytes) -> list[Path]:
-    """An OBJ's MTL files and their textures, found by a scan of its bytes (no decoding: the
-    workflow asks this of every mesh take when it builds its jobs)."""
+    """An OBJ's MTL files and their textures, found by a scan of its bytes (no decoding)."""
     names, at = [], data.find(b"mtllib")
     while at >= 0:
         start = data.rfind(b"\n", 0, at) + 1
