@@ -1157,6 +1157,33 @@ def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, small_sc
     np.testing.assert_array_equal(read_mesh(tmp_path / "stray.obj").faces, f)
 
 
+def test_textured_obj_cut_inside_its_last_face_line_names_the_line(small_scan, tmp_path):
+    """A textured OBJ cut inside a face line's last reference (``f 9/9 5/5 1``: three vertices,
+    one without its texture coordinate) made trimesh drop every UV of the file: the renderer
+    then crashed with a traceback and the take's job failed, stopping its subject (audit7).
+    Refused naming the line, by the check and the reader, as is such a line inside a file."""
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import read_mesh
+
+    obj = _textured_obj(small_scan, tmp_path)
+    text = obj.read_text()
+    last = text.rstrip("\n").rsplit("\n", 1)[1]  # f a/a b/b c/c
+    cut = text.rstrip("\n")[: -len(last)] + last.rsplit("/", 1)[0].rsplit(" ", 1)[0] + " 1"
+    obj.write_text(cut)
+    line = cut.count("\n") + 1
+    match = rf"face.obj: face line {line}: vertex references of different forms .*cut short"
+    (problem,) = take_file_problems("mesh", {"mesh": obj})
+    assert re.search(match, problem), problem
+    with pytest.raises(InputError, match=match):
+        read_mesh(obj)
+    lines = text.split("\n")
+    inner = next(i for i, t in enumerate(lines) if t.startswith("f ")) + 2
+    lines[inner] = lines[inner].rsplit("/", 1)[0]  # f a/a b/b c
+    obj.write_text("\n".join(lines))
+    with pytest.raises(InputError, match=rf"face line {inner + 1}: vertex references"):
+        read_mesh(obj)
+
+
 def test_mesh_file_of_another_format_or_cut_short(mesh_files, tmp_path):
     """A PLY named .obj read as an OBJ without faces ('a point cloud?'); a binary PLY cut short
     gave trimesh's words."""
