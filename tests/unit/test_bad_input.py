@@ -696,6 +696,29 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
     assert "iBUG" not in exc.value.problem.replace("(iBUG 37, 46)", "")
 
 
+def test_rgbd_depth_scale_off_by_10_without_landmarks_is_named(tmp_path):
+    """Without a landmark file nothing checked an RGB-D take's depth scale: off by 10, the
+    repair (its thresholds in mm) cut the face apart and the detector refused it as a "profile
+    view" with a 658 mm nose (audit7). A face whose depth lies outside a depth camera's
+    range, that the detector finds at the depth scale x 0.1 or x 10, names the scale; the same
+    take with the right scale reads."""
+    from scan2morph.synth.rgbd import make_rgbd_take, write_rgbd_take
+
+    res = make_rgbd_take("s1", "neutral", "neutral", "neutral", seed=3)
+    names = (("depth", "d.png"), ("color", "c.png"), ("intrinsics", "i.yaml"))
+    files = {k: tmp_path / f for k, f in names}
+    write_rgbd_take(res, *files.values(), tmp_path / "l.pts", tmp_path / "truth.npz")
+    _rgbd(files)  # the right scale, no landmarks
+    for factor, expected in ((10.0, "x 0.1"), (0.1, "x 10")):
+
+        def edit(doc, factor=factor):
+            doc["depth_scale_mm"] *= factor
+
+        bad = _edit_yaml(files["intrinsics"], tmp_path / "bad.yaml", edit)
+        with pytest.raises(InputError, match=rf"depth_scale_mm: .* \({expected}\) .*a face"):
+            _rgbd(files, intrinsics=bad)
+
+
 @pytest.mark.parametrize(
     "edit, match",
     [
