@@ -696,27 +696,27 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
     assert "iBUG" not in exc.value.problem.replace("(iBUG 37, 46)", "")
 
 
-def test_rgbd_depth_scale_off_by_10_without_landmarks_is_named(tmp_path):
+def test_rgbd_depth_scale_off_by_10_without_landmarks_is_named(rgbd_files, tmp_path):
     """Without a landmark file nothing checked an RGB-D take's depth scale: off by 10, the
     repair (its thresholds in mm) cut the face apart and the detector refused it as a "profile
-    view" with a 658 mm nose (audit7). A face whose depth lies outside a depth camera's
-    range, that the detector finds at the depth scale x 0.1 or x 10, names the scale; the same
-    take with the right scale reads."""
-    from scan2morph.synth.rgbd import make_rgbd_take, write_rgbd_take
+    view" with a 658 mm nose (audit7). A nearest object outside the depths a face is detected
+    at, that the scale x 0.1, 10, 0.001 or 1000 puts there, names the scale, by the subject's
+    check and the ingest; the right scale reads."""
+    from scan2morph.io.check import take_file_problems
 
-    res = make_rgbd_take("s1", "neutral", "neutral", "neutral", seed=3)
-    names = (("depth", "d.png"), ("color", "c.png"), ("intrinsics", "i.yaml"))
-    files = {k: tmp_path / f for k, f in names}
-    write_rgbd_take(res, *files.values(), tmp_path / "l.pts", tmp_path / "truth.npz")
+    files = {k: v for k, v in rgbd_files.items() if k != "landmarks"}
     _rgbd(files)  # the right scale, no landmarks
-    for factor, expected in ((10.0, "x 0.1"), (0.1, "x 10")):
+    for factor, expected in ((10.0, "x 0.1"), (0.1, "x 10"), (1e-3, "x 1000")):
 
         def edit(doc, factor=factor):
             doc["depth_scale_mm"] *= factor
 
         bad = _edit_yaml(files["intrinsics"], tmp_path / "bad.yaml", edit)
-        with pytest.raises(InputError, match=rf"depth_scale_mm: .* \({expected}\) .*a face"):
+        match = rf"bad.yaml: depth_scale_mm: .* \({expected}\) it is \d+ mm away"
+        with pytest.raises(InputError, match=match):
             _rgbd(files, intrinsics=bad)
+        (problem,) = take_file_problems("rgbd", files | {"intrinsics": bad})
+        assert re.search(match, problem), problem
 
 
 @pytest.mark.parametrize(

@@ -12,7 +12,6 @@ plane fitted to the surface between ``PLANE_MM`` of the nose tip.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -257,58 +256,6 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
                 f"take's depth_scale_mm x {mm:g} in its intrinsics",
             ) from None
         raise
-
-
-#: Depths at which a depth camera sees a face, mm (the nearest object's median depth): outside
-#: them a depth scale off by 10 or 1000 is looked for (:func:`check_depth_scale`).
-FACE_DEPTH_MM = (150.0, 4000.0)
-
-
-def check_depth_scale(xyz: np.ndarray, depth_scale_mm: float, intrinsics: str | Path) -> None:
-    """Refuse a depth camera's take whose depth scale is off by 10 or 1000, without landmarks.
-
-    Only when the nearest object's depth lies outside :data:`FACE_DEPTH_MM` (no cost
-    otherwise): the grid is searched for a face (:func:`_find_face`) at the depth scale times
-    0.1, 10, 0.001 and 1000, each that puts it within those depths; a face found names the
-    scale. With a landmark file the landmarks' face check does so
-    (:func:`~scan2morph.io.rgbd.read_rgbd_take`); the repair, whose thresholds are in mm, would
-    otherwise cut the face apart first.
-
-    Parameters
-    ----------
-    xyz : (H, W, 3) float
-        The take's grid in the depth camera's frame, mm as the scale gives them (NaN = none).
-    depth_scale_mm : float
-        The intrinsics' ``depth_scale_mm``.
-    intrinsics : str or path-like
-        The intrinsics file, named in the error.
-
-    Raises
-    ------
-    InputError
-        ``depth_scale_mm: ...`` with the scale that gives a face.
-    """
-    xyz = np.asarray(xyz, dtype=np.float64)
-    if int(np.isfinite(xyz).all(axis=2).sum()) < MIN_PIXELS:
-        return
-    depth = _head_depth(xyz)
-    lo, hi = FACE_DEPTH_MM
-    if lo <= depth <= hi:
-        return
-    scale = _grid_scale(xyz)
-    for factor in (0.1, 10.0, 0.001, 1000.0):
-        if not lo <= depth * factor <= hi or not _searchable(scale / factor, xyz.shape[:2]):
-            continue
-        try:
-            _find_face(xyz * factor, str(intrinsics))
-        except InputError:
-            continue
-        raise InputError(
-            intrinsics,
-            f"depth_scale_mm: {depth_scale_mm:g} puts the nearest object {depth:.0f} mm from "
-            f"the camera; with depth_scale_mm = {depth_scale_mm * factor:g} (x {factor:g}) it "
-            f"is a face at {depth * factor:.0f} mm: is the depth scale in mm per unit?",
-        )
 
 
 def _grid_scale(xyz: np.ndarray) -> float:

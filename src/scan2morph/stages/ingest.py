@@ -33,7 +33,6 @@ from scan2morph.io.mesh_scan import SHADED, read_mesh_take
 from scan2morph.io.rgbd import read_rgbd_take
 from scan2morph.io.take import range_in_mm
 from scan2morph.jobs import sha256_file
-from scan2morph.landmarks.face import check_depth_scale
 from scan2morph.scan import reconstruct_stereo
 from scan2morph.scan.fusion import FusionParams, fuse_depth_frames
 from scan2morph.scan.view import shaded_image
@@ -158,8 +157,6 @@ def _read_rgbd(files, row, params: Params) -> _Scan:
     scan = read_rgbd_take(
         files["depth"], files["color"], files["intrinsics"], files.get("landmarks"), fuse
     )
-    if files.get("landmarks") is None:  # the landmarks' face check names a wrong scale
-        check_depth_scale(scan.xyz, scan.intrinsics.depth_scale_mm, files["intrinsics"])
     cam = scan.intrinsics.color
     camera = dict(K=cam.K, distortion=cam.D, pose=scan.intrinsics.color_from_depth, size=cam.size)
     attrs = {"depth_frames": 1}
