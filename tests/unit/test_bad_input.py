@@ -696,6 +696,29 @@ def test_rgbd_depth_scale_off_by_1000_is_named(rgbd_files, tmp_path, factor, exp
     assert "iBUG" not in exc.value.problem.replace("(iBUG 37, 46)", "")
 
 
+def test_rgbd_depth_scale_off_by_10_without_landmarks_is_named(rgbd_files, tmp_path):
+    """Without a landmark file nothing checked an RGB-D take's depth scale: off by 10, the
+    repair (its thresholds in mm) cut the face apart and the detector refused it as a "profile
+    view" with a 658 mm nose (audit7). A nearest object outside the depths a face is detected
+    at, that the scale x 0.1, 10, 0.001 or 1000 puts there, names the scale, by the subject's
+    check and the ingest; the right scale reads."""
+    from scan2morph.io.check import take_file_problems
+
+    files = {k: v for k, v in rgbd_files.items() if k != "landmarks"}
+    _rgbd(files)  # the right scale, no landmarks
+    for factor, expected in ((10.0, "x 0.1"), (0.1, "x 10"), (1e-3, "x 1000")):
+
+        def edit(doc, factor=factor):
+            doc["depth_scale_mm"] *= factor
+
+        bad = _edit_yaml(files["intrinsics"], tmp_path / "bad.yaml", edit)
+        match = rf"bad.yaml: depth_scale_mm: .* \({expected}\) it is \d+ mm away"
+        with pytest.raises(InputError, match=match):
+            _rgbd(files, intrinsics=bad)
+        (problem,) = take_file_problems("rgbd", files | {"intrinsics": bad})
+        assert re.search(match, problem), problem
+
+
 @pytest.mark.parametrize(
     "edit, match",
     [
@@ -1155,6 +1178,33 @@ def test_obj_cut_short_or_with_0_based_faces_names_the_line(mesh_files, small_sc
     ones = "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f)
     (tmp_path / "stray.obj").write_text(vertices + "f 1 2\n" + ones)
     np.testing.assert_array_equal(read_mesh(tmp_path / "stray.obj").faces, f)
+
+
+def test_textured_obj_cut_inside_its_last_face_line_names_the_line(small_scan, tmp_path):
+    """A textured OBJ cut inside a face line's last reference (``f 9/9 5/5 1``: three vertices,
+    one without its texture coordinate) made trimesh drop every UV of the file: the renderer
+    then crashed with a traceback and the take's job failed, stopping its subject (audit7).
+    Refused naming the line, by the check and the reader, as is such a line inside a file."""
+    from scan2morph.io.check import take_file_problems
+    from scan2morph.io.mesh_scan import read_mesh
+
+    obj = _textured_obj(small_scan, tmp_path)
+    text = obj.read_text()
+    last = text.rstrip("\n").rsplit("\n", 1)[1]  # f a/a b/b c/c
+    cut = text.rstrip("\n")[: -len(last)] + last.rsplit("/", 1)[0].rsplit(" ", 1)[0] + " 1"
+    obj.write_text(cut)
+    line = cut.count("\n") + 1
+    match = rf"face.obj: face line {line}: vertex references of different forms .*cut short"
+    (problem,) = take_file_problems("mesh", {"mesh": obj})
+    assert re.search(match, problem), problem
+    with pytest.raises(InputError, match=match):
+        read_mesh(obj)
+    lines = text.split("\n")
+    inner = next(i for i, t in enumerate(lines) if t.startswith("f ")) + 2
+    lines[inner] = lines[inner].rsplit("/", 1)[0]  # f a/a b/b c
+    obj.write_text("\n".join(lines))
+    with pytest.raises(InputError, match=rf"face line {inner + 1}: vertex references"):
+        read_mesh(obj)
 
 
 def test_mesh_file_of_another_format_or_cut_short(mesh_files, tmp_path):

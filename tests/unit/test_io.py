@@ -178,6 +178,19 @@ def test_color_round_trip_and_errors(tmp_path):
         read_color(tmp_path / "c.tiff")
 
 
+def test_a_jpeg_cut_short_is_refused(tmp_path):
+    """OpenCV decodes a JPEG cut short (a truncated copy or download) without an error, the
+    missing rows filled grey: an RGB-D take's colour image cut to a third ran the whole
+    pipeline, its landmarks detected on the grey (audit7). Refused; a whole JPEG reads."""
+    rgb = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    write_color(tmp_path / "c.jpg", rgb)
+    assert read_color(tmp_path / "c.jpg").shape == rgb.shape
+    data = (tmp_path / "c.jpg").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=r"cut.jpg: color: the image is cut short"):
+        read_color(tmp_path / "cut.jpg")
+
+
 def test_range_take_checks_sizes_and_landmarks(tmp_path):
     v, u = np.mgrid[0:20, 0:30].astype(np.float64)
     xyz = np.dstack([u, v, np.full_like(u, 600.0)])  # a plane (all zeros is a placeholder)

@@ -182,6 +182,17 @@ def test_profile_view():
         detect(color, xyz, "s/profile")
 
 
+def test_a_face_in_another_unit_is_named_so():
+    """A range take in metres (or an RGB-D take whose depth_scale_mm is 10 times too large)
+    without a landmark file was refused as "no face found" or as a "profile view" (a 658 mm
+    nose), not naming the unit that the sheet's check names for a clicked take (audit7). The
+    face the detector finds at the scale named is the evidence; a blank grid names none."""
+    color, xyz = _scene()
+    for factor, unit in ((1e-3, "metres"), (10.0, "0.1 mm")):
+        with pytest.raises(InputError, match=rf"s/unit: no face found in mm: .* in {unit}"):
+            detect(color, xyz * factor, "s/unit")
+
+
 def test_mismatched_grids():
     color, xyz = _scene()
     with pytest.raises(InputError, match="color: expected 480 x 640"):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import read_stereo_calibration
-from scan2morph.io.depth_image import depth_frame_paths, read_depth_frames
+from scan2morph.io.depth_image import check_face_depth, depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.mesh_scan import check_mesh_size, read_landmarks3d, read_mesh
@@ -117,6 +117,9 @@ def _cross_check(
         )
         if loaded.get("landmarks") is not None:
             check_landmarks_inside(loaded["landmarks"], *intr.color.size, files["landmarks"])
+        else:  # with landmarks the ingest's face check names a wrong scale
+            depth = loaded["depth"][0] * intr.depth_scale_mm
+            check_face_depth(depth, intr.depth_scale_mm, files["intrinsics"])
 
 
 __all__ = ["READERS", "take_file_problems"]

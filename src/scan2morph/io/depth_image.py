@@ -156,3 +156,52 @@ __all__ = [
     "read_depth_frames",
     "write_depth_png",
 ]
+
+
+#: Depths at which a depth camera sees a face it can be detected in, mm (the nearest object's
+#: median depth; beyond 4 m a face is under 0.4 px per mm for a colour camera of a 60-degree
+#: field of view, too small to detect): outside them a depth scale off by 10 or 1000 is named.
+FACE_DEPTH_MM = (150.0, 4000.0)
+#: The nearest object: the points this far behind the nearest (1st percentile) depth, mm.
+NEAREST_OBJECT_MM = 200.0
+
+
+def check_face_depth(z: np.ndarray, depth_scale_mm: float, intrinsics: str | Path) -> None:
+    """Refuse a depth image whose nearest object lies where no face is detected, when the depth
+    scale times 0.1, 10, 0.001 or 1000 puts it at a face's depth (:data:`FACE_DEPTH_MM`).
+
+    For takes without a landmark file (with one, the landmarks' face size names the scale):
+    the repair, whose thresholds are in mm, would otherwise cut the face apart and the
+    detector refuse it for another reason (a "profile view").
+
+    Parameters
+    ----------
+    z : (H, W) float
+        Depth along the camera's axis, mm as the scale gives them (NaN or 0 = no data).
+    depth_scale_mm : float
+        The intrinsics' ``depth_scale_mm``.
+    intrinsics : str or path-like
+        The intrinsics file, named in the error.
+
+    Raises
+    ------
+    InputError
+        ``depth_scale_mm: ...`` with the scale that puts the face at a face's depth.
+    """
+    z = np.asarray(z, dtype=np.float64)[::4, ::4]
+    z = z[np.isfinite(z) & (z > 0)]
+    if len(z) == 0:
+        return
+    near = float(np.percentile(z, 1))
+    depth = float(np.median(z[z < near + NEAREST_OBJECT_MM]))
+    lo, hi = FACE_DEPTH_MM
+    fits = [f for f in (0.1, 10.0, 0.001, 1000.0) if lo <= depth * f <= hi]
+    if lo <= depth <= hi or not fits:
+        return
+    raise InputError(
+        intrinsics,
+        f"depth_scale_mm: {depth_scale_mm:g} puts the nearest object {depth:.0f} mm from the "
+        f"camera (a face is detected {lo:g}-{hi:g} mm away); with depth_scale_mm = "
+        f"{depth_scale_mm * fits[0]:g} (x {fits[0]:g}) it is {depth * fits[0]:.0f} mm away: is "
+        "the depth scale in mm per unit?",
+    )

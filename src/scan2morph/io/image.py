@@ -32,6 +32,8 @@ def read_color(path: str | Path) -> np.ndarray:
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(path, "color: cannot decode the image (corrupt or not an image)")
+    if path.suffix.lower() in (".jpg", ".jpeg"):
+        _check_whole_jpeg(path)
     if img.dtype == np.uint16:
         img = (img / 257.0).round().astype(np.uint8)
     if img.dtype != np.uint8:
@@ -41,6 +43,30 @@ def read_color(path: str | Path) -> np.ndarray:
     elif img.shape[2] == 4:
         img = img[:, :, :3]
     return np.ascontiguousarray(img[:, :, ::-1])
+
+
+def _check_whole_jpeg(path: Path) -> None:
+    """Refuse a JPEG cut short: OpenCV decodes one without an error, the rows it lacks filled
+    grey (Pillow's decoder says it is truncated; the pixels stay OpenCV's).
+
+    Raises
+    ------
+    InputError
+        The file is a JPEG cut short.
+    """
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            image.load()
+    except OSError as exc:
+        if "truncated" not in str(exc):  # OpenCV decoded it: Pillow's other limits are not ours
+            return
+        raise InputError(
+            path,
+            "color: the image is cut short (a truncated copy or download: its last rows are "
+            "missing); expected a whole JPEG",
+        ) from None
 
 
 def write_color(path: str | Path, color: np.ndarray) -> None:

@@ -118,6 +118,41 @@ def check_obj_text(path: Path) -> None:
         _relative_problem(path, lines)
 
 
+def uv_problem(path: Path) -> str:
+    """Why an OBJ whose material has a texture image reads without texture coordinates.
+
+    trimesh drops every UV of the file when one face line's vertex references mix forms
+    (``f 9/9 5/5 1``, as a file cut inside its last reference leaves); without UVs the texture
+    cannot be rendered. Read only when that happened (one pass over the face lines).
+
+    Returns
+    -------
+    str
+        The first face line whose references mix forms (its number, two of its forms, and
+        that the file looks cut short when it is the last line with text), or that the file
+        gives its faces no texture coordinates.
+    """
+    lines = [line.split(b"#", 1)[0] for line in path.read_bytes().split(b"\n")]  # no comments
+    last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
+    for i, line in enumerate(lines):
+        if line.lstrip()[:2] not in (b"f ", b"f\t"):
+            continue
+        refs = [r.decode(errors="replace") for r in line.split()[1:]]
+        forms = {(r.count("/"), "//" in r): r for r in refs}
+        if len(forms) > 1:
+            a, b = list(forms.values())[:2]
+            cut = ": the file looks cut short" if i == last else ""
+            return (
+                f"face line {i + 1}: vertex references of different forms ({a!r} and {b!r}), "
+                f"so no face keeps its texture coordinates{cut}; expected one form (v/vt, "
+                "v/vt/vn, v//vn or v) throughout a line"
+            )
+    return (
+        "texture: the material has a texture image but the faces have no texture "
+        "coordinates (vt); expected UVs for the texture, or a mesh without the texture"
+    )
+
+
 def _mtl_files(path: Path, text: str) -> list[tuple[str, Path | None]]:
     """The ``mtllib`` names of an OBJ's text, each with its file (None: missing)."""
     out = []

@@ -48,6 +48,7 @@ from scan2morph.io.mesh_file import (  # noqa: E402
     load_problem,
     referenced_textures,
     stand_in_problem,
+    uv_problem,
 )
 from scan2morph.io.mesh_units import (  # noqa: E402
     MESH_EXTENT_MM,
@@ -231,6 +232,8 @@ def _colour_visual(loaded, path: Path, texture, materials: ObjMaterials | None =
             f"{why}; put the MTL and its texture beside the OBJ or give the texture in the "
             "sheet's texture column",
         )
+    if image is not None and uv is None:  # a face line mixing forms drops every UV
+        raise InputError(path, uv_problem(path))
     if image is not None:
         return _unlit_texture(uv, image)
     if names := referenced_textures(path):

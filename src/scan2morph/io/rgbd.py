@@ -52,7 +52,7 @@ import numpy as np
 
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import MIN_BASELINE_MM
-from scan2morph.io.depth_image import depth_frame_paths, read_depth_frames
+from scan2morph.io.depth_image import check_face_depth, depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.take import RangeTake, check_face, check_image_size, check_landmarks_inside
@@ -482,7 +482,9 @@ def read_rgbd_take(
         ``width``/``height`` (names the intrinsics file); no depth data at all; landmarks
         outside the colour image; the face check of :func:`~scan2morph.io.check_face`, which
         names a ``depth_scale_mm`` off by a factor 10 or 1000 when that factor gives a face of
-        the right size; from ``fuse``.
+        the right size; without landmarks, a nearest object outside a face's depths that
+        the scale x 0.1, 10, 0.001 or 1000 puts there
+        (:func:`~scan2morph.io.depth_image.check_face_depth`); from ``fuse``.
     """
     intr = read_rgbd_intrinsics(intrinsics_path)
     paths = depth_frame_paths(depth_path)
@@ -500,7 +502,8 @@ def read_rgbd_take(
         depth_mm = np.nan_to_num(fusion.depth_mm, nan=0.0)
     xyz = depth_to_color_grid(depth_mm, intr)
     take = RGBDTake(xyz=xyz, color=color, landmarks=None, intrinsics=intr, fusion=fusion)
-    if landmarks_path is None:
+    if landmarks_path is None:  # with landmarks, their face size names a wrong scale (below)
+        check_face_depth(depth * intr.depth_scale_mm, intr.depth_scale_mm, intrinsics_path)
         return take
     landmarks = read_pts(landmarks_path)
     check_landmarks_inside(landmarks, *intr.color.size, landmarks_path)

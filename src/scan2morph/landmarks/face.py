@@ -210,8 +210,71 @@ def _tip_near(cam: np.ndarray, zs: np.ndarray, tip: np.ndarray) -> tuple[int, in
     return int(iy), int(ix)
 
 
+#: Units a take's coordinates may be in instead of mm, tried when no face is found in mm:
+#: (name, mm per unit, the sheet's ``units`` value for it).
+OTHER_UNITS = (
+    ("metres", 1000.0, "m"),
+    ("cm", 10.0, "cm"),
+    ("inches", 25.4, "25.4"),
+    ("0.1 mm", 0.1, "0.1"),
+)
+#: Refusals that a wrong unit gives (a face 1000 times too small has no nose-like peak; 10
+#: times too large, its outline's nose-sized bumps read as a profile).
+_UNIT_SYMPTOMS = ("no face found", "profile view: no nose")
+
+
 def find_face(xyz: np.ndarray, source: str) -> Face:
-    """Find the one face of a take's range grid.
+    """Find the one face of a take's range grid (:func:`_find_face`); when none is found in mm
+    but one is with the coordinates in another unit (:data:`OTHER_UNITS`), the refusal names
+    that unit.
+
+    Raises
+    ------
+    InputError
+        As :func:`_find_face`; ``no face found in mm: ...`` naming the unit the take's
+        coordinates look like and what to set (the sheet's ``units``, an RGB-D take's
+        ``depth_scale_mm``).
+    """
+    try:
+        return _find_face(xyz, source)
+    except InputError as exc:
+        if not exc.problem.startswith(_UNIT_SYMPTOMS):
+            raise
+        xyz = np.asarray(xyz, dtype=np.float64)
+        scale = _grid_scale(xyz)
+        for unit, mm, value in OTHER_UNITS:
+            if not _searchable(scale / mm, xyz.shape[:2]):
+                continue
+            try:  # only on the refusal's path: a face at another scale is the evidence
+                _find_face(xyz * mm, source)
+            except InputError:
+                continue
+            raise InputError(
+                source,
+                f"no face found in mm: the surface is a face in {unit} ({mm:g} mm per unit); "
+                f"give the take's unit in the sheet's units column ({value}), or an RGB-D "
+                f"take's depth_scale_mm x {mm:g} in its intrinsics",
+            ) from None
+        raise
+
+
+def _grid_scale(xyz: np.ndarray) -> float:
+    """px per mm of a range grid (H, W, 3) at its nearest object's depth, its coordinates read
+    as mm (0 with too little data for a camera)."""
+    if xyz.ndim != 3 or int(np.isfinite(xyz).all(axis=2).sum()) < MIN_PIXELS:
+        return 0.0
+    camera = grid_camera(xyz)
+    return 0.0 if camera is None else camera.px_per_mm(_head_depth(camera.to_camera(xyz)))
+
+
+def _searchable(scale: float, shape: tuple[int, ...]) -> bool:
+    """Whether a face at ``scale`` px per mm could be found in a grid of ``shape`` (H, W): not
+    too small, and its nose's probes (``PEAK_MM`` to each side) within the grid."""
+    return MIN_PX_PER_MM <= scale and 4 * PEAK_MM * scale < min(shape)
+
+
+def _find_face(xyz: np.ndarray, source: str) -> Face:
+    """Find the one face of a take's range grid, its coordinates in mm.
 
     Parameters
     ----------
