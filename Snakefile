@@ -43,6 +43,10 @@ rule all:
         get_final_outputs(),
 
 
+onstart:
+    drop_stale_backups()
+
+
 onsuccess:
     report_left_out()
 

@@ -1,6 +1,7 @@
 """The user-facing text keeps the shape issue #31 gave it: a README a person reads in one sitting,
 and a configuration whose comments and schema descriptions give meaning, unit and default only
-(measurements, dates and what changed belong in docs/ and CHANGELOG.md)."""
+(measurements, dates and what changed belong in docs/ and CHANGELOG.md); every path it names
+and every link between its pages leads somewhere."""
 
 from __future__ import annotations
 
@@ -15,6 +16,25 @@ HISTORY = re.compile(
     r"|\d\s*->\s*\d"  # a before and after
     r"|\bMeasured\b|measured (worse|better)"  # a measurement
 )
+
+#: The files a user or contributor reads for paths and links: the docs, and the comments of the
+#: config, the profiles, the Makefile and pyproject.toml (CHANGELOG.md keeps history's names).
+GUIDES = (
+    "README.md",
+    "CONTRIBUTING.md",
+    "docs/*.md",
+    "config/config.yaml",
+    "profiles/*/config.yaml",
+    "Makefile",
+    "pyproject.toml",
+)
+#: A path in the repository, e.g. tests/workflow/test_slurm.py or docs/cluster.md.
+REPO_PATH = re.compile(
+    r"(?<![\w./-])((?:tests|benchmarks|tools|workflow|src|config|schemas|profiles|resources|docs)"
+    r"/[\w./-]*\w)"
+)
+#: A Markdown link to a file of the repository, with its anchor: [text](target#anchor).
+LINK = re.compile(r"\]\((?!https?:)([^)#\s]*)(?:#([^)\s]+))?\)")
 
 
 def _descriptions(node, path="") -> list[tuple[str, str]]:
@@ -62,3 +82,39 @@ def test_the_history_pattern_finds_what_it_names():
         "auto: measured on the stable points",
     ):
         assert not HISTORY.search(text), text
+
+
+def _guides():
+    """The files of :data:`GUIDES`."""
+    return [path for pattern in GUIDES for path in sorted(REPO.glob(pattern))]
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading: lower case, punctuation dropped, spaces to -."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_every_repository_path_the_guides_name_exists():
+    missing = []
+    for guide in _guides():
+        for number, line in enumerate(guide.read_text(encoding="utf-8").splitlines(), 1):
+            for match in REPO_PATH.finditer(line):
+                path = match.group(1).rstrip(".")
+                if not path.endswith("_") and not (REPO / path).exists():
+                    missing.append(f"{guide.relative_to(REPO)}:{number}: {path}")
+    assert not missing, missing
+
+
+def test_every_link_between_the_docs_reaches_its_file_and_heading():
+    dead = []
+    for guide in (path for path in _guides() if path.suffix == ".md"):
+        for number, line in enumerate(guide.read_text(encoding="utf-8").splitlines(), 1):
+            for target, anchor in LINK.findall(line):
+                path = (guide.parent / target).resolve() if target else guide
+                headings = []
+                if path.is_file() and path.suffix == ".md":
+                    text = path.read_text(encoding="utf-8")
+                    headings = [_anchor(h) for h in re.findall(r"^#+ (.*)$", text, re.M)]
+                if not path.exists() or (anchor and anchor not in headings):
+                    dead.append(f"{guide.relative_to(REPO)}:{number}: {target}#{anchor}")
+    assert not dead, dead

@@ -15,6 +15,7 @@ import gzip
 import json
 import re
 import shutil
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -716,3 +717,21 @@ def test_a_stopped_subjects_earlier_report_says_it_is_out_of_date(cohort, tmp_pa
     assert run_workflow(copy, copy / "mine.yaml", targets=job)
     assert _banner(folder) is None
     assert (folder / "report.html").read_bytes() == before[folder / "report.html"]
+
+
+def test_a_run_after_a_killed_one_goes_on_from_where_it_stopped(cohort, tmp_path):
+    """A run killed during alice's subject job (out of memory, a closed terminal) leaves
+    Snakemake's copies of the job's folder outputs in .snakemake/backups, and the job's
+    job.json deleted. After `snakemake --unlock` the next run goes on (README): it removes those
+    copies (Snakemake cannot copy a folder over one: FileExistsError) and runs the job again,
+    whose stages are up to date."""
+    work, _, _ = cohort
+    copy = tmp_path / "wf"
+    shutil.copytree(work, copy, symlinks=True)
+    head = Path("results") / "alice" / "meshes" / "head"
+    shutil.copytree(copy / head, copy / ".snakemake" / "backups" / head)
+    (copy / "results" / "alice" / "job.json").unlink()
+    assert run_workflow(copy, copy / "tiny.yaml", targets=["results/alice/job.json"])
+    summary = (copy / "logs" / "subject" / "alice.log").read_text().splitlines()
+    assert summary and all(line.endswith("up to date, not run") for line in summary), summary
+    assert not (copy / ".snakemake" / "backups" / head).exists()

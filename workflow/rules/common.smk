@@ -1,6 +1,7 @@
 # Shared tables: config validation, the subject sheet, the synthetic cohort and the take table,
 # and lookups over them by subject. Included first; the other helper files and the rules use these.
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -17,6 +18,24 @@ from scan2morph.stages.stage_job import SUBJECT_STAGES, check_stage_params
 from scan2morph.template.mesh import FIDUCIAL_SETS
 
 SCHEMAS = Path(workflow.basedir) / "schemas"
+
+
+def drop_stale_backups(backups=Path(".snakemake") / "backups"):
+    """Remove the copies of a killed run's outputs (README: after `snakemake --unlock` the run
+    goes on from where it stopped). Snakemake copies a job's update() outputs there while the job
+    runs and removes them when it ends; a killed job leaves them, and Snakemake cannot copy a
+    folder output over its old copy (FileExistsError at the job's start). Called before any job
+    of the run (onstart, under the run's lock): a killed stage re-runs all the same, as its
+    fingerprint leaves stages.json before it runs (scan2morph.stages.stage_job.run_stages).
+    """
+    if backups.exists():
+        # the folders a finished job's copies were in stay behind, empty: no message for those
+        left = any(path.is_file() for path in backups.rglob("*"))
+        shutil.rmtree(backups)
+        if left:
+            sys.stderr.write(
+                f"removed {backups}: a killed run's copies of its outputs\n"
+            )
 
 
 def stop_run(exc):
