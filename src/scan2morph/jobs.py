@@ -253,10 +253,14 @@ def files_sha256(files: Mapping[str, str | Path | Sequence[str | Path]]) -> dict
 def _sha256_path(path: str | Path) -> str:
     if not Path(path).is_dir():
         return sha256_file(path)
-    listing = "".join(
-        f"{f.name}\0{sha256_file(f)}\n" for f in sorted(Path(path).iterdir()) if f.is_file()
-    )
-    return hashlib.sha256(listing.encode()).hexdigest()
+    return files_digest(f for f in sorted(Path(path).iterdir()) if f.is_file())
+
+
+def files_digest(paths: Iterable[str | Path], head: str = "") -> str:
+    """Hex SHA-256 of ``head`` and each file's name and :func:`sha256_file`, in order: one
+    checksum for several files (a folder's, a mesh file's with the files it names)."""
+    text = head + "".join(f"\n{Path(f).name}\0{sha256_file(f)}" for f in paths)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def config_sha256(config: Mapping, leave_out: Iterable[str] = ()) -> str:

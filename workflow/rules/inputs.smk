@@ -59,10 +59,12 @@ def frame_files(parts):
 COMPANION_SCAN_BYTES = 1 << 20
 
 
+@functools.cache
 def companions(subject, take):
     """The files a user's mesh file names (an OBJ's MTL and texture, a glTF's buffers and
     images: ``scan2morph.io.mesh_file.companion_files``), as the take input ``companions``
-    (none for other takes): a texture changed beside its mesh re-runs the take."""
+    (none for other takes): a texture changed beside its mesh re-runs the take. Found once a
+    Snakemake (the job's inputs and stamps both ask); its callers do not change it."""
     if TAKES.loc[(subject, take), "synthetic"]:
         return {}
     mesh = take_inputs(subject, take).get("mesh")
@@ -81,12 +83,13 @@ def get_take_stamps(wildcards):
     if TAKES.loc[(subject, take), "synthetic"]:
         return {}
     files = take_inputs(subject, take) | companions(subject, take)
-    return {
-        role: [
-            [os.stat(f).st_size, os.stat(f).st_mtime_ns]
-            for f in ([value] if isinstance(value, str) else value)
-        ]
+    stats = {
+        role: [os.stat(f) for f in ([value] if isinstance(value, str) else value)]
         for role, value in files.items()
+    }
+    return {
+        role: [[st.st_size, st.st_mtime_ns] for st in sts]
+        for role, sts in stats.items()
     }
 
 

@@ -118,8 +118,7 @@ def _cross_check(
         if loaded.get("landmarks") is not None:
             check_landmarks_inside(loaded["landmarks"], *intr.color.size, files["landmarks"])
         else:  # with landmarks the ingest's face check names a wrong scale
-            depth = loaded["depth"][0] * intr.depth_scale_mm
-            check_face_depth(depth, intr.depth_scale_mm, files["intrinsics"])
+            check_face_depth(loaded["depth"][0], intr.depth_scale_mm, files["intrinsics"])
 
 
 __all__ = ["READERS", "take_file_problems"]

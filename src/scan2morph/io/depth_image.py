@@ -166,7 +166,7 @@ FACE_DEPTH_MM = (150.0, 4000.0)
 NEAREST_OBJECT_MM = 200.0
 
 
-def check_face_depth(z: np.ndarray, depth_scale_mm: float, intrinsics: str | Path) -> None:
+def check_face_depth(depth: np.ndarray, depth_scale_mm: float, intrinsics: str | Path) -> None:
     """Refuse a depth image whose nearest object lies where no face is detected, when the depth
     scale times 0.1, 10, 0.001 or 1000 puts it at a face's depth (:data:`FACE_DEPTH_MM`).
 
@@ -176,10 +176,10 @@ def check_face_depth(z: np.ndarray, depth_scale_mm: float, intrinsics: str | Pat
 
     Parameters
     ----------
-    z : (H, W) float
-        Depth along the camera's axis, mm as the scale gives them (NaN or 0 = no data).
+    depth : (H, W) array
+        Depth along the camera's axis in the image's units (NaN or 0 = no data).
     depth_scale_mm : float
-        The intrinsics' ``depth_scale_mm``.
+        The intrinsics' ``depth_scale_mm``: mm per unit.
     intrinsics : str or path-like
         The intrinsics file, named in the error.
 
@@ -188,7 +188,7 @@ def check_face_depth(z: np.ndarray, depth_scale_mm: float, intrinsics: str | Pat
     InputError
         ``depth_scale_mm: ...`` with the scale that puts the face at a face's depth.
     """
-    z = np.asarray(z, dtype=np.float64)[::4, ::4]
+    z = np.asarray(depth, dtype=np.float64)[::4, ::4] * depth_scale_mm
     z = z[np.isfinite(z) & (z > 0)]
     if len(z) == 0:
         return

@@ -47,13 +47,18 @@ def read_color(path: str | Path) -> np.ndarray:
 
 def _check_whole_jpeg(path: Path) -> None:
     """Refuse a JPEG cut short: OpenCV decodes one without an error, the rows it lacks filled
-    grey (Pillow's decoder says it is truncated; the pixels stay OpenCV's).
+    grey (Pillow's decoder says it is truncated; the pixels stay OpenCV's). A file ending in
+    JPEG's end-of-image marker is whole and not decoded again.
 
     Raises
     ------
     InputError
         The file is a JPEG cut short.
     """
+    with open(path, "rb") as fh:
+        fh.seek(max(path.stat().st_size - 2, 0))
+        if fh.read() == b"\xff\xd9":
+            return
     from PIL import Image
 
     try:

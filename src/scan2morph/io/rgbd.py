@@ -503,7 +503,7 @@ def read_rgbd_take(
     xyz = depth_to_color_grid(depth_mm, intr)
     take = RGBDTake(xyz=xyz, color=color, landmarks=None, intrinsics=intr, fusion=fusion)
     if landmarks_path is None:  # with landmarks, their face size names a wrong scale (below)
-        check_face_depth(depth * intr.depth_scale_mm, intr.depth_scale_mm, intrinsics_path)
+        check_face_depth(depth, intr.depth_scale_mm, intrinsics_path)
         return take
     landmarks = read_pts(landmarks_path)
     check_landmarks_inside(landmarks, *intr.color.size, landmarks_path)

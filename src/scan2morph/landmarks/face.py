@@ -240,8 +240,8 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
     except InputError as exc:
         if not exc.problem.startswith(_UNIT_SYMPTOMS):
             raise
-        xyz = np.asarray(xyz, dtype=np.float64)
-        scale = _grid_scale(xyz)
+        xyz = np.asarray(xyz, dtype=np.float64)  # (H, W, 3): else refused for its shape
+        scale = _grid(xyz)[3]
         for unit, mm, value in OTHER_UNITS:
             if not _searchable(scale / mm, xyz.shape[:2]):
                 continue
@@ -258,13 +258,16 @@ def find_face(xyz: np.ndarray, source: str) -> Face:
         raise
 
 
-def _grid_scale(xyz: np.ndarray) -> float:
-    """px per mm of a range grid (H, W, 3) at its nearest object's depth, its coordinates read
-    as mm (0 with too little data for a camera)."""
-    if xyz.ndim != 3 or int(np.isfinite(xyz).all(axis=2).sum()) < MIN_PIXELS:
-        return 0.0
-    camera = grid_camera(xyz)
-    return 0.0 if camera is None else camera.px_per_mm(_head_depth(camera.to_camera(xyz)))
+def _grid(xyz: np.ndarray) -> tuple[int, GridCamera | None, np.ndarray | None, float]:
+    """A range grid (H, W, 3), its coordinates read as mm: its number of points with data, its
+    camera, its points in the camera frame (H, W, 3) mm and its px per mm at the nearest
+    object's depth (no camera, no points and 0 with fewer than :data:`MIN_PIXELS` points)."""
+    n_valid = int(np.isfinite(xyz).all(axis=2).sum())
+    camera = grid_camera(xyz) if n_valid >= MIN_PIXELS else None
+    if camera is None:
+        return n_valid, None, None, 0.0
+    cam = camera.to_camera(xyz)
+    return n_valid, camera, cam, camera.px_per_mm(_head_depth(cam))
 
 
 def _searchable(scale: float, shape: tuple[int, ...]) -> bool:
@@ -297,15 +300,12 @@ def _find_face(xyz: np.ndarray, source: str) -> Face:
     xyz = np.asarray(xyz, dtype=np.float64)
     if xyz.ndim != 3 or xyz.shape[2] != 3:
         raise InputError(source, f"xyz: expected an (H, W, 3) range grid, got shape {xyz.shape}")
-    n_valid = int(np.isfinite(xyz).all(axis=2).sum())
-    camera = grid_camera(xyz) if n_valid >= MIN_PIXELS else None
+    n_valid, camera, cam, scale = _grid(xyz)
     if camera is None:
         raise InputError(
             source, f"no face found: {n_valid} pixels have range data (at least {MIN_PIXELS})"
         )
-    cam = camera.to_camera(xyz)
     # the search runs on every other pixel of a fine grid (about 1 mm per pixel at 640 x 480)
-    scale = camera.px_per_mm(_head_depth(cam))
     stride = 2 if scale >= 1.2 else 1
     coarse = cam[::stride, ::stride]
     height, zs = _peaks(coarse, scale / stride)

@@ -12,7 +12,6 @@ subject; a problem of another take leaves that take out (its ingest records why,
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ from dataclasses import dataclass
 from scan2morph.errors import InputError
 from scan2morph.io.check import take_file_problems
 from scan2morph.io.mesh_file import companion_files
-from scan2morph.jobs import files_sha256, sha256_file
+from scan2morph.jobs import files_digest, files_sha256
 from scan2morph.sheet import mm_per_unit
 from scan2morph.stages.part import Part, Take
 from scan2morph.template import Template
@@ -177,10 +176,8 @@ def input_checksums(files: Mapping[str, object]) -> dict[str, list[str]]:
     """
     out = files_sha256(files)
     mesh = files.get("mesh")
-    others = companion_files(mesh) if isinstance(mesh, str) else []
-    if others:
-        text = out["mesh"][0] + "".join(f"\n{f.name}\0{sha256_file(f)}" for f in others)
-        out["mesh"] = [hashlib.sha256(text.encode()).hexdigest()]
+    if others := companion_files(mesh) if isinstance(mesh, str) else []:
+        out["mesh"] = [files_digest(others, head=out["mesh"][0])]
     return out
 
 
