@@ -17,22 +17,17 @@ import numpy as np
 from scan2morph.align import IcpParams, rotation_angle_deg, transform_points
 from scan2morph.errors import InputError
 from scan2morph.io.mesh_scan import SHADED
-from scan2morph.refine import (
-    Channel,
-    RefineParams,
-    SurfaceChannel,
-    grey,
-    refine_channels,
-    texture_channel,
-)
+from scan2morph.refine import RefineParams, grey, refine_channels, shape_channels, texture_channel
+from scan2morph.refine.carried import carried_start
 from scan2morph.refine.jaw import ChinMeshes, JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipImages, LipParams, LipPrior, lip_prior
 from scan2morph.refine.memo import active, sharing
-from scan2morph.refine.shape import ShapeParams, shape_image
+from scan2morph.refine.shape import ShapeParams
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.store import paths
+from scan2morph.store.warnings import landmark_source, text_value
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
 from scan2morph.template.regions import icp_region, lip
@@ -49,6 +44,13 @@ JAW_LINE = 17
 GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
+#: ``refine.carry_upper_face`` values, the takes whose upper face is carried from the neutral
+#: (:mod:`scan2morph.refine.carried`): those whose or whose neutral's detection is doubtful
+#: (``landmark_doubtful``), those whose landmarks were all detected, every take, none.
+CARRY_UPPER = ("doubtful", "detected", "all", "none")
+#: A vertex is measured where the refinement's confidence is at least this (as :data:`GIVE_UP`'s
+#: share counts them).
+MEASURED = 0.5
 log = logging.getLogger("scan2morph")
 
 
@@ -93,6 +95,13 @@ class Params:
         A refinement that would move the skin farther than this from the template fit (RMS
         over the vertices, mm) is not used (``refine.max_correction_rms_mm``): a colour image
         that is not the scan's (another take's) is followed tens of mm off.
+    carry_upper_face : str
+        One of :data:`CARRY_UPPER` (``refine.carry_upper_face``): whose upper face starts from
+        the neutral's carried by the take's alignment instead of the take's own landmarks.
+    max_unmeasured_slope_deg : float or None
+        In those takes, a vertex measured nowhere (confidence below :data:`MEASURED`) on a
+        surface steeper than this (degrees, as ``max_slope_deg``) is invalid, its motion filled
+        from its neighbours' (``refine.max_unmeasured_slope_deg``); None: off.
     """
 
     method: str
@@ -110,6 +119,8 @@ class Params:
     shape: ShapeParams = ShapeParams()
     texture_unmatched: bool = False
     max_correction_rms_mm: float = 8.0
+    carry_upper_face: str = "doubtful"
+    max_unmeasured_slope_deg: float | None = 60.0
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -137,7 +148,18 @@ class Params:
             max_correction_rms_mm=float(
                 refine.get("max_correction_rms_mm", cls.max_correction_rms_mm)
             ),
+            carry_upper_face=str(refine.get("carry_upper_face", cls.carry_upper_face)),
+            max_unmeasured_slope_deg=refine.get(
+                "max_unmeasured_slope_deg", cls.max_unmeasured_slope_deg
+            ),
         )
+
+    def __post_init__(self) -> None:
+        if (which := self.carry_upper_face) not in CARRY_UPPER:
+            expected = ", ".join(CARRY_UPPER)
+            raise InputError(
+                "refine", f"carry_upper_face: expected one of {expected}, got {which!r}"
+            )
 
 
 def _settings(kind, refine: Mapping, name: str, base: Mapping | None = None):
@@ -275,6 +297,13 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         for t in (neutral, name)
     ]
     anchors = _anchors(template, sets[name], source)
+    carried = _carries_upper(data, (name, neutral), params.carry_upper_face)
+    if carried:
+        xyz = [need(data, paths.range_image(t, "xyz"), source) for t in (name, neutral)]
+        move = need(data, paths.align(name, "transform"), source)
+        lm = need(data, paths.landmarks(name), source)
+        start = (template, lm, sets[name], maps[0], xyz, move, anchors, source)
+        maps[1], anchors = carried_start(*start)
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
     problem = problem or _too_far(data, name, refined, fine.faces, params, source)
     if problem:
@@ -293,6 +322,12 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     refined, priors = _lips(fine, take, neutral_points, refined, report, params)
     vertices, ok = sample_points(data, name, refined, fine.faces, params, source)
+    if carried and params.max_unmeasured_slope_deg is not None:
+        steep = replace(params, max_slope_deg=params.max_unmeasured_slope_deg)
+        ok &= sample_points(data, name, refined, fine.faces, steep, source)[1] | (
+            report["confidence"] >= MEASURED
+        )
+        vertices = np.where(ok[:, None], vertices, np.nan)
     attrs = _attrs(params, problem, report, ok, jaw, priors)
     log.info("%s: refined %s", name, attrs)
     return Part(
@@ -304,6 +339,16 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         },
         attrs={paths.refine_group(name): attrs},
     )
+
+
+def _carries_upper(data: Mapping[str, np.ndarray], takes: tuple[str, str], which: str) -> bool:
+    """Whether a take's upper face is carried from its neutral (``takes``: the take's and the
+    neutral's names; ``which``: one of :data:`CARRY_UPPER`)."""
+    if which in ("all", "none"):
+        return which == "all"
+    if which == "detected":
+        return landmark_source(data, takes[0]) == "detected"
+    return any(text_value(data.get(paths.landmark_info(t, "doubtful"), "")) for t in takes)
 
 
 def _too_far(data, name: str, refined: np.ndarray, faces, params: Params, source: str) -> str:
@@ -383,8 +428,7 @@ def _shaded(data: Mapping[str, np.ndarray], takes) -> str:
     the start of a message; ``""`` when none."""
     names = []
     for t in dict.fromkeys(takes):
-        value = data.get(paths.camera(t, "color_source"), b"")
-        if (value.decode() if isinstance(value, bytes) else str(value)) == SHADED:
+        if text_value(data.get(paths.camera(t, "color_source"), "")) == SHADED:
             names.append(t)
     if not names:
         return ""
@@ -466,25 +510,11 @@ def _by_shape(fine, takes, data, maps, anchors, texture: list, params: Params):
     ``(points, report)`` of :func:`~scan2morph.refine.refine_channels`, ``report["shape"]``
     True. ``takes`` are the take's and the neutral's names."""
     take, neutral = takes
-    prm = params.shape
-    sources = {t: paths.range_image(t, "xyz") for t in takes}
-    xyz = {t: need(data, sources[t], sources[t]) for t in takes}
-    images = [shape_image(xyz[t], prm.sigma_mm, sources[t]) for t in (neutral, take)]
-    shape = Channel(*images, prm.high_pass_px, prm.noise, prm.precision_px)
+    sources = [paths.range_image(t, "xyz") for t in (neutral, take)]
+    xyz = [need(data, s, s) for s in sources]
     transform = need(data, paths.align(take, "transform"), take)
-    moved = transform_points(transform, xyz[take].reshape(-1, 3))
-    surface = SurfaceChannel(
-        xyz[neutral],
-        moved.reshape(xyz[take].shape),
-        prm.surface_tolerance_mm,
-        prm.surface_precision_px,
-    )
-    gated = [
-        replace(c, gate_px=prm.texture_gate_px, precision_px=prm.texture_precision_px)
-        for c in (texture if prm.texture else [])
-    ]
-    channels = [shape, *gated] + ([surface] if prm.surface else [])
-    flow = replace(params.flow, fade_px=prm.fade_px)
+    channels = shape_channels(*xyz, transform, texture, params.shape, sources)
+    flow = replace(params.flow, fade_px=params.shape.fade_px)
     refined, report = refine_channels(
         fine.vertices, fine.faces, tuple(maps), channels, anchors, flow
     )
