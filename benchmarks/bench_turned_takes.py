@@ -35,7 +35,6 @@ import os
 import sys
 import time
 from pathlib import Path
-from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -139,11 +138,9 @@ def main(argv=None) -> int:
     targets = [f"results/{s}/{s}.h5" for s in names]
     print(f"library {library}, Snakefile {args.repo.resolve() / 'Snakefile'}")
     t0 = time.perf_counter()
-    # run_workflow runs its module's REPO's Snakefile with that REPO's config/config.yaml
-    with mock.patch.object(workflow_api, "REPO", args.repo.resolve()):
-        done = workflow_api.run_workflow(
-            args.work, args.work / "turned.yaml", targets, cores=args.cores
-        )
+    done = workflow_api.run_workflow(
+        args.work, args.work / "turned.yaml", targets, cores=args.cores, repo=args.repo.resolve()
+    )
     wall = time.perf_counter() - t0
     print(f"\nworkflow {'finished' if done else 'FAILED'} in {wall:.0f} s ({args.work})")
     results = {}

@@ -144,39 +144,49 @@ def test_a_doubtful_takes_upper_face_starts_from_the_neutrals_skin(template, dou
         assert np.median(off) > 0.4 * np.linalg.norm(OFF)  # measured 3.33 of 7.2
 
 
-def test_steep_skin_measured_nowhere_is_left_to_its_neighbours(template):
-    """A plane 66 degrees to the image plane (a pixel is 1.6 mm of depth), the skin's texture
-    plain above the eyes: there the refinement measured nothing, and in a doubtful take those
-    vertices are invalid (the motion stage fills them from their neighbours') with
-    refine.max_unmeasured_slope_deg 60; the measured ones stay valid. Off, on a plane seen
-    face-on, or in a take not carried, every vertex stays."""
+def test_steep_skin_is_left_to_its_neighbours(template):
+    """Planes 66 and 75 degrees to the image plane (a pixel is 1.6 and 2.6 mm of depth), the
+    skin's texture plain above the eyes, where the refinement measures nothing. In a doubtful
+    take a vertex measured nowhere on skin steeper than refine.max_unmeasured_slope_deg (60), or
+    a measured one steeper than refine.max_measured_slope_deg (70), is invalid (the motion stage
+    fills it from its neighbours'); the others stay valid. A limit of None, a plane seen face-on
+    or a take not carried leave every vertex as the fit has it."""
     config = repo_config()
     params = refine.Params.from_config(config)
-    assert params.max_unmeasured_slope_deg == config["refine"]["max_unmeasured_slope_deg"] == 60
+    assert (params.max_unmeasured_slope_deg, params.max_measured_slope_deg) == (60, 70)
+    assert config["refine"]["max_measured_slope_deg"] == 70
     results = {}
-    for name, slope, limit, doubtful in (
-        ("steep", (1.6, 0.0), 60.0, ("she",)),
-        ("steep, off", (1.6, 0.0), None, ("she",)),
-        ("steep, not carried", (1.6, 0.0), 60.0, ()),
-        ("face-on", (0.05, -0.03), 60.0, ("she",)),
+    for name, slope, limits, doubtful in (
+        ("66", (1.6, 0.0), (60.0, 70.0), ("she",)),
+        ("75", (2.6, 0.0), (60.0, 70.0), ("she",)),
+        ("75, measured unlimited", (2.6, 0.0), (60.0, None), ("she",)),
+        ("75, not carried", (2.6, 0.0), (60.0, 70.0), ()),
+        ("face-on", (0.05, -0.03), (60.0, 70.0), ("she",)),
     ):
         data = _planes(template, config, slope, off=np.zeros(2), doubtful=doubtful)
         take = Take("x", "she", "viseme", "she", "neutral", data=data)
-        part = refine.run(template, take, replace(params, max_unmeasured_slope_deg=limit))
+        limited = replace(
+            params, max_unmeasured_slope_deg=limits[0], max_measured_slope_deg=limits[1]
+        )
+        part = refine.run(template, take, limited)
         results[name] = (
             part.datasets[paths.refine("she", "valid")],
-            part.datasets[paths.refine("she", "confidence")],
+            part.datasets[paths.refine("she", "confidence")] >= refine.MEASURED,
             part.datasets[paths.refine("she", "vertices")],
+            data[paths.mesh("she", "valid")],
         )
-    fit_valid = data[paths.mesh("she", "valid")]
-    valid, confidence, vertices = results["steep"]
-    measured = confidence >= refine.MEASURED
-    print(f"\nsteep: {np.mean(~valid & fit_valid):.2f} of the vertices left to their neighbours")
-    assert measured.mean() > 0.3 and (~measured & fit_valid).mean() > 0.2
-    np.testing.assert_array_equal(valid, fit_valid & measured)
+    valid, measured, vertices, fit = results["66"]
+    print(f"\n66 degrees: {np.mean(~valid & fit):.2f} of the vertices left to their neighbours")
+    assert measured.mean() > 0.3 and (~measured & fit).mean() > 0.2 and fit.mean() > 0.9
+    np.testing.assert_array_equal(valid, fit & measured)
     assert np.isnan(vertices[~valid]).all() and np.isfinite(vertices[valid]).all()
-    for name in ("steep, off", "steep, not carried", "face-on"):
-        np.testing.assert_array_equal(results[name][0], fit_valid)
+    valid, measured, _, fit = results["75"]
+    assert measured.mean() > 0.3 and fit.mean() > 0.9 and not valid.any()
+    valid, measured, _, fit = results["75, measured unlimited"]
+    np.testing.assert_array_equal(valid, fit & measured)
+    for name in ("75, not carried", "face-on"):
+        valid, _, _, fit = results[name]
+        np.testing.assert_array_equal(valid, fit)
 
 
 @pytest.mark.parametrize(
@@ -184,6 +194,7 @@ def test_steep_skin_measured_nowhere_is_left_to_its_neighbours(template):
     [
         ("carry_upper_face", "clicked", r"refine\.carry_upper_face: expected one of .*doubtful"),
         ("max_unmeasured_slope_deg", 95, "max_unmeasured_slope_deg"),
+        ("max_measured_slope_deg", 0, "max_measured_slope_deg"),
     ],
 )
 def test_a_bad_setting_is_refused_naming_it(key, value, expected):

@@ -44,13 +44,13 @@ JAW_LINE = 17
 GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
-#: ``refine.carry_upper_face`` values, the takes whose upper face is carried from the neutral
-#: (:mod:`scan2morph.refine.carried`): those whose or whose neutral's detection is doubtful
-#: (``landmark_doubtful``), those whose landmarks were all detected, every take, none.
+#: ``refine.carry_upper_face`` values (:mod:`scan2morph.refine.carried`): a doubtful detection of
+#: the take or its neutral (``landmark_doubtful``), every detected take, every take, none.
 CARRY_UPPER = ("doubtful", "detected", "all", "none")
-#: A vertex is measured where the refinement's confidence is at least this (as :data:`GIVE_UP`'s
-#: share counts them).
+#: A vertex is measured where the refinement's confidence is at least this (as in :data:`GIVE_UP`).
 MEASURED = 0.5
+#: The config keys of the slope limits of a carried take's skin (:class:`Params`).
+STEEP_KEYS = ("max_unmeasured_slope_deg", "max_measured_slope_deg")
 log = logging.getLogger("scan2morph")
 
 
@@ -98,10 +98,11 @@ class Params:
     carry_upper_face : str
         One of :data:`CARRY_UPPER` (``refine.carry_upper_face``): whose upper face starts from
         the neutral's carried by the take's alignment instead of the take's own landmarks.
-    max_unmeasured_slope_deg : float or None
-        In those takes, a vertex measured nowhere (confidence below :data:`MEASURED`) on a
-        surface steeper than this (degrees, as ``max_slope_deg``) is invalid, its motion filled
-        from its neighbours' (``refine.max_unmeasured_slope_deg``); None: off.
+    max_unmeasured_slope_deg, max_measured_slope_deg : float or None
+        In those takes, a vertex measured nowhere (confidence below :data:`MEASURED`), or one
+        measured, on a surface steeper than this (degrees, as ``max_slope_deg``) is invalid, its
+        motion filled from its neighbours' (``refine.max_unmeasured_slope_deg``,
+        ``refine.max_measured_slope_deg``); None: no such limit.
     """
 
     method: str
@@ -121,6 +122,7 @@ class Params:
     max_correction_rms_mm: float = 8.0
     carry_upper_face: str = "doubtful"
     max_unmeasured_slope_deg: float | None = 60.0
+    max_measured_slope_deg: float | None = 70.0
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -149,9 +151,7 @@ class Params:
                 refine.get("max_correction_rms_mm", cls.max_correction_rms_mm)
             ),
             carry_upper_face=str(refine.get("carry_upper_face", cls.carry_upper_face)),
-            max_unmeasured_slope_deg=refine.get(
-                "max_unmeasured_slope_deg", cls.max_unmeasured_slope_deg
-            ),
+            **{k: refine.get(k, getattr(cls, k)) for k in STEEP_KEYS},
         )
 
     def __post_init__(self) -> None:
@@ -301,9 +301,8 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     if carried:
         xyz = [need(data, paths.range_image(t, "xyz"), source) for t in (name, neutral)]
         move = need(data, paths.align(name, "transform"), source)
-        lm = need(data, paths.landmarks(name), source)
-        start = (template, lm, sets[name], maps[0], xyz, move, anchors, source)
-        maps[1], anchors = carried_start(*start)
+        start = (template, need(data, paths.landmarks(name), source), sets[name], maps[0])
+        maps[1], anchors = carried_start(*start, xyz, move, anchors, source)
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
     problem = problem or _too_far(data, name, refined, fine.faces, params, source)
     if problem:
@@ -322,11 +321,13 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     refined, priors = _lips(fine, take, neutral_points, refined, report, params)
     vertices, ok = sample_points(data, name, refined, fine.faces, params, source)
-    if carried and params.max_unmeasured_slope_deg is not None:
-        steep = replace(params, max_slope_deg=params.max_unmeasured_slope_deg)
-        ok &= sample_points(data, name, refined, fine.faces, steep, source)[1] | (
-            report["confidence"] >= MEASURED
-        )
+    if carried:  # a pixel on steep skin is mm of depth: its neighbours' motion serves better
+        measured = report["confidence"] >= MEASURED
+        limits = (params.max_unmeasured_slope_deg, params.max_measured_slope_deg)
+        for limit, which in zip(limits, (~measured, measured), strict=True):
+            if limit is not None:
+                steep = replace(params, max_slope_deg=limit)
+                ok &= sample_points(data, name, refined, fine.faces, steep, source)[1] | ~which
         vertices = np.where(ok[:, None], vertices, np.nan)
     attrs = _attrs(params, problem, report, ok, jaw, priors)
     log.info("%s: refined %s", name, attrs)
