@@ -33,7 +33,7 @@ from scan2morph.render.scene import look_at
 from scan2morph.store import paths, read_part
 from scan2morph.synth.scanner import backproject, camera_matrix, project
 from tests.support.lps_landmarks import LANDMARKS_MM
-from tests.support.real_user import _noisy_color
+from tests.support.real_user import noisy_color
 
 #: The range scanner's image (width, height), px.
 SIZE = (640, 480)
@@ -178,7 +178,7 @@ def _range_take(head, take: str, pose: np.ndarray, folder: Path, rng: np.random.
     length = np.linalg.norm(xyz, axis=2, keepdims=True)
     xyz = xyz * (1.0 + RANGE_NOISE_MM * rng.standard_normal(length.shape) / length)
     np.savez_compressed(folder / "xyz.npz", xyz=xyz.astype(np.float32))
-    Image.fromarray(_noisy_color(color, rng)).save(folder / "color.png")
+    Image.fromarray(noisy_color(color, rng)).save(folder / "color.png")
     marks = LANDMARKS_MM + displacement(head, take, LANDMARKS_MM)
     write_pts(folder / "landmarks.pts", project(K, transform_points(pose, marks)))
     return {"xyz": "xyz.npz", "color": "color.png", "landmarks": "landmarks.pts"}
