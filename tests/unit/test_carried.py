@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from scan2morph.refine.carried import UPPER_FACE_BELOW, carried_map, in_upper_face, upper_face
-from scan2morph.stages import Take, refine
+from scan2morph.stages import Subject, Take, consensus, refine
+from scan2morph.stages.take_mesh import MEASURED, carries_upper
 from scan2morph.store import paths
 from scan2morph.template import build_template, fit_map
 from tests.support.configs import repo_config
@@ -70,11 +71,9 @@ def test_the_carried_map_places_the_upper_face_at_the_neutrals_skin_and_the_rest
     )
     plain = fit_map(template, take, "closed")(upper) - (neutral_map(upper) + shift)
     assert np.median(np.linalg.norm(plain, axis=1)) > 0.8 * np.linalg.norm(OFF)
-    # points the carry cannot place (NaN: no surface there) are left to the spline
-    half = lambda px: np.where(px[:, :1] < 320.0, px + shift, np.nan)  # noqa: E731
-    partial = carried_map(template, take, "closed", neutral_map, half)
-    left = upper[neutral_map(upper)[:, 0] < 320.0]
-    np.testing.assert_allclose(partial(left), neutral_map(left) + shift, atol=1e-6)
+    # a carry that finds nothing (fewer than 3 points on the take's surface) gives no map
+    nothing = lambda px: np.full_like(px, np.nan)  # noqa: E731
+    assert carried_map(template, take, "closed", neutral_map, nothing) is None
 
 
 def _planes(template, config, depth_slope=(0.05, -0.03), off=OFF, doubtful=("she",)):
@@ -105,6 +104,7 @@ DOUBT = "the detected landmarks are doubtful: median confidence 0.05 below 0.5"
         ("detected", ("neutral",), "doubtful", True),
         ("detected", (), "doubtful", False),
         ("clicked", (), "doubtful", False),
+        ("clicked", ("neutral",), "doubtful", True),
         ("detected", (), "detected", True),
         ("clicked+detected jawline", (), "detected", False),
         ("clicked", (), "all", True),
@@ -118,7 +118,7 @@ def test_which_takes_are_carried(source, doubtful, which, carried):
     data = {paths.landmark_info("she", "source"): source.encode()}
     data |= {paths.landmark_info(t, "doubtful"): DOUBT.encode() for t in doubtful}
     data |= {paths.landmark_info(t, "doubtful"): b"" for t in {"she", "neutral"} - set(doubtful)}
-    assert refine._carries_upper(data, ("she", "neutral"), which) is carried
+    assert carries_upper(data, ("she", "neutral"), which) is carried
 
 
 @pytest.mark.parametrize("doubtful", [("she",), ("neutral",), ()])
@@ -138,6 +138,7 @@ def test_a_doubtful_takes_upper_face_starts_from_the_neutrals_skin(template, dou
     neutral = data[paths.mesh("neutral", "points2d")][: len(template.vertices)][fine_upper]
     off = np.linalg.norm(got - neutral, axis=1)
     print(f"\ndoubtful {doubtful}: upper face off the neutral's skin by {np.median(off):.2f} px")
+    assert part.attrs[paths.refine_group("she")]["upper_carried"] is bool(doubtful)
     if doubtful:
         assert np.median(off) < 0.3 and off.max() < 1.0
     else:
@@ -171,7 +172,7 @@ def test_steep_skin_is_left_to_its_neighbours(template):
         part = refine.run(template, take, limited)
         results[name] = (
             part.datasets[paths.refine("she", "valid")],
-            part.datasets[paths.refine("she", "confidence")] >= refine.MEASURED,
+            part.datasets[paths.refine("she", "confidence")] >= MEASURED,
             part.datasets[paths.refine("she", "vertices")],
             data[paths.mesh("she", "valid")],
         )
@@ -211,3 +212,64 @@ def test_a_bad_setting_is_refused_naming_it(key, value, expected):
             InputError, match="expected one of doubtful, detected, all, none, got 'clicked'"
         ):
             replace(refine.Params.from_config(repo_config()), carry_upper_face=value)
+
+
+def test_a_take_the_carry_cannot_place_keeps_its_own_points(template, caplog):
+    """A doubtful take whose alignment failed its gate, or whose alignment carries the neutral off
+    its surface (a metre away: nothing found), starts from its own points, says so in its
+    attributes (``upper_carried``), and with nothing found warns."""
+    config = repo_config()
+    params = refine.Params.from_config(config)
+    for what in ("failed gate", "nothing found"):
+        data = _planes(template, config)
+        if what == "failed gate":
+            data[paths.align("she", "ok")] = np.bool_(False)
+        else:
+            far = np.eye(4)
+            far[2, 3] = 1000.0
+            data[paths.align("she", "transform")] = far
+        with caplog.at_level("WARNING", logger="scan2morph"):
+            part = refine.run(
+                template, Take("x", "she", "viseme", "she", "neutral", data=data), params
+            )
+        assert part.attrs[paths.refine_group("she")]["upper_carried"] is False, what
+        warned = "upper face not carried: no neutral point found" in caplog.text
+        assert warned == (what == "nothing found"), (what, caplog.text)
+        caplog.clear()
+
+
+def test_the_takes_consensus_keeps_a_carried_takes_steep_skin_to_its_neighbours(
+    template, monkeypatch
+):
+    """The consensus resamples the takes it moves: a carried take keeps its refinement's slope
+    limits there (here the consensus moves nothing, so its valid vertices are the refinement's);
+    with the carry off, the fit's rules alone."""
+    config = repo_config()
+    data = _planes(template, config, (1.6, 0.0), off=np.zeros(2))
+    params = refine.Params.from_config(config)
+    refined = refine.run(template, Take("x", "she", "viseme", "she", "neutral", data=data), params)
+    takes = ("a", "b", "c")
+    subject_data = {k: v for k, v in data.items() if "/takes/she/" not in k}
+    for t in takes:
+        rename = lambda d: {k.replace("/takes/she/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: B023, E731
+        subject_data |= rename({k: v for k, v in data.items() if "/takes/she/" in k})
+        subject_data |= rename(refined.datasets)
+        subject_data[paths.refine_group(t)] = {"shape_used": True}
+        subject_data[paths.align(t, "ok")] = np.bool_(True)
+    kinds = {"neutral": "neutral"} | dict.fromkeys(takes, "viseme")
+    subject = Subject("x", kinds, {t: t for t in kinds})
+
+    def still(grid, vertices, before, images, flow, rounds, share):
+        keep = {"kept": True, "confident_share": 1.0, "median_correction_px": 0.0}
+        return dict(before), {t: keep for t in before}
+
+    monkeypatch.setattr(consensus, "take_consensus", still)
+    refine_valid = refined.datasets[paths.refine("she", "valid")]
+    fit_valid = data[paths.mesh("she", "valid")]
+    assert (fit_valid & ~refine_valid).mean() > 0.2  # the steep skin left out
+    for which, expected in (("doubtful", refine_valid), ("none", fit_valid)):
+        cfg = repo_config()
+        cfg["refine"]["carry_upper_face"] = which
+        part = consensus.run(template, subject, subject_data, consensus.Params.from_config(cfg))
+        for t in takes:
+            np.testing.assert_array_equal(part.datasets[paths.consensus(t, "valid")], expected)

@@ -51,7 +51,7 @@ def carried_map(
     neutral_map: Callable[[np.ndarray], np.ndarray],
     carry: Callable[[np.ndarray], np.ndarray],
     source: str = "take",
-) -> TPS:
+) -> TPS | None:
     """A take's map from template coordinates to its pixels, its upper face carried from the
     neutral.
 
@@ -74,9 +74,10 @@ def carried_map(
 
     Returns
     -------
-    TPS
+    TPS or None
         Callable: template coordinates (n, 2) -> take px (n, 2), through the take's fiducials
-        below the upper face and the carried upper face.
+        below the upper face and the carried upper face; None when the carry placed none of the
+        upper face's points.
     """
     numbers, base_idx = template.fiducial_set(fiducial_set, source=source)
     src = template.vertices[base_idx]
@@ -85,6 +86,8 @@ def carried_map(
     upper = template.vertices[upper_face(template)]
     carried = np.asarray(carry(neutral_map(upper)), dtype=np.float64)
     found = np.isfinite(carried).all(axis=1)
+    if not found.any():
+        return None
     return TPS.fit(
         np.vstack([src[below], upper[found]]),
         np.vstack([dst[below], carried[found]]),
@@ -101,7 +104,7 @@ def carried_start(
     transform: np.ndarray,
     anchors: np.ndarray,
     source: str = "take",
-) -> tuple[TPS, np.ndarray]:
+) -> tuple[TPS, np.ndarray] | None:
     """Where a take's refinement starts with its upper face carried from the neutral.
 
     Parameters
@@ -117,11 +120,11 @@ def carried_start(
 
     Returns
     -------
-    take_map : TPS
-        :func:`carried_map`, the neutral's skin carried by
-        :func:`~scan2morph.align.carry.carry_points`.
-    anchors : (k',) int
-        Those below the upper face: the take's landmarks above it are no constraint.
+    (take_map, anchors) or None
+        ``take_map``: :func:`carried_map`, the neutral's skin carried by
+        :func:`~scan2morph.align.carry.carry_points` (which finds nothing when fewer than 3
+        points are on the take's surface: then None); ``anchors`` (k',) int: those below the
+        upper face (the take's landmarks above it are no constraint).
     """
     take_xyz, neutral_xyz = xyz
 
@@ -129,6 +132,8 @@ def carried_start(
         return carry_points(take_xyz, neutral_xyz, points, transform, source)
 
     take_map = carried_map(template, landmarks, fiducial_set, neutral_map, carry, source)
+    if take_map is None:
+        return None
     return take_map, np.asarray(anchors)[~in_upper_face(template, anchors)]
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from scan2morph.align import IcpParams, rotation_angle_deg, transform_points
+from scan2morph.align import IcpParams, rotation_angle_deg
 from scan2morph.errors import InputError
 from scan2morph.io.mesh_scan import SHADED
 from scan2morph.refine import RefineParams, grey, refine_channels, shape_channels, texture_channel
@@ -26,8 +26,9 @@ from scan2morph.refine.shape import ShapeParams
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
+from scan2morph.stages.take_mesh import CARRY_UPPER, carries_upper, sample_points
 from scan2morph.store import paths
-from scan2morph.store.warnings import landmark_source, text_value
+from scan2morph.store.warnings import text_value
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
 from scan2morph.template.regions import icp_region, lip
@@ -44,11 +45,6 @@ JAW_LINE = 17
 GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
-#: ``refine.carry_upper_face`` values (:mod:`scan2morph.refine.carried`): a doubtful detection of
-#: the take or its neutral (``landmark_doubtful``), every detected take, every take, none.
-CARRY_UPPER = ("doubtful", "detected", "all", "none")
-#: A vertex is measured where the refinement's confidence is at least this (as in :data:`GIVE_UP`).
-MEASURED = 0.5
 #: The config keys of the slope limits of a carried take's skin (:class:`Params`).
 STEEP_KEYS = ("max_unmeasured_slope_deg", "max_measured_slope_deg")
 log = logging.getLogger("scan2morph")
@@ -99,7 +95,8 @@ class Params:
         One of :data:`CARRY_UPPER` (``refine.carry_upper_face``): whose upper face starts from
         the neutral's carried by the take's alignment instead of the take's own landmarks.
     max_unmeasured_slope_deg, max_measured_slope_deg : float or None
-        In those takes, a vertex measured nowhere (confidence below :data:`MEASURED`), or one
+        In those takes, a vertex measured nowhere (confidence below
+        :data:`~scan2morph.stages.take_mesh.MEASURED`), or one
         measured, on a surface steeper than this (degrees, as ``max_slope_deg``) is invalid, its
         motion filled from its neighbours' (``refine.max_unmeasured_slope_deg``,
         ``refine.max_measured_slope_deg``); None: no such limit.
@@ -151,7 +148,7 @@ class Params:
                 refine.get("max_correction_rms_mm", cls.max_correction_rms_mm)
             ),
             carry_upper_face=str(refine.get("carry_upper_face", cls.carry_upper_face)),
-            **{k: refine.get(k, getattr(cls, k)) for k in STEEP_KEYS},
+            **{k: _degrees(refine.get(k, getattr(cls, k))) for k in STEEP_KEYS},
         )
 
     def __post_init__(self) -> None:
@@ -160,6 +157,17 @@ class Params:
             raise InputError(
                 "refine", f"carry_upper_face: expected one of {expected}, got {which!r}"
             )
+        for key in STEEP_KEYS:
+            limit = getattr(self, key)
+            if limit is not None and not 0.0 < limit <= 90.0:
+                raise InputError(
+                    "refine", f"{key}: expected degrees in (0, 90] or None, got {limit}"
+                )
+
+
+def _degrees(value) -> float | None:
+    """A slope limit: degrees, or None (no limit)."""
+    return None if value is None else float(value)
 
 
 def _settings(kind, refine: Mapping, name: str, base: Mapping | None = None):
@@ -187,51 +195,6 @@ def shape_verdicts(data: Mapping, takes) -> dict[str, bool]:
         if isinstance(attrs, Mapping) and "shape_used" in attrs:
             out[take] = bool(attrs["shape_used"])
     return out
-
-
-def sample_points(
-    data: Mapping[str, np.ndarray],
-    take: str,
-    points: np.ndarray,
-    faces: np.ndarray,
-    params: Params,
-    source: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    """A take's mesh sampled from its range image at pixel positions, in the neutral frame.
-
-    Parameters
-    ----------
-    data : mapping store path -> array
-        The take's repair, fit and align parts.
-    take : str
-    points : (V, 2) float
-        Pixel positions of the template's vertices in the take's image, px.
-    faces : (F, 3) int
-        The subdivided template's triangles.
-    params : Params
-        The fit's sampling rules (``min_weight``, ``max_slope_deg``).
-    source : str
-        ``subject/take``, for messages.
-
-    Returns
-    -------
-    vertices : (V, 3) float64
-        mm in the neutral frame (the take's alignment applied); NaN where invalid.
-    ok : (V,) bool
-        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid.
-    """
-    valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
-    vertices, ok = sample_mesh(
-        need(data, paths.range_image(take, "xyz"), source),
-        points,
-        faces,
-        source,
-        params.min_weight,
-        params.max_slope_deg,
-        exclude=np.flatnonzero(~valid),
-    )
-    transform = need(data, paths.align(take, "transform"), source)
-    return transform_points(transform, vertices), ok
 
 
 def run(template: Template, take: Take, params: Params) -> Part:
@@ -297,12 +260,10 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         for t in (neutral, name)
     ]
     anchors = _anchors(template, sets[name], source)
-    carried = _carries_upper(data, (name, neutral), params.carry_upper_face)
+    steep = carries_upper(data, (name, neutral), params.carry_upper_face)
+    carried = steep and _carried(template, data, (name, neutral), sets[name], maps, anchors, source)
     if carried:
-        xyz = [need(data, paths.range_image(t, "xyz"), source) for t in (name, neutral)]
-        move = need(data, paths.align(name, "transform"), source)
-        start = (template, need(data, paths.landmarks(name), source), sets[name], maps[0])
-        maps[1], anchors = carried_start(*start, xyz, move, anchors, source)
+        maps[1], anchors = carried
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
     problem = problem or _too_far(data, name, refined, fine.faces, params, source)
     if problem:
@@ -320,16 +281,9 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     elif params.jaw.prior:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     refined, priors = _lips(fine, take, neutral_points, refined, report, params)
-    vertices, ok = sample_points(data, name, refined, fine.faces, params, source)
-    if carried:  # a pixel on steep skin is mm of depth: its neighbours' motion serves better
-        measured = report["confidence"] >= MEASURED
-        limits = (params.max_unmeasured_slope_deg, params.max_measured_slope_deg)
-        for limit, which in zip(limits, (~measured, measured), strict=True):
-            if limit is not None:
-                steep = replace(params, max_slope_deg=limit)
-                ok &= sample_points(data, name, refined, fine.faces, steep, source)[1] | ~which
-        vertices = np.where(ok[:, None], vertices, np.nan)
-    attrs = _attrs(params, problem, report, ok, jaw, priors)
+    confidence = report["confidence"] if steep else None
+    vertices, ok = sample_points(data, name, refined, fine.faces, params, source, confidence)
+    attrs = _attrs(params, problem, report, ok, jaw, priors) | {"upper_carried": bool(carried)}
     log.info("%s: refined %s", name, attrs)
     return Part(
         {
@@ -342,14 +296,19 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     )
 
 
-def _carries_upper(data: Mapping[str, np.ndarray], takes: tuple[str, str], which: str) -> bool:
-    """Whether a take's upper face is carried from its neutral (``takes``: the take's and the
-    neutral's names; ``which``: one of :data:`CARRY_UPPER`)."""
-    if which in ("all", "none"):
-        return which == "all"
-    if which == "detected":
-        return landmark_source(data, takes[0]) == "detected"
-    return any(text_value(data.get(paths.landmark_info(t, "doubtful"), "")) for t in takes)
+def _carried(template, data, takes, fiducials: str, maps, anchors, source: str):
+    """The take's map and anchors with its upper face carried from the neutral
+    (:func:`~scan2morph.refine.carried.carried_start`); None when the take failed its
+    alignment's gate or the carry found nothing (a warning: its own points place it)."""
+    if not bool(np.asarray(data.get(paths.align(takes[0], "ok"), True))):
+        return None
+    xyz = [need(data, paths.range_image(t, "xyz"), source) for t in takes]
+    move = need(data, paths.align(takes[0], "transform"), source)
+    lm = need(data, paths.landmarks(takes[0]), source)
+    start = carried_start(template, lm, fiducials, maps[0], xyz, move, anchors, source)
+    if start is None:
+        log.warning("%s: upper face not carried: no neutral point found on its surface", source)
+    return start
 
 
 def _too_far(data, name: str, refined: np.ndarray, faces, params: Params, source: str) -> str:
