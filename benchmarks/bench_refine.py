@@ -48,6 +48,7 @@ from scan2morph.evaluate.motion import (
 from scan2morph.evaluate.truth import read_truth
 from scan2morph.geometry import vertex_normals
 from scan2morph.stages import Take, refine
+from scan2morph.stages.take_mesh import sample_points
 from scan2morph.store import paths, read_parts
 from scan2morph.template import fit_take, load_template, subdivide_template
 
@@ -180,7 +181,7 @@ def _oracle_mouth(b: _Bench, take: str, part, ref_m, where, normals) -> str:
     px = np.array(part.datasets[paths.refine(take, "points2d")])
     swap = b.mouth & ok
     px[swap] = true_px[swap]
-    v, v_ok = refine.sample_points(b.data, take, px, b.fine.faces, b.params, take)
+    v, v_ok = sample_points(b.data, take, px, b.fine.faces, b.params, take)
     material = b.materials[take]
     # both over the vertices the oracle's pixels sample too
     both = where & v_ok

@@ -63,7 +63,9 @@ def _smile_at(points: np.ndarray, nose: np.ndarray) -> np.ndarray:
     return smile_displacement(points[:, 0] - nose[0], points[:, 1] - nose[1])
 
 
-def _noisy_color(color: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def noisy_color(color: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``color`` (H, W, 3) uint8 with the colour sensors' noise (:data:`IMAGE_NOISE` grey levels,
+    ``rng``), rounded and clipped."""
     noisy = color.astype(np.float64) + IMAGE_NOISE * rng.standard_normal(color.shape)
     return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
@@ -82,7 +84,7 @@ def _range_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator) 
     cam = cam * (1.0 + RANGE_NOISE_MM * rng.standard_normal(length.shape) / length)
     xyz = transform_points(invert(take.pose), cam)
     np.savez_compressed(folder / "range.npz", xyz=xyz.astype(np.float32))
-    cv2.imwrite(str(folder / "range.png"), _noisy_color(take.color, rng)[..., ::-1])
+    cv2.imwrite(str(folder / "range.png"), noisy_color(take.color, rng)[..., ::-1])
     write_pts(folder / "range.pts", take.landmarks)
     return {"xyz": "range.npz", "color": "range.png", "landmarks": "range.pts"}
 
@@ -101,7 +103,7 @@ def _rgbd_take(obj: Path, marks: Path, folder: Path, rng: np.random.Generator):
     z = z + RGBD_NOISE_MM_AT_1M * (z / 1000.0) ** 2 * rng.standard_normal(z.shape)
     depth = np.where(np.isfinite(z), np.rint(z), 0).astype(np.uint16)
     cv2.imwrite(str(folder / "depth.png"), depth)
-    cv2.imwrite(str(folder / "color.png"), _noisy_color(take.color, rng)[..., ::-1])
+    cv2.imwrite(str(folder / "color.png"), noisy_color(take.color, rng)[..., ::-1])
     (fx, _, cx), (_, fy, cy) = take.K[:2].tolist()
     intrinsics = dict(width=take.size[0], height=take.size[1], fx=fx, fy=fy, cx=cx, cy=cy)
     (folder / "intrinsics.yaml").write_text(yaml.safe_dump(intrinsics | {"depth_scale_mm": 1.0}))

@@ -25,9 +25,10 @@ def snakemake_dry_run(workdir: Path, configfile: str) -> tuple[int, list[str]]:
 
 
 def run_workflow(
-    workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False
+    workdir: Path, configfile: Path, targets=(), keep_going=True, cores=2, dryrun=False, repo=REPO
 ):
-    """Run the repo's Snakefile in ``workdir`` with ``configfile``; returns True on success."""
+    """Run ``repo``'s Snakefile (this repository's by default) in ``workdir`` with its config
+    and ``configfile`` over it; returns True on success."""
     # imported here: the unit tests import REPO from this module, and snakemake's API costs
     # every test worker about 0.8 s to import at collection
     from snakemake.api import SnakemakeApi
@@ -43,9 +44,9 @@ def run_workflow(
         workflow = api.workflow(
             resource_settings=ResourceSettings(cores=cores),
             config_settings=ConfigSettings(
-                configfiles=[REPO / "config" / "config.yaml", configfile]
+                configfiles=[Path(repo) / "config" / "config.yaml", configfile]
             ),
-            snakefile=REPO / "Snakefile",
+            snakefile=Path(repo) / "Snakefile",
             workdir=workdir,
         )
         dag = workflow.dag(dag_settings=DAGSettings(targets=set(targets)))

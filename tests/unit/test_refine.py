@@ -23,18 +23,13 @@ from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
 from tests.support.configs import config_schema, repo_config
+from tests.support.plane_take import plane_take, renamed
+from tests.support.plane_take import skin_texture as _texture
 
 
 @pytest.fixture(scope="module")
 def fine():
     return subdivide_template(build_template(), 1)
-
-
-def _texture(shape, seed, blob_px=1.5, contrast=25.0):
-    """A skin-like random texture: blurred noise, grey levels around 150."""
-    rng = np.random.default_rng(seed)
-    t = gaussian_filter(rng.standard_normal(shape), blob_px)
-    return 150.0 + contrast * t / t.std()
 
 
 def _warp(image, dx, dy):
@@ -422,36 +417,6 @@ def test_the_jaw_prior_follows_the_chin_of_an_open_jaw():
     assert errors[True] < 0.9 * errors[False], errors
 
 
-def _plane_take(template, texture_seed, config):
-    """A take of a tilted plane (640 x 480) with a random texture and landmarks on it."""
-    from scan2morph.align import transform_points
-    from scan2morph.stages import fit
-    from scan2morph.store import paths
-    from scan2morph.template import fit_take
-
-    y, x = np.mgrid[0:480, 0:640].astype(np.float64)
-    plane = np.array([[0.7, 0.0, 0.05], [0.0, 0.7, -0.03], [-224.0, -168.0, 1000.0]])
-    xyz = np.stack([x, y, np.ones_like(x)], axis=-1) @ plane
-    landmarks = np.array([320.0, 230.0]) + 70.0 * template.ibug_xy
-    grey = np.clip(_texture((480, 640), texture_seed), 0, 255).astype(np.uint8)
-    mesh = fit_take(
-        template,
-        landmarks,
-        xyz,
-        fiducial_set=fit.Params.from_config(config).fiducial_set("viseme"),
-        rules=fit.Params.from_config(config).rules,
-    )
-    return {
-        paths.range_image("t", "xyz"): xyz,
-        paths.range_image("t", "color"): np.repeat(grey[..., None], 3, axis=-1),
-        paths.landmarks("t"): landmarks,
-        paths.mesh("t", "valid"): mesh["valid"],
-        paths.mesh("t", "points2d"): mesh["points2d"],
-        paths.align("t", "transform"): np.eye(4),
-        paths.align("t", "vertices"): transform_points(np.eye(4), mesh["vertices"]),
-    }
-
-
 @pytest.mark.parametrize(("same_skin", "by_shape"), [(True, True), (False, False), (False, True)])
 def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(same_skin, by_shape):
     """The neutral and the take see the same plane; with the same texture the refinement is used
@@ -467,9 +432,8 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
 
     config = repo_config()
     template = build_template()
-    rename = lambda d, t: {k.replace("/takes/t/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: E731
-    data = rename(_plane_take(template, 21, config), "neutral")
-    data |= rename(_plane_take(template, 21 if same_skin else 22, config), "she")
+    data = renamed(plane_take(template, 21, config), "neutral")
+    data |= renamed(plane_take(template, 21 if same_skin else 22, config), "she")
     params = refine.Params.from_config(config)
     params = replace(params, shape=replace(params.shape, use=by_shape))
     take = Take("x", "she", "viseme", "she", "neutral", data=data)
@@ -689,9 +653,8 @@ def test_a_refinement_that_would_move_the_skin_far_from_the_fit_is_not_used():
 
     config = repo_config()
     template = build_template()
-    rename = lambda d, t: {k.replace("/takes/t/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: E731
-    data = rename(_plane_take(template, 21, config), "neutral")
-    take_data = rename(_plane_take(template, 21, config), "she")
+    data = renamed(plane_take(template, 21, config), "neutral")
+    take_data = renamed(plane_take(template, 21, config), "she")
     color = paths.range_image("she", "color")
     take_data[color] = np.roll(take_data[color], 20, axis=1)
     data |= take_data

@@ -10,9 +10,10 @@ on RGB-D, and 0.07 mm at the face. Before the texture's veto of the jaw prior th
 clicked run left 0.119-0.124: the prior took the smile's pull on the chin for a rigid 8-degree
 turn of it. The stereo takes (the real-data tests' rig, its speckle projected from the rig and
 so not moving with the skin) with the left camera's texture shot as their colour: 0.33-0.38
-clicked (asserted), 0.94 detected or the detected smile left out for a folded template (the
-benchmark's); without the shot the benchmark measures 0.50-0.82 clicked and 1.53 detected or the
-smile left out."""
+clicked, 0.39-0.40 detected (both asserted; the detected 0.438-0.936 before its doubtful
+detection's upper face was carried from the neutral, 2026-12-07); without the shot the benchmark
+measures 0.50-0.82 clicked and 0.43-0.90 detected. Detected since then: mesh 0.062, range 0.095,
+RGB-D 0.202-0.209."""
 
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ BOUNDS = {
     "mesh": (0.1, 0.08, 0.10),
     "range": (0.1, 0.10, 0.12),
     "rgbd": (0.45, 0.26, 0.30),
-    "stereo-shot": (0.2, 0.40, None),
+    "stereo-shot": (0.2, 0.40, 0.42),
 }
 
 
@@ -52,7 +53,8 @@ def test_a_real_smile_in_every_modality_with_and_without_landmark_files(tmp_path
         assert "left_out" not in r, (subject, r)  # the smile was left out of its subject
         scan, source = subject.split("_")
         assert r["rotation_deg"] < BOUNDS[scan][0] and r["translation_mm"] < 0.2, (subject, r)
-        assert r["vertices"] > 1600, (subject, r)  # of the template's 1682
+        # of the template's 1682 (the stereo rig's depth has more holes: 1586-1614)
+        assert r["vertices"] > (1550 if scan.startswith("stereo") else 1600), (subject, r)
         assert r["material_relative_error"] < bound[subject], (subject, r)
         # a detection on a real face is doubtful, and says so; clicks raise no such warning
         doubtful = any("detected landmarks are doubtful" in w for w in r["warnings"])

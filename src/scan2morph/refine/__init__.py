@@ -21,10 +21,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from scan2morph.align.rigid import transform_points
 from scan2morph.geometry import face_sides, lengths_2d
 from scan2morph.refine.flow import aperture, fuse_across, fusion, measure_flow
 from scan2morph.refine.memo import active, shared
-from scan2morph.refine.shape import surface_flow
+from scan2morph.refine.shape import shape_image, surface_flow
 from scan2morph.refine.template_space import TemplateGrid, pull_back, template_grid
 from scan2morph.template.tps import TPS
 
@@ -165,6 +166,46 @@ def texture_channel(neutral_image, take_image, params: RefineParams) -> Channel:
         params.noise_grey,
         params.flow_precision_px,
     )
+
+
+def shape_channels(
+    neutral_xyz, take_xyz, transform, texture: list, params, sources=("neutral", "take")
+) -> list:
+    """The channels of the refinement by the surface's shape (:mod:`scan2morph.refine.shape`):
+    the mean curvature's, the ``texture`` channels gated by it (the skin's, where it
+    correlates; with ``params.texture``) and the still skin's (with ``params.surface``).
+
+    Parameters
+    ----------
+    neutral_xyz, take_xyz : (H, W, 3) float
+        The range images, mm, each in its own frame.
+    transform : (4, 4) float
+        Take frame -> neutral frame (the take's alignment), mm.
+    texture : list of Channel
+    params : ShapeParams
+        The section ``refine.shape``'s settings.
+    sources : (str, str)
+        The neutral's and the take's range images, for messages.
+
+    Returns
+    -------
+    list of Channel and SurfaceChannel
+    """
+    pairs = zip((neutral_xyz, take_xyz), sources, strict=True)
+    images = [shape_image(xyz, params.sigma_mm, source) for xyz, source in pairs]
+    shape = Channel(*images, params.high_pass_px, params.noise, params.precision_px)
+    moved = transform_points(transform, np.asarray(take_xyz).reshape(-1, 3))
+    surface = SurfaceChannel(
+        neutral_xyz,
+        moved.reshape(np.shape(take_xyz)),
+        params.surface_tolerance_mm,
+        params.surface_precision_px,
+    )
+    gated = [
+        replace(c, gate_px=params.texture_gate_px, precision_px=params.texture_precision_px)
+        for c in (texture if params.texture else [])
+    ]
+    return [shape, *gated] + ([surface] if params.surface else [])
 
 
 def refine_points(

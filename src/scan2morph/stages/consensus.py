@@ -16,6 +16,7 @@ from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.failure import usable
 from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import aligned_takes
+from scan2morph.stages.take_mesh import carries_upper, sample_points
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
@@ -139,8 +140,11 @@ def run(
         # (stages.motion_noise): the undisturbed draw gives these points bit for bit
         correction = moved[take] - before[take]
         points = before[take] + correction
-        vertices, ok = refine_stage.sample_points(
-            data, take, points, fine.faces, rp, subject.source(take)
+        # a carried take's steep skin is left to its neighbours, as in its refinement
+        steep = carries_upper(data, (take, subject.neutral), rp.carry_upper_face)
+        confidence = need(data, paths.refine(take, "confidence"), take) if steep else None
+        vertices, ok = sample_points(
+            data, take, points, fine.faces, rp, subject.source(take), confidence
         )
         datasets |= {
             paths.consensus(take, "points2d"): points,

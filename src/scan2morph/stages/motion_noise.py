@@ -19,6 +19,7 @@ from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
 from scan2morph.stages.quality import modelled
 from scan2morph.stages.refine import shape_verdicts
+from scan2morph.stages.take_mesh import carries_upper, sample_points
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 
@@ -108,10 +109,14 @@ def _refiner(
         by_shape.setdefault(take, bool(part.attrs[paths.refine_group(take)]["shape_used"]))
         d = part.datasets
         vertices, valid = d[paths.refine(take, "vertices")], d[paths.refine(take, "valid")]
-        if take in moves:
+        confidence = d[paths.refine(take, "confidence")]
+        if take in moves:  # as the consensus moved the take's own refinement
             points = d[paths.refine(take, "points2d")] + moves[take]
-            vertices, valid = refine_stage.sample_points(draw, take, points, faces, p, source)
-        return vertices, valid, d[paths.refine(take, "confidence")]
+            steep = carries_upper(draw, (take, neutral), p.carry_upper_face)
+            vertices, valid = sample_points(
+                draw, take, points, faces, p, source, confidence if steep else None
+            )
+        return vertices, valid, confidence
 
     return refiner
 

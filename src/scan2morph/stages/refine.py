@@ -14,25 +14,21 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from scan2morph.align import IcpParams, rotation_angle_deg, transform_points
+from scan2morph.align import IcpParams, rotation_angle_deg
 from scan2morph.errors import InputError
 from scan2morph.io.mesh_scan import SHADED
-from scan2morph.refine import (
-    Channel,
-    RefineParams,
-    SurfaceChannel,
-    grey,
-    refine_channels,
-    texture_channel,
-)
+from scan2morph.refine import RefineParams, grey, refine_channels, shape_channels, texture_channel
+from scan2morph.refine.carried import carried_start
 from scan2morph.refine.jaw import ChinMeshes, JawParams, JawPrior, chin_weights, jaw_prior
 from scan2morph.refine.lip import LipImages, LipParams, LipPrior, lip_prior
 from scan2morph.refine.memo import active, sharing
-from scan2morph.refine.shape import ShapeParams, shape_image
+from scan2morph.refine.shape import ShapeParams
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
+from scan2morph.stages.take_mesh import CARRY_UPPER, carries_upper, sample_points
 from scan2morph.store import paths
+from scan2morph.store.warnings import text_value
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
 from scan2morph.template.regions import icp_region, lip
@@ -49,6 +45,8 @@ JAW_LINE = 17
 GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
+#: The config keys of the slope limits of a carried take's skin (:class:`Params`).
+STEEP_KEYS = ("max_unmeasured_slope_deg", "max_measured_slope_deg")
 log = logging.getLogger("scan2morph")
 
 
@@ -93,6 +91,15 @@ class Params:
         A refinement that would move the skin farther than this from the template fit (RMS
         over the vertices, mm) is not used (``refine.max_correction_rms_mm``): a colour image
         that is not the scan's (another take's) is followed tens of mm off.
+    carry_upper_face : str
+        One of :data:`CARRY_UPPER` (``refine.carry_upper_face``): whose upper face starts from
+        the neutral's carried by the take's alignment instead of the take's own landmarks.
+    max_unmeasured_slope_deg, max_measured_slope_deg : float or None
+        In those takes, a vertex measured nowhere (confidence below
+        :data:`~scan2morph.stages.take_mesh.MEASURED`), or one
+        measured, on a surface steeper than this (degrees, as ``max_slope_deg``) is invalid, its
+        motion filled from its neighbours' (``refine.max_unmeasured_slope_deg``,
+        ``refine.max_measured_slope_deg``); None: no such limit.
     """
 
     method: str
@@ -110,6 +117,9 @@ class Params:
     shape: ShapeParams = ShapeParams()
     texture_unmatched: bool = False
     max_correction_rms_mm: float = 8.0
+    carry_upper_face: str = "doubtful"
+    max_unmeasured_slope_deg: float | None = 60.0
+    max_measured_slope_deg: float | None = 70.0
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -137,7 +147,27 @@ class Params:
             max_correction_rms_mm=float(
                 refine.get("max_correction_rms_mm", cls.max_correction_rms_mm)
             ),
+            carry_upper_face=str(refine.get("carry_upper_face", cls.carry_upper_face)),
+            **{k: _degrees(refine.get(k, getattr(cls, k))) for k in STEEP_KEYS},
         )
+
+    def __post_init__(self) -> None:
+        if (which := self.carry_upper_face) not in CARRY_UPPER:
+            expected = ", ".join(CARRY_UPPER)
+            raise InputError(
+                "refine", f"carry_upper_face: expected one of {expected}, got {which!r}"
+            )
+        for key in STEEP_KEYS:
+            limit = getattr(self, key)
+            if limit is not None and not 0.0 < limit <= 90.0:
+                raise InputError(
+                    "refine", f"{key}: expected degrees in (0, 90] or None, got {limit}"
+                )
+
+
+def _degrees(value) -> float | None:
+    """A slope limit: degrees, or None (no limit)."""
+    return None if value is None else float(value)
 
 
 def _settings(kind, refine: Mapping, name: str, base: Mapping | None = None):
@@ -165,51 +195,6 @@ def shape_verdicts(data: Mapping, takes) -> dict[str, bool]:
         if isinstance(attrs, Mapping) and "shape_used" in attrs:
             out[take] = bool(attrs["shape_used"])
     return out
-
-
-def sample_points(
-    data: Mapping[str, np.ndarray],
-    take: str,
-    points: np.ndarray,
-    faces: np.ndarray,
-    params: Params,
-    source: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    """A take's mesh sampled from its range image at pixel positions, in the neutral frame.
-
-    Parameters
-    ----------
-    data : mapping store path -> array
-        The take's repair, fit and align parts.
-    take : str
-    points : (V, 2) float
-        Pixel positions of the template's vertices in the take's image, px.
-    faces : (F, 3) int
-        The subdivided template's triangles.
-    params : Params
-        The fit's sampling rules (``min_weight``, ``max_slope_deg``).
-    source : str
-        ``subject/take``, for messages.
-
-    Returns
-    -------
-    vertices : (V, 3) float64
-        mm in the neutral frame (the take's alignment applied); NaN where invalid.
-    ok : (V,) bool
-        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid.
-    """
-    valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
-    vertices, ok = sample_mesh(
-        need(data, paths.range_image(take, "xyz"), source),
-        points,
-        faces,
-        source,
-        params.min_weight,
-        params.max_slope_deg,
-        exclude=np.flatnonzero(~valid),
-    )
-    transform = need(data, paths.align(take, "transform"), source)
-    return transform_points(transform, vertices), ok
 
 
 def run(template: Template, take: Take, params: Params) -> Part:
@@ -275,6 +260,10 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         for t in (neutral, name)
     ]
     anchors = _anchors(template, sets[name], source)
+    steep = carries_upper(data, (name, neutral), params.carry_upper_face)
+    carried = steep and _carried(template, data, (name, neutral), sets[name], maps, anchors, source)
+    if carried:
+        maps[1], anchors = carried
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
     problem = problem or _too_far(data, name, refined, fine.faces, params, source)
     if problem:
@@ -292,8 +281,9 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     elif params.jaw.prior:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     refined, priors = _lips(fine, take, neutral_points, refined, report, params)
-    vertices, ok = sample_points(data, name, refined, fine.faces, params, source)
-    attrs = _attrs(params, problem, report, ok, jaw, priors)
+    confidence = report["confidence"] if steep else None
+    vertices, ok = sample_points(data, name, refined, fine.faces, params, source, confidence)
+    attrs = _attrs(params, problem, report, ok, jaw, priors) | {"upper_carried": bool(carried)}
     log.info("%s: refined %s", name, attrs)
     return Part(
         {
@@ -304,6 +294,21 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         },
         attrs={paths.refine_group(name): attrs},
     )
+
+
+def _carried(template, data, takes, fiducials: str, maps, anchors, source: str):
+    """The take's map and anchors with its upper face carried from the neutral
+    (:func:`~scan2morph.refine.carried.carried_start`); None when the take failed its
+    alignment's gate or the carry found nothing (a warning: its own points place it)."""
+    if not bool(np.asarray(data.get(paths.align(takes[0], "ok"), True))):
+        return None
+    xyz = [need(data, paths.range_image(t, "xyz"), source) for t in takes]
+    move = need(data, paths.align(takes[0], "transform"), source)
+    lm = need(data, paths.landmarks(takes[0]), source)
+    start = carried_start(template, lm, fiducials, maps[0], xyz, move, anchors, source)
+    if start is None:
+        log.warning("%s: upper face not carried: no neutral point found on its surface", source)
+    return start
 
 
 def _too_far(data, name: str, refined: np.ndarray, faces, params: Params, source: str) -> str:
@@ -383,8 +388,7 @@ def _shaded(data: Mapping[str, np.ndarray], takes) -> str:
     the start of a message; ``""`` when none."""
     names = []
     for t in dict.fromkeys(takes):
-        value = data.get(paths.camera(t, "color_source"), b"")
-        if (value.decode() if isinstance(value, bytes) else str(value)) == SHADED:
+        if text_value(data.get(paths.camera(t, "color_source"), "")) == SHADED:
             names.append(t)
     if not names:
         return ""
@@ -466,25 +470,11 @@ def _by_shape(fine, takes, data, maps, anchors, texture: list, params: Params):
     ``(points, report)`` of :func:`~scan2morph.refine.refine_channels`, ``report["shape"]``
     True. ``takes`` are the take's and the neutral's names."""
     take, neutral = takes
-    prm = params.shape
-    sources = {t: paths.range_image(t, "xyz") for t in takes}
-    xyz = {t: need(data, sources[t], sources[t]) for t in takes}
-    images = [shape_image(xyz[t], prm.sigma_mm, sources[t]) for t in (neutral, take)]
-    shape = Channel(*images, prm.high_pass_px, prm.noise, prm.precision_px)
+    sources = [paths.range_image(t, "xyz") for t in (neutral, take)]
+    xyz = [need(data, s, s) for s in sources]
     transform = need(data, paths.align(take, "transform"), take)
-    moved = transform_points(transform, xyz[take].reshape(-1, 3))
-    surface = SurfaceChannel(
-        xyz[neutral],
-        moved.reshape(xyz[take].shape),
-        prm.surface_tolerance_mm,
-        prm.surface_precision_px,
-    )
-    gated = [
-        replace(c, gate_px=prm.texture_gate_px, precision_px=prm.texture_precision_px)
-        for c in (texture if prm.texture else [])
-    ]
-    channels = [shape, *gated] + ([surface] if prm.surface else [])
-    flow = replace(params.flow, fade_px=prm.fade_px)
+    channels = shape_channels(*xyz, transform, texture, params.shape, sources)
+    flow = replace(params.flow, fade_px=params.shape.fade_px)
     refined, report = refine_channels(
         fine.vertices, fine.faces, tuple(maps), channels, anchors, flow
     )

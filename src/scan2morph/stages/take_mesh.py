@@ -1,0 +1,106 @@
+"""A take's mesh sampled at its template's pixels, in the neutral frame: what the refine stage,
+the takes' consensus and the click-noise draws resample once they have moved a take's points.
+
+A take whose detection, or its neutral's, is doubtful (:func:`carries_upper`) has its upper face
+carried from the neutral in the refinement (:mod:`scan2morph.refine.carried`), and its template
+may reach the head's sides, where a pixel is several mm of depth: there a vertex on skin steeper
+than ``max_unmeasured_slope_deg`` (the refinement measured nothing there) or
+``max_measured_slope_deg`` (it did) is invalid, and the motion stage fills its motion from its
+neighbours'. Every resampling of such a take applies the same limits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from scan2morph.align import transform_points
+from scan2morph.stages.part import need
+from scan2morph.store import paths
+from scan2morph.store.warnings import landmark_source, text_value
+from scan2morph.template.sample import sample_mesh
+
+#: ``refine.carry_upper_face`` values (:mod:`scan2morph.refine.carried`): a doubtful detection of
+#: the take or its neutral (``landmark_doubtful``), every detected take, every take, none.
+CARRY_UPPER = ("doubtful", "detected", "all", "none")
+#: A vertex is measured where the refinement's confidence is at least this.
+MEASURED = 0.5
+
+
+def carries_upper(data: Mapping[str, np.ndarray], takes: tuple[str, str], which: str) -> bool:
+    """Whether a take's upper face is carried from its neutral.
+
+    Parameters
+    ----------
+    data : mapping store path -> array
+        Holds the take's and the neutral's landmarks parts.
+    takes : (str, str)
+        The take's and its neutral's names.
+    which : str
+        One of :data:`CARRY_UPPER`.
+    """
+    if which in ("all", "none"):
+        return which == "all"
+    if which == "detected":
+        return landmark_source(data, takes[0]) == "detected"
+    return any(text_value(data.get(paths.landmark_info(t, "doubtful"), "")) for t in takes)
+
+
+def sample_points(
+    data: Mapping[str, np.ndarray],
+    take: str,
+    points: np.ndarray,
+    faces: np.ndarray,
+    params,
+    source: str,
+    confidence: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A take's mesh sampled from its range image at pixel positions, in the neutral frame.
+
+    Parameters
+    ----------
+    data : mapping store path -> array
+        The take's repair, fit and align parts.
+    take : str
+    points : (V, 2) float
+        Pixel positions of the template's vertices in the take's image, px.
+    faces : (F, 3) int
+        The subdivided template's triangles.
+    params : scan2morph.stages.refine.Params
+        The fit's sampling rules (``min_weight``, ``max_slope_deg``) and the steep skin's
+        limits (``max_unmeasured_slope_deg``, ``max_measured_slope_deg``, degrees; None: none).
+    source : str
+        ``subject/take``, for messages.
+    confidence : (V,) float, optional
+        The refinement's confidence at ``points``, for a take whose upper face is carried: a
+        vertex on skin steeper than its limit (measured where at least :data:`MEASURED`) is
+        invalid. None: the fit's rules alone.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        mm in the neutral frame (the take's alignment applied); NaN where invalid.
+    ok : (V,) bool
+        Valid vertices; the fit's invalid vertices (folds, no data) stay invalid.
+    """
+    valid = np.asarray(need(data, paths.mesh(take, "valid"), source), dtype=bool)
+    xyz = need(data, paths.range_image(take, "xyz"), source)
+
+    def sample(max_slope_deg):
+        rules = (params.min_weight, max_slope_deg)
+        return sample_mesh(xyz, points, faces, source, *rules, exclude=np.flatnonzero(~valid))
+
+    vertices, ok = sample(params.max_slope_deg)
+    if confidence is not None:  # a pixel on steep skin is mm of depth: its neighbours serve
+        measured = np.asarray(confidence) >= MEASURED
+        limits = (params.max_unmeasured_slope_deg, params.max_measured_slope_deg)
+        for limit, which in zip(limits, (~measured, measured), strict=True):
+            if limit is not None:
+                ok &= sample(limit)[1] | ~which
+        vertices = np.where(ok[:, None], vertices, np.nan)
+    transform = need(data, paths.align(take, "transform"), source)
+    return transform_points(transform, vertices), ok
+
+
+__all__ = ["CARRY_UPPER", "MEASURED", "carries_upper", "sample_points"]
