@@ -65,6 +65,6 @@ def plane_take(template, texture_seed, config, depth_slope=(0.05, -0.03), landma
     }
 
 
-def renamed(data, take):
-    """``data`` of take ``t`` as take ``take``'s."""
-    return {k.replace("/takes/t/", f"/takes/{take}/"): v for k, v in data.items()}
+def renamed(data, take, old="t"):
+    """``data`` of take ``old`` as take ``take``'s."""
+    return {k.replace(f"/takes/{old}/", f"/takes/{take}/"): v for k, v in data.items()}

@@ -27,10 +27,13 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from scan2morph.align import invert, rotation_angle_deg, transform_points
+from scan2morph.evaluate.motion import material_accuracy
+from scan2morph.geometry import vertex_normals
 from scan2morph.io import write_pts
 from scan2morph.io.mesh_scan import render_mesh
 from scan2morph.render.scene import look_at
 from scan2morph.store import paths, read_part
+from scan2morph.store.warnings import landmark_source, text_value
 from scan2morph.synth.scanner import backproject, camera_matrix, project
 from tests.support.lps_landmarks import LANDMARKS_MM
 from tests.support.real_user import noisy_color
@@ -243,17 +246,12 @@ def write_takes(head, work: Path, seed: int, turns=(0.0, 8.0)) -> dict[str, dict
     return poses
 
 
-def _text(store: dict, key: str) -> str:
-    """A string dataset of a store ('' when absent)."""
-    value = np.asarray(store.get(key, "")).item()
-    return value.decode() if isinstance(value, bytes) else str(value)
-
-
-def _take_accuracy(head, store: dict, take: str, kind: str, poses: dict, model: np.ndarray):
+def _take_accuracy(head, store: dict, take: str, kind: str, poses: dict, model, normals):
     """One take's alignment and material error in a subject's store (``model``: the neutral's
-    template vertices mapped to the model frame, (V, 3) mm)."""
+    template vertices mapped to the model frame, (V, 3) mm; ``normals``: the neutral mesh's,
+    (V, 3))."""
     if paths.failed(take, "reason") in store:
-        return {"left_out": _text(store, paths.failed(take, "reason"))}
+        return {"left_out": text_value(store[paths.failed(take, "reason")])}
     neutral = poses["neutral"]
     true_transform = neutral @ invert(poses[take])  # take frame -> neutral frame
     got = np.asarray(store[paths.align(take, "transform")], dtype=np.float64)
@@ -263,15 +261,14 @@ def _take_accuracy(head, store: dict, take: str, kind: str, poses: dict, model: 
     field = np.asarray(store[key], dtype=np.float64)
     truth = displacement(head, take, model) @ neutral[:3, :3].T
     ok = np.isfinite(field).all(axis=1) & np.isfinite(truth).all(axis=1)
-    rms = float(np.sqrt(np.mean(np.sum(truth[ok] ** 2, axis=1))))
-    error = float(np.sqrt(np.mean(np.sum((field[ok] - truth[ok]) ** 2, axis=1))))
+    error = material_accuracy(field, truth, normals, ok)
     return {
         "rotation_deg": float(rotation_angle_deg((got @ invert(true_transform))[:3, :3])),
-        "motion_rms_mm": rms,
-        "material_relative_error": error / rms,
+        "motion_rms_mm": error["material_rms_mm"],
+        "material_relative_error": error["material_relative_error"],
         "vertices": int(ok.sum()),
-        "landmark_source": _text(store, paths.landmark_info(take, "source")),
-        "doubtful": _text(store, paths.landmark_info(take, "doubtful")),
+        "landmark_source": landmark_source(store, take),
+        "doubtful": text_value(store.get(paths.landmark_info(take, "doubtful"), "")),
     }
 
 
@@ -305,8 +302,9 @@ def evaluate(head, work: Path, subject: str, poses: dict[str, dict[str, np.ndarr
     take_poses = poses[subject.rsplit("_", 1)[0]]
     vertices = np.asarray(store[paths.mesh("neutral", "vertices")], dtype=np.float64)
     model = transform_points(invert(take_poses["neutral"]), vertices)
+    normals = vertex_normals(vertices, np.asarray(store[paths.template("faces")]))
     return {
-        take: _take_accuracy(head, store, take, kind, take_poses, model)
+        take: _take_accuracy(head, store, take, kind, take_poses, model, normals)
         for take, kind, _ in TAKES
         if kind != "neutral"
     }

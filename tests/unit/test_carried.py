@@ -250,10 +250,9 @@ def test_the_takes_consensus_keeps_a_carried_takes_steep_skin_to_its_neighbours(
     refined = refine.run(template, Take("x", "she", "viseme", "she", "neutral", data=data), params)
     takes = ("a", "b", "c")
     subject_data = {k: v for k, v in data.items() if "/takes/she/" not in k}
+    she = {k: v for k, v in data.items() if "/takes/she/" in k} | refined.datasets
     for t in takes:
-        rename = lambda d: {k.replace("/takes/she/", f"/takes/{t}/"): v for k, v in d.items()}  # noqa: B023, E731
-        subject_data |= rename({k: v for k, v in data.items() if "/takes/she/" in k})
-        subject_data |= rename(refined.datasets)
+        subject_data |= renamed(she, t, "she")
         subject_data[paths.refine_group(t)] = {"shape_used": True}
         subject_data[paths.align(t, "ok")] = np.bool_(True)
     kinds = {"neutral": "neutral"} | dict.fromkeys(takes, "viseme")
