@@ -196,6 +196,7 @@ def test_steep_skin_is_left_to_its_neighbours(template):
         ("carry_upper_face", "clicked", r"refine\.carry_upper_face: expected one of .*doubtful"),
         ("max_unmeasured_slope_deg", 95, "max_unmeasured_slope_deg"),
         ("max_measured_slope_deg", 0, "max_measured_slope_deg"),
+        ("max_measured_slope_deg", 90, "max_measured_slope_deg"),
     ],
 )
 def test_a_bad_setting_is_refused_naming_it(key, value, expected):

@@ -159,9 +159,9 @@ class Params:
             )
         for key in STEEP_KEYS:
             limit = getattr(self, key)
-            if limit is not None and not 0.0 < limit <= 90.0:
+            if limit is not None and not 0.0 < limit < 90.0:
                 raise InputError(
-                    "refine", f"{key}: expected degrees in (0, 90] or None, got {limit}"
+                    "refine", f"{key}: expected degrees in (0, 90) or None, got {limit}"
                 )
 
 
