@@ -1,4 +1,5 @@
-"""A textured plane seen as a take (640 x 480): the refinement's scenes with a known answer."""
+"""A textured plane seen as a take (640 x 480, or smaller): the refinement's scenes with a known
+answer."""
 
 from __future__ import annotations
 
@@ -16,7 +17,9 @@ def skin_texture(shape, seed, blob_px=1.5, contrast=25.0):
     return 150.0 + contrast * t / t.std()
 
 
-def plane_take(template, texture_seed, config, depth_slope=(0.05, -0.03), landmarks=None):
+def plane_take(
+    template, texture_seed, config, depth_slope=(0.05, -0.03), landmarks=None, size=(480, 640)
+):
     """A take ``t`` of a tilted plane (640 x 480) with a random texture and landmarks on it.
 
     Parameters
@@ -30,8 +33,10 @@ def plane_take(template, texture_seed, config, depth_slope=(0.05, -0.03), landma
         The plane's depth per pixel along x and y, mm (``PIXEL_MM`` laterally: 1.6 along x is
         66 degrees to the image plane).
     landmarks : (68, 2) float, optional
-        The take's landmarks, px (default: the template's iBUG points, 70 px a unit, about
-        (320, 230)).
+        The take's landmarks, px (default: :func:`plane_landmarks`).
+    size : (2,) int
+        The image's height and width, px; the plane's centre stays at the image's centre, its
+        pixels ``PIXEL_MM`` wide.
 
     Returns
     -------
@@ -43,13 +48,15 @@ def plane_take(template, texture_seed, config, depth_slope=(0.05, -0.03), landma
     from scan2morph.store import paths
     from scan2morph.template import fit_take
 
-    y, x = np.mgrid[0:480, 0:640].astype(np.float64)
+    h, w = size
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
     sx, sy = depth_slope
-    plane = np.array([[PIXEL_MM, 0.0, sx], [0.0, PIXEL_MM, sy], [-224.0, -168.0, 1000.0]])
+    origin = [-PIXEL_MM * w / 2, -PIXEL_MM * h / 2, 1000.0]
+    plane = np.array([[PIXEL_MM, 0.0, sx], [0.0, PIXEL_MM, sy], origin])
     xyz = np.stack([x, y, np.ones_like(x)], axis=-1) @ plane
     if landmarks is None:
-        landmarks = np.array([320.0, 230.0]) + 70.0 * template.ibug_xy
-    grey = np.clip(skin_texture((480, 640), texture_seed), 0, 255).astype(np.uint8)
+        landmarks = plane_landmarks(template, size)
+    grey = np.clip(skin_texture((h, w), texture_seed), 0, 255).astype(np.uint8)
     params = fit.Params.from_config(config)
     mesh = fit_take(
         template, landmarks, xyz, fiducial_set=params.fiducial_set("viseme"), rules=params.rules
@@ -63,6 +70,13 @@ def plane_take(template, texture_seed, config, depth_slope=(0.05, -0.03), landma
         paths.align("t", "transform"): np.eye(4),
         paths.align("t", "vertices"): transform_points(np.eye(4), mesh["vertices"]),
     }
+
+
+def plane_landmarks(template, size=(480, 640)):
+    """(68, 2) the template's iBUG points on a plane take of ``size`` (height, width), px: 70 px
+    a unit about (320, 230) at 640 x 480, scaled with the width."""
+    scale = size[1] / 640.0
+    return scale * (np.array([320.0, 230.0]) + 70.0 * template.ibug_xy)
 
 
 def renamed(data, take, old="t"):

@@ -15,10 +15,13 @@ from scan2morph.stages.take_mesh import MEASURED, carries_upper
 from scan2morph.store import paths
 from scan2morph.template import build_template, fit_map
 from tests.support.configs import repo_config
-from tests.support.plane_take import plane_take, renamed
+from tests.support.plane_take import plane_landmarks, plane_take, renamed
 
 #: A detector's error in the take's view: its upper-face points this far off, px.
 OFF = np.array([6.0, -4.0])
+#: The plane scenes' images, px (height, width): the scanner's, and half of it where the claim
+#: does not depend on the refinement's reach (for the suite's time).
+FULL, HALF = (480, 640), (240, 320)
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +29,8 @@ def template():
     return build_template()
 
 
-def _landmarks(template):
-    return np.array([320.0, 230.0]) + 70.0 * template.ibug_xy
+def _landmarks(template, size=FULL):
+    return plane_landmarks(template, size)
 
 
 def _upper_landmarks(template):
@@ -76,18 +79,18 @@ def test_the_carried_map_places_the_upper_face_at_the_neutrals_skin_and_the_rest
     assert carried_map(template, take, "closed", neutral_map, nothing) is None
 
 
-def _planes(template, config, depth_slope=(0.05, -0.03), off=OFF, doubtful=("she",)):
+def _planes(template, config, depth_slope=(0.05, -0.03), off=OFF, doubtful=("she",), size=HALF):
     """A neutral and a take ``she`` of the same textured plane, the skin's texture flat (nothing
-    to correlate) above the eyes (rows 0-239); the take's upper-face landmarks ``off`` px off;
+    to correlate) above the eyes (the upper half of the image); the take's upper-face landmarks ``off`` px off;
     the takes ``doubtful`` detected with a doubtful detection, the others detected."""
-    landmarks = _landmarks(template)
+    landmarks = _landmarks(template, size)
     moved = landmarks.copy()
     moved[_upper_landmarks(template)] += off
-    data = renamed(plane_take(template, 21, config, depth_slope), "neutral")
-    data |= renamed(plane_take(template, 21, config, depth_slope, moved), "she")
+    data = renamed(plane_take(template, 21, config, depth_slope, size=size), "neutral")
+    data |= renamed(plane_take(template, 21, config, depth_slope, moved, size), "she")
     for take in ("neutral", "she"):
         colour = data[paths.range_image(take, "color")].copy()
-        colour[:240] = 150
+        colour[: size[0] // 2] = 150
         data[paths.range_image(take, "color")] = colour
         data[paths.landmark_info(take, "source")] = b"detected"
         data[paths.landmark_info(take, "doubtful")] = DOUBT.encode() if take in doubtful else b""
@@ -129,7 +132,7 @@ def test_a_doubtful_takes_upper_face_starts_from_the_neutrals_skin(template, dou
     the upper face's points are the neutral's to a fraction of a pixel; not carried, they keep
     most of the landmarks' error."""
     config = repo_config()
-    data = _planes(template, config, doubtful=doubtful)
+    data = _planes(template, config, doubtful=doubtful, size=FULL)
     params = refine.Params.from_config(config)
     assert params.carry_upper_face == config["refine"]["carry_upper_face"] == "doubtful"
     part = refine.run(template, Take("x", "she", "viseme", "she", "neutral", data=data), params)

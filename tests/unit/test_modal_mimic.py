@@ -27,14 +27,14 @@ A_MM, T_N_PER_MM, RHO, H_MM = 100.0, 1.0, 1.1e-9, 1.0
 
 
 def membrane(n_modes: int, **factors) -> ModalParams:
-    """A 1 mm membrane (no shell) under 1 N/mm, dense solver; ``factors``: mimic_*_factor."""
+    """A 1 mm membrane (no shell) under 1 N/mm; ``factors``: mimic_*_factor."""
     return ModalParams(
         n_modes=n_modes,
         thickness_mm=H_MM,
         upper_thickness_factor=1.0,
         material=ShellMaterial(0.0, 0.3, RHO),
         tension_n_per_mm=T_N_PER_MM,
-        method="dense",
+        method="block",
         **factors,
     )
 

@@ -300,15 +300,15 @@ def test_landmark_outside_the_left_image(files, tmp_path):
 
 
 @pytest.mark.parametrize("case", ["flat_right", "other_take"])
-def test_images_that_do_not_overlap(files, tmp_path, case):
+def test_images_that_do_not_overlap(files, take, tmp_path, case):
     """Read fine, but no stereo pair: the reconstruction names both files (as ingest does)."""
     res, paths = files
     right = tmp_path / "right.png"
     if case == "flat_right":
         write_color(right, np.full_like(res["right"], 120))
-    else:  # the right image of another take, turned upside down
-        other = make_stereo_take("s1", "too", "viseme", "too", seed=3, params=SMALL)
-        write_color(right, np.ascontiguousarray(other["right"][::-1]))
+    else:  # the right image of another take (the module's car, shrunk), turned upside down
+        other = cv2.resize(take["right"], res["right"].shape[1::-1], interpolation=cv2.INTER_AREA)
+        write_color(right, np.ascontiguousarray(other[::-1]))
     pair = read_stereo_take(paths["left"], right, paths["calibration"], paths["landmarks"])
     source = f"{paths['left']}, {right}"
     with pytest.raises(
