@@ -176,6 +176,17 @@ def test_tiny_face():
         detect(color, xyz, "s/tiny")
 
 
+def test_a_far_face_is_too_small_not_a_profile():
+    """A face 9 m from the camera (about 15 px between the outer eye corners) was refused as a
+    profile view: no nose-like peak at that size, and the outline's bumps read as a nose in
+    profile (an audit's RGB-D take 3.5 m away, alike). It is a face too small, said before
+    any peak is sought, as at 5 m (after the peak is found)."""
+    for distance_mm, px in ((9000.0, 15), (5000.0, 26)):
+        _, xyz = _scene(distance_mm=distance_mm)
+        with pytest.raises(InputError, match=rf"s/far: face too small: about {px} px .* nearer"):
+            detect(np.zeros((*xyz.shape[:2], 3), np.uint8), xyz, "s/far")
+
+
 def test_profile_view():
     color, xyz = _scene(yaw_deg=80.0)
     with pytest.raises(InputError, match="profile view"):

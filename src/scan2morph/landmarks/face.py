@@ -219,8 +219,9 @@ OTHER_UNITS = (
     ("0.1 mm", 0.1, "0.1"),
 )
 #: Refusals that a wrong unit gives (a face 1000 times too small has no nose-like peak; 10
-#: times too large, its outline's nose-sized bumps read as a profile).
-_UNIT_SYMPTOMS = ("no face found", "profile view: no nose")
+#: times too large, its outline's nose-sized bumps read as a profile, or it reads as a face
+#: seen from 10 times farther).
+_UNIT_SYMPTOMS = ("no face found", "profile view: no nose", "face too small")
 
 
 def find_face(xyz: np.ndarray, source: str) -> Face:
@@ -317,6 +318,9 @@ def _find_face(xyz: np.ndarray, source: str) -> Face:
                 f"{flat} and has no nose-like peak (highest {best:.1f} mm, at least "
                 f"{MIN_PEAK_MM:g} mm above its surroundings): is this take a scan of a face?",
             )
+        nearest = camera.px_per_mm(float(np.nanmin(cam[..., 2])))
+        if nearest < MIN_PX_PER_MM:  # no face on the nearest surface would be large enough
+            raise InputError(source, _too_small(nearest))
         bump = silhouette_bump(np.isfinite(coarse).all(axis=2), scale / stride)
         if bump >= MIN_PEAK_MM:
             raise InputError(
@@ -336,11 +340,7 @@ def _find_face(xyz: np.ndarray, source: str) -> Face:
     _refuse_second_face(coarse, flat, tip, peak, stride, source)
     scale = camera.px_per_mm(float(tip[2]))
     if scale < MIN_PX_PER_MM:
-        raise InputError(
-            source,
-            f"face too small: about {90 * scale:.0f} px between the outer eye corners "
-            f"(at least {90 * MIN_PX_PER_MM:.0f} px, {MIN_PX_PER_MM:g} px per mm)",
-        )
+        raise InputError(source, _too_small(scale))
     normal = _plane_normal(coarse, tip)
     if normal is None:
         raise InputError(source, "no face found: too little surface around the nose-like peak")
@@ -355,6 +355,15 @@ def _find_face(xyz: np.ndarray, source: str) -> Face:
     iy, ix = _tip_near(coarse, zs, tip)
     nose_px = stride * np.array([ix, iy], dtype=np.float64)
     return Face(camera, cam, nose_px, coarse[iy, ix], scale, yaw, pitch, peak)
+
+
+def _too_small(scale: float) -> str:
+    """The refusal of a face at ``scale`` px per mm (below :data:`MIN_PX_PER_MM`)."""
+    return (
+        f"face too small: about {90 * scale:.0f} px between the outer eye corners (at least "
+        f"{90 * MIN_PX_PER_MM:.0f} px, {MIN_PX_PER_MM:g} px per mm); scan the face from nearer "
+        "or at a higher resolution"
+    )
 
 
 def _refuse_second_face(
