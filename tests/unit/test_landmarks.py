@@ -179,12 +179,22 @@ def test_tiny_face():
 def test_a_far_face_is_too_small_not_a_profile():
     """A face 9 m from the camera (about 15 px between the outer eye corners) was refused as a
     profile view: no nose-like peak at that size, and the outline's bumps read as a nose in
-    profile (an audit's RGB-D take 3.5 m away, alike). It is a face too small, said before
-    any peak is sought, as at 5 m (after the peak is found)."""
-    for distance_mm, px in ((9000.0, 15), (5000.0, 26)):
+    profile (an audit's RGB-D take 3.5 m away, alike); at 20 m as "no face found: 207 pixels
+    have range data" (the audit's other RGB-D take). Each is a face too small, as at 5 m
+    (test_tiny_face: found after the nose), its size said from the pixels' span where they are
+    too few for a camera; a few pixels strewn over metres are no face."""
+    for distance_mm, what in (
+        (9000.0, "about 15 px"),
+        (20000.0, r"207 pixels have range data \(at least 400\), 318 x 146 mm: about 6 px"),
+    ):
         _, xyz = _scene(distance_mm=distance_mm)
-        with pytest.raises(InputError, match=rf"s/far: face too small: about {px} px .* nearer"):
+        with pytest.raises(InputError, match=rf"s/far: face too small: {what} .* nearer"):
             detect(np.zeros((*xyz.shape[:2], 3), np.uint8), xyz, "s/far")
+    strewn = np.full((480, 640, 3), np.nan)
+    rng = np.random.default_rng(0)
+    strewn[100:110, 100:110] = rng.normal(0.0, 1000.0, (10, 10, 3)) + [0.0, 0.0, 2000.0]
+    with pytest.raises(InputError, match=r"s/few: no face found: 100 pixels have range data"):
+        detect(np.zeros((480, 640, 3), np.uint8), strewn, "s/few")
 
 
 def test_profile_view():

@@ -303,9 +303,7 @@ def _find_face(xyz: np.ndarray, source: str) -> Face:
         raise InputError(source, f"xyz: expected an (H, W, 3) range grid, got shape {xyz.shape}")
     n_valid, camera, cam, scale = _grid(xyz)
     if camera is None:
-        raise InputError(
-            source, f"no face found: {n_valid} pixels have range data (at least {MIN_PIXELS})"
-        )
+        raise InputError(source, _too_few_pixels(xyz, n_valid))
     # the search runs on every other pixel of a fine grid (about 1 mm per pixel at 640 x 480)
     stride = 2 if scale >= 1.2 else 1
     coarse = cam[::stride, ::stride]
@@ -357,12 +355,32 @@ def _find_face(xyz: np.ndarray, source: str) -> Face:
     return Face(camera, cam, nose_px, coarse[iy, ix], scale, yaw, pitch, peak)
 
 
-def _too_small(scale: float) -> str:
-    """The refusal of a face at ``scale`` px per mm (below :data:`MIN_PX_PER_MM`)."""
+#: Extents of a surface that may be a head, mm: a surface with too few pixels whose two largest
+#: extents lie in this range is called a face too small.
+HEAD_EXTENT_MM = (60.0, 600.0)
+
+
+def _too_few_pixels(xyz: np.ndarray, n_valid: int) -> str:
+    """The refusal of a grid with fewer than :data:`MIN_PIXELS` points: a face too small when
+    they span a head's size (:data:`HEAD_EXTENT_MM`; their px per mm from their count over the
+    area of their two largest extents), else no face."""
+    problem = f"no face found: {n_valid} pixels have range data (at least {MIN_PIXELS})"
+    if n_valid < 20:
+        return problem
+    b, a = np.sort(np.ptp(xyz[np.isfinite(xyz).all(axis=2)], axis=0))[1:]
+    if not HEAD_EXTENT_MM[0] <= b <= a <= HEAD_EXTENT_MM[1]:
+        return problem
+    detail = f"{n_valid} pixels have range data (at least {MIN_PIXELS}), {a:.0f} x {b:.0f} mm"
+    return _too_small(np.sqrt(n_valid / (a * b)), f"{detail}: ")
+
+
+def _too_small(scale: float, detail: str = "") -> str:
+    """The refusal of a face at ``scale`` px per mm (below :data:`MIN_PX_PER_MM`), ``detail``
+    after its first words."""
     return (
-        f"face too small: about {90 * scale:.0f} px between the outer eye corners (at least "
-        f"{90 * MIN_PX_PER_MM:.0f} px, {MIN_PX_PER_MM:g} px per mm); scan the face from nearer "
-        "or at a higher resolution"
+        f"face too small: {detail}about {90 * scale:.0f} px between the outer eye corners "
+        f"(at least {90 * MIN_PX_PER_MM:.0f} px, {MIN_PX_PER_MM:g} px per mm); scan the face from "
+        "nearer or at a higher resolution"
     )
 
 
