@@ -107,8 +107,39 @@ DETECTOR_SEED ?= 1
 detector: setup
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m scan2morph.landmarks.train --seed $(DETECTOR_SEED) --out src/scan2morph/landmarks/model.npz
 
+# Every benchmark's cheapest documented run, on the finished default run in results/ (make run
+# first): a smoke run that none of them has rotted (none is run by the tests), about 5 minutes on
+# two cores. The measurements themselves take each script's own options (its docstring); left
+# out here as too long or not self-contained: bench_landmarks.py (4 minutes), bench_motion_noise.py
+# without --stage (7), bench_noise_estimators.py without --paired (minutes a realisation),
+# bench_subject_jobs.py (two source trees) and bench_facemesh.py (a model to download by hand).
+BENCH_QUICK = \
+	"bench_align.py --subjects 1" \
+	"bench_align_still.py --run . synth04" \
+	"bench_consensus.py . synth02" \
+	"bench_depth_fusion.py --frames 1 2 --takes neutral" \
+	"bench_fit.py" \
+	"bench_mesh_camera.py" \
+	"bench_modal.py --dofs 6000 --ks 10 --methods block arpack" \
+	"bench_modal.py --reconstruction . synth01 --config config/config.yaml" \
+	"bench_modal_span.py . --tune synth01 --configs skin" \
+	"bench_motion_noise.py --stage . --repeat 1 synth04" \
+	"bench_noise_estimators.py --paired --run . --draws 2 synth04" \
+	"bench_profile.py --width 160 --height 120 --dag-subjects 2" \
+	"bench_real_user.py" \
+	"bench_refine.py --workdir . --subject synth04" \
+	"bench_refine_skin.py --draws 1" \
+	"bench_repair.py" \
+	"bench_scaling.py --subjects 1 --width 160 --height 120" \
+	"bench_stage_cpu.py . --src src --stages align --repeat 1 --subject synth01" \
+	"bench_stereo.py --width 320 --height 240 --repeats 1" \
+	"bench_stereo_rigs.py --quick --only 0" \
+	"bench_stereo_takes.py --subjects 1 --labels neutral" \
+	"bench_turned_takes.py --yaw 0" \
+	"bench_zero_click.py . ."
 bench: setup
-	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+	@test -f results/synth04/synth04.h5 || { echo "make bench reads the default run's results: run make run first"; exit 1; }
+	@for b in $(BENCH_QUICK); do echo "== benchmarks/$$b"; $(BIN)/python benchmarks/$$b || exit 1; done
 
 # snakemake --lint asks every rule for a conda environment or container; the project installs its
 # own environment (make setup), so that one lint is expected and any other fails.

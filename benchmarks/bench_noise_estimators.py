@@ -1,7 +1,7 @@
 """The click-noise error bar's estimators against the truth, draw by draw (issue #35).
 
 Run after ``make run``: ``.venv/bin/python benchmarks/bench_noise_estimators.py [--out F.json]
-[subject ...]`` (default synth01, synth02, synth04; synth03 has no exact 2D landmarks to draw
+[--realisations 8] [subject ...]`` (default synth01, synth02, synth04; synth03 has no exact 2D landmarks to draw
 around and is skipped). For each subject it makes ``REALISATIONS`` fresh draws of the nominal
 click noise (``synthetic.scanner.click_noise_px``) around the exact landmarks (seed ``SEED``: the
 clicks of ``bench_motion_noise.py``'s error-bar check), re-runs fit, align, refine and motion of
@@ -91,6 +91,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from scan2morph.errors import InputError
 from scan2morph.evaluate.truth import read_truth
 from scan2morph.motion.clicks import clicked_take
 from scan2morph.motion.uncertainty import (
@@ -133,18 +134,38 @@ def signs(rng, shape) -> np.ndarray:
     return rng.integers(0, 2, shape) * 2.0 - 1.0
 
 
-def perturbed(template, c, stream, px, n, rules, sign: bool, seed: int = SEED_NOISE) -> list:
+def fit_recipe(params: motion_noise.Params) -> DrawRecipe:
+    """The stage's recipe of a draw's fit (its rules and rim share; no refiner: the refined
+    draws call the stage's refiner themselves)."""
+    return DrawRecipe(params.fit.rules, params.smoothing, None, params.fit.rim_share)
+
+
+def partners_of(neutral, n_fits) -> list:
+    """Each draw's neutral with that draw's clicks, whose rim a viseme's fit of the same draw
+    follows (as :func:`scan2morph.motion.uncertainty.click_noise_motion` pairs them)."""
+    return [neutral if f is None else replace(neutral, landmarks=f[2]) for f in n_fits]
+
+
+def perturbed(
+    template, c, stream, px, n, recipe, sign: bool, seed: int = SEED_NOISE, partners=None
+) -> list:
     """``n`` fits of a take with its clicks perturbed (Gaussian, or +-px with ``sign``), the
-    stage's streams (:func:`scan2morph.motion.uncertainty._perturbed`)."""
+    stage's streams (:func:`scan2morph.motion.uncertainty._perturbed`); None where a fit is
+    refused. ``partners``: each draw's neutral (a viseme's)."""
     if not sign:
-        return _perturbed(
-            template, "t", c, stream, ClickNoise(px, n, seed), n, DrawRecipe(rules, {}, None), "s"
-        )
+        fits, _ = _perturbed(
+            template, "t", c, stream, ClickNoise(px, n, seed), n, recipe, "s", partners
+        )  # fmt: skip
+        return fits
     rng = np.random.default_rng([seed, *stream])
     out = []
-    for _ in range(n):
+    for k in range(n):
         noisy = c.landmarks + px * signs(rng, np.shape(c.landmarks))
-        out.append((*_fit(template, c, noisy, rules, "t"), noisy))
+        partner = None if partners is None else partners[k]
+        try:
+            out.append((*_fit(template, c, noisy, recipe, "t", partner), noisy))
+        except InputError:
+            out.append(None)
     return out
 
 
@@ -159,21 +180,23 @@ def draws(template, data, run: Run, px: float, seed: int = SEED_NOISE) -> dict:
     takes = {t: clicked_take(data, t, fiducials[t]) for t in [subject.neutral, *subject.visemes]}
     suppressed = np.asarray(data[paths.mask("suppressed")], dtype=bool)
     smooth = _FinalMotion(suppressed, params.smoothing)
-    rules = params.fit.rules
+    recipe = fit_recipe(params)
     neutral = takes[subject.neutral]
-    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, rules, "n")
+    n_base, n_mesh = _fit(template, neutral, neutral.landmarks, recipe, "n")
     faces = n_mesh["faces"]
     out = {v: {} for v in subject.visemes}
     with sharing():
         for kind in ("gauss", "sign"):
-            n_fits = perturbed(template, neutral, [0], px, FIT_DRAWS, rules, kind == "sign", seed)
+            sign = kind == "sign"
+            n_fits = perturbed(template, neutral, [0], px, FIT_DRAWS, recipe, sign, seed)
+            partners = partners_of(neutral, n_fits)
             for take in subject.visemes:
                 c = takes[take]
                 ref = np.asarray(c.motion, dtype=np.float64)
-                t0 = _fit(template, c, c.landmarks, rules, take)
+                t0 = _fit(template, c, c.landmarks, recipe, take, neutral)
                 ref_fit = smooth(t0[0], t0[1]["valid"], None, n_base, n_mesh["valid"], faces, take)
                 stream = [1, zlib.crc32(take.encode())]
-                t_fits = perturbed(template, c, stream, px, FIT_DRAWS, rules, kind == "sign", seed)
+                t_fits = perturbed(template, c, stream, px, FIT_DRAWS, recipe, sign, seed, partners)
                 free = ~suppressed & np.isfinite(ref).all(axis=1)
                 rec = {
                     "refined": [],
@@ -181,6 +204,8 @@ def draws(template, data, run: Run, px: float, seed: int = SEED_NOISE) -> dict:
                     "motion_rms_mm": float(np.sqrt(np.mean(np.sum(ref[free] ** 2, axis=1)))),
                 }
                 for k, (nf, tf) in enumerate(zip(n_fits, t_fits, strict=True)):
+                    if nf is None or tf is None:  # a refused draw, as the stage leaves it out
+                        continue
                     nv = nf[1]["valid"]
                     m = smooth(tf[0], tf[1]["valid"], None, nf[0], nv, faces, take)
                     rec["fit"].append(float(np.nanmean(np.sum((m - ref_fit) ** 2, axis=1)[free])))
@@ -193,8 +218,8 @@ def draws(template, data, run: Run, px: float, seed: int = SEED_NOISE) -> dict:
     return out
 
 
-def measure(subject: str) -> dict:
-    """Truth and draws of one subject (see the module's docstring)."""
+def measure(subject: str, realisations: int = REALISATIONS) -> dict:
+    """Truth and draws of one subject (see the module's docstring) over ``realisations``."""
     config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     nominal = float(config["synthetic"]["scanner"]["click_noise_px"])
     rows = config["synthetic"]["takes"]
@@ -228,7 +253,7 @@ def measure(subject: str) -> dict:
     free = ~np.asarray(exact[paths.mask("suppressed")], dtype=bool)
     rng = np.random.default_rng(SEED)
     out = {"rel0": rel0, "realisations": []}
-    for r in range(REALISATIONS):
+    for r in range(realisations):
         t0 = time.perf_counter()
         clicks = {
             t: truths[t].landmarks2d + nominal * rng.standard_normal(truths[t].landmarks2d.shape)
@@ -332,10 +357,14 @@ def paired(run_dir: Path, subject: str, variants: list[str], n: int) -> None:
     ct = {t: clicked_take(data, t, params.fit.fiducial_set(kinds[t])) for t in takes}
     suppressed = np.asarray(data[paths.mask("suppressed")], dtype=bool)
     smooth = _FinalMotion(suppressed, params.smoothing)
-    rules = params.fit.rules
-    n_fits = perturbed(template, ct[subj.neutral], [0], px, n, rules, False)
+    recipe = fit_recipe(params)
+    neutral = ct[subj.neutral]
+    n_fits = perturbed(template, neutral, [0], px, n, recipe, False)
+    partners = partners_of(neutral, n_fits)
     t_fits = {
-        v: perturbed(template, ct[v], [1, zlib.crc32(v.encode())], px, n, rules, False)
+        v: perturbed(
+            template, ct[v], [1, zlib.crc32(v.encode())], px, n, recipe, False, SEED_NOISE, partners
+        )
         for v in subj.visemes
     }
     runs, changes = {}, {}
@@ -353,6 +382,8 @@ def paired(run_dir: Path, subject: str, variants: list[str], n: int) -> None:
                 free = ~suppressed & np.isfinite(ref).all(axis=1)
                 x[v] = []
                 for nf, tf in zip(n_fits, t_fits[v], strict=True):
+                    if nf is None or tf is None:
+                        continue
                     vv, valid, conf = _corresponded(refiner, v, tf, tf[2], nf[2])
                     m = smooth(vv, valid, conf, nf[0], nf[1]["valid"], nf[1]["faces"], v)
                     x[v].append(float(np.nanmean(np.sum((m - ref) ** 2, axis=1)[free])))
@@ -368,15 +399,16 @@ def paired(run_dir: Path, subject: str, variants: list[str], n: int) -> None:
             for v in subj.visemes
         )
         print(f"{variant:24} ratio to the config's (correlation): {cells}")
-    n0, m0 = _fit(template, ct[subj.neutral], ct[subj.neutral].landmarks, rules, "n")
+    n0, m0 = _fit(template, neutral, neutral.landmarks, recipe, "n")
     shares = []
     for v in subj.visemes:
-        t0 = _fit(template, ct[v], ct[v].landmarks, rules, v)
+        t0 = _fit(template, ct[v], ct[v].landmarks, recipe, v, neutral)
         base = smooth(t0[0], t0[1]["valid"], None, n0, m0["valid"], m0["faces"], v)
         e = np.array(
             [
                 smooth(tf[0], tf[1]["valid"], None, nf[0], nf[1]["valid"], m0["faces"], v) - base
                 for nf, tf in zip(n_fits, t_fits[v], strict=True)
+                if nf is not None and tf is not None
             ]
         )
         d = np.array(changes[v])
@@ -395,6 +427,9 @@ if __name__ == "__main__":
     parser.add_argument("--paired", nargs="*", metavar="VARIANT", help="see paired()")
     parser.add_argument("--run", type=Path, default=ROOT, help="--paired's finished run")
     parser.add_argument("--draws", type=int, default=4, help="--paired's draws")
+    parser.add_argument(
+        "--realisations", type=int, default=REALISATIONS, help="click realisations per subject"
+    )
     cli = parser.parse_args()
     if cli.report:
         report(json.loads(cli.report.read_text()))
@@ -405,7 +440,7 @@ if __name__ == "__main__":
         sys.exit(0)
     found = {}
     for name in cli.subjects or ["synth01", "synth02", "synth04"]:
-        found[name] = measure(name)
+        found[name] = measure(name, cli.realisations)
         if cli.out:
             cli.out.write_text(json.dumps(found))
     report(found)

@@ -8,8 +8,10 @@ cost on a large sheet.
 profiles itself (:func:`scan2morph.jobs.run_job`: cProfile statistics and the CPU time spent
 before its body, i.e. the interpreter, Snakemake's script wrapper and the imports). It prints
 
-1. per rule: jobs, mean job wall time (Snakemake's benchmark files), mean start-up CPU, mean
-   body wall time, and the share of the job that is start-up;
+1. per job rule (``take``: a take's stages in one process; ``subject``: a subject's; and the
+   one-stage rules): jobs, mean job wall time (Snakemake's benchmark files), mean start-up CPU
+   (paid once a job) and its share of the job; then per stage: its runs, its mean body time and
+   its line in its job's benchmark;
 2. per rule, the functions with the most time of their own (cProfile ``tottime``, summed over
    the rule's jobs), and the library's own functions with the most cumulative time;
 3. the scheduler: the wall and CPU time of a dry run (``snakemake -n``: parsing, the DAG) on a
@@ -36,6 +38,7 @@ import pandas as pd
 from bench_scaling import ROOT, SNAKEMAKE, job_benchmarks, write_config
 
 from scan2morph.jobs import PROFILE_ENV
+from scan2morph.stages.stage_job import SUBJECT_STAGES, TAKE_STAGES
 
 #: Functions of the job machinery, not of the work (left out of the tables).
 WRAPPERS = {"run_job", "_profiled", "job", "main", "isolated", "run_take_job", "<module>"}
@@ -60,24 +63,43 @@ def rule_of(stem: str) -> str:
     return stem.split("-")[0]
 
 
-def rule_table(work: Path, profile: Path) -> pd.DataFrame:
-    """Per rule: jobs, job wall time, start-up CPU and body time, means over the rule's jobs."""
+def _job_of(stem: str) -> str:
+    """The job a profiled stage ran in: ``take-{subject}-{take}`` for a take's stage,
+    ``subject-{subject}`` for a subject's (one process each, issue #35), else its own name."""
+    rule, *rest = stem.split("-")
+    if rule in TAKE_STAGES:
+        return "-".join(["take", *rest])
+    if rule in SUBJECT_STAGES:
+        return "-".join(["subject", *rest[:1]])
+    return stem
+
+
+def rule_table(work: Path, profile: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per stage: its runs, mean body time and mean stage time (its line in the job's benchmark);
+    per job rule (``take``, ``subject`` and the one-stage rules): jobs, mean job wall time, mean
+    start-up CPU (the interpreter, Snakemake's wrapper and the imports, paid once a job: the
+    first stage it runs records it) and its share of the job's wall time."""
     rows = []
     for f in profile.glob("*.json"):
-        rows.append({"rule": rule_of(f.stem)} | json.loads(f.read_text()))
-    jobs = (
-        pd.DataFrame(rows)
-        .groupby("rule")
-        .agg(
-            jobs=("startup_cpu_s", "size"),
-            startup_cpu_s=("startup_cpu_s", "mean"),
-            body_wall_s=("body_wall_s", "mean"),
-        )
+        rows.append({"rule": rule_of(f.stem), "job": _job_of(f.stem)} | json.loads(f.read_text()))
+    runs = pd.DataFrame(rows)
+    bench = job_benchmarks(work)
+    stage_wall = bench[~bench.job].groupby("rule")["s"].mean().rename("stage_wall_s")
+    stages = (
+        runs.groupby("rule")
+        .agg(runs=("body_wall_s", "size"), body_wall_s=("body_wall_s", "mean"))
+        .join(stage_wall, how="left")
+        .sort_values("body_wall_s", ascending=False)
     )
-    wall = job_benchmarks(work).groupby("rule")["s"].mean().rename("job_wall_s")
-    table = jobs.join(wall, how="left")
-    table["startup_share"] = table.startup_cpu_s / table.job_wall_s
-    return table.sort_values("job_wall_s", ascending=False)
+    per_job = runs.groupby("job").agg(startup_cpu_s=("startup_cpu_s", "sum"))
+    per_job["rule"] = [rule_of(j) for j in per_job.index]
+    jobs = per_job.groupby("rule").agg(
+        jobs=("startup_cpu_s", "size"), startup_cpu_s=("startup_cpu_s", "mean")
+    )
+    job_wall = bench[bench.job].groupby("rule")["s"].mean().rename("job_wall_s")
+    jobs = jobs.join(job_wall, how="left")
+    jobs["startup_share"] = jobs.startup_cpu_s / jobs.job_wall_s
+    return stages, jobs.sort_values("job_wall_s", ascending=False)
 
 
 def top_functions(profile: Path, rule: str, n: int) -> tuple[list[str], list[str]]:
@@ -129,11 +151,15 @@ def main(argv=None) -> int:
     work = Path(tempfile.mkdtemp(prefix="bench_profile_"))
     try:
         profile = run_profiled(work, args)
-        table = rule_table(work, profile)
+        stages, jobs = rule_table(work, profile)
         pd.set_option("display.width", 160)
-        print(f"== per rule, one subject at {args.width} x {args.height} (means over jobs)")
-        print(table.round(2).to_string())
-        for rule in table.index:
+        print(f"== per job rule, one subject at {args.width} x {args.height} (means over jobs)")
+        print(jobs.round(2).to_string())
+        print(
+            "\n== per stage (means over its runs; a take's stages share one job, a subject's too)"
+        )
+        print(stages.round(2).to_string())
+        for rule in stages.index:
             own, cumulative = top_functions(profile, rule, args.top)
             print(f"\n== {rule}: own time (summed over its jobs)")
             print("\n".join(own))
