@@ -25,7 +25,7 @@ error against the truth is printed beside what the truth says about the alignmen
 
 Usage::
 
-    PYTHONPATH=src .venv/bin/python benchmarks/bench_align_still.py --run /path/to/run synth04
+    PYTHONPATH=src .venv/bin/python benchmarks/bench_align_still.py --run RUN [--config F] synth04
 
 ``--run`` is a folder holding ``results/`` and ``resources/template.npz`` of a finished default
 run (default: this checkout).

@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_real_user.py [--work DIR] [--seed 7]
+    .venv/bin/python benchmarks/bench_real_user.py [--work DIR] [--seed 7] [--cores 2]
 
 The real head of the real-data tests (``../shared/data``, CC BY 3.0; tests/support/real_head.py)
 is written as a user's scans: a neutral and a smiling take (the real-data tests' smile, the cheeks

@@ -14,7 +14,7 @@ Usage::
 
     PYOPENGL_PLATFORM=osmesa .venv/bin/python benchmarks/bench_stereo_takes.py \\
         [--subjects 3] [--labels neutral car smile] \\
-        [--variant rectify_interpolation=linear,patch_curvature=false ...]
+        [--variant rectify_interpolation=linear,patch_curvature=false [--variant ...]]
 """
 
 from __future__ import annotations
