@@ -1,12 +1,12 @@
 """The click-noise error bar's estimators against the truth, draw by draw (issue #35).
 
 Run after ``make run``: ``.venv/bin/python benchmarks/bench_noise_estimators.py [--out F.json]
-[--realisations 8] [subject ...]`` (default synth01, synth02, synth04; synth03 has no exact 2D landmarks to draw
-around and is skipped). For each subject it makes ``REALISATIONS`` fresh draws of the nominal
-click noise (``synthetic.scanner.click_noise_px``) around the exact landmarks (seed ``SEED``: the
-clicks of ``bench_motion_noise.py``'s error-bar check), re-runs fit, align, refine and motion of
-the neutral and the visemes (``sweep``'s stages, the run's config) for each and for the exact
-landmarks, and measures
+[--realisations 8] [subject ...]`` (default synth01, synth02, synth04; synth03 has no exact 2D
+landmarks to draw around and is skipped). For each subject it makes ``REALISATIONS`` (or
+``--realisations``) fresh draws of the nominal click noise (``synthetic.scanner.click_noise_px``)
+around the exact landmarks (seed ``SEED``: the clicks of ``bench_motion_noise.py``'s error-bar
+check), re-runs fit, align, refine and motion of the neutral and the visemes (``sweep``'s
+stages, the run's config) for each and for the exact landmarks, and measures
 
 * the truth: the click-noise part of the motion error, both as ``bench_motion_noise.py`` takes
   it, ``sqrt(mean(rel^2) - rel0^2)`` with ``rel`` the realisations' ``relative_error`` and
@@ -363,7 +363,7 @@ def paired(run_dir: Path, subject: str, variants: list[str], n: int) -> None:
     partners = partners_of(neutral, n_fits)
     t_fits = {
         v: perturbed(
-            template, ct[v], [1, zlib.crc32(v.encode())], px, n, recipe, False, SEED_NOISE, partners
+            template, ct[v], [1, zlib.crc32(v.encode())], px, n, recipe, False, partners=partners
         )
         for v in subj.visemes
     }

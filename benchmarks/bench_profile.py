@@ -35,10 +35,9 @@ import time
 from pathlib import Path
 
 import pandas as pd
-from bench_scaling import ROOT, SNAKEMAKE, job_benchmarks, write_config
+from bench_scaling import MULTI_STAGE, ROOT, SNAKEMAKE, job_benchmarks, write_config
 
 from scan2morph.jobs import PROFILE_ENV
-from scan2morph.stages.stage_job import SUBJECT_STAGES, TAKE_STAGES
 
 #: Functions of the job machinery, not of the work (left out of the tables).
 WRAPPERS = {"run_job", "_profiled", "job", "main", "isolated", "run_take_job", "<module>"}
@@ -66,11 +65,10 @@ def rule_of(stem: str) -> str:
 def _job_of(stem: str) -> str:
     """The job a profiled stage ran in: ``take-{subject}-{take}`` for a take's stage,
     ``subject-{subject}`` for a subject's (one process each, issue #35), else its own name."""
-    rule, *rest = stem.split("-")
-    if rule in TAKE_STAGES:
-        return "-".join(["take", *rest])
-    if rule in SUBJECT_STAGES:
-        return "-".join(["subject", *rest[:1]])
+    stage, *rest = stem.split("-")
+    for job, stages in MULTI_STAGE.values():
+        if stage in stages:  # a take job is one take's, a subject job one subject's
+            return "-".join([job, *rest[: 2 if job == "take" else 1]])
     return stem
 
 

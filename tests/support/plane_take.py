@@ -8,6 +8,9 @@ from scipy.ndimage import gaussian_filter
 
 #: Lateral size of one pixel on the plane, mm.
 PIXEL_MM = 0.7
+#: The plane takes' images, px (height, width): the scanner's, and half of it (for tests whose
+#: claim does not depend on the size).
+FULL, HALF = (480, 640), (240, 320)
 
 
 def skin_texture(shape, seed, blob_px=1.5, contrast=25.0):
@@ -18,7 +21,7 @@ def skin_texture(shape, seed, blob_px=1.5, contrast=25.0):
 
 
 def plane_take(
-    template, texture_seed, config, depth_slope=(0.05, -0.03), landmarks=None, size=(480, 640)
+    template, texture_seed, config, depth_slope=(0.05, -0.03), landmarks=None, size=FULL
 ):
     """A take ``t`` of a tilted plane (640 x 480) with a random texture and landmarks on it.
 
@@ -72,7 +75,7 @@ def plane_take(
     }
 
 
-def plane_landmarks(template, size=(480, 640)):
+def plane_landmarks(template, size=FULL):
     """(68, 2) the template's iBUG points on a plane take of ``size`` (height, width), px: 70 px
     a unit about (320, 230) at 640 x 480, scaled with the width."""
     scale = size[1] / 640.0

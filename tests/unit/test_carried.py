@@ -15,22 +15,15 @@ from scan2morph.stages.take_mesh import MEASURED, carries_upper
 from scan2morph.store import paths
 from scan2morph.template import build_template, fit_map
 from tests.support.configs import repo_config
-from tests.support.plane_take import plane_landmarks, plane_take, renamed
+from tests.support.plane_take import FULL, HALF, plane_landmarks, plane_take, renamed
 
 #: A detector's error in the take's view: its upper-face points this far off, px.
 OFF = np.array([6.0, -4.0])
-#: The plane scenes' images, px (height, width): the scanner's, and half of it where the claim
-#: does not depend on the refinement's reach (for the suite's time).
-FULL, HALF = (480, 640), (240, 320)
 
 
 @pytest.fixture(scope="module")
 def template():
     return build_template()
-
-
-def _landmarks(template, size=FULL):
-    return plane_landmarks(template, size)
 
 
 def _upper_landmarks(template):
@@ -59,7 +52,7 @@ def test_the_carried_map_places_the_upper_face_at_the_neutrals_skin_and_the_rest
     neutral's (to 1e-6 px: the spline interpolates), the lower face's fiducials at the take's
     own points; the take's plain spline puts the upper face OFF away."""
     shift = np.array([5.0, 3.0])
-    neutral = _landmarks(template)
+    neutral = plane_landmarks(template)
     take = neutral + shift
     up = _upper_landmarks(template)
     take[up] += OFF
@@ -81,9 +74,10 @@ def test_the_carried_map_places_the_upper_face_at_the_neutrals_skin_and_the_rest
 
 def _planes(template, config, depth_slope=(0.05, -0.03), off=OFF, doubtful=("she",), size=HALF):
     """A neutral and a take ``she`` of the same textured plane, the skin's texture flat (nothing
-    to correlate) above the eyes (the upper half of the image); the take's upper-face landmarks ``off`` px off;
+    to correlate) above the eyes (the image's upper half); the take's upper-face landmarks ``off``
+    px off;
     the takes ``doubtful`` detected with a doubtful detection, the others detected."""
-    landmarks = _landmarks(template, size)
+    landmarks = plane_landmarks(template, size)
     moved = landmarks.copy()
     moved[_upper_landmarks(template)] += off
     data = renamed(plane_take(template, 21, config, depth_slope, size=size), "neutral")

@@ -23,12 +23,8 @@ from scan2morph.refine.template_space import pull_back, template_grid
 from scan2morph.stages import Take
 from scan2morph.template import build_template, subdivide_template
 from tests.support.configs import config_schema, repo_config
-from tests.support.plane_take import plane_take, renamed
+from tests.support.plane_take import HALF, plane_take, renamed
 from tests.support.plane_take import skin_texture as _texture
-
-#: The plane scenes' images, px (height, width): half the scanner's 640 x 480 (the refinement's
-#: decisions on a plane do not depend on the size; the suite's time does).
-PLANE_SIZE = (240, 320)
 
 
 @pytest.fixture(scope="module")
@@ -436,8 +432,8 @@ def test_a_take_whose_image_shares_no_texture_with_the_neutral_keeps_its_fit(sam
 
     config = repo_config()
     template = build_template()
-    data = renamed(plane_take(template, 21, config, size=PLANE_SIZE), "neutral")
-    data |= renamed(plane_take(template, 21 if same_skin else 22, config, size=PLANE_SIZE), "she")
+    data = renamed(plane_take(template, 21, config, size=HALF), "neutral")
+    data |= renamed(plane_take(template, 21 if same_skin else 22, config, size=HALF), "she")
     params = refine.Params.from_config(config)
     params = replace(params, shape=replace(params.shape, use=by_shape))
     take = Take("x", "she", "viseme", "she", "neutral", data=data)
