@@ -118,6 +118,7 @@ BENCH_QUICK = \
 	"bench_align_still.py --run . synth04" \
 	"bench_consensus.py . synth02" \
 	"bench_depth_fusion.py --frames 1 2 --takes neutral" \
+	"bench_error_regions.py" \
 	"bench_fit.py" \
 	"bench_mesh_camera.py" \
 	"bench_modal.py --dofs 6000 --ks 10 --methods block arpack" \
