@@ -184,3 +184,24 @@ def test_the_store_says_which_code_made_it(tmp_path):
         named = {*layout["root_attributes"], *layout["optional_root_attributes"]}
         assert set(attrs) <= named
         assert set(layout["root_attributes"]) <= set(attrs)
+
+
+def test_the_layout_says_the_expression_displacement_is_smoothed():
+    """Every store carries the layout's description as the dataset's ``description`` attribute.
+    The motion stage smooths expression fields (``smoothing.expression_iterations`` Laplacian
+    steps, 10 by default) since 2026-12-02; the layout still said "neither masked nor smoothed"."""
+    import yaml
+
+    from tests.support.workflow_api import REPO
+
+    (entry,) = [
+        d
+        for d in load_layout(LAYOUT)["datasets"]
+        if d["path"] == "/expressions/{take}/displacement"
+    ]
+    text = " ".join(entry["description"].split())
+    assert "nor smoothed" not in text and "not smoothed" not in text
+    assert "smoothed by smoothing.expression_iterations" in text
+    schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text(encoding="utf-8"))
+    default = schema["properties"]["smoothing"]["properties"]["expression_iterations"]["default"]
+    assert f"({default} by default" in text
