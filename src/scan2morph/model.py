@@ -62,9 +62,13 @@ class Model:
     sigma_convention : str or None
         ``sample`` (the coefficients' sample standard deviation) or ``paper`` (sqrt eigenvalue).
     frequencies_hz : (k,) float
-        Natural frequencies of the modal basis.
+        Frequencies of the modal basis, Hz: the natural ones (coordinates ``mass``) or each
+        orthonormalised mode's Rayleigh-quotient frequency (coordinates ``vertex``, the default),
+        which need not ascend.
     modes : (k, V, 3) float
-        Mode shapes (translational part), mass-orthonormal.
+        Mode shapes (translational part), orthonormal in the mass the coordinates use: the
+        model's mass (``/modal/physics`` coordinates ``mass``) or, by default (preset ``skin``,
+        coordinates ``vertex``), the total mass shared equally by the vertices.
     coordinates : dict take -> (k,) float
         Modal coordinates of each expression.
     head_frame : (4, 4) float or None
