@@ -108,7 +108,11 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
         )
     try:
         text = tab_cells(path, sheet_text(path))
-        df = pd.read_csv(io.StringIO(text), sep="\t", dtype=str, index_col=False)
+        # keep_default_na=False: a cell reads as written ('NA', 'None' or 'null' is an id, a
+        # units cell 'NaN' is refused), not as pandas' missing value (an empty cell)
+        df = pd.read_csv(
+            io.StringIO(text), sep="\t", dtype=str, index_col=False, keep_default_na=False
+        )
     except pd.errors.EmptyDataError:
         df = pd.DataFrame(columns=list(COLUMNS))
     except pd.errors.ParserError as exc:  # the text is decoded: sheet_text names bad bytes

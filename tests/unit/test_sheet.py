@@ -339,3 +339,25 @@ def test_header_ids_and_cells_the_bad_input_audit_found_misleading(tmp_path):
         1.0,
         None,
     ]
+
+
+def test_cells_pandas_takes_for_missing_values_read_as_written(tmp_path):
+    """A subject 'NA' (initials) or a take 'null' was read as an empty cell, and the whole
+    sheet refused as "'' is not an id"; a units cell 'NaN' or 'N/A' was silently mm."""
+    _files(tmp_path, "n.abs", "c.abs")
+    rows = [
+        ["NA", "neutral", "neutral", "neutral", "range", "n.abs", "", "", "", "", ""],
+        ["NA", "null", "viseme", "None", "range", "c.abs", "", "", "", "", ""],
+    ]
+    table = read_sheet(_sheet(tmp_path, rows))
+    assert table[["subject", "take", "label"]].values.tolist() == [
+        ["NA", "neutral", "neutral"],
+        ["NA", "null", "None"],
+    ]
+    path = tmp_path / "units.tsv"
+    path.write_text(HEADER.replace("\n", "\tunits\n") + "\t".join(rows[0]) + "\tNaN\n")
+    problems = subject_problems(read_sheet(path))["NA"]
+    assert problems == [
+        f"{path} row 2 (NA/neutral): column 'units': 'NaN' unknown (expected mm, "
+        "cm, m or a number of mm per unit, e.g. 25.4 for inches; empty means mm)"
+    ]
