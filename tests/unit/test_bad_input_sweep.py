@@ -241,6 +241,36 @@ def test_a_boolean_depth_array_names_its_type(tmp_path):
     )
 
 
+def test_a_file_that_is_not_the_numpy_format_its_suffix_names(tmp_path):
+    """Before: a text file named .npz or .npy was 'This file contains pickled (object) data. If
+    you trust the file you can load it unsafely using the `allow_pickle=` keyword argument',
+    an .npy named .npz 'object does not support the context manager protocol', and an .npz
+    named .npy 'expected an (H, W) number array, got (1,) <U5' (the array of its key names)."""
+    from scan2morph.io import read_npz_range
+
+    depth = np.ones((12, 16))
+    (tmp_path / "text.npz").write_text("hello")
+    np.save(tmp_path / "one.npy", depth)
+    (tmp_path / "one.npz").write_bytes((tmp_path / "one.npy").read_bytes())
+    np.savez(tmp_path / "two.npz", depth=depth)
+    (tmp_path / "two.npy").write_bytes((tmp_path / "two.npz").read_bytes())
+    (tmp_path / "empty.npy").write_bytes(b"")
+    npz, npy = "a NumPy .npz (a zip archive of named arrays)", "a NumPy .npy array"
+    cases = [
+        (read_npz_range, "text.npz", f"xyz: expected {npz}, got a file starting with b'hello', "
+         "not NumPy data"),
+        (read_npz_range, "one.npz", f"xyz: expected {npz}, got {npy} named .npz"),
+        (read_depth, "one.npz", f"depth: expected {npz}, got {npy} named .npz"),
+        (read_depth, "two.npy", f"depth: expected {npy}, got {npz} named .npy"),
+        (read_depth, "empty.npy", f"depth: expected {npy}, got an empty file (0 bytes)"),
+    ]  # fmt: skip
+    for reader, name, problem in cases:
+        with pytest.raises(InputError) as exc:
+            reader(tmp_path / name)
+        assert _one_line(exc, tmp_path / name) == f"{tmp_path / name}: {problem}"
+    assert read_depth(tmp_path / "one.npy").shape == read_depth(tmp_path / "two.npz").shape
+
+
 def test_3d_landmarks_saved_with_a_bom_read_like_a_pts_file(tmp_path):
     """Before: 'line 1: expected 'x y z' numbers, got '\\ufeff1 2 3'' (a .pts with a BOM read)."""
     rows = np.arange(68 * 3, dtype=float).reshape(68, 3)

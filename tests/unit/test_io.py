@@ -128,7 +128,7 @@ def test_npz_bad_input(tmp_path):
     with pytest.raises(InputError, match="infinite"):
         read_npz_range(tmp_path / "c.npz")
     (tmp_path / "d.npz").write_text("not a zip")
-    with pytest.raises(InputError, match="cannot read as .npz"):
+    with pytest.raises(InputError, match="xyz: expected a NumPy .npz .*, not NumPy data"):
         read_npz_range(tmp_path / "d.npz")
 
 

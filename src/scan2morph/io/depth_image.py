@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
+from scan2morph.io.range_image import check_numpy_file
 from scan2morph.sheet import split_paths
 
 #: Depth file suffixes.
@@ -117,6 +118,7 @@ def read_depth(path: str | Path) -> np.ndarray:
             raise InputError(path, f"depth: expected a 16-bit single-channel PNG, got {kind}")
         depth = img.astype(np.float64)
     else:
+        check_numpy_file(path, "depth")
         try:
             if suffix == ".npz":
                 with np.load(path, allow_pickle=False) as data:

@@ -251,6 +251,45 @@ def _check_placeholder(xyz: np.ndarray, source, field: str, which: str, fix: str
         )
 
 
+#: The first bytes of NumPy's files: an ``.npz`` is a zip archive (an empty one starts ``PK``
+#: ``05 06``), an ``.npy`` starts with its magic string.
+NUMPY_MAGIC = {".npz": (b"PK\x03\x04", b"PK\x05\x06"), ".npy": (b"\x93NUMPY",)}
+_NUMPY_KIND = {".npz": "a NumPy .npz (a zip archive of named arrays)", ".npy": "a NumPy .npy array"}
+
+
+def check_numpy_file(path: Path, field: str) -> None:
+    """Refuse a file whose first bytes are not the NumPy format its suffix names, before
+    :func:`numpy.load` reads it (which calls any other file pickled data and suggests loading
+    it unsafely, reads an ``.npz`` named ``.npy`` as an array of its key names, and fails on an
+    ``.npy`` named ``.npz`` with a context-manager error).
+
+    Parameters
+    ----------
+    path : Path
+        An ``.npz`` or ``.npy`` file that exists.
+    field : str
+        The sheet column, for the message (``xyz``, ``depth``).
+
+    Raises
+    ------
+    InputError
+        Naming what the file is instead: empty, the other NumPy format, or not NumPy data.
+    """
+    suffix = path.suffix.lower()
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head.startswith(NUMPY_MAGIC[suffix]):
+        return
+    other = next((k for k, magic in NUMPY_MAGIC.items() if head.startswith(magic)), None)
+    if not head:
+        got = "an empty file (0 bytes)"
+    elif other is not None:
+        got = f"{_NUMPY_KIND[other]} named {suffix}"
+    else:
+        got = f"a file starting with {head!r}, not NumPy data"
+    raise InputError(path, f"{field}: expected {_NUMPY_KIND[suffix]}, got {got}")
+
+
 def read_npz_range(path: str | Path) -> np.ndarray:
     """Read a range image from an ``.npz`` with key ``xyz`` ((H, W, 3) float, mm, NaN = no data).
 
@@ -262,6 +301,7 @@ def read_npz_range(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found (expected an .npz with key 'xyz')")
+    check_numpy_file(path, "xyz")
     try:
         with np.load(path, allow_pickle=False) as data:
             if "xyz" not in data.files:
