@@ -76,6 +76,24 @@ def test_a_face_indexing_past_the_vertices_is_named(tmp_path):
         read_mesh(path)
 
 
+def test_an_obj_whose_first_vertex_follows_a_bom_is_refused_not_shifted(tmp_path):
+    """Before: the BOM hid the first vertex line and trimesh dropped it: every face pointed one
+    vertex on, read without a word when the last vertex was unused (here, the tetrahedron's
+    faces landing on a stray vertex) and otherwise 'faces: a face refers to a vertex the file
+    does not have'. A BOM before a comment line hides nothing and still reads."""
+    vertices = np.r_[TETRA_V, [[50.0, 50.0, 50.0]]]  # a vertex no face uses
+    path = _obj(tmp_path / "bom.obj", vertices, TETRA_F)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    with pytest.raises(InputError) as exc:
+        read_mesh(path)
+    assert _one_line(exc, path) == (
+        f"{path}: mesh: the OBJ starts with a byte-order mark (BOM) before its first line "
+        "'v 0.0 0.0 0.0', which hides that line from the reader; save it as UTF-8 without BOM"
+    )
+    path.write_bytes(b"\xef\xbb\xbf# exported\n" + path.read_bytes()[3:])
+    assert np.array_equal(read_mesh(path).vertices[read_mesh(path).faces], TETRA_V[TETRA_F])
+
+
 @pytest.mark.parametrize("name", ["z.glb", "z.ply", "z.obj"])
 def test_an_empty_mesh_file_says_so(tmp_path, name):
     (tmp_path / name).write_bytes(b"")

@@ -18,6 +18,8 @@ from scan2morph.errors import InputError
 
 #: The first bytes of the binary mesh formats, by the suffix they take.
 MAGIC = {".ply": b"ply", ".glb": b"glTF"}
+#: UTF-8's byte-order mark, which Windows editors write at the start of a text file.
+BOM = b"\xef\xbb\xbf"
 #: Format names, for messages.
 FORMAT_NAMES = {".obj": "OBJ text", ".ply": "a PLY file", ".glb": "a GLB file", ".gltf": "glTF"}
 
@@ -28,8 +30,8 @@ def check_format(path: Path) -> None:
     Raises
     ------
     InputError
-        A PLY or GLB file under another suffix (``face.obj`` holding a PLY), or binary data
-        named ``.obj``.
+        A PLY or GLB file under another suffix (``face.obj`` holding a PLY), binary data named
+        ``.obj``, or an OBJ whose first line (not a comment) follows a byte-order mark.
     """
     with path.open("rb") as f:
         head = f.read(4096)
@@ -43,6 +45,16 @@ def check_format(path: Path) -> None:
         )
     if suffix == ".obj" and b"\x00" in head:
         raise InputError(path, "mesh: the file is not OBJ text (it holds binary data)")
+    rest = head[len(BOM) :]
+    if suffix == ".obj" and head.startswith(BOM) and rest[:1] not in (b"", b"#", b"\n", b"\r"):
+        # trimesh reads the line as an unknown keyword and drops it: a first vertex lost shifts
+        # every face by one vertex (a mesh of wrong triangles when the last vertex is unused)
+        first = rest.splitlines()[0].decode("utf-8", "replace")
+        raise InputError(
+            path,
+            f"mesh: the OBJ starts with a byte-order mark (BOM) before its first line "
+            f"{first[:40]!r}, which hides that line from the reader; save it as UTF-8 without BOM",
+        )
 
 
 def load_problem(exc: Exception, path: Path) -> str:
