@@ -289,6 +289,19 @@ def test_a_file_that_is_not_the_numpy_format_its_suffix_names(tmp_path):
     assert read_depth(tmp_path / "one.npy").shape == read_depth(tmp_path / "two.npz").shape
 
 
+def test_a_depth_folder_copied_from_a_mac_reads_without_its_hidden_files(tmp_path):
+    """Before: macOS's '._f0.png' beside each frame (its metadata, on a USB stick or a network
+    share) was read as a frame: 'depth: cannot decode the PNG (corrupt or not an image)'."""
+    from scan2morph.io.depth_image import depth_frame_paths, read_depth_frames
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    write_depth_png(folder / "f0.png", np.full((12, 16), 600.0))
+    (folder / "._f0.png").write_bytes(b"\x00\x05\x16\x07\x00\x02\x00\x00Mac OS X")
+    assert depth_frame_paths(folder) == [folder / "f0.png"]
+    assert [f.shape for f in read_depth_frames(str(folder))] == [(12, 16)]
+
+
 def test_3d_landmarks_saved_with_a_bom_read_like_a_pts_file(tmp_path):
     """Before: 'line 1: expected 'x y z' numbers, got '\\ufeff1 2 3'' (a .pts with a BOM read)."""
     rows = np.arange(68 * 3, dtype=float).reshape(68, 3)

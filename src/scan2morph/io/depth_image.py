@@ -1,8 +1,9 @@
 """Depth images: one frame (a 16-bit PNG, ``.npy`` or ``.npz``) or several frames of one take.
 
 A take's ``depth`` may name several frames of the same pose: files separated by ``;``, or a
-folder (its ``.png``/``.npy``/``.npz`` files in name order). The first frame is the one the
-colour image was taken with (:mod:`scan2morph.io.rgbd`, :mod:`scan2morph.scan.fusion`).
+folder (its ``.png``/``.npy``/``.npz`` files in name order, hidden ones, ``.name``, left out).
+The first frame is the one the colour image was taken with (:mod:`scan2morph.io.rgbd`,
+:mod:`scan2morph.scan.fusion`).
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ def depth_frame_paths(value) -> list[Path]:
             continue
         path = Path(part)
         if path.is_dir():
-            found = sorted(f for f in path.iterdir() if f.suffix.lower() in DEPTH_SUFFIXES)
+            found = sorted(f for f in path.iterdir() if _frame_name(f.name))
             if not found:
                 raise InputError(
                     path, f"depth: the folder holds no depth frames (files {DEPTH_SUFFIXES})"
@@ -60,6 +61,13 @@ def depth_frame_paths(value) -> list[Path]:
     if not out:
         raise InputError(str(value), "depth: no depth file named")
     return out
+
+
+def _frame_name(name: str) -> bool:
+    """Whether a file of a depth folder is a frame: a depth suffix, and not hidden (macOS
+    writes a ``._`` copy of each file's metadata beside it on a USB stick or a network share,
+    with the file's own suffix)."""
+    return Path(name).suffix.lower() in DEPTH_SUFFIXES and not name.startswith(".")
 
 
 def read_depth_frames(value) -> list[np.ndarray]:
