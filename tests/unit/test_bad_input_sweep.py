@@ -94,6 +94,40 @@ def test_an_obj_whose_first_vertex_follows_a_bom_is_refused_not_shifted(tmp_path
     assert np.array_equal(read_mesh(path).vertices[read_mesh(path).faces], TETRA_V[TETRA_F])
 
 
+def test_an_ascii_ply_cut_short_is_refused_not_read_in_part(tmp_path):
+    """Before: cut in its face list, an ASCII PLY read without a word with the faces there were
+    (a face cut in half: half a face); cut in its vertices, 'no faces (... a point cloud?)' or,
+    with vertex colours, trimesh's 'face colors incorrect shape!'."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=90.0)
+    text = sphere.export(file_type="ply", encoding="ascii")
+    head, body = text.split(b"end_header\n")
+    lines = body.split(b"\n")
+    cuts = {
+        "faces.ply": (lines[:300], "300 data lines, expected 482 (162 vertex + 320 face)"),
+        "vertices.ply": (lines[:100], "100 data lines, expected 482 (162 vertex + 320 face)"),
+    }
+    for name, (kept, said) in cuts.items():
+        path = tmp_path / name
+        path.write_bytes(head + b"end_header\n" + b"\n".join(kept))
+        with pytest.raises(InputError) as exc:
+            read_mesh(path)
+        assert _one_line(exc, path) == (
+            f"{path}: mesh: the file is shorter than its PLY header says (cut short?): {said}"
+        )
+    path = tmp_path / "last.ply"
+    path.write_bytes(head + b"end_header\n" + b"\n".join(lines[:481]) + b"\n3 5")
+    with pytest.raises(InputError) as exc:
+        read_mesh(path)
+    assert _one_line(exc, path).endswith(
+        "mesh: the file's last face holds 1 of the 3 vertex indices it says: the file looks cut "
+        "short"
+    )
+    path.write_bytes(text)
+    assert len(read_mesh(path).faces) == 320
+
+
 @pytest.mark.parametrize("name", ["z.glb", "z.ply", "z.obj"])
 def test_an_empty_mesh_file_says_so(tmp_path, name):
     (tmp_path / name).write_bytes(b"")

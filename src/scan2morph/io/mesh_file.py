@@ -130,6 +130,50 @@ def check_obj_text(path: Path) -> None:
         _relative_problem(path, lines)
 
 
+def check_ply_text(path: Path) -> None:
+    """Refuse an ASCII PLY cut short: trimesh reads the lines there are and drops the rest
+    without a word (a face cut in half read as half a face) or fails on a shape that is not the
+    cause (``face colors incorrect shape!``, a point cloud). A binary PLY cut short is trimesh's
+    own error (:func:`load_problem`).
+
+    Raises
+    ------
+    InputError
+        Fewer data lines than the header's elements count (naming both), or a last line that
+        holds fewer vertex indices than it says (an element of one list property, ``face``).
+    """
+    data = path.read_bytes()
+    end = data.find(b"end_header")
+    if end < 0 or data.find(b"format ascii", 0, end) < 0:
+        return  # binary, or no header: trimesh's own errors
+    elements: list[tuple[str, int, list[str]]] = []
+    for line in data[:end].decode("ascii", "replace").splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == "element" and parts[2].isdigit():
+            elements.append((parts[1], int(parts[2]), []))
+        elif parts[:1] == ["property"] and elements:
+            elements[-1][2].append(line)
+    body = data[end:].split(b"\n", 1)[1] if b"\n" in data[end:] else b""
+    lines = [line for line in body.splitlines() if line.strip()]
+    expected = sum(count for _, count, _ in elements)
+    counts = " + ".join(f"{count} {name}" for name, count, _ in elements)
+    if len(lines) < expected:
+        raise InputError(
+            path,
+            f"mesh: the file is shorter than its PLY header says (cut short?): {len(lines)} data "
+            f"lines, expected {expected} ({counts})",
+        )
+    name, count, properties = elements[-1] if elements else ("", 0, [])
+    if count and len(properties) == 1 and properties[0].split()[1:2] == ["list"]:
+        values = lines[expected - 1].split()
+        if values and values[0].isdigit() and len(values) < 1 + int(values[0]):
+            raise InputError(
+                path,
+                f"mesh: the file's last {name} holds {len(values) - 1} of the {int(values[0])} "
+                "vertex indices it says: the file looks cut short",
+            )
+
+
 def uv_problem(path: Path) -> str:
     """Why an OBJ whose material has a texture image reads without texture coordinates.
 
@@ -416,6 +460,7 @@ __all__ = [
     "check_format",
     "check_obj_materials",
     "check_obj_text",
+    "check_ply_text",
     "companion_files",
     "load_problem",
     "obj_materials",

@@ -45,6 +45,7 @@ from scan2morph.io.mesh_file import (  # noqa: E402
     check_format,
     check_obj_materials,
     check_obj_text,
+    check_ply_text,
     load_problem,
     referenced_textures,
     stand_in_problem,
@@ -139,8 +140,8 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     InputError
         Missing, empty or unreadable file, a file whose bytes are another format than its
         suffix, an OBJ face line cut short or indexing vertex 0 (0-based faces) or past the
-        vertices, no faces (a point cloud), a NaN or infinite vertex, fewer than 3 triangles
-        of non-zero area, an MTL or texture the file references but that is missing (unless
+        vertices, an ASCII PLY cut short, no faces (a point cloud), a NaN or infinite vertex,
+        fewer than 3 triangles of non-zero area, an MTL or texture the file references but that is missing (unless
         the sheet gives the texture), a ``texture`` given for a mesh without UVs.
 
     Notes
@@ -160,6 +161,8 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
         )
     check_format(path)
     materials = None
+    if path.suffix.lower() == ".ply":
+        check_ply_text(path)
     if path.suffix.lower() == ".obj":
         check_obj_text(path)
         materials = check_obj_materials(path)
