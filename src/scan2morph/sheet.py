@@ -94,9 +94,9 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
     ------
     InputError
         The file is missing (naming its resolved path), a column name is unknown or empty, a
-        required column is missing, a quote is not closed, an id has forbidden characters or a
-        subject id is one of :data:`RESERVED_SUBJECTS` (these make the sheet unreadable as a
-        whole, so the run stops before any job).
+        required column is missing, a quote is not closed, an id has forbidden characters, a
+        subject id is one of :data:`RESERVED_SUBJECTS` or differs from another only in capitals
+        (these make the sheet unreadable as a whole, so the run stops before any job).
     """
     import pandas as pd
 
@@ -140,6 +140,16 @@ def read_sheet(path: str | Path) -> pd.DataFrame:
                 )
         if rec.subject.lower() in RESERVED_SUBJECTS:
             raise InputError(path, f"row {row}, column 'subject': {reserved_problem(rec.subject)}")
+    spelled: dict[str, tuple[str, int]] = {}
+    for row, subject in enumerate(df["subject"], start=2):
+        first, at = spelled.setdefault(subject.lower(), (subject, row))
+        if first != subject:  # results/Alice is results/alice on macOS and Windows
+            raise InputError(
+                path,
+                f"row {row}, column 'subject': {subject!r} differs from {first!r} (row {at}) only "
+                f"in capitals, and on a case-insensitive file system (macOS, Windows) both would "
+                f"write results/{first}/; spell one subject one way",
+            )
     base = path.resolve().parent
     for col in PATH_COLUMNS:
         df[col] = [_resolve(v, base, col in MULTI_PATH_COLUMNS) for v in df[col]]
@@ -426,9 +436,9 @@ def sheet_problems(
     """The sheet's problems per subject, each with the take it belongs to.
 
     Checks: kind and modality known, the modality's files named (and present when
-    ``check_files``, for user rows), take ids unique per subject, exactly one neutral take, no
-    take id that names a model output (:func:`take_name_problems`; ``reserved``: the config's
-    blend names), no scan file serving two rows (:func:`shared_scan_problems`), and, with
+    ``check_files``, for user rows), take ids unique per subject (in any capitals), exactly one
+    neutral take, no take id that names a model output (:func:`take_name_problems`;
+    ``reserved``: the config's blend names), no scan file serving two rows (:func:`shared_scan_problems`), and, with
     ``schema`` (``schemas/sheet.schema.yaml``), every user row against it (e.g. an empty
     ``label``). Each problem is one line naming the sheet row and the column.
 
@@ -491,15 +501,16 @@ def sheet_problems(
                                 else f"file not found: {part}"
                             )
                             out.append((rec.take, f"{where}: column '{col}': {what}"))
-        dup = rows["take"][rows["take"].duplicated()].unique()
-        for take in dup:
-            out.append(
-                (
-                    "",
-                    f"{rows['sheet'].iloc[0]}: take {take!r} appears more than once for subject "
-                    f"{subject!r}",
-                )
+        lower = rows["take"].str.lower()
+        for key in lower[lower.duplicated()].unique():
+            takes = list(dict.fromkeys(rows["take"][lower == key]))
+            said = (
+                f"take {takes[0]!r} appears more than once"
+                if len(takes) == 1  # else results/{subject}/takes/Car is .../car on macOS
+                else f"takes {takes} differ only in capitals (one folder on a case-insensitive "
+                "file system)"
             )
+            out.append(("", f"{rows['sheet'].iloc[0]}: {said} for subject {subject!r}"))
         out += take_name_problems(rows, reserved) + shared_scan_problems(rows)
         n_neutral = int((rows["kind"] == "neutral").sum())
         if n_neutral != 1:

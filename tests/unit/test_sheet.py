@@ -361,3 +361,28 @@ def test_cells_pandas_takes_for_missing_values_read_as_written(tmp_path):
         f"{path} row 2 (NA/neutral): column 'units': 'NaN' unknown (expected mm, "
         "cm, m or a number of mm per unit, e.g. 25.4 for inches; empty means mm)"
     ]
+
+
+def test_ids_that_differ_only_in_capitals_are_refused(tmp_path):
+    """'alice' and 'Alice' ran as two subjects and 'car' and 'Car' as two takes: on macOS or
+    Windows each pair writes one folder (results/alice/, results/alice/takes/car/), and one
+    subject's or take's results overwrote the other's."""
+    _files(tmp_path, "n.abs", "c.abs", "d.abs")
+    rows = [
+        ["alice", "neutral", "neutral", "neutral", "range", "n.abs", "", "", "", "", ""],
+        ["alice", "car", "viseme", "car", "range", "c.abs", "", "", "", "", ""],
+        ["alice", "Car", "viseme", "car", "range", "d.abs", "", "", "", "", ""],
+    ]
+    problems = subject_problems(read_sheet(_sheet(tmp_path, rows)))["alice"]
+    assert problems == [
+        f"{tmp_path / 'sheet.tsv'}: takes ['car', 'Car'] differ only in capitals (one folder on "
+        "a case-insensitive file system) for subject 'alice'"
+    ]
+    rows[2][:2] = ["Alice", "neutral"]
+    with pytest.raises(InputError) as exc:
+        read_sheet(_sheet(tmp_path, rows))
+    assert str(exc.value) == (
+        f"{tmp_path / 'sheet.tsv'}: row 4, column 'subject': 'Alice' differs from 'alice' (row 2) "
+        "only in capitals, and on a case-insensitive file system (macOS, Windows) both would "
+        "write results/alice/; spell one subject one way"
+    )
