@@ -336,6 +336,28 @@ def test_a_depth_folder_copied_from_a_mac_reads_without_its_hidden_files(tmp_pat
     assert [f.shape for f in read_depth_frames(str(folder))] == [(12, 16)]
 
 
+def test_a_text_file_saved_as_latin1_names_the_line_and_byte(tmp_path):
+    """Before: Python's codec message, "cannot read as text: 'utf-8' codec can't decode byte
+    0xe4 in position 23: invalid continuation byte" (the intrinsics: "cannot read as YAML: ...")."""
+    points = np.tile([[50.0, 60.0]], (68, 1))
+    write_pts(tmp_path / "p.pts", points)
+    pts = tmp_path / "p.pts"
+    pts.write_bytes(pts.read_bytes() + "# Gesicht gedr\xfcckt\n".encode("latin-1"))
+    xyz = tmp_path / "l.txt"
+    xyz.write_bytes("# Kopf von J\xfcrgen\n".encode("latin-1") + b"1 2 3\n" * 68)
+    intrinsics = tmp_path / "i.yaml"
+    intrinsics.write_bytes("# Kamera vorn \xe4\nwidth: 160\n".encode("latin-1"))
+    said = "is not UTF-8 text (saved as Latin-1 or another code page?); expected UTF-8"
+    for reader, path, where in (
+        (read_pts, pts, "line 73: byte 0xfc"),
+        (read_landmarks3d, xyz, "line 1: byte 0xfc"),
+        (read_rgbd_intrinsics, intrinsics, "line 1: byte 0xe4"),
+    ):
+        with pytest.raises(InputError) as exc:
+            reader(path)
+        assert _one_line(exc, path) == f"{path}: {where} {said}"
+
+
 def test_3d_landmarks_saved_with_a_bom_read_like_a_pts_file(tmp_path):
     """Before: 'line 1: expected 'x y z' numbers, got '\\ufeff1 2 3'' (a .pts with a BOM read)."""
     rows = np.arange(68 * 3, dtype=float).reshape(68, 3)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scan2morph.errors import InputError, writing
+from scan2morph.errors import InputError, utf8_text, writing
 from scan2morph.tol import N_IBUG
 
 #: iBUG numbers (1-based) of the jawline, which a 51-point file leaves out.
@@ -109,10 +109,7 @@ def read_pts(path: str | Path, n_points: int | None = None) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found (expected an iBUG .pts landmark file)")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read as text: {exc}") from exc
+    text = utf8_text(path)
     refuse_left_out(path, text)
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     if not lines:

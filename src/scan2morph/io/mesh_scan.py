@@ -30,7 +30,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 import numpy as np  # noqa: E402
 
-from scan2morph.errors import InputError  # noqa: E402
+from scan2morph.errors import InputError, utf8_text  # noqa: E402
 from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import (  # noqa: E402
@@ -280,10 +280,7 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found (expected 68 or 51 lines 'x y z' of 3D landmarks)")
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # a BOM, as Windows editors save
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read as text: {exc}") from None
+    text = utf8_text(path, "utf-8-sig")  # a BOM, as Windows editors save
     refuse_left_out(path, text)
     rows = []
     for number, line in enumerate(text.splitlines(), start=1):

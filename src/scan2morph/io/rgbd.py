@@ -50,7 +50,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from scan2morph.errors import InputError
+from scan2morph.errors import InputError, utf8_text
 from scan2morph.io.calibration import MIN_BASELINE_MM
 from scan2morph.io.depth_image import check_face_depth, depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
@@ -219,9 +219,10 @@ def read_rgbd_intrinsics(path: str | Path) -> RGBDIntrinsics:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found (expected an RGB-D intrinsics YAML)")
+    text = utf8_text(path)
     try:
-        doc = load_yaml(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        doc = load_yaml(text)
+    except yaml.YAMLError as exc:
         raise InputError(path, f"cannot read as YAML: {yaml_problem(exc)}") from None
     if not isinstance(doc, dict):
         raise InputError(path, f"expected a mapping with keys {list(_PINHOLE)}, got {doc!r:.60}")
