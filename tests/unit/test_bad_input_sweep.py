@@ -128,6 +128,19 @@ def test_an_ascii_ply_cut_short_is_refused_not_read_in_part(tmp_path):
     assert len(read_mesh(path).faces) == 320
 
 
+def test_an_obj_with_decimal_commas_names_its_first_vertex_line(tmp_path):
+    """Before: trimesh's 'mesh: cannot read: string or file could not be read to its end due to
+    unmatched data'."""
+    path = _obj(tmp_path / "comma.obj", TETRA_V + 0.5, TETRA_F)
+    path.write_text("# exported, Gr\u00f6\u00dfe 1,5\n" + path.read_text().replace(".", ","))
+    with pytest.raises(InputError) as exc:
+        read_mesh(path)
+    assert _one_line(exc, path) == (
+        f"{path}: vertex line 2: 'v 0,5 0,5 0,5' has decimal commas; expected numbers with "
+        "decimal points (an exporter set to a European locale?)"
+    )
+
+
 @pytest.mark.parametrize("name", ["z.glb", "z.ply", "z.obj"])
 def test_an_empty_mesh_file_says_so(tmp_path, name):
     (tmp_path / name).write_bytes(b"")

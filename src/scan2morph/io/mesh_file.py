@@ -20,6 +20,8 @@ from scan2morph.errors import InputError
 MAGIC = {".ply": b"ply", ".glb": b"glTF"}
 #: UTF-8's byte-order mark, which Windows editors write at the start of a text file.
 BOM = b"\xef\xbb\xbf"
+#: How an OBJ vertex line starts (``v``, then a space or a tab).
+VERTEX = (b"v ", b"v\t")
 #: Format names, for messages.
 FORMAT_NAMES = {".obj": "OBJ text", ".ply": "a PLY file", ".glb": "a GLB file", ".gltf": "glTF"}
 
@@ -106,8 +108,8 @@ def check_obj_text(path: Path) -> None:
     InputError
         Naming the line: the file's last line a face with fewer than 3 vertices (a file cut
         short; such a line elsewhere is a stray one trimesh drops), vertex index 0 (0-based
-        faces), a negative (relative) index counting back past the first vertex. Comments
-        (``#`` to the line's end) are not read.
+        faces), a negative (relative) index counting back past the first vertex, a vertex line
+        with decimal commas. Comments (``#`` to the line's end) are not read.
     """
     lines = [line.split(b"#", 1)[0] for line in path.read_bytes().split(b"\n")]  # no comments
     faces = [i for i, line in enumerate(lines) if line.lstrip()[:2] in (b"f ", b"f\t")]
@@ -117,6 +119,16 @@ def check_obj_text(path: Path) -> None:
         refs = len(lines[last].split()) - 1
         if refs < 3 and not lines[last].rstrip().endswith(b"\\"):  # not a continued line
             raise InputError(path, f"face line {last + 1}: {_short_face(refs, True)}")
+    comma = next(
+        (i for i, line in enumerate(lines) if line.lstrip()[:2] in VERTEX and b"," in line), None
+    )
+    if comma is not None:  # trimesh: "string or file could not be read to its end"
+        text = lines[comma].strip().decode("utf-8", "replace")
+        raise InputError(
+            path,
+            f"vertex line {comma + 1}: {text[:60]!r} has decimal commas; expected numbers with "
+            "decimal points (an exporter set to a European locale?)",
+        )
     blob = b"\n".join([lines[i] for i in faces]).replace(b"\t", b" ") + b"\n"
     zeros = [k for k in (blob.find(z) for z in (b" 0 ", b" 0/", b" 0\n", b" 0\r")) if k >= 0]
     if zeros:
