@@ -154,10 +154,12 @@ def check_ply_text(path: Path) -> None:
         Fewer data lines than the header's elements count (naming both), or a last line that
         holds fewer vertex indices than it says (an element of one list property, ``face``).
     """
-    data = path.read_bytes()
-    end = data.find(b"end_header")
-    if end < 0 or data.find(b"format ascii", 0, end) < 0:
+    with path.open("rb") as f:
+        head = f.read(65536)  # the header (a binary PLY's data is not read here)
+    end = head.find(b"end_header")
+    if end < 0 or head.find(b"format ascii", 0, end) < 0:
         return  # binary, or no header: trimesh's own errors
+    data = path.read_bytes()
     elements: list[tuple[str, int, list[str]]] = []
     for line in data[:end].decode("ascii", "replace").splitlines():
         parts = line.split()
