@@ -542,12 +542,14 @@ def take_table(sheet: pd.DataFrame, synthetic: pd.DataFrame) -> pd.DataFrame:
     import pandas as pd
 
     both = pd.concat([sheet, synthetic], ignore_index=True)
-    clash = set(sheet["subject"]) & set(synthetic["subject"])
+    # in any capitals: results/SYNTH01 is results/synth01 on macOS and Windows
+    cohort = {s.lower() for s in synthetic["subject"]}
+    clash = {s for s in sheet["subject"] if s.lower() in cohort}
     if clash:
         raise InputError(
             sheet["sheet"].iloc[0],
-            f"subject ids {sorted(clash)} clash with the synthetic cohort's; rename them or set "
-            "synthetic.prefix",
+            f"subject ids {sorted(clash)} clash with the synthetic cohort's (ids are compared "
+            "in any capitals); rename them or set synthetic.prefix",
         )
     both = both.set_index(["subject", "take"], drop=False)
     return both[~both.index.duplicated(keep="first")]
