@@ -548,6 +548,23 @@ def test_one_image_given_twice_as_a_stereo_pair(tmp_path):
     ]
 
 
+def test_a_corrupt_stereo_image_is_named_by_its_column(tmp_path):
+    """Before: a corrupt right (or left) image was reported as 'color: cannot decode the
+    image', whichever column named it (audit finding 12)."""
+    from scan2morph.io.take import read_stereo_take
+
+    files = _stereo_pair(tmp_path)
+    for column in ("left", "right"):
+        good = files[column].read_bytes()
+        files[column].write_bytes(b"not a png")
+        problem = f"{files[column]}: {column}: cannot decode the image (corrupt or not an image)"
+        assert take_file_problems("stereo", files) == [problem]
+        with pytest.raises(InputError) as exc:
+            read_stereo_take(files["left"], files["right"], files["calibration"], None)
+        assert str(exc.value) == problem
+        files[column].write_bytes(good)
+
+
 def test_a_calibration_of_another_image_size_is_named_by_its_principal_point(tmp_path):
     """Before (a calibration without image_width/height): 'calibration: expected views that can
     share a surface at 200-5000 mm, got rectified views that do not', after rectifying."""

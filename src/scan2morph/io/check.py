@@ -12,6 +12,7 @@ resampling.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 
 from scan2morph.errors import InputError
@@ -35,8 +36,8 @@ from scan2morph.sheet import OPTIONAL_FILES
 READERS: dict[str, dict[str, Callable]] = {
     "range": {"xyz": read_range, "color": read_color, "landmarks": read_pts},
     "stereo": {
-        "left": read_color,
-        "right": read_color,
+        "left": partial(read_color, field="left"),
+        "right": partial(read_color, field="right"),
         "calibration": read_stereo_calibration,
         "color": read_color,
         "landmarks": read_pts,

@@ -13,8 +13,15 @@ from scan2morph.jobs import atomic_output
 COLOR_SUFFIXES = (".png", ".ppm", ".pnm", ".jpg", ".jpeg")
 
 
-def read_color(path: str | Path) -> np.ndarray:
+def read_color(path: str | Path, field: str = "color") -> np.ndarray:
     """Read a color image.
+
+    Parameters
+    ----------
+    path : str or Path
+    field : str
+        The sheet column that names the file, for messages (``color``, ``left``, ``right``,
+        ``texture``).
 
     Returns
     -------
@@ -27,17 +34,19 @@ def read_color(path: str | Path) -> np.ndarray:
         raise InputError(path, "file not found (expected a PNG/PPM/JPEG color image)")
     if path.suffix.lower() not in COLOR_SUFFIXES:
         raise InputError(
-            path, f"color: unknown image format {path.suffix!r} (expected PNG, PPM or JPEG)"
+            path, f"{field}: unknown image format {path.suffix!r} (expected PNG, PPM or JPEG)"
         )
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
-        raise InputError(path, "color: cannot decode the image (corrupt or not an image)")
+        raise InputError(path, f"{field}: cannot decode the image (corrupt or not an image)")
     if path.suffix.lower() in (".jpg", ".jpeg"):
-        _check_whole_jpeg(path)
+        _check_whole_jpeg(path, field)
     if img.dtype == np.uint16:
         img = (img / 257.0).round().astype(np.uint8)
     if img.dtype != np.uint8:
-        raise InputError(path, f"color: unsupported pixel type {img.dtype} (expected 8 or 16 bit)")
+        raise InputError(
+            path, f"{field}: unsupported pixel type {img.dtype} (expected 8 or 16 bit)"
+        )
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
     elif img.shape[2] == 4:
@@ -45,7 +54,7 @@ def read_color(path: str | Path) -> np.ndarray:
     return np.ascontiguousarray(img[:, :, ::-1])
 
 
-def _check_whole_jpeg(path: Path) -> None:
+def _check_whole_jpeg(path: Path, field: str) -> None:
     """Refuse a JPEG cut short: OpenCV decodes one without an error, the rows it lacks filled
     grey (Pillow's decoder says it is truncated; the pixels stay OpenCV's). A file ending in
     JPEG's end-of-image marker is whole and not decoded again.
@@ -69,7 +78,7 @@ def _check_whole_jpeg(path: Path) -> None:
             return
         raise InputError(
             path,
-            "color: the image is cut short (a truncated copy or download: its last rows are "
+            f"{field}: the image is cut short (a truncated copy or download: its last rows are "
             "missing); expected a whole JPEG",
         ) from None
 

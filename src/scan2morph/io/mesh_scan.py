@@ -222,7 +222,7 @@ def _colour_visual(loaded, path: Path, texture, materials: ObjMaterials | None =
             )
         from PIL import Image
 
-        return _unlit_texture(uv, Image.fromarray(read_color(texture)))
+        return _unlit_texture(uv, Image.fromarray(read_color(texture, "texture")))
     if visual.kind != "texture":
         return visual
     if materials is not None and materials.colour_only:

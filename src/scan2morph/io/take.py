@@ -245,9 +245,9 @@ def read_stereo_take(
         from the left image's, or it is not the left camera's view (:func:`check_texture_shot`,
         names the colour file).
     """
-    left = read_color(left_path)
+    left = read_color(left_path, "left")
     check_image_size(left.shape, left_path, "left")
-    right = read_color(right_path)
+    right = read_color(right_path, "right")
     h, w = left.shape[:2]
     _check_left_size(
         right, left, right_path, "right", Path(left_path).name,
