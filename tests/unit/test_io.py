@@ -94,6 +94,28 @@ def test_abs_bad_input(tmp_path, text, match):
     assert str(path) in str(info.value)
 
 
+def test_abs_that_is_not_ascii_says_why(tmp_path):
+    """Before: "cannot read as FRGC .abs text: 'ascii' codec can't decode byte 0xef in position
+    0: ordinal not in range(128)" for a file an editor saved with a byte-order mark (audit
+    finding 15)."""
+    path = tmp_path / "bom.abs"
+    path.write_bytes(b"\xef\xbb\xbf" + _abs_text().encode())
+    with pytest.raises(InputError) as info:
+        read_abs(path)
+    assert str(info.value) == (
+        f"{path}: the file starts with a byte-order mark (BOM, as an editor saves UTF-8 text); "
+        "expected FRGC .abs text in plain ASCII: save it without BOM"
+    )
+    path.write_bytes(
+        _abs_text(lines=["1 1 1 1", "1 2 3 4", "5 6 7 8", "9 10 11 1\xb5"]).encode("latin-1")
+    )
+    with pytest.raises(InputError) as info:
+        read_abs(path)
+    assert str(info.value) == (
+        f"{path}: byte 0xb5 is not ASCII text; expected FRGC .abs text (ASCII numbers)"
+    )
+
+
 def test_abs_truncated_gzip(tmp_path, xyz):
     path = tmp_path / "scan.abs.gz"
     write_abs(path, xyz)

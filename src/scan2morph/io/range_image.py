@@ -67,6 +67,18 @@ def _open_text(path: Path, mode: str):
     return open(path, mode, encoding="ascii", newline="\n")
 
 
+def _not_ascii(exc: UnicodeDecodeError) -> str:
+    """The message for an ``.abs`` whose text is not ASCII (the decoder's own names a codec and
+    a position in a block, not what the user can change)."""
+    if exc.object[:3] == b"\xef\xbb\xbf" and exc.start < 3:
+        return (
+            "the file starts with a byte-order mark (BOM, as an editor saves UTF-8 text); "
+            "expected FRGC .abs text in plain ASCII: save it without BOM"
+        )
+    byte = exc.object[exc.start]
+    return f"byte {byte:#04x} is not ASCII text; expected FRGC .abs text (ASCII numbers)"
+
+
 def read_abs(path: str | Path) -> np.ndarray:
     """Read an FRGC ``.abs`` or ``.abs.gz`` range image.
 
@@ -101,7 +113,9 @@ def read_abs(path: str | Path) -> np.ndarray:
             lines += fh.read().splitlines()
     except EOFError as exc:
         raise InputError(path, f"truncated gzip stream: {exc}") from exc
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        raise InputError(path, _not_ascii(exc)) from None
+    except OSError as exc:
         raise InputError(path, f"cannot read as FRGC .abs text: {exc}") from exc
     n = rows * cols
     data_lines = [ln for ln in lines[3:] if ln.strip()]
