@@ -511,7 +511,10 @@ def sheet_problems(
                 "file system)"
             )
             out.append(("", f"{rows['sheet'].iloc[0]}: {said} for subject {subject!r}"))
-        out += take_name_problems(rows, reserved) + shared_scan_problems(rows)
+        # a take of an unknown kind is left out by its kind's line alone (not also named as a
+        # non-neutral 'neutral' when its kind is 'Neutral')
+        known = rows[rows["kind"].isin(KINDS)]
+        out += take_name_problems(known, reserved) + shared_scan_problems(rows)
         n_neutral = int((rows["kind"] == "neutral").sum())
         if n_neutral != 1:
             out.append(
