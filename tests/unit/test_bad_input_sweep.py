@@ -306,6 +306,31 @@ def test_a_boolean_depth_array_names_its_type(tmp_path):
     )
 
 
+def test_an_8_bit_depth_array_is_refused_and_a_float16_one_named(tmp_path, caplog):
+    """Before: an 8-bit array (256 levels; an 8-bit PNG is refused) and a float16 one (0.5 mm
+    steps at 1 m) were read without a word (audit finding 18)."""
+    depth = np.full((120, 160), 1000.0)
+    np.save(tmp_path / "d8.npy", np.full((120, 160), 200, np.uint8))
+    with pytest.raises(InputError) as exc:
+        read_depth(tmp_path / "d8.npy")
+    assert _one_line(exc, tmp_path / "d8.npy").endswith(
+        "depth: expected 16-bit or wider integers or float32/float64, got uint8"
+    )
+    np.save(tmp_path / "d16.npy", (depth + 0.2).astype(np.float16))
+    with caplog.at_level("WARNING", logger="scan2morph"):
+        read = read_depth(tmp_path / "d16.npy")
+    assert np.all(read == 1000.0)  # 1000.2 read as 1000: the steps the warning names
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{tmp_path / 'd16.npy'}: depth: float16 values keep 11 significant bits (0.5 mm steps "
+        "at 1 m): the surface is read quantised; save the depth as float32 or 16-bit integers"
+    ]
+    caplog.clear()
+    np.save(tmp_path / "d32.npy", depth.astype(np.float32))
+    with caplog.at_level("WARNING", logger="scan2morph"):
+        read_depth(tmp_path / "d32.npy")
+    assert not caplog.records
+
+
 def test_a_file_that_is_not_the_numpy_format_its_suffix_names(tmp_path):
     """Before: a text file named .npz or .npy was 'This file contains pickled (object) data. If
     you trust the file you can load it unsafely using the `allow_pickle=` keyword argument',

@@ -8,6 +8,7 @@ The first frame is the one the colour image was taken with (:mod:`scan2morph.io.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import cv2
@@ -16,6 +17,8 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.io.range_image import check_numpy_file
 from scan2morph.sheet import split_paths
+
+log = logging.getLogger("scan2morph")
 
 #: Depth file suffixes.
 DEPTH_SUFFIXES = (".png", ".npy", ".npz")
@@ -142,10 +145,32 @@ def read_depth(path: str | Path) -> np.ndarray:
         if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.number):
             got = f"{depth.shape} {depth.dtype}"
             raise InputError(path, f"depth: expected an (H, W) number array, got {got}")
+        _check_depth_type(depth.dtype, path)
         depth = depth.astype(np.float64)
     if np.isinf(depth).any() or (depth < 0).any():
         raise InputError(path, "depth: negative or infinite values (0 or NaN = no data)")
     return depth
+
+
+def _check_depth_type(dtype: np.dtype, path: Path) -> None:
+    """Refuse an 8-bit depth array (256 levels, as an 8-bit PNG is refused) and warn of a
+    float16 one (11 significant bits: 0.5 mm steps at 1 m, whatever the unit), naming the type.
+
+    Raises
+    ------
+    InputError
+        An 8-bit integer array.
+    """
+    if dtype.itemsize == 1:
+        raise InputError(
+            path, f"depth: expected 16-bit or wider integers or float32/float64, got {dtype}"
+        )
+    if dtype == np.float16:
+        log.warning(
+            "%s: depth: float16 values keep 11 significant bits (0.5 mm steps at 1 m): the "
+            "surface is read quantised; save the depth as float32 or 16-bit integers",
+            path,
+        )
 
 
 def write_depth_png(path: str | Path, depth_units: np.ndarray) -> None:
