@@ -213,6 +213,28 @@ def test_a_jpeg_cut_short_is_refused(tmp_path):
         read_color(tmp_path / "cut.jpg")
 
 
+def test_a_jpeg_a_viewer_turns_is_read_as_stored_with_a_warning(tmp_path, caplog):
+    """A phone's photo: its EXIF orientation has viewers turn it, OpenCV reads the pixels as
+    stored. Read as stored (the range grid's order), with a warning naming the turn; before,
+    without a word (audit finding 13). A JPEG without the tag reads quietly."""
+    from PIL import Image
+
+    rgb = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    exif = Image.Exif()
+    exif[274] = 6
+    Image.fromarray(rgb).save(tmp_path / "phone.jpg", quality=95, exif=exif)
+    Image.fromarray(rgb).save(tmp_path / "plain.jpg", quality=95)
+    with caplog.at_level("WARNING", logger="scan2morph"):
+        turned = read_color(tmp_path / "phone.jpg")
+        plain = read_color(tmp_path / "plain.jpg")
+    assert turned.shape == (48, 64, 3) and np.array_equal(turned, plain)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{tmp_path / 'phone.jpg'}: color: the JPEG's EXIF orientation has viewers show it "
+        "turned 90 degrees clockwise; its pixels are read as stored, not turned: landmarks "
+        "must be in the stored pixel order"
+    ]
+
+
 def test_range_take_checks_sizes_and_landmarks(tmp_path):
     v, u = np.mgrid[0:20, 0:30].astype(np.float64)
     xyz = np.dstack([u, v, np.full_like(u, 600.0)])  # a plane (all zeros is a placeholder)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import cv2
@@ -9,6 +10,8 @@ import numpy as np
 
 from scan2morph.errors import InputError, writing
 from scan2morph.jobs import atomic_output
+
+log = logging.getLogger("scan2morph")
 
 COLOR_SUFFIXES = (".png", ".ppm", ".pnm", ".jpg", ".jpeg")
 
@@ -41,6 +44,7 @@ def read_color(path: str | Path, field: str = "color") -> np.ndarray:
         raise InputError(path, f"{field}: cannot decode the image (corrupt or not an image)")
     if path.suffix.lower() in (".jpg", ".jpeg"):
         _check_whole_jpeg(path, field)
+        _warn_exif_turn(path, field)
     if img.dtype == np.uint16:
         img = (img / 257.0).round().astype(np.uint8)
     if img.dtype != np.uint8:
@@ -52,6 +56,39 @@ def read_color(path: str | Path, field: str = "color") -> np.ndarray:
     elif img.shape[2] == 4:
         img = img[:, :, :3]
     return np.ascontiguousarray(img[:, :, ::-1])
+
+
+#: What a photo viewer does to a JPEG of each EXIF orientation (tag 274) other than 1.
+EXIF_TURNS = {
+    2: "mirrored left to right",
+    3: "turned 180 degrees",
+    4: "mirrored top to bottom",
+    5: "mirrored and turned 90 degrees",
+    6: "turned 90 degrees clockwise",
+    7: "mirrored and turned 90 degrees",
+    8: "turned 90 degrees anticlockwise",
+}
+
+
+def _warn_exif_turn(path: Path, field: str) -> None:
+    """Warn of a JPEG whose EXIF orientation asks viewers to turn or mirror it (a phone's
+    photo): its pixels are read as stored, so landmarks clicked in such a viewer, and a range
+    grid made from the turned view, are in another pixel order."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            turn = EXIF_TURNS.get(image.getexif().get(274, 1))
+    except OSError:
+        return
+    if turn:
+        log.warning(
+            "%s: %s: the JPEG's EXIF orientation has viewers show it %s; its pixels are read "
+            "as stored, not turned: landmarks must be in the stored pixel order",
+            path,
+            field,
+            turn,
+        )
 
 
 def _check_whole_jpeg(path: Path, field: str) -> None:
