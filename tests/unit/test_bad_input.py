@@ -131,6 +131,25 @@ def test_degenerate_landmarks(tmp_path, take, template, change, at_ingest, at_fi
         fit_take(template, landmarks, take["xyz"], source="s1/neutral")
 
 
+def test_landmarks_with_x_and_y_swapped_say_so(tmp_path, take):
+    """A .pts written (row, column) instead of (x, y) mirrors the face about its diagonal: it
+    was refused as 'mirrored left/right' alone (audit finding 17); the message now asks whether
+    x and y are swapped, and a face mirrored left/right is not asked that."""
+    lm = take["landmarks"]
+    centre = lm.mean(axis=0)
+    swapped = centre + (lm - centre)[:, ::-1]  # about the face's centre: it stays on the face
+    files = _write(tmp_path, take, landmarks=swapped)
+    with pytest.raises(InputError) as exc:
+        _ingest(files)
+    text = _one_line(exc, files["landmarks"])
+    assert "mirrored left/right" in text
+    assert text.endswith("are the file's x and y swapped? (x is the column, y the row)")
+    files = _write(tmp_path, take, landmarks=_mirrored(lm), name="m")
+    with pytest.raises(InputError, match="mirrored left/right") as exc:
+        _ingest(files)
+    assert "swapped" not in str(exc.value)
+
+
 def test_landmarks_on_the_background(tmp_path, take, template):
     lm = take["landmarks"]
     corner = (lm - lm.min(axis=0)) * 0.25 + 1.0  # a small face in the top-left corner

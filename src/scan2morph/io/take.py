@@ -473,10 +473,19 @@ def check_face(
         )
     d1, d2 = lm[45] - lm[36], lm[8] - lm[36]
     if d1[0] * d2[1] - d1[1] * d2[0] <= 0:  # image y down: 37 -> 46 -> chin turns clockwise
+        # a file's x and y swapped (row, column) mirrors the face about its diagonal too: its
+        # eyes then lie one above the other
+        swapped = (
+            "; the eyes lie one above the other: are the file's x and y swapped? (x is the "
+            "column, y the row)"
+            if abs(d1[1]) > abs(d1[0])
+            else ""
+        )
         raise InputError(
             landmarks_source,
             "landmarks: mirrored left/right (the outer eye corners iBUG 37 -> 46 and the chin 9 "
-            "wind the wrong way; iBUG 37 is the outer corner of the eye on the image's left)",
+            f"wind the wrong way; iBUG 37 is the outer corner of the eye on the image's left)"
+            f"{swapped}",
         )
     lifted = lift_landmarks(xyz, lm, (37, 46))
     for k, n in enumerate((37, 46)):
