@@ -902,6 +902,16 @@ def test_mesh_landmarks_off_the_mesh_or_in_metres(mesh_files, tmp_path):
         r"landmarks look like metres: give them in the mesh's frame and unit\)",
     ):
         _mesh(mesh_files, landmarks=tmp_path / "lm_m.txt")
+    # the subject's check job finds it too, before any take job (audit finding 11)
+    from scan2morph.io.check import take_file_problems
+
+    files = {"mesh": mesh_files["mesh"], "landmarks": tmp_path / "lm_m.txt"}
+    (problem,) = take_file_problems("mesh", files)
+    assert problem.startswith(f"{tmp_path / 'lm_m.txt'}: face size: the outer eye corners")
+    assert problem.endswith(
+        "(the landmarks look like metres: give them in the mesh's frame and unit)"
+    )
+    assert take_file_problems("mesh", files | {"landmarks": mesh_files["landmarks"]}) == []
     (tmp_path / "short.txt").write_text("# 67 points\n" + "1 2 3\n" * 67)
     with pytest.raises(
         InputError, match=r"got 67 points \(lines 'x y z'\); accepted: 68 \(iBUG-68\) or 51"

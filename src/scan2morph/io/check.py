@@ -15,12 +15,15 @@ from collections.abc import Callable, Mapping
 from functools import partial
 from pathlib import Path
 
+import numpy as np
+
 from scan2morph.errors import InputError
 from scan2morph.io.calibration import read_stereo_calibration
 from scan2morph.io.depth_image import check_face_depth, depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.mesh_scan import check_mesh_size, read_landmarks3d, read_mesh
+from scan2morph.io.mesh_units import check_landmark_units
 from scan2morph.io.range_image import read_range
 from scan2morph.io.rgbd import check_rgbd_files, read_rgbd_intrinsics
 from scan2morph.io.take import (
@@ -111,6 +114,11 @@ def _cross_check(
         read_stereo_take(
             files["left"], files["right"], files["calibration"], landmarks, files.get("color")
         )
+    elif modality == "mesh":
+        if loaded.get("landmarks") is not None:  # their unit against the mesh's (the ingest's)
+            extents = np.asarray(loaded["mesh"].extents, dtype=np.float64) * mm_per_unit
+            lm3 = np.asarray(loaded["landmarks"], dtype=np.float64) * mm_per_unit
+            check_landmark_units(lm3, extents, files["mesh"], files["landmarks"], mm_per_unit)
     elif modality == "rgbd":
         intr, paths = loaded["intrinsics"], depth_frame_paths(files["depth"])
         check_rgbd_files(

@@ -544,7 +544,7 @@ def read_mesh_take(
         mesh.apply_scale(mm_per_unit)
     lm3 = None if landmarks_path is None else read_landmarks3d(landmarks_path) * mm_per_unit
     if lm3 is not None:
-        check_landmark_units(lm3, mesh, mesh_path, landmarks_path, mm_per_unit)
+        check_landmark_units(lm3, mesh.extents, mesh_path, landmarks_path, mm_per_unit)
     check_mesh_extents(as_read, mm_per_unit, mesh_path)
     if lm3 is not None:
         _check_on_mesh(mesh, lm3, mesh_path, landmarks_path)

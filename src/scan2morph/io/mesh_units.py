@@ -90,7 +90,7 @@ def check_mesh_extents(extents: np.ndarray, mm_per_unit: float, source: str | Pa
 
 
 def check_landmark_units(
-    lm3: np.ndarray, mesh, mesh_path, landmarks_path, mm_per_unit: float = 1.0
+    lm3: np.ndarray, extents_mm: np.ndarray, mesh_path, landmarks_path, mm_per_unit: float = 1.0
 ) -> None:
     """Refuse 3D landmarks whose outer eye corners (iBUG 37, 46) are not 50-150 mm apart.
 
@@ -98,10 +98,10 @@ def check_landmark_units(
     ----------
     lm3 : (68, 3) float
         The landmarks, scaled to mm.
-    mesh : trimesh.Trimesh
-        The mesh, scaled to mm: when it is of a face's size (:data:`MESH_EXTENT_MM`) and the
-        eye span is a face's in another unit, the landmark file is named (not in the mesh's
-        unit), else the mesh (its unit, or the sheet's, is wrong).
+    extents_mm : (3,) float
+        The mesh's bounding box, scaled to mm: when it is of a face's size
+        (:data:`MESH_EXTENT_MM`) and the eye span is a face's in another unit, the landmark file
+        is named (not in the mesh's unit), else the mesh (its unit, or the sheet's, is wrong).
     mesh_path, landmarks_path : str or path-like
         The files, for messages.
     mm_per_unit : float
@@ -121,7 +121,7 @@ def check_landmark_units(
         f"the outer eye corners (iBUG 37, 46) are {span:.4g} {unit_read} apart, expected "
         f"{lo:g}-{hi:g} mm"
     )
-    across = float(np.max(mesh.extents))
+    across = float(np.max(extents_mm))
     unit = likely_unit(span, EYE_SPAN_MM)
     if unit and MESH_EXTENT_MM[0] <= across <= MESH_EXTENT_MM[1]:
         looks = f"look like {unit}" if mm_per_unit == 1.0 else "are not in its unit"
