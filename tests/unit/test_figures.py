@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -20,10 +21,16 @@ from scan2morph.render.figures import (
     write_figures,
     write_stage_figures,
 )
-from scan2morph.render.fit_figures import fig_model
-from scan2morph.render.modal_figures import fig_expressions
+from scan2morph.render.fit_figures import fig_landmarks, fig_model
+from scan2morph.render.modal_figures import (
+    fig_expressions,
+    fig_modes,
+    fig_reconstruction,
+    fig_statistics,
+    fig_synthesis,
+)
 from scan2morph.render.morph_figures import blend_title, fig_eigen, fig_gradual, pca_alphas
-from scan2morph.render.motion_figures import fig_click_noise, fig_distance, fig_mask
+from scan2morph.render.motion_figures import fig_alignment, fig_click_noise, fig_distance, fig_mask
 from scan2morph.render.names import FIGURE_NAMES
 from scan2morph.render.source import (
     StoreMapping,
@@ -427,7 +434,7 @@ def test_eigen_figure_names_its_sigma_and_stays_near_the_models(store):
     # the length of the whole field, and what a vertex moves (the audit's F4: "130.9 mm" read
     # as a displacement)
     per_vertex = np.sqrt(np.mean(np.sum((sigma[0] * store[paths.pca("components")][0]) ** 2, 1)))
-    assert f"PC1: σ = {sigma[0]:.1f} mm, {per_vertex:.2f} mm RMS a vertex" in titles
+    assert f"PC1: σ = {sigma[0]:.1f} mm\n{per_vertex:.2f} mm RMS a vertex" in titles
     paper = {k: v for k, v in store.items() if k != paths.pca("sigma")}
     titles = " ".join(
         t.get_text() for t in fig_eigen(paper).findobj(lambda o: hasattr(o, "get_text"))
@@ -799,3 +806,129 @@ def test_opaque_rgba_draws_as_the_rgb_image_within_a_level():
         ax.set_ylim(40.2, 3.9)
         drawn.append(figure_to_array(fig).astype(int))
     assert np.abs(drawn[0] - drawn[1]).max() <= 1
+
+
+# --------------------------------------------------------------------------------------------
+# Audit 12: what the figures say
+# --------------------------------------------------------------------------------------------
+def _texts(fig) -> list[str]:
+    return [t.get_text() for t in fig.findobj(lambda o: hasattr(o, "get_text")) if t.get_text()]
+
+
+def _colorbar(fig):
+    (bar,) = [ax._colorbar for ax in fig.axes if getattr(ax, "_colorbar", None) is not None]
+    return bar
+
+
+def test_eigen_row_labels_stay_in_their_rows_and_the_figure(store):
+    """The upright row labels ("PC1: σ = 130.9 mm, 3.19 mm RMS a vertex") ran into each other
+    and off the figure's top and bottom on one line."""
+    fig = fig_eigen(store)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    labels = [t for t in fig.texts if t.get_rotation() == 90 and t.get_text().startswith("PC")]
+    assert len(labels) == len(store[paths.pca("components")]) >= 2
+    boxes = sorted((t.get_window_extent(renderer) for t in labels), key=lambda b: -b.y1)
+    for box in boxes:
+        assert box.x0 >= 0 and box.y0 >= 0 and box.y1 <= fig.bbox.height
+    for upper, lower in zip(boxes, boxes[1:], strict=False):
+        assert lower.y1 < upper.y0  # no overlap
+    images = figure_panels(fig)
+    left = min(box[1].start for _, _, box in images)
+    assert max(b.x1 for b in boxes) < left  # clear of the panels
+
+
+def test_colour_scale_clipped_at_a_percentile_has_an_arrow():
+    values = np.array([0.0, 1.0, 2.0, 9.0, np.nan])
+    assert ColorScale.clipped(0.0, 2.0, "x", values).extend == "max"
+    assert ColorScale.clipped(0.0, 9.0, "x", values).extend == "neither"
+    assert ColorScale.clipped(1.0, 2.0, "x", values).extend == "both"
+
+
+def test_field_figures_mark_the_values_above_their_scale(store):
+    """The field figures end their scale at the 99th percentile: the colour bar's arrow says
+    the top colour means "this much or more" (before, the bar ended flat at 0.8 mm while car's
+    click-noise error went above it)."""
+    known = dict(store)
+    xy = store[paths.template("vertices2d")]
+    spike = np.where(xy[:, 1] > 1.0, 0.5, 0.0)
+    spike[np.argmax(xy[:, 1])] = 50.0  # one vertex far above the 99th percentile
+    known[paths.viseme("car", "noise_rms_mm")] = spike
+    assert _colorbar(fig_click_noise(known)).extend == "max"
+    assert _colorbar(fig_expressions(store)).extend == "max"
+    assert _colorbar(fig_synthesis(store)).extend == "max"
+    assert _colorbar(fig_modes(store)).extend == "neither"  # 0..1 of each mode's maximum
+
+
+def test_synthesis_titles_give_the_differences_rms(store):
+    """The |synth. - meas.| column is near blank on the fields' scale: its title says how big."""
+    fig = fig_synthesis(store)
+    for take in expression_takes(store):
+        d = store[paths.expression(take, "displacement")]
+        s = store[paths.expression(take, "synthesized")]
+        rms = np.sqrt(np.nanmean(np.sum((s - d) ** 2, axis=1)))
+        assert f"{take}: |synth. - meas.|\nRMS {rms:.2f} mm" in _texts(fig)
+
+
+def test_mode_figure_says_when_the_modes_are_orthonormalised_per_vertex(store):
+    """With coordinates "vertex" (the default skin preset) the stored modes are not the natural
+    ones and their frequencies are Rayleigh quotients, out of order: the title said "Natural
+    mode shapes" over "mode 4, 215.3 Hz" after "mode 2, 277.1 Hz"."""
+    vertex = dict(store) | {
+        paths.modal("physics"): json.dumps({"preset": "skin", "coordinates": "vertex"})
+    }
+    title = fig_modes(vertex)._suptitle.get_text()
+    assert "Natural" not in title and "orthonormalised per vertex" in title
+    assert "Rayleigh" in title
+    mass = dict(store) | {paths.modal("physics"): json.dumps({"coordinates": "mass"})}
+    assert fig_modes(mass)._suptitle.get_text() == "Natural mode shapes of the neutral face"
+    assert fig_modes(store)._suptitle.get_text() == "Natural mode shapes of the neutral face"
+
+
+def test_reconstruction_legend_explains_the_dashed_lines(store):
+    known = dict(store)
+    for take in expression_takes(store):
+        rms = store[paths.expression(take, "reconstruction_rms_mm")]
+        known[paths.expression(take, "reconstruction_normal_rms_mm")] = 0.5 * rms
+    legend = fig_reconstruction(known).axes[0].get_legend()
+    texts = [t.get_text() for t in legend.get_texts()]
+    assert texts[: len(expression_takes(store))] == expression_takes(store)
+    assert any("dashed" in t and "normals" in t for t in texts)
+    # without the normal parts, no dashed line and no legend entry for one
+    plain = fig_reconstruction(store).axes[0].get_legend()
+    assert not any("dashed" in t.get_text() for t in plain.get_texts())
+
+
+def test_landmark_figure_names_the_image_each_modality_is_seen_in(store):
+    """A mesh scan's landmarks sit on its virtual-camera render, a stereo take's on its left
+    image: the title said "color image" for every subject."""
+
+    def titled(modality):
+        known = dict(store)
+        if modality is not None:
+            for take in ("neutral", example_take(store)):
+                known[paths.camera(take, "modality")] = np.asarray(modality, dtype=object)
+        fig = fig_landmarks(known)
+        return fig._suptitle.get_text(), [ax.get_ylabel() for ax in fig.axes if ax.get_ylabel()]
+
+    assert titled("mesh") == (
+        "Template fitted to the virtual-camera render",
+        ["virtual-camera render"] * 2,
+    )
+    assert titled("stereo")[0] == "Template fitted to the left image"
+    assert titled("rgbd")[0] == "Template fitted to the color image"
+    assert titled(None)[0] == "Template fitted to the color image"
+
+
+def test_neutral_is_not_named_twice(store):
+    assert neutral_take(store) == "neutral"
+    assert "neutral (neutral)" not in " ".join(_texts(fig_alignment(store)))
+    assert fig_model(store)._suptitle.get_text() == (
+        "3D face model of the neutral take, scanner frame"
+    )
+
+
+def test_statistics_titles_count_takes_in_the_singular_too(store):
+    titles = [ax.get_title(loc="left") for ax in fig_statistics(store).axes]
+    assert "sad: mean ± std over 1 take (one take: no std)" in titles
+    assert "smile: mean ± std over 2 takes" in titles

@@ -839,7 +839,9 @@ def test_modal_tables_match_the_store(report):
     path, store, *_ = report
     page = _parse(path.read_text())
     coords, recon = _table(page, "Modal coordinates"), _table(page, "RMS error")
-    freqs = _table(page, "Natural frequencies")
+    # "Natural frequencies", or with coordinates "vertex" "Frequencies (Rayleigh quotients, ..."
+    (name,) = [n for n in page.tables if re.match(r"(Natural f|F)requencies.* of the first", n)]
+    freqs = page.tables[name]
     with h5py.File(store) as h5:
         q = h5[paths.expression("smile1", "coordinates")][()]
         ks = h5[paths.modal("reconstruction_k")][()]
@@ -1122,6 +1124,28 @@ def test_modal_section_splits_the_reconstruction_and_shows_the_outline():
     (caption,) = [n for n in caption.tables if n.startswith("Disp")]
     assert "4 clamped" in caption and "the other 2 are held by the skin beyond the" in caption
     assert "a strip 6 mm wide" in caption
+
+
+def test_modal_frequency_caption_says_when_they_are_rayleigh_quotients():
+    """Audit 12: with coordinates "vertex" (the skin preset) the stored frequencies are Rayleigh
+    quotients of the vertex-orthonormalised modes, out of order (205, 277, 278, 215 Hz): the
+    table called them "Natural frequencies"."""
+    from scan2morph.report import html as report_html
+
+    def caption(physics):
+        with h5py.File("modal.h5", "w", driver="core", backing_store=False) as h5:
+            h5[paths.modal("frequencies_hz")] = [205.0, 277.1, 215.3]
+            if physics is not None:
+                h5[paths.modal("physics")] = json.dumps(physics)
+            page = _parse(report_html.render_blocks(sections.modal(h5, 3)))
+        (name,) = [n for n in page.tables if "of the first 3 of 3 modes" in n]
+        return name
+
+    vertex = caption({"preset": "skin", "coordinates": "vertex"})
+    assert vertex.startswith("Frequencies (Rayleigh quotients, not in ascending order")
+    assert "Natural frequencies" not in vertex
+    assert caption({"preset": "paper", "coordinates": "mass"}).startswith("Natural frequencies")
+    assert caption(None).startswith("Natural frequencies")
 
 
 def test_viewer_data_decodes_to_the_store_within_half_a_step():

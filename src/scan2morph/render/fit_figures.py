@@ -38,6 +38,15 @@ from scan2morph.template.mesh import CLOSED_MOUTH, INNER_LIP_CORNERS, INNER_LIPS
 WIRE_RGB = np.array([0.15, 0.15, 0.2])
 #: Margin around the face when an image is cropped to it, as a share of the face's extent.
 CROP_MARGIN = 0.08
+#: The image a take's landmarks and fit are drawn on, by modality (``/takes/{t}/camera/modality``);
+#: others (range, RGB-D): the color image.
+IMAGE_NAMES = {"stereo": "left image", "mesh": "virtual-camera render"}
+
+
+def image_name(store: Mapping, take: str) -> str:
+    """What a take's ``range_image/color`` is: its color image, a stereo pair's left image or a
+    mesh scan's render through the virtual camera."""
+    return IMAGE_NAMES.get(_text(store, paths.camera(take, "modality"), "range"), "color image")
 
 
 def _valid_faces(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -209,6 +218,7 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
         _landmark_dots(axes[row, 0], marks, store.get(paths.landmark_confidence(take)))
         source = landmark_source(store, take)
         axes[row, 0].set_title(f"{take}: 68 landmarks, {source}", fontsize=8)
+        axes[row, 0].set_ylabel(image_name(store, take), fontsize=8)
         for ax, (label, tri) in zip(axes[row, 1:], meshes, strict=True):
             tri = _valid_faces(pts, tri)
             lw = 0.35 if len(tri) < 1500 else 0.2
@@ -217,7 +227,9 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
         bad = ~valid & np.all(np.isfinite(pts), axis=1)
         axes[row, -1].scatter(pts[bad, 0], pts[bad, 1], s=6, marker="x", c="red", linewidths=0.6)
         axes[row, -1].set_xlabel(f"{valid.sum()} of {len(valid)} vertices valid", fontsize=7)
-    fig.suptitle("Template fitted to the color image", fontsize=10)
+    # named per modality: a stereo take's left image, a mesh scan's render (not "color image")
+    shown = list(dict.fromkeys(image_name(store, t) for t in takes))
+    fig.suptitle(f"Template fitted to the {' and the '.join(shown)}", fontsize=10)
     return fig
 
 
@@ -240,8 +252,9 @@ def fig_model(store: Mapping[str, np.ndarray]) -> Figure:
             "(c) wireframe",
         ),
     ]
+    named = "" if take == "neutral" else f" ({take})"  # not "neutral take (neutral)"
     return panel_figure(
-        panels, ncols=3, title=f"3D face model of the neutral take ({take}), scanner frame"
+        panels, ncols=3, title=f"3D face model of the neutral take{named}, scanner frame"
     )
 
 

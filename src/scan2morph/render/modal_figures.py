@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from scan2morph.errors import InputError
 from scan2morph.geometry import TexturedMesh
@@ -50,15 +52,41 @@ def _modes(store: Mapping, what: str) -> np.ndarray:
 
 
 def _field_scale(fields: list[np.ndarray], label: str) -> ColorScale:
-    """0 to the 99th percentile of the magnitudes of several fields (one scale for all panels)."""
+    """0 to the 99th percentile of the magnitudes of several fields (one scale for all panels;
+    the colour bar's arrow: the top 1% take its top colour)."""
     mags = np.concatenate([np.linalg.norm(f, axis=1) for f in fields])
     mags = mags[np.isfinite(mags)]
     vmax = float(np.percentile(mags, 99)) if mags.size else 1.0
-    return ColorScale(0.0, max(vmax, 1e-6), label)
+    return ColorScale.clipped(0.0, max(vmax, 1e-6), label, mags)
+
+
+def physics(store: Mapping) -> dict:
+    """``/modal/physics`` as a dict (empty when the store has none or it is not JSON)."""
+    key = paths.modal("physics")
+    if key not in store:
+        return {}
+    value = store[key]
+    value = value.item() if isinstance(value, np.ndarray) else value
+    value = value.decode() if isinstance(value, bytes) else str(value)
+    try:
+        out = json.loads(value)
+    except ValueError:
+        return {}
+    return out if isinstance(out, dict) else {}
+
+
+def vertex_coordinates(store: Mapping) -> bool:
+    """Whether the stored modes are the natural modes orthonormalised per vertex (``/modal/physics``
+    coordinates ``"vertex"``, the ``skin`` presets): mode j is natural mode j plus a combination
+    of the ones before it, and its frequency the Rayleigh quotient (not in ascending order)."""
+    return physics(store).get("coordinates") == "vertex"
 
 
 def fig_modes(store: Mapping[str, np.ndarray]) -> Figure:
-    """The lowest natural modes on the neutral, colour = displacement magnitude (Fig. 5)."""
+    """The lowest modes on the neutral, colour = displacement magnitude (Fig. 5): the natural
+    modes, or with vertex coordinates (:func:`vertex_coordinates`) the stored basis vectors,
+    natural modes orthonormalised per vertex, with their Rayleigh-quotient frequencies; the
+    title says which."""
     what = "the mode-shape figure"
     f = template_faces(store, what)
     base = mesh(store, paths.neutral("vertices"), what)
@@ -73,12 +101,11 @@ def fig_modes(store: Mapping[str, np.ndarray]) -> Figure:
         rgb = scale.rgb(mag / peak if peak > 0 else mag)
         hz = f", {freq[i]:.1f} Hz" if i < len(freq) else ""
         panels.append(Panel(render_view(TexturedMesh(base, f), view, rgb=rgb), f"mode {i + 1}{hz}"))
-    return panel_figure(
-        panels,
-        ncols=min(3, len(panels)),
-        title="Natural mode shapes of the neutral face",
-        scale=scale,
-    )
+    title = "Natural mode shapes of the neutral face"
+    if vertex_coordinates(store):
+        # one line (the grid leaves one line of title): the caption says the rest
+        title = "Modes of the neutral face (orthonormalised per vertex; Hz: Rayleigh quotients)"
+    return panel_figure(panels, ncols=min(3, len(panels)), title=title, scale=scale)
 
 
 def _displacements(store: Mapping, what: str) -> dict[str, np.ndarray]:
@@ -154,6 +181,7 @@ def fig_reconstruction(store: Mapping[str, np.ndarray]) -> Figure:
     ks = need(store, paths.modal("reconstruction_k"), what).astype(int)
     fig, ax = subplots(figsize=(5.0, 3.4))
     relative = all(paths.expression(t, "displacement") in store for t in takes)
+    dashed = False
     for i, take in enumerate(takes):
         key = paths.expression(take, "reconstruction_rms_mm")
         rms = need(store, key, what).astype(float)
@@ -168,12 +196,17 @@ def fig_reconstruction(store: Mapping[str, np.ndarray]) -> Figure:
         normal = paths.expression(take, "reconstruction_normal_rms_mm")
         if normal in store and np.shape(store[normal]) == ks.shape:
             ax.plot(ks, np.asarray(store[normal], dtype=float) / scale, "--", lw=0.8, color=colour)
+            dashed = True
+    handles, labels = ax.get_legend_handles_labels()
+    if dashed:  # the dashed lines, once, in the legend: without it they were unexplained
+        handles.append(Line2D([], [], ls="--", lw=0.8, color="0.3"))
+        labels.append("dashed: part along the normals")
     ax.set_xscale("log")
     ax.set_xlabel("number of modes K")
     ax.set_ylabel("share of the expression's RMS left" if relative else "RMS error (mm)")
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    ax.legend(handles, labels, fontsize=7)
     preset = paths.modal("preset")
     physics = f" (preset {store[preset]})" if preset in store else ""
     ax.set_title(f"Expressions rebuilt from their first K modes{physics}", fontsize=9)
@@ -200,7 +233,8 @@ def fig_statistics(store: Mapping[str, np.ndarray]) -> Figure:
         ax.set_ylabel(f"q ({Q_UNITS})", fontsize=7)
         single = " (one take: no std)" if not np.isfinite(std).any() else ""
         ax.set_title(
-            f"{label}: mean ± std over {n if n is not None else '?'} takes{single}",
+            f"{label}: mean ± std over {n if n is not None else '?'} take{'' if n == 1 else 's'}"
+            f"{single}",
             fontsize=8,
             loc="left",
         )
@@ -222,9 +256,17 @@ def fig_synthesis(store: Mapping[str, np.ndarray]) -> Figure:
     shapes = [base + d for d in fields.values()] + [base + s for s in synth.values()]
     view = frame_view(neutral_view(store, what), shapes, f)
     scale = _field_scale(list(fields.values()), "displacement magnitude or difference (mm)")
+    # the bar's arrow over every value shown (the synthesised fields and differences too)
+    shown = [
+        np.linalg.norm(v, axis=1) for t, d in fields.items() for v in (d, synth[t], synth[t] - d)
+    ]
+    scale = ColorScale.clipped(scale.vmin, scale.vmax, scale.label, np.concatenate(shown))
     panels = []
     for take, d in fields.items():
         s = synth[take]
+        # the difference is small on the fields' scale (it looks blank): its RMS says how small
+        diff = np.linalg.norm(s - d, axis=1)
+        rms = float(np.sqrt(np.nanmean(diff**2))) if np.isfinite(diff).any() else float("nan")
         panels += [
             Panel(
                 render_view(
@@ -242,7 +284,7 @@ def fig_synthesis(store: Mapping[str, np.ndarray]) -> Figure:
                 render_view(
                     TexturedMesh(base + s, f), view, rgb=scale.rgb(np.linalg.norm(s - d, axis=1))
                 ),
-                f"{take}: |synth. - meas.|",
+                f"{take}: |synth. - meas.|\nRMS {rms:.2f} mm",
             ),
         ]
     return panel_figure(

@@ -173,9 +173,10 @@ def fig_eigen(store: Mapping[str, np.ndarray]) -> Figure:
         for a in EIGEN_ALPHAS:
             label = "mean" if a == 0 else f"mean {'+' if a > 0 else '−'} {abs(a):g}σ"
             panels.append(Panel(images[(i, a) if a else "mean"], f"PC{i + 1}: {label}"))
-    # sigma is the length of the whole (3V,) vector: a vertex moves by its RMS, sigma / sqrt(V)
+    # sigma is the length of the whole (3V,) vector: a vertex moves by its RMS, sigma / sqrt(V);
+    # on two lines, so that the upright label fits its row (on one it ran into the next rows')
     rows = [
-        f"PC{i + 1}: σ = {sigmas[i]:.1f} mm, {sigmas[i] / np.sqrt(len(mean)):.2f} mm RMS a vertex"
+        f"PC{i + 1}: σ = {sigmas[i]:.1f} mm\n{sigmas[i] / np.sqrt(len(mean)):.2f} mm RMS a vertex"
         for i in range(n)
     ]
     return panel_figure(

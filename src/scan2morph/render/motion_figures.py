@@ -132,7 +132,7 @@ def fig_alignment(store: Mapping[str, np.ndarray]) -> Figure:
             panels.append(
                 Panel(render_view(TexturedMesh(vertices, both), view, rgb=rgb, yaw_deg=yaw), side)
             )
-    legend = [(PAIR_RGB[0], f"{neutral} (neutral)"), (PAIR_RGB[1], take)]
+    legend = [(PAIR_RGB[0], _neutral_name(neutral)), (PAIR_RGB[1], take)]
     return panel_figure(
         panels,
         ncols=2,
@@ -140,6 +140,12 @@ def fig_alignment(store: Mapping[str, np.ndarray]) -> Figure:
         legend=legend,
         row_labels=list(rows),
     )
+
+
+def _neutral_name(take: str) -> str:
+    """The neutral take as a legend names it: ``smile0 (neutral)``, and ``neutral`` alone when
+    the take is called so (not ``neutral (neutral)``)."""
+    return take if take == "neutral" else f"{take} (neutral)"
 
 
 def fig_mask(store: Mapping[str, np.ndarray]) -> Figure:
@@ -175,7 +181,8 @@ def _viseme_fields(
     title: str,
 ) -> Figure:
     """Each viseme model coloured by a per-vertex field (mm), one shared scale to its 99th
-    percentile; ``field(take, model)`` gives the (V,) values and the panel title."""
+    percentile (the colour bar's arrow: values above it take its top colour);
+    ``field(take, model)`` gives the (V,) values and the panel title."""
     takes = viseme_takes(store)
     if not takes:
         return message_figure(title, "the store has no viseme takes")
@@ -186,7 +193,7 @@ def _viseme_fields(
         values[take], titles[take] = field(take, models[take])
     finite = np.concatenate([d[np.isfinite(d)] for d in values.values()])
     vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
-    scale = ColorScale(0.0, max(vmax, 1e-3), label)
+    scale = ColorScale.clipped(0.0, max(vmax, 1e-3), label, finite)
     view = frame_view(neutral_view(store, what), list(models.values()), faces)
     panels = [
         Panel(

@@ -68,12 +68,31 @@ class View:
 
 @dataclass(frozen=True)
 class ColorScale:
-    """A colour map with its limits and the colour bar's label (with units)."""
+    """A colour map with its limits and the colour bar's label (with units).
+
+    ``extend`` is the colour bar's (matplotlib's ``"neither"``, ``"min"``, ``"max"``,
+    ``"both"``): ``"max"`` when the data go beyond ``vmax`` (a scale cut at a percentile), so
+    that the bar's arrow says the top colour means "this much or more" (see :meth:`clipped`).
+    """
 
     vmin: float
     vmax: float
     label: str
     cmap: str | Colormap = field(default_factory=lambda: FIELD_CMAP)
+    extend: str = "neither"
+
+    @classmethod
+    def clipped(cls, vmin: float, vmax: float, label: str, values: np.ndarray) -> ColorScale:
+        """A scale from ``vmin`` to ``vmax`` whose colour bar shows an arrow at the ends the
+        finite ``values`` pass (the colours there are clipped to the end colour)."""
+        v = np.asarray(values, dtype=np.float64)
+        v = v[np.isfinite(v)]
+        over = bool(v.size) and float(v.max()) > vmax
+        under = bool(v.size) and float(v.min()) < vmin
+        extend = {(False, False): "neither", (True, False): "max", (False, True): "min"}.get(
+            (over, under), "both"
+        )
+        return cls(vmin, vmax, label, extend=extend)
 
     @property
     def colormap(self) -> Colormap:
@@ -253,6 +272,8 @@ GAP_IN = 0.04
 #: Band of the figure title above a grid, of a legend row below it, of the row labels left of
 #: it and of the colour bar (with its ticks and label) right of it, inches.
 SUPTITLE_IN, LEGEND_ROW_IN, ROW_LABEL_IN, COLORBAR_IN = 0.28, 0.22, 0.4, 1.0
+#: Band of each further line of a row label (9 pt lines), inches.
+ROW_LABEL_LINE_IN = 9 * 1.2 / 72
 #: The colour bar's gap to the grid and its largest width, inches.
 COLORBAR_GAP_IN, COLORBAR_MAX_WIDTH_IN = 0.15, 0.25
 #: Height of one line of an 8 pt panel title, and the title's gap to its image (matplotlib's
@@ -289,7 +310,8 @@ def panel_figure(
     legend : sequence of (sRGB, label)
         Colour swatches below the grid.
     row_labels : sequence of str
-        Text left of each row.
+        Text left of each row, turned upright; lines split on ``"\n"`` (each line must fit
+        the row's height: a long label is given on two lines).
     legend_ncol : int, optional
         Swatches per legend row (default: all in one row).
     """
@@ -310,8 +332,10 @@ def panel_figure(
         ),
         default=0.0,
     )
+    label_lines = max((len(lab.split("\n")) for lab in row_labels), default=0)
+    label_w = ROW_LABEL_IN + (label_lines - 1) * ROW_LABEL_LINE_IN if row_labels else 0.0
     width = max(
-        ncols * panel_w + (1.0 if scale else 0.0) + (0.4 if row_labels else 0.0),
+        ncols * panel_w + (1.0 if scale else 0.0) + label_w,
         0.075 * len(title) + 0.4,
         legend_w + 0.2,
     )
@@ -322,7 +346,7 @@ def panel_figure(
         (nrows, ncols),
         (width, height),
         margins=(
-            ROW_LABEL_IN if row_labels else 0.0,
+            label_w,
             COLORBAR_IN if scale else 0.0,
             LEGEND_ROW_IN * legend_rows,
         ),
@@ -331,7 +355,14 @@ def panel_figure(
         _draw_panel(fig, panel, rect)
     for label, y in zip(row_labels, layout.row_centers, strict=False):
         fig.text(
-            ROW_LABEL_IN / 2 / width, y, label, rotation=90, ha="center", va="center", fontsize=9
+            label_w / 2 / width,
+            y,
+            label,
+            rotation=90,
+            ha="center",
+            va="center",
+            fontsize=9,
+            multialignment="center",
         )
     fig.suptitle(title, fontsize=10, y=1.0 - GAP_IN / height, va="top")
     if scale is not None:
@@ -341,7 +372,7 @@ def panel_figure(
         bar_w = min(span * height / 20, COLORBAR_MAX_WIDTH_IN) / width
         x = layout.grid_right + COLORBAR_GAP_IN / width
         cax = fig.add_axes((x, (top + bottom - span) / 2, bar_w, span))
-        fig.colorbar(scale.mappable(), cax=cax, label=scale.label)
+        fig.colorbar(scale.mappable(), cax=cax, label=scale.label, extend=scale.extend)
     if legend:
         handles = [Patch(facecolor=c, edgecolor="0.3", label=lab) for c, lab in legend]
         fig.legend(

@@ -306,11 +306,22 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
         physics = (
             f" (physics: preset {h5[preset].asstr()[()]}, config modal.preset; /modal/physics)"
         )
+    key = paths.modal("physics")
+    settings = json.loads(h5[key].asstr()[()]) if key in h5 else {}
+    what = "Natural frequencies"
+    if isinstance(settings, dict) and settings.get("coordinates") == "vertex":
+        # the stored modes are the natural ones orthonormalised per vertex: their frequencies
+        # are Rayleigh quotients, out of order (mode 4 below mode 2), not natural frequencies
+        what = (
+            "Frequencies (Rayleigh quotients, not in ascending order: coordinates 'vertex', the "
+            "natural modes orthonormalised per vertex, mode j = natural mode j + the modes "
+            "before it)"
+        )
     out = [
         table_block(
             ["", *[f"mode {i + 1}" for i in range(n)]],
             [["frequency (Hz)", *map(float, freqs[:n])]],
-            f"Natural frequencies of the first {n} of {len(freqs)} modes{physics}",
+            f"{what} of the first {n} of {len(freqs)} modes{physics}",
         )
     ]
     exprs = list(h5[paths.EXPRESSIONS]) if paths.EXPRESSIONS in h5 else []
