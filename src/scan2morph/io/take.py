@@ -409,6 +409,32 @@ def flat_surface(points: np.ndarray) -> str | None:
     )
 
 
+def _check_winding(lm: np.ndarray, source) -> None:
+    """Refuse landmarks (68, 2) px mirrored left/right: the outer eye corners iBUG 37 -> 46
+    and the chin 9 turn clockwise in the image (y down) on a face seen from the front.
+
+    Raises
+    ------
+    InputError
+        Naming ``source``; asking whether the file's x and y are swapped when the eyes lie
+        one above the other (a file written row, column mirrors the face about its diagonal).
+    """
+    d1, d2 = lm[45] - lm[36], lm[8] - lm[36]
+    if d1[0] * d2[1] - d1[1] * d2[0] > 0:
+        return
+    swapped = (
+        "; the eyes lie one above the other: are the file's x and y swapped? (x is the column, "
+        "y the row)"
+        if abs(d1[1]) > abs(d1[0])
+        else ""
+    )
+    raise InputError(
+        source,
+        "landmarks: mirrored left/right (the outer eye corners iBUG 37 -> 46 and the chin 9 "
+        f"wind the wrong way; iBUG 37 is the outer corner of the eye on the image's left){swapped}",
+    )
+
+
 def check_face(
     xyz: np.ndarray,
     landmarks: np.ndarray,
@@ -471,22 +497,7 @@ def check_face(
             f"against {height:.1f} px from the nose bridge to the chin (iBUG 28, 9): a profile or "
             f"extreme head pose (expected a roughly frontal face, ratio >= {MIN_EYE_SPAN_RATIO:g})",
         )
-    d1, d2 = lm[45] - lm[36], lm[8] - lm[36]
-    if d1[0] * d2[1] - d1[1] * d2[0] <= 0:  # image y down: 37 -> 46 -> chin turns clockwise
-        # a file's x and y swapped (row, column) mirrors the face about its diagonal too: its
-        # eyes then lie one above the other
-        swapped = (
-            "; the eyes lie one above the other: are the file's x and y swapped? (x is the "
-            "column, y the row)"
-            if abs(d1[1]) > abs(d1[0])
-            else ""
-        )
-        raise InputError(
-            landmarks_source,
-            "landmarks: mirrored left/right (the outer eye corners iBUG 37 -> 46 and the chin 9 "
-            f"wind the wrong way; iBUG 37 is the outer corner of the eye on the image's left)"
-            f"{swapped}",
-        )
+    _check_winding(lm, landmarks_source)
     lifted = lift_landmarks(xyz, lm, (37, 46))
     for k, n in enumerate((37, 46)):
         if not np.isfinite(lifted[k]).all():

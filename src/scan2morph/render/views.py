@@ -366,13 +366,7 @@ def panel_figure(
         )
     fig.suptitle(title, fontsize=10, y=1.0 - GAP_IN / height, va="top")
     if scale is not None:
-        bottom, top = layout.grid_y
-        span = 0.8 * (top - bottom)
-        # matplotlib's colour bar is 1/20 as wide as long; here no wider than its band allows
-        bar_w = min(span * height / 20, COLORBAR_MAX_WIDTH_IN) / width
-        x = layout.grid_right + COLORBAR_GAP_IN / width
-        cax = fig.add_axes((x, (top + bottom - span) / 2, bar_w, span))
-        fig.colorbar(scale.mappable(), cax=cax, label=scale.label, extend=scale.extend)
+        _colour_bar(fig, scale, layout, (width, height))
     if legend:
         handles = [Patch(facecolor=c, edgecolor="0.3", label=lab) for c, lab in legend]
         fig.legend(
@@ -384,6 +378,19 @@ def panel_figure(
             frameon=False,
         )
     return fig
+
+
+def _colour_bar(fig: Figure, scale: ColorScale, layout, size: tuple[float, float]) -> None:
+    """A panel grid's colour bar, right of the grid (``layout``: its :class:`GridLayout`;
+    ``size``: the figure's width and height, inches), 0.8 of the grid's height."""
+    width, height = size
+    bottom, top = layout.grid_y
+    span = 0.8 * (top - bottom)
+    # matplotlib's colour bar is 1/20 as wide as long; here no wider than its band allows
+    bar_w = min(span * height / 20, COLORBAR_MAX_WIDTH_IN) / width
+    x = layout.grid_right + COLORBAR_GAP_IN / width
+    cax = fig.add_axes((x, (top + bottom - span) / 2, bar_w, span))
+    fig.colorbar(scale.mappable(), cax=cax, label=scale.label, extend=scale.extend)
 
 
 @dataclass(frozen=True)
