@@ -932,3 +932,27 @@ def test_statistics_titles_count_takes_in_the_singular_too(store):
     titles = [ax.get_title(loc="left") for ax in fig_statistics(store).axes]
     assert "sad: mean ± std over 1 take (one take: no std)" in titles
     assert "smile: mean ± std over 2 takes" in titles
+
+
+def test_takes_figure_names_the_virtual_camera_only_with_mesh_takes(store):
+    """The audit's finding 11: the takes figure said "(mesh takes: rendered by the virtual
+    camera)" on every subject, also one without mesh takes."""
+    from scan2morph.render.fit_figures import fig_takes
+
+    title = fig_takes(store)._suptitle.get_text().replace("\n", " ")
+    assert "virtual camera" not in title and title.startswith("Each take's image and landmarks;")
+    meshed = dict(store) | {paths.camera("car", "modality"): "mesh"}
+    title = fig_takes(meshed)._suptitle.get_text().replace("\n", " ")
+    assert "(mesh takes: rendered by the virtual camera)" in title
+
+
+def test_a_small_contribution_ratio_keeps_two_digits():
+    """The audit's finding 14: PC5's bar read "0.000 (46.9 mm²)" where Table 1 gives 0.045%."""
+    from scan2morph.render.morph_figures import _share
+
+    assert [_share(c) for c in (0.83092, 0.01, 0.00045, 0.0)] == [
+        "0.831",
+        "0.010",
+        "0.00045",
+        "0.000",
+    ]

@@ -1370,3 +1370,30 @@ def test_a_stale_banner_goes_on_top_of_the_page_and_comes_off_byte_for_byte(tmp_
     assert clear_stale(page) and page.read_bytes() == written.encode()
     assert not clear_stale(page) and page.read_bytes() == written.encode()
     assert not mark_stale(tmp_path / "none.html", "x") and not clear_stale(tmp_path / "none.html")
+
+
+def test_the_inputs_and_the_coordinates_say_each_thing_once(tmp_path):
+    """The audit of the figures and the report (its findings 15, 16): a thumbnail's caption
+    read "neutral: neutral neutral, range, ..." (take id, kind and label alike), and the modal
+    coordinates' table "q = Q^T M v" where the default per-vertex basis projects with W."""
+    from scan2morph.report.sections import _projection, inputs
+
+    with h5py.File(tmp_path / "s.h5", "w") as h5:
+        for take, kind, label in (("neutral", "neutral", "neutral"), ("car", "viseme", "car"),
+                                  ("smile1", "expression", "smile")):  # fmt: skip
+            h5.create_group(paths.take(take)).attrs.update(
+                {"kind": kind, "label": label, "modality": "range"}
+            )
+            h5[paths.range_image(take, "color")] = np.zeros((48, 64, 3), np.uint8)
+        (block,) = inputs(h5, ["neutral", "car", "smile1"], 32)
+        assert [t["text"] for t in block["thumbs"]] == [
+            "neutral: range, 64x48 px",
+            "car: viseme, range, 64x48 px",
+            "smile1: expression smile, range, 64x48 px",
+        ]
+        assert _projection(h5) == "Q^T M v"  # no physics recorded: the paper's Eq. 7
+        h5[paths.modal("physics")] = json.dumps({"coordinates": "vertex"})
+        assert _projection(h5) == "Q^T W v (W: the mass shared equally by the vertices)"
+        del h5[paths.modal("physics")]
+        h5[paths.modal("physics")] = json.dumps({"coordinates": "mass"})
+        assert _projection(h5) == "Q^T M v"

@@ -296,9 +296,12 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         # the take on one line, how it was seen on the next: side by side they overlapped
         title = f"{take}\n{fill(note, int(TITLE_CHARS_PER_INCH * 2.3))}"
         ax.set_title(title, fontsize=7, color="darkred" if doubtful else "black")
+    # the virtual camera named only where a mesh take is shown
+    meshes = any(_text(store, paths.camera(t, "modality"), "range") == "mesh" for t in takes)
+    rendered = " (mesh takes: rendered by the virtual camera)" if meshes else ""
     text = (
-        "Each take's image and landmarks (mesh takes: rendered by the virtual camera); clicked "
-        "points red, detected ones coloured by confidence (yellow high, purple low)"
+        f"Each take's image and landmarks{rendered}; clicked points red, detected ones coloured "
+        "by confidence (yellow high, purple low)"
     )
     # wrapped to the figure's width (one row of four takes cut it at both ends)
     fig.suptitle(fill(text, int(TITLE_CHARS_PER_INCH * 2.3 * ncols)), fontsize=9)

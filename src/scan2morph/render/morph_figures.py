@@ -219,6 +219,12 @@ def fig_pca_blends(store: Mapping[str, np.ndarray]) -> Figure:
     )
 
 
+def _share(c: float) -> str:
+    """A contribution ratio as a bar's label: three decimals, two significant digits below 0.01
+    (a small component's 0.00045 read "0.000")."""
+    return f"{c:.3f}" if c >= 0.01 or c == 0 else f"{c:.2g}"
+
+
 def fig_contribution(store: Mapping[str, np.ndarray]) -> Figure:
     """Contribution rate (bars) and cumulative contribution rate (line) per component (Table 1)."""
     what = "the contribution-rate chart"
@@ -233,7 +239,7 @@ def fig_contribution(store: Mapping[str, np.ndarray]) -> Figure:
         for x, c, e in zip(k, cr, eig, strict=True):
             inside = c > 0.25  # tall bars carry their label inside, clear of the CCR line
             ax.annotate(
-                f"{c:.3f}\n({e:,.0f} mm²)" if e >= 100 else f"{c:.3f}\n({e:.3g} mm²)",
+                f"{_share(c)}\n({e:,.0f} mm²)" if e >= 100 else f"{_share(c)}\n({e:.3g} mm²)",
                 (x, c),
                 ha="center",
                 va="top" if inside else "bottom",

@@ -169,7 +169,10 @@ def inputs(h5: h5py.File, takes: list[str], thumbnail_px: int) -> list[dict]:
         color = h5[paths.range_image(take, "color")][()]
         h, w = color.shape[:2]
         uri = data_uri(thumbnail_jpeg(color, thumbnail_px), "image/jpeg")
-        text = f"{take}: {kind} {label}, {modality}, {w}x{h} px{correspondence(h5, take)}"
+        # kind and label once each, not repeating the take id ("neutral: neutral neutral")
+        said = [" ".join(w for w in dict.fromkeys((kind, label)) if w != take)]
+        text = ", ".join([*filter(None, said), modality, f"{w}x{h} px"])
+        text = f"{take}: {text}{correspondence(h5, take)}"
         items.append({"take": take, "uri": uri, "width": min(w, thumbnail_px), "text": text})
     return [{"kind": "thumbs", "thumbs": items}]
 
@@ -293,6 +296,20 @@ def motion_noise(h5: h5py.File) -> list[dict]:
     return [table_block(columns, rows, caption), _columns("motion_noise")]
 
 
+def _physics(h5) -> dict:
+    """``/modal/physics`` (the basis's settings, JSON) as a dict; empty without one."""
+    key = paths.modal("physics")
+    value = json.loads(h5[key].asstr()[()]) if key in h5 else {}
+    return value if isinstance(value, dict) else {}
+
+
+def _projection(h5) -> str:
+    """The coordinates' projection: ``Q^T W v`` per vertex (the default), else ``Q^T M v``."""
+    if _physics(h5).get("coordinates") == "vertex":
+        return "Q^T W v (W: the mass shared equally by the vertices)"
+    return "Q^T M v"
+
+
 def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
     """The first ``n_coordinates`` natural frequencies, the expressions' modal coordinates and
     their reconstruction error against the number of modes."""
@@ -306,10 +323,8 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
         physics = (
             f" (physics: preset {h5[preset].asstr()[()]}, config modal.preset; /modal/physics)"
         )
-    key = paths.modal("physics")
-    settings = json.loads(h5[key].asstr()[()]) if key in h5 else {}
     what = "Natural frequencies"
-    if isinstance(settings, dict) and settings.get("coordinates") == "vertex":
+    if _physics(h5).get("coordinates") == "vertex":
         # the stored modes are the natural ones orthonormalised per vertex: their frequencies
         # are Rayleigh quotients, out of order (mode 4 below mode 2), not natural frequencies
         what = (
@@ -340,7 +355,7 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
         table_block(
             ["expression", *[f"q{i + 1}" for i in range(n)]],
             rows,
-            f"Modal coordinates q = Q^T M v of each expression, first {n} modes",
+            f"Modal coordinates q = {_projection(h5)} of each expression, first {n} modes",
         )
     )
     out.append(_columns("modal_coordinates"))
@@ -415,9 +430,7 @@ def _outline(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -> list[
         f"vertices, {int((fixed & outline).sum())} clamped (config modal.fixed_outline; no mode "
         "moves a clamped vertex, so what an expression moves there no K rebuilds)"
     )
-    key = paths.modal("physics")
-    physics = json.loads(h5[key].asstr()[()]) if key in h5 else {}
-    strip = float(physics.get("outline_strip_mm", 0.0) or 0.0)
+    strip = float(_physics(h5).get("outline_strip_mm", 0.0) or 0.0)
     if strip > 0 and (outline & ~fixed).any():
         caption += (
             f"; the other {int((outline & ~fixed).sum())} are held by the skin beyond the "
