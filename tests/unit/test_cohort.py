@@ -240,13 +240,15 @@ def test_a_stopped_subject_is_a_row_that_says_why(stores, tmp_path):
 
 
 def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
-    """Material error (%) first, motion (mm), CCR (%), then the accuracy split by unit: mm,
-    degrees, fraction, px."""
+    """Material error (%) first, motion (mm), CCR (%, its axis from 0), then the accuracy split
+    by unit: mm, degrees, fraction, px, and a unit's minima of what should be high (a coverage)
+    apart from its errors (the figures audit: a stereo coverage sat among the errors)."""
     alice, bob, _ = stores
     summary = {
         "mesh_rms_mm_max": 0.5,
         "align_rotation_deg_max": 0.25,
         "motion_relative_error_max": 0.1,
+        "stereo_coverage_min": 0.9,
         "click_noise_px_used": 0.5,
     }
     table = cohort_table(
@@ -260,6 +262,8 @@ def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
         drawn["ticks"] = [
             [t.get_text() for t in ax.get_xticklabels()] for ax in fig.axes if ax.get_visible()
         ]
+        drawn["titles"] = [ax.get_title() for ax in fig.axes if ax.get_visible()]
+        drawn["ccr"] = next(ax.get_ylim() for ax in fig.axes if ax.get_ylabel() == "CCR (%)")
         return real(fig, path, **kwargs)
 
     monkeypatch.setattr(cohort_module.Figure, "savefig", savefig)
@@ -271,6 +275,7 @@ def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
         "mm",
         "degrees",
         "fraction",
+        "fraction",
         "px",
     ]
     assert drawn["ticks"][0] == ["car", "too", "smile (expr.)"]
@@ -279,8 +284,13 @@ def test_the_cohort_plot_has_one_panel_per_unit(stores, tmp_path, monkeypatch):
         ["mesh_rms_mm_max"],
         ["align_rotation_deg_max"],
         ["motion_relative_error_max"],
+        ["stereo_coverage_min"],
         ["click_noise_px_used"],
     ]
+    assert (
+        drawn["titles"][6] == "Accuracy against ground truth (the least of each, higher is better)"
+    )
+    assert drawn["ccr"] == (0.0, 100.0)
     assert (tmp_path / "c.png").stat().st_size > 0
 
 
