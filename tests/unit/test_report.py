@@ -46,6 +46,7 @@ from scan2morph.report import (
     thumbnail_jpeg,
     write_subject_report,
 )
+from scan2morph.report import accuracy as report_accuracy
 from scan2morph.report.viewer import VIEWER_BUNDLE, script_hash, three_unavailable, viewer_script
 from scan2morph.store import paths
 from scan2morph.template import build_template, subdivide_template
@@ -868,7 +869,7 @@ def test_modal_tables_match_the_store(report):
 def test_accuracy_and_provenance_match_their_sources(report, run):
     path, store, _, accuracy = report
     page = _parse(path.read_text())
-    summary = {r[0]: r[1] for r in _table(page, "Summary")[1:]}
+    summary = {r[0]: r[2] for r in _table(page, "Summary: each measure")[1:]}
     numbers = {k: v for k, v in accuracy["summary"].items() if isinstance(v, (int, float))}
     assert numbers.keys() <= summary.keys()
     for key, value in numbers.items():
@@ -1009,14 +1010,14 @@ RECONSTRUCTION_KEYS = (
     "reconstruction_normal_rms_mm",
     "reconstruction_tangential_rms_mm",
 )
-MATERIAL, IDEAL = sections.MATERIAL_KEYS, sections.IDEAL_KEYS
+MATERIAL, IDEAL = report_accuracy.MATERIAL_KEYS, report_accuracy.IDEAL_KEYS
 
 
 def _assert_material_tables(page, accuracy):
     """The accuracy section's first tables show accuracy.json's material and method-ideal
     errors of each viseme and the material errors of each expression (% and mm)."""
     visemes = _table(page, "Viseme motion: error against the material motion")
-    assert visemes[0] == sections.MATERIAL_COLUMNS
+    assert visemes[0] == report_accuracy.MATERIAL_COLUMNS
     assert all(c.endswith(("(mm)", "(% of the motion)")) for c in visemes[0][2:])  # units stated
     want = [t for t, e in accuracy["takes"].items() if "motion" in e]
     assert [r[0] for r in visemes[1:]] == [t for t in want for _ in range(2)]
@@ -1057,7 +1058,7 @@ def test_accuracy_section_leads_with_the_material_error():
             "smile1": {"expression": {k: 0.3 * (i + 2) for i, k in enumerate(MATERIAL)}},
         },
     }
-    text = report_html.render_blocks(sections.accuracy(accuracy))
+    text = report_html.render_blocks(report_accuracy.accuracy(accuracy))
     page = _parse(text)
     names = list(page.tables)
     assert names[0].startswith("Viseme motion: error against the material motion")
@@ -1068,9 +1069,11 @@ def test_accuracy_section_leads_with_the_material_error():
     assert too[:3] == ["too", "material motion", "2"] and too[4] == "n/a"
     assert _table(page, "Viseme motion")[1][2] == "12.35"
     # no material entries (an older accuracy.json): no headline tables, the rest stays
-    old = sections.accuracy({"summary": {"x": 1.0}, "takes": {"car": {"mesh": {"rms_mm": 1}}}})
+    old = report_accuracy.accuracy(
+        {"summary": {"x": 1.0}, "takes": {"car": {"mesh": {"rms_mm": 1}}}}
+    )
     assert [b["table"]["caption"] for b in old if b["kind"] == "table"] == [
-        "Summary (worst take)",
+        report_accuracy.SUMMARY_CAPTION,
         "Per take",
     ]
 
@@ -1397,3 +1400,35 @@ def test_the_inputs_and_the_coordinates_say_each_thing_once(tmp_path):
         del h5[paths.modal("physics")]
         h5[paths.modal("physics")] = json.dumps({"coordinates": "mass"})
         assert _projection(h5) == "Q^T M v"
+
+
+def test_the_accuracy_summary_gives_units_and_a_column_per_modality():
+    """The figures audit's finding 13: the summary was one key / value dump, the by-modality
+    part flattened into it ("by_modality range takes" with a JSON list as its value) and the
+    units only in the names."""
+    summary = {
+        "align_rotation_deg_max": 0.085,
+        "mesh_rms_mm_max": 0.197,
+        "click_noise_px_used": 0.45,
+        "by_modality": {
+            "range": {"align_rotation_deg_max": 0.085, "takes": ["man", "she"]},
+            "stereo": {"align_rotation_deg_max": 0.016, "coverage_min": 0.89, "takes": ["neutral"]},
+        },
+    }
+    first, second = report_accuracy.summary_tables(summary)
+
+    def texts(block):
+        return [[c["text"] for c in row] for row in block["table"]["rows"]]
+
+    assert first["table"]["columns"] == ["measure", "unit", "value"]
+    assert texts(first) == [
+        ["align_rotation_deg_max", "deg", "0.085"],
+        ["mesh_rms_mm_max", "mm", "0.197"],
+        ["click_noise_px_used", "px", "0.45"],
+    ]
+    assert second["table"]["columns"] == ["measure", "unit", "range", "stereo"]
+    assert texts(second) == [
+        ["align_rotation_deg_max", "deg", "0.085", "0.016"],
+        ["coverage_min", "fraction", "n/a", "0.89"],
+        ["takes", "", "man, she", "neutral"],
+    ]

@@ -34,6 +34,7 @@ from markupsafe import Markup
 
 from scan2morph.errors import InputError, writing
 from scan2morph.report import sections, viewer
+from scan2morph.report.accuracy import accuracy as accuracy_tables
 from scan2morph.report.provenance import software_versions, store_provenance
 from scan2morph.report.sections import ReportFigure
 from scan2morph.store import open_store
@@ -148,7 +149,7 @@ def subject_report_html(store_path: str | Path, page: ReportPage | None = None) 
         view, script = viewer.viewer_context(glb, h5, order, n_coordinates, three_dir)
         parts = [
             ("status", "Warnings and skipped stages", sections.status(h5)),
-            ("accuracy", "Accuracy against ground truth", sections.accuracy(accuracy)),
+            ("accuracy", "Accuracy against ground truth", accuracy_tables(accuracy)),
             ("inputs", "Inputs", sections.inputs(h5, order, thumbnail_px)),
             ("viewer", "3D model (glTF viewer)", [{"kind": "viewer", "viewer": view}]),
             ("figures", "Figures", sections.figures(figures)),
