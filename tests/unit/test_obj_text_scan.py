@@ -35,6 +35,12 @@ def _obj(tmp_path, body: bytes):
         VERTICES + b"f\x0b0 1 2\n",  # a vertical tab is not a separator the check reads
         b"f 1 2 3\x0b-9\n" + VERTICES,  # a minus after a vertical tab: not an index counted back
         b"",
+        # a word ending in f or v mid-line is no statement (the review: the patterns were not
+        # tied to a line's start, and these valid files were refused)
+        VERTICES + b"g Half 0\nf 1 2 3\n",
+        VERTICES + b"usemtl leaf 0\nf 1 2 3\n",
+        b"o Scan rev 2, cleaned\n" + VERTICES + b"f 1 2 3\n",
+        b"v inf 0 0\n" + VERTICES + b"f 1 2 3\n",
     ],
 )
 def test_passes(tmp_path, body):

@@ -20,6 +20,8 @@ from scan2morph.errors import InputError
 MAGIC = {".ply": b"ply", ".glb": b"glTF"}
 #: UTF-8's byte-order mark, which Windows editors write at the start of a text file.
 BOM = b"\xef\xbb\xbf"
+#: The OBJ statements whose loss matters when a byte-order mark hides a file's first line.
+HIDDEN = (b"v", b"vt", b"vn", b"vp", b"f", b"l", b"p", b"mtllib", b"usemtl")
 #: How an OBJ vertex line starts (``v``, then a space or a tab).
 VERTEX = (b"v ", b"v\t")
 #: Format names, for messages.
@@ -47,11 +49,13 @@ def check_format(path: Path) -> None:
         )
     if suffix == ".obj" and b"\x00" in head:
         raise InputError(path, "mesh: the file is not OBJ text (it holds binary data)")
-    rest = head[len(BOM) :]
-    if suffix == ".obj" and head.startswith(BOM) and rest[:1] not in (b"", b"#", b"\n", b"\r"):
+    first = head[len(BOM) :].split(b"\n", 1)[0].strip()
+    statement = (first.split() or [b""])[0]
+    if suffix == ".obj" and head.startswith(BOM) and statement in HIDDEN:
         # trimesh reads the line as an unknown keyword and drops it: a first vertex lost shifts
-        # every face by one vertex (a mesh of wrong triangles when the last vertex is unused)
-        first = rest.splitlines()[0].decode("utf-8", "replace")
+        # every face by one vertex (a mesh of wrong triangles when the last vertex is unused);
+        # a hidden comment, object or group name costs nothing
+        first = first.decode("utf-8", "replace")
         raise InputError(
             path,
             f"mesh: the OBJ starts with a byte-order mark (BOM) before its first line "
@@ -97,8 +101,9 @@ def _relative_problem(path: Path, lines: list[bytes]) -> None:
                     )
 
 
-#: Leading whitespace of an OBJ line (what ``bytes.lstrip`` strips inside a line).
-_LEAD = rb"[ \t\r\x0b\x0c]*"
+#: A line's start and its leading whitespace (what ``bytes.lstrip`` strips inside a line): the
+#: patterns below are compiled with ``re.M``, so ``^`` is each line's start.
+_LEAD = rb"^[ \t\r\x0b\x0c]*"
 #: A face line (``f``, then a space or a tab) up to a vertex index 0 (a space or tab, ``0``,
 #: then a space, tab, ``/`` or the line's end): the 0-based exporter's face.
 _ZERO_INDEX = re.compile(_LEAD + rb"f(?=[ \t])[^\n]*?[ \t]0(?=[ \t/\r\n]|\Z)", re.M)
