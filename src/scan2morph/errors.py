@@ -50,37 +50,6 @@ def require_numbers(source: str | PathLike[str], values: Mapping[str, Any]) -> N
             raise InputError(source, f"{name}: expected a number, got {value!r}")
 
 
-def utf8_text(path: str | PathLike[str], encoding: str = "utf-8") -> str:
-    """A text file's text, or an :class:`InputError` naming the line and the byte that is not
-    UTF-8 (a file saved as Latin-1 or another code page), not Python's codec message.
-
-    Parameters
-    ----------
-    path : str or path-like
-        The file (it exists).
-    encoding : str
-        ``utf-8``, or ``utf-8-sig`` to drop a byte-order mark.
-
-    Raises
-    ------
-    InputError
-        The file cannot be read, or its bytes are not UTF-8.
-    """
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
-    try:
-        return raw.decode(encoding)
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise InputError(
-            path,
-            f"line {line}: byte {raw[exc.start]:#04x} is not UTF-8 text (saved as Latin-1 or "
-            "another code page?); expected UTF-8",
-        ) from None
-
-
 #: ``errno`` values of a full disk (or a used-up quota).
 _DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 
@@ -128,4 +97,4 @@ def no_space_left(path: str | PathLike[str], needed: int = 1) -> bool:
         return False
 
 
-__all__ = ["InputError", "OutputError", "disk_full", "no_space_left", "utf8_text", "writing"]
+__all__ = ["InputError", "OutputError", "disk_full", "no_space_left", "writing"]

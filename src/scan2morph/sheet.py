@@ -438,9 +438,10 @@ def sheet_problems(
     Checks: kind and modality known, the modality's files named (and present when
     ``check_files``, for user rows), take ids unique per subject (in any capitals), exactly one
     neutral take, no take id that names a model output (:func:`take_name_problems`;
-    ``reserved``: the config's blend names), no scan file serving two rows (:func:`shared_scan_problems`), and, with
-    ``schema`` (``schemas/sheet.schema.yaml``), every user row against it (e.g. an empty
-    ``label``). Each problem is one line naming the sheet row and the column.
+    ``reserved``: the config's blend names), no scan file serving two rows
+    (:func:`shared_scan_problems`), and, with ``schema`` (``schemas/sheet.schema.yaml``),
+    every user row against it (e.g. an empty ``label``). Each problem is one line naming the
+    sheet row and the column.
 
     Returns
     -------

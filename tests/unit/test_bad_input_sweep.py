@@ -92,6 +92,9 @@ def test_an_obj_whose_first_vertex_follows_a_bom_is_refused_not_shifted(tmp_path
     )
     path.write_bytes(b"\xef\xbb\xbf# exported\n" + path.read_bytes()[3:])
     assert np.array_equal(read_mesh(path).vertices[read_mesh(path).faces], TETRA_V[TETRA_F])
+    # a hidden object or group name costs nothing either (the review: it was refused)
+    path.write_bytes(b"\xef\xbb\xbfo Head\n" + path.read_bytes()[3:])
+    assert np.array_equal(read_mesh(path).vertices[read_mesh(path).faces], TETRA_V[TETRA_F])
 
 
 def test_an_ascii_ply_cut_short_is_refused_not_read_in_part(tmp_path):
@@ -321,8 +324,9 @@ def test_an_8_bit_depth_array_is_refused_and_a_float16_one_named(tmp_path, caplo
         read = read_depth(tmp_path / "d16.npy")
     assert np.all(read == 1000.0)  # 1000.2 read as 1000: the steps the warning names
     assert [r.getMessage() for r in caplog.records] == [
-        f"{tmp_path / 'd16.npy'}: depth: float16 values keep 11 significant bits (0.5 mm steps "
-        "at 1 m): the surface is read quantised; save the depth as float32 or 16-bit integers"
+        f"{tmp_path / 'd16.npy'}: depth: float16 values keep 11 significant bits (steps of "
+        "1/2048 to 1/1024 of the value, 0.5-1 mm at 1 m): the surface is read quantised; save "
+        "the depth as float32 or 16-bit integers"
     ]
     caplog.clear()
     np.save(tmp_path / "d32.npy", depth.astype(np.float32))

@@ -231,8 +231,15 @@ def test_a_jpeg_a_viewer_turns_is_read_as_stored_with_a_warning(tmp_path, caplog
     assert [r.getMessage() for r in caplog.records] == [
         f"{tmp_path / 'phone.jpg'}: color: the JPEG's EXIF orientation has viewers show it "
         "turned 90 degrees clockwise; its pixels are read as stored, not turned: landmarks "
-        "must be in the stored pixel order"
+        "and UVs must be in the stored pixel order"
     ]
+    # more pixels than Pillow's bomb limit (a 200 MP phone photo): read by OpenCV, no traceback
+    monkey = pytest.MonkeyPatch()
+    monkey.setattr(Image, "MAX_IMAGE_PIXELS", 100)
+    try:
+        assert np.array_equal(read_color(tmp_path / "phone.jpg"), plain)
+    finally:
+        monkey.undo()
 
 
 def test_range_take_checks_sizes_and_landmarks(tmp_path):
@@ -254,3 +261,30 @@ def test_range_take_checks_sizes_and_landmarks(tmp_path):
     write_abs(tmp_path / "empty.abs", np.full((20, 30, 3), np.nan))
     with pytest.raises(InputError, match="no valid pixel"):
         read_range_take(tmp_path / "empty.abs", tmp_path / "ok.png", tmp_path / "p.pts")
+
+
+def test_a_text_files_bad_byte_is_named_by_its_line_bom_or_not(tmp_path):
+    """The review: with the byte-order mark dropped the error's offset was the text's, not the
+    file's, and named "line 1: byte 0x20" for a Latin-1 byte on line 2."""
+    from scan2morph.io.text_file import utf8_text
+
+    path = tmp_path / "lm.txt"
+    path.write_bytes(b"\xef\xbb\xbf1 2 3\n\xe9 5 6\n")
+    for bom in (True, False):
+        with pytest.raises(InputError) as info:
+            utf8_text(path, bom=bom)
+        assert str(info.value) == (
+            f"{path}: line 2: byte 0xe9 is not UTF-8 text (saved as Latin-1 or another code "
+            "page?); expected UTF-8"
+        )
+    path.write_bytes(b"\xef\xbb\xbf1 2 3\n")
+    assert utf8_text(path, bom=True) == "1 2 3\n"
+
+
+def test_a_numpy_file_that_cannot_be_opened_is_one_line(tmp_path):
+    """The review: opening the file to read its first bytes raised OSError as a traceback."""
+    from scan2morph.io.numpy_file import check_numpy_file
+
+    (tmp_path / "d.npz").mkdir()  # a folder where a file should be: open() fails
+    with pytest.raises(InputError, match=r"d.npz: depth: cannot read: Is a directory"):
+        check_numpy_file(tmp_path / "d.npz", "depth")

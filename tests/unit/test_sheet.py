@@ -307,19 +307,20 @@ def test_a_take_named_as_a_model_of_its_subject_is_left_out(tmp_path, take):
     assert sheet.sheet_problems(read_sheet(_sheet(tmp_path, rows)))["s"] == []
 
 
-def test_a_capitalised_kind_is_one_line(tmp_path):
-    """Before: kind 'Neutral' gave its own line and a second, misleading one: "take id
-    'neutral' is also the name of a model of the subject's own ...; rename the take" (audit
-    finding 16)."""
+def test_a_capitalised_kind_is_not_told_to_rename_its_take(tmp_path):
+    """Before: kind 'Neutral' gave its own line and a misleading one: "take id 'neutral' is
+    also the name of a model of the subject's own ...; rename the take" (audit finding 16).
+    What is left: the kind's line and the subject's missing neutral."""
     _files(tmp_path, "n.abs", "c.abs")
     rows = [
         ["s", "neutral", "Neutral", "neutral", "range", "n.abs", "", "", "", "", ""],
         ["s", "car", "viseme", "car", "range", "c.abs", "", "", "", "", ""],
     ]
-    problems = [p for t, p in sheet.sheet_problems(read_sheet(_sheet(tmp_path, rows)))["s"]]
-    said = [p.split(": ", 1)[1] for p in problems]
-    assert "kind 'Neutral' unknown (expected one of ['neutral', 'viseme', 'expression'])" in said
-    assert not [p for p in said if "is also the name of" in p]
+    problems = sheet.sheet_problems(read_sheet(_sheet(tmp_path, rows)))["s"]
+    assert [(t, p.split(": ", 1)[1]) for t, p in problems] == [
+        ("neutral", "kind 'Neutral' unknown (expected one of ['neutral', 'viseme', 'expression'])"),
+        ("", "expected exactly one take of kind 'neutral', found 0"),
+    ]
 
 
 def test_header_ids_and_cells_the_bad_input_audit_found_misleading(tmp_path):

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from scan2morph.errors import InputError
-from scan2morph.io.range_image import check_numpy_file
+from scan2morph.io.numpy_file import check_numpy_file
 from scan2morph.sheet import split_paths
 
 log = logging.getLogger("scan2morph")
@@ -154,7 +154,7 @@ def read_depth(path: str | Path) -> np.ndarray:
 
 def _check_depth_type(dtype: np.dtype, path: Path) -> None:
     """Refuse an 8-bit depth array (256 levels, as an 8-bit PNG is refused) and warn of a
-    float16 one (11 significant bits: 0.5 mm steps at 1 m, whatever the unit), naming the type.
+    float16 one (11 significant bits: 0.5-1 mm steps at 1 m, in mm or in metres).
 
     Raises
     ------
@@ -167,8 +167,9 @@ def _check_depth_type(dtype: np.dtype, path: Path) -> None:
         )
     if dtype == np.float16:
         log.warning(
-            "%s: depth: float16 values keep 11 significant bits (0.5 mm steps at 1 m): the "
-            "surface is read quantised; save the depth as float32 or 16-bit integers",
+            "%s: depth: float16 values keep 11 significant bits (steps of 1/2048 to 1/1024 of "
+            "the value, 0.5-1 mm at 1 m): the surface is read quantised; save the depth as "
+            "float32 or 16-bit integers",
             path,
         )
 

@@ -63,9 +63,9 @@ EXIF_TURNS = {
     2: "mirrored left to right",
     3: "turned 180 degrees",
     4: "mirrored top to bottom",
-    5: "mirrored and turned 90 degrees",
+    5: "mirrored about its top-left to bottom-right diagonal",
     6: "turned 90 degrees clockwise",
-    7: "mirrored and turned 90 degrees",
+    7: "mirrored about its top-right to bottom-left diagonal",
     8: "turned 90 degrees anticlockwise",
 }
 
@@ -74,17 +74,21 @@ def _warn_exif_turn(path: Path, field: str) -> None:
     """Warn of a JPEG whose EXIF orientation asks viewers to turn or mirror it (a phone's
     photo): its pixels are read as stored, so landmarks clicked in such a viewer, and a range
     grid made from the turned view, are in another pixel order."""
+    import warnings
+
     from PIL import Image
 
-    try:
-        with Image.open(path) as image:
-            turn = EXIF_TURNS.get(image.getexif().get(274, 1))
-    except OSError:
+    try:  # a photo of more pixels than Pillow's bomb limit reads in OpenCV: not a traceback
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as image:
+                turn = EXIF_TURNS.get(image.getexif().get(274, 1))
+    except (OSError, Image.DecompressionBombError):
         return
     if turn:
         log.warning(
             "%s: %s: the JPEG's EXIF orientation has viewers show it %s; its pixels are read "
-            "as stored, not turned: landmarks must be in the stored pixel order",
+            "as stored, not turned: landmarks and UVs must be in the stored pixel order",
             path,
             field,
             turn,
@@ -110,6 +114,8 @@ def _check_whole_jpeg(path: Path, field: str) -> None:
     try:
         with Image.open(path) as image:
             image.load()
+    except Image.DecompressionBombError:  # OpenCV decoded it: Pillow's limits are not ours
+        return
     except OSError as exc:
         if "truncated" not in str(exc):  # OpenCV decoded it: Pillow's other limits are not ours
             return

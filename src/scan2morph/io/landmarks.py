@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scan2morph.errors import InputError, utf8_text, writing
+from scan2morph.errors import InputError, writing
+from scan2morph.io.text_file import utf8_text
 from scan2morph.tol import N_IBUG
 
 #: iBUG numbers (1-based) of the jawline, which a 51-point file leaves out.

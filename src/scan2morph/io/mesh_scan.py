@@ -30,7 +30,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 import numpy as np  # noqa: E402
 
-from scan2morph.errors import InputError, utf8_text  # noqa: E402
+from scan2morph.errors import InputError  # noqa: E402
 from scan2morph.geometry import finite_points, lambert_grey  # noqa: E402
 from scan2morph.io.image import read_color  # noqa: E402
 from scan2morph.io.landmarks import (  # noqa: E402
@@ -64,11 +64,8 @@ from scan2morph.io.mesh_view import (  # noqa: E402
     surface_camera,
 )
 from scan2morph.io.rgbd import PinholeCamera, depth_points  # noqa: E402
-from scan2morph.io.take import (  # noqa: E402
-    RangeTake,
-    check_face,
-    check_landmarks_inside,
-)
+from scan2morph.io.take import RangeTake, check_face, check_landmarks_inside  # noqa: E402
+from scan2morph.io.text_file import utf8_text  # noqa: E402
 from scan2morph.io.uv_orientation import orient_texture  # noqa: E402
 
 log = logging.getLogger("scan2morph")
@@ -138,11 +135,11 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     Raises
     ------
     InputError
-        Missing, empty or unreadable file, a file whose bytes are another format than its
-        suffix, an OBJ face line cut short or indexing vertex 0 (0-based faces) or past the
-        vertices, an ASCII PLY cut short, no faces (a point cloud), a NaN or infinite vertex,
-        fewer than 3 triangles of non-zero area, an MTL or texture the file references but that is missing (unless
-        the sheet gives the texture), a ``texture`` given for a mesh without UVs.
+        Missing, empty or unreadable file, bytes of another format than its suffix, an OBJ
+        face line cut short or indexing vertex 0 (0-based faces) or past the vertices, an
+        ASCII PLY cut short, no faces (a point cloud), a NaN or infinite vertex, fewer than 3
+        triangles of non-zero area, a missing MTL or texture the file references (unless the
+        sheet gives the texture), a ``texture`` given for a mesh without UVs.
 
     Notes
     -----
@@ -280,7 +277,7 @@ def read_landmarks3d(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found (expected 68 or 51 lines 'x y z' of 3D landmarks)")
-    text = utf8_text(path, "utf-8-sig")  # a BOM, as Windows editors save
+    text = utf8_text(path, bom=True)  # a BOM, as Windows editors save
     refuse_left_out(path, text)
     rows = []
     for number, line in enumerate(text.splitlines(), start=1):

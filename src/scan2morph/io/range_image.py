@@ -28,6 +28,7 @@ import numpy as np
 
 from scan2morph.errors import InputError, writing
 from scan2morph.io.decimal_text import parse_decimals
+from scan2morph.io.numpy_file import check_numpy_file
 
 #: The placeholder FRGC writes for the coordinates of a pixel without data.
 ABS_INVALID = -999999.0
@@ -263,45 +264,6 @@ def _check_placeholder(xyz: np.ndarray, source, field: str, which: str, fix: str
         raise InputError(
             source, f"{field}: {share:.0%} of the {which} are exactly ({coords}): {fix}"
         )
-
-
-#: The first bytes of NumPy's files: an ``.npz`` is a zip archive (an empty one starts ``PK``
-#: ``05 06``), an ``.npy`` starts with its magic string.
-NUMPY_MAGIC = {".npz": (b"PK\x03\x04", b"PK\x05\x06"), ".npy": (b"\x93NUMPY",)}
-_NUMPY_KIND = {".npz": "a NumPy .npz (a zip archive of named arrays)", ".npy": "a NumPy .npy array"}
-
-
-def check_numpy_file(path: Path, field: str) -> None:
-    """Refuse a file whose first bytes are not the NumPy format its suffix names, before
-    :func:`numpy.load` reads it (which calls any other file pickled data and suggests loading
-    it unsafely, reads an ``.npz`` named ``.npy`` as an array of its key names, and fails on an
-    ``.npy`` named ``.npz`` with a context-manager error).
-
-    Parameters
-    ----------
-    path : Path
-        An ``.npz`` or ``.npy`` file that exists.
-    field : str
-        The sheet column, for the message (``xyz``, ``depth``).
-
-    Raises
-    ------
-    InputError
-        Naming what the file is instead: empty, the other NumPy format, or not NumPy data.
-    """
-    suffix = path.suffix.lower()
-    with open(path, "rb") as fh:
-        head = fh.read(8)
-    if head.startswith(NUMPY_MAGIC[suffix]):
-        return
-    other = next((k for k, magic in NUMPY_MAGIC.items() if head.startswith(magic)), None)
-    if not head:
-        got = "an empty file (0 bytes)"
-    elif other is not None:
-        got = f"{_NUMPY_KIND[other]} named {suffix}"
-    else:
-        got = f"a file starting with {head!r}, not NumPy data"
-    raise InputError(path, f"{field}: expected {_NUMPY_KIND[suffix]}, got {got}")
 
 
 def read_npz_range(path: str | Path) -> np.ndarray:

@@ -50,12 +50,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from scan2morph.errors import InputError, utf8_text
+from scan2morph.errors import InputError
 from scan2morph.io.calibration import MIN_BASELINE_MM
 from scan2morph.io.depth_image import check_face_depth, depth_frame_paths, read_depth_frames
 from scan2morph.io.image import read_color
 from scan2morph.io.landmarks import complete, read_pts
 from scan2morph.io.take import RangeTake, check_face, check_image_size, check_landmarks_inside
+from scan2morph.io.text_file import utf8_text
 from scan2morph.io.yaml_text import load_yaml, yaml_problem
 
 #: A triangle of neighbouring depth pixels steeper than this to the view ray spans a depth step
