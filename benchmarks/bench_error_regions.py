@@ -2,7 +2,7 @@
 RGB-D subjects 2-4x the range subject's error).
 
 ``.venv/bin/python benchmarks/bench_error_regions.py [RUN] [--subjects synth03 synth04]
-[--rings 2] [--still-mm 0.1]`` reads a finished default run (``RUN``, default the repository:
+[--rings 2] [--still-mm 0.1] [--config FILE]`` reads a finished default run (``RUN``, default the repository:
 ``results/{subject}/{subject}.h5``, the synthetic truth ``results/synthetic/{subject}/truth`` and
 the template ``resources/template.npz``) and prints, for every viseme and expression of each
 synthetic subject, its material error (the error of the final motion or displacement field
@@ -33,25 +33,26 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import scipy.sparse as sp
+import yaml
 
 from scan2morph.evaluate.modality import take_modality
-from scan2morph.evaluate.motion import template_lip_sides, true_motions
+from scan2morph.evaluate.motion import material_accuracy, template_lip_sides, true_motions
 from scan2morph.evaluate.truth import read_truth
-from scan2morph.geometry import boundary_edges, edge_adjacency, unique_edges
+from scan2morph.geometry import edge_adjacency, unique_edges, vertex_normals
 from scan2morph.store import paths, read_part
-from scan2morph.template import load_template
-from scan2morph.template.rim import BROWS
+from scan2morph.template import load_template, subdivide_template
+from scan2morph.template.rim import rim_vertices
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def rim_band(vertices2d: np.ndarray, faces: np.ndarray, brow_y: float, rings: int) -> np.ndarray:
-    """(V,) bool: the outline's vertices above ``brow_y`` (canonical y, up is negative) and
-    ``rings`` edge rings of vertices inside them."""
-    n = len(vertices2d)
+def rim_band(fine, faces: np.ndarray, rings: int) -> np.ndarray:
+    """(V,) bool: the forehead rim of the subdivided template ``fine``
+    (:func:`~scan2morph.template.rim.rim_vertices`: its outline above the brows' mean height)
+    and ``rings`` edge rings of vertices inside it (``faces`` (F, 3) its triangles)."""
+    n = len(fine.vertices)
     band = np.zeros(n, dtype=bool)
-    band[np.unique(boundary_edges(faces))] = True
-    band &= vertices2d[:, 1] < brow_y
+    band[rim_vertices(fine)] = True
     adjacency = edge_adjacency(unique_edges(faces), n) + sp.eye_array(n)
     for _ in range(rings):
         band = (adjacency @ band.astype(np.float64)) > 0
@@ -70,17 +71,19 @@ def rigid_share(neutral: np.ndarray, field: np.ndarray, material: np.ndarray) ->
     return float(1.0 - np.sum((moved - q) ** 2) / before) if before > 0 else 0.0
 
 
-def subject_rows(run: Path, subject: str, rings: int, still_mm: float) -> list[dict]:
-    """One row per viseme and expression of ``subject`` (see the module docstring)."""
+def subject_rows(run: Path, subject: str, config: dict, rings: int, still_mm: float) -> list[dict]:
+    """One row per viseme and expression of ``subject`` (see the module docstring; ``config``
+    the run's, for its template subdivision)."""
     store = read_part(run / "results" / subject / f"{subject}.h5")
     accuracy = json.loads((run / "results" / subject / "accuracy.json").read_text())
     truth_dir = run / "results" / "synthetic" / subject / "truth"
-    template = load_template(run / "resources" / "template.npz")
-    brow_y = float(np.mean(template.ibug_xy[np.array(BROWS) - 1, 1]))
     v2 = np.asarray(store[paths.template("vertices2d")], dtype=np.float64)
     faces = np.asarray(store[paths.template("faces")])
-    rim = rim_band(v2, faces, brow_y, rings)
+    levels = int(config["template"]["subdivision_levels"])
+    fine = subdivide_template(load_template(run / "resources" / "template.npz"), levels)
+    rim = rim_band(fine, faces, rings)
     neutral = np.asarray(store[paths.mesh("neutral", "vertices")], dtype=np.float64)
+    normals = vertex_normals(neutral, faces)
     free = ~np.asarray(store[paths.mask("suppressed")], dtype=bool)
     fields = {}
     for take, entry in accuracy["takes"].items():
@@ -103,7 +106,9 @@ def subject_rows(run: Path, subject: str, rings: int, still_mm: float) -> list[d
         ok &= np.ones(len(ok), dtype=bool) if where is None else where
         ok &= np.isfinite(neutral).all(axis=1)
         sq = np.sum((field - material) ** 2, axis=1)
-        ref = np.sqrt(np.mean(np.sum(material[ok] ** 2, axis=1)))
+        # the accuracy stage's own measure (its relative error and the motion's RMS)
+        measured = material_accuracy(field, material, normals, ok)
+        ref = measured["material_rms_mm"]
         still = ok & (np.linalg.norm(material, axis=1) < still_mm)
         total = sq[ok].sum()
         rows.append(
@@ -112,7 +117,7 @@ def subject_rows(run: Path, subject: str, rings: int, still_mm: float) -> list[d
                 "modality": take_modality(store, take),
                 "take": take,
                 "accuracy.json": entry["material_relative_error"],
-                "relative": np.sqrt(sq[ok].mean()) / ref,
+                "relative": measured["material_relative_error"],
                 "rigid": rigid_share(neutral[ok], field[ok], material[ok]),
                 "still": sq[still].sum() / total,
                 "rim": sq[ok & rim].sum() / total,
@@ -130,11 +135,15 @@ def main(argv=None) -> None:
     ap.add_argument("--subjects", nargs="+", help="default: every synthetic subject of the run")
     ap.add_argument("--rings", type=int, default=2, help="edge rings inside the rim's outline")
     ap.add_argument("--still-mm", type=float, default=0.1, help="true motion of still skin, mm")
+    ap.add_argument("--config", type=Path, help="the run's config (default RUN/config/config.yaml)")
     args = ap.parse_args(argv)
     subjects = args.subjects or sorted(
         p.name for p in (args.run / "results" / "synthetic").iterdir() if p.is_dir()
     )
-    rows = [r for s in subjects for r in subject_rows(args.run, s, args.rings, args.still_mm)]
+    config = yaml.safe_load((args.config or args.run / "config" / "config.yaml").read_text())
+    rows = [
+        r for s in subjects for r in subject_rows(args.run, s, config, args.rings, args.still_mm)
+    ]
     table = pd.DataFrame(rows).set_index(["subject", "modality", "take"])
     shown = ("display.width", 200, "display.max_rows", 500, "display.max_columns", 20)
     with pd.option_context(*shown):

@@ -205,3 +205,26 @@ def test_the_layout_says_the_expression_displacement_is_smoothed():
     schema = yaml.safe_load((REPO / "schemas" / "config.schema.yaml").read_text(encoding="utf-8"))
     default = schema["properties"]["smoothing"]["properties"]["expression_iterations"]["default"]
     assert f"({default} by default" in text
+
+
+def test_the_modal_physics_reads_alike_from_a_file_and_a_mapping(tmp_path):
+    """One reader of /modal/physics for the figures and the report (the review: two copies, the
+    report's crashing on a value that is not JSON)."""
+    import json
+
+    import h5py
+
+    from scan2morph.store import paths
+    from scan2morph.store.modal_physics import modal_physics, vertex_coordinates
+
+    physics = {"coordinates": "vertex", "outline_strip_mm": 6.0}
+    key = paths.modal("physics")
+    with h5py.File(tmp_path / "s.h5", "w") as h5:
+        h5[key] = json.dumps(physics)
+    with h5py.File(tmp_path / "s.h5") as h5:
+        assert modal_physics(h5) == physics and vertex_coordinates(h5)
+        assert modal_physics(read_part(tmp_path / "s.h5")) == physics
+    assert modal_physics({key: np.array(json.dumps(physics).encode())}) == physics
+    assert modal_physics({}) == {} and not vertex_coordinates({})
+    assert modal_physics({key: "not json"}) == {} and modal_physics({key: "[1, 2]"}) == {}
+    assert not vertex_coordinates({key: json.dumps({"coordinates": "mass"})})

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 
 import numpy as np
@@ -31,6 +30,7 @@ from scan2morph.render.views import (
     subplots,
 )
 from scan2morph.store import paths
+from scan2morph.store.modal_physics import vertex_coordinates
 
 #: Modes shown on the neutral (the paper's Fig. 5 shows a few of the lowest).
 N_MODES = 6
@@ -58,28 +58,6 @@ def _field_scale(fields: list[np.ndarray], label: str) -> ColorScale:
     mags = mags[np.isfinite(mags)]
     vmax = float(np.percentile(mags, 99)) if mags.size else 1.0
     return ColorScale.clipped(0.0, max(vmax, 1e-6), label, mags)
-
-
-def physics(store: Mapping) -> dict:
-    """``/modal/physics`` as a dict (empty when the store has none or it is not JSON)."""
-    key = paths.modal("physics")
-    if key not in store:
-        return {}
-    value = store[key]
-    value = value.item() if isinstance(value, np.ndarray) else value
-    value = value.decode() if isinstance(value, bytes) else str(value)
-    try:
-        out = json.loads(value)
-    except ValueError:
-        return {}
-    return out if isinstance(out, dict) else {}
-
-
-def vertex_coordinates(store: Mapping) -> bool:
-    """Whether the stored modes are the natural modes orthonormalised per vertex (``/modal/physics``
-    coordinates ``"vertex"``, the ``skin`` presets): mode j is natural mode j plus a combination
-    of the ones before it, and its frequency the Rayleigh quotient (not in ascending order)."""
-    return physics(store).get("coordinates") == "vertex"
 
 
 def fig_modes(store: Mapping[str, np.ndarray]) -> Figure:

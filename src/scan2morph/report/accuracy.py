@@ -47,6 +47,8 @@ def summary_tables(summary: Mapping) -> list[dict]:
 
 
 def _flatten(entry: Mapping, prefix: str = "") -> dict[str, object]:
+    """A nested ``accuracy.json`` entry as one level: ``"mesh rms_mm"`` -> value (the keys
+    joined by a space; a list as its JSON text)."""
     out: dict[str, object] = {}
     for key, value in entry.items():
         name = f"{prefix}{key}"
@@ -87,6 +89,8 @@ MATERIAL_COLUMNS = [
 
 
 def _error_row(take: str, reference: str, entry: Mapping, keys: Sequence[str]) -> list:
+    """A row of the material tables: the take, what it is compared with, the relative error in
+    % and the other ``keys``' values (None where the entry lacks one)."""
     values = [entry.get(k) for k in keys]
     rel = values[0]
     percent = 100 * rel if isinstance(rel, (int, float)) else None

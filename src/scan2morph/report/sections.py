@@ -27,6 +27,7 @@ import numpy as np
 from scan2morph.errors import InputError
 from scan2morph.report.blocks import note_block, table_block
 from scan2morph.store import paths
+from scan2morph.store.modal_physics import modal_physics, vertex_coordinates
 from scan2morph.store.warnings import read_warnings, skipped_stages
 
 #: Image types a report embeds: file suffix -> (MIME type, leading magic bytes).
@@ -170,7 +171,7 @@ def inputs(h5: h5py.File, takes: list[str], thumbnail_px: int) -> list[dict]:
         h, w = color.shape[:2]
         uri = data_uri(thumbnail_jpeg(color, thumbnail_px), "image/jpeg")
         # kind and label once each, not repeating the take id ("neutral: neutral neutral")
-        said = [" ".join(w for w in dict.fromkeys((kind, label)) if w != take)]
+        said = [" ".join(x for x in dict.fromkeys((kind, label)) if x and x != take)]
         text = ", ".join([*filter(None, said), modality, f"{w}x{h} px"])
         text = f"{take}: {text}{correspondence(h5, take)}"
         items.append({"take": take, "uri": uri, "width": min(w, thumbnail_px), "text": text})
@@ -296,16 +297,9 @@ def motion_noise(h5: h5py.File) -> list[dict]:
     return [table_block(columns, rows, caption), _columns("motion_noise")]
 
 
-def _physics(h5) -> dict:
-    """``/modal/physics`` (the basis's settings, JSON) as a dict; empty without one."""
-    key = paths.modal("physics")
-    value = json.loads(h5[key].asstr()[()]) if key in h5 else {}
-    return value if isinstance(value, dict) else {}
-
-
 def _projection(h5) -> str:
     """The coordinates' projection: ``Q^T W v`` per vertex (the default), else ``Q^T M v``."""
-    if _physics(h5).get("coordinates") == "vertex":
+    if vertex_coordinates(h5):
         return "Q^T W v (W: the mass shared equally by the vertices)"
     return "Q^T M v"
 
@@ -324,7 +318,7 @@ def modal(h5: h5py.File, n_coordinates: int) -> list[dict]:
             f" (physics: preset {h5[preset].asstr()[()]}, config modal.preset; /modal/physics)"
         )
     what = "Natural frequencies"
-    if _physics(h5).get("coordinates") == "vertex":
+    if vertex_coordinates(h5):
         # the stored modes are the natural ones orthonormalised per vertex: their frequencies
         # are Rayleigh quotients, out of order (mode 4 below mode 2), not natural frequencies
         what = (
@@ -430,7 +424,7 @@ def _outline(h5: h5py.File, exprs: list[str], label: Mapping[str, str]) -> list[
         f"vertices, {int((fixed & outline).sum())} clamped (config modal.fixed_outline; no mode "
         "moves a clamped vertex, so what an expression moves there no K rebuilds)"
     )
-    strip = float(_physics(h5).get("outline_strip_mm", 0.0) or 0.0)
+    strip = float(modal_physics(h5).get("outline_strip_mm", 0.0) or 0.0)
     if strip > 0 and (outline & ~fixed).any():
         caption += (
             f"; the other {int((outline & ~fixed).sum())} are held by the skin beyond the "
