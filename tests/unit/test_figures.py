@@ -956,3 +956,16 @@ def test_a_small_contribution_ratio_keeps_two_digits():
         "0.00045",
         "0.000",
     ]
+
+
+def test_takes_figure_is_shown_at_its_own_size_in_the_report(store):
+    """The figures audit (its finding 11): five takes a row made the figure 1725 px wide, shown
+    at two thirds in the report's 1200 px page (its padding 2 x 1.5 rem): 7 pt titles at 5 pt."""
+    from scan2morph.render.fit_figures import fig_takes
+    from scan2morph.render.views import DPI
+    from tests.support.workflow_api import REPO
+
+    css = (REPO / "src/scan2morph/report/templates/report.css").read_text()
+    page_px = int(re.search(r"max-width:(\d+)px;padding:0 1.5rem", css).group(1)) - 2 * 24
+    fig = fig_takes(store)
+    assert fig.get_size_inches()[0] * DPI <= page_px

@@ -325,8 +325,10 @@ def _landmark_dots(ax, marks: np.ndarray, confidence: np.ndarray | None) -> None
         )
 
 
-#: Panels per row of :func:`fig_takes`.
-TAKES_PER_ROW = 5
+#: Panels per row of :func:`fig_takes`: three (2.3 inches each at 150 dpi, 1035 px) fit the
+#: report's 1200 px page at their own size; five (1725 px) were shrunk to two thirds there, their
+#: 7 pt take titles to about 5 pt.
+TAKES_PER_ROW = 3
 #: Figure name -> function, in the order the report shows them.
 FIGURES = {
     "template": fig_template,
