@@ -969,3 +969,21 @@ def test_takes_figure_is_shown_at_its_own_size_in_the_report(store):
     page_px = int(re.search(r"max-width:(\d+)px;padding:0 1.5rem", css).group(1)) - 2 * 24
     fig = fig_takes(store)
     assert fig.get_size_inches()[0] * DPI <= page_px
+
+
+def test_detected_landmarks_get_a_confidence_colour_bar(store):
+    """The figures audit's finding 12: detected points are coloured by confidence, said only
+    in words. With a detected take the takes and landmark figures have a 0-1 colour bar; with
+    clicked takes alone none."""
+    from scan2morph.render.fit_figures import fig_landmarks, fig_takes
+
+    def bars(fig):
+        return [ax._colorbar for ax in fig.axes if getattr(ax, "_colorbar", None) is not None]
+
+    assert bars(fig_takes(store)) == [] and bars(fig_landmarks(store)) == []
+    neutral = neutral_take(store)
+    detected = dict(store) | {paths.landmark_confidence(neutral): np.linspace(0.2, 0.9, 68)}
+    for fig in (fig_takes(detected), fig_landmarks(detected)):
+        (bar,) = bars(fig)
+        assert bar.ax.get_ylabel() == "landmark confidence"
+        assert (bar.vmin, bar.vmax) == (0.0, 1.0)

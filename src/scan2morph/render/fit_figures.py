@@ -196,6 +196,7 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
         figsize=(2.6 * ncols, 3.3 * len(takes)),
         squeeze=False,
     )
+    dots = []  # the detected landmarks' scatters (None for a clicked take)
     for row, take in enumerate(takes):
         what = f"the landmark figure of take {take}"
         color = need(store, paths.range_image(take, "color"), what)
@@ -215,7 +216,7 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
             ax.set_ylim(y1, y0)
             ax.set_xticks([])
             ax.set_yticks([])
-        _landmark_dots(axes[row, 0], marks, store.get(paths.landmark_confidence(take)))
+        dots.append(_landmark_dots(axes[row, 0], marks, store.get(paths.landmark_confidence(take))))
         source = landmark_source(store, take)
         axes[row, 0].set_title(f"{take}: 68 landmarks, {source}", fontsize=8)
         axes[row, 0].set_ylabel(image_name(store, take), fontsize=8)
@@ -227,6 +228,7 @@ def fig_landmarks(store: Mapping[str, np.ndarray]) -> Figure:
         bad = ~valid & np.all(np.isfinite(pts), axis=1)
         axes[row, -1].scatter(pts[bad, 0], pts[bad, 1], s=6, marker="x", c="red", linewidths=0.6)
         axes[row, -1].set_xlabel(f"{valid.sum()} of {len(valid)} vertices valid", fontsize=7)
+    _confidence_bar(fig, axes[:, 0], dots)
     # named per modality: a stereo take's left image, a mesh scan's render (not "color image")
     shown = list(dict.fromkeys(image_name(store, t) for t in takes))
     fig.suptitle(f"Template fitted to the {' and the '.join(shown)}", fontsize=10)
@@ -279,6 +281,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
     fig, axes = subplots(nrows, ncols, figsize=(2.3 * ncols, 2.7 * nrows), squeeze=False)
     for ax in axes.flat:
         axes_off(ax)
+    dots = []  # the detected landmarks' scatters (None for a clicked take)
     for ax, take in zip(axes.flat, takes, strict=False):
         what = f"the takes figure of take {take}"
         color = need(store, paths.range_image(take, "color"), what)
@@ -289,13 +292,14 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         ax.imshow(opaque_rgba(color), interpolation="bilinear")
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
-        _landmark_dots(ax, marks, store.get(paths.landmark_confidence(take)))
+        dots.append(_landmark_dots(ax, marks, store.get(paths.landmark_confidence(take))))
         source = landmark_source(store, take)
         doubtful = _text(store, paths.landmark_info(take, "doubtful"), "")
         note = ", ".join(n for n in (modality, shown, source, "DOUBTFUL" if doubtful else "") if n)
         # the take on one line, how it was seen on the next: side by side they overlapped
         title = f"{take}\n{fill(note, int(TITLE_CHARS_PER_INCH * 2.3))}"
         ax.set_title(title, fontsize=7, color="darkred" if doubtful else "black")
+    _confidence_bar(fig, axes, dots)
     # the virtual camera named only where a mesh take is shown
     meshes = any(_text(store, paths.camera(t, "modality"), "range") == "mesh" for t in takes)
     rendered = " (mesh takes: rendered by the virtual camera)" if meshes else ""
@@ -308,21 +312,31 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
     return fig
 
 
-def _landmark_dots(ax, marks: np.ndarray, confidence: np.ndarray | None) -> None:
-    """Clicked points red; detected ones (finite ``confidence``) coloured by their confidence."""
+def _landmark_dots(ax, marks: np.ndarray, confidence: np.ndarray | None):
+    """Clicked points red; detected ones (finite ``confidence``) coloured by their confidence:
+    the scatter of the detected ones (for a colour bar), None without any."""
     conf = np.full(len(marks), np.nan) if confidence is None else np.asarray(confidence, float)
     clicked = ~np.isfinite(conf)
     ax.scatter(*marks[clicked].T, s=5, c="red", edgecolors="none")
-    if (~clicked).any():
-        ax.scatter(
-            *marks[~clicked].T,
-            s=6,
-            c=conf[~clicked],
-            cmap="plasma",
-            vmin=0.0,
-            vmax=1.0,
-            edgecolors="none",
-        )
+    if not (~clicked).any():
+        return None
+    return ax.scatter(
+        *marks[~clicked].T,
+        s=6,
+        c=conf[~clicked],
+        cmap="plasma",
+        vmin=0.0,
+        vmax=1.0,
+        edgecolors="none",
+    )
+
+
+def _confidence_bar(fig: Figure, axes, dots: list) -> None:
+    """The detected landmarks' confidence colour bar beside ``axes`` (an array of axes), when
+    any panel shows detected points (``dots``: their scatters, None for a clicked take)."""
+    shown = [d for d in dots if d is not None]
+    if shown:
+        fig.colorbar(shown[0], ax=list(np.ravel(axes)), shrink=0.4, label="landmark confidence")
 
 
 #: Panels per row of :func:`fig_takes`: three (2.3 inches each at 150 dpi, 1035 px) fit the
