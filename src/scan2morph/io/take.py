@@ -362,10 +362,8 @@ def check_image_size(shape: tuple[int, ...], source: str | Path, field: str) -> 
 def lift_landmarks(xyz: np.ndarray, landmarks: np.ndarray, numbers) -> np.ndarray:
     """3D points of the range image at some landmarks: the per-coordinate median of the pixels
     with data around each (robust to a spike), in the smallest window of :data:`_LIFT_RADIUS`
-    that holds :data:`_LIFT_MIN_PIXELS` of them (the largest: 3% of the image's width, which on
-    a face far from the camera spans more than the face's features: its median at an outer eye
-    corner lay 11 mm inside it at 2 mm per pixel, and 3 mm per pixel refused a face of the
-    usual size as 0.42 times it).
+    that holds :data:`_LIFT_MIN_PIXELS` of them (3% of the width, always, put an outer eye
+    corner 11 mm inside a face far from the camera, at 2 mm per pixel).
 
     Parameters
     ----------
