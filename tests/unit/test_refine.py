@@ -677,3 +677,11 @@ def test_a_refinement_that_would_move_the_skin_far_from_the_fit_is_not_used():
     assert not part.datasets[paths.refine("she", "confidence")].any()
     loose = refine.run(template, take, replace(params, max_correction_rms_mm=100.0))
     assert loose.attrs[paths.refine_group("she")]["used"]
+    # with detected landmarks their being far off is named first (a zero-click audit: a head
+    # turned 30 degrees got "another take's image?", the image right, the landmarks 13 mm off)
+    data[paths.landmark_info("she", "source")] = "detected"
+    detected = refine.run(template, Take("x", "she", "viseme", "she", "neutral", data=data), params)
+    assert detected.attrs[paths.refine_group("she")]["problem"].endswith(
+        "the detected landmarks are far off (a turned or unusual face? give landmark files), or "
+        "the colour image does not follow the range data"
+    )

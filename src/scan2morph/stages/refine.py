@@ -28,7 +28,7 @@ from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
 from scan2morph.stages.take_mesh import CARRY_UPPER, carries_upper, sample_points
 from scan2morph.store import paths
-from scan2morph.store.warnings import text_value
+from scan2morph.store.warnings import landmark_source, text_value
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
 from scan2morph.template.regions import icp_region, lip
@@ -323,10 +323,17 @@ def _too_far(data, name: str, refined: np.ndarray, faces, params: Params, source
     rms = float(np.sqrt(np.mean(np.sum((moved[both] - fit[both]) ** 2, axis=1))))
     if rms <= params.max_correction_rms_mm:
         return ""
+    # with detected landmarks these are far off more often than an image is another take's (a
+    # head turned 30 degrees from its neutral: the mouth detected on the nose, 13 mm)
+    cause = (
+        "the detected landmarks are far off (a turned or unusual face? give landmark files), or "
+        "the colour image does not follow the range data"
+        if "detected" in landmark_source(data, name)
+        else "the colour image does not follow the range data (another take's image?)"
+    )
     return (
         f"it would move the skin {rms:.1f} mm RMS from the template fit (more than "
-        f"refine.max_correction_rms_mm {params.max_correction_rms_mm:g}): the colour image does "
-        "not follow the range data (another take's image?)"
+        f"refine.max_correction_rms_mm {params.max_correction_rms_mm:g}): {cause}"
     )
 
 
