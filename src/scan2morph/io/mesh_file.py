@@ -15,11 +15,10 @@ from pathlib import Path
 from urllib.parse import unquote
 
 from scan2morph.errors import InputError
+from scan2morph.io.text_file import BOM
 
 #: The first bytes of the binary mesh formats, by the suffix they take.
 MAGIC = {".ply": b"ply", ".glb": b"glTF"}
-#: UTF-8's byte-order mark, which Windows editors write at the start of a text file.
-BOM = b"\xef\xbb\xbf"
 #: The OBJ statements whose loss matters when a byte-order mark hides a file's first line.
 HIDDEN = (b"v", b"vt", b"vn", b"vp", b"f", b"l", b"p", b"mtllib", b"usemtl")
 #: How an OBJ vertex line starts (``v``, then a space or a tab).
@@ -144,7 +143,7 @@ def _line_at(data: bytes, at: int) -> tuple[int, bytes]:
     return data.count(b"\n", 0, at) + 1, data[start : len(data) if end < 0 else end]
 
 
-def check_obj_text(path: Path) -> None:
+def check_obj_text(path: Path, data: bytes | None = None) -> None:
     """Refuse an OBJ whose faces trimesh would read wrongly or drop without a word.
 
     Byte searches over the whole text, no loop over its lines in Python (a 2.3 M vertex,
@@ -158,9 +157,10 @@ def check_obj_text(path: Path) -> None:
         Naming the line: the file's last line a face with fewer than 3 vertices (a file cut
         short; such a line elsewhere is a stray one trimesh drops), vertex index 0 (0-based
         faces), a negative (relative) index counting back past the first vertex, a vertex line
-        with decimal commas. Comments (``#`` to the line's end) are not read.
+        with decimal commas. Comments (``#`` to the line's end) are not read. ``data``: the
+        file's bytes when the caller has read them (else read here).
     """
-    data = _without_comments(path.read_bytes())
+    data = _without_comments(path.read_bytes() if data is None else data)
     end = len(data)
     while end and data[end - 1] in _SPACE:  # the last line with text: a cut may end in newlines
         end -= 1
@@ -321,12 +321,12 @@ class ObjMaterials:
         return bool(named) and named <= self.defined and not named & self.with_image
 
 
-def obj_materials(path: Path) -> ObjMaterials:
+def obj_materials(path: Path, data: bytes | None = None) -> ObjMaterials:
     """Read an OBJ's ``mtllib`` and ``usemtl`` lines and the ``newmtl`` and ``map_Kd`` lines of
     the MTL (comments, ``#`` to the line's end, are not read; byte searches for the keywords,
     not a decoding of the text and a pass over its lines: a few hundredths of a second for a
-    360 MB scan)."""
-    data = path.read_bytes()
+    360 MB scan). ``data``: the OBJ's bytes when the caller has read them (else read here)."""
+    data = path.read_bytes() if data is None else data
     libs = _statements(b"mtllib", data)
     used: dict[str, int] = {}
     for at, name, _ in _statements(b"usemtl", data):
@@ -368,20 +368,21 @@ def _statements(keyword: bytes, data: bytes) -> list[tuple[int, str, int]]:
     return out
 
 
-def check_obj_materials(path: Path) -> ObjMaterials:
+def check_obj_materials(path: Path, data: bytes | None = None) -> ObjMaterials:
     """Refuse an OBJ whose faces use a material its MTL does not define.
 
     trimesh gives such faces its grey stand-in image, and with a second material it packs the
     stand-in into one image with the others: the faces render flat grey and the mesh reads as
     textured. An OBJ whose MTL is missing is left to :func:`stand_in_problem` (the sheet's
-    texture column may give the texture).
+    texture column may give the texture). ``data``: the OBJ's bytes when the caller has read
+    them.
 
     Raises
     ------
     InputError
         Naming the material, its line and the MTL's materials.
     """
-    found = obj_materials(path)
+    found = obj_materials(path, data)
     if found.mtl is None or not found.used:
         return found
     missing = [(n, line) for n, line in found.used.items() if n not in found.defined]

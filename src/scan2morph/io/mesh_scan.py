@@ -161,8 +161,9 @@ def read_mesh(path: str | Path, texture: str | Path | None = None):
     if path.suffix.lower() == ".ply":
         check_ply_text(path)
     if path.suffix.lower() == ".obj":
-        check_obj_text(path)
-        materials = check_obj_materials(path)
+        data = path.read_bytes()  # once for both checks (a scan's OBJ may be hundreds of MB)
+        check_obj_text(path, data)
+        materials = check_obj_materials(path, data)
     try:
         loaded = _load(path, materials)
     except Exception as exc:  # trimesh raises many kinds on corrupt files

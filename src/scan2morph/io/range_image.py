@@ -29,6 +29,7 @@ import numpy as np
 from scan2morph.errors import InputError, writing
 from scan2morph.io.decimal_text import parse_decimals
 from scan2morph.io.numpy_file import check_numpy_file
+from scan2morph.io.text_file import BOM
 
 #: The placeholder FRGC writes for the coordinates of a pixel without data.
 ABS_INVALID = -999999.0
@@ -71,7 +72,7 @@ def _open_text(path: Path, mode: str):
 def _not_ascii(exc: UnicodeDecodeError) -> str:
     """The message for an ``.abs`` whose text is not ASCII (the decoder's own names a codec and
     a position in a block, not what the user can change)."""
-    if exc.object[:3] == b"\xef\xbb\xbf" and exc.start < 3:
+    if exc.object[: len(BOM)] == BOM and exc.start < len(BOM):
         return (
             "the file starts with a byte-order mark (BOM, as an editor saves UTF-8 text); "
             "expected FRGC .abs text in plain ASCII: save it without BOM"

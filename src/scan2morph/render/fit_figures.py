@@ -282,11 +282,13 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
     for ax in axes.flat:
         axes_off(ax)
     dots = []  # the detected landmarks' scatters (None for a clicked take)
+    modalities = set()
     for ax, take in zip(axes.flat, takes, strict=False):
         what = f"the takes figure of take {take}"
         color = need(store, paths.range_image(take, "color"), what)
         marks = need(store, paths.landmarks(take), what).astype(float)
         modality = _text(store, paths.camera(take, "modality"), "range")
+        modalities.add(modality)
         shown = _text(store, paths.camera(take, "color_source"), "")
         x0, x1, y0, y1 = _crop_box(marks, color.shape)
         ax.imshow(opaque_rgba(color), interpolation="bilinear")
@@ -301,8 +303,7 @@ def fig_takes(store: Mapping[str, np.ndarray]) -> Figure:
         ax.set_title(title, fontsize=7, color="darkred" if doubtful else "black")
     _confidence_bar(fig, axes, dots)
     # the virtual camera named only where a mesh take is shown
-    meshes = any(_text(store, paths.camera(t, "modality"), "range") == "mesh" for t in takes)
-    rendered = " (mesh takes: rendered by the virtual camera)" if meshes else ""
+    rendered = " (mesh takes: rendered by the virtual camera)" if "mesh" in modalities else ""
     text = (
         f"Each take's image and landmarks{rendered}; clicked points red, detected ones coloured "
         "by confidence (yellow high, purple low)"
