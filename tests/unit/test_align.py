@@ -21,6 +21,7 @@ from scan2morph.align import (
     rotation_angle_deg,
     transform_points,
     vertex_normals,
+    view_turn_deg,
 )
 from scan2morph.errors import InputError
 
@@ -213,6 +214,58 @@ def test_rotation_angle_deg_matches_rotvec(deg):
     t = np.eye(4)
     t[:3, :3] = r
     assert rotation_angle_deg(t) == pytest.approx(deg, abs=1e-9)
+
+
+def _turned(axis: str, deg: float, shift=(0.0, 0.0, 0.0)) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = Rotation.from_euler(axis, deg, degrees=True).as_matrix()
+    t[:3, 3] = shift
+    return t
+
+
+@pytest.mark.parametrize(
+    "axis, deg, expected",
+    [("y", 20.0, 20.0), ("x", -12.0, 12.0), ("z", 30.0, 0.0), ("y", 0.0, 0.0), ("y", 180.0, 180.0)],
+)
+def test_view_turn_of_a_head_turned_before_a_fixed_scanner(axis, deg, expected):
+    """A head turned about the image's axes (yaw, pitch) in front of one scanner turns the view
+    by that angle, whatever the shift; a turn about the optical axis (roll) does not turn it."""
+    transform = _turned(axis, deg, shift=(40.0, -10.0, 650.0))
+    assert view_turn_deg(transform) == pytest.approx(expected, abs=1e-9)
+
+
+def test_view_turn_with_each_takes_own_camera():
+    """Each take's own camera (a mesh take's virtual camera): the two optical axes compared in
+    the neutral's frame, against the directions of points on each axis carried there (an
+    independent construction: each camera's centre and a point 100 mm in front of it)."""
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        take_pose, neutral_pose, transform = (_rigid(rng, 40.0, 300.0) for _ in range(3))
+
+        def axis_in_neutral(pose, to_neutral):
+            ends = transform_points(invert(pose), np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 100.0]]))
+            ends = transform_points(to_neutral, ends)
+            return (ends[1] - ends[0]) / 100.0
+
+        a = axis_in_neutral(take_pose, transform)
+        b = axis_in_neutral(neutral_pose, np.eye(4))
+        expected = np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0)))
+        assert view_turn_deg(transform, take_pose, neutral_pose) == pytest.approx(
+            expected, abs=1e-6
+        )
+    # a mesh take whose virtual camera sees its face as the neutral's sees the neutral's (the same
+    # point, the same camera coordinates): no turn, whatever the two mesh files' frames
+    frame, camera = _rigid(rng, 70.0, 500.0), _rigid(rng, 50.0, 600.0)
+    assert view_turn_deg(frame, camera @ frame, camera) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_view_turn_bad_input():
+    with pytest.raises(InputError, match="expected shape \\(4, 4\\)"):
+        view_turn_deg(np.eye(3))
+    bad = np.eye(4)
+    bad[0, 0] = np.nan
+    with pytest.raises(InputError, match="finite"):
+        view_turn_deg(np.eye(4), bad)
 
 
 def test_invert_and_transform_points():

@@ -13,7 +13,13 @@ from scan2morph.align.icp import (
     vertex_normals,
 )
 from scan2morph.align.noise import MeshNoise, mesh_noise
-from scan2morph.align.rigid import invert, kabsch, rotation_angle_deg, transform_points
+from scan2morph.align.rigid import (
+    invert,
+    kabsch,
+    rotation_angle_deg,
+    transform_points,
+    view_turn_deg,
+)
 
 __all__ = [
     "AlignMeshes",
@@ -32,4 +38,5 @@ __all__ = [
     "rotation_angle_deg",
     "transform_points",
     "vertex_normals",
+    "view_turn_deg",
 ]

@@ -1,4 +1,5 @@
-"""Rigid transforms: least-squares fit (Kabsch), application, inversion, rotation angle.
+"""Rigid transforms: least-squares fit (Kabsch), application, inversion, rotation angle, and
+the turn between two takes' views.
 
 A rigid transform is a (4, 4) float64 homogeneous matrix that maps column vectors,
 ``p_dst = T @ [p_src, 1]``. Rotations are proper (det +1); there is no scale.
@@ -176,4 +177,41 @@ def rotation_angle_deg(r: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(sin, cos)))
 
 
-__all__ = ["invert", "kabsch", "rotation_angle_deg", "transform_points"]
+def view_turn_deg(
+    transform: np.ndarray,
+    take_pose: np.ndarray | None = None,
+    neutral_pose: np.ndarray | None = None,
+) -> float:
+    """The angle between two takes' viewing directions once they are aligned, in degrees.
+
+    A take's grid is its camera's view of the face; the neutral's, its own camera's. After the
+    take's alignment (``transform``: take frame -> neutral frame) the two cameras' optical axes
+    are compared in the neutral's frame: a head turned 20 degrees between the takes in front of
+    a fixed scanner gives 20 whatever the turn's axis in the image plane, and a turn about the
+    optical axis (the head tilted within the image) gives 0.
+
+    Parameters
+    ----------
+    transform : (4, 4) float
+        The take's alignment, take frame -> neutral frame, mm.
+    take_pose, neutral_pose : (4, 4) float, optional
+        Each take's frame -> its camera's frame (a mesh take's virtual camera, an RGB-D take's
+        colour camera); None: the take's points are in its camera's frame (range, stereo).
+
+    Returns
+    -------
+    float
+        In [0, 180] degrees.
+    """
+    z = np.array([0.0, 0.0, 1.0])
+    rotations = [
+        np.eye(3) if p is None else _transform(p)[:3, :3] for p in (take_pose, neutral_pose)
+    ]
+    take_axis = _transform(transform)[:3, :3] @ (rotations[0].T @ z)  # in the neutral frame
+    neutral_axis = rotations[1].T @ z
+    cos = float(np.clip(take_axis @ neutral_axis, -1.0, 1.0))
+    sin = float(np.linalg.norm(np.cross(take_axis, neutral_axis)))
+    return float(np.degrees(np.arctan2(sin, cos)))
+
+
+__all__ = ["invert", "kabsch", "rotation_angle_deg", "transform_points", "view_turn_deg"]
