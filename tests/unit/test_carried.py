@@ -11,7 +11,7 @@ import pytest
 
 from scan2morph.refine.carried import UPPER_FACE_BELOW, carried_map, in_upper_face, upper_face
 from scan2morph.stages import Subject, Take, consensus, refine
-from scan2morph.stages.take_mesh import MEASURED, carries_upper
+from scan2morph.stages.take_mesh import MEASURED, carries_upper, steep_skin, view_turn
 from scan2morph.store import paths
 from scan2morph.template import build_template, fit_map
 from tests.support.configs import repo_config
@@ -147,21 +147,27 @@ def test_steep_skin_is_left_to_its_neighbours(template):
     skin's texture plain above the eyes, where the refinement measures nothing. In a doubtful
     take a vertex measured nowhere on skin steeper than refine.max_unmeasured_slope_deg (60), or
     a measured one steeper than refine.max_measured_slope_deg (70), is invalid (the motion stage
-    fills it from its neighbours'); the others stay valid. A limit of None, a plane seen face-on
-    or a take not carried leave every vertex as the fit has it."""
+    fills it from its neighbours'); the others stay valid. A take not carried but seen from more
+    than refine.turned_view_deg (5) from its neutral's direction has the same limits. A limit of
+    None, a plane seen face-on, or a take neither carried nor turned leave every vertex as the
+    fit has it."""
     config = repo_config()
     params = refine.Params.from_config(config)
     assert (params.max_unmeasured_slope_deg, params.max_measured_slope_deg) == (60, 70)
     assert config["refine"]["max_measured_slope_deg"] == 70
+    assert params.turned_view_deg == config["refine"]["turned_view_deg"] == 5.0
     results = {}
-    for name, slope, limits, doubtful in (
-        ("66", (1.6, 0.0), (60.0, 70.0), ("she",)),
-        ("75", (2.6, 0.0), (60.0, 70.0), ("she",)),
-        ("75, measured unlimited", (2.6, 0.0), (60.0, None), ("she",)),
-        ("75, not carried", (2.6, 0.0), (60.0, 70.0), ()),
-        ("face-on", (0.05, -0.03), (60.0, 70.0), ("she",)),
+    for name, slope, limits, doubtful, turn in (
+        ("66", (1.6, 0.0), (60.0, 70.0), ("she",), 0.0),
+        ("75", (2.6, 0.0), (60.0, 70.0), ("she",), 0.0),
+        ("75, measured unlimited", (2.6, 0.0), (60.0, None), ("she",), 0.0),
+        ("75, not carried", (2.6, 0.0), (60.0, 70.0), (), 0.0),
+        ("75, not carried, turned 8", (2.6, 0.0), (60.0, 70.0), (), 8.0),
+        ("75, not carried, turned 3", (2.6, 0.0), (60.0, 70.0), (), 3.0),
+        ("face-on", (0.05, -0.03), (60.0, 70.0), ("she",), 0.0),
     ):
         data = _planes(template, config, slope, off=np.zeros(2), doubtful=doubtful)
+        data[paths.align("she", "transform")] = _yaw(turn)
         take = Take("x", "she", "viseme", "she", "neutral", data=data)
         limited = replace(
             params, max_unmeasured_slope_deg=limits[0], max_measured_slope_deg=limits[1]
@@ -182,9 +188,50 @@ def test_steep_skin_is_left_to_its_neighbours(template):
     assert measured.mean() > 0.3 and fit.mean() > 0.9 and not valid.any()
     valid, measured, _, fit = results["75, measured unlimited"]
     np.testing.assert_array_equal(valid, fit & measured)
-    for name in ("75, not carried", "face-on"):
+    valid, _, _, fit = results["75, not carried, turned 8"]  # steeper than either limit
+    assert fit.mean() > 0.9 and not valid.any()
+    for name in ("75, not carried", "75, not carried, turned 3", "face-on"):
         valid, _, _, fit = results[name]
         np.testing.assert_array_equal(valid, fit)
+
+
+def _yaw(deg: float) -> np.ndarray:
+    """(4, 4) a turn of ``deg`` degrees about the image's vertical axis."""
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, 0.0, s, 0.0], [0.0, 1.0, 0.0, 0.0], [-s, 0.0, c, 0.0], [0, 0, 0, 1.0]])
+
+
+@pytest.mark.parametrize(
+    ("takes", "doubtful", "turn", "limit", "steep"),
+    [
+        (("she", "neutral"), (), 8.0, 5.0, True),
+        (("she", "neutral"), (), 3.0, 5.0, False),
+        (("she", "neutral"), (), 30.0, None, False),
+        (("she", "neutral"), ("she",), 0.0, 5.0, True),
+        (("she", "neutral"), ("she",), 0.0, None, True),
+        (("neutral", "neutral"), (), 8.0, 5.0, False),
+    ],
+)
+def test_which_takes_leave_their_steep_skin_to_their_neighbours(
+    takes, doubtful, turn, limit, steep
+):
+    """The carried takes (a doubtful detection, by default), and the takes seen from more than
+    ``refine.turned_view_deg`` from their neutral's direction once aligned; never the neutral
+    for its turn (its alignment to itself). The turn is the alignment's, each take's points in
+    its own camera's frame (a range take; a mesh or RGB-D take's camera pose is its own)."""
+    data = {paths.landmark_info(t, "source"): b"detected" for t in ("she", "neutral")}
+    data |= {
+        paths.landmark_info(t, "doubtful"): DOUBT.encode() if t in doubtful else b""
+        for t in ("she", "neutral")
+    }
+    data |= {paths.align(takes[0], "transform"): _yaw(turn)}
+    params = replace(refine.Params.from_config(repo_config()), turned_view_deg=limit)
+    assert steep_skin(data, takes, params, "x/she") is steep
+    if takes[0] != takes[1]:
+        assert view_turn(data, takes, "x/she") == pytest.approx(turn, abs=1e-9)
+        # a camera turned with the head (a mesh take's virtual camera facing its face) undoes it
+        data[paths.camera(takes[0], "pose")] = _yaw(turn)
+        assert view_turn(data, takes, "x/she") == pytest.approx(0.0, abs=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -194,6 +241,8 @@ def test_steep_skin_is_left_to_its_neighbours(template):
         ("max_unmeasured_slope_deg", 95, "max_unmeasured_slope_deg"),
         ("max_measured_slope_deg", 0, "max_measured_slope_deg"),
         ("max_measured_slope_deg", 90, "max_measured_slope_deg"),
+        ("turned_view_deg", -1.0, "turned_view_deg"),
+        ("turned_view_deg", 180.0, "turned_view_deg"),
     ],
 )
 def test_a_bad_setting_is_refused_naming_it(key, value, expected):
@@ -210,6 +259,9 @@ def test_a_bad_setting_is_refused_naming_it(key, value, expected):
             InputError, match="expected one of doubtful, detected, all, none, got 'clicked'"
         ):
             replace(refine.Params.from_config(repo_config()), carry_upper_face=value)
+    if key == "turned_view_deg":
+        with pytest.raises(InputError, match=r"turned_view_deg: expected degrees in \[0, 180\)"):
+            replace(refine.Params.from_config(repo_config()), turned_view_deg=value)
 
 
 def test_a_take_the_carry_cannot_place_keeps_its_own_points(template, caplog):

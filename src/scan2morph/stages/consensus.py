@@ -16,7 +16,7 @@ from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.failure import usable
 from scan2morph.stages.part import Part, Run, Subject, need
 from scan2morph.stages.quality import aligned_takes
-from scan2morph.stages.take_mesh import carries_upper, sample_points
+from scan2morph.stages.take_mesh import sample_points, steep_skin
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 from scan2morph.template.fit import fit_map
@@ -141,7 +141,7 @@ def run(
         correction = moved[take] - before[take]
         points = before[take] + correction
         # a carried take's steep skin is left to its neighbours, as in its refinement
-        steep = carries_upper(data, (take, subject.neutral), rp.carry_upper_face)
+        steep = steep_skin(data, (take, subject.neutral), rp, take)
         confidence = need(data, paths.refine(take, "confidence"), take) if steep else None
         vertices, ok = sample_points(
             data, take, points, fine.faces, rp, subject.source(take), confidence

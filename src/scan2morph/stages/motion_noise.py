@@ -19,7 +19,7 @@ from scan2morph.stages import refine as refine_stage
 from scan2morph.stages.part import Part, Run, Subject, Take, need
 from scan2morph.stages.quality import modelled
 from scan2morph.stages.refine import shape_verdicts
-from scan2morph.stages.take_mesh import carries_upper, sample_points
+from scan2morph.stages.take_mesh import sample_points, steep_skin
 from scan2morph.store import paths
 from scan2morph.template import Template, subdivide_template
 
@@ -112,7 +112,7 @@ def _refiner(
         confidence = d[paths.refine(take, "confidence")]
         if take in moves:  # as the consensus moved the take's own refinement
             points = d[paths.refine(take, "points2d")] + moves[take]
-            steep = carries_upper(draw, (take, neutral), p.carry_upper_face)
+            steep = steep_skin(draw, (take, neutral), p, source)
             vertices, valid = sample_points(
                 draw, take, points, faces, p, source, confidence if steep else None
             )

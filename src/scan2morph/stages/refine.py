@@ -26,7 +26,7 @@ from scan2morph.refine.shape import ShapeParams
 from scan2morph.stages import align as align_stage
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
-from scan2morph.stages.take_mesh import CARRY_UPPER, carries_upper, sample_points
+from scan2morph.stages.take_mesh import CARRY_UPPER, carries_upper, sample_points, steep_skin
 from scan2morph.store import paths
 from scan2morph.store.warnings import landmark_source, text_value
 from scan2morph.template import Template, subdivide_template
@@ -100,6 +100,11 @@ class Params:
         measured, on a surface steeper than this (degrees, as ``max_slope_deg``) is invalid, its
         motion filled from its neighbours' (``refine.max_unmeasured_slope_deg``,
         ``refine.max_measured_slope_deg``); None: no such limit.
+    turned_view_deg : float or None
+        A take seen from a direction more than this from its neutral's once aligned (degrees,
+        :func:`~scan2morph.stages.take_mesh.view_turn`) has the same limits
+        (``refine.turned_view_deg``; :func:`~scan2morph.stages.take_mesh.steep_skin`); None:
+        only the carried takes.
     """
 
     method: str
@@ -120,6 +125,7 @@ class Params:
     carry_upper_face: str = "doubtful"
     max_unmeasured_slope_deg: float | None = 60.0
     max_measured_slope_deg: float | None = 70.0
+    turned_view_deg: float | None = 5.0
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
@@ -149,6 +155,7 @@ class Params:
             ),
             carry_upper_face=str(refine.get("carry_upper_face", cls.carry_upper_face)),
             **{k: _degrees(refine.get(k, getattr(cls, k))) for k in STEEP_KEYS},
+            turned_view_deg=_degrees(refine.get("turned_view_deg", cls.turned_view_deg)),
         )
 
     def __post_init__(self) -> None:
@@ -163,6 +170,10 @@ class Params:
                 raise InputError(
                     "refine", f"{key}: expected degrees in (0, 90) or None, got {limit}"
                 )
+        if (turn := self.turned_view_deg) is not None and not 0.0 <= turn < 180.0:
+            raise InputError(
+                "refine", f"turned_view_deg: expected degrees in [0, 180) or None, got {turn}"
+            )
 
 
 def _degrees(value) -> float | None:
@@ -260,8 +271,9 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         for t in (neutral, name)
     ]
     anchors = _anchors(template, sets[name], source)
-    steep = carries_upper(data, (name, neutral), params.carry_upper_face)
-    carried = steep and _carried(template, data, (name, neutral), sets[name], maps, anchors, source)
+    carried = carries_upper(data, (name, neutral), params.carry_upper_face) and _carried(
+        template, data, (name, neutral), sets[name], maps, anchors, source
+    )
     if carried:
         maps[1], anchors = carried
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
@@ -281,6 +293,7 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     elif params.jaw.prior:
         log.info("%s: jaw prior not used: %s", source, jaw.problem)
     refined, priors = _lips(fine, take, neutral_points, refined, report, params)
+    steep = steep_skin(data, (name, neutral), params, source)
     confidence = report["confidence"] if steep else None
     vertices, ok = sample_points(data, name, refined, fine.faces, params, source, confidence)
     attrs = _attrs(params, problem, report, ok, jaw, priors) | {"upper_carried": bool(carried)}

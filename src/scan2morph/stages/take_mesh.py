@@ -3,8 +3,10 @@ the takes' consensus and the click-noise draws resample once they have moved a t
 
 A take whose detection, or its neutral's, is doubtful (:func:`carries_upper`) has its upper face
 carried from the neutral in the refinement (:mod:`scan2morph.refine.carried`), and its template
-may reach the head's sides, where a pixel is several mm of depth: there a vertex on skin steeper
-than ``max_unmeasured_slope_deg`` (the refinement measured nothing there) or
+may reach the head's sides, where a pixel is several mm of depth; a take seen from another
+direction than its neutral (:func:`view_turn`) sees one side of the face more obliquely than the
+neutral does, and the two fits place that skin mm apart. In both (:func:`steep_skin`) a vertex
+on skin steeper than ``max_unmeasured_slope_deg`` (the refinement measured nothing there) or
 ``max_measured_slope_deg`` (it did) is invalid, and the motion stage fills its motion from its
 neighbours'. Every resampling of such a take applies the same limits.
 """
@@ -15,7 +17,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from scan2morph.align import transform_points
+from scan2morph.align import transform_points, view_turn_deg
 from scan2morph.stages.part import need
 from scan2morph.store import paths
 from scan2morph.store.warnings import landmark_source, text_value
@@ -45,6 +47,37 @@ def carries_upper(data: Mapping[str, np.ndarray], takes: tuple[str, str], which:
     if which == "detected":
         return landmark_source(data, takes[0]) == "detected"
     return any(text_value(data.get(paths.landmark_info(t, "doubtful"), "")) for t in takes)
+
+
+def view_turn(data: Mapping[str, np.ndarray], takes: tuple[str, str], source: str) -> float:
+    """The turn between a take's view and its neutral's once aligned, degrees
+    (:func:`~scan2morph.align.view_turn_deg`).
+
+    Parameters
+    ----------
+    data : mapping store path -> array
+        Holds the take's alignment and both takes' repair parts (their camera poses, for mesh
+        and RGB-D takes).
+    takes : (str, str)
+        The take's and its neutral's names.
+    source : str
+        ``subject/take``, for messages.
+    """
+    poses = [data.get(paths.camera(t, "pose")) for t in takes]
+    return view_turn_deg(need(data, paths.align(takes[0], "transform"), source), *poses)
+
+
+def steep_skin(data: Mapping[str, np.ndarray], takes: tuple[str, str], params, source: str) -> bool:
+    """Whether a take's steep skin is left to its neighbours (module docstring): its upper face
+    is carried (:func:`carries_upper`, ``params.carry_upper_face``) or its view is turned from
+    its neutral's by more than ``params.turned_view_deg`` (degrees; None: never).
+
+    ``params`` is a :class:`scan2morph.stages.refine.Params`; the other arguments are
+    :func:`view_turn`'s."""
+    if carries_upper(data, takes, params.carry_upper_face):
+        return True
+    limit = params.turned_view_deg
+    return takes[0] != takes[1] and limit is not None and view_turn(data, takes, source) > limit
 
 
 def sample_points(
@@ -103,4 +136,4 @@ def sample_points(
     return transform_points(transform, vertices), ok
 
 
-__all__ = ["CARRY_UPPER", "MEASURED", "carries_upper", "sample_points"]
+__all__ = ["CARRY_UPPER", "MEASURED", "carries_upper", "sample_points", "steep_skin", "view_turn"]
