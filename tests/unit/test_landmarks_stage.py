@@ -15,7 +15,12 @@ from scan2morph.synth.cohort import make_take
 from scan2morph.template import build_template
 from tests.support.configs import repo_config
 
-SETTINGS = {"min_valid_fraction": 0.0, "include_failed_takes": False, "max_click_noise_px": 1.0}
+SETTINGS = {
+    "min_valid_fraction": 0.0,
+    "include_failed_takes": False,
+    "max_click_noise_px": 1.0,
+    "max_view_turn_deg": 15.0,
+}
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 import h5py
 import numpy as np
 
+from scan2morph.stages.take_mesh import view_turn
 from scan2morph.store import paths
 from scan2morph.store.warnings import (
     Warning,
@@ -68,7 +69,8 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
         The subject's store (open for reading).
     settings : mapping
         The config section ``quality``: ``include_failed_takes`` (bool), ``max_click_noise_px``
-        (px), ``min_valid_fraction`` (share of template vertices with data).
+        (px), ``min_valid_fraction`` (share of template vertices with data),
+        ``max_view_turn_deg`` (degrees).
 
     Returns
     -------
@@ -108,6 +110,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     sources = {t: landmark_source(h5, t) for t in takes}
     given = [t for t, source in sources.items() if source.startswith("clicked")]
     neutral = next((t for t in takes if str(takes[t].attrs.get("kind", "")) == "neutral"), "")
+    out += _turned_warnings(h5, list(takes), neutral, float(settings["max_view_turn_deg"]))
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
@@ -123,6 +126,33 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
         out.append(Warning("refine", "", SHAPE_REFINED.format(takes=", ".join(shaped))))
     detected = any("detected" in source for source in sources.values())
     out += _motion_noise_warnings(h5, settings, detected)
+    return out
+
+
+#: The warning of a take seen from another direction than its neutral (:func:`_turned_warnings`).
+TURNED = (
+    "seen from {turn:.0f} degrees away from its neutral's direction: the side of the face it sees "
+    "more obliquely than the neutral is filled from its neighbours, and its skin is matched less "
+    "well (the real head's smile with its landmark files: {example}); scan every take from the "
+    "neutral's direction"
+)
+#: :data:`TURNED`'s measured example (``benchmarks/bench_turned_takes.py``, seed 7).
+TURNED_EXAMPLE = (
+    "0.12 of its motion in error seen as the neutral is, 0.16 turned 12 degrees, 0.36 turned 20, "
+    "0.67 turned 30"
+)
+
+
+def _turned_warnings(h5: h5py.File, takes: list[str], neutral: str, limit: float) -> list[Warning]:
+    """A warning for each take seen from more than ``limit`` degrees away from its neutral's
+    direction once aligned (:func:`~scan2morph.stages.take_mesh.view_turn`)."""
+    out = []
+    for take in takes:
+        if take == neutral or not neutral or paths.align(take, "transform") not in h5:
+            continue
+        turn = view_turn(h5, (take, neutral), take)
+        if turn > limit:
+            out.append(Warning("align", take, TURNED.format(turn=turn, example=TURNED_EXAMPLE)))
     return out
 
 
