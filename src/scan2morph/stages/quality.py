@@ -110,7 +110,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     sources = {t: landmark_source(h5, t) for t in takes}
     given = [t for t, source in sources.items() if source.startswith("clicked")]
     neutral = next((t for t in takes if str(takes[t].attrs.get("kind", "")) == "neutral"), "")
-    out += _turned_warnings(h5, list(takes), neutral, float(settings["max_view_turn_deg"]))
+    out += _turned_warnings(h5, list(takes), neutral, settings)
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
@@ -143,15 +143,18 @@ TURNED_EXAMPLE = (
 )
 
 
-def _turned_warnings(h5: h5py.File, takes: list[str], neutral: str, limit: float) -> list[Warning]:
-    """A warning for each take seen from more than ``limit`` degrees away from its neutral's
-    direction once aligned (:func:`~scan2morph.stages.take_mesh.view_turn`)."""
+def _turned_warnings(
+    h5: h5py.File, takes: list[str], neutral: str, settings: Mapping
+) -> list[Warning]:
+    """A warning for each take seen from more than ``settings["max_view_turn_deg"]`` degrees
+    away from its neutral's direction once aligned
+    (:func:`~scan2morph.stages.take_mesh.view_turn`)."""
     out = []
     for take in takes:
         if take == neutral or not neutral or paths.align(take, "transform") not in h5:
             continue
         turn = view_turn(h5, (take, neutral), take)
-        if turn > limit:
+        if turn > float(settings["max_view_turn_deg"]):
             out.append(Warning("align", take, TURNED.format(turn=turn, example=TURNED_EXAMPLE)))
     return out
 
