@@ -216,10 +216,14 @@ def test_rotation_angle_deg_matches_rotvec(deg):
     assert rotation_angle_deg(t) == pytest.approx(deg, abs=1e-9)
 
 
-def _turned(axis: str, deg: float, shift=(0.0, 0.0, 0.0)) -> np.ndarray:
+FACE = np.array([0.0, 0.0, 700.0])  # a face 700 mm in front of a scanner at the origin
+
+
+def _about_face(axis: str, deg: float, shift=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(4, 4) a turn about ``FACE`` (degrees about ``axis``), then a shift, mm."""
     t = np.eye(4)
     t[:3, :3] = Rotation.from_euler(axis, deg, degrees=True).as_matrix()
-    t[:3, 3] = shift
+    t[:3, 3] = FACE - t[:3, :3] @ FACE + np.asarray(shift)
     return t
 
 
@@ -228,44 +232,47 @@ def _turned(axis: str, deg: float, shift=(0.0, 0.0, 0.0)) -> np.ndarray:
     [("y", 20.0, 20.0), ("x", -12.0, 12.0), ("z", 30.0, 0.0), ("y", 0.0, 0.0), ("y", 180.0, 180.0)],
 )
 def test_view_turn_of_a_head_turned_before_a_fixed_scanner(axis, deg, expected):
-    """A head turned about the image's axes (yaw, pitch) in front of one scanner turns the view
-    by that angle, whatever the shift; a turn about the optical axis (roll) does not turn it."""
-    transform = _turned(axis, deg, shift=(40.0, -10.0, 650.0))
-    assert view_turn_deg(transform) == pytest.approx(expected, abs=1e-9)
+    """A head turned about the face (yaw, pitch) before one scanner shows it the face that
+    much turned; a head that tilts about the line to the scanner (roll) shows it the same."""
+    camera = np.zeros(3)
+    assert view_turn_deg(_about_face(axis, deg), camera, camera, FACE) == pytest.approx(
+        expected, abs=1e-9
+    )
 
 
-def test_view_turn_with_each_takes_own_camera():
-    """Each take's own camera (a mesh take's virtual camera): the two optical axes compared in
-    the neutral's frame, against the directions of points on each axis carried there (an
-    independent construction: each camera's centre and a point 100 mm in front of it)."""
+def test_view_turn_of_a_head_moved_or_turned_about_the_camera():
+    """A head moved sideways by 700 tan(10 degrees) mm is seen 10 degrees from the side; a head
+    turned about the camera's own centre shows the camera the same side (0); each camera's own
+    centre counts (the take's in its own frame, an independent construction: the angle between
+    the two centres as seen from the face, by the law of cosines)."""
+    camera = np.zeros(3)
+    moved = np.eye(4)
+    moved[0, 3] = 700.0 * np.tan(np.radians(10.0))
+    face = np.array([0.0, 0.0, 700.0])
+    assert view_turn_deg(moved, camera, camera, face) == pytest.approx(10.0, abs=1e-9)
+    about_camera = np.eye(4)
+    about_camera[:3, :3] = Rotation.from_euler("y", 25.0, degrees=True).as_matrix()
+    assert view_turn_deg(about_camera, camera, camera, face) == pytest.approx(0.0, abs=1e-9)
     rng = np.random.default_rng(3)
     for _ in range(5):
-        take_pose, neutral_pose, transform = (_rigid(rng, 40.0, 300.0) for _ in range(3))
-
-        def axis_in_neutral(pose, to_neutral):
-            ends = transform_points(invert(pose), np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 100.0]]))
-            ends = transform_points(to_neutral, ends)
-            return (ends[1] - ends[0]) / 100.0
-
-        a = axis_in_neutral(take_pose, transform)
-        b = axis_in_neutral(neutral_pose, np.eye(4))
-        expected = np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0)))
-        assert view_turn_deg(transform, take_pose, neutral_pose) == pytest.approx(
-            expected, abs=1e-6
-        )
-    # a mesh take whose virtual camera sees its face as the neutral's sees the neutral's (the same
-    # point, the same camera coordinates): no turn, whatever the two mesh files' frames
-    frame, camera = _rigid(rng, 70.0, 500.0), _rigid(rng, 50.0, 600.0)
-    assert view_turn_deg(frame, camera @ frame, camera) == pytest.approx(0.0, abs=1e-6)
+        transform = _rigid(rng, 40.0, 300.0)
+        take_camera, neutral_camera = rng.normal(size=3) * 200.0, rng.normal(size=3) * 200.0
+        a = transform_points(transform, take_camera) - FACE
+        b = neutral_camera - FACE
+        c = np.linalg.norm(a - b)
+        la, lb = np.linalg.norm(a), np.linalg.norm(b)
+        expected = np.degrees(np.arccos((la**2 + lb**2 - c**2) / (2 * la * lb)))
+        got = view_turn_deg(transform, take_camera, neutral_camera, FACE)
+        assert got == pytest.approx(expected, abs=1e-6)
 
 
 def test_view_turn_bad_input():
     with pytest.raises(InputError, match="expected shape \\(4, 4\\)"):
-        view_turn_deg(np.eye(3))
-    bad = np.eye(4)
-    bad[0, 0] = np.nan
-    with pytest.raises(InputError, match="finite"):
-        view_turn_deg(np.eye(4), bad)
+        view_turn_deg(np.eye(3), np.zeros(3), np.zeros(3), FACE)
+    with pytest.raises(InputError, match="take_camera: expected 3 finite coordinates"):
+        view_turn_deg(np.eye(4), np.full(3, np.nan), np.zeros(3), FACE)
+    with pytest.raises(InputError, match="face: expected 3 finite coordinates"):
+        view_turn_deg(np.eye(4), np.zeros(3), np.zeros(3), FACE[:2])
 
 
 def test_invert_and_transform_points():

@@ -16,6 +16,7 @@ from scan2morph.store import paths
 from scan2morph.template import build_template, fit_map
 from tests.support.configs import repo_config
 from tests.support.plane_take import FULL, HALF, plane_landmarks, plane_take, renamed
+from tests.support.turned_grids import ball_grid, middle, yaw_about
 
 #: A detector's error in the take's view: its upper-face points this far off, px.
 OFF = np.array([6.0, -4.0])
@@ -167,7 +168,7 @@ def test_steep_skin_is_left_to_its_neighbours(template):
         ("face-on", (0.05, -0.03), (60.0, 70.0), ("she",), 0.0),
     ):
         data = _planes(template, config, slope, off=np.zeros(2), doubtful=doubtful)
-        data[paths.align("she", "transform")] = _yaw(turn)
+        data[paths.align("she", "transform")] = yaw_about(turn, middle(data, "neutral"))
         take = Take("x", "she", "viseme", "she", "neutral", data=data)
         limited = replace(
             params, max_unmeasured_slope_deg=limits[0], max_measured_slope_deg=limits[1]
@@ -195,12 +196,6 @@ def test_steep_skin_is_left_to_its_neighbours(template):
         np.testing.assert_array_equal(valid, fit)
 
 
-def _yaw(deg: float) -> np.ndarray:
-    """(4, 4) a turn of ``deg`` degrees about the image's vertical axis."""
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-    return np.array([[c, 0.0, s, 0.0], [0.0, 1.0, 0.0, 0.0], [-s, 0.0, c, 0.0], [0, 0, 0, 1.0]])
-
-
 @pytest.mark.parametrize(
     ("takes", "doubtful", "turn", "limit", "steep"),
     [
@@ -216,22 +211,27 @@ def test_which_takes_leave_their_steep_skin_to_their_neighbours(
     takes, doubtful, turn, limit, steep
 ):
     """The carried takes (a doubtful detection, by default), and the takes seen from more than
-    ``refine.turned_view_deg`` from their neutral's direction once aligned; never the neutral
-    for its turn (its alignment to itself). The turn is the alignment's, each take's points in
-    its own camera's frame (a range take; a mesh or RGB-D take's camera pose is its own)."""
+    ``refine.turned_view_deg`` away from where their neutral was (the head turned between them:
+    the take's alignment turns it back); never the neutral for its turn. Each take's camera is
+    found from its own grid: a take whose points come in another frame (a range scanner's own,
+    a mesh take's) but was seen from the neutral's place is not turned."""
     data = {paths.landmark_info(t, "source"): b"detected" for t in ("she", "neutral")}
     data |= {
         paths.landmark_info(t, "doubtful"): DOUBT.encode() if t in doubtful else b""
         for t in ("she", "neutral")
     }
-    data |= {paths.align(takes[0], "transform"): _yaw(turn)}
+    data |= {paths.range_image(t, "xyz"): ball_grid() for t in ("she", "neutral")}
+    data[paths.align(takes[0], "transform")] = yaw_about(turn, middle(data, "neutral"))
     params = replace(refine.Params.from_config(repo_config()), turned_view_deg=limit)
     assert steep_skin(data, takes, params, "x/she") is steep
     if takes[0] != takes[1]:
         assert view_turn(data, takes, "x/she") == pytest.approx(turn, abs=1e-9)
-        # a camera turned with the head (a mesh take's virtual camera facing its face) undoes it
-        data[paths.camera(takes[0], "pose")] = _yaw(turn)
-        assert view_turn(data, takes, "x/she") == pytest.approx(0.0, abs=1e-9)
+        # the same scan in a frame of its own, aligned by the inverse motion: not turned
+        frame = yaw_about(35.0, np.array([100.0, 0.0, 0.0]))
+        frame[:3, 3] += [20.0, -40.0, 90.0]
+        data[paths.range_image(takes[0], "xyz")] = ball_grid(frame)
+        data[paths.align(takes[0], "transform")] = np.linalg.inv(frame)
+        assert view_turn(data, takes, "x/she") == pytest.approx(0.0, abs=0.05)
 
 
 @pytest.mark.parametrize(

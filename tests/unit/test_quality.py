@@ -96,39 +96,45 @@ def test_takes_refined_by_their_shape_are_one_warning(store):
     assert said[0].message.startswith("car: refined by the surface's shape")
 
 
-def _yaw(deg: float) -> np.ndarray:
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-    return np.array([[c, 0.0, s, 5.0], [0.0, 1.0, 0.0, -3.0], [-s, 0.0, c, 40.0], [0, 0, 0, 1]])
-
-
 def test_a_take_seen_from_another_direction_than_its_neutral_is_a_warning(tmp_path):
     """The audit's silent garbage: the real head's smile turned 20 degrees from its neutral kept
-    0.84 of its motion in error with landmark files (0.12 seen as the neutral is) and the report
-    said nothing. A take seen from more than quality.max_view_turn_deg from its neutral's
-    direction (the alignment's turn of the camera's optical axis; a tilt within the image plane
-    turns none) is now a warning naming the turn; the neutral itself and a take within the limit
-    are not. A mesh take's own virtual camera, turned with its head, undoes the turn."""
-    data = {paths.align(t, "ok"): np.bool_(True) for t in ("n", "car", "smile", "tilt", "mesh")}
-    data |= {
-        paths.align("n", "transform"): np.eye(4),
-        paths.align("car", "transform"): _yaw(12.0),
-        paths.align("smile", "transform"): _yaw(-21.4),
-        paths.align("mesh", "transform"): _yaw(30.0),
-        paths.camera("mesh", "pose"): _yaw(30.0),
-    }
+    0.85 of its motion in error with landmark files (0.12 seen as the neutral is) and the report
+    said nothing. A take seen from more than quality.max_view_turn_deg away from where its
+    neutral was (the angle at the face between the two cameras once aligned; a tilt about the
+    line to the camera turns none) is now a warning naming the turn; the neutral itself, a take
+    within the limit, a take in its own frame seen from the neutral's place, and a take whose
+    alignment failed its gate (its turn would be the failed alignment's) are not."""
+    from tests.support.turned_grids import ball_grid, middle, yaw_about
+
+    ball = ball_grid()
+    middle = middle({paths.range_image("n", "xyz"): ball}, "n")
     tilt = np.eye(4)
     tilt[:2, :2] = [[np.cos(0.6), -np.sin(0.6)], [np.sin(0.6), np.cos(0.6)]]  # 34 degrees
-    data[paths.align("tilt", "transform")] = tilt
-    kinds = {"n": "neutral", "car": "viseme", "smile": "expression", "tilt": "expression"}
-    attrs = {paths.take(t): {"kind": k} for t, k in (kinds | {"mesh": "expression"}).items()}
+    tilt[:3, 3] = middle - tilt[:3, :3] @ middle
+    frame = yaw_about(40.0, np.array([50.0, 0.0, 0.0]))
+    transforms = {
+        "n": np.eye(4),
+        "car": yaw_about(12.0, middle),
+        "smile": yaw_about(-21.4, middle),
+        "tilt": tilt,
+        "own_frame": np.linalg.inv(frame),
+        "failed": yaw_about(40.0, middle),
+    }
+    data = {paths.align(t, "transform"): m for t, m in transforms.items()}
+    data |= {paths.align(t, "ok"): np.bool_(t != "failed") for t in transforms}
+    data |= {paths.range_image(t, "xyz"): ball for t in transforms}
+    data[paths.range_image("own_frame", "xyz")] = ball_grid(frame)
+    attrs = {paths.take(t): {"kind": "neutral" if t == "n" else "expression"} for t in transforms}
+    attrs[paths.align_group("failed")] = {"problems": ["ICP did not converge (50 iterations)"]}
     write_part(tmp_path / "s.h5", data, attrs=attrs)
     with h5py.File(tmp_path / "s.h5") as h5:
         said = [w for w in subject_warnings(h5, SETTINGS) if w.stage == "align"]
-        assert [w.take for w in said] == ["smile"]
-        assert said[0].message == TURNED.format(turn=21.4, example=TURNED_EXAMPLE)
-        assert said[0].message.startswith("seen from 21 degrees away from its neutral's direction")
+        assert [w.take for w in said] == ["failed", "smile"]
+        assert said[0].message.startswith("ICP did not converge")
+        assert said[1].message == TURNED.format(turn=21.4, example=TURNED_EXAMPLE)
+        assert said[1].message.startswith("seen from 21 degrees away from where its neutral was")
         stricter = subject_warnings(h5, SETTINGS | {"max_view_turn_deg": 10.0})
-        assert [w.take for w in stricter if w.stage == "align"] == ["car", "smile"]
+        assert [w.take for w in stricter if "degrees away" in w.message] == ["car", "smile"]
 
 
 def test_warnings_round_trip_through_the_store(store, tmp_path):

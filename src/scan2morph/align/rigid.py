@@ -178,40 +178,41 @@ def rotation_angle_deg(r: np.ndarray) -> float:
 
 
 def view_turn_deg(
-    transform: np.ndarray,
-    take_pose: np.ndarray | None = None,
-    neutral_pose: np.ndarray | None = None,
+    transform: np.ndarray, take_camera: np.ndarray, neutral_camera: np.ndarray, face: np.ndarray
 ) -> float:
-    """The angle between two takes' viewing directions once they are aligned, in degrees.
+    """How far a take's camera stood from its neutral's, as the face sees them: the angle at
+    ``face`` between the directions to the two camera centres once the take is aligned, in
+    degrees.
 
-    A take's grid is its camera's view of the face; the neutral's, its own camera's. After the
-    take's alignment (``transform``: take frame -> neutral frame) the two cameras' optical axes
-    are compared in the neutral's frame: a head turned 20 degrees between the takes in front of
-    a fixed scanner gives 20 whatever the turn's axis in the image plane, and a turn about the
-    optical axis (the head tilted within the image) gives 0.
+    A head turned 20 degrees between the takes in front of a fixed scanner gives 20 (about any
+    axis through the face); a head that only tilts within the image, or turns about the
+    camera's own centre, shows the camera the same side of the face and gives 0; a head moved
+    sideways gives the angle it moved by as the face sees it.
 
     Parameters
     ----------
     transform : (4, 4) float
         The take's alignment, take frame -> neutral frame, mm.
-    take_pose, neutral_pose : (4, 4) float, optional
-        Each take's frame -> its camera's frame (a mesh take's virtual camera, an RGB-D take's
-        colour camera); None: the take's points are in its camera's frame (range, stereo).
+    take_camera : (3,) float
+        The take's camera centre in the take's frame, mm.
+    neutral_camera : (3,) float
+        The neutral's camera centre in the neutral's frame, mm.
+    face : (3,) float
+        A point of the face in the neutral's frame (its centre), mm.
 
     Returns
     -------
     float
         In [0, 180] degrees.
     """
-    z = np.array([0.0, 0.0, 1.0])
-    rotations = [
-        np.eye(3) if p is None else _transform(p)[:3, :3] for p in (take_pose, neutral_pose)
-    ]
-    take_axis = _transform(transform)[:3, :3] @ (rotations[0].T @ z)  # in the neutral frame
-    neutral_axis = rotations[1].T @ z
-    cos = float(np.clip(take_axis @ neutral_axis, -1.0, 1.0))
-    sin = float(np.linalg.norm(np.cross(take_axis, neutral_axis)))
-    return float(np.degrees(np.arctan2(sin, cos)))
+    t = _transform(transform)
+    points = [np.asarray(p, dtype=np.float64) for p in (take_camera, neutral_camera, face)]
+    for name, p in zip(("take_camera", "neutral_camera", "face"), points, strict=True):
+        if p.shape != (3,) or not np.isfinite(p).all():
+            raise InputError("view turn", f"{name}: expected 3 finite coordinates, got {p}")
+    a = t[:3, :3] @ points[0] + t[:3, 3] - points[2]
+    b = points[1] - points[2]
+    return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)))
 
 
 __all__ = ["invert", "kabsch", "rotation_angle_deg", "transform_points", "view_turn_deg"]

@@ -141,7 +141,7 @@ def run(
         correction = moved[take] - before[take]
         points = before[take] + correction
         # a carried take's steep skin is left to its neighbours, as in its refinement
-        steep = steep_skin(data, (take, subject.neutral), rp, take)
+        steep = steep_skin(data, (take, subject.neutral), rp, subject.source(take))
         confidence = need(data, paths.refine(take, "confidence"), take) if steep else None
         vertices, ok = sample_points(
             data, take, points, fine.faces, rp, subject.source(take), confidence

@@ -45,7 +45,7 @@ JAW_LINE = 17
 GIVE_UP = 0.5
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
-#: The config keys of the slope limits of a carried take's skin (:class:`Params`).
+#: The config keys of the slope limits of a carried or turned take's skin (:class:`Params`).
 STEEP_KEYS = ("max_unmeasured_slope_deg", "max_measured_slope_deg")
 log = logging.getLogger("scan2morph")
 

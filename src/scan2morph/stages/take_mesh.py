@@ -4,11 +4,11 @@ the takes' consensus and the click-noise draws resample once they have moved a t
 A take whose detection, or its neutral's, is doubtful (:func:`carries_upper`) has its upper face
 carried from the neutral in the refinement (:mod:`scan2morph.refine.carried`), and its template
 may reach the head's sides, where a pixel is several mm of depth; a take seen from another
-direction than its neutral (:func:`view_turn`) sees one side of the face more obliquely than the
-neutral does, and the two fits place that skin mm apart. In both (:func:`steep_skin`) a vertex
-on skin steeper than ``max_unmeasured_slope_deg`` (the refinement measured nothing there) or
-``max_measured_slope_deg`` (it did) is invalid, and the motion stage fills its motion from its
-neighbours'. Every resampling of such a take applies the same limits.
+place than its neutral (:func:`view_turn`: the head turned between them) sees one side of the
+face more obliquely than the neutral does, and the two fits place that skin mm apart. In both
+(:func:`steep_skin`) a vertex on skin steeper than ``max_unmeasured_slope_deg`` (the refinement
+measured nothing there) or ``max_measured_slope_deg`` (it did) is invalid, and the motion stage
+fills its motion from its neighbours'. Every resampling of such a take applies the same limits.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from scan2morph.align import transform_points, view_turn_deg
+from scan2morph.scan.view import scanner_view
 from scan2morph.stages.part import need
 from scan2morph.store import paths
 from scan2morph.store.warnings import landmark_source, text_value
@@ -50,27 +51,34 @@ def carries_upper(data: Mapping[str, np.ndarray], takes: tuple[str, str], which:
 
 
 def view_turn(data: Mapping[str, np.ndarray], takes: tuple[str, str], source: str) -> float:
-    """The turn between a take's view and its neutral's once aligned, degrees
-    (:func:`~scan2morph.align.view_turn_deg`).
+    """How far a take's camera stood from its neutral's, as the face sees them once the take is
+    aligned, degrees (:func:`~scan2morph.align.view_turn_deg`).
+
+    Each camera is the one that took the take's grid, estimated from the grid itself
+    (:func:`~scan2morph.scan.view.scanner_view`: range XYZ may come in any frame; a mesh take's
+    grid is its virtual camera's); the face is the middle (median) of the neutral's points.
 
     Parameters
     ----------
     data : mapping store path -> array
-        Holds the take's alignment and both takes' repair parts (their camera poses, for mesh
-        and RGB-D takes).
+        Holds the take's alignment and both takes' range images (their repair parts).
     takes : (str, str)
         The take's and its neutral's names.
     source : str
         ``subject/take``, for messages.
     """
-    poses = [data.get(paths.camera(t, "pose")) for t in takes]
-    return view_turn_deg(need(data, paths.align(takes[0], "transform"), source), *poses)
+    grids = [np.asarray(need(data, paths.range_image(t, "xyz"), source)) for t in takes]
+    cameras = [scanner_view(xyz).centre for xyz in grids]
+    points = grids[1].reshape(-1, 3)
+    face = np.median(points[np.isfinite(points).all(axis=1)], axis=0)
+    return view_turn_deg(need(data, paths.align(takes[0], "transform"), source), *cameras, face)
 
 
 def steep_skin(data: Mapping[str, np.ndarray], takes: tuple[str, str], params, source: str) -> bool:
     """Whether a take's steep skin is left to its neighbours (module docstring): its upper face
-    is carried (:func:`carries_upper`, ``params.carry_upper_face``) or its view is turned from
-    its neutral's by more than ``params.turned_view_deg`` (degrees; None: never).
+    is carried (:func:`carries_upper`, ``params.carry_upper_face``) or it was seen from more than
+    ``params.turned_view_deg`` (degrees; None: never) away from where its neutral was
+    (:func:`view_turn`).
 
     ``params`` is a :class:`scan2morph.stages.refine.Params`; the other arguments are
     :func:`view_turn`'s."""
