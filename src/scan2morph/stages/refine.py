@@ -43,6 +43,13 @@ JAW_LINE = 17
 #: ``refine.min_confident_share``: it is taken as not correlating (its rounds measure about the
 #: same share; the shape refines it, where ``refine.shape.use``).
 GIVE_UP = 0.5
+#: Why a detected take whose refinement would move its skin too far is left out: the template fit
+#: it would keep rests on those landmarks (a head turned 30 degrees from its neutral: the mouth
+#: detected on the nose, 16.7 times the smile's motion in error, kept in the models).
+DETECTION_FAILED = (
+    "left out, as its template fit rests on these landmarks and is not its skin (give this "
+    "take's landmarks in the sheet to keep it)"
+)
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
 #: The config keys of the slope limits of a carried or turned take's skin (:class:`Params`).
@@ -239,6 +246,14 @@ def run(template: Template, take: Take, params: Params) -> Part:
         upper-lip prior was used (``lip_used``), why not (``lip_problem``), the lip's vertices
         and those placed (``lip_vertices``, ``lip_measured``) and the median redness step at
         its border (``lip_contrast``).
+
+    Raises
+    ------
+    InputError
+        A take whose landmarks were all detected and whose refinement would move its skin
+        farther than ``params.max_correction_rms_mm`` from its template fit: the fit rests on
+        those landmarks, so the take is left out (:mod:`scan2morph.stages.failure`); a take
+        with given landmarks keeps its fit instead, with the ``problem`` named.
     """
     name, neutral, data, source = take.take, take.neutral, take.data, take.source
     aligned = need(data, paths.align(name, "vertices"), source)
@@ -277,7 +292,9 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
     if carried:
         maps[1], anchors = carried
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
-    problem = problem or _too_far(data, name, refined, fine.faces, params, source)
+    if not problem and (problem := _too_far(data, name, refined, fine.faces, params, source)):
+        if landmark_source(data, name) == "detected":
+            raise InputError(source, f"{problem}; {DETECTION_FAILED}")
     if problem:
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points
