@@ -95,6 +95,17 @@ def _planes(template, config, depth_slope=(0.05, -0.03), off=OFF, doubtful=("she
 DOUBT = "the detected landmarks are doubtful: median confidence 0.05 below 0.5"
 
 
+def _aligned(data, take: str, transform: np.ndarray) -> None:
+    """The take aligned by ``transform`` (4, 4) instead of the identity: its transform and its
+    aligned fit (the plane takes' fit is in the take's frame), as the align stage writes them."""
+    from scan2morph.align import transform_points
+
+    data[paths.align(take, "vertices")] = transform_points(
+        transform, data[paths.align(take, "vertices")]
+    )
+    data[paths.align(take, "transform")] = transform
+
+
 @pytest.mark.parametrize(
     ("source", "doubtful", "which", "carried"),
     [
@@ -168,7 +179,7 @@ def test_steep_skin_is_left_to_its_neighbours(template):
         ("face-on", (0.05, -0.03), (60.0, 70.0), ("she",), 0.0),
     ):
         data = _planes(template, config, slope, off=np.zeros(2), doubtful=doubtful)
-        data[paths.align("she", "transform")] = yaw_about(turn, middle(data, "neutral"))
+        _aligned(data, "she", yaw_about(turn, middle(data, "neutral")))
         take = Take("x", "she", "viseme", "she", "neutral", data=data)
         limited = replace(
             params, max_unmeasured_slope_deg=limits[0], max_measured_slope_deg=limits[1]
@@ -277,7 +288,7 @@ def test_a_take_the_carry_cannot_place_keeps_its_own_points(template, caplog):
         else:
             far = np.eye(4)
             far[2, 3] = 1000.0
-            data[paths.align("she", "transform")] = far
+            _aligned(data, "she", far)
         with caplog.at_level("WARNING", logger="scan2morph"):
             part = refine.run(
                 template, Take("x", "she", "viseme", "she", "neutral", data=data), params

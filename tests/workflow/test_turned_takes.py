@@ -59,6 +59,6 @@ def test_takes_turned_from_their_neutral(tmp_path):
         assert r["rotation_deg"] < 0.1 and r["vertices"] > 1600, (take, r)
         assert r["material_relative_error"] < bound, (take, r)
     store = read_part(tmp_path / "results" / subjects[1] / f"{subjects[1]}.h5")
-    turned = [w for w in read_warnings(store) if "degrees away from its neutral's" in w.message]
+    turned = [w for w in read_warnings(store) if "degrees away from where its neutral" in w.message]
     assert [(w.stage, w.take) for w in turned] == [("align", "car1"), ("align", "smile1")]
     assert all(w.message.startswith("seen from 20 degrees away") for w in turned), turned
