@@ -283,6 +283,31 @@ def test_a_refiner_that_finds_the_skin_whatever_the_clicks_leaves_only_the_neutr
     assert len({s.tobytes() for s in seen}) == len(seen) == 101
 
 
+def test_a_draw_the_refinement_refuses_is_left_out_not_the_subject(template, takes):
+    """The refine stage refuses a detected take whose fit is not its skin (it leaves its
+    subject); in the click-noise draws such a refusal leaves that draw out and is counted, and
+    the subject's error bar stands on the others (a review found it stopping the subject's
+    job). The draws' numbers are those of the same refiner that refuses nothing, without that
+    draw."""
+    neutral, visemes = takes
+    calls = []
+
+    def refiner(refuse):
+        def refine(take, fit, take_landmarks, neutral_landmarks):
+            calls.append(refuse)
+            if refuse and sum(calls) == 3:  # the reference, then the second draw
+                raise InputError("subj/she", "it would move the skin 9.1 mm RMS")
+            return fit["vertices"], fit["valid"], None
+
+        return refine
+
+    kept = _run(template, takes, draws=8, refiner=refiner(True))["she"]
+    every = _run(template, takes, draws=8, refiner=refiner(False))["she"]
+    assert kept["failed_draws"] == 1 and every["failed_draws"] == 0
+    assert np.isfinite(kept["rms_error_mm"]) and kept["rms_error_mm"] > 0
+    assert_array_equal(kept["motion"], every["motion"])
+
+
 def test_a_refiners_confidence_shortens_the_smoothing_of_the_draws(template, takes):
     """The draws are smoothed as the pipeline smooths: with a refiner that measured every vertex
     (confidence 1) and a relief of 1, 30 smoothing steps leave a bumpy motion unsmoothed; at

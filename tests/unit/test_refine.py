@@ -694,8 +694,9 @@ def test_a_refinement_that_would_move_the_skin_far_from_the_fit_is_not_used():
     assert re.fullmatch(
         r"it would move the skin \d+\.\d mm RMS from the template fit \(more than "
         r"refine\.max_correction_rms_mm 8\): the detected landmarks are far off \(a turned or "
-        r"unusual face\? give landmark files\), or the colour image does not follow the range "
-        r"data; left out, as its template fit rests on these landmarks and is not its skin "
-        r"\(give this take's landmarks in the sheet to keep it\)",
+        r"unusual face\?\), or the colour image does not follow the range data; its template "
+        r"fit rests on those landmarks, so none of it is known to be its skin: give this take's "
+        r"landmarks in the sheet \(its detected ones, to correct: "
+        r"results/x/landmarks/she\.pts\)",
         caught.value.problem,
     ), caught.value.problem

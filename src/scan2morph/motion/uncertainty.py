@@ -176,7 +176,8 @@ def click_noise_motion(
         ``relative``: the RMS of ``rms_mm`` over the unmasked vertices divided by the RMS of the
         motion there (NaN when that motion is zero); ``rms_error_mm``: the former;
         ``motion_rms_mm``: the latter; ``failed_draws``: draws whose perturbed fit of the take
-        or of the neutral was refused (folded template, a fiducial outside the image), left out.
+        or of the neutral was refused (folded template, a fiducial outside the image), or whose
+        refinement refused the take (a detected take's fit not its skin), left out.
         Every take has its own noise stream (seeded by ``seed`` and the take id), so adding or
         removing a take leaves the others' numbers unchanged.
 
@@ -219,7 +220,11 @@ def click_noise_motion(
             if n_fit is None or t_fit is None:
                 continue
             where = f"{source}/{take} (click-noise draw)"
-            v, valid, conf = _corresponded(recipe.refiner, take, t_fit, t_fit[2], n_fit[2])
+            try:  # a refinement that refuses a draw (its detected fit not its skin) skips it
+                v, valid, conf = _corresponded(recipe.refiner, take, t_fit, t_fit[2], n_fit[2])
+            except InputError as err:
+                log.info("%s: draw not refined, left out: %s", where, err)
+                continue
             moved = smooth(v, valid, conf, n_fit[0], n_fit[1]["valid"], faces, where)
             d2 = np.sum((moved - reference[take]) ** 2, axis=1)
             have = np.isfinite(d2)  # a vertex the smoothing could not reach has no value

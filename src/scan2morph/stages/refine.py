@@ -47,8 +47,8 @@ GIVE_UP = 0.5
 #: it would keep rests on those landmarks (a head turned 30 degrees from its neutral: the mouth
 #: detected on the nose, 16.7 times the smile's motion in error, kept in the models).
 DETECTION_FAILED = (
-    "left out, as its template fit rests on these landmarks and is not its skin (give this "
-    "take's landmarks in the sheet to keep it)"
+    "its template fit rests on those landmarks, so none of it is known to be its skin: give "
+    "this take's landmarks in the sheet (its detected ones, to correct: {pts})"
 )
 #: ``refine.method`` values: image-correlation refinement, or the template fit as it is.
 METHODS = ("flow", "none")
@@ -97,7 +97,8 @@ class Params:
     max_correction_rms_mm : float
         A refinement that would move the skin farther than this from the template fit (RMS
         over the vertices, mm) is not used (``refine.max_correction_rms_mm``): a colour image
-        that is not the scan's (another take's) is followed tens of mm off.
+        that is not the scan's (another take's) is followed tens of mm off. A take whose
+        landmarks were all detected is refused instead (:func:`run`): its fit rests on them.
     carry_upper_face : str
         One of :data:`CARRY_UPPER` (``refine.carry_upper_face``): whose upper face starts from
         the neutral's carried by the take's alignment instead of the take's own landmarks.
@@ -293,8 +294,9 @@ def _refine(template: Template, take: Take, params: Params) -> Part:
         maps[1], anchors = carried
     refined, report, problem = _flow(fine, name, neutral, data, maps, anchors, params, source)
     if not problem and (problem := _too_far(data, name, refined, fine.faces, params, source)):
-        if landmark_source(data, name) == "detected":
-            raise InputError(source, f"{problem}; {DETECTION_FAILED}")
+        if landmark_source(data, name) == "detected":  # stages.landmarks.DETECTED
+            pts = f"results/{take.subject}/landmarks/{name}.pts"
+            raise InputError(source, f"{problem}; {DETECTION_FAILED.format(pts=pts)}")
     if problem:
         log.warning("%s: refinement not used: %s", source, problem)
         refined = points
@@ -356,8 +358,8 @@ def _too_far(data, name: str, refined: np.ndarray, faces, params: Params, source
     # with detected landmarks these are far off more often than an image is another take's (a
     # head turned 30 degrees from its neutral: the mouth detected on the nose, 13 mm)
     cause = (
-        "the detected landmarks are far off (a turned or unusual face? give landmark files), or "
-        "the colour image does not follow the range data"
+        "the detected landmarks are far off (a turned or unusual face?), or the colour image "
+        "does not follow the range data"
         if "detected" in landmark_source(data, name)
         else "the colour image does not follow the range data (another take's image?)"
     )
