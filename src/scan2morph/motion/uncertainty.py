@@ -217,15 +217,9 @@ def click_noise_motion(
             log.warning("%s/%s has no click-noise error bar: %s", source, take, problem)
         sq, count, used = np.zeros(len(n_base)), np.zeros(len(n_base), dtype=np.int64), 0
         for n_fit, t_fit in () if problem else zip(n_fits, t_fits, strict=True):
-            if n_fit is None or t_fit is None:
+            moved = _draw_motion(recipe.refiner, smooth, take, (n_fit, t_fit), faces, source)
+            if moved is None:  # its fit, or its refinement, refused
                 continue
-            where = f"{source}/{take} (click-noise draw)"
-            try:  # a refinement that refuses a draw (its detected fit not its skin) skips it
-                v, valid, conf = _corresponded(recipe.refiner, take, t_fit, t_fit[2], n_fit[2])
-            except InputError as err:
-                log.info("%s: draw not refined, left out: %s", where, err)
-                continue
-            moved = smooth(v, valid, conf, n_fit[0], n_fit[1]["valid"], faces, where)
             d2 = np.sum((moved - reference[take]) ** 2, axis=1)
             have = np.isfinite(d2)  # a vertex the smoothing could not reach has no value
             sq[have] += d2[have]
@@ -235,6 +229,22 @@ def click_noise_motion(
             "failed_draws": draws - used
         }
     return out
+
+
+def _draw_motion(refiner, smooth, take, fits, faces, source):
+    """One draw's final motion of a take from its and its neutral's perturbed ``fits``; None
+    when either fit was refused (None) or its refinement refuses it (a detected take's fit not
+    its skin): the draw is left out."""
+    n_fit, t_fit = fits
+    if n_fit is None or t_fit is None:
+        return None
+    where = f"{source}/{take} (click-noise draw)"
+    try:
+        v, valid, conf = _corresponded(refiner, take, t_fit, t_fit[2], n_fit[2])
+    except InputError as err:
+        log.info("%s: draw not refined, left out: %s", where, err)
+        return None
+    return smooth(v, valid, conf, n_fit[0], n_fit[1]["valid"], faces, where)
 
 
 def _reference(
