@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from scan2morph.stages.take_mesh import grid_middle
 from scan2morph.store import paths
 
 
 def middle(data, take: str) -> np.ndarray:
-    """(3,) the median of a take's range points, mm: the face
+    """(3,) the middle of a take's range points, mm: the face
     :func:`scan2morph.stages.take_mesh.view_turn` measures the turn at."""
-    xyz = data[paths.range_image(take, "xyz")].reshape(-1, 3)
-    return np.median(xyz[np.isfinite(xyz).all(axis=1)], axis=0)
+    return grid_middle(data[paths.range_image(take, "xyz")])
 
 
 def yaw_about(deg: float, about: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from scan2morph.align import transform_points, view_turn_deg
+from scan2morph.geometry import finite_points
 from scan2morph.scan.view import scanner_view
 from scan2morph.stages.part import need
 from scan2morph.store import paths
@@ -69,9 +70,14 @@ def view_turn(data: Mapping[str, np.ndarray], takes: tuple[str, str], source: st
     """
     grids = [np.asarray(need(data, paths.range_image(t, "xyz"), source)) for t in takes]
     cameras = [scanner_view(xyz).centre for xyz in grids]
-    points = grids[1].reshape(-1, 3)
-    face = np.median(points[np.isfinite(points).all(axis=1)], axis=0)
-    return view_turn_deg(need(data, paths.align(takes[0], "transform"), source), *cameras, face)
+    transform = need(data, paths.align(takes[0], "transform"), source)
+    return view_turn_deg(transform, *cameras, grid_middle(grids[1]))
+
+
+def grid_middle(xyz: np.ndarray) -> np.ndarray:
+    """(3,) the median of a range image's (H, W, 3) points with data, mm: the face's middle,
+    where :func:`view_turn` measures the turn."""
+    return np.median(xyz[finite_points(xyz)], axis=0)
 
 
 def steep_skin(data: Mapping[str, np.ndarray], takes: tuple[str, str], params, source: str) -> bool:
@@ -144,4 +150,12 @@ def sample_points(
     return transform_points(transform, vertices), ok
 
 
-__all__ = ["CARRY_UPPER", "MEASURED", "carries_upper", "sample_points", "steep_skin", "view_turn"]
+__all__ = [
+    "CARRY_UPPER",
+    "MEASURED",
+    "carries_upper",
+    "grid_middle",
+    "sample_points",
+    "steep_skin",
+    "view_turn",
+]
