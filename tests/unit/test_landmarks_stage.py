@@ -20,6 +20,7 @@ SETTINGS = {
     "include_failed_takes": False,
     "max_click_noise_px": 1.0,
     "max_view_turn_deg": 15.0,
+    "max_clipped_share": 0.25,
 }
 
 

@@ -26,6 +26,7 @@ SETTINGS = {
     "max_click_noise_px": 1.5,
     "min_valid_fraction": 0.5,
     "max_view_turn_deg": 15.0,
+    "max_clipped_share": 0.25,
 }
 
 
@@ -201,3 +202,42 @@ def test_a_scan_with_no_data_under_its_mouth_and_nose_points_is_a_warning(store)
         "has no data: the template there is filled in from the measured skin around it, not "
         "measured"
     ]
+
+
+def test_a_colour_image_clipped_on_much_of_the_face_is_a_warning(tmp_path):
+    """The audit's silent garbage: the real head's RGB-D smile with its images twice as bright
+    (the face white: 99% of its pixels with a channel at 255) kept 0.56 of its motion in error
+    and the report said nothing. A take whose colour image is clipped on more than
+    quality.max_clipped_share of its face (pixels with a surface point; the background does not
+    count) is now a warning naming the share; a take clipped on less, a float image (no known
+    top) and a take without a colour image are not."""
+    from scan2morph.refine import clipped_share
+    from scan2morph.stages.quality import CLIPPED, CLIPPED_EXAMPLE
+
+    xyz = np.ones((40, 50, 3))
+    xyz[:, :10] = np.nan  # no surface: its pixels are not the face's
+    color = np.full((40, 50, 3), 120, np.uint8)
+    color[:, :10] = 255  # white background
+    bright = color.copy()
+    bright[:12, 10:, 1] = 255  # 12 of 40 rows of the face: 30%
+    dim = color.copy()
+    dim[:8, 10:] = 255  # 20%
+    data = {paths.range_image("n", "xyz"): xyz, paths.range_image("n", "color"): color}
+    data |= {paths.range_image(t, "xyz"): xyz for t in ("bright", "dim", "float", "none")}
+    data |= {paths.range_image("bright", "color"): bright, paths.range_image("dim", "color"): dim}
+    data[paths.range_image("float", "color")] = bright.astype(np.float32)
+    data |= {paths.align(t, "ok"): np.bool_(True) for t in ("n", "bright", "dim", "float", "none")}
+    attrs = {paths.take(t): {"kind": "expression"} for t in ("n", "bright", "dim", "float", "none")}
+    write_part(tmp_path / "s.h5", data, attrs=attrs)
+    assert clipped_share(color, xyz) == 0.0
+    assert clipped_share(bright, xyz) == pytest.approx(0.3)
+    assert clipped_share(dim[..., 0], xyz) == pytest.approx(0.2)  # a grey image
+    with h5py.File(tmp_path / "s.h5") as h5:
+        said = [w for w in subject_warnings(h5, SETTINGS) if w.stage == "ingest"]
+        assert [(w.take, w.message) for w in said] == [
+            ("bright", CLIPPED.format(share=30.0, example=CLIPPED_EXAMPLE))
+        ]
+        assert said[0].message.startswith("the colour image is clipped (a channel at the top")
+        assert "on 30% of the face" in said[0].message
+        stricter = subject_warnings(h5, SETTINGS | {"max_clipped_share": 0.1})
+        assert [w.take for w in stricter if w.stage == "ingest"] == ["bright", "dim"]

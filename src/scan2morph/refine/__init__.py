@@ -33,6 +33,7 @@ __all__ = [
     "Channel",
     "SurfaceChannel",
     "RefineParams",
+    "clipped_share",
     "compose_field",
     "grey",
     "neutral_grid",
@@ -103,6 +104,32 @@ def grey(color: np.ndarray) -> np.ndarray:
     if c.ndim == 2:
         return c
     return c[..., 0] * 0.299 + c[..., 1] * 0.587 + c[..., 2] * 0.114
+
+
+def clipped_share(color: np.ndarray, xyz: np.ndarray) -> float:
+    """Share of the face's pixels whose colour is clipped: a channel at the top of an integer
+    image's range (255 in 8 bits), where an over-exposed or too brightly lit skin shows no
+    texture for the refinement to follow.
+
+    Parameters
+    ----------
+    color : (H, W, 3) or (H, W) array
+        The take's colour or grey image, pixel to pixel with ``xyz``.
+    xyz : (H, W, 3) float
+        Its range image, mm, NaN where there is no surface: the face's pixels are the others.
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 for a float image (no known top) or an image without surface.
+    """
+    c = np.asarray(color)
+    face = np.isfinite(np.asarray(xyz)).all(axis=-1)
+    if not np.issubdtype(c.dtype, np.integer) or not face.any():
+        return 0.0
+    top = c == np.iinfo(c.dtype).max
+    clipped = top.any(axis=-1) if c.ndim == 3 else top
+    return float(np.mean(clipped[face]))
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 import h5py
 import numpy as np
 
+from scan2morph.refine import clipped_share
 from scan2morph.stages.take_mesh import view_turn
 from scan2morph.store import paths
 from scan2morph.store.warnings import (
@@ -41,6 +42,18 @@ SHAPE_REFINED = (
     "flat): skin that slides without changing its shape is followed less well (a darkened "
     "texture on the real head: 2.9 times the motion error); a neutral whose colour image "
     "matches its takes' is refined by the skin"
+)
+#: The warning of a take whose colour image is clipped (saturated) on more than
+#: ``quality.max_clipped_share`` of its face; measured on the real head (``{example}``).
+CLIPPED = (
+    "the colour image is clipped (a channel at the top of its range) on {share:.0f}% of the "
+    "face: over-exposed or lit too brightly, the skin shows no texture there and the "
+    "refinement's image correlation follows what is left of it ({example}); expose for the skin"
+)
+#: :data:`CLIPPED`'s measured example.
+CLIPPED_EXAMPLE = (
+    "the real head's smile with every image twice as bright, 99% of the face clipped: 0.34 of "
+    "its motion in error as a range scan, 0.56 as an RGB-D take, against 0.08 and 0.19"
 )
 #: Config section this module reads.
 SECTIONS = ("quality",)
@@ -70,7 +83,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     settings : mapping
         The config section ``quality``: ``include_failed_takes`` (bool), ``max_click_noise_px``
         (px), ``min_valid_fraction`` (share of template vertices with data),
-        ``max_view_turn_deg`` (degrees).
+        ``max_view_turn_deg`` (degrees), ``max_clipped_share`` (share of the face).
 
     Returns
     -------
@@ -89,6 +102,9 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             out.append(Warning("fit", take, f"only {share:.0f}% of the template has data"))
         if bool(takes[take].attrs.get("grey_color", False)):
             out.append(Warning("ingest", take, GREY))
+        if (share := _clipped(h5, take)) > float(settings["max_clipped_share"]):
+            said = CLIPPED.format(share=100 * share, example=CLIPPED_EXAMPLE)
+            out.append(Warning("ingest", take, said))
         folded = int(takes[take].attrs.get("n_folded", 0))
         if folded:
             out.append(Warning("fit", take, f"{folded} folded triangles in the fitted template"))
@@ -141,6 +157,15 @@ TURNED_EXAMPLE = (
     "0.12 of its motion in error seen as the neutral is, 0.26 turned 15 degrees, 0.41 turned 20, "
     "1.31 turned 30"
 )
+
+
+def _clipped(h5: h5py.File, take: str) -> float:
+    """:func:`~scan2morph.refine.clipped_share` of a take's stored colour image (0 without
+    one)."""
+    color, xyz = h5.get(paths.range_image(take, "color")), h5.get(paths.range_image(take, "xyz"))
+    if color is None or xyz is None:
+        return 0.0
+    return clipped_share(color[()], xyz[()])
 
 
 def _turned_warnings(
