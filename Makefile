@@ -120,6 +120,7 @@ BENCH_QUICK = \
 	"bench_depth_fusion.py --frames 1 2 --takes neutral" \
 	"bench_error_regions.py" \
 	"bench_fit.py" \
+	"bench_lighting.py --exposures dark_smile" \
 	"bench_mesh_camera.py" \
 	"bench_modal.py --dofs 6000 --ks 10 --methods block arpack" \
 	"bench_modal.py --reconstruction . synth01 --config config/config.yaml" \
