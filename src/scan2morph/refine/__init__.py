@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from scan2morph.align.rigid import transform_points
@@ -106,7 +107,7 @@ def grey(color: np.ndarray) -> np.ndarray:
     return c[..., 0] * 0.299 + c[..., 1] * 0.587 + c[..., 2] * 0.114
 
 
-def clipped_share(color: np.ndarray, xyz: np.ndarray) -> float:
+def clipped_share(color: np.ndarray, xyz: np.ndarray, landmarks: np.ndarray) -> float:
     """Share of the face's pixels whose colour is clipped: a channel at the top of an integer
     image's range (255 in 8 bits), where an over-exposed or too brightly lit skin shows no
     texture for the refinement to follow.
@@ -116,16 +117,28 @@ def clipped_share(color: np.ndarray, xyz: np.ndarray) -> float:
     color : (H, W, 3) or (H, W) array
         The take's colour or grey image, pixel to pixel with ``xyz``.
     xyz : (H, W, 3) float
-        Its range image, mm, NaN where there is no surface: the face's pixels are the others.
+        Its range image, mm, NaN where there is no surface.
+    landmarks : (n, 2) float
+        The take's landmarks, px ((0, 0) the centre of the top-left pixel): the face is the
+        pixels with a surface point inside their convex hull (not the hair, the shoulders or a
+        wall behind the head that a depth camera sees).
 
     Returns
     -------
     float
-        In [0, 1]; 0 for a float image (no known top) or an image without surface.
+        In [0, 1]; 0 for a float image (no known top), or without a face (fewer than three
+        finite landmarks, no surface inside them).
     """
     c = np.asarray(color)
-    face = np.isfinite(np.asarray(xyz)).all(axis=-1)
-    if not np.issubdtype(c.dtype, np.integer) or not face.any():
+    points = np.asarray(landmarks, dtype=np.float64).reshape(-1, 2)
+    points = points[np.isfinite(points).all(axis=1)]
+    if not np.issubdtype(c.dtype, np.integer) or len(points) < 3:
+        return 0.0
+    hull = cv2.convexHull(points.astype(np.float32))[:, 0]
+    inside = np.zeros(c.shape[:2], np.uint8)
+    cv2.fillConvexPoly(inside, np.rint(hull * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+    face = inside.astype(bool) & np.isfinite(np.asarray(xyz)).all(axis=-1)
+    if not face.any():
         return 0.0
     top = c == np.iinfo(c.dtype).max
     clipped = top.any(axis=-1) if c.ndim == 3 else top
@@ -151,6 +164,9 @@ class Channel:
     gate_px : float or None
         When given, the channel's vectors count only where the other channels measured, and
         within this of their answer, px (a texture that may find false matches).
+    match_gain : bool
+        The take's image shows the neutral's skin at another exposure or light: its texture is
+        scaled by its gain over the neutral's (:func:`~scan2morph.refine.flow.measure_flow`).
     """
 
     neutral: np.ndarray
@@ -159,6 +175,7 @@ class Channel:
     noise: float
     precision_px: float
     gate_px: float | None = None
+    match_gain: bool = False
 
 
 @dataclass(frozen=True)
@@ -185,13 +202,15 @@ class SurfaceChannel:
 
 
 def texture_channel(neutral_image, take_image, params: RefineParams) -> Channel:
-    """The skin's texture as a :class:`Channel`, with the section ``refine``'s settings."""
+    """The skin's texture as a :class:`Channel`, with the section ``refine``'s settings (the
+    take's texture matched at its gain over the neutral's)."""
     return Channel(
         neutral_image,
         take_image,
         params.high_pass_px,
         params.noise_grey,
         params.flow_precision_px,
+        match_gain=True,
     )
 
 
@@ -228,8 +247,14 @@ def shape_channels(
         params.surface_tolerance_mm,
         params.surface_precision_px,
     )
+    # a texture that does not correlate has no gain over the neutral's to match
     gated = [
-        replace(c, gate_px=params.texture_gate_px, precision_px=params.texture_precision_px)
+        replace(
+            c,
+            gate_px=params.texture_gate_px,
+            precision_px=params.texture_precision_px,
+            match_gain=False,
+        )
         for c in (texture if params.texture else [])
     ]
     return [shape, *gated] + ([surface] if params.surface else [])
@@ -510,6 +535,7 @@ def _channel_flow(channel, reference, mapped, inside, params: RefineParams):
         max_fb_px=params.max_fb_px,
         min_zncc=params.min_zncc,
         level=params.flow_level,
+        match_gain=channel.match_gain,
     )
 
 

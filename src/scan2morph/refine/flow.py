@@ -33,9 +33,11 @@ from scan2morph.errors import InputError
 from scan2morph.geometry import finite_points, lengths_2d
 from scan2morph.refine.memo import shared
 
+#: Gaussian scale of the ZNCC window that checks each flow vector (:func:`measure_flow`), px.
+ZNCC_WINDOW_PX = 3.0
 #: Gaussian scale of the structure tensor's average (:func:`aperture`), px: the correlation's
-#: own window (:func:`measure_flow`'s ``patch``).
-APERTURE_RHO_PX = 3.0
+#: own window.
+APERTURE_RHO_PX = ZNCC_WINDOW_PX
 #: A direction's texture counts against this many times the noise's own gradient energy
 #: (:func:`aperture`). Larger is more anisotropic: on the default cohort (3 iterations, one
 #: projector for all channels) 1 / 4 / 16 left the worst take at 1.07x / 1.16x / 1.13x of the
@@ -43,8 +45,12 @@ APERTURE_RHO_PX = 3.0
 APERTURE_NOISE = 1.0
 #: Fewest textured pixels from which :func:`texture_gain` estimates a take's texture gain.
 MIN_GAIN_PIXELS = 100
-#: A texture gain within this factor of 1 is taken as 1 (:func:`texture_gain`).
+#: A texture gain is shrunk towards 1 by this factor (:func:`texture_gain`): a flow between
+#: images 10% apart in contrast loses about 4% of its precision.
 GAIN_BAND = 1.1
+#: Below this texture gain the moving image shows too little of the reference's texture to
+#: match it (:func:`measure_flow` measures nothing rather than amplify its noise).
+MIN_GAIN = 0.1
 #: Coarsest finest-level of the flow's search (:func:`measure_flow`'s ``level``): 2 is a quarter
 #: of the resolution; OpenCV quietly searches a small grid at a finer level than asked.
 MAX_LEVEL = 2
@@ -139,11 +145,15 @@ def aperture(reference: np.ndarray, sigma: float, noise: float) -> np.ndarray:
 def texture_gain(rms_r: np.ndarray, rms_m: np.ndarray, both: np.ndarray, noise: float) -> float:
     """The moving image's texture contrast over the reference's, where both show the skin.
 
-    The median, over the pixels where the reference has texture (its local RMS above
-    ``noise``), of the ratio of the two local RMS: a take exposed or lit darker than its
-    neutral (its grey levels times 0.3) gives about 0.3. On takes of one exposure it is 1
-    within 2%, whatever the expression changed (the ratio of the two images' median contrasts
-    moves by up to 17% on a flat-coloured mesh scan, whose texture is at the noise's level).
+    With ``noise`` n and the skin's contrast s, a local RMS is about ``sqrt(g^2 s^2 + n^2)``:
+    the gain g is the square root of the median, over the pixels where the reference's texture
+    stands clear of the noise (its local RMS above ``2 n``), of ``(rms_m^2 - n^2) /
+    (rms_r^2 - n^2)`` (0 where the moving image shows only noise). A take exposed or lit darker
+    than its neutral (its grey levels times 0.3) gives about 0.3. The estimate's own scatter is
+    a few percent (0.96-1.03 on the default cohort's takes, against the ratio of the two images'
+    median contrasts' 0.90-1.17 on a flat-coloured mesh scan), so it is shrunk towards 1 by
+    :data:`GAIN_BAND` (in ratio: 1 within it, ``g * GAIN_BAND`` below, ``g / GAIN_BAND`` above;
+    continuous), which leaves takes of one exposure as they were refined.
 
     Parameters
     ----------
@@ -157,16 +167,17 @@ def texture_gain(rms_r: np.ndarray, rms_m: np.ndarray, both: np.ndarray, noise: 
     Returns
     -------
     float
-        The gain; 1 within :data:`GAIN_BAND` of it (the same exposure: a flow between images
-        10% apart in contrast loses about 4% of its precision, and the refinement of takes of
-        one exposure stays as it was), or where fewer than :data:`MIN_GAIN_PIXELS` pixels have
-        texture.
+        The gain (>= 0); 1 where fewer than :data:`MIN_GAIN_PIXELS` pixels have texture.
     """
-    textured = both & (rms_r > noise)
+    textured = both & (rms_r > 2.0 * noise)
     if np.count_nonzero(textured) < MIN_GAIN_PIXELS:
         return 1.0
-    gain = float(np.median(rms_m[textured] / rms_r[textured]))
-    return 1.0 if 1.0 / GAIN_BAND <= gain <= GAIN_BAND else gain
+    n2 = noise**2
+    ratio = np.maximum(rms_m[textured] ** 2 - n2, 0.0) / (rms_r[textured] ** 2 - n2)
+    gain = float(np.sqrt(np.median(ratio)))
+    if gain * GAIN_BAND < 1.0:
+        return gain * GAIN_BAND
+    return gain / GAIN_BAND if gain > GAIN_BAND else 1.0
 
 
 def _to_u8(hp: np.ndarray, scale: float) -> np.ndarray:
@@ -192,9 +203,9 @@ def measure_flow(
     sigma: float = 4.0,
     noise: float = 2.0,
     max_fb_px: float = 0.5,
-    patch: float = 3.0,
     min_zncc: float = 0.5,
     level: int = 0,
+    match_gain: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Displacement ``m`` with ``moving(x + m(x)) ~ reference(x)``, and its confidence.
 
@@ -208,14 +219,17 @@ def measure_flow(
         Image noise, grey levels (std): texture weaker than this is not trusted.
     max_fb_px : float
         Forward-backward inconsistency beyond which a vector gets no weight, px.
-    patch : float
-        Gaussian scale of the ZNCC window, px.
     min_zncc : float
         ZNCC after the displacement below which a vector gets no weight.
     level : int
         Finest pyramid level the flow is searched on (0: the grid itself, 1: half its
         resolution, the preset's default, then upsampled). The skin's texture that carries the
         displacement (pores, freckles) is 1-3 px across, which half the resolution loses.
+    match_gain : bool
+        Scale the moving image's texture by its gain over the reference's
+        (:func:`texture_gain`): two images of one skin taken at other exposures or under a
+        weaker or stronger light. Not for images whose contrast differs for another reason (a
+        curvature image, where a crease is contrast; a projected speckle against skin).
 
     Returns
     -------
@@ -228,6 +242,7 @@ def measure_flow(
         raise InputError(
             "refine", f"refine.flow_level: expected an integer 0..{MAX_LEVEL}, got {level!r}"
         )
+    patch = ZNCC_WINDOW_PX
     # the reference's side is the same in every round of a refinement (and, in a sharing
     # scope, for every take refined against one fit of the neutral)
     hp_r, rms_r, g_rr, texture = shared(
@@ -238,13 +253,11 @@ def measure_flow(
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
     contrast = float(np.median(rms_r[both])) if both.any() else 0.0
-    gain = texture_gain(rms_r, rms_m, both, noise)
-    if contrast <= 0 or gain <= 0:
+    gain = texture_gain(rms_r, rms_m, both, noise) if match_gain else 1.0
+    if contrast <= 0 or gain < MIN_GAIN:
         shape = reference.shape
         return np.zeros((*shape, 2)), np.zeros(shape)
     scale = 40.0 / contrast  # the face's median contrast spans +-40 grey levels
-    # the take's texture at the reference's: a take exposed or lit otherwise than its neutral
-    # shows the same skin at another gain
     r8, m8 = _to_u8(hp_r, scale), _to_u8(hp_m, scale / gain)
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
     dis.setFinestScale(int(level))

@@ -454,6 +454,7 @@ def second_pass(
                 max_fb_px=FLOW.max_fb_px,
                 min_zncc=FLOW.min_zncc,
                 level=FLOW.flow_level,
+                match_gain=True,
             ),
             take.source,
         )
