@@ -76,14 +76,15 @@ def expose(base: Path, work: Path, gains: tuple[float, float]) -> None:
 
 
 def clipped(work: Path, subject: str) -> float:
-    """Share of the smile's face (its repaired range image's points) clipped in its colour."""
+    """Share of the smile's face (its repaired range image's points within its landmarks)
+    clipped in its colour."""
     from scan2morph.refine import clipped_share
     from scan2morph.store import paths, read_part
 
-    part = read_part(work / "results" / subject / "takes" / "smile" / "repair.h5")
-    return clipped_share(
-        part[paths.range_image("smile", "color")], part[paths.range_image("smile", "xyz")]
-    )
+    takes = work / "results" / subject / "takes" / "smile"
+    part = read_part(takes / "repair.h5") | read_part(takes / "landmarks.h5")
+    keys = [paths.range_image("smile", "color"), paths.range_image("smile", "xyz")]
+    return clipped_share(*(part[k] for k in keys), part[paths.landmarks("smile")])
 
 
 def main(argv=None) -> int:

@@ -21,6 +21,7 @@ SETTINGS = {
     "max_click_noise_px": 1.0,
     "max_view_turn_deg": 15.0,
     "max_clipped_share": 0.25,
+    "max_noise_mm": 0.25,
 }
 
 

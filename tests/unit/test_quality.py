@@ -27,6 +27,7 @@ SETTINGS = {
     "min_valid_fraction": 0.5,
     "max_view_turn_deg": 15.0,
     "max_clipped_share": 0.25,
+    "max_noise_mm": 0.25,
 }
 
 
@@ -208,36 +209,72 @@ def test_a_colour_image_clipped_on_much_of_the_face_is_a_warning(tmp_path):
     """The audit's silent garbage: the real head's RGB-D smile with its images twice as bright
     (the face white: 99% of its pixels with a channel at 255) kept 0.56 of its motion in error
     and the report said nothing. A take whose colour image is clipped on more than
-    quality.max_clipped_share of its face (pixels with a surface point; the background does not
-    count) is now a warning naming the share; a take clipped on less, a float image (no known
-    top) and a take without a colour image are not."""
+    quality.max_clipped_share of its face is now a warning naming the share. The face is the
+    pixels with a surface point within the landmarks' hull: a white wall behind the head that a
+    depth camera sees, or white hair, does not count, and a face clipped in front of a dark
+    background is not diluted by it. A take clipped on less, a float image (no known top), a
+    take without a colour image or without landmarks are no warning."""
     from scan2morph.refine import clipped_share
     from scan2morph.stages.quality import CLIPPED, CLIPPED_EXAMPLE
 
-    xyz = np.ones((40, 50, 3))
-    xyz[:, :10] = np.nan  # no surface: its pixels are not the face's
-    color = np.full((40, 50, 3), 120, np.uint8)
-    color[:, :10] = 255  # white background
+    xyz = np.ones((60, 80, 3))  # every pixel has a surface point: the wall too
+    color = np.full((60, 80, 3), 120, np.uint8)
+    color[:, :20] = 255  # a white wall left of the face
+    # 68 landmarks whose hull is the face's square, columns 30-69 and rows 10-49
+    marks = np.random.default_rng(0).uniform([31, 11], [68, 48], (68, 2))
+    marks[:4] = [[30.0, 10.0], [69.0, 10.0], [69.0, 49.0], [30.0, 49.0]]
     bright = color.copy()
-    bright[:12, 10:, 1] = 255  # 12 of 40 rows of the face: 30%
+    bright[10:22, 30:70, 1] = 255  # 12 of the face's 40 rows: 30%
     dim = color.copy()
-    dim[:8, 10:] = 255  # 20%
-    data = {paths.range_image("n", "xyz"): xyz, paths.range_image("n", "color"): color}
-    data |= {paths.range_image(t, "xyz"): xyz for t in ("bright", "dim", "float", "none")}
+    dim[10:18, 30:70] = 255  # 20%
+    white = np.full((60, 80, 3), 10, np.uint8)  # a white face against a dark background
+    white[10:50, 30:70] = 255
+    takes = ("n", "bright", "dim", "white", "float", "none", "unmarked")
+    data = {paths.range_image(t, "xyz"): xyz for t in takes}
+    data |= {paths.landmarks(t): marks for t in takes if t != "unmarked"}
+    data |= {paths.range_image(t, "color"): color for t in ("n", "unmarked")}
     data |= {paths.range_image("bright", "color"): bright, paths.range_image("dim", "color"): dim}
+    data[paths.range_image("white", "color")] = white
     data[paths.range_image("float", "color")] = bright.astype(np.float32)
-    data |= {paths.align(t, "ok"): np.bool_(True) for t in ("n", "bright", "dim", "float", "none")}
-    attrs = {paths.take(t): {"kind": "expression"} for t in ("n", "bright", "dim", "float", "none")}
+    data |= {paths.align(t, "ok"): np.bool_(True) for t in takes}
+    attrs = {paths.take(t): {"kind": "expression"} for t in takes}
     write_part(tmp_path / "s.h5", data, attrs=attrs)
-    assert clipped_share(color, xyz) == 0.0
-    assert clipped_share(bright, xyz) == pytest.approx(0.3)
-    assert clipped_share(dim[..., 0], xyz) == pytest.approx(0.2)  # a grey image
+    assert clipped_share(color, xyz, marks) == 0.0  # the white wall is not the face
+    assert clipped_share(bright, xyz, marks) == pytest.approx(0.3)
+    assert clipped_share(dim[..., 0], xyz, marks) == pytest.approx(0.2)  # a grey image
+    assert clipped_share(white, xyz, marks) == 1.0
     with h5py.File(tmp_path / "s.h5") as h5:
         said = [w for w in subject_warnings(h5, SETTINGS) if w.stage == "ingest"]
-        assert [(w.take, w.message) for w in said] == [
-            ("bright", CLIPPED.format(share=30.0, example=CLIPPED_EXAMPLE))
-        ]
-        assert said[0].message.startswith("the colour image is clipped (a channel at the top")
-        assert "on 30% of the face" in said[0].message
+        assert [w.take for w in said] == ["bright", "white"]
+        assert said[0].message == CLIPPED.format(share=30.0, example=CLIPPED_EXAMPLE)
+        assert said[0].message.startswith(
+            "the colour image is clipped (a channel at the top of its range) on 30.0% of the "
+            "face: over-exposed"
+        )
         stricter = subject_warnings(h5, SETTINGS | {"max_clipped_share": 0.1})
-        assert [w.take for w in stricter if w.stage == "ingest"] == ["bright", "dim"]
+        assert [w.take for w in stricter if w.stage == "ingest"] == ["bright", "dim", "white"]
+
+
+def test_a_take_noisier_than_the_limit_is_a_warning(tmp_path):
+    """The audit's silent garbage: the real head's RGB-D smile seen from 1.2 m (2 mm per pixel,
+    depth noise about 3 mm) kept 0.97 of its motion in error and said nothing. A take, or the
+    neutral, whose surface the alignment measured noisier than quality.max_noise_mm is now a
+    warning naming the noise (the neutral's from the first aligned take, once); takes within
+    the limit and takes without an alignment record are not."""
+    from scan2morph.stages.quality import NOISY, NOISY_EXAMPLE
+
+    attrs = {paths.take(t): {"kind": "expression"} for t in ("car", "smile", "eel", "too")}
+    attrs[paths.take("n")] = {"kind": "neutral"}
+    attrs[paths.align_group("car")] = {"noise_take_mm": 0.12, "noise_neutral_mm": 0.4}
+    attrs[paths.align_group("smile")] = {"noise_take_mm": 0.69, "noise_neutral_mm": 0.4}
+    attrs[paths.align_group("eel")] = {"noise_take_mm": 0.25, "noise_neutral_mm": 0.4}
+    data = {paths.align(t, "ok"): np.bool_(True) for t in ("n", "car", "smile", "eel", "too")}
+    write_part(tmp_path / "s.h5", data, attrs=attrs)
+    with h5py.File(tmp_path / "s.h5") as h5:
+        said = [w for w in subject_warnings(h5, SETTINGS) if "noisy" in w.message]
+        assert [(w.stage, w.take) for w in said] == [("align", "n"), ("align", "smile")]
+        assert said[1].message == NOISY.format(noise=0.69, example=NOISY_EXAMPLE)
+        assert said[1].message.startswith("its surface is noisy: 0.69 mm RMS")
+        assert said[0].message.startswith("its surface is noisy: 0.40 mm RMS")
+        laxer = subject_warnings(h5, SETTINGS | {"max_noise_mm": 0.5})
+        assert [w.take for w in laxer if "noisy" in w.message] == ["smile"]

@@ -481,12 +481,7 @@ def test_a_refinement_not_used_is_a_warning_of_the_subject(tmp_path):
         h5.create_group(paths.refine_group("car")).attrs["problem"] = ""
         for take in ("she", "car"):
             h5[paths.align(take, "ok")] = True
-        settings = {"include_failed_takes": False, "min_valid_fraction": 0.5}
-        warnings = subject_warnings(
-            h5,
-            settings
-            | {"max_click_noise_px": 1.5, "max_view_turn_deg": 15, "max_clipped_share": 0.25},
-        )
+        warnings = subject_warnings(h5, repo_config()["quality"])
     assert [(w.stage, w.take, w.message) for w in warnings] == [
         ("refine", "she", "only 9% correlates")
     ]

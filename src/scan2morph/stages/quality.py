@@ -46,7 +46,7 @@ SHAPE_REFINED = (
 #: The warning of a take whose colour image is clipped (saturated) on more than
 #: ``quality.max_clipped_share`` of its face; measured on the real head (``{example}``).
 CLIPPED = (
-    "the colour image is clipped (a channel at the top of its range) on {share:.0f}% of the "
+    "the colour image is clipped (a channel at the top of its range) on {share:.1f}% of the "
     "face: over-exposed or lit too brightly, the skin shows no texture there and the "
     "refinement's image correlation follows what is left of it ({example}); expose for the skin"
 )
@@ -54,6 +54,19 @@ CLIPPED = (
 CLIPPED_EXAMPLE = (
     "the real head's smile with every image twice as bright, 99% of the face clipped: 0.34 of "
     "its motion in error as a range scan, 0.56 as an RGB-D take, against 0.08 and 0.19"
+)
+#: The warning of a take whose surface the alignment measured noisier than
+#: ``quality.max_noise_mm`` (:func:`_noise_warnings`).
+NOISY = (
+    "its surface is noisy: {noise:.2f} mm RMS at the template's vertex spacing, as the "
+    "alignment measured it (the default cohort's scans 0.05-0.13 mm): its alignment and its "
+    "correspondence are less accurate ({example}); scan it from nearer, or give several depth "
+    "frames of the take"
+)
+#: :data:`NOISY`'s measured example.
+NOISY_EXAMPLE = (
+    "the real head's RGB-D smile seen from 0.6 / 0.9 / 1.2 m: 0.13 / 0.31 / 0.69 mm, 0.21 / "
+    "0.39 / 0.97 of its motion in error; from 1.2 m with four depth frames 0.32 mm, 0.53"
 )
 #: Config section this module reads.
 SECTIONS = ("quality",)
@@ -83,7 +96,8 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     settings : mapping
         The config section ``quality``: ``include_failed_takes`` (bool), ``max_click_noise_px``
         (px), ``min_valid_fraction`` (share of template vertices with data),
-        ``max_view_turn_deg`` (degrees), ``max_clipped_share`` (share of the face).
+        ``max_view_turn_deg`` (degrees), ``max_clipped_share`` (share of the face),
+        ``max_noise_mm`` (mm).
 
     Returns
     -------
@@ -127,6 +141,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     given = [t for t, source in sources.items() if source.startswith("clicked")]
     neutral = next((t for t in takes if str(takes[t].attrs.get("kind", "")) == "neutral"), "")
     out += _turned_warnings(h5, list(takes), neutral, settings)
+    out += _noise_warnings(h5, list(takes), neutral, float(settings["max_noise_mm"]))
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
@@ -160,12 +175,31 @@ TURNED_EXAMPLE = (
 
 
 def _clipped(h5: h5py.File, take: str) -> float:
-    """:func:`~scan2morph.refine.clipped_share` of a take's stored colour image (0 without
-    one)."""
-    color, xyz = h5.get(paths.range_image(take, "color")), h5.get(paths.range_image(take, "xyz"))
-    if color is None or xyz is None:
+    """:func:`~scan2morph.refine.clipped_share` of a take's stored colour image, within its
+    landmarks (0 without them or without a colour image)."""
+    keys = [paths.range_image(take, "color"), paths.range_image(take, "xyz"), paths.landmarks(take)]
+    if any(k not in h5 for k in keys):
         return 0.0
-    return clipped_share(color[()], xyz[()])
+    return clipped_share(*(h5[k][()] for k in keys))
+
+
+def _noise_warnings(h5: h5py.File, takes: list[str], neutral: str, limit: float) -> list[Warning]:
+    """A warning for each take, the neutral among them, whose surface the alignment measured
+    noisier than ``limit`` mm (the align group's ``noise_take_mm``, and ``noise_neutral_mm`` of
+    the first aligned take for the neutral)."""
+    noise = {}
+    for take in takes:
+        group = h5.get(paths.align_group(take))
+        if group is None or "noise_take_mm" not in group.attrs:
+            continue
+        noise[take] = float(group.attrs["noise_take_mm"])
+        noise.setdefault(neutral, float(group.attrs.get("noise_neutral_mm", np.nan)))
+    said = {t: n for t, n in noise.items() if t and n > limit}
+    return [
+        Warning("align", t, NOISY.format(noise=said[t], example=NOISY_EXAMPLE))
+        for t in takes
+        if t in said
+    ]
 
 
 def _turned_warnings(
