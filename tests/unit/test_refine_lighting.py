@@ -36,7 +36,7 @@ def test_a_take_exposed_otherwise_measures_the_displacement_as_well(gain):
     """The take's 8-bit image at another exposure (gain 0.3 or 0.2: its texture spans a third or
     a fifth of the grey levels; 1.6: brighter, about 1% of it clipped): matched at its gain, the
     flow finds the known displacement as well as at the neutral's exposure. Measured, median
-    error of the confident vectors: 0.046 px at the same exposure; 0.047, 0.050 and 0.047 px;
+    error of the confident vectors: 0.046 px at the same exposure; 0.049, 0.051 and 0.048 px;
     0.110, 0.123 and 0.067 px with the neutral's scale for both (``match_gain`` off, as before
     2026-12-07)."""
     ref, dx, dy, moving = _scene()
@@ -56,22 +56,18 @@ def test_a_take_exposed_otherwise_measures_the_displacement_as_well(gain):
 def test_the_texture_gain_is_the_exposure_ratio_shrunk_towards_one():
     """:func:`texture_gain` of a displaced texture at another exposure is that exposure's
     ratio shrunk towards 1 by :data:`GAIN_BAND` (within 5%), and 1 exactly within the band
-    (takes of one exposure are refined as they were); the noise's share of the local RMS is
-    taken out (a dark take's noise does not read as texture); without texture in the reference
-    it is 1."""
+    (takes of one exposure are refined as they were); without texture in the reference it is
+    1."""
     ref, _, _, moving = _scene()
     both = np.ones(ref.shape, bool)
     _, rms_r = high_pass(_as_8bit(ref), 4.0)
-    for g in (0.2, 0.3, 0.5, 0.8, 1.3, 1.8):  # 8-bit rounding: noise about 0.3 grey levels
+    for g in (0.2, 0.3, 0.5, 0.8, 1.3, 1.8):
         _, rms_m = high_pass(_as_8bit(g * moving), 4.0)
         want = g * GAIN_BAND if g < 1 else g / GAIN_BAND
-        assert texture_gain(rms_r, rms_m, both, 0.5) == pytest.approx(want, rel=0.05), g
+        assert texture_gain(rms_r, rms_m, both, 2.0) == pytest.approx(want, rel=0.05), g
     for g in (0.95, 1.0, 1.05):
         _, rms_m = high_pass(_as_8bit(g * moving), 4.0)
-        assert texture_gain(rms_r, rms_m, both, 0.5) == 1.0, g
-    noisy = 0.3 * moving + np.random.default_rng(1).normal(0.0, 3.0, moving.shape)
-    _, rms_m = high_pass(noisy, 4.0)
-    assert texture_gain(rms_r, rms_m, both, 3.0) == pytest.approx(0.3 * GAIN_BAND, rel=0.1)
+        assert texture_gain(rms_r, rms_m, both, 2.0) == 1.0, g
     flat = np.full(ref.shape, 0.5)  # no texture above the noise: no gain to measure
     assert texture_gain(flat, 0.3 * flat, both, 2.0) == 1.0
 

@@ -145,15 +145,19 @@ def aperture(reference: np.ndarray, sigma: float, noise: float) -> np.ndarray:
 def texture_gain(rms_r: np.ndarray, rms_m: np.ndarray, both: np.ndarray, noise: float) -> float:
     """The moving image's texture contrast over the reference's, where both show the skin.
 
-    With ``noise`` n and the skin's contrast s, a local RMS is about ``sqrt(g^2 s^2 + n^2)``:
-    the gain g is the square root of the median, over the pixels where the reference's texture
-    stands clear of the noise (its local RMS above ``2 n``), of ``(rms_m^2 - n^2) /
-    (rms_r^2 - n^2)`` (0 where the moving image shows only noise). A take exposed or lit darker
-    than its neutral (its grey levels times 0.3) gives about 0.3. The estimate's own scatter is
-    a few percent (0.96-1.03 on the default cohort's takes, against the ratio of the two images'
-    median contrasts' 0.90-1.17 on a flat-coloured mesh scan), so it is shrunk towards 1 by
-    :data:`GAIN_BAND` (in ratio: 1 within it, ``g * GAIN_BAND`` below, ``g / GAIN_BAND`` above;
-    continuous), which leaves takes of one exposure as they were refined.
+    The median, over the pixels where the reference's texture stands clear of the noise (its
+    local RMS above ``2 noise``), of the ratio of the two local RMS: a take exposed or lit
+    darker than its neutral (its grey levels times 0.3) gives about 0.3. Where the take's
+    texture sinks towards the noise the ratio reads high (0.3 over a texture of contrast 8 with
+    1.5 grey levels of noise: 0.37); taking the noise out (the ratio of the contrast energies
+    above ``noise``) reads low instead wherever the image's noise is less than ``noise`` (a
+    darkened image's noise is darkened too) and matched the real head's darkened smile worse
+    (0.100 / 0.238 of its motion in error, range / RGB-D, against 0.080 / 0.203). The
+    estimate's own scatter is a few percent (0.96-1.03 on the default cohort's takes, against
+    the ratio of the two images' median contrasts' 0.90-1.17 on a flat-coloured mesh scan), so
+    it is shrunk towards 1 by :data:`GAIN_BAND` (in ratio: 1 within it, ``g * GAIN_BAND``
+    below, ``g / GAIN_BAND`` above; continuous), which leaves takes of one exposure as they
+    were refined.
 
     Parameters
     ----------
@@ -172,9 +176,7 @@ def texture_gain(rms_r: np.ndarray, rms_m: np.ndarray, both: np.ndarray, noise: 
     textured = both & (rms_r > 2.0 * noise)
     if np.count_nonzero(textured) < MIN_GAIN_PIXELS:
         return 1.0
-    n2 = noise**2
-    ratio = np.maximum(rms_m[textured] ** 2 - n2, 0.0) / (rms_r[textured] ** 2 - n2)
-    gain = float(np.sqrt(np.median(ratio)))
+    gain = float(np.median(rms_m[textured] / rms_r[textured]))
     if gain * GAIN_BAND < 1.0:
         return gain * GAIN_BAND
     return gain / GAIN_BAND if gain > GAIN_BAND else 1.0
