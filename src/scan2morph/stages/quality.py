@@ -39,9 +39,9 @@ GREY = (
 SHAPE_REFINED = (
     "{takes}: refined by the surface's shape, as their texture does not correlate with the "
     "neutral's (other lighting or exposure, another sensor's texture, or a texture too dark or "
-    "flat): skin that slides without changing its shape is followed less well (a darkened "
-    "texture on the real head: 2.9 times the motion error); a neutral whose colour image "
-    "matches its takes' is refined by the skin"
+    "flat): skin that slides without changing its shape is followed less well (the real "
+    "head's range scans with both colour images at 0.3 of their brightness: 3.6 times the "
+    "motion error); a neutral whose colour image matches its takes' is refined by the skin"
 )
 #: The warning of a take whose colour image is clipped (saturated) on more than
 #: ``quality.max_clipped_share`` of its face; measured on the real head (``{example}``).
