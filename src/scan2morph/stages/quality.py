@@ -116,7 +116,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             out.append(Warning("fit", take, f"only {share:.0f}% of the template has data"))
         if bool(takes[take].attrs.get("grey_color", False)):
             out.append(Warning("ingest", take, GREY))
-        if (share := _clipped(h5, take)) > float(settings["max_clipped_share"]):
+        if (share := _clipped(h5, take)) and share > float(settings["max_clipped_share"]):
             said = CLIPPED.format(share=100 * share, example=CLIPPED_EXAMPLE)
             out.append(Warning("ingest", take, said))
         folded = int(takes[take].attrs.get("n_folded", 0))
@@ -141,7 +141,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     given = [t for t, source in sources.items() if source.startswith("clicked")]
     neutral = next((t for t in takes if str(takes[t].attrs.get("kind", "")) == "neutral"), "")
     out += _turned_warnings(h5, list(takes), neutral, settings)
-    out += _noise_warnings(h5, list(takes), neutral, float(settings["max_noise_mm"]))
+    out += _noise_warnings(h5, list(takes), neutral, settings)
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
         if doubtful is not None and doubtful.asstr()[()]:
@@ -183,10 +183,12 @@ def _clipped(h5: h5py.File, take: str) -> float:
     return clipped_share(*(h5[k][()] for k in keys))
 
 
-def _noise_warnings(h5: h5py.File, takes: list[str], neutral: str, limit: float) -> list[Warning]:
+def _noise_warnings(
+    h5: h5py.File, takes: list[str], neutral: str, settings: Mapping
+) -> list[Warning]:
     """A warning for each take, the neutral among them, whose surface the alignment measured
-    noisier than ``limit`` mm (the align group's ``noise_take_mm``, and ``noise_neutral_mm`` of
-    the first aligned take for the neutral)."""
+    noisier than ``settings["max_noise_mm"]`` mm (the align group's ``noise_take_mm``, and
+    ``noise_neutral_mm`` of the first aligned take for the neutral)."""
     noise = {}
     for take in takes:
         group = h5.get(paths.align_group(take))
@@ -194,6 +196,9 @@ def _noise_warnings(h5: h5py.File, takes: list[str], neutral: str, limit: float)
             continue
         noise[take] = float(group.attrs["noise_take_mm"])
         noise.setdefault(neutral, float(group.attrs.get("noise_neutral_mm", np.nan)))
+    if not noise:
+        return []
+    limit = float(settings["max_noise_mm"])
     said = {t: n for t, n in noise.items() if t and n > limit}
     return [
         Warning("align", t, NOISY.format(noise=said[t], example=NOISY_EXAMPLE))
