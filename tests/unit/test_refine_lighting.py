@@ -94,3 +94,19 @@ def test_only_the_skins_texture_is_matched_at_its_gain():
     channels = shape_channels(xyz, xyz, np.eye(4), [texture], ShapeParams())
     flows = [c for c in channels if hasattr(c, "match_gain")]
     assert len(flows) >= 2 and not any(c.match_gain for c in flows)
+
+
+def test_the_texture_gain_needs_enough_textured_pixels():
+    """:func:`texture_gain` measures a gain from :data:`MIN_GAIN_PIXELS` pixels where the
+    reference has texture (local RMS above twice the noise), and gives 1 from fewer."""
+    from scan2morph.refine.flow import MIN_GAIN_PIXELS
+
+    rms_r = np.full((20, 20), 1.0)  # below twice the noise of 2: no texture
+    rms_m = 0.3 * np.full((20, 20), 10.0)
+    both = np.ones((20, 20), bool)
+    textured = rms_r.reshape(-1)
+    textured[: MIN_GAIN_PIXELS - 1] = 10.0
+    assert texture_gain(rms_r, rms_m, both, 2.0) == 1.0
+    textured[MIN_GAIN_PIXELS - 1] = 10.0
+    assert texture_gain(rms_r, rms_m, both, 2.0) == pytest.approx(0.3 * GAIN_BAND)
+    assert texture_gain(rms_r, rms_m, ~both, 2.0) == 1.0  # no pixel with both images
