@@ -78,13 +78,13 @@ def expose(base: Path, work: Path, gains: tuple[float, float]) -> None:
 def clipped(work: Path, subject: str) -> float:
     """Share of the smile's face (its repaired range image's points within its landmarks)
     clipped in its colour."""
-    from scan2morph.refine import clipped_share
-    from scan2morph.store import paths, read_part
+    from scan2morph.stages.quality import take_clipped_share
+    from scan2morph.store import read_part
 
     takes = work / "results" / subject / "takes" / "smile"
-    part = read_part(takes / "repair.h5") | read_part(takes / "landmarks.h5")
-    keys = [paths.range_image("smile", "color"), paths.range_image("smile", "xyz")]
-    return clipped_share(*(part[k] for k in keys), part[paths.landmarks("smile")])
+    return take_clipped_share(
+        read_part(takes / "repair.h5") | read_part(takes / "landmarks.h5"), "smile"
+    )
 
 
 def main(argv=None) -> int:

@@ -214,6 +214,7 @@ def test_a_colour_image_clipped_on_much_of_the_face_is_a_warning(tmp_path):
     depth camera sees, or white hair, does not count, and a face clipped in front of a dark
     background is not diluted by it. A take clipped on less, a float image (no known top), a
     take without a colour image or without landmarks are no warning."""
+    from scan2morph.evaluate import face_region
     from scan2morph.refine import clipped_share
     from scan2morph.stages.quality import CLIPPED, CLIPPED_EXAMPLE
 
@@ -239,10 +240,11 @@ def test_a_colour_image_clipped_on_much_of_the_face_is_a_warning(tmp_path):
     data |= {paths.align(t, "ok"): np.bool_(True) for t in takes}
     attrs = {paths.take(t): {"kind": "expression"} for t in takes}
     write_part(tmp_path / "s.h5", data, attrs=attrs)
-    assert clipped_share(color, xyz, marks) == 0.0  # the white wall is not the face
-    assert clipped_share(bright, xyz, marks) == pytest.approx(0.3)
-    assert clipped_share(dim[..., 0], xyz, marks) == pytest.approx(0.2)  # a grey image
-    assert clipped_share(white, xyz, marks) == 1.0
+    face = face_region(np.isfinite(xyz).all(axis=-1), marks)
+    assert clipped_share(color, face) == 0.0  # the white wall is not the face
+    assert clipped_share(bright, face) == pytest.approx(0.3)
+    assert clipped_share(dim[..., 0], face) == pytest.approx(0.2)  # a grey image
+    assert clipped_share(white, face) == 1.0
     with h5py.File(tmp_path / "s.h5") as h5:
         said = [w for w in subject_warnings(h5, SETTINGS) if w.stage == "ingest"]
         assert [w.take for w in said] == ["bright", "white"]

@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 
 from scan2morph.align.rigid import transform_points
@@ -107,7 +106,7 @@ def grey(color: np.ndarray) -> np.ndarray:
     return c[..., 0] * 0.299 + c[..., 1] * 0.587 + c[..., 2] * 0.114
 
 
-def clipped_share(color: np.ndarray, xyz: np.ndarray, landmarks: np.ndarray) -> float:
+def clipped_share(color: np.ndarray, face: np.ndarray) -> float:
     """Share of the face's pixels whose colour is clipped: a channel at the top of an integer
     image's range (255 in 8 bits), where an over-exposed or too brightly lit skin shows no
     texture for the refinement to follow.
@@ -115,30 +114,20 @@ def clipped_share(color: np.ndarray, xyz: np.ndarray, landmarks: np.ndarray) -> 
     Parameters
     ----------
     color : (H, W, 3) or (H, W) array
-        The take's colour or grey image, pixel to pixel with ``xyz``.
-    xyz : (H, W, 3) float
-        Its range image, mm, NaN where there is no surface.
-    landmarks : (n, 2) float
-        The take's landmarks, px ((0, 0) the centre of the top-left pixel): the face is the
-        pixels with a surface point inside their convex hull (not the hair, the shoulders or a
-        wall behind the head that a depth camera sees).
+        The take's colour or grey image.
+    face : (H, W) bool
+        The face's pixels (:func:`scan2morph.evaluate.face_region` of the pixels with a surface
+        point and the take's landmarks: not the hair, the shoulders or a wall behind the head
+        that a depth camera sees).
 
     Returns
     -------
     float
-        In [0, 1]; 0 for a float image (no known top), or without a face (fewer than three
-        finite landmarks, no surface inside them).
+        In [0, 1]; 0 for a float image (no known top) or an empty face.
     """
     c = np.asarray(color)
-    points = np.asarray(landmarks, dtype=np.float64).reshape(-1, 2)
-    points = points[np.isfinite(points).all(axis=1)]
-    if not np.issubdtype(c.dtype, np.integer) or len(points) < 3:
-        return 0.0
-    hull = cv2.convexHull(points.astype(np.float32))[:, 0]
-    inside = np.zeros(c.shape[:2], np.uint8)
-    cv2.fillConvexPoly(inside, np.rint(hull * 16).astype(np.int32), 1, cv2.LINE_8, 4)
-    face = inside.astype(bool) & np.isfinite(np.asarray(xyz)).all(axis=-1)
-    if not face.any():
+    face = np.asarray(face, dtype=bool)
+    if not np.issubdtype(c.dtype, np.integer) or not face.any():
         return 0.0
     top = c == np.iinfo(c.dtype).max
     clipped = top.any(axis=-1) if c.ndim == 3 else top

@@ -244,13 +244,12 @@ def measure_flow(
         raise InputError(
             "refine", f"refine.flow_level: expected an integer 0..{MAX_LEVEL}, got {level!r}"
         )
-    patch = ZNCC_WINDOW_PX
     # the reference's side is the same in every round of a refinement (and, in a sharing
     # scope, for every take refined against one fit of the neutral)
     hp_r, rms_r, g_rr, texture = shared(
         "flow_reference",
-        (reference, sigma, patch, noise),
-        lambda: reference_side(reference, sigma, patch, noise),
+        (reference, sigma, ZNCC_WINDOW_PX, noise),
+        lambda: reference_side(reference, sigma, ZNCC_WINDOW_PX, noise),
     )
     hp_m, rms_m = high_pass(moving, sigma)
     both = np.isfinite(reference) & np.isfinite(moving)
@@ -268,8 +267,8 @@ def measure_flow(
     fb = lengths_2d(fw + _warp(bw, fw))
     # ZNCC of the two high-passes over a Gaussian window, after the displacement
     mw = _warp(hp_m, fw).astype(np.float64)
-    num = gaussian_filter(hp_r * mw, patch)
-    den = np.sqrt(np.maximum(g_rr * gaussian_filter(mw**2, patch), 1e-12))
+    num = gaussian_filter(hp_r * mw, ZNCC_WINDOW_PX)
+    den = np.sqrt(np.maximum(g_rr * gaussian_filter(mw**2, ZNCC_WINDOW_PX), 1e-12))
     zncc = num / den
     ok = both & (fb <= max_fb_px) & (zncc >= min_zncc) & finite_points(fw)
     conf = np.where(ok, texture * np.clip((zncc - min_zncc) / (1 - min_zncc), 0, 1), 0.0)

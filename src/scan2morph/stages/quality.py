@@ -17,6 +17,8 @@ from collections.abc import Mapping
 import h5py
 import numpy as np
 
+from scan2morph.evaluate import face_region
+from scan2morph.geometry import finite_points
 from scan2morph.refine import clipped_share
 from scan2morph.stages.take_mesh import view_turn
 from scan2morph.store import paths
@@ -109,6 +111,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
         for t, f in read_failures(h5).items()
     ]
     takes = h5.get(paths.TAKES, {})
+    data = _ReadOnce(h5)
     for take in takes:
         valid = h5.get(paths.mesh(take, "valid"))
         if valid is not None and valid[()].mean() < settings["min_valid_fraction"]:
@@ -116,13 +119,15 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
             out.append(Warning("fit", take, f"only {share:.0f}% of the template has data"))
         if bool(takes[take].attrs.get("grey_color", False)):
             out.append(Warning("ingest", take, GREY))
-        if (share := _clipped(h5, take)) and share > float(settings["max_clipped_share"]):
+        if (share := take_clipped_share(data, take)) and share > float(
+            settings["max_clipped_share"]
+        ):
             said = CLIPPED.format(share=100 * share, example=CLIPPED_EXAMPLE)
             out.append(Warning("ingest", take, said))
         folded = int(takes[take].attrs.get("n_folded", 0))
         if folded:
             out.append(Warning("fit", take, f"{folded} folded triangles in the fitted template"))
-        if len(off := unmeasured_landmarks(h5, take)) > MAX_UNMEASURED_POINTS:
+        if len(off := unmeasured_landmarks(data, take)) > MAX_UNMEASURED_POINTS:
             out.append(Warning("fit", take, UNMEASURED.format(n=len(off), points=_ranges(off))))
     for take in takes:
         if bool(h5.get(paths.align(take, "ok"), True)[()]):
@@ -140,7 +145,7 @@ def subject_warnings(h5: h5py.File, settings: Mapping) -> list[Warning]:
     sources = {t: landmark_source(h5, t) for t in takes}
     given = [t for t, source in sources.items() if source.startswith("clicked")]
     neutral = next((t for t in takes if str(takes[t].attrs.get("kind", "")) == "neutral"), "")
-    out += _turned_warnings(h5, list(takes), neutral, settings)
+    out += _turned_warnings(h5, data, list(takes), neutral, settings)
     out += _noise_warnings(h5, list(takes), neutral, settings)
     for take in takes:
         doubtful = h5.get(paths.landmark_info(take, "doubtful"))
@@ -174,13 +179,41 @@ TURNED_EXAMPLE = (
 )
 
 
-def _clipped(h5: h5py.File, take: str) -> float:
-    """:func:`~scan2morph.refine.clipped_share` of a take's stored colour image, within its
-    landmarks (0 without them or without a colour image)."""
+def take_clipped_share(data: Mapping, take: str) -> float:
+    """:func:`~scan2morph.refine.clipped_share` of a take's stored colour image over its face
+    (the pixels with a surface point within its landmarks' hull); 0 without a colour image or
+    fewer than three landmarks."""
     keys = [paths.range_image(take, "color"), paths.range_image(take, "xyz"), paths.landmarks(take)]
-    if any(k not in h5 for k in keys):
+    if any(k not in data for k in keys):
         return 0.0
-    return clipped_share(*(h5[k][()] for k in keys))
+    color, xyz, points = (data[k] for k in keys)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    points = points[np.isfinite(points).all(axis=1)]
+    if len(points) < 3:
+        return 0.0
+    return clipped_share(color, face_region(finite_points(xyz), points))
+
+
+class _ReadOnce(Mapping):
+    """A store's datasets, each read once: the gates read a take's range image for several
+    checks, and the neutral's for every take's turn."""
+
+    def __init__(self, h5: h5py.File):
+        self.h5, self.read = h5, {}
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if key not in self.read:
+            self.read[key] = self.h5[key][()]
+        return self.read[key]
+
+    def __contains__(self, key) -> bool:
+        return key in self.h5
+
+    def __iter__(self):
+        return iter(self.h5)
+
+    def __len__(self) -> int:
+        return len(self.h5)
 
 
 def _noise_warnings(
@@ -208,18 +241,19 @@ def _noise_warnings(
 
 
 def _turned_warnings(
-    h5: h5py.File, takes: list[str], neutral: str, settings: Mapping
+    h5: h5py.File, data: Mapping, takes: list[str], neutral: str, settings: Mapping
 ) -> list[Warning]:
     """A warning for each take seen from more than ``settings["max_view_turn_deg"]`` degrees
-    away from where its neutral was (:func:`~scan2morph.stages.take_mesh.view_turn`); not for a
-    take whose alignment failed its gate (its turn would be the failed alignment's)."""
+    away from where its neutral was (:func:`~scan2morph.stages.take_mesh.view_turn` of the
+    store's datasets ``data``, each read once); not for a take whose alignment failed its gate
+    (its turn would be the failed alignment's)."""
     out = []
     for take in takes:
         if take == neutral or not neutral or paths.align(take, "transform") not in h5:
             continue
         if not bool(h5.get(paths.align(take, "ok"), True)[()]):
             continue
-        turn = view_turn(h5, (take, neutral), take)
+        turn = view_turn(data, (take, neutral), take)
         if turn > float(settings["max_view_turn_deg"]):
             out.append(Warning("align", take, TURNED.format(turn=turn, example=TURNED_EXAMPLE)))
     return out
@@ -238,7 +272,7 @@ UNMEASURED = (
 )
 
 
-def unmeasured_landmarks(h5: h5py.File, take: str) -> list[int]:
+def unmeasured_landmarks(h5: h5py.File | Mapping, take: str) -> list[int]:
     """The take's eye, nose and mouth landmarks (iBUG numbers, :data:`INNER_FACE`) with no range
     data within a pixel of them (or outside its image); empty without landmarks or a range
     image."""
@@ -372,5 +406,6 @@ __all__ = [
     "read_warnings",
     "skipped_stages",
     "subject_warnings",
+    "take_clipped_share",
     "warning_datasets",
 ]
