@@ -146,9 +146,10 @@ def test_params_from_the_whole_config():
 
 def test_tracking_params_from_the_config():
     section = {"track": False, "min_track_confidence": 0.6, "max_track_px": 4, "track_weight": 1}
-    params = landmarks.Params.from_config({"landmarks": section})
+    params = landmarks.Params.from_config({"landmarks": section | {"turned_view_deg": 8}})
     assert (params.track, params.min_track_confidence) == (False, 0.6)
     assert (params.max_track_px, params.track_weight) == (4.0, 1.0)
+    assert params.turned_view_deg == 8.0
 
 
 def test_an_unfolded_detection_is_a_warning(car, monkeypatch):

@@ -30,14 +30,17 @@ from functools import partial
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from scan2morph.align import view_turn_deg
 from scan2morph.align.carry import carry_points, carry_stable, track_points
 from scan2morph.errors import InputError
 from scan2morph.io import check_face, check_handedness
 from scan2morph.io.landmarks import complete
 from scan2morph.refine import RefineParams, grey
 from scan2morph.refine.flow import measure_flow
+from scan2morph.scan.view import scanner_view
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
+from scan2morph.stages.take_mesh import grid_middle
 from scan2morph.store import paths
 from scan2morph.template import FitRules, fit_folds
 from scan2morph.template.sample import sample_range
@@ -85,7 +88,10 @@ class Params:
     track_weight : float
         A tracked point's place: this share of the tracked position, the rest the detected one,
         in [0, 1] (1: the neutral's point as tracked; the neutral's own detection error then
-        passes whole to the take, the take's is averaged out).
+        passes whole to the take, the take's is averaged out; 1: see ``turned_view_deg``).
+    turned_view_deg : float
+        A doubtful detection whose camera stood more than this from its neutral's (degrees at
+        the face, :func:`~scan2morph.align.view_turn_deg`) goes the whole way (:func:`_reach`).
     unfold : bool
         Whether a detected take whose points would fold its template fit (so that the fit
         would leave it out) is moved towards its neutral's points carried rigidly
@@ -103,6 +109,7 @@ class Params:
     min_track_confidence: float = 0.3
     max_track_px: float = 6.0
     track_weight: float = 0.5
+    turned_view_deg: float = 5.0
     unfold: bool = True
     fit: fit_stage.Params | None = None
 
@@ -119,6 +126,7 @@ class Params:
             ),
             max_track_px=float(section.get("max_track_px", cls.max_track_px)),
             track_weight=float(section.get("track_weight", cls.track_weight)),
+            turned_view_deg=float(section.get("turned_view_deg", cls.turned_view_deg)),
             unfold=bool(section.get("unfold", cls.unfold)),
             fit=_fold_rules(config, section),
         )
@@ -401,7 +409,8 @@ def second_pass(
     confidence), it goes the whole way, however far: the detector's error is then not in the
     neutral's points, so the take follows the user's points through the skin instead of
     keeping that error in its motion (the real head, a clicked neutral and a detected smile:
-    0.49 of the skin's motion in error, 0.085 this way; both detected 0.090).
+    0.49 of the skin's motion in error, 0.085 this way; both detected 0.090). So it does for a
+    doubtful detection seen turned from the neutral (:func:`_reach`).
 
     Parameters
     ----------
@@ -422,7 +431,8 @@ def second_pass(
         neutral's and the take's weighted as its position is (it inherits the neutral's error
         in that share).
     attrs : dict
-        ``landmarks_carried_px`` (the stable points' shifts, px), ``landmarks_tracked``
+        ``landmarks_carried_px`` (the stable points' shifts, px), ``landmarks_view_turn_deg``
+        (the take's camera from the neutral's, degrees: :func:`_view_turn`), ``landmarks_tracked``
         (how many points were tracked) and, when the points were unfolded,
         ``landmarks_unfolded`` (the share of the way to the neutral's, :func:`unfold`).
     """
@@ -435,7 +445,10 @@ def second_pass(
     carried = carry_stable(
         xyz, found.points, neutral_xyz, neutral_points, params.stable_points, take.source
     )
-    attrs: dict = {"landmarks_carried_px": [float(v) for v in carried.shift_px]}
+    attrs: dict = {
+        "landmarks_carried_px": [float(v) for v in carried.shift_px],
+        "landmarks_view_turn_deg": _view_turn(carried, xyz, neutral_xyz),
+    }
     points, confidence = carried.points, found.confidence
     neutral_conf = data.get(paths.landmark_confidence(neutral))  # clicked: none, i.e. sure
     neutral_conf = np.ones(len(points)) if neutral_conf is None else np.asarray(neutral_conf)
@@ -458,8 +471,7 @@ def second_pass(
             ),
             take.source,
         )
-        given = paths.landmark_confidence(neutral) not in data  # the neutral's were clicked
-        reach, w = (np.inf, 1.0) if given else (params.max_track_px, params.track_weight)
+        reach, w = _reach(found, take, attrs["landmarks_view_turn_deg"], params)
         use = (tracked.confidence >= params.min_track_confidence) & (
             np.linalg.norm(tracked.points - found.points, axis=1) <= reach
         )
@@ -479,6 +491,29 @@ def second_pass(
             confidence = np.where(went, share * neutral_conf + (1 - share) * confidence, confidence)
             points = moved
     return replace(found, points=points, confidence=confidence), attrs
+
+
+def _reach(found: Landmarks, take: Take, turn: float, params: Params) -> tuple[float, float]:
+    """How far from its detection a tracked point may land (px) and the share of the way it
+    goes: the whole way from any distance beside a clicked neutral, or for a doubtful detection
+    (``params.min_confidence``) whose camera stood more than ``params.turned_view_deg`` (``turn``,
+    degrees) from the neutral's: a detector's errors on one face are mostly shared by views
+    from one place and differ between two; the neutral's, which a tracked point carries, cancel
+    in the take's motion, the take's own do not (docs/landmarks.md, "The second pass")."""
+    given = paths.landmark_confidence(take.neutral) not in take.data  # the neutral's clicked
+    if given or (turn > params.turned_view_deg and found.doubtful(params.min_confidence)):
+        return np.inf, 1.0
+    return params.max_track_px, params.track_weight
+
+
+def _view_turn(carried, xyz: np.ndarray, neutral_xyz: np.ndarray) -> float:
+    """How far the take's camera stood from the neutral's once aligned by ``carried``, degrees
+    at the face (:func:`~scan2morph.align.view_turn_deg`, each camera found from its grid); NaN
+    when not every stable point was carried (the transform is then no measure of the view)."""
+    if not np.all(carried.carried):
+        return float("nan")
+    cameras = (scanner_view(xyz).centre, scanner_view(neutral_xyz).centre)
+    return float(view_turn_deg(carried.transform, *cameras, grid_middle(neutral_xyz)))
 
 
 def unfold(template, take: Take, points, rigid, size, fit: fit_stage.Params) -> tuple:
