@@ -112,9 +112,6 @@ def carry_stable(
     transform = _surface_icp(take_xyz, neutral_xyz, take_3d[both], initial)
     into_take = transform_points(invert(transform), neutral_3d)
     pixels = range_pixels(take_xyz, into_take, start=points[idx], source=source)
-    lost = ~np.isfinite(pixels).all(axis=1)
-    if lost.any():  # a detection too far off to start from: from the nearest pixel in 3D
-        pixels[lost] = range_pixels(take_xyz, into_take[lost], source=source)
     carried = np.isfinite(pixels).all(axis=1)
     shift = np.full(len(idx), np.nan)
     shift[carried] = np.linalg.norm(pixels[carried] - points[idx][carried], axis=1)
@@ -191,21 +188,15 @@ def _surface_icp(
     src = _near(np.asarray(take_xyz, float), take_centres, SURFACE_RADIUS_MM)
     src = src[:: max(1, len(src) // MAX_ICP_POINTS)]
     centres_n = transform_points(initial, take_centres)
-    # the steps turn about the neutral frame's origin: put it at the stable points, so that the
-    # pose does not depend on the frame the neutral's XYZ come in (a metre away, the normal
-    # equations are ill-conditioned and the damped steps stop short)
-    middle = np.eye(4)
-    middle[:3, 3] = centres_n.mean(axis=0)
-    centres_n = centres_n - middle[:3, 3]
     normals = surface_normals(np.asarray(neutral_xyz, float))
     ok = np.isfinite(neutral_xyz).all(axis=2) & np.isfinite(normals).all(axis=2)
-    dst, dst_n = neutral_xyz[ok] - middle[:3, 3], normals[ok]
+    dst, dst_n = neutral_xyz[ok], normals[ok]
     near = np.linalg.norm(dst[:, None, :] - centres_n[None], axis=2).min(axis=1)
     keep = near < SURFACE_RADIUS_MM + MAX_PAIR_MM
     if len(src) < 50 or keep.sum() < 50:
         return initial
     surface = PointToPlane(dst[keep], dst_n[keep], MAX_PAIR_MM)
-    pose = invert(middle) @ np.asarray(initial, dtype=np.float64)
+    pose = np.array(initial, dtype=np.float64)
     pairs = surface.at(src, pose)
     for _ in range(ICP_ITERATIONS):
         if pairs.fitness == 0.0:
@@ -217,7 +208,7 @@ def _surface_icp(
             and abs(pairs.rmse - old.rmse) < ICP_CONVERGED
         ):
             break
-    return middle @ pose
+    return pose
 
 
 @dataclass(frozen=True)

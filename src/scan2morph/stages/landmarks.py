@@ -509,8 +509,8 @@ def _reach(found: Landmarks, take: Take, turn: float, params: Params) -> tuple[f
 def _view_turn(carried, xyz: np.ndarray, neutral_xyz: np.ndarray) -> float:
     """How far the take's camera stood from the neutral's once aligned by ``carried``, degrees
     at the face (:func:`~scan2morph.align.view_turn_deg`, each camera found from its grid); NaN
-    when not every stable point was carried (the transform is then no measure of the view)."""
-    if not np.all(carried.carried):
+    when fewer than 3 stable points were carried (the transform is then no measure of the view)."""
+    if np.count_nonzero(carried.carried) < 3:
         return float("nan")
     cameras = (scanner_view(xyz).centre, scanner_view(neutral_xyz).centre)
     return float(view_turn_deg(carried.transform, *cameras, grid_middle(neutral_xyz)))
