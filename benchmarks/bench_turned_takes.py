@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/bench_turned_takes.py [--work DIR] [--seed 7] [--cores 2]
-        [--yaw 0 8] [--repo DIR]
+        [--yaw 0 8] [--turned-view-deg 5] [--repo DIR]
 
 The real head of the real-data tests (``../shared/data``, CC BY 3.0; tests/support/real_head.py)
 is written as a user's range scans (tests/support/turned_takes.py): a neutral, a jaw drop
@@ -17,6 +17,8 @@ subjects: one gives the hand annotation moved with the skin as landmark files (`
 the other leaves the landmarks column empty (``detected``: the zero-click path). The workflow
 runs on the sheet with the default config, as ``make run CONFIG=...`` would.
 
+``--turned-view-deg 5`` sets ``landmarks.turned_view_deg`` (off by default: a doubtful detection
+turned more than that follows its neutral's points the whole way, docs/landmarks.md).
 ``--repo DIR`` runs another checkout's code (its ``src`` and its Snakefile and
 ``config/config.yaml``) on the same scans, e.g. a branch's worktree holding a fix.
 
@@ -35,6 +37,8 @@ import os
 import sys
 import time
 from pathlib import Path
+
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -117,6 +121,10 @@ def main(argv=None) -> int:
         help="the takes' turns from the neutral's view, degrees (one variant each)",
     )  # fmt: skip
     parser.add_argument(
+        "--turned-view-deg", type=float, default=None,
+        help="landmarks.turned_view_deg for the run (default: the config's, off)",
+    )  # fmt: skip
+    parser.add_argument(
         "--repo", type=Path, default=ROOT,
         help="the checkout whose library and Snakefile run (default: this one)",
     )  # fmt: skip
@@ -135,6 +143,10 @@ def main(argv=None) -> int:
     head = load_real_head()
     poses = write_takes(head, args.work, args.seed, args.yaw)
     names = subjects(args.yaw)
+    if args.turned_view_deg is not None:  # a doubtful take turned more follows its neutral's points
+        config = yaml.safe_load((args.work / "turned.yaml").read_text())
+        config["landmarks"] = {"turned_view_deg": args.turned_view_deg}
+        (args.work / "turned.yaml").write_text(yaml.safe_dump(config))
     targets = [f"results/{s}/{s}.h5" for s in names]
     print(f"library {library}, Snakefile {args.repo.resolve() / 'Snakefile'}")
     t0 = time.perf_counter()

@@ -231,7 +231,8 @@ def test_a_doubtful_detection_seen_turned_is_followed_the_whole_way(takes):
     detections are all doubtful, a smile turned 8 degrees from its neutral moved 0.69 of the
     skin's motion in error halfway within 6 px, 0.41 this way). The generator saw the car
     about 3.3 degrees turned from the neutral: the measured turn is checked against its poses;
-    a limit of 2 degrees counts the take as turned, the default 5 does not, and the same
+    a limit of 2 degrees counts the take as turned, 5 does not, nor does the default (None:
+    never), and the same
     points detected with confidence (0.8) stay within ``max_track_px`` of the detection."""
     turned = landmarks.Params(track_weight=0.5, max_track_px=6.0, turned_view_deg=2.0)
     got, attrs, noisy, true_t = _second_pass(takes, turned, off_px=8.0, confidence=0.1)
@@ -242,10 +243,11 @@ def test_a_doubtful_detection_seen_turned_is_followed_the_whole_way(takes):
     _assert_followed_the_whole_way(got, attrs, noisy, true_t)  # the neutral's confidence: 1
     near = _second_pass(takes, turned, off_px=8.0, confidence=0.8)[1]["landmarks_tracked"]
     assert near < attrs["landmarks_tracked"] / 2
-    default = landmarks.Params(track_weight=0.5, max_track_px=6.0)
-    assert default.turned_view_deg == 5.0
-    unturned = _second_pass(takes, default, off_px=8.0, confidence=0.1)[1]["landmarks_tracked"]
-    assert unturned == near
+    assert landmarks.Params().turned_view_deg is None  # the default: never
+    for limit in (5.0, None):  # the take is turned less than 5 degrees
+        params = landmarks.Params(track_weight=0.5, max_track_px=6.0, turned_view_deg=limit)
+        unturned = _second_pass(takes, params, off_px=8.0, confidence=0.1)[1]
+        assert unturned["landmarks_tracked"] == near
 
 
 def _own_frame(xyz: np.ndarray) -> np.ndarray:

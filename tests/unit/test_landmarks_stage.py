@@ -150,6 +150,10 @@ def test_tracking_params_from_the_config():
     assert (params.track, params.min_track_confidence) == (False, 0.6)
     assert (params.max_track_px, params.track_weight) == (4.0, 1.0)
     assert params.turned_view_deg == 8.0
+    assert (
+        landmarks.Params.from_config({"landmarks": {"turned_view_deg": None}}).turned_view_deg
+        is None
+    )
 
 
 def test_an_unfolded_detection_is_a_warning(car, monkeypatch):

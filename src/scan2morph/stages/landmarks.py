@@ -89,9 +89,8 @@ class Params:
         A tracked point's place: this share of the tracked position, the rest the detected one,
         in [0, 1] (1: the neutral's point as tracked; the neutral's own detection error then
         passes whole to the take, the take's is averaged out; 1: see ``turned_view_deg``).
-    turned_view_deg : float
-        A doubtful detection whose camera stood more than this from its neutral's (degrees at
-        the face, :func:`~scan2morph.align.view_turn_deg`) goes the whole way (:func:`_reach`).
+    turned_view_deg : float or None
+        A doubtful detection turned more than this (degrees) goes the whole way; None: never.
     unfold : bool
         Whether a detected take whose points would fold its template fit (so that the fit
         would leave it out) is moved towards its neutral's points carried rigidly
@@ -109,13 +108,14 @@ class Params:
     min_track_confidence: float = 0.3
     max_track_px: float = 6.0
     track_weight: float = 0.5
-    turned_view_deg: float = 5.0
+    turned_view_deg: float | None = None
     unfold: bool = True
     fit: fit_stage.Params | None = None
 
     @classmethod
     def from_config(cls, config: Mapping) -> Params:
         section = dict(config.get("landmarks") or {})
+        turned = section.get("turned_view_deg", cls.turned_view_deg)
         return cls(
             min_confidence=float(section.get("min_confidence", cls.min_confidence)),
             carry_stable=bool(section.get("carry_stable", cls.carry_stable)),
@@ -126,7 +126,7 @@ class Params:
             ),
             max_track_px=float(section.get("max_track_px", cls.max_track_px)),
             track_weight=float(section.get("track_weight", cls.track_weight)),
-            turned_view_deg=float(section.get("turned_view_deg", cls.turned_view_deg)),
+            turned_view_deg=None if turned is None else float(turned),
             unfold=bool(section.get("unfold", cls.unfold)),
             fit=_fold_rules(config, section),
         )
@@ -497,19 +497,19 @@ def _reach(found: Landmarks, take: Take, turn: float, params: Params) -> tuple[f
     """How far from its detection a tracked point may land (px) and the share of the way it
     goes: the whole way from any distance beside a clicked neutral, or for a doubtful detection
     (``params.min_confidence``) whose camera stood more than ``params.turned_view_deg`` (``turn``,
-    degrees) from the neutral's: a detector's errors on one face are mostly shared by views
-    from one place and differ between two; the neutral's, which a tracked point carries, cancel
-    in the take's motion, the take's own do not (docs/landmarks.md, "The second pass")."""
+    degrees; None: never) from the neutral's: a detector's errors on one face differ between
+    views from two places (docs/landmarks.md, "The second pass")."""
     given = paths.landmark_confidence(take.neutral) not in take.data  # the neutral's clicked
-    if given or (turn > params.turned_view_deg and found.doubtful(params.min_confidence)):
+    limit = params.turned_view_deg
+    if given or (limit is not None and turn > limit and found.doubtful(params.min_confidence)):
         return np.inf, 1.0
     return params.max_track_px, params.track_weight
 
 
 def _view_turn(carried, xyz: np.ndarray, neutral_xyz: np.ndarray) -> float:
     """How far the take's camera stood from the neutral's once aligned by ``carried``, degrees
-    at the face (:func:`~scan2morph.align.view_turn_deg`, each camera found from its grid); NaN
-    when fewer than 3 stable points were carried (the transform is then no measure of the view)."""
+    at the face (:func:`~scan2morph.align.view_turn_deg`, each camera from its grid); NaN when
+    fewer than 3 stable points were carried (the transform is no measure of the view then)."""
     if np.count_nonzero(carried.carried) < 3:
         return float("nan")
     cameras = (scanner_view(xyz).centre, scanner_view(neutral_xyz).centre)
