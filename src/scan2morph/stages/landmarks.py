@@ -30,17 +30,15 @@ from functools import partial
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from scan2morph.align import view_turn_deg
 from scan2morph.align.carry import carry_points, carry_stable, track_points
 from scan2morph.errors import InputError
 from scan2morph.io import check_face, check_handedness
 from scan2morph.io.landmarks import complete
 from scan2morph.refine import RefineParams, grey
 from scan2morph.refine.flow import measure_flow
-from scan2morph.scan.view import scanner_view
 from scan2morph.stages import fit as fit_stage
 from scan2morph.stages.part import Part, Run, Take, need
-from scan2morph.stages.take_mesh import grid_middle
+from scan2morph.stages.take_mesh import grids_turn
 from scan2morph.store import paths
 from scan2morph.template import FitRules, fit_folds
 from scan2morph.template.sample import sample_range
@@ -508,12 +506,11 @@ def _reach(found: Landmarks, take: Take, turn: float, params: Params) -> tuple[f
 
 def _view_turn(carried, xyz: np.ndarray, neutral_xyz: np.ndarray) -> float:
     """How far the take's camera stood from the neutral's once aligned by ``carried``, degrees
-    at the face (:func:`~scan2morph.align.view_turn_deg`, each camera from its grid); NaN when
+    at the face (:func:`~scan2morph.stages.take_mesh.grids_turn`); NaN when
     fewer than 3 stable points were carried (the transform is no measure of the view then)."""
     if np.count_nonzero(carried.carried) < 3:
         return float("nan")
-    cameras = (scanner_view(xyz).centre, scanner_view(neutral_xyz).centre)
-    return float(view_turn_deg(carried.transform, *cameras, grid_middle(neutral_xyz)))
+    return grids_turn(carried.transform, xyz, neutral_xyz)
 
 
 def unfold(template, take: Take, points, rigid, size, fit: fit_stage.Params) -> tuple:

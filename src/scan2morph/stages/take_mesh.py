@@ -69,9 +69,15 @@ def view_turn(data: Mapping[str, np.ndarray], takes: tuple[str, str], source: st
         ``subject/take``, for messages.
     """
     grids = [np.asarray(need(data, paths.range_image(t, "xyz"), source)) for t in takes]
-    cameras = [scanner_view(xyz).centre for xyz in grids]
-    transform = need(data, paths.align(takes[0], "transform"), source)
-    return view_turn_deg(transform, *cameras, grid_middle(grids[1]))
+    return grids_turn(need(data, paths.align(takes[0], "transform"), source), *grids)
+
+
+def grids_turn(transform: np.ndarray, xyz: np.ndarray, neutral_xyz: np.ndarray) -> float:
+    """:func:`view_turn` of a take aligned to its neutral by ``transform`` (4, 4), take ->
+    neutral frame, from the two range images (H, W, 3) mm: each camera found from its grid, the
+    face the middle of the neutral's, degrees."""
+    cameras = [scanner_view(grid).centre for grid in (xyz, neutral_xyz)]
+    return float(view_turn_deg(transform, *cameras, grid_middle(neutral_xyz)))
 
 
 def grid_middle(xyz: np.ndarray) -> np.ndarray:
@@ -155,6 +161,7 @@ __all__ = [
     "MEASURED",
     "carries_upper",
     "grid_middle",
+    "grids_turn",
     "sample_points",
     "steep_skin",
     "view_turn",
