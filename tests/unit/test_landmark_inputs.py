@@ -237,6 +237,7 @@ def test_a_mesh_takes_points_come_back_as_its_landmark_file(
 
     from scan2morph.io import write_landmarks3d
     from scan2morph.stages import landmarks
+    from scan2morph.stages.landmark_files import surface_points
     from scan2morph.stages.part import Take
     from scan2morph.store import paths
 
@@ -268,7 +269,7 @@ def test_a_mesh_takes_points_come_back_as_its_landmark_file(
     # a point off the render's data goes to the nearest surface pixel
     off = px.copy()
     off[0] = [1.0, 1.0]
-    corner = landmarks.surface_points(free.xyz, off)[0]
+    corner = surface_points(free.xyz, off)[0]
     assert np.isfinite(corner).all()
     assert np.nanmin(np.linalg.norm(free.xyz.reshape(-1, 3) - corner, axis=1)) == 0.0
 
@@ -327,7 +328,7 @@ def test_a_mesh_takes_landmark_file_given_back_comes_back_as_given(mesh_files, t
     assert part.datasets["/takes/neutral/landmark_source"] == "clicked"
     np.testing.assert_array_equal(again, given)
     # the case is the audit's: lifted on this render, some given points move far
-    from scan2morph.stages.landmarks import surface_points
+    from scan2morph.stages.landmark_files import surface_points
 
     lifted = surface_points(np.asarray(grid), part.datasets["/takes/neutral/landmarks"])
     moved = np.linalg.norm(lifted - given, axis=1)
