@@ -7,7 +7,10 @@ Candidates (scan2morph.landmarks):
 * ``cascade-7``: the cascade from 7 starts around the global stage's shape, on the canonical
   frame only;
 * ``cascade-7+mirror``: the same on the frame and on its mirror image (the detector,
-  :func:`scan2morph.landmarks.detect`).
+  :func:`scan2morph.landmarks.detect`);
+* ``+lips (doubtful)``: the detector, and a doubtful detection's mouth (median confidence below
+  the landmarks stage's ``min_confidence``) placed on the lips' colour edge
+  (:func:`scan2morph.landmarks.fit_lips`), as the landmarks stage places it.
 
 Takes: every take of the default synthetic cohort (config/config.yaml: seed 2009, held out from
 training) after the ingest and repair stages, per modality; and range renders of the real head
@@ -44,6 +47,7 @@ import numpy as np
 sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
 from scan2morph.align.carry import carry_stable  # noqa: E402
 from scan2morph.align.rigid import transform_points  # noqa: E402
+from scan2morph.landmarks import fit_lips  # noqa: E402
 from scan2morph.landmarks.canonical import canonical  # noqa: E402
 from scan2morph.landmarks.cascade import run  # noqa: E402
 from scan2morph.landmarks.detect import cached_model, detect, ensemble_shapes  # noqa: E402
@@ -79,12 +83,23 @@ def cascade(color, xyz, source):
     return detect(color, xyz, source).points
 
 
+def cascade_lips(color, xyz, source):
+    """The detector, a doubtful detection's mouth on the lips' colour edge (the stage's rule)."""
+    found = detect(color, xyz, source)
+    if np.median(found.confidence) >= Params().min_confidence:
+        return found.points
+    return fit_lips(color, found.points).points
+
+
 CANDIDATES = {
     "geometry": geometry_only,
     "cascade-1": cascade_single,
     "cascade-7": cascade_frame_only,
     "cascade-7+mirror": cascade,
+    "+lips (doubtful)": cascade_lips,
 }
+#: The candidates whose median per region is printed.
+REGION_CANDIDATES = ("cascade-7+mirror", "+lips (doubtful)")
 
 
 def load_takes(cache: Path | None) -> list[GridTake]:
@@ -142,10 +157,11 @@ def _region_row(name: str, errs: list[np.ndarray]) -> str:
 
 def evaluate(takes, groups) -> None:
     """Print one row per candidate and group of takes (objects with ``color``, ``xyz``,
-    ``truth`` and ``name``), then the last candidate's (the detector's) median per region."""
+    ``truth`` and ``name``), then the median per region of :data:`REGION_CANDIDATES`."""
     print(HEADER)
+    regions = []
     for name, fn in CANDIDATES.items():
-        results, regions = [], []
+        results = []
         for t in takes:
             t0 = time.process_time()  # CPU time: the machine may be shared
             pts = fn(t.color, t.xyz, t.name)
@@ -155,7 +171,8 @@ def evaluate(takes, groups) -> None:
             sel = [r for t, r in zip(takes, results, strict=True) if pick(t)]
             if sel:
                 print(_row(f"{name} {gname}", [s[0] for s in sel], [s[1] for s in sel]))
-                regions.append(_region_row(f"{name} {gname}", [s[0] for s in sel]))
+                if name in REGION_CANDIDATES:
+                    regions.append(_region_row(f"{name} {gname}", [s[0] for s in sel]))
     print("median per region (px)")
     print("\n".join(regions))
 

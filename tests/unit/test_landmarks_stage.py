@@ -350,3 +350,40 @@ def test_a_doubtful_detection_beside_a_given_neutral_says_it_follows_the_neutral
         "take's landmarks too, or none for any take)"
     )
     assert said["s"].endswith("there the take's own detection error is taken up")
+
+
+@pytest.mark.parametrize(
+    ("confidence", "config", "moves"),
+    [(0.2, {}, True), (0.9, {}, False), (0.2, {"lips_from_colour": False}, False)],
+)
+def test_a_doubtful_detections_mouth_goes_onto_the_lips(
+    car, monkeypatch, confidence, config, moves
+):
+    """A doubtful detection (median confidence below ``min_confidence``) has its mouth placed on
+    the lips' colour edge (scan2morph.landmarks.fit_lips), a sure one keeps the detector's,
+    and ``landmarks.lips_from_colour: false`` keeps every detection's."""
+    r = car
+    data = {
+        paths.range_image("car", "xyz"): r["xyz"],
+        paths.range_image("car", "color"): r["color"],
+    }
+    start = r["landmarks"].copy()  # the car's clicks, 0.5 px off the truth
+    centre = start[48:].mean(axis=0)
+    start[48:] = centre + (start[48:] - centre) * [1.3, 1.0] + [0.0, 3.0]  # too wide and low
+    found = landmarks.Landmarks(start, landmarks.DETECTED, np.full(68, confidence), "d", "1")
+    monkeypatch.setattr(landmarks, "settle", lambda *a: found)
+    take = Take("s1", "car", "viseme", "car", "car", data)  # its own neutral: no second pass
+    params = landmarks.Params.from_config({"landmarks": config})
+    part = landmarks.run(None, take, params)
+    got = part.datasets[paths.landmarks("car")]
+    attrs = part.attrs[paths.take("car")]
+    np.testing.assert_array_equal(got[:48], start[:48])
+    before = np.median(np.linalg.norm(start[48:] - r["landmarks"][48:], axis=1))
+    after = np.median(np.linalg.norm(got[48:] - r["landmarks"][48:], axis=1))
+    if moves:
+        print(f"\ncar's mouth {before:.2f} -> {after:.2f} px from its clicks")
+        assert after < 1.5 < 3.0 < before
+        assert attrs["landmarks_lips_moved_px"] > 2.0
+    else:
+        np.testing.assert_array_equal(got, start)
+        assert "landmarks_lips_moved_px" not in attrs

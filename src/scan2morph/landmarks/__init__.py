@@ -2,10 +2,12 @@
 
 :func:`detect` finds the face from the geometry and runs a cascaded shape regression trained on
 the project's own synthetic heads (:mod:`scan2morph.landmarks.train`); :func:`complete_jawline`
-adds the 17 jawline points to a 51-point set.
+adds the 17 jawline points to a 51-point set; :func:`fit_lips` places a detected mouth on the
+lips' colour edge.
 """
 
 from scan2morph.landmarks.detect import DETECTOR, Detection, detect
 from scan2morph.landmarks.jaw import complete_jawline
+from scan2morph.landmarks.lips import LipFit, fit_lips
 
-__all__ = ["DETECTOR", "Detection", "complete_jawline", "detect"]
+__all__ = ["DETECTOR", "Detection", "LipFit", "complete_jawline", "detect", "fit_lips"]

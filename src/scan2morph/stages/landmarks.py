@@ -89,6 +89,9 @@ class Params:
         Whether a detected take whose points would fold its template fit (so that the fit
         would leave it out) is moved towards its neutral's points carried rigidly
         (:func:`unfold`).
+    lips_from_colour : bool
+        Whether a doubtful detection's mouth is placed on the lips' colour edge
+        (:func:`scan2morph.landmarks.fit_lips`).
     fit : scan2morph.stages.fit.Params or None
         The fit's parameters the fold test follows (config section ``template``: its fiducial
         sets, rim share, subdivisions and fold limit); None: no test (also with ``unfold`` or
@@ -104,6 +107,7 @@ class Params:
     track_weight: float = 0.5
     turned_view_deg: float | None = None
     unfold: bool = True
+    lips_from_colour: bool = True
     fit: fit_stage.Params | None = None
 
     @classmethod
@@ -122,6 +126,7 @@ class Params:
             track_weight=float(section.get("track_weight", cls.track_weight)),
             turned_view_deg=None if turned is None else float(turned),
             unfold=bool(section.get("unfold", cls.unfold)),
+            lips_from_colour=bool(section.get("lips_from_colour", cls.lips_from_colour)),
             fit=_fold_rules(config, section),
         )
 
@@ -269,9 +274,13 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmarks`` (68, 2) px, ``landmark_source``, ``landmark_detector`` and
         ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
-        px, the detector's points before the second pass (:func:`second_pass`); the take group's ``nose_depth_mm`` (:func:`~scan2morph.io.check_handedness`);
+        px, the detector's points before its lips' step and the second pass
+        (:func:`second_pass`); the take group's ``nose_depth_mm``
+        (:func:`~scan2morph.io.check_handedness`) and, for a doubtful detection placed on the
+        lips' colour edge (``params.lips_from_colour``), ``landmarks_lips_moved_px``;
         ``files["pts"]`` the points for the ``.pts`` file, ``files["xyz"]`` (68, 3) mm the
-        same points on the take's measured surface (:func:`written_points`: a mesh take's lie
+        same points on the take's measured surface
+        (:func:`~scan2morph.stages.landmark_files.written_points`: a mesh take's lie
         on the mesh, its given points as given), in its frame.
     """
     t, data = take.take, take.data
@@ -285,7 +294,14 @@ def run(template, take: Take, params: Params) -> Part:
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
         detected = found.points
-        found, attrs = second_pass(found, take, (xyz, color), params, template)
+    if params.lips_from_colour and found.doubtful(params.min_confidence):
+        from scan2morph.landmarks import fit_lips
+
+        lips = fit_lips(np.asarray(color), found.points)  # the mouth onto the lips' colour edge
+        found, attrs["landmarks_lips_moved_px"] = replace(found, points=lips.points), lips.moved_px
+    if detected is not None:
+        found, carried = second_pass(found, take, (xyz, color), params, template)
+        attrs |= carried
     doubtful = [found.doubtful(params.min_confidence)]
     if attrs.get("landmarks_unfolded"):
         doubtful.append(
