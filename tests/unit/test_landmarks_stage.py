@@ -387,3 +387,40 @@ def test_a_doubtful_detections_mouth_goes_onto_the_lips(
     else:
         np.testing.assert_array_equal(got, start)
         assert "landmarks_lips_moved_px" not in attrs
+
+
+@pytest.mark.parametrize("lips", [True, False])
+def test_a_doubtful_takes_lips_step_comes_before_its_second_pass(car, monkeypatch, lips):
+    """A doubtful take other than the neutral: the second pass starts from its mouth on the lips
+    (off: from the detector's points), ``landmark_detected`` keeps the detector's own points,
+    and the attributes hold both steps'."""
+    r = car
+    data = {
+        paths.range_image("car", "xyz"): r["xyz"],
+        paths.range_image("car", "color"): r["color"],
+    }
+    start = r["landmarks"].copy()
+    centre = start[48:].mean(axis=0)
+    start[48:] = centre + (start[48:] - centre) * [1.3, 1.0] + [0.0, 3.0]
+    found = landmarks.Landmarks(start, landmarks.DETECTED, np.full(68, 0.2), "d", "1")
+    seen = {}
+
+    def second_pass(found, take, grids, params, template=None):
+        seen["points"] = found.points.copy()
+        return found, {"landmarks_tracked": 7}
+
+    monkeypatch.setattr(landmarks, "settle", lambda *a: found)
+    monkeypatch.setattr(landmarks, "second_pass", second_pass)
+    take = Take("s1", "car", "viseme", "car", "neutral", data)
+    params = landmarks.Params.from_config({"landmarks": {"lips_from_colour": lips}})
+    part = landmarks.run(None, take, params)
+    np.testing.assert_array_equal(part.datasets[paths.landmark_detected("car")], start)
+    attrs = part.attrs[paths.take("car")]
+    assert attrs["landmarks_tracked"] == 7
+    moved = np.linalg.norm(seen["points"] - start, axis=1)
+    if lips:
+        assert np.median(moved[48:]) == pytest.approx(attrs["landmarks_lips_moved_px"])
+        assert attrs["landmarks_lips_moved_px"] > 2.0
+        assert not moved[:48].any()
+    else:
+        assert not moved.any() and "landmarks_lips_moved_px" not in attrs

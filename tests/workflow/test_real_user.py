@@ -10,7 +10,7 @@ on RGB-D, and 0.07 mm at the face. Before the texture's veto of the jaw prior th
 clicked run left 0.119-0.124: the prior took the smile's pull on the chin for a rigid 8-degree
 turn of it. The stereo takes (the real-data tests' rig, its speckle projected from the rig and
 so not moving with the skin) with the left camera's texture shot as their colour: 0.33-0.38
-clicked, 0.39-0.40 detected (both asserted; the detected 0.438-0.936 before its doubtful
+clicked, 0.39-0.40 detected (both asserted; 0.45-0.47 detected since 2026-12-07, below; the detected 0.438-0.936 before its doubtful
 detection's upper face was carried from the neutral, 2026-12-07); without the shot the benchmark
 measures 0.50-0.82 clicked and 0.43-0.90 detected. Detected since then: mesh 0.062, range 0.095,
 RGB-D 0.202-0.209. Since a doubtful detection's mouth is placed on the lips' colour edge

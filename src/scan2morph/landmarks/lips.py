@@ -26,16 +26,20 @@ OUTER = 12
 SAMPLES_PER_SEGMENT = 6
 #: The chroma's smoothing (Gaussian sigma) as a share of the mouth's width.
 SMOOTHING = 0.025
-#: The region searched about the detected mouth, as a share of its width on every side.
+#: The region searched about the detected mouth, as a share of its width on every side: the
+#: mouth's points stay within it.
 MARGIN = 0.6
 #: The search's steps (the shifts' as a share of the mouth's width, the stretches' as a factor),
 #: coarse to fine; at each, steps are taken while one improves the edge.
 STEPS = (0.08, 0.04, 0.02, 0.01)
 #: The stretch's bounds along the mouth's axis and across it.
 STRETCH = ((0.6, 1.5), (0.6, 1.6))
-#: Below this standard deviation of ``a*`` (8-bit levels) about the mouth the image has no
-#: colour to follow (a grey shading of a geometry-only scan): the points stay.
-MIN_CHROMA = 1.0
+#: Below this standard deviation of the smoothed ``a*`` about the mouth (8-bit levels) the image
+#: has no lips' colour to follow and the points stay: a grey shading of a geometry-only scan
+#: (0), or a colour camera's noise alone (0.2-0.6 levels once smoothed; raw, noise of 1.5 grey
+#: levels per channel exceeds 1). Lips give 4.8-5.7 on the real head's renders, 7.5 and more on
+#: the synthetic heads.
+MIN_CHROMA = 2.0
 
 
 @dataclass(frozen=True)
@@ -86,17 +90,29 @@ def outline(mouth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return samples, normals
 
 
+def _as_rgb8(roi: np.ndarray) -> np.ndarray:
+    """An RGB(A) region as 8-bit RGB: floats in [0, 1] and wider integers scaled to 0-255."""
+    rgb = roi[..., :3]
+    if rgb.dtype == np.uint8:
+        return np.ascontiguousarray(rgb)
+    values = rgb.astype(np.float64)
+    if np.issubdtype(rgb.dtype, np.integer):
+        values *= 255.0 / np.iinfo(rgb.dtype).max
+    elif np.nanmax(values, initial=0.0) <= 1.0:  # floats in [0, 1]; bool too
+        values *= 255.0
+    return np.clip(np.rint(np.nan_to_num(values)), 0, 255).astype(np.uint8)
+
+
 def _chroma_gradient(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: float):
     """The gradient (gx, gy) of the smoothed, standardised ``a*`` of ``color[lo:hi]`` (x, y px
-    bounds, inclusive); None where the region has no colour (:data:`MIN_CHROMA`)."""
-    roi = np.ascontiguousarray(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1, :3])
+    bounds, inclusive); None where the region has no lips' colour (:data:`MIN_CHROMA`)."""
+    roi = _as_rgb8(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1])
     chroma = cv2.cvtColor(roi, cv2.COLOR_RGB2LAB)[..., 1].astype(np.float32)
+    chroma = cv2.GaussianBlur(chroma, (0, 0), max(0.5, SMOOTHING * width))
     spread = float(chroma.std())
     if spread < MIN_CHROMA:
         return None
-    chroma = cv2.GaussianBlur(chroma, (0, 0), max(0.5, SMOOTHING * width))
-    chroma = (chroma - chroma.mean()) / max(float(chroma.std()), 1e-6)
-    gy, gx = np.gradient(chroma)
+    gy, gx = np.gradient((chroma - chroma.mean()) / spread)
     return gx, gy
 
 
@@ -105,8 +121,9 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
 
     Parameters
     ----------
-    color : (H, W, 3) uint8
-        The take's colour image (RGB) on its pixel grid; a grey (H, W) image is left as it is.
+    color : (H, W, 3) or (H, W, 4) array
+        The take's colour image (RGB, uint8; floats in [0, 1] and wider integers are scaled) on
+        its pixel grid; a grey image, (H, W) or (H, W, 1), keeps the points.
     points : (68, 2) float
         The detected iBUG-68 points, px (x right, y down).
 
@@ -123,7 +140,7 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
     same = LipFit(points, 0.0, 0.0, 0.0)
     axis = mouth[6] - mouth[0]
     width = float(np.linalg.norm(axis))
-    if color.ndim != 3 or not np.isfinite(mouth).all() or width < 4.0:
+    if color.ndim != 3 or color.shape[2] < 3 or not np.isfinite(mouth).all() or width < 4.0:
         return same
     size = np.array([color.shape[1] - 1, color.shape[0] - 1])
     lo = np.clip(np.floor(mouth.min(axis=0) - MARGIN * width), 0, size).astype(int)
@@ -138,6 +155,11 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
 
     def place(t: np.ndarray) -> np.ndarray:
         return centre + (local * t[2:] + t[:2]) @ frame
+
+    def inside(t: np.ndarray) -> bool:  # the stretch's bounds, the mouth within the region
+        shape = place(t)
+        stretch = all(a <= s <= b for s, (a, b) in zip(t[2:], STRETCH, strict=True))
+        return stretch and bool((shape >= lo).all() and (shape <= hi).all())
 
     def edge(t: np.ndarray) -> float:
         samples, normals = outline(place(t) - lo)
@@ -156,7 +178,7 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
                 for sign in (1.0, -1.0):
                     t = best.copy()
                     t[k] += sign * step * unit[k]
-                    if not all(a <= s <= b for s, (a, b) in zip(t[2:], STRETCH, strict=True)):
+                    if not inside(t):
                         continue
                     value = edge(t)
                     if value > score + 1e-9:

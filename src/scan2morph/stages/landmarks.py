@@ -13,7 +13,8 @@ takes, and its other points are followed from the neutral's by the skin's textur
 :func:`scan2morph.refine.flow.measure_flow`) where the correlation is confident and lands near
 the detection: the take's landmarks then move with its skin relative to the neutral's instead
 of scattering by the detector's error. A detection whose confidence is low is *doubtful*: the take is
-still used, with a warning at the top of the report and in ``accuracy.json``.
+still used, with a warning at the top of the report and in ``accuracy.json``, and its mouth is
+placed on the lips' colour edge (:func:`scan2morph.landmarks.fit_lips`) before the second pass.
 
 Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) and
 lifted onto the take's surface (``files["xyz"]``,
