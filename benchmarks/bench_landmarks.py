@@ -47,13 +47,18 @@ import numpy as np
 sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
 from scan2morph.align.carry import carry_stable  # noqa: E402
 from scan2morph.align.rigid import transform_points  # noqa: E402
-from scan2morph.landmarks import fit_lips  # noqa: E402
 from scan2morph.landmarks.canonical import canonical  # noqa: E402
 from scan2morph.landmarks.cascade import run  # noqa: E402
 from scan2morph.landmarks.detect import cached_model, detect, ensemble_shapes  # noqa: E402
 from scan2morph.landmarks.face import find_face  # noqa: E402
 from scan2morph.scan.view import shaded_image  # noqa: E402
-from scan2morph.stages.landmarks import DETECTED, Landmarks, Params, second_pass  # noqa: E402
+from scan2morph.stages.landmarks import (  # noqa: E402
+    DETECTED,
+    Landmarks,
+    Params,
+    lips_placed,
+    second_pass,
+)
 from scan2morph.stages.part import Take  # noqa: E402
 from scan2morph.store import paths  # noqa: E402
 from scan2morph.template.sample import range_pixels, sample_range  # noqa: E402
@@ -86,9 +91,8 @@ def cascade(color, xyz, source):
 def cascade_lips(color, xyz, source):
     """The detector, a doubtful detection's mouth on the lips' colour edge (the stage's rule)."""
     found = detect(color, xyz, source)
-    if np.median(found.confidence) >= Params().min_confidence:
-        return found.points
-    return fit_lips(color, found.points).points
+    detected = Landmarks(found.points, DETECTED, found.confidence)
+    return lips_placed(detected, color, Params())[0].points
 
 
 CANDIDATES = {

@@ -116,6 +116,26 @@ def _chroma_gradient(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: f
     return gx, gy
 
 
+def _ascend(value, start: np.ndarray, score: float, unit: np.ndarray) -> tuple[np.ndarray, float]:
+    """A coordinate ascent of ``value`` from ``start`` (whose value is ``score``): at each of
+    :data:`STEPS` (times ``unit``, per parameter) each parameter is stepped up and down, a step
+    taken whenever it raises the value, until none does. Returns the best parameters and their
+    value."""
+    best = start
+    for step in STEPS:
+        improved = True
+        while improved:
+            improved = False
+            for k in range(len(best)):
+                for sign in (1.0, -1.0):
+                    t = best.copy()
+                    t[k] += sign * step * unit[k]
+                    v = value(t)
+                    if v > score + 1e-9:
+                        best, score, improved = t, v, True
+    return best, score
+
+
 def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
     """Move the detected mouth onto the lips' colour edge.
 
@@ -156,33 +176,20 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
     def place(t: np.ndarray) -> np.ndarray:
         return centre + (local * t[2:] + t[:2]) @ frame
 
-    def inside(t: np.ndarray) -> bool:  # the stretch's bounds, the mouth within the region
-        shape = place(t)
-        stretch = all(a <= s <= b for s, (a, b) in zip(t[2:], STRETCH, strict=True))
-        return stretch and bool((shape >= lo).all() and (shape <= hi).all())
-
-    def edge(t: np.ndarray) -> float:
-        samples, normals = outline(place(t) - lo)
+    def edge(shape: np.ndarray) -> float:
+        samples, normals = outline(shape - lo)
         at = [samples[:, 1], samples[:, 0]]
         g = np.stack([map_coordinates(c, at, order=1, mode="nearest") for c in gradient], axis=1)
         return -float(np.mean(np.einsum("ij,ij->i", g, normals))) * width
 
-    best = np.array([0.0, 0.0, 1.0, 1.0])
-    before = score = edge(best)
-    unit = np.array([width, width, 1.0, 1.0])
-    for step in STEPS:
-        improved = True
-        while improved:
-            improved = False
-            for k in range(4):
-                for sign in (1.0, -1.0):
-                    t = best.copy()
-                    t[k] += sign * step * unit[k]
-                    if not inside(t):
-                        continue
-                    value = edge(t)
-                    if value > score + 1e-9:
-                        best, score, improved = t, value, True
+    def value(t: np.ndarray) -> float:  # -inf beyond the stretch's bounds or the region
+        shape = place(t)
+        stretched = all(a <= s <= b for s, (a, b) in zip(t[2:], STRETCH, strict=True))
+        return edge(shape) if stretched and (shape >= lo).all() and (shape <= hi).all() else -np.inf
+
+    start = np.array([0.0, 0.0, 1.0, 1.0])
+    before = edge(place(start))
+    best, score = _ascend(value, start, before, np.array([width, width, 1.0, 1.0]))
     out = points.copy()
     out[MOUTH] = place(best)
     moved = float(np.median(np.linalg.norm(out[MOUTH] - mouth, axis=1)))

@@ -295,11 +295,9 @@ def run(template, take: Take, params: Params) -> Part:
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
         detected = found.points
-    if params.lips_from_colour and found.doubtful(params.min_confidence):
-        from scan2morph.landmarks import fit_lips
-
-        lips = fit_lips(np.asarray(color), found.points)  # the mouth onto the lips' colour edge
-        found, attrs["landmarks_lips_moved_px"] = replace(found, points=lips.points), lips.moved_px
+    found, moved = lips_placed(found, color, params)
+    if moved is not None:
+        attrs["landmarks_lips_moved_px"] = moved
     if detected is not None:
         found, carried = second_pass(found, take, (xyz, color), params, template)
         attrs |= carried
@@ -327,6 +325,18 @@ def run(template, take: Take, params: Params) -> Part:
         attrs={paths.take(t): attrs | {"nose_depth_mm": nose_depth}},
         files={"pts": found.points, "xyz": written_points(xyz, take, found.points)},
     )
+
+
+def lips_placed(found: Landmarks, color: np.ndarray, params: Params):
+    """A doubtful detection (``params.min_confidence``) with its mouth on the lips' colour edge
+    (:func:`scan2morph.landmarks.fit_lips`, with ``params.lips_from_colour``), and how far the
+    mouth moved (median over its 20 points, px); other landmarks as they are, and None."""
+    if not (params.lips_from_colour and found.doubtful(params.min_confidence)):
+        return found, None
+    from scan2morph.landmarks import fit_lips
+
+    lips = fit_lips(np.asarray(color), found.points)
+    return replace(found, points=lips.points), lips.moved_px
 
 
 def second_pass(
@@ -527,6 +537,7 @@ __all__ = [
     "JAWLINE_DETECTED",
     "Landmarks",
     "Params",
+    "lips_placed",
     "run",
     "second_pass",
     "settle",
