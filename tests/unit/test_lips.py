@@ -82,6 +82,34 @@ def test_a_misplaced_mouth_goes_onto_the_drawn_lips(roll_deg):
     np.testing.assert_array_equal(fit.points[:48], start[:48])
 
 
+@pytest.mark.parametrize("offset", [(0.0, 30.0), (-24.0, 24.0)])
+def test_a_mouth_far_off_its_lips_is_found_from_the_grid(offset):
+    """A mouth its height (30 px) below its lips, or 24 px to the side and below, sees no edge
+    it can climb from where it is (from the detection alone the search ends 37 and 54 px off;
+    the real stereo rig's smile, its detected mouth 10 px low, 8.4 px off the annotation): the
+    search from the grid's best place finds the lips."""
+    image, truth = _face()
+    start = truth.copy()
+    start[MOUTH] += offset
+    fit = fit_lips(image, start)
+    after = np.linalg.norm(fit.points[MOUTH] - truth[MOUTH], axis=1)
+    print(f"\noffset {offset}: mouth {np.linalg.norm(offset):.1f} -> {np.median(after):.2f} px")
+    assert np.median(after) < 1.0
+
+
+@pytest.mark.parametrize("off", [1, 4, 6])
+def test_a_mouth_cut_by_the_image_edge_keeps_its_place(off):
+    """A mouth on its lips whose corner lies ``off`` px beyond the image's left edge: the search
+    from the detection starts from its own edge, so no place whose edge is lower wins (scored
+    from the grid's value, which refuses any place off the region, it went 1.7-3.2 px off)."""
+    image, truth = _face()
+    x0 = int(np.floor(truth[48, 0])) + off  # the corner, iBUG 49, at x = -off
+    cut, start = np.ascontiguousarray(image[:, x0:]), truth - [x0, 0.0]
+    fit = fit_lips(cut, start)
+    np.testing.assert_array_equal(fit.points, start)
+    assert fit.edge_after == fit.edge_before
+
+
 def test_a_mouth_on_its_lips_stays_within_a_pixel():
     image, truth = _face()
     fit = fit_lips(image, truth)

@@ -18,6 +18,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
+from scan2morph.landmarks.image_fit import as_rgb8, ascend
+
 #: The mouth's points in iBUG-68 order (0-based): the outer contour (12), then the inner (8).
 MOUTH = slice(48, 68)
 #: The outer contour's points within :data:`MOUTH`, in order around the lips.
@@ -32,6 +34,10 @@ MARGIN = 0.6
 #: The search's steps (the shifts' as a share of the mouth's width, the stretches' as a factor),
 #: coarse to fine; at each, steps are taken while one improves the edge.
 STEPS = (0.08, 0.04, 0.02, 0.01)
+#: The coarse grid of shifts the search also starts from (the best of): steps of this share of
+#: the mouth's width, along the mouth and across it, up to :data:`GRID_REACH` either way.
+GRID = 0.1
+GRID_REACH = 0.3
 #: The stretch's bounds along the mouth's axis and across it.
 STRETCH = ((0.6, 1.5), (0.6, 1.6))
 #: Below this standard deviation of the smoothed ``a*`` about the mouth (8-bit levels) the image
@@ -90,23 +96,10 @@ def outline(mouth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return samples, normals
 
 
-def _as_rgb8(roi: np.ndarray) -> np.ndarray:
-    """An RGB(A) region as 8-bit RGB: floats in [0, 1] and wider integers scaled to 0-255."""
-    rgb = roi[..., :3]
-    if rgb.dtype == np.uint8:
-        return np.ascontiguousarray(rgb)
-    values = rgb.astype(np.float64)
-    if np.issubdtype(rgb.dtype, np.integer):
-        values *= 255.0 / np.iinfo(rgb.dtype).max
-    elif np.nanmax(values, initial=0.0) <= 1.0:  # floats in [0, 1]; bool too
-        values *= 255.0
-    return np.clip(np.rint(np.nan_to_num(values)), 0, 255).astype(np.uint8)
-
-
 def _chroma_gradient(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: float):
     """The gradient (gx, gy) of the smoothed, standardised ``a*`` of ``color[lo:hi]`` (x, y px
     bounds, inclusive); None where the region has no lips' colour (:data:`MIN_CHROMA`)."""
-    roi = _as_rgb8(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1])
+    roi = as_rgb8(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1])
     chroma = cv2.cvtColor(roi, cv2.COLOR_RGB2LAB)[..., 1].astype(np.float32)
     chroma = cv2.GaussianBlur(chroma, (0, 0), max(0.5, SMOOTHING * width))
     spread = float(chroma.std())
@@ -114,26 +107,6 @@ def _chroma_gradient(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: f
         return None
     gy, gx = np.gradient((chroma - chroma.mean()) / spread)
     return gx, gy
-
-
-def _ascend(value, start: np.ndarray, score: float, unit: np.ndarray) -> tuple[np.ndarray, float]:
-    """A coordinate ascent of ``value`` from ``start`` (whose value is ``score``): at each of
-    :data:`STEPS` (times ``unit``, per parameter) each parameter is stepped up and down, a step
-    taken whenever it raises the value, until none does. Returns the best parameters and their
-    value."""
-    best = start
-    for step in STEPS:
-        improved = True
-        while improved:
-            improved = False
-            for k in range(len(best)):
-                for sign in (1.0, -1.0):
-                    t = best.copy()
-                    t[k] += sign * step * unit[k]
-                    v = value(t)
-                    if v > score + 1e-9:
-                        best, score, improved = t, v, True
-    return best, score
 
 
 def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
@@ -152,8 +125,11 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
     LipFit
         The points with the mouth shifted (along the mouth's axis through its corners, iBUG 49
         and 55, and across it) and stretched along both (0.6-1.5 along, 0.6-1.6 across) to
-        where its outer contour meets the strongest mean outward fall of ``a*``; a coordinate
-        search from the detected place, each step a share of the mouth's width (:data:`STEPS`).
+        where its outer contour meets the strongest mean outward fall of ``a*``: coordinate
+        searches, each step a share of the mouth's width (:data:`STEPS`), from the detected
+        place and, when the best of a grid of shifts (:data:`GRID`, up to :data:`GRID_REACH` of
+        the width either way) lies higher than where that search ends, from there too, the
+        higher end kept: never below the detection's own edge.
     """
     points = np.asarray(points, dtype=np.float64)
     mouth = points[MOUTH]
@@ -189,7 +165,20 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
 
     start = np.array([0.0, 0.0, 1.0, 1.0])
     before = edge(place(start))
-    best, score = _ascend(value, start, before, np.array([width, width, 1.0, 1.0]))
+    # a detection far off the lips (a smiling mouth 10 px low) sees no edge from where it is: the
+    # search also starts from the best of a coarse grid of shifts, and the higher end wins
+    shifts = GRID * np.arange(-round(GRID_REACH / GRID), round(GRID_REACH / GRID) + 1) * width
+    grid = [np.array([x, y, 1.0, 1.0]) for x in shifts for y in shifts]
+    scores = [value(t) for t in grid]
+    unit = np.array([width, width, 1.0, 1.0])
+    # from the detection as before the grid: its own edge (also when a point lies off the
+    # region, where the search's value is -inf), so that the answer is never below it
+    best, score = ascend(value, start, before, unit, STEPS)
+    k = int(np.argmax(scores))
+    if scores[k] > score + 1e-9:  # the grid's best place lies higher than that end: climb it
+        found, value_found = ascend(value, grid[k], scores[k], unit, STEPS)
+        if value_found > score + 1e-9:
+            best, score = found, value_found
     out = points.copy()
     out[MOUTH] = place(best)
     moved = float(np.median(np.linalg.norm(out[MOUTH] - mouth, axis=1)))

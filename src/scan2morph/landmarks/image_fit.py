@@ -1,0 +1,56 @@
+"""What the image fits of a doubtful detection's features share (:mod:`scan2morph.landmarks.lips`,
+:mod:`scan2morph.landmarks.brows`): a colour region as 8-bit RGB, and the coordinate search."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+
+def as_rgb8(roi: np.ndarray) -> np.ndarray:
+    """An RGB(A) region (..., 3 or 4) as 8-bit RGB: floats in [0, 1] and wider integers scaled to
+    0-255, NaN as 0."""
+    rgb = roi[..., :3]
+    if rgb.dtype == np.uint8:
+        return np.ascontiguousarray(rgb)
+    values = rgb.astype(np.float64)
+    if np.issubdtype(rgb.dtype, np.integer):
+        values *= 255.0 / np.iinfo(rgb.dtype).max
+    elif np.nanmax(values, initial=0.0) <= 1.0:  # floats in [0, 1]; bool too
+        values *= 255.0
+    return np.clip(np.rint(np.nan_to_num(values)), 0, 255).astype(np.uint8)
+
+
+def ascend(
+    value: Callable[[np.ndarray], float],
+    start: np.ndarray,
+    score: float,
+    unit: np.ndarray,
+    steps: Sequence[float],
+) -> tuple[np.ndarray, float]:
+    """A coordinate ascent of ``value`` from ``start`` (whose value is ``score``).
+
+    At each of ``steps`` (times ``unit``, per parameter), coarse to fine, each parameter is
+    stepped up and down, a step taken whenever it raises the value, until none does.
+
+    Returns
+    -------
+    best : (P,) float64
+        The parameters found.
+    score : float
+        Their value.
+    """
+    best = np.asarray(start, dtype=np.float64)
+    for step in steps:
+        improved = True
+        while improved:
+            improved = False
+            for k in range(len(best)):
+                for sign in (1.0, -1.0):
+                    t = best.copy()
+                    t[k] += sign * step * unit[k]
+                    v = value(t)
+                    if v > score + 1e-9:
+                        best, score, improved = t, v, True
+    return best, score
