@@ -10,7 +10,9 @@ Candidates (scan2morph.landmarks):
   :func:`scan2morph.landmarks.detect`);
 * ``+lips (doubtful)``: the detector, and a doubtful detection's mouth (median confidence below
   the landmarks stage's ``min_confidence``) placed on the lips' colour edge
-  (:func:`scan2morph.landmarks.fit_lips`), as the landmarks stage places it.
+  (:func:`scan2morph.landmarks.fit_lips`);
+* ``+lips+brows (doubtful)``: and its brows on the eyebrows' dark bands
+  (:func:`scan2morph.landmarks.fit_brows`), as the landmarks stage places them.
 
 Takes: every take of the default synthetic cohort (config/config.yaml: seed 2009, held out from
 training) after the ingest and repair stages, per modality; and range renders of the real head
@@ -56,7 +58,7 @@ from scan2morph.stages.landmarks import (  # noqa: E402
     DETECTED,
     Landmarks,
     Params,
-    lips_placed,
+    features_placed,
     second_pass,
 )
 from scan2morph.stages.part import Take  # noqa: E402
@@ -88,11 +90,21 @@ def cascade(color, xyz, source):
     return detect(color, xyz, source).points
 
 
-def cascade_lips(color, xyz, source):
-    """The detector, a doubtful detection's mouth on the lips' colour edge (the stage's rule)."""
+def _features(color, xyz, source, brows: bool):
+    """The detector and the stage's rule for a doubtful detection's mouth, and its brows."""
     found = detect(color, xyz, source)
     detected = Landmarks(found.points, DETECTED, found.confidence)
-    return lips_placed(detected, color, Params())[0].points
+    return features_placed(detected, color, Params(brows_from_colour=brows))[0].points
+
+
+def cascade_lips(color, xyz, source):
+    """The detector, a doubtful detection's mouth on the lips' colour edge."""
+    return _features(color, xyz, source, brows=False)
+
+
+def cascade_features(color, xyz, source):
+    """The detector, a doubtful detection's mouth and brows placed (the stage's rule)."""
+    return _features(color, xyz, source, brows=True)
 
 
 CANDIDATES = {
@@ -101,9 +113,10 @@ CANDIDATES = {
     "cascade-7": cascade_frame_only,
     "cascade-7+mirror": cascade,
     "+lips (doubtful)": cascade_lips,
+    "+lips+brows (doubtful)": cascade_features,
 }
 #: The candidates whose median per region is printed.
-REGION_CANDIDATES = ("cascade-7+mirror", "+lips (doubtful)")
+REGION_CANDIDATES = ("cascade-7+mirror", "+lips (doubtful)", "+lips+brows (doubtful)")
 
 
 def load_takes(cache: Path | None) -> list[GridTake]:

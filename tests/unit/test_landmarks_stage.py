@@ -352,24 +352,39 @@ def test_a_doubtful_detection_beside_a_given_neutral_says_it_follows_the_neutral
     assert said["s"].endswith("there the take's own detection error is taken up")
 
 
+def _misplaced_features(clicks: np.ndarray) -> np.ndarray:
+    """The car's clicks (0.5 px off the truth) with the mouth too wide and low and the brows
+    6 px (8 mm) too high, as the detector puts a real face's."""
+    start = clicks.copy()
+    centre = start[48:].mean(axis=0)
+    start[48:] = centre + (start[48:] - centre) * [1.3, 1.0] + [0.0, 3.0]
+    start[17:27, 1] -= 6.0
+    return start
+
+
 @pytest.mark.parametrize(
-    ("confidence", "config", "moves"),
-    [(0.2, {}, True), (0.9, {}, False), (0.2, {"lips_from_colour": False}, False)],
+    ("confidence", "config", "lips", "brows"),
+    [
+        (0.2, {}, True, True),
+        (0.9, {}, False, False),
+        (0.2, {"lips_from_colour": False}, False, True),
+        (0.2, {"brows_from_colour": False}, True, False),
+    ],
 )
-def test_a_doubtful_detections_mouth_goes_onto_the_lips(
-    car, monkeypatch, confidence, config, moves
+def test_a_doubtful_detections_mouth_and_brows_go_onto_the_face(
+    car, monkeypatch, confidence, config, lips, brows
 ):
     """A doubtful detection (median confidence below ``min_confidence``) has its mouth placed on
-    the lips' colour edge (scan2morph.landmarks.fit_lips), a sure one keeps the detector's,
-    and ``landmarks.lips_from_colour: false`` keeps every detection's."""
+    the lips' colour edge (scan2morph.landmarks.fit_lips) and its brows on the eyebrows' bands
+    (scan2morph.landmarks.fit_brows), a sure one keeps the detector's, and
+    ``landmarks.lips_from_colour: false`` / ``brows_from_colour: false`` keep every detection's
+    mouth / brows."""
     r = car
     data = {
         paths.range_image("car", "xyz"): r["xyz"],
         paths.range_image("car", "color"): r["color"],
     }
-    start = r["landmarks"].copy()  # the car's clicks, 0.5 px off the truth
-    centre = start[48:].mean(axis=0)
-    start[48:] = centre + (start[48:] - centre) * [1.3, 1.0] + [0.0, 3.0]  # too wide and low
+    start = _misplaced_features(r["landmarks"])
     found = landmarks.Landmarks(start, landmarks.DETECTED, np.full(68, confidence), "d", "1")
     monkeypatch.setattr(landmarks, "settle", lambda *a: found)
     take = Take("s1", "car", "viseme", "car", "car", data)  # its own neutral: no second pass
@@ -377,31 +392,35 @@ def test_a_doubtful_detections_mouth_goes_onto_the_lips(
     part = landmarks.run(None, take, params)
     got = part.datasets[paths.landmarks("car")]
     attrs = part.attrs[paths.take("car")]
-    np.testing.assert_array_equal(got[:48], start[:48])
-    before = np.median(np.linalg.norm(start[48:] - r["landmarks"][48:], axis=1))
-    after = np.median(np.linalg.norm(got[48:] - r["landmarks"][48:], axis=1))
-    if moves:
-        print(f"\ncar's mouth {before:.2f} -> {after:.2f} px from its clicks")
-        assert after < 1.5 < 3.0 < before
-        assert attrs["landmarks_lips_moved_px"] > 2.0
-    else:
-        np.testing.assert_array_equal(got, start)
-        assert "landmarks_lips_moved_px" not in attrs
+    np.testing.assert_array_equal(got[:17], start[:17])
+    np.testing.assert_array_equal(got[27:48], start[27:48])
+    # the synthetic brow clicks lie 1 mm (0.7 px here) above the band's middle, where the fit
+    # puts them, and carry 0.5 px of click noise
+    features = (("lips", slice(48, 68), lips, 1.5), ("brows", slice(17, 27), brows, 2.0))
+    for name, span, moves, bound in features:
+        before = np.median(np.linalg.norm(start[span] - r["landmarks"][span], axis=1))
+        after = np.median(np.linalg.norm(got[span] - r["landmarks"][span], axis=1))
+        key = f"landmarks_{name}_moved_px"
+        if moves:
+            print(f"\ncar's {name} {before:.2f} -> {after:.2f} px from its clicks")
+            assert after < bound < 3.0 < before
+            assert attrs[key] > 2.0
+        else:
+            np.testing.assert_array_equal(got[span], start[span])
+            assert key not in attrs
 
 
-@pytest.mark.parametrize("lips", [True, False])
-def test_a_doubtful_takes_lips_step_comes_before_its_second_pass(car, monkeypatch, lips):
+@pytest.mark.parametrize("placed", [True, False])
+def test_a_doubtful_takes_features_are_placed_before_its_second_pass(car, monkeypatch, placed):
     """A doubtful take other than the neutral: the second pass starts from its mouth on the lips
-    (off: from the detector's points), ``landmark_detected`` keeps the detector's own points,
-    and the attributes hold both steps'."""
+    and its brows on the eyebrows (off: from the detector's points), ``landmark_detected`` keeps
+    the detector's own points, and the attributes hold every step's."""
     r = car
     data = {
         paths.range_image("car", "xyz"): r["xyz"],
         paths.range_image("car", "color"): r["color"],
     }
-    start = r["landmarks"].copy()
-    centre = start[48:].mean(axis=0)
-    start[48:] = centre + (start[48:] - centre) * [1.3, 1.0] + [0.0, 3.0]
+    start = _misplaced_features(r["landmarks"])
     found = landmarks.Landmarks(start, landmarks.DETECTED, np.full(68, 0.2), "d", "1")
     seen = {}
 
@@ -412,15 +431,18 @@ def test_a_doubtful_takes_lips_step_comes_before_its_second_pass(car, monkeypatc
     monkeypatch.setattr(landmarks, "settle", lambda *a: found)
     monkeypatch.setattr(landmarks, "second_pass", second_pass)
     take = Take("s1", "car", "viseme", "car", "neutral", data)
-    params = landmarks.Params.from_config({"landmarks": {"lips_from_colour": lips}})
+    config = {"lips_from_colour": placed, "brows_from_colour": placed}
+    params = landmarks.Params.from_config({"landmarks": config})
     part = landmarks.run(None, take, params)
     np.testing.assert_array_equal(part.datasets[paths.landmark_detected("car")], start)
     attrs = part.attrs[paths.take("car")]
     assert attrs["landmarks_tracked"] == 7
     moved = np.linalg.norm(seen["points"] - start, axis=1)
-    if lips:
+    if placed:
         assert np.median(moved[48:]) == pytest.approx(attrs["landmarks_lips_moved_px"])
-        assert attrs["landmarks_lips_moved_px"] > 2.0
-        assert not moved[:48].any()
+        assert np.median(moved[17:27]) == pytest.approx(attrs["landmarks_brows_moved_px"])
+        assert attrs["landmarks_lips_moved_px"] > 2.0 and attrs["landmarks_brows_moved_px"] > 2.0
+        assert not moved[:17].any() and not moved[27:48].any()
     else:
-        assert not moved.any() and "landmarks_lips_moved_px" not in attrs
+        assert not moved.any()
+        assert not {"landmarks_lips_moved_px", "landmarks_brows_moved_px"} & set(attrs)

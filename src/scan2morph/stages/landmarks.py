@@ -14,7 +14,8 @@ takes, and its other points are followed from the neutral's by the skin's textur
 the detection: the take's landmarks then move with its skin relative to the neutral's instead
 of scattering by the detector's error. A detection whose confidence is low is *doubtful*: the take is
 still used, with a warning at the top of the report and in ``accuracy.json``, and its mouth is
-placed on the lips' colour edge (:func:`scan2morph.landmarks.fit_lips`) before the second pass.
+placed on the lips' colour edge (:func:`scan2morph.landmarks.fit_lips`) and its brows on the
+eyebrows' dark bands (:func:`scan2morph.landmarks.fit_brows`) before the second pass.
 
 Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) and
 lifted onto the take's surface (``files["xyz"]``,
@@ -93,6 +94,9 @@ class Params:
     lips_from_colour : bool
         Whether a doubtful detection's mouth is placed on the lips' colour edge
         (:func:`scan2morph.landmarks.fit_lips`).
+    brows_from_colour : bool
+        Whether a doubtful detection's brows are placed on the eyebrows' dark bands
+        (:func:`scan2morph.landmarks.fit_brows`).
     fit : scan2morph.stages.fit.Params or None
         The fit's parameters the fold test follows (config section ``template``: its fiducial
         sets, rim share, subdivisions and fold limit); None: no test (also with ``unfold`` or
@@ -109,6 +113,7 @@ class Params:
     turned_view_deg: float | None = None
     unfold: bool = True
     lips_from_colour: bool = True
+    brows_from_colour: bool = True
     fit: fit_stage.Params | None = None
 
     @classmethod
@@ -128,6 +133,7 @@ class Params:
             turned_view_deg=None if turned is None else float(turned),
             unfold=bool(section.get("unfold", cls.unfold)),
             lips_from_colour=bool(section.get("lips_from_colour", cls.lips_from_colour)),
+            brows_from_colour=bool(section.get("brows_from_colour", cls.brows_from_colour)),
             fit=_fold_rules(config, section),
         )
 
@@ -278,7 +284,9 @@ def run(template, take: Take, params: Params) -> Part:
         px, the detector's points before its lips' step and the second pass
         (:func:`second_pass`); the take group's ``nose_depth_mm``
         (:func:`~scan2morph.io.check_handedness`) and, for a doubtful detection placed on the
-        lips' colour edge (``params.lips_from_colour``), ``landmarks_lips_moved_px``;
+        lips' colour edge (``params.lips_from_colour``), ``landmarks_lips_moved_px``, and
+        with its brows on the eyebrows (``params.brows_from_colour``),
+        ``landmarks_brows_moved_px``;
         ``files["pts"]`` the points for the ``.pts`` file, ``files["xyz"]`` (68, 3) mm the
         same points on the take's measured surface
         (:func:`~scan2morph.stages.landmark_files.written_points`: a mesh take's lie
@@ -295,9 +303,7 @@ def run(template, take: Take, params: Params) -> Part:
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
         detected = found.points
-    found, moved = lips_placed(found, color, params)
-    if moved is not None:
-        attrs["landmarks_lips_moved_px"] = moved
+    found, attrs = features_placed(found, color, params)
     if detected is not None:
         found, carried = second_pass(found, take, (xyz, color), params, template)
         attrs |= carried
@@ -327,16 +333,32 @@ def run(template, take: Take, params: Params) -> Part:
     )
 
 
-def lips_placed(found: Landmarks, color: np.ndarray, params: Params):
+def features_placed(found: Landmarks, color: np.ndarray, params: Params):
     """A doubtful detection (``params.min_confidence``) with its mouth on the lips' colour edge
-    (:func:`scan2morph.landmarks.fit_lips`, with ``params.lips_from_colour``), and how far the
-    mouth moved (median over its 20 points, px); other landmarks as they are, and None."""
-    if not (params.lips_from_colour and found.doubtful(params.min_confidence)):
-        return found, None
-    from scan2morph.landmarks import fit_lips
+    (:func:`scan2morph.landmarks.fit_lips`, with ``params.lips_from_colour``) and its brows on
+    the eyebrows' dark bands (:func:`scan2morph.landmarks.fit_brows`, with
+    ``params.brows_from_colour``); other detections as they are.
 
-    lips = fit_lips(np.asarray(color), found.points)
-    return replace(found, points=lips.points), lips.moved_px
+    Returns
+    -------
+    found : Landmarks
+    attrs : dict
+        How far the features moved (median over their points, px):
+        ``landmarks_lips_moved_px``, ``landmarks_brows_moved_px``, for each step taken.
+    """
+    if not found.doubtful(params.min_confidence):
+        return found, {}
+    from scan2morph.landmarks import fit_brows, fit_lips
+
+    steps = [("lips", params.lips_from_colour, fit_lips)]
+    steps.append(("brows", params.brows_from_colour, fit_brows))
+    attrs = {}
+    for name, wanted, fit in steps:
+        if wanted:
+            placed = fit(np.asarray(color), found.points)
+            found = replace(found, points=placed.points)
+            attrs[f"landmarks_{name}_moved_px"] = placed.moved_px
+    return found, attrs
 
 
 def second_pass(
@@ -537,7 +559,7 @@ __all__ = [
     "JAWLINE_DETECTED",
     "Landmarks",
     "Params",
-    "lips_placed",
+    "features_placed",
     "run",
     "second_pass",
     "settle",
