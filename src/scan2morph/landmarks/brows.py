@@ -21,10 +21,12 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from scan2morph.landmarks.image_fit import as_rgb8, ascend
+from scan2morph.landmarks.image_fit import ascend, lab_channel, region
 
-#: Each brow's points in iBUG-68 order (0-based): the right brow (the image's left), the left.
+#: Each brow's points in iBUG-68 order (0-based): the right brow (the image's left), the left;
+#: and both.
 BROWS = (slice(17, 22), slice(22, 27))
+SPAN = slice(17, 27)
 #: Samples along a brow's curve (and along the detected polyline, for the contrast before).
 SAMPLES = 24
 #: The luminance's smoothing (Gaussian sigma) as a share of the brow's chord (about 1.5 mm).
@@ -67,6 +69,8 @@ MIN_SIGNAL = 3.2
 #: is flat, a colour camera's noise alone (0.1-0.3 levels once smoothed), and the points stay;
 #: faces give 25-60 (the real head's renders and the synthetic takes).
 MIN_SPREAD = 2.0
+#: Where a curve is sampled: shares of its chord.
+_ALONG = np.linspace(0.0, 1.0, SAMPLES)
 
 
 @dataclass(frozen=True)
@@ -96,10 +100,9 @@ def _luminance(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, chord: float):
     """The smoothed, standardised ``L*`` of ``color[lo:hi]`` (x, y px bounds, inclusive), and
     the standard deviation of the texture finer than the smoothing in the same units; None for
     a grey image or a flat one (:data:`MIN_SPREAD`)."""
-    roi = as_rgb8(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1])
-    if np.ptp(roi.astype(np.int16), axis=2).max(initial=0) == 0:  # grey: no hair to see
+    raw = lab_channel(color, lo, hi, 0)
+    if raw is None:  # grey: no hair to see
         return None
-    raw = cv2.cvtColor(roi, cv2.COLOR_RGB2LAB)[..., 0].astype(np.float32)
     light = cv2.GaussianBlur(raw, (0, 0), max(0.5, SMOOTHING * chord))
     spread = float(light.std())
     if spread < MIN_SPREAD:
@@ -120,10 +123,6 @@ class _Brow:
         self.u = along / self.chord
         # across the chord, pointing up the image (y falling)
         self.up = np.array([self.u[1], -self.u[0]]) * (1.0 if self.u[0] >= 0 else -1.0)
-        # the points' places along the chord, shares of it: evenly spaced, as iBUG spaces
-        # them (the detected spacing of a misplaced brow is no better: 4.8 against 4.6 px on
-        # the real head's renders)
-        self.at = np.linspace(0.0, 1.0, len(brow))
 
     def curve(self, t: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(len(s), 2) px: the points at shares ``s`` of the chord of the curve whose ends are
@@ -155,7 +154,7 @@ class _Brow:
         """The contrast of the curve ``t``; -inf beyond :data:`REACH`."""
         if np.abs(t).max() > REACH * self.chord:
             return -np.inf
-        return self.contrast(self.curve(t, np.linspace(0.0, 1.0, SAMPLES)))
+        return self.contrast(self.curve(t, _ALONG))
 
     def fit(self) -> tuple[np.ndarray, float, float]:
         """The brow's points on its band (as detected when no band stands out), and the
@@ -177,7 +176,9 @@ class _Brow:
         best, after = ascend(self.value, start, max(scores), np.full(3, self.chord), STEPS)
         if not after > before:  # the detection lies on the band already, or none is seen
             return self.brow, before, before
-        return self.curve(best, self.at), before, after
+        # the points evenly spaced along the chord, as iBUG spaces them (the detected spacing
+        # of a misplaced brow is no better: 4.8 against 4.6 px on the real head's renders)
+        return self.curve(best, np.linspace(0.0, 1.0, len(self.brow))), before, after
 
 
 def fit_brows(color: np.ndarray, points: np.ndarray) -> BrowFit:
@@ -206,26 +207,18 @@ def fit_brows(color: np.ndarray, points: np.ndarray) -> BrowFit:
     brows = [points[s] for s in BROWS]
     chords = [float(np.linalg.norm(b[-1] - b[0])) for b in brows]
     same = BrowFit(points, 0.0, np.zeros(2), np.zeros(2))  # nothing measured
-    if (
-        color.ndim != 3
-        or color.shape[2] < 3
-        or not np.isfinite(points[BROWS[0].start : BROWS[1].stop]).all()
-    ):
+    if color.ndim != 3 or color.shape[2] < 3 or not np.isfinite(points[SPAN]).all():
         return same
     if min(chords) < 8.0:
         return same
-    size = np.array([color.shape[1] - 1, color.shape[0] - 1])
     # every curve (its ends and its arch each up to REACH: 2 REACH off the chord at most) and
     # what it reads beside it, within the image
-    reach = (2.0 * REACH + BESIDE) * max(chords)
-    both = np.concatenate(brows)
-    lo = np.clip(np.floor(both.min(axis=0) - reach), 0, size).astype(int)
-    hi = np.clip(np.ceil(both.max(axis=0) + reach), 0, size).astype(int)
-    seen = None if (hi - lo < 8).any() else _luminance(color, lo, hi, float(np.mean(chords)))
+    box = region(points[SPAN], (2.0 * REACH + BESIDE) * max(chords), color.shape)
+    seen = None if box is None else _luminance(color, *box, float(np.mean(chords)))
     if seen is None:
         return same
     light, texture = seen
-    fits = [_Brow(brow, light, (lo, hi), max(chords)).fit() for brow in brows]
+    fits = [_Brow(brow, light, box, max(chords)).fit() for brow in brows]
     before, after = np.array([f[1] for f in fits]), np.array([f[2] for f in fits])
     # a brow without its band, or bands no darker than the image's fine texture varies (a
     # projected speckle): the pair stays
@@ -234,6 +227,5 @@ def fit_brows(color: np.ndarray, points: np.ndarray) -> BrowFit:
     out = points.copy()
     for s, fit in zip(BROWS, fits, strict=True):
         out[s] = fit[0]
-    span = slice(BROWS[0].start, BROWS[1].stop)
-    moved = float(np.median(np.linalg.norm(out[span] - points[span], axis=1)))
+    moved = float(np.median(np.linalg.norm(out[SPAN] - points[SPAN], axis=1)))
     return BrowFit(out, moved, before, after)

@@ -1,10 +1,12 @@
 """What the image fits of a doubtful detection's features share (:mod:`scan2morph.landmarks.lips`,
-:mod:`scan2morph.landmarks.brows`): a colour region as 8-bit RGB, and the coordinate search."""
+:mod:`scan2morph.landmarks.brows`): the region read about the feature, a CIELAB channel of it,
+and the coordinate search."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+import cv2
 import numpy as np
 
 
@@ -20,6 +22,27 @@ def as_rgb8(roi: np.ndarray) -> np.ndarray:
     elif np.nanmax(values, initial=0.0) <= 1.0:  # floats in [0, 1]; bool too
         values *= 255.0
     return np.clip(np.rint(np.nan_to_num(values)), 0, 255).astype(np.uint8)
+
+
+def region(
+    points: np.ndarray, margin: float, shape: tuple[int, ...]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box about ``points`` (n, 2) px, ``margin`` px wider on every side, within an image of
+    ``shape`` (H, W, ...): its (x, y) bounds ``lo``, ``hi`` (int, inclusive); None when it is
+    less than 8 px wide or high."""
+    size = np.array([shape[1] - 1, shape[0] - 1])
+    lo = np.clip(np.floor(points.min(axis=0) - margin), 0, size).astype(int)
+    hi = np.clip(np.ceil(points.max(axis=0) + margin), 0, size).astype(int)
+    return None if (hi - lo < 8).any() else (lo, hi)
+
+
+def lab_channel(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, channel: int):
+    """CIELAB channel ``channel`` (0: ``L*``, 1: ``a*``) of ``color[lo:hi]`` (x, y px bounds,
+    inclusive; 8-bit levels, float32); None for a grey region (every channel equal)."""
+    roi = as_rgb8(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1])
+    if np.ptp(roi.astype(np.int16), axis=2).max(initial=0) == 0:
+        return None
+    return cv2.cvtColor(roi, cv2.COLOR_RGB2LAB)[..., channel].astype(np.float32)
 
 
 def ascend(

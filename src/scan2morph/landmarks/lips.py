@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from scan2morph.landmarks.image_fit import as_rgb8, ascend
+from scan2morph.landmarks.image_fit import ascend, lab_channel, region
 
 #: The mouth's points in iBUG-68 order (0-based): the outer contour (12), then the inner (8).
 MOUTH = slice(48, 68)
@@ -99,8 +99,9 @@ def outline(mouth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _chroma_gradient(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: float):
     """The gradient (gx, gy) of the smoothed, standardised ``a*`` of ``color[lo:hi]`` (x, y px
     bounds, inclusive); None where the region has no lips' colour (:data:`MIN_CHROMA`)."""
-    roi = as_rgb8(color[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1])
-    chroma = cv2.cvtColor(roi, cv2.COLOR_RGB2LAB)[..., 1].astype(np.float32)
+    chroma = lab_channel(color, lo, hi, 1)
+    if chroma is None:  # grey: no lips' colour
+        return None
     chroma = cv2.GaussianBlur(chroma, (0, 0), max(0.5, SMOOTHING * width))
     spread = float(chroma.std())
     if spread < MIN_CHROMA:
@@ -138,12 +139,11 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
     width = float(np.linalg.norm(axis))
     if color.ndim != 3 or color.shape[2] < 3 or not np.isfinite(mouth).all() or width < 4.0:
         return same
-    size = np.array([color.shape[1] - 1, color.shape[0] - 1])
-    lo = np.clip(np.floor(mouth.min(axis=0) - MARGIN * width), 0, size).astype(int)
-    hi = np.clip(np.ceil(mouth.max(axis=0) + MARGIN * width), 0, size).astype(int)
-    gradient = None if (hi - lo < 8).any() else _chroma_gradient(color, lo, hi, width)
+    box = region(mouth, MARGIN * width, color.shape)
+    gradient = None if box is None else _chroma_gradient(color, *box, width)
     if gradient is None:
         return same
+    lo, hi = box
     u = axis / width
     frame = np.stack([u, [-u[1], u[0]]])  # rows: along the mouth, across it
     centre = mouth.mean(axis=0)

@@ -281,7 +281,7 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmarks`` (68, 2) px, ``landmark_source``, ``landmark_detector`` and
         ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
-        px, the detector's points before its lips' step and the second pass
+        px, the detector's points before its lips' and brows' steps and the second pass
         (:func:`second_pass`); the take group's ``nose_depth_mm``
         (:func:`~scan2morph.io.check_handedness`) and, for a doubtful detection placed on the
         lips' colour edge (``params.lips_from_colour``), ``landmarks_lips_moved_px``, and
@@ -350,12 +350,14 @@ def features_placed(found: Landmarks, color: np.ndarray, params: Params):
         return found, {}
     from scan2morph.landmarks import fit_brows, fit_lips
 
-    steps = [("lips", params.lips_from_colour, fit_lips)]
-    steps.append(("brows", params.brows_from_colour, fit_brows))
-    attrs = {}
+    color, attrs = np.asarray(color), {}
+    steps = (
+        ("lips", params.lips_from_colour, fit_lips),
+        ("brows", params.brows_from_colour, fit_brows),
+    )
     for name, wanted, fit in steps:
         if wanted:
-            placed = fit(np.asarray(color), found.points)
+            placed = fit(color, found.points)
             found = replace(found, points=placed.points)
             attrs[f"landmarks_{name}_moved_px"] = placed.moved_px
     return found, attrs
