@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from scan2morph.landmarks import fit_brows
+from tests.support.colour_types import same_colours
 from tests.support.real_head import GLB
 
 SKIN, HAIR = (205, 160, 140), (95, 70, 60)
@@ -207,8 +208,7 @@ def test_other_colour_types_give_the_uint8_answer():
     image, truth = _face()
     start = _misplaced(truth)
     want = fit_brows(image, start).points
-    rgba = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
-    for img in (image / 255.0, image.astype(np.uint16) * 257, rgba):
+    for img in same_colours(image):
         np.testing.assert_allclose(fit_brows(img, start).points, want, atol=1e-9)
 
 

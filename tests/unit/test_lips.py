@@ -9,6 +9,7 @@ import pytest
 
 from scan2morph.landmarks import fit_lips
 from scan2morph.landmarks.lips import MOUTH
+from tests.support.colour_types import same_colours
 from tests.support.real_head import GLB
 
 #: A closed mouth in its own frame, px (x along the mouth, y down): the outer contour, iBUG 49-60
@@ -150,13 +151,7 @@ def test_other_colour_types_give_the_uint8_answer():
     image, truth = _face()
     start = _misplaced(truth)
     want = fit_lips(image, start).points
-    rgba = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
-    for img in (
-        image / 255.0,
-        image.astype(np.float32) / 255.0,
-        image.astype(np.uint16) * 257,
-        rgba,
-    ):
+    for img in same_colours(image):
         np.testing.assert_allclose(fit_lips(img, start).points, want, atol=1e-9)
 
 
