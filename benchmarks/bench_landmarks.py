@@ -12,7 +12,9 @@ Candidates (scan2morph.landmarks):
   the landmarks stage's ``min_confidence``) placed on the lips' colour edge
   (:func:`scan2morph.landmarks.fit_lips`);
 * ``+lips+brows (doubtful)``: and its brows on the eyebrows' dark bands
-  (:func:`scan2morph.landmarks.fit_brows`), as the landmarks stage places them.
+  (:func:`scan2morph.landmarks.fit_brows`);
+* ``+lips+brows+chin (doubtful)``: and its chin, with the jawline, on the face's outline below
+  the mouth (:func:`scan2morph.landmarks.fit_chin`), as the landmarks stage places them.
 
 Takes: every take of the default synthetic cohort (config/config.yaml: seed 2009, held out from
 training) after the ingest and repair stages, per modality; and range renders of the real head
@@ -90,21 +92,27 @@ def cascade(color, xyz, source):
     return detect(color, xyz, source).points
 
 
-def _features(color, xyz, source, brows: bool):
-    """The detector and the stage's rule for a doubtful detection's mouth, and its brows."""
+def _features(color, xyz, source, **steps):
+    """The detector and the stage's rule for a doubtful detection's features: ``steps`` the
+    :class:`~scan2morph.stages.landmarks.Params` switches of the steps left out."""
     found = detect(color, xyz, source)
     detected = Landmarks(found.points, DETECTED, found.confidence)
-    return features_placed(detected, color, Params(brows_from_colour=brows))[0].points
+    return features_placed(detected, (xyz, color), Params(**steps))[0].points
 
 
 def cascade_lips(color, xyz, source):
     """The detector, a doubtful detection's mouth on the lips' colour edge."""
-    return _features(color, xyz, source, brows=False)
+    return _features(color, xyz, source, brows_from_colour=False, chin_from_shape=False)
+
+
+def cascade_lips_brows(color, xyz, source):
+    """The detector, a doubtful detection's mouth and brows placed."""
+    return _features(color, xyz, source, chin_from_shape=False)
 
 
 def cascade_features(color, xyz, source):
-    """The detector, a doubtful detection's mouth and brows placed (the stage's rule)."""
-    return _features(color, xyz, source, brows=True)
+    """The detector, a doubtful detection's mouth, brows and chin placed (the stage's rule)."""
+    return _features(color, xyz, source)
 
 
 CANDIDATES = {
@@ -113,10 +121,16 @@ CANDIDATES = {
     "cascade-7": cascade_frame_only,
     "cascade-7+mirror": cascade,
     "+lips (doubtful)": cascade_lips,
-    "+lips+brows (doubtful)": cascade_features,
+    "+lips+brows (doubtful)": cascade_lips_brows,
+    "+lips+brows+chin (doubtful)": cascade_features,
 }
 #: The candidates whose median per region is printed.
-REGION_CANDIDATES = ("cascade-7+mirror", "+lips (doubtful)", "+lips+brows (doubtful)")
+REGION_CANDIDATES = (
+    "cascade-7+mirror",
+    "+lips (doubtful)",
+    "+lips+brows (doubtful)",
+    "+lips+brows+chin (doubtful)",
+)
 
 
 def load_takes(cache: Path | None) -> list[GridTake]:

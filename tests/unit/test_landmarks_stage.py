@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from scan2morph.errors import InputError
+from scan2morph.landmarks import fit_chin
 from scan2morph.stages import fit, landmarks
 from scan2morph.stages.part import Take
 from scan2morph.stages.quality import subject_warnings
@@ -353,32 +354,36 @@ def test_a_doubtful_detection_beside_a_given_neutral_says_it_follows_the_neutral
 
 
 def _misplaced_features(clicks: np.ndarray) -> np.ndarray:
-    """The car's clicks (0.5 px off the truth) with the mouth too wide and low and the brows
-    6 px (8 mm) too high, as the detector puts a real face's."""
+    """The car's clicks (0.5 px off the truth) with the mouth too wide and low, the brows
+    6 px (8 mm) too high and the jaw 12 px too low, as the detector puts a real face's."""
     start = clicks.copy()
     centre = start[48:].mean(axis=0)
     start[48:] = centre + (start[48:] - centre) * [1.3, 1.0] + [0.0, 3.0]
     start[17:27, 1] -= 6.0
+    start[:17, 1] += 12.0
     return start
 
 
 @pytest.mark.parametrize(
-    ("confidence", "config", "lips", "brows"),
+    ("confidence", "config", "lips", "brows", "chin"),
     [
-        (0.2, {}, True, True),
-        (0.9, {}, False, False),
-        (0.2, {"lips_from_colour": False}, False, True),
-        (0.2, {"brows_from_colour": False}, True, False),
+        (0.2, {}, True, True, True),
+        (0.9, {}, False, False, False),
+        (0.2, {"lips_from_colour": False}, False, True, True),
+        (0.2, {"brows_from_colour": False}, True, False, True),
+        (0.2, {"chin_from_shape": False}, True, True, False),
     ],
 )
-def test_a_doubtful_detections_mouth_and_brows_go_onto_the_face(
-    car, monkeypatch, confidence, config, lips, brows
+def test_a_doubtful_detections_features_go_onto_the_face(
+    car, monkeypatch, confidence, config, lips, brows, chin
 ):
     """A doubtful detection (median confidence below ``min_confidence``) has its mouth placed on
-    the lips' colour edge (scan2morph.landmarks.fit_lips) and its brows on the eyebrows' bands
-    (scan2morph.landmarks.fit_brows), a sure one keeps the detector's, and
-    ``landmarks.lips_from_colour: false`` / ``brows_from_colour: false`` keep every detection's
-    mouth / brows."""
+    the lips' colour edge (scan2morph.landmarks.fit_lips), its brows on the eyebrows' bands
+    (scan2morph.landmarks.fit_brows) and its chin, with the jawline, on the face's outline
+    (scan2morph.landmarks.fit_chin, from the points the other steps placed: its midline runs
+    through the lips); a sure one keeps the detector's, and ``landmarks.lips_from_colour:
+    false`` / ``brows_from_colour: false`` / ``chin_from_shape: false`` keep every detection's
+    mouth / brows / jawline."""
     r = car
     data = {
         paths.range_image("car", "xyz"): r["xyz"],
@@ -392,7 +397,6 @@ def test_a_doubtful_detections_mouth_and_brows_go_onto_the_face(
     part = landmarks.run(None, take, params)
     got = part.datasets[paths.landmarks("car")]
     attrs = part.attrs[paths.take("car")]
-    np.testing.assert_array_equal(got[:17], start[:17])
     np.testing.assert_array_equal(got[27:48], start[27:48])
     # the synthetic brow clicks lie 1 mm (0.7 px here) above the band's middle, where the fit
     # puts them, and carry 0.5 px of click noise
@@ -408,12 +412,25 @@ def test_a_doubtful_detections_mouth_and_brows_go_onto_the_face(
         else:
             np.testing.assert_array_equal(got[span], start[span])
             assert key not in attrs
+    np.testing.assert_array_equal(got[[0, 16]], start[[0, 16]])  # the jaw's ends, by the ears
+    if chin:  # the library's own answer (tests/unit/test_chin.py measures it)
+        placed = fit_chin(r["xyz"], np.concatenate([start[:17], got[17:]]))
+        np.testing.assert_array_equal(got[:17], placed.points[:17])
+        assert attrs["landmarks_chin_moved_px"] == placed.moved_px > 3.0
+        # towards the clicks (the generator's chin lies 2-4 px inside the outline at 320 x 240)
+        before, after = (np.linalg.norm(p[8] - r["landmarks"][8]) for p in (start, got))
+        print(f"\ncar's chin {before:.2f} -> {after:.2f} px from its clicks")
+        assert after < 5.0 < before
+    else:
+        np.testing.assert_array_equal(got[:17], start[:17])
+        assert "landmarks_chin_moved_px" not in attrs
 
 
 @pytest.mark.parametrize("placed", [True, False])
 def test_a_doubtful_takes_features_are_placed_before_its_second_pass(car, monkeypatch, placed):
-    """A doubtful take other than the neutral: the second pass starts from its mouth on the lips
-    and its brows on the eyebrows (off: from the detector's points), ``landmark_detected`` keeps
+    """A doubtful take other than the neutral: the second pass starts from its mouth on the lips,
+    its brows on the eyebrows and its chin on the face's outline (off: from the detector's
+    points), ``landmark_detected`` keeps
     the detector's own points, and the attributes hold every step's."""
     r = car
     data = {
@@ -431,7 +448,7 @@ def test_a_doubtful_takes_features_are_placed_before_its_second_pass(car, monkey
     monkeypatch.setattr(landmarks, "settle", lambda *a: found)
     monkeypatch.setattr(landmarks, "second_pass", second_pass)
     take = Take("s1", "car", "viseme", "car", "neutral", data)
-    config = {"lips_from_colour": placed, "brows_from_colour": placed}
+    config = {"lips_from_colour": placed, "brows_from_colour": placed, "chin_from_shape": placed}
     params = landmarks.Params.from_config({"landmarks": config})
     part = landmarks.run(None, take, params)
     np.testing.assert_array_equal(part.datasets[paths.landmark_detected("car")], start)
@@ -442,7 +459,9 @@ def test_a_doubtful_takes_features_are_placed_before_its_second_pass(car, monkey
         assert np.median(moved[48:]) == pytest.approx(attrs["landmarks_lips_moved_px"])
         assert np.median(moved[17:27]) == pytest.approx(attrs["landmarks_brows_moved_px"])
         assert attrs["landmarks_lips_moved_px"] > 2.0 and attrs["landmarks_brows_moved_px"] > 2.0
-        assert not moved[:17].any() and not moved[27:48].any()
+        assert moved[8] == pytest.approx(attrs["landmarks_chin_moved_px"]) and moved[8] > 3.0
+        assert not moved[[0, 16]].any() and not moved[27:48].any()
     else:
         assert not moved.any()
-        assert not {"landmarks_lips_moved_px", "landmarks_brows_moved_px"} & set(attrs)
+        steps = {f"landmarks_{n}_moved_px" for n in ("lips", "brows", "chin")}
+        assert not steps & set(attrs)

@@ -14,8 +14,10 @@ takes, and its other points are followed from the neutral's by the skin's textur
 the detection: the take's landmarks then move with its skin relative to the neutral's instead
 of scattering by the detector's error. A detection whose confidence is low is *doubtful*: the take is
 still used, with a warning at the top of the report and in ``accuracy.json``, and its mouth is
-placed on the lips' colour edge (:func:`scan2morph.landmarks.fit_lips`) and its brows on the
-eyebrows' dark bands (:func:`scan2morph.landmarks.fit_brows`) before the second pass.
+placed on the lips' colour edge (:func:`scan2morph.landmarks.fit_lips`), its brows on the
+eyebrows' dark bands (:func:`scan2morph.landmarks.fit_brows`) and its chin, with the jawline, on
+the face's outline below the mouth (:func:`scan2morph.landmarks.fit_chin`) before the second
+pass.
 
 Besides its part the stage writes the points as an iBUG ``.pts`` file (``files["pts"]``) and
 lifted onto the take's surface (``files["xyz"]``,
@@ -97,6 +99,9 @@ class Params:
     brows_from_colour : bool
         Whether a doubtful detection's brows are placed on the eyebrows' dark bands
         (:func:`scan2morph.landmarks.fit_brows`).
+    chin_from_shape : bool
+        Whether a doubtful detection's chin (and the jawline with it) is placed on the face's
+        outline below the mouth (:func:`scan2morph.landmarks.fit_chin`).
     fit : scan2morph.stages.fit.Params or None
         The fit's parameters the fold test follows (config section ``template``: its fiducial
         sets, rim share, subdivisions and fold limit); None: no test (also with ``unfold`` or
@@ -114,6 +119,7 @@ class Params:
     unfold: bool = True
     lips_from_colour: bool = True
     brows_from_colour: bool = True
+    chin_from_shape: bool = True
     fit: fit_stage.Params | None = None
 
     @classmethod
@@ -134,6 +140,7 @@ class Params:
             unfold=bool(section.get("unfold", cls.unfold)),
             lips_from_colour=bool(section.get("lips_from_colour", cls.lips_from_colour)),
             brows_from_colour=bool(section.get("brows_from_colour", cls.brows_from_colour)),
+            chin_from_shape=bool(section.get("chin_from_shape", cls.chin_from_shape)),
             fit=_fold_rules(config, section),
         )
 
@@ -286,7 +293,8 @@ def run(template, take: Take, params: Params) -> Part:
         (:func:`~scan2morph.io.check_handedness`) and, for a doubtful detection placed on the
         lips' colour edge (``params.lips_from_colour``), ``landmarks_lips_moved_px``, and
         with its brows on the eyebrows (``params.brows_from_colour``),
-        ``landmarks_brows_moved_px``;
+        ``landmarks_brows_moved_px``, and with its chin on the face's outline
+        (``params.chin_from_shape``), ``landmarks_chin_moved_px``;
         ``files["pts"]`` the points for the ``.pts`` file, ``files["xyz"]`` (68, 3) mm the
         same points on the take's measured surface
         (:func:`~scan2morph.stages.landmark_files.written_points`: a mesh take's lie
@@ -303,7 +311,7 @@ def run(template, take: Take, params: Params) -> Part:
     attrs, detected = {}, None
     if params.carry_stable and found.source == DETECTED and take.take != take.neutral:
         detected = found.points
-    found, attrs = features_placed(found, color, params)
+    found, attrs = features_placed(found, (xyz, color), params)
     if detected is not None:
         found, carried = second_pass(found, take, (xyz, color), params, template)
         attrs |= carried
@@ -333,31 +341,45 @@ def run(template, take: Take, params: Params) -> Part:
     )
 
 
-def features_placed(found: Landmarks, color: np.ndarray, params: Params):
+def features_placed(
+    found: Landmarks, grids: tuple[np.ndarray, np.ndarray], params: Params
+) -> tuple[Landmarks, dict]:
     """A doubtful detection (``params.min_confidence``) with its mouth on the lips' colour edge
-    (:func:`scan2morph.landmarks.fit_lips`, with ``params.lips_from_colour``) and its brows on
+    (:func:`scan2morph.landmarks.fit_lips`, with ``params.lips_from_colour``), its brows on
     the eyebrows' dark bands (:func:`scan2morph.landmarks.fit_brows`, with
-    ``params.brows_from_colour``); other detections as they are.
+    ``params.brows_from_colour``) and its chin on the face's outline below the mouth
+    (:func:`scan2morph.landmarks.fit_chin`, with ``params.chin_from_shape``); other detections
+    as they are.
+
+    Parameters
+    ----------
+    found : Landmarks
+    grids : tuple of ndarray
+        The take's ``xyz`` (H, W, 3) mm and ``color`` (H, W, 3) image.
+    params : Params
 
     Returns
     -------
     found : Landmarks
     attrs : dict
-        How far the features moved (median over their points, px):
-        ``landmarks_lips_moved_px``, ``landmarks_brows_moved_px``, for each step taken.
+        How far the features moved (median over their points, the chin's own move; px):
+        ``landmarks_lips_moved_px``, ``landmarks_brows_moved_px``, ``landmarks_chin_moved_px``,
+        for each step taken.
     """
     if not found.doubtful(params.min_confidence):
         return found, {}
-    from scan2morph.landmarks import fit_brows, fit_lips
+    from scan2morph.landmarks import fit_brows, fit_chin, fit_lips
 
-    color, attrs = np.asarray(color), {}
-    steps = (
-        ("lips", params.lips_from_colour, fit_lips),
-        ("brows", params.brows_from_colour, fit_brows),
+    xyz, color = (np.asarray(g) for g in grids)
+    attrs = {}
+    steps = (  # the chin's midline runs through the lips' midpoints: after the lips
+        ("lips", params.lips_from_colour, fit_lips, color),
+        ("brows", params.brows_from_colour, fit_brows, color),
+        ("chin", params.chin_from_shape, fit_chin, xyz),
     )
-    for name, wanted, fit in steps:
+    for name, wanted, fit, grid in steps:
         if wanted:
-            placed = fit(color, found.points)
+            placed = fit(grid, found.points)
             found = replace(found, points=placed.points)
             attrs[f"landmarks_{name}_moved_px"] = placed.moved_px
     return found, attrs
