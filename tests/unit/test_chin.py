@@ -130,16 +130,44 @@ def test_a_low_chin_goes_onto_the_faces_outline(pitch_deg):
     np.testing.assert_array_equal(fit.points[17:], points[17:])
 
 
-@pytest.mark.parametrize("gap_px", [4, 12, 24])
-def test_a_shadow_under_a_lowered_chin_is_not_bridged_to_the_neck(gap_px):
-    """Lowered 25 degrees, with rows of no data below the chin (a stereo rig's shadow): the neck
-    beyond the gap lies far behind, so the chin still ends where the surface ends (within 1.5 px),
-    not on the neck."""
-    xyz, truth, outline = _take(-25.0)
+@pytest.mark.parametrize("pitch_deg", [0.0, -12.0, -25.0])
+@pytest.mark.parametrize("gap_px", [4, 12, 24, 48])
+def test_a_shadow_under_the_chin_is_not_bridged_to_the_neck(pitch_deg, gap_px):
+    """Rows of no data just below the chin's outline (a stereo rig's shadow, 2-24 mm): the neck
+    beyond the gap is another surface, so the chin still ends on its outline (within 1.5 px),
+    level or lowered, not on the neck 30 px below."""
+    xyz, truth, outline = _take(pitch_deg)
     row = int(np.ceil(outline[1])) + 1
     xyz[row : row + gap_px] = np.nan
     fit = fit_chin(xyz, _low(truth))
     assert np.linalg.norm(fit.points[CHIN] - outline) < 1.5
+
+
+def test_a_surface_that_ends_on_the_chins_front_puts_the_chin_at_its_end():
+    """No data from 6 px above the outline down (the chin's front seen last): the chin goes to
+    the last row with data, inside the image."""
+    xyz, truth, outline = _take()
+    last = int(outline[1]) - 6
+    xyz[last + 1 :] = np.nan
+    fit = fit_chin(xyz, _low(truth))
+    assert abs(fit.points[CHIN, 1] - last) < 1.5 and fit.moved_px > 20.0
+
+
+def test_a_chin_detected_above_the_lip_is_searched_below_it():
+    """The search runs from the lower lip away from the nose, whatever side of the lip the
+    detection put the chin: one 5 px above the lip comes to the outline."""
+    xyz, truth, outline = _take()
+    points = _low(truth)
+    points[CHIN, 1] = truth[57, 1] - 5.0
+    assert np.linalg.norm(fit_chin(xyz, points).points[CHIN] - outline) < 1.5
+
+
+def test_a_mirrored_frame_finds_the_same_chin():
+    """The grid's x axis negated (a left-handed frame): the face's forward axis is told by the
+    nose's side, and the chin comes to its outline as before."""
+    xyz, truth, outline = _take()
+    xyz[..., 0] *= -1.0
+    assert np.linalg.norm(fit_chin(xyz, _low(truth)).points[CHIN] - outline) < 1.5
 
 
 def test_a_hole_in_the_chins_skin_is_bridged():
@@ -215,7 +243,7 @@ def test_a_profile_cut_by_the_images_edge_keeps_the_chin(cut_px):
     xyz, truth, outline = _take()
     cut = xyz[: int(outline[1]) - cut_px]
     points = _low(truth)
-    points[JAW, 1] = np.minimum(points[JAW, 1], len(cut) - 1)
+    points[JAW, 1] = np.minimum(points[JAW, 1], len(cut) - 11)  # not already at the edge
     np.testing.assert_array_equal(fit_chin(cut, points).points, points)
 
 
@@ -227,12 +255,26 @@ def test_a_chin_farther_than_max_move_keeps_the_points():
     np.testing.assert_array_equal(fit_chin(xyz, far).points, far)
 
 
-def test_a_near_constant_surface_keeps_the_points():
-    """A grid whose profile barely changes (1e-9 mm apart: no face at any scale) keeps the
-    points without smoothing over millions of samples."""
+def test_a_near_constant_profile_keeps_the_points():
+    """Below the lip a surface that barely changes (1e-9 of its relief: no face at any scale):
+    the points stay, without smoothing over millions of samples."""
     xyz, truth, _ = _take()
-    tiny = np.where(np.isfinite(xyz), xyz * 1e-9, np.nan)
-    np.testing.assert_array_equal(fit_chin(tiny, _low(truth)).points, _low(truth))
+    below = int(truth[57, 1]) + 20
+    ref = xyz[below, SIZE // 2].copy()
+    xyz[below:] = ref + 1e-9 * (xyz[below:] - ref)
+    points = _low(truth)
+    np.testing.assert_array_equal(fit_chin(xyz, points).points, points)
+
+
+def test_a_profile_still_turning_at_the_images_edge_keeps_the_points():
+    """A broad chin (radius 100 mm) whose profile the image's edge cuts while it runs back at 22
+    degrees from forward, still turning: its flattest place is beyond the edge, not at it; kept
+    (the outline is not in the image)."""
+    up, forward = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    plane = np.column_stack([np.zeros(80), np.arange(20.0, 0.0, -0.25), np.zeros(80)])
+    y = np.arange(0.0, -100.0 * np.sin(np.radians(68.0)), -0.25)
+    arc = np.column_stack([np.zeros_like(y), y, -100.0 * (1.0 - np.cos(np.arcsin(-y / 100.0)))])
+    assert chin._outline(np.concatenate([plane, arc]), up, forward) is None
 
 
 def test_a_wrong_grid_keeps_the_points():

@@ -22,8 +22,8 @@ raised or lowered finds the same point:
    the chin is the first sample where the profile runs back within :data:`OUTLINE_DEG` of
    ``forward`` (the surface's normal more than 90 - that from ``forward``: the 72 degrees of our
    annotation's silhouette), or where it is flattest (no flatter just beyond) within
-   :data:`FLATTEST_DEG`, or where the surface ends within the image or jumps back (the chin in
-   front of the neck);
+   :data:`FLATTEST_DEG`, or where the surface ends within the image or jumps (the chin in front
+   of the neck, a shadow under it);
 4. point 9 goes there and the rest of the jawline follows it, by a share falling linearly from 1
    at the chin to 0 at the jaw's ends (1 and 17, at the ears, stay).
 
@@ -63,7 +63,8 @@ SMOOTHING_MM = 1.5
 #: The outline: where the profile runs back within this angle of ``forward``, degrees.
 OUTLINE_DEG = 18.0
 #: ... or where it is flattest within this angle, degrees (no sample over the next
-#: ``FLAT_AHEAD_MM`` mm flatter by more than ``FLAT_TOLERANCE_DEG`` degrees): an under-chin whose
+#: ``FLAT_AHEAD_MM`` mm, counted in median steps, flatter by more than ``FLAT_TOLERANCE_DEG``
+#: degrees): an under-chin whose
 #: slope in the face's frame runs just above :data:`OUTLINE_DEG` (the real head's at 19 degrees,
 #: raised 5 degrees and turned 10) would otherwise be followed onto the throat.
 FLATTEST_DEG = 25.0
@@ -72,7 +73,10 @@ FLAT_AHEAD_MM, FLAT_TOLERANCE_DEG = 2.0, 0.5
 #: (the chin seen in front of the neck; the surface at 72 degrees stretches a step 3.2 times).
 #: Across a gap in the data (``k`` samples missing) the step may be longer by what skin at 72
 #: degrees spans over the missing samples; beyond that it is a jump (a shadow under the chin).
+#: A gap longer than ``MAX_GAP_MM`` (at the median step) is never bridged: over a long shadow
+#: that allowance would reach the neck behind the chin.
 JUMP = 8.0
+MAX_GAP_MM = 3.0
 #: Below this median step between samples (mm) the profile is not a face's at any scale.
 MIN_SPACING_MM = 1e-3
 #: The nose tip must stand this far in front of the eye and mouth corners for the frame's
@@ -141,7 +145,8 @@ def _outline(profile: np.ndarray, up: np.ndarray, forward: np.ndarray) -> int | 
     stretch = 1.0 / np.cos(np.radians(90.0 - OUTLINE_DEG))
     # the surfaces between jumps (one in front of another: a lip's shadow, the neck behind the
     # chin), each smoothed on its own
-    cuts = np.flatnonzero(step > spacing * (JUMP + (gap - 1) * stretch)) + 1
+    jump = (step > spacing * (JUMP + (gap - 1) * stretch)) | ((gap - 1) * spacing > MAX_GAP_MM)
+    cuts = np.flatnonzero(jump) + 1
     height, depth = (
         np.concatenate(
             [
@@ -161,7 +166,10 @@ def _outline(profile: np.ndarray, up: np.ndarray, forward: np.ndarray) -> int | 
         angle = np.degrees(np.arccos(np.clip(back, -1.0, 1.0)))  # from forward
         # the flattest place: none flatter by FLAT_TOLERANCE_DEG over the next FLAT_AHEAD_MM
         w = int(np.ceil(FLAT_AHEAD_MM / spacing))
-        ahead = np.concatenate([angle[1:], np.full(w, np.inf)])
+        # past the segment's end nothing is flatter where the surface ends or jumps; at the
+        # image's edge the profile may run on flatter beyond it
+        edge = hi == len(at) and at[-1] == len(profile) - 1
+        ahead = np.concatenate([angle[1:], np.full(w, -np.inf if edge else np.inf)])
         ahead = sliding_window_view(ahead, w).min(axis=1)
         turned = (angle <= OUTLINE_DEG) | (
             (angle <= FLATTEST_DEG) & (angle <= ahead + FLAT_TOLERANCE_DEG)
