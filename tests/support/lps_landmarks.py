@@ -167,3 +167,14 @@ def real_takes(head, poses, zoom: float = 1.0) -> list[RealTake]:
         truth = rd._project(world, K, R, centre)
         out.append(RealTake(f"yaw {yaw:+g} pitch {pitch:+g}", colour, xyz, truth))
     return out
+
+
+def detected_real_takes(poses) -> list[tuple[RealTake, np.ndarray]]:
+    """The real head's colour renders in ``poses`` (:func:`real_takes`), each with the
+    detector's points on it (68, 2) px: what a doubtful detection's feature steps start from."""
+    from scan2morph.landmarks import detect
+
+    return [
+        (take, detect(take.color, take.xyz, take.name).points)
+        for take in real_takes(load_real_head(), poses)
+    ]

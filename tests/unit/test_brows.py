@@ -219,15 +219,13 @@ def test_the_real_heads_detected_brows_go_onto_its_eyebrows():
     detector, trained on synthetic faces only, puts the brows 16-21 px off our hand annotation
     (too high, and arched); on the eyebrows' bands they are within 5 px (the rest mostly along
     the brow, where its ends are; benchmarks/bench_landmarks.py measures eight views)."""
-    from scan2morph.landmarks import detect
-    from tests.support.lps_landmarks import load_real_head, real_takes
+    from tests.support.lps_landmarks import detected_real_takes
 
-    for take in real_takes(load_real_head(), [(0, 0), (0, -10)]):
-        found = detect(take.color, take.xyz, take.name)
-        fit = fit_brows(take.color, found.points)
-        before = np.linalg.norm(found.points - take.truth, axis=1)[BROWS]
+    for take, found in detected_real_takes([(0, 0), (0, -10)]):
+        fit = fit_brows(take.color, found)
+        before = np.linalg.norm(found - take.truth, axis=1)[BROWS]
         after = np.linalg.norm(fit.points - take.truth, axis=1)[BROWS]
         print(f"\n{take.name}: brows {np.median(before):.2f} -> {np.median(after):.2f} px")
         assert np.median(before) > 12.0
         assert np.median(after) < 5.0
-        np.testing.assert_array_equal(fit.points[OTHERS], found.points[OTHERS])
+        np.testing.assert_array_equal(fit.points[OTHERS], found[OTHERS])

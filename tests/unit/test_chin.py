@@ -293,13 +293,11 @@ def test_the_real_heads_detected_chin_goes_onto_its_outline():
     point 9 lies about 3 px beside the midline: its 17 jaw points are spaced evenly along the
     outline). benchmarks/bench_landmarks.py measures eight views (median 18.6 -> 3.2 px; the
     least helped, turned -10 degrees and lowered 5, 7.1 -> 6.9)."""
-    from scan2morph.landmarks import detect
-    from tests.support.lps_landmarks import load_real_head, real_takes
+    from tests.support.lps_landmarks import detected_real_takes
 
-    for take in real_takes(load_real_head(), [(0, 10), (15, 0), (20, 5)]):
-        found = detect(take.color, take.xyz, take.name)
-        fit = fit_chin(take.xyz, found.points)
-        before = np.linalg.norm(found.points[CHIN] - take.truth[CHIN])
+    for take, found in detected_real_takes([(0, 10), (15, 0), (20, 5)]):
+        fit = fit_chin(take.xyz, found)
+        before = np.linalg.norm(found[CHIN] - take.truth[CHIN])
         after = np.linalg.norm(fit.points[CHIN] - take.truth[CHIN])
         print(f"\n{take.name}: chin {before:.2f} -> {after:.2f} px")
         assert before > 15.0

@@ -162,13 +162,11 @@ def test_the_real_heads_detected_mouth_goes_onto_its_lips():
     detector, trained on synthetic faces only, puts the mouth 7-10 px off our hand annotation
     (the corners 14-21 px: the mouth too wide); on the lips' colour edge it is within 3 px
     (benchmarks/bench_landmarks.py measures eight views)."""
-    from scan2morph.landmarks import detect
-    from tests.support.lps_landmarks import load_real_head, real_takes
+    from tests.support.lps_landmarks import detected_real_takes
 
-    for take in real_takes(load_real_head(), [(0, 0), (0, 10)]):
-        found = detect(take.color, take.xyz, take.name)
-        fit = fit_lips(take.color, found.points)
-        before = np.linalg.norm(found.points - take.truth, axis=1)[MOUTH]
+    for take, found in detected_real_takes([(0, 0), (0, 10)]):
+        fit = fit_lips(take.color, found)
+        before = np.linalg.norm(found - take.truth, axis=1)[MOUTH]
         after = np.linalg.norm(fit.points - take.truth, axis=1)[MOUTH]
         print(f"\n{take.name}: mouth {np.median(before):.2f} -> {np.median(after):.2f} px")
         assert np.median(before) > 6.0 and np.median(after) < 3.0

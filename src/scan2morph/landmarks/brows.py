@@ -17,11 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from scan2morph.landmarks.image_fit import ascend, lab_channel, region
+from scan2morph.landmarks.image_fit import ascend, region, smoothed_channel
 
 #: Each brow's points in iBUG-68 order (0-based): the right brow (the image's left), the left;
 #: and both.
@@ -96,17 +95,14 @@ class BrowFit:
     contrast_after: np.ndarray
 
 
-def _luminance(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, chord: float):
-    """The smoothed, standardised ``L*`` of ``color[lo:hi]`` (x, y px bounds, inclusive), and
-    the standard deviation of the texture finer than the smoothing in the same units; None for
-    a grey image or a flat one (:data:`MIN_SPREAD`)."""
-    raw = lab_channel(color, lo, hi, 0)
-    if raw is None:  # grey: no hair to see
+def _luminance(color: np.ndarray, box: tuple, chord: float):
+    """The smoothed, standardised ``L*`` of the region ``box``, and the standard deviation of the
+    texture finer than the smoothing in the same units; None for a grey image (no hair to see)
+    or a flat one (:data:`MIN_SPREAD`)."""
+    read = smoothed_channel(color, box, 0, SMOOTHING * chord, MIN_SPREAD)
+    if read is None:
         return None
-    light = cv2.GaussianBlur(raw, (0, 0), max(0.5, SMOOTHING * chord))
-    spread = float(light.std())
-    if spread < MIN_SPREAD:
-        return None
+    light, raw, spread = read
     return (light - light.mean()) / spread, float((raw - light).std()) / spread
 
 
@@ -214,7 +210,7 @@ def fit_brows(color: np.ndarray, points: np.ndarray) -> BrowFit:
     # every curve (its ends and its arch each up to REACH: 2 REACH off the chord at most) and
     # what it reads beside it, within the image
     box = region(points[SPAN], (2.0 * REACH + BESIDE) * max(chords), color.shape)
-    seen = None if box is None else _luminance(color, *box, float(np.mean(chords)))
+    seen = None if box is None else _luminance(color, box, float(np.mean(chords)))
     if seen is None:
         return same
     light, texture = seen

@@ -1,6 +1,6 @@
 """What the image fits of a doubtful detection's features share (:mod:`scan2morph.landmarks.lips`,
-:mod:`scan2morph.landmarks.brows`): the region read about the feature, a CIELAB channel of it,
-and the coordinate search."""
+:mod:`scan2morph.landmarks.brows`): the region read about the feature, a CIELAB channel of it
+(smoothed), and the coordinate search."""
 
 from __future__ import annotations
 
@@ -43,6 +43,31 @@ def lab_channel(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, channel: int)
     if np.ptp(roi.astype(np.int16), axis=2).max(initial=0) == 0:
         return None
     return cv2.cvtColor(roi, cv2.COLOR_RGB2LAB)[..., channel].astype(np.float32)
+
+
+def smoothed_channel(
+    color: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
+    channel: int,
+    sigma: float,
+    min_spread: float,
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """CIELAB channel ``channel`` of the region ``box`` (:func:`region`'s ``lo``, ``hi``) as read
+    (:func:`lab_channel`) and Gaussian-smoothed by ``sigma`` px (at least 0.5), with the smoothed
+    channel's standard deviation (8-bit levels); None for a grey region, or one whose smoothed
+    channel varies by less than ``min_spread`` (a flat image: a camera's noise alone).
+
+    Returns
+    -------
+    smooth, raw : (h, w) float32
+    spread : float
+    """
+    raw = lab_channel(color, *box, channel)
+    if raw is None:
+        return None
+    smooth = cv2.GaussianBlur(raw, (0, 0), max(0.5, sigma))
+    spread = float(smooth.std())
+    return None if spread < min_spread else (smooth, raw, spread)
 
 
 def ascend(

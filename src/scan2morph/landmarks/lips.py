@@ -14,11 +14,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from scan2morph.landmarks.image_fit import ascend, lab_channel, region
+from scan2morph.landmarks.image_fit import ascend, region, smoothed_channel
 
 #: The mouth's points in iBUG-68 order (0-based): the outer contour (12), then the inner (8).
 MOUTH = slice(48, 68)
@@ -96,16 +95,13 @@ def outline(mouth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return samples, normals
 
 
-def _chroma_gradient(color: np.ndarray, lo: np.ndarray, hi: np.ndarray, width: float):
-    """The gradient (gx, gy) of the smoothed, standardised ``a*`` of ``color[lo:hi]`` (x, y px
-    bounds, inclusive); None where the region has no lips' colour (:data:`MIN_CHROMA`)."""
-    chroma = lab_channel(color, lo, hi, 1)
-    if chroma is None:  # grey: no lips' colour
+def _chroma_gradient(color: np.ndarray, box: tuple, width: float):
+    """The gradient (gx, gy) of the smoothed, standardised ``a*`` of the region ``box``; None
+    where the region has no lips' colour (grey, or flatter than :data:`MIN_CHROMA`)."""
+    read = smoothed_channel(color, box, 1, SMOOTHING * width, MIN_CHROMA)
+    if read is None:
         return None
-    chroma = cv2.GaussianBlur(chroma, (0, 0), max(0.5, SMOOTHING * width))
-    spread = float(chroma.std())
-    if spread < MIN_CHROMA:
-        return None
+    chroma, _, spread = read
     gy, gx = np.gradient((chroma - chroma.mean()) / spread)
     return gx, gy
 
@@ -140,7 +136,7 @@ def fit_lips(color: np.ndarray, points: np.ndarray) -> LipFit:
     if color.ndim != 3 or color.shape[2] < 3 or not np.isfinite(mouth).all() or width < 4.0:
         return same
     box = region(mouth, MARGIN * width, color.shape)
-    gradient = None if box is None else _chroma_gradient(color, *box, width)
+    gradient = None if box is None else _chroma_gradient(color, box, width)
     if gradient is None:
         return same
     lo, hi = box

@@ -288,7 +288,7 @@ def run(template, take: Take, params: Params) -> Part:
         ``landmarks`` (68, 2) px, ``landmark_source``, ``landmark_detector`` and
         ``landmark_doubtful`` (:func:`~scan2morph.store.paths.landmark_info`);
         ``landmark_confidence`` (68,) when any point was detected; ``landmark_detected`` (68, 2)
-        px, the detector's points before its lips' and brows' steps and the second pass
+        px, the detector's points before its lips', brows' and chin's steps and the second pass
         (:func:`second_pass`); the take group's ``nose_depth_mm``
         (:func:`~scan2morph.io.check_handedness`) and, for a doubtful detection placed on the
         lips' colour edge (``params.lips_from_colour``), ``landmarks_lips_moved_px``, and

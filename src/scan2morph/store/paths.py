@@ -203,8 +203,9 @@ def landmark_info(take_id: str, name: str) -> str:
 
 def landmark_detected(take_id: str) -> str:
     """A detected take's landmarks as the detector placed them (68, 2) px, before a doubtful
-    detection's mouth and brows went onto the lips and the eyebrows and its stable points were
-    carried over from the neutral (what the click precision is measured on)."""
+    detection's mouth, brows and chin went onto the lips, the eyebrows and the face's outline and
+    its stable points were carried over from the neutral (what the click precision is measured
+    on)."""
     return _build("/takes/{take}", "landmark_detected", take=take_id)
 
 
